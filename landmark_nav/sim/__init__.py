@@ -1,0 +1,1 @@
+"""Deterministic simulator: world, robot, odometry, laser and sonar, named scenarios."""
