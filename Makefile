@@ -1,0 +1,41 @@
+# The two commands of the README:
+#   make demo   -- set up .venv if needed, then run the main job (writes out/)
+#   make test   -- set up .venv if needed, then run the test suite
+# Both create or update the local virtual environment .venv; a second run installs nothing
+# (the install step re-runs only when a requirements file or the package metadata changes).
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.landmark_nav-installed
+DEPS := requirements.txt requirements-test.txt constraints.txt setup.py setup.cfg package.xml
+
+.PHONY: demo test venv bags lint clean
+
+venv: $(STAMP)
+
+$(STAMP): $(DEPS)
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check \
+		-c constraints.txt -r requirements.txt -r requirements-test.txt
+	@# setup.cfg sends scripts to lib/landmark_nav for `ros2 run`; in the venv they belong
+	@# in bin, so the editable install overrides the develop script_dir.
+	@printf '[develop]\nscript_dir=%s\n' "$(abspath $(BIN))" > $(VENV)/develop.cfg
+	DIST_EXTRA_CONFIG=$(VENV)/develop.cfg $(BIN)/python -m pip install --quiet \
+		--disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/landmark_nav demo --out out
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q test
+
+# Regenerate the committed recordings (fixed seeds) with the package's own simulator.
+bags: $(STAMP)
+	$(BIN)/landmark_nav simulate office --seed 1 --out bags/office --force
+	$(BIN)/landmark_nav simulate hallway --seed 1 --out bags/hallway --force
+	$(BIN)/landmark_nav simulate calibration --seed 1 --out bags/calibration --force
+
+clean:
+	rm -rf $(VENV) out build install log

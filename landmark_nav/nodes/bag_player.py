@@ -1,0 +1,183 @@
+"""Executable ``bag_player``: publish a rosbag2 (MCAP) bag into the ROS graph.
+
+Like ``ros2 bag play``: recorded timing scaled by a rate factor, a start offset, a topic
+filter, optional /clock and looping. Messages go out as the recorded CDR bytes, so the
+original header stamps are kept exactly. Latched topics (transient local in the bag's QoS)
+are published transient local. Also available as ``landmark_nav replay``.
+"""
+
+import argparse
+import sys
+import time
+from typing import List, Optional
+
+from landmark_nav.bag import BagError, BagReader, message_class
+from landmark_nav.conversions import ns_to_stamp
+from landmark_nav.replay import due_after_start_s, ReplayOptions
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+
+def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the replay options to an argument parser (shared with ``landmark_nav replay``)."""
+    parser.add_argument('bag', help='rosbag2 directory (or .mcap file)')
+    parser.add_argument('--rate', type=float, default=1.0, help='playback speed factor')
+    parser.add_argument('--start-offset', type=float, default=0.0,
+                        help='start this many seconds into the bag')
+    parser.add_argument('--topics', nargs='+', default=None, help='only these topics')
+    parser.add_argument('--loop', action='store_true', help='play again at the end')
+    parser.add_argument('--clock', type=float, nargs='?', const=100.0, default=0.0,
+                        metavar='HZ', help='publish /clock (default 100 Hz when given)')
+    parser.add_argument('--delay', type=float, default=0.0,
+                        help='seconds to wait before the first message')
+    parser.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
+                        help='wait up to this long for a subscriber on every played topic')
+
+
+def options_from_args(args: argparse.Namespace) -> ReplayOptions:
+    """Build validated ReplayOptions from parsed arguments."""
+    return ReplayOptions(rate=args.rate, start_offset_s=args.start_offset,
+                         topics=tuple(args.topics) if args.topics else None,
+                         loop=args.loop, clock_hz=args.clock, delay_s=args.delay,
+                         wait_for_subscribers_s=args.wait_for_subscribers)
+
+
+class BagPlayer(Node):
+    """Publish the messages of one bag at recorded timing."""
+
+    def __init__(self, bag_path: str, options: ReplayOptions) -> None:
+        """Open the bag and create one publisher per played topic.
+
+        Raises:
+            BagError: The bag cannot be read or lacks a requested topic.
+
+        """
+        super().__init__('bag_player')
+        self.bag_path = bag_path
+        self.options = options
+        with BagReader(bag_path) as reader:
+            topics = reader.topics()
+        wanted = options.topics or tuple(sorted(topics))
+        missing = [t for t in wanted if t not in topics]
+        if missing:
+            raise BagError(f'{bag_path} has no topic {", ".join(missing)}')
+        self._publishers = {}
+        for name in wanted:
+            info = topics[name]
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST,
+                depth=1 if info.latched else 1000,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=(DurabilityPolicy.TRANSIENT_LOCAL if info.latched
+                            else DurabilityPolicy.VOLATILE))
+            self._publishers[name] = self.create_publisher(
+                message_class(info.type_name), name, qos)
+        self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
+                           if options.clock_hz > 0 else None)
+        self.published = 0
+
+    def wait_for_subscribers(self) -> bool:
+        """Wait until every played topic has a subscriber, up to the configured time."""
+        deadline = time.monotonic() + self.options.wait_for_subscribers_s
+        while time.monotonic() < deadline:
+            if all(p.get_subscription_count() > 0 for p in self._publishers.values()):
+                return True
+            time.sleep(0.02)
+        lonely = [t for t, p in self._publishers.items() if p.get_subscription_count() == 0]
+        if lonely:
+            self.get_logger().warning(f'No subscriber yet on {", ".join(lonely)}; playing')
+        return not lonely
+
+    def _publish_clock(self, bag_ns: int) -> None:
+        msg = Clock()
+        msg.clock = ns_to_stamp(bag_ns)
+        self._clock_pub.publish(msg)
+
+    def _sleep_until(self, wall_due: float, first_ns: int, wall_start: float) -> None:
+        """Sleep until a wall time, ticking /clock in bag time meanwhile."""
+        period = 1.0 / self.options.clock_hz if self._clock_pub else None
+        while rclpy.ok():
+            remaining = wall_due - time.monotonic()
+            if remaining <= 0:
+                return
+            if period is None:
+                time.sleep(remaining)
+                return
+            time.sleep(min(remaining, period))
+            elapsed = (time.monotonic() - wall_start) * self.options.rate
+            offset = self.options.start_offset_s
+            self._publish_clock(first_ns + int((elapsed + offset) * 1e9))
+
+    def play_once(self) -> int:
+        """Play the bag once; return the number of messages published."""
+        count = 0
+        with BagReader(self.bag_path) as reader:
+            first_ns = reader.start_ns
+            wall_start = time.monotonic()
+            for item in reader.messages(tuple(self._publishers)):
+                due = due_after_start_s(item.log_time_ns, first_ns, self.options)
+                if due < 0:
+                    continue
+                self._sleep_until(wall_start + due, first_ns, wall_start)
+                if not rclpy.ok():
+                    break
+                if self._clock_pub:
+                    self._publish_clock(item.log_time_ns)
+                self._publishers[item.topic].publish(item.data)
+                count += 1
+        self.published += count
+        return count
+
+    def play(self) -> int:
+        """Play (looping if asked); return the total number of messages published."""
+        if self.options.wait_for_subscribers_s > 0:
+            self.wait_for_subscribers()
+        if self.options.delay_s > 0:
+            time.sleep(self.options.delay_s)
+        while rclpy.ok():
+            self.play_once()
+            if not self.options.loop:
+                break
+        return self.published
+
+
+def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> int:
+    """Initialise rclpy, play the bag, shut down; return messages published."""
+    rclpy.init(args=args)
+    player = None
+    try:
+        player = BagPlayer(bag, options)
+        published = player.play()
+        # Give reliable transports a moment to deliver the tail of the stream.
+        for pub in player._publishers.values():
+            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2.0))
+        player.get_logger().info(f'Published {published} messages from {bag}')
+        return published
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return player.published if player else 0
+    finally:
+        if player is not None:
+            player.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Entry point of ``ros2 run landmark_nav bag_player <bag> [options]``."""
+    argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
+    parser = argparse.ArgumentParser(prog='bag_player', description=__doc__.split('\n')[0])
+    add_replay_arguments(parser)
+    parsed = parser.parse_args(argv)
+    try:
+        options = options_from_args(parsed)
+        run(parsed.bag, options, args)
+    except (BagError, ValueError) as err:
+        print(f'bag_player: error: {err}', file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""The ``landmark_nav`` command line: simulate, record, replay, inspect and evaluate.
+
+Every subcommand reports bad input (missing or corrupt bag, unknown scenario, bad
+seed, ...) as one line on stderr and exits with status 2; no tracebacks.
+"""
+
+import argparse
+import sys
+from typing import List, Optional
+
+from landmark_nav.bag import BagError
+
+PROG = 'landmark_nav'
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str) -> None:
+        """Print ``prog: error: message`` and exit with status 2."""
+        self.exit(2, f'{self.prog}: error: {message}\n')
+
+
+def _seed(text: str) -> int:
+    """Parse a simulator seed: an integer in [0, 2**32)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'seed must be an integer, got {text!r}') from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f'seed must be in [0, 2**32), got {value}')
+    return value
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from landmark_nav.sim.record import record_scenario
+    summary = record_scenario(args.scenario, args.seed, args.out, force=args.force)
+    print(summary)
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from landmark_nav.nodes.bag_player import options_from_args, run
+    run(args.bag, options_from_args(args))
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.bag_info import describe_bag
+    print(describe_bag(args.bag))
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.demo import run_demo
+    print(run_demo(args.bag, args.out))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser with every subcommand."""
+    from landmark_nav.nodes.bag_player import add_replay_arguments
+    from landmark_nav.sim.scenarios import SCENARIOS
+
+    parser = _Parser(prog=PROG, description=__doc__.split('\n')[0])
+    sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND',
+                                parser_class=_Parser)
+
+    p = sub.add_parser('simulate', help='simulate a named scenario into a rosbag2 (MCAP) bag')
+    p.add_argument('scenario', choices=sorted(SCENARIOS), help='scenario name')
+    p.add_argument('--seed', type=_seed, default=1, help='random seed (default 1)')
+    p.add_argument('--out', required=True, help='bag directory to create')
+    p.add_argument('--force', action='store_true', help='replace an existing bag directory')
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser('replay', help='publish a bag into the ROS graph (like ros2 bag play)')
+    add_replay_arguments(p)
+    p.set_defaults(func=_cmd_replay)
+
+    p = sub.add_parser('info', help='print the topics, counts and duration of a bag')
+    p.add_argument('bag', help='rosbag2 directory')
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
+    p.add_argument('--bag', default='bags/office', help='bag to evaluate')
+    p.add_argument('--out', default='out', help='output directory')
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        return 130
+    except (BagError, ValueError, OSError) as err:
+        print(f'{PROG}: error: {err}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())

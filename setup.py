@@ -1,0 +1,36 @@
+"""Build script for the landmark_nav ament_python package."""
+
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'landmark_nav'
+
+# One console script per ROS executable; `ros2 run landmark_nav <exe>` finds them in
+# lib/landmark_nav (see setup.cfg), a pip install puts them on PATH.
+EXECUTABLES = {
+    'landmark_nav': 'landmark_nav.tools.cli:main',
+    'bag_player': 'landmark_nav.nodes.bag_player:main',
+}
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        (os.path.join('share', PACKAGE, 'config'), glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='landmark_nav maintainers',
+    maintainer_email='maintainers@landmark-nav.invalid',
+    description='Landmark-based navigation for a differential-drive robot (ROS 2 Jazzy).',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [f'{name} = {target}' for name, target in EXECUTABLES.items()],
+    },
+)
