@@ -1,5 +1,4 @@
-"""
-Conversions between ROS 2 messages and numpy data (the only module knowing both).
+"""Conversions between ROS 2 messages and numpy data (the only module knowing both).
 
 Readers (``*_to_*``) validate the message and return frozen dataclasses holding read-only
 numpy arrays; builders (``make_*``) validate their arguments and return messages that
@@ -31,12 +30,11 @@ from typing import NamedTuple, Optional, Sequence
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseWithCovarianceStamped, Quaternion
+from landmark_nav.geometry import quaternion_to_yaw, yaw_to_quaternion
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 from sensor_msgs.msg import Image, JointState, LaserScan, Range
 from std_msgs.msg import Header
-
-from .geometry import quaternion_to_yaw, yaw_to_quaternion
 
 NS_PER_S = 1_000_000_000
 _MIN_NS = -(2 ** 31) * NS_PER_S
@@ -70,6 +68,12 @@ def _ro(array: np.ndarray) -> np.ndarray:
     return out
 
 
+def _f32(value: float) -> float:
+    """Round to float32, as the wire does, so in-process and received messages agree."""
+    with np.errstate(over='ignore'):
+        return float(np.float32(value))
+
+
 def _finite(value: float, what: str) -> float:
     v = float(value)
     if not math.isfinite(v):
@@ -86,10 +90,10 @@ def stamp_to_ns(stamp: Time) -> int:
 
 
 def ns_to_stamp(ns: int) -> Time:
-    """
-    Convert integer nanoseconds to builtin_interfaces/Time.
+    """Convert integer nanoseconds to builtin_interfaces/Time.
 
-    :raises ConversionError: If ``ns`` is not an integer or does not fit int32 seconds.
+    Raises:
+        ConversionError: If ``ns`` is not an integer or does not fit int32 seconds.
     """
     if isinstance(ns, (bool, np.bool_)) or not isinstance(ns, (int, np.integer)):
         raise ConversionError(f'Time: stamp_ns must be an integer; got {ns!r}')
@@ -133,10 +137,10 @@ class ScanData:
         return self.angle_min + max(self.ranges.size - 1, 0) * self.angle_increment
 
     def points(self) -> tuple[np.ndarray, np.ndarray]:
-        """
-        Cartesian points of the valid beams in the laser frame.
+        """Cartesian points of the valid beams in the laser frame.
 
-        :return: (xy, index): xy of shape (M, 2) in metres, and the (M,) beam indices.
+        Returns:
+            (xy, index): xy of shape (M, 2) in metres, and the (M,) beam indices.
         """
         idx = np.flatnonzero(self.valid)
         r = self.ranges[idx]
@@ -146,10 +150,10 @@ class ScanData:
 
 def classify_ranges(ranges: np.ndarray, range_min: float,
                     range_max: float) -> tuple[np.ndarray, ...]:
-    """
-    Classify ranges per REP 117.
+    """Classify ranges per REP 117.
 
-    :return: (valid, no_return, too_close, error) boolean arrays; exactly one is True per beam.
+    Returns:
+        (valid, no_return, too_close, error) boolean arrays; exactly one is True per beam.
     """
     r = np.asarray(ranges, dtype=float)
     error = np.isnan(r)
@@ -192,26 +196,30 @@ def _check_scan_fields(n: int, angle_min: float, angle_max: float, angle_increme
 
 
 def scan_to_data(msg: LaserScan) -> ScanData:
-    """
-    Validate a LaserScan and convert it to :class:`ScanData`.
+    """Validate a LaserScan and convert it to :class:`ScanData`.
 
-    :raises ConversionError: On non-finite angle/time/range fields, angle_increment <= 0,
-        angle_max < angle_min, range_max <= range_min or range_min < 0, a beam count
-        off by more than one from round((angle_max - angle_min) / inc) + 1, or
-        intensities that are neither empty nor len(ranges) long.
+    Raises:
+        ConversionError: On non-finite angle/time/range fields, angle_increment <= 0,
+            angle_max < angle_min, range_max <= range_min or range_min < 0, a beam count
+            off by more than one from round((angle_max - angle_min) / inc) + 1, or
+            intensities that are neither empty nor len(ranges) long.
     """
-    ranges = np.asarray(msg.ranges, dtype=np.float64)
-    intensities = np.asarray(msg.intensities, dtype=np.float64)
-    _check_scan_fields(ranges.size, msg.angle_min, msg.angle_max, msg.angle_increment,
-                       msg.time_increment, msg.scan_time, msg.range_min, msg.range_max,
+    # float32 fields: an unserialized message may hold float64 values, round them first.
+    ranges = np.asarray(msg.ranges, dtype=np.float32).astype(np.float64)
+    intensities = np.asarray(msg.intensities, dtype=np.float32).astype(np.float64)
+    f = {k: _f32(getattr(msg, k)) for k in (
+        'angle_min', 'angle_max', 'angle_increment', 'time_increment', 'scan_time',
+        'range_min', 'range_max')}
+    _check_scan_fields(ranges.size, f['angle_min'], f['angle_max'], f['angle_increment'],
+                       f['time_increment'], f['scan_time'], f['range_min'], f['range_max'],
                        intensities.size)
-    angles = float(msg.angle_min) + np.arange(ranges.size) * float(msg.angle_increment)
-    masks = classify_ranges(ranges, msg.range_min, msg.range_max)
+    angles = f['angle_min'] + np.arange(ranges.size) * f['angle_increment']
+    masks = classify_ranges(ranges, f['range_min'], f['range_max'])
     return ScanData(
         stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=msg.header.frame_id,
-        angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
-        time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
-        range_min=float(msg.range_min), range_max=float(msg.range_max),
+        angle_min=f['angle_min'], angle_increment=f['angle_increment'],
+        time_increment=f['time_increment'], scan_time=f['scan_time'],
+        range_min=f['range_min'], range_max=f['range_max'],
         ranges=_ro(ranges), angles=_ro(angles), intensities=_ro(intensities),
         valid=_ro(masks[0]), no_return=_ro(masks[1]), too_close=_ro(masks[2]),
         error=_ro(masks[3]))
@@ -221,26 +229,28 @@ def make_scan(stamp_ns: int, frame_id: str, angle_min: float, angle_increment: f
               ranges: Sequence[float], range_min: float, range_max: float,
               time_increment: float = 0.0, scan_time: float = 0.0,
               intensities: Optional[Sequence[float]] = None) -> LaserScan:
-    """
-    Build a LaserScan; angle_max = angle_min + (n - 1) * angle_increment.
+    """Build a LaserScan; angle_max = angle_min + (n - 1) * angle_increment.
 
-    :raises ConversionError: If the fields fail the checks of :func:`scan_to_data`.
+    Float fields are rounded to float32 (the message type) before validation.
+
+    Raises:
+        ConversionError: If the fields fail the checks of :func:`scan_to_data`.
     """
     r = np.asarray(ranges, dtype=np.float32).ravel()
     inten = (np.zeros(0, np.float32) if intensities is None
              else np.asarray(intensities, dtype=np.float32).ravel())
-    angle_max = float(angle_min) + max(r.size - 1, 0) * float(angle_increment)
-    _check_scan_fields(r.size, angle_min, angle_max, angle_increment, time_increment,
-                       scan_time, range_min, range_max, inten.size)
+    a_min, inc = _f32(angle_min), _f32(angle_increment)
+    f = {'angle_min': a_min, 'angle_max': _f32(a_min + max(r.size - 1, 0) * inc),
+         'angle_increment': inc, 'time_increment': _f32(time_increment),
+         'scan_time': _f32(scan_time), 'range_min': _f32(range_min),
+         'range_max': _f32(range_max)}
+    _check_scan_fields(r.size, f['angle_min'], f['angle_max'], f['angle_increment'],
+                       f['time_increment'], f['scan_time'], f['range_min'], f['range_max'],
+                       inten.size)
     msg = LaserScan()
     msg.header = _header(stamp_ns, frame_id)
-    msg.angle_min = float(angle_min)
-    msg.angle_max = angle_max
-    msg.angle_increment = float(angle_increment)
-    msg.time_increment = float(time_increment)
-    msg.scan_time = float(scan_time)
-    msg.range_min = float(range_min)
-    msg.range_max = float(range_max)
+    for name, value in f.items():
+        setattr(msg, name, value)
     msg.ranges = r
     msg.intensities = inten
     return msg
@@ -279,8 +289,7 @@ def cov6_to_cov3(cov6: Sequence[float]) -> np.ndarray:
 
 def cov3_to_cov6(cov3: Optional[np.ndarray], what: str = 'covariance',
                  unused_variance: float = DEFAULT_UNUSED_VARIANCE) -> np.ndarray:
-    """
-    Place a 3x3 (x, y, yaw) covariance into a flat row-major 6x6.
+    """Place a 3x3 (x, y, yaw) covariance into a flat row-major 6x6.
 
     None means a zero 3x3. z, roll and pitch get ``unused_variance`` on the diagonal and 0
     in every cross term.
@@ -350,8 +359,7 @@ def make_odometry(stamp_ns: int, frame_id: str, child_frame_id: str, pose: Seque
                   twist: Optional[Sequence[float]] = None,
                   twist_covariance3: Optional[np.ndarray] = None,
                   unused_variance: float = DEFAULT_UNUSED_VARIANCE) -> Odometry:
-    """
-    Build nav_msgs/Odometry from [x, y, yaw], [vx, vy, wz] and 3x3 covariances.
+    """Build nav_msgs/Odometry from [x, y, yaw], [vx, vy, wz] and 3x3 covariances.
 
     See the module docstring for how the 3x3 blocks are placed in the 6x6 matrices.
     """
@@ -422,17 +430,16 @@ def _check_range_limits(min_range: float, max_range: float) -> None:
 
 
 def range_to_value(msg: Range) -> RangeReading:
-    """
-    Convert sensor_msgs/Range to (stamp_ns, frame_id, range, status).
+    """Convert sensor_msgs/Range to (stamp_ns, frame_id, range, status).
 
     +inf (no detection) and finite values > max_range are 'no_return'; -inf (detection
     too close, also "detected" for fixed-distance rangers) and finite values < min_range
     are 'too_close'; NaN is 'error'.
     """
-    _check_range_limits(msg.min_range, msg.max_range)
-    return RangeReading(stamp_to_ns(msg.header.stamp), msg.header.frame_id,
-                        float(msg.range), range_status(msg.range, msg.min_range,
-                                                       msg.max_range))
+    lo, hi, value = _f32(msg.min_range), _f32(msg.max_range), _f32(msg.range)
+    _check_range_limits(lo, hi)
+    return RangeReading(stamp_to_ns(msg.header.stamp), msg.header.frame_id, value,
+                        range_status(value, lo, hi))
 
 
 def make_range(stamp_ns: int, frame_id: str, value: float, field_of_view: float,
@@ -458,14 +465,14 @@ def make_range(stamp_ns: int, frame_id: str, value: float, field_of_view: float,
 
 
 def image_to_array(msg: Image) -> np.ndarray:
-    """
-    Convert sensor_msgs/Image to a new contiguous array (H, W) or (H, W, 3).
+    """Convert sensor_msgs/Image to a new contiguous array (H, W) or (H, W, 3).
 
     Supports mono8, rgb8, bgr8 (uint8) and 16UC1/mono16 (uint16, native byte order);
     honours ``step`` padding and ``is_bigendian``.
 
-    :raises ConversionError: Unsupported encoding, step < width * bytes per pixel, or
-        len(data) != step * height.
+    Raises:
+        ConversionError: Unsupported encoding, step < width * bytes per pixel, or
+            len(data) != step * height.
     """
     enc = msg.encoding
     if enc not in _ENCODINGS:
@@ -483,22 +490,21 @@ def image_to_array(msg: Image) -> np.ndarray:
             f'Image: len(data)={buf.size} but step*height={step}*{h}={step * h}')
     rows = buf.reshape(h, step)[:, :row_bytes]
     order = '>' if (nbytes > 1 and msg.is_bigendian) else '<'
-    arr = np.ascontiguousarray(rows).view(np.dtype(order + kind))
-    arr = arr.astype(np.dtype(kind), copy=True)  # native byte order, new memory
     shape = (h, w) if channels == 1 else (h, w, channels)
-    return np.ascontiguousarray(arr.reshape(shape))
+    arr = np.ascontiguousarray(rows).view(np.dtype(order + kind)).reshape(shape)
+    return arr.astype(np.dtype(kind), order='C', copy=True)  # native byte order, new memory
 
 
 def array_to_image(array: np.ndarray, encoding: str, stamp_ns: int = 0, frame_id: str = '',
                    is_bigendian: bool = False) -> Image:
-    """
-    Build sensor_msgs/Image (unpadded rows) from a uint8 or uint16 array.
+    """Build sensor_msgs/Image (unpadded rows) from a uint8 or uint16 array.
 
-    :param array: (H, W) for mono8/16UC1/mono16 or (H, W, 3) for rgb8/bgr8.
-    :param encoding: One of mono8, rgb8, bgr8, 16UC1, mono16.
-    :param stamp_ns: Header stamp in ns.
-    :param frame_id: Header frame_id.
-    :param is_bigendian: Byte order to write 16-bit data in.
+    Args:
+        array: (H, W) for mono8/16UC1/mono16 or (H, W, 3) for rgb8/bgr8.
+        encoding: One of mono8, rgb8, bgr8, 16UC1, mono16.
+        stamp_ns: Header stamp in ns.
+        frame_id: Header frame_id.
+        is_bigendian: Byte order to write 16-bit data in.
     """
     if encoding not in _ENCODINGS:
         raise ConversionError(
@@ -549,10 +555,10 @@ class GridData:
 
 
 def grid_to_data(msg: OccupancyGrid) -> GridData:
-    """
-    Convert nav_msgs/OccupancyGrid to :class:`GridData` (values are not checked).
+    """Convert nav_msgs/OccupancyGrid to :class:`GridData` (values are not checked).
 
-    :raises ConversionError: If len(data) != width * height or resolution is not > 0.
+    Raises:
+        ConversionError: If len(data) != width * height or resolution is not > 0.
     """
     info = msg.info
     w, h = int(info.width), int(info.height)
@@ -570,10 +576,10 @@ def grid_to_data(msg: OccupancyGrid) -> GridData:
 
 def make_occupancy_grid(data: np.ndarray, resolution: float, origin: Sequence[float],
                         frame_id: str = 'map', stamp_ns: int = 0) -> OccupancyGrid:
-    """
-    Build nav_msgs/OccupancyGrid from an (H, W) array with values in {-1} or [0, 100].
+    """Build nav_msgs/OccupancyGrid from an (H, W) array with values in {-1} or [0, 100].
 
-    :raises ConversionError: On a non-2D array, values outside [-1, 100] or resolution <= 0.
+    Raises:
+        ConversionError: On a non-2D array, values outside [-1, 100] or resolution <= 0.
     """
     a = np.asarray(data)
     if a.ndim != 2:

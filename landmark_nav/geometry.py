@@ -1,5 +1,4 @@
-"""
-SE(2) pose algebra, point transforms and small helpers (pure numpy).
+"""SE(2) pose algebra, point transforms and small helpers (pure numpy).
 
 A pose is an array ``[x, y, theta]`` (m, m, rad) of shape ``(3,)`` or ``(..., 3)``;
 functions broadcast over leading axes where that is natural. Frames follow REP 103
@@ -34,11 +33,13 @@ TWO_PI = 2.0 * math.pi
 
 
 def wrap_angle(a: ArrayLike) -> Union[float, np.ndarray]:
-    """
-    Wrap angle(s) to the half-open interval [-pi, pi).
+    """Wrap angle(s) to the half-open interval [-pi, pi).
 
-    :param a: Angle or array of angles (rad); any magnitude.
-    :return: A float for scalar input, otherwise an array of the same shape. ``pi`` maps to
+    Args:
+        a: Angle or array of angles (rad); any magnitude.
+
+    Returns:
+        A float for scalar input, otherwise an array of the same shape. ``pi`` maps to
         ``-pi``; NaN and +-inf give NaN.
     """
     arr = np.asarray(a, dtype=float)
@@ -61,12 +62,14 @@ def _as_pose(x: ArrayLike, name: str = 'pose') -> np.ndarray:
 
 
 def compose(x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
-    """
-    Compose two poses, x1 ⊕ x2 (eq. 16).
+    """Compose two poses, x1 ⊕ x2 (eq. 16).
 
-    :param x1: Pose of frame 1 in frame 0, shape (..., 3).
-    :param x2: Pose of frame 2 in frame 1, shape (..., 3).
-    :return: Pose of frame 2 in frame 0, shape broadcast(x1, x2).
+    Args:
+        x1: Pose of frame 1 in frame 0, shape (..., 3).
+        x2: Pose of frame 2 in frame 1, shape (..., 3).
+
+    Returns:
+        Pose of frame 2 in frame 0, shape broadcast(x1, x2).
     """
     p1 = _as_pose(x1, 'x1')
     p2 = _as_pose(x2, 'x2')
@@ -79,11 +82,13 @@ def compose(x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
 
 
 def inverse(x: ArrayLike) -> np.ndarray:
-    """
-    Invert a pose, ⊖x (eq. 17).
+    """Invert a pose, ⊖x (eq. 17).
 
-    :param x: Pose of frame 1 in frame 0, shape (..., 3).
-    :return: Pose of frame 0 in frame 1, same shape.
+    Args:
+        x: Pose of frame 1 in frame 0, shape (..., 3).
+
+    Returns:
+        Pose of frame 0 in frame 1, same shape.
     """
     p = _as_pose(x, 'x')
     c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
@@ -94,23 +99,27 @@ def inverse(x: ArrayLike) -> np.ndarray:
 
 
 def relative(x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
-    """
-    Return ⊖x1 ⊕ x2, the pose of x2 seen from x1 (eq. 13, odometry increment).
+    """Return ⊖x1 ⊕ x2, the pose of x2 seen from x1 (eq. 13, odometry increment).
 
-    :param x1: Earlier pose (e.g. odometry at k-1), shape (..., 3).
-    :param x2: Later pose (e.g. odometry at k), shape (..., 3).
-    :return: The increment u with ``compose(x1, u) == x2``.
+    Args:
+        x1: Earlier pose (e.g. odometry at k-1), shape (..., 3).
+        x2: Later pose (e.g. odometry at k), shape (..., 3).
+
+    Returns:
+        The increment u with ``compose(x1, u) == x2``.
     """
     return compose(inverse(x1), x2)  # eq. 13
 
 
 def compose_jacobians(x1: ArrayLike, x2: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """
-    Jacobians of x1 ⊕ x2 with respect to x1 and x2 (eqs. 27-30).
+    """Jacobians of x1 ⊕ x2 with respect to x1 and x2 (eqs. 27-30).
 
-    :param x1: Pose, shape (..., 3).
-    :param x2: Pose, shape (..., 3).
-    :return: (J1, J2), each of shape broadcast(...) + (3, 3).
+    Args:
+        x1: Pose, shape (..., 3).
+        x2: Pose, shape (..., 3).
+
+    Returns:
+        (J1, J2), each of shape broadcast(...) + (3, 3).
     """
     p1 = _as_pose(x1, 'x1')
     p2 = _as_pose(x2, 'x2')
@@ -136,11 +145,13 @@ def compose_jacobians(x1: ArrayLike, x2: ArrayLike) -> tuple[np.ndarray, np.ndar
 
 
 def inverse_jacobian(x: ArrayLike) -> np.ndarray:
-    """
-    Jacobian of ⊖x with respect to x (derivative of eq. 17).
+    """Jacobian of ⊖x with respect to x (derivative of eq. 17).
 
-    :param x: Pose, shape (..., 3).
-    :return: Array of shape (..., 3, 3).
+    Args:
+        x: Pose, shape (..., 3).
+
+    Returns:
+        Array of shape (..., 3, 3).
     """
     p = _as_pose(x, 'x')
     c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
@@ -157,13 +168,15 @@ def inverse_jacobian(x: ArrayLike) -> np.ndarray:
 
 
 def transform_points(pose: ArrayLike, points: ArrayLike) -> np.ndarray:
-    """
-    Express points given in frame ``pose`` in the parent frame.
+    """Express points given in frame ``pose`` in the parent frame.
 
-    :param pose: Pose of the child frame in the parent frame, shape (3,) (or (..., 3)
-        broadcasting against the leading axes of ``points``).
-    :param points: Points in the child frame, shape (N, 2) or (..., 2).
-    :return: Points in the parent frame, ``R(theta) p + t``, same shape as ``points``.
+    Args:
+        pose: Pose of the child frame in the parent frame, shape (3,) (or (..., 3)
+            broadcasting against the leading axes of ``points``).
+        points: Points in the child frame, shape (N, 2) or (..., 2).
+
+    Returns:
+        Points in the parent frame, ``R(theta) p + t``, same shape as ``points``.
     """
     p = _as_pose(pose)
     pts = np.asarray(points, dtype=float)
@@ -176,12 +189,14 @@ def transform_points(pose: ArrayLike, points: ArrayLike) -> np.ndarray:
 
 
 def inverse_transform_points(pose: ArrayLike, points: ArrayLike) -> np.ndarray:
-    """
-    Express points given in the parent frame in frame ``pose``.
+    """Express points given in the parent frame in frame ``pose``.
 
-    :param pose: Pose of the child frame in the parent frame, shape (3,) or (..., 3).
-    :param points: Points in the parent frame, shape (N, 2) or (..., 2).
-    :return: Points in the child frame, ``R(theta)^T (p - t)``.
+    Args:
+        pose: Pose of the child frame in the parent frame, shape (3,) or (..., 3).
+        points: Points in the parent frame, shape (N, 2) or (..., 2).
+
+    Returns:
+        Points in the child frame, ``R(theta)^T (p - t)``.
     """
     p = _as_pose(pose)
     pts = np.asarray(points, dtype=float)
@@ -194,24 +209,30 @@ def inverse_transform_points(pose: ArrayLike, points: ArrayLike) -> np.ndarray:
 
 
 def sensor_to_base(points: ArrayLike, sensor_pose: ArrayLike) -> np.ndarray:
-    """
-    Transform points from a 2D sensor frame into base_link.
+    """Transform points from a 2D sensor frame into base_link.
 
-    :param points: Points in the sensor frame, shape (N, 2).
-    :param sensor_pose: Mounting ``[x, y, yaw]`` of the sensor in base_link (see module doc).
-    :return: Points in base_link, shape (N, 2).
+    Args:
+        points: Points in the sensor frame, shape (N, 2).
+        sensor_pose: Mounting ``[x, y, yaw]`` of the sensor in base_link (see module doc).
+
+    Returns:
+        Points in base_link, shape (N, 2).
     """
     return transform_points(sensor_pose, points)
 
 
 def validate_pose_parameter(values: Sequence[float], name: str) -> np.ndarray:
-    """
-    Check a ``[x, y, yaw]`` parameter value and return it as a float array.
+    """Check a ``[x, y, yaw]`` parameter value and return it as a float array.
 
-    :param values: The parameter value, e.g. ``[0.2, 0.0, 0.0]``.
-    :param name: Parameter name, used in the error message.
-    :return: Array of shape (3,), dtype float64 (yaw returned as given, not wrapped).
-    :raises ValueError: If ``values`` is not 3 finite real numbers.
+    Args:
+        values: The parameter value, e.g. ``[0.2, 0.0, 0.0]``.
+        name: Parameter name, used in the error message.
+
+    Returns:
+        Array of shape (3,), dtype float64 (yaw returned as given, not wrapped).
+
+    Raises:
+        ValueError: If ``values`` is not 3 finite real numbers.
     """
     expect = f'parameter "{name}" must be a list of 3 finite numbers [x, y, yaw] (m, m, rad)'
     if isinstance(values, (str, bytes)) or not hasattr(values, '__len__'):
@@ -230,11 +251,13 @@ def validate_pose_parameter(values: Sequence[float], name: str) -> np.ndarray:
 
 
 def yaw_to_quaternion(yaw: ArrayLike) -> np.ndarray:
-    """
-    Quaternion of a rotation by ``yaw`` about z.
+    """Quaternion of a rotation by ``yaw`` about z.
 
-    :param yaw: Angle(s) in rad.
-    :return: Array ``[x, y, z, w]`` of shape (..., 4); for a scalar yaw, shape (4,) which
+    Args:
+        yaw: Angle(s) in rad.
+
+    Returns:
+        Array ``[x, y, z, w]`` of shape (..., 4); for a scalar yaw, shape (4,) which
         unpacks as ``x, y, z, w = yaw_to_quaternion(yaw)``.
     """
     half = 0.5 * np.asarray(yaw, dtype=float)
@@ -244,18 +267,22 @@ def yaw_to_quaternion(yaw: ArrayLike) -> np.ndarray:
 
 def quaternion_to_yaw(x: ArrayLike, y: ArrayLike, z: ArrayLike,
                       w: ArrayLike) -> Union[float, np.ndarray]:
-    """
-    Yaw (z-y-x Euler, about z) of a possibly non-normalised 3D quaternion.
+    """Yaw (z-y-x Euler, about z) of a possibly non-normalised 3D quaternion.
 
     The formula is homogeneous in the quaternion, so any non-zero scale gives the same
     yaw. At pitch = +-pi/2 (gimbal lock) yaw is undefined and 0 is returned.
 
-    :param x: Quaternion x component(s).
-    :param y: Quaternion y component(s).
-    :param z: Quaternion z component(s).
-    :param w: Quaternion w component(s).
-    :return: Yaw in [-pi, pi); float for scalar input.
-    :raises ValueError: If a quaternion is zero or not finite.
+    Args:
+        x: Quaternion x component(s).
+        y: Quaternion y component(s).
+        z: Quaternion z component(s).
+        w: Quaternion w component(s).
+
+    Returns:
+        Yaw in [-pi, pi); float for scalar input.
+
+    Raises:
+        ValueError: If a quaternion is zero or not finite.
     """
     qx, qy, qz, qw = (np.asarray(v, dtype=float) for v in (x, y, z, w))
     norm2 = qx * qx + qy * qy + qz * qz + qw * qw
@@ -267,17 +294,21 @@ def quaternion_to_yaw(x: ArrayLike, y: ArrayLike, z: ArrayLike,
 
 def interpolate_pose(t: ArrayLike, times: ArrayLike, poses: ArrayLike,
                      extrapolate: bool = False) -> np.ndarray:
-    """
-    Linearly interpolate poses in time; theta follows the shortest arc.
+    """Linearly interpolate poses in time; theta follows the shortest arc.
 
-    :param t: Query time(s), scalar or shape (M,).
-    :param times: Sample times, shape (N,), non-decreasing.
-    :param poses: Sample poses, shape (N, 3).
-    :param extrapolate: If True, times outside [times[0], times[-1]] are extrapolated
-        linearly from the first/last interval (a single sample is held constant).
-    :return: Pose(s), shape (3,) for scalar ``t``, otherwise (M, 3).
-    :raises ValueError: On bad shapes, unsorted or non-finite times, or ``t`` out of range
-        when ``extrapolate`` is False.
+    Args:
+        t: Query time(s), scalar or shape (M,).
+        times: Sample times, shape (N,), non-decreasing.
+        poses: Sample poses, shape (N, 3).
+        extrapolate: If True, times outside [times[0], times[-1]] are extrapolated
+            linearly from the first/last interval (a single sample is held constant).
+
+    Returns:
+        Pose(s), shape (3,) for scalar ``t``, otherwise (M, 3).
+
+    Raises:
+        ValueError: On bad shapes, unsorted or non-finite times, or ``t`` out of range
+            when ``extrapolate`` is False.
     """
     ts = np.asarray(times, dtype=float)
     ps = np.asarray(poses, dtype=float)

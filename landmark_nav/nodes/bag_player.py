@@ -64,7 +64,7 @@ class BagPlayer(Node):
         missing = [t for t in wanted if t not in topics]
         if missing:
             raise BagError(f'{bag_path} has no topic {", ".join(missing)}')
-        self._publishers = {}
+        self._topic_publishers = {}
         for name in wanted:
             info = topics[name]
             qos = QoSProfile(
@@ -73,7 +73,7 @@ class BagPlayer(Node):
                 reliability=ReliabilityPolicy.RELIABLE,
                 durability=(DurabilityPolicy.TRANSIENT_LOCAL if info.latched
                             else DurabilityPolicy.VOLATILE))
-            self._publishers[name] = self.create_publisher(
+            self._topic_publishers[name] = self.create_publisher(
                 message_class(info.type_name), name, qos)
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if options.clock_hz > 0 else None)
@@ -83,10 +83,10 @@ class BagPlayer(Node):
         """Wait until every played topic has a subscriber, up to the configured time."""
         deadline = time.monotonic() + self.options.wait_for_subscribers_s
         while time.monotonic() < deadline:
-            if all(p.get_subscription_count() > 0 for p in self._publishers.values()):
+            if all(p.get_subscription_count() > 0 for p in self._topic_publishers.values()):
                 return True
             time.sleep(0.02)
-        lonely = [t for t, p in self._publishers.items() if p.get_subscription_count() == 0]
+        lonely = [t for t, p in self._topic_publishers.items() if p.get_subscription_count() == 0]
         if lonely:
             self.get_logger().warning(f'No subscriber yet on {", ".join(lonely)}; playing')
         return not lonely
@@ -117,7 +117,7 @@ class BagPlayer(Node):
         with BagReader(self.bag_path) as reader:
             first_ns = reader.start_ns
             wall_start = time.monotonic()
-            for item in reader.messages(tuple(self._publishers)):
+            for item in reader.messages(tuple(self._topic_publishers)):
                 due = due_after_start_s(item.log_time_ns, first_ns, self.options)
                 if due < 0:
                     continue
@@ -126,7 +126,7 @@ class BagPlayer(Node):
                     break
                 if self._clock_pub:
                     self._publish_clock(item.log_time_ns)
-                self._publishers[item.topic].publish(item.data)
+                self._topic_publishers[item.topic].publish(item.data)
                 count += 1
         self.published += count
         return count
@@ -152,7 +152,7 @@ def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> i
         player = BagPlayer(bag, options)
         published = player.play()
         # Give reliable transports a moment to deliver the tail of the stream.
-        for pub in player._publishers.values():
+        for pub in player._topic_publishers.values():
             pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2.0))
         player.get_logger().info(f'Published {published} messages from {bag}')
         return published
