@@ -389,7 +389,7 @@ class World:
             wx = seg[None, :, 0] - o[:, 0:1]
             wy = seg[None, :, 1] - o[:, 1:2]
             denom = dx[:, None] * ey[None, :] - dy[:, None] * ex[None, :]  # d x e
-            with np.errstate(divide='ignore', invalid='ignore'):
+            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
                 t = (wx * ey[None, :] - wy * ex[None, :]) / denom  # (w x e) / (d x e)
                 s = (wx * dy[:, None] - wy * dx[:, None]) / denom  # (w x d) / (d x e)
             valid = (denom != 0.0) & (t > 0.0) & (s >= -_S_SLACK) & (s <= 1.0 + _S_SLACK)

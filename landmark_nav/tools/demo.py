@@ -1,0 +1,127 @@
+"""The main job at this stage: odometry drift on a recorded bag, as a plot and a summary.
+
+Reads ``/ground_truth/odom`` and ``/odom`` straight from the bag (no DDS), draws the world
+from the bag's ``ground_truth.yaml`` with both paths, and writes ``world_paths.png`` and
+``summary.txt`` (also returned) into the output directory.
+"""
+
+from pathlib import Path
+
+from landmark_nav.bag import BagReader
+from landmark_nav.conversions import odometry_to_pose
+from landmark_nav.geometry import wrap_angle
+from landmark_nav.sim.record import load_ground_truth
+from landmark_nav.sim.world import World
+import numpy as np
+
+
+def read_poses(bag_dir, topic: str):
+    """Return (stamps_ns (N,), poses (N, 3)) of an Odometry topic."""
+    stamps, poses = [], []
+    with BagReader(bag_dir) as reader:
+        for _, _, msg in reader.decoded([topic]):
+            data = odometry_to_pose(msg)
+            stamps.append(data.stamp_ns)
+            poses.append(data.pose)
+    if not stamps:
+        raise ValueError(f'{bag_dir} has no messages on {topic}')
+    return np.asarray(stamps, dtype=np.int64), np.asarray(poses)
+
+
+def odometry_drift(truth: np.ndarray, odom: np.ndarray) -> dict:
+    """Drift figures of odometry vs truth sampled at the same stamps (both (N, 3)).
+
+    The odometry frame coincides with the world at the first sample, so errors are plain
+    differences; heading errors are wrapped.
+    """
+    steps = np.linalg.norm(np.diff(truth[:, :2], axis=0), axis=1)
+    travelled = np.concatenate([[0.0], np.cumsum(steps)])
+    pos_err = np.linalg.norm(odom[:, :2] - truth[:, :2], axis=1)
+    yaw_err = np.abs(wrap_angle(odom[:, 2] - truth[:, 2]))
+    at = {}
+    for frac in (0.25, 0.5, 0.75, 1.0):
+        i = int(np.searchsorted(travelled, frac * travelled[-1]))
+        i = min(i, len(travelled) - 1)
+        at[f'{int(frac * 100)}%'] = {'distance_m': float(travelled[i]),
+                                     'position_error_m': float(pos_err[i]),
+                                     'heading_error_deg': float(np.degrees(yaw_err[i]))}
+    return {
+        'path_length_m': float(travelled[-1]),
+        'final_position_error_m': float(pos_err[-1]),
+        'final_heading_error_deg': float(np.degrees(yaw_err[-1])),
+        'max_position_error_m': float(pos_err.max()),
+        'max_heading_error_deg': float(np.degrees(yaw_err.max())),
+        'final_error_percent_of_distance': float(100.0 * pos_err[-1] / max(travelled[-1], 1e-9)),
+        'along_path': at,
+        'position_error_m': pos_err,
+    }
+
+
+def plot_world_paths(world: World, truth: np.ndarray, odom: np.ndarray, path: Path,
+                     title: str) -> None:
+    """Draw walls, round obstacles, true corners and the two paths into a PNG."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 7), dpi=110)
+    for x1, y1, x2, y2 in world.segments:
+        ax.plot([x1, x2], [y1, y2], color='0.15', lw=2)
+    for cx, cy, r in world.circles:
+        ax.add_patch(plt.Circle((cx, cy), r, color='0.3'))
+    corners = world.corners().positions
+    if len(corners):
+        ax.scatter(corners[:, 0], corners[:, 1], marker='s', s=18, color='tab:orange',
+                   label=f'true corners ({len(corners)})', zorder=3)
+    ax.plot(truth[:, 0], truth[:, 1], color='tab:green', lw=1.5, label='ground truth')
+    ax.plot(odom[:, 0], odom[:, 1], color='tab:red', lw=1.2, ls='--', label='odometry')
+    ax.plot(truth[0, 0], truth[0, 1], 'k^', label='start')
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run_demo(bag, out) -> str:
+    """Write world_paths.png and summary.txt for a simulator bag; return the summary."""
+    bag, out = Path(bag), Path(out)
+    truth_meta = load_ground_truth(bag)
+    t_truth, truth = read_poses(bag, '/ground_truth/odom')
+    t_odom, odom = read_poses(bag, '/odom')
+    common, i_truth, i_odom = np.intersect1d(t_truth, t_odom, return_indices=True)
+    if len(common) < 2:
+        raise ValueError(f'{bag}: /odom and /ground_truth/odom share fewer than 2 stamps')
+    truth, odom = truth[i_truth], odom[i_odom]
+    drift = odometry_drift(truth, odom)
+    out.mkdir(parents=True, exist_ok=True)
+    name = truth_meta.get('scenario', bag.name)
+    plot_world_paths(World.from_dict(truth_meta['world']), truth, odom, out / 'world_paths.png',
+                     f'{name} (seed {truth_meta.get("seed")}): ground truth vs odometry')
+    robot = truth_meta.get('robot', {})
+    lines = [
+        f'bag: {bag}',
+        f'scenario: {name}, seed {truth_meta.get("seed")}, '
+        f'{(common[-1] - common[0]) / 1e9:.1f} s, {len(common)} odometry samples',
+        f'simulated calibration factors: k1={robot.get("k1")}, k2={robot.get("k2")}, '
+        f'k3={robot.get("k3")}',
+        f'path length: {drift["path_length_m"]:.2f} m',
+        f'odometry final position error: {drift["final_position_error_m"]:.3f} m '
+        f'({drift["final_error_percent_of_distance"]:.2f} % of distance)',
+        f'odometry final heading error: {drift["final_heading_error_deg"]:.2f} deg',
+        f'odometry max position error: {drift["max_position_error_m"]:.3f} m, '
+        f'max heading error: {drift["max_heading_error_deg"]:.2f} deg',
+        'drift along the path:',
+    ]
+    for key, row in drift['along_path'].items():
+        lines.append(f'  {key:>4} ({row["distance_m"]:6.2f} m): position error '
+                     f'{row["position_error_m"]:.3f} m, heading error '
+                     f'{row["heading_error_deg"]:.2f} deg')
+    lines.append(f'plot: {out / "world_paths.png"}')
+    summary = '\n'.join(lines)
+    (out / 'summary.txt').write_text(summary + '\n')
+    return summary
