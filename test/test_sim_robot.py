@@ -71,8 +71,6 @@ def test_straight_command_curvature_eqs_17_18():
     # Eqs. 1-3 with constant D, dth put every pose on one circle (regular polygon).
     dth = w * p.sample_time
     rho = v * p.sample_time / (2.0 * math.sin(0.5 * dth))
-    centre = np.array([0.0, rho * math.cos(0.5 * dth)]) + \
-        np.array([-rho * math.sin(0.5 * dth), 0.0]) * 0.0
     centre = _circle_centre(traj.poses[:3, :2])
     dist = np.hypot(*(traj.poses[:, :2] - centre).T)
     assert dist == pytest.approx(np.full(n + 1, rho), rel=1e-9)

@@ -40,7 +40,8 @@ class BagMessage:
 
 
 _READ_ERRORS = (ReaderError, OSError, KeyError, ValueError, struct.error, EOFError,
-                AssertionError, IndexError, TypeError, UnicodeDecodeError)
+                AssertionError, IndexError, TypeError, UnicodeDecodeError, MemoryError,
+                OverflowError)
 
 
 class BagReader:

@@ -5,6 +5,7 @@ seed, ...) as one line on stderr and exits with status 2; no tracebacks.
 """
 
 import argparse
+import os
 import sys
 from typing import List, Optional
 
@@ -98,6 +99,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     except (BagError, ValueError, OSError) as err:
         print(f'{PROG}: error: {err}', file=sys.stderr)
         return 2
+    except Exception as err:  # last resort: still one line, with a way to get the trace
+        if os.environ.get('LANDMARK_NAV_DEBUG'):
+            raise
+        print(f'{PROG}: internal error: {type(err).__name__}: {err} '
+              '(set LANDMARK_NAV_DEBUG=1 for a traceback)', file=sys.stderr)
+        return 1
 
 
 if __name__ == '__main__':

@@ -1,0 +1,75 @@
+"""Bad input to the command line: one line on stderr, non-zero exit, never a traceback."""
+
+import subprocess
+import sys
+
+import pytest
+from test_bag import write_small_bag
+
+
+def run_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, '-m', 'landmark_nav.tools.cli', *map(str, args)],
+                          capture_output=True, text=True, timeout=120, cwd=cwd)
+
+
+def assert_one_line_error(result, *needles):
+    assert result.returncode != 0
+    assert 'Traceback' not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert 'error' in lines[0]
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+
+
+def test_missing_bag(tmp_path):
+    for command in ('info', 'replay'):
+        assert_one_line_error(run_cli(command, tmp_path / 'nope'), 'nope')
+    assert_one_line_error(run_cli('demo', '--bag', tmp_path / 'nope', '--out', tmp_path / 'o'))
+
+
+def test_corrupt_mcap(tmp_path):
+    bag = tmp_path / 'b'
+    write_small_bag(bag)
+    mcap = bag / 'b.mcap'
+    data = bytearray(mcap.read_bytes())
+    for i in range(200, len(data) - 200, 37):  # scramble the body, keep the file size
+        data[i] ^= 0x5A
+    mcap.write_bytes(bytes(data))
+    assert_one_line_error(run_cli('replay', bag, '--rate', '100'))
+    assert_one_line_error(run_cli('info', bag))
+
+
+def test_not_a_bag(tmp_path):
+    (tmp_path / 'dir').mkdir()
+    assert_one_line_error(run_cli('info', tmp_path / 'dir'), 'metadata.yaml')
+    (tmp_path / 'x.mcap').write_bytes(b'not an mcap file at all')
+    assert_one_line_error(run_cli('info', tmp_path / 'x.mcap'))
+
+
+def test_unknown_scenario(tmp_path):
+    assert_one_line_error(run_cli('simulate', 'moon', '--out', tmp_path / 'b'), 'moon',
+                          'office')
+    assert not (tmp_path / 'b').exists()
+
+
+@pytest.mark.parametrize('seed', ['-1', 'abc', '1.5', str(2**32)])
+def test_bad_seed(tmp_path, seed):
+    assert_one_line_error(run_cli('simulate', 'office', '--seed', seed, '--out', tmp_path / 'b'),
+                          'seed')
+
+
+def test_existing_output_is_not_overwritten(tmp_path):
+    (tmp_path / 'b').mkdir()
+    assert_one_line_error(run_cli('simulate', 'calibration', '--out', tmp_path / 'b'), 'exists')
+
+
+def test_bad_replay_options(tmp_path):
+    write_small_bag(tmp_path / 'b')
+    assert_one_line_error(run_cli('replay', tmp_path / 'b', '--rate', '0'), 'rate')
+    assert_one_line_error(run_cli('replay', tmp_path / 'b', '--topics', '/nope'), '/nope')
+
+
+def test_usage_errors_are_one_line():
+    assert_one_line_error(run_cli())
+    assert_one_line_error(run_cli('frobnicate'))

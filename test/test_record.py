@@ -1,0 +1,112 @@
+"""Simulator recordings: determinism at message level, ground truth, committed bags."""
+
+from pathlib import Path
+
+from landmark_nav.bag import BagReader
+from landmark_nav.conversions import odometry_to_pose, range_to_value, scan_to_data
+from landmark_nav.sim.record import load_ground_truth, record_scenario, sonar_topic
+from landmark_nav.sim.world import World
+from landmark_nav.tools.bag_info import bag_size_bytes
+from landmark_nav.tools.demo import run_demo
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+COMMITTED = {'office': 1, 'hallway': 1, 'calibration': 1}  # scenario -> seed (Makefile)
+
+
+def content(bag, topics):
+    """Decode the given topics into comparable plain arrays."""
+    out = {}
+    with BagReader(bag) as reader:
+        for topic, log_ns, msg in reader.decoded(topics):
+            if topic == '/scan':
+                d = scan_to_data(msg)
+                row = np.concatenate([[d.stamp_ns, log_ns], d.ranges])
+            elif topic.startswith('/sonar'):
+                r = range_to_value(msg)
+                row = np.array([r.stamp_ns, log_ns, r.value])
+            else:
+                p = odometry_to_pose(msg)
+                row = np.concatenate([[p.stamp_ns, log_ns], p.pose, p.covariance.ravel()])
+            out.setdefault(topic, []).append(row)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+TOPICS = ['/odom', '/ground_truth/odom', '/scan', sonar_topic(3)]
+
+
+@pytest.fixture(scope='module')
+def office(tmp_path_factory):
+    bag = tmp_path_factory.mktemp('rec') / 'office'
+    record_scenario('office', 7, bag)
+    return bag
+
+
+def test_same_seed_same_messages(office, tmp_path):
+    again = tmp_path / 'again'
+    record_scenario('office', 7, again)
+    a, b = content(office, TOPICS), content(again, TOPICS)
+    assert a.keys() == b.keys() == set(TOPICS)
+    for topic in TOPICS:
+        np.testing.assert_array_equal(a[topic], b[topic], err_msg=topic)
+
+
+def test_other_seed_other_messages(office, tmp_path):
+    other = tmp_path / 'other'
+    record_scenario('office', 8, other)
+    a, b = content(office, ['/scan']), content(other, ['/scan'])
+    assert not np.array_equal(a['/scan'], b['/scan'])
+
+
+def test_recording_is_consistent(office):
+    meta = load_ground_truth(office)
+    world = World.from_dict(meta['world'])
+    with BagReader(office) as reader:
+        topics = reader.topics()
+        corners = next(m for _, _, m in reader.decoded(['/ground_truth/corners']))
+        states = [m for _, _, m in reader.decoded(['/joint_states'])]
+    assert topics['/ground_truth/corners'].latched
+    assert len(corners.poses) == len(world.corners().ids) == len(meta['world']['corners'])
+    np.testing.assert_allclose([[p.position.x, p.position.y] for p in corners.poses],
+                               world.corners().positions)
+    assert all(list(s.name) == ['left_wheel_joint', 'right_wheel_joint'] for s in states)
+    c = content(office, TOPICS)
+    # Odometry and ground truth at 10 Hz on the same stamps; header stamp == log time.
+    np.testing.assert_array_equal(c['/odom'][:, 0], c['/ground_truth/odom'][:, 0])
+    assert np.allclose(np.diff(c['/odom'][:, 0]), 1e8)
+    for rows in c.values():
+        np.testing.assert_array_equal(rows[:, 0], rows[:, 1])
+    # Odometry starts at the true pose; truth has zero covariance.
+    np.testing.assert_allclose(c['/odom'][0, 2:5], c['/ground_truth/odom'][0, 2:5], atol=1e-12)
+    assert not c['/ground_truth/odom'][:, 5:].any()
+    # Laser: REP 117 (no-return beams are +inf, no negative or NaN values).
+    ranges = c['/scan'][:, 2:]
+    assert np.isposinf(ranges).any() and not np.isnan(ranges).any()
+    assert (ranges[np.isfinite(ranges)] > 0).all()
+    assert ranges.shape[1] == 361
+
+
+def test_demo_writes_plot_and_summary(office, tmp_path):
+    summary = run_demo(office, tmp_path / 'out')
+    png = tmp_path / 'out' / 'world_paths.png'
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert (tmp_path / 'out' / 'summary.txt').read_text().strip() == summary
+    assert 'odometry final position error' in summary
+
+
+@pytest.mark.parametrize('scenario', sorted(COMMITTED))
+def test_committed_bag_is_small_and_reproducible(scenario, tmp_path):
+    bag = REPO / 'bags' / scenario
+    assert (bag / 'metadata.yaml').is_file(), f'{bag} missing: run `make bags`'
+    assert bag_size_bytes(bag) < 10 * 1024 * 1024
+    meta = load_ground_truth(bag)
+    assert meta['scenario'] == scenario and meta['seed'] == COMMITTED[scenario]
+    fresh = tmp_path / scenario
+    record_scenario(scenario, COMMITTED[scenario], fresh)
+    with BagReader(bag) as reader:
+        topics = [t for t in ('/odom', '/scan', sonar_topic(0)) if t in reader.topics()]
+    a, b = content(bag, topics), content(fresh, topics)
+    for topic in topics:
+        np.testing.assert_array_equal(a[topic], b[topic], err_msg=topic)
+    assert load_ground_truth(fresh) == meta
