@@ -148,6 +148,18 @@ def waypoint_mission(points: Sequence[Sequence[float]], params: RobotParams,
     return out
 
 
+def brake_speed(dist: float, accel: float, dt: float, final: float = 0.0) -> float:
+    """Largest speed that can still brake to ``final`` within ``dist`` in steps of ``dt``.
+
+    With per-step decrements ``dv = accel dt`` the braking distance from speed ``u`` is
+    about ``dt (u^2 / (2 dv) + u / 2)``; solving for ``u`` avoids the overshoot of the
+    continuous-time ``sqrt(2 a d)`` profile.
+    """
+    dv = accel * dt
+    extra = final * final / (2.0 * dv) + 0.5 * final
+    return dv * (-0.5 + math.sqrt(0.25 + 2.0 * (dist / dt + extra) / dv))
+
+
 class _Controller:
     """Stepwise controller state (true pose feedback, last nominal command)."""
 
@@ -182,7 +194,7 @@ class _Controller:
         """Braking-limited turn rate toward a remaining heading error."""
         p = self.p
         mag = min(p.max_angular_speed,
-                  math.sqrt(2.0 * DECEL_MARGIN * p.max_angular_accel * abs(err)),
+                  brake_speed(abs(err), DECEL_MARGIN * p.max_angular_accel, p.sample_time),
                   abs(err) / p.sample_time)
         return math.copysign(mag, err)
 
@@ -224,7 +236,6 @@ class _Controller:
     def _goto(self, prim: GoTo) -> None:
         p = self.p
         dt = p.sample_time
-        brake = 2.0 * DECEL_MARGIN * p.max_linear_accel
         turning = None
         for _ in range(MAX_PRIMITIVE_STEPS):
             dx, dy = prim.x - self.x, prim.y - self.y
@@ -243,7 +254,8 @@ class _Controller:
             if turning:
                 self.apply(0.0, self.turn_rate(err))
                 continue
-            v = min(p.max_linear_speed, math.sqrt(prim.pass_speed ** 2 + brake * dist))
+            v = min(p.max_linear_speed,
+                    brake_speed(dist, DECEL_MARGIN * p.max_linear_accel, dt, prim.pass_speed))
             if prim.pass_speed == 0.0:
                 v = min(v, dist / dt)
             v *= max(0.0, math.cos(err))

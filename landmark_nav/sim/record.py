@@ -31,8 +31,8 @@ from geometry_msgs.msg import Point, Pose, PoseArray
 from landmark_nav.bag import BagWriter
 from landmark_nav.conversions import (make_joint_state, make_odometry, make_range, make_scan,
                                       ns_to_stamp, quaternion_msg_from_yaw)
-from landmark_nav.sim.scenarios import (OdometrySample, run_scenario, TruthSample)
 from landmark_nav.sim.laser import ScanSample
+from landmark_nav.sim.scenarios import OdometrySample, run_scenario, TruthSample
 from landmark_nav.sim.sonar import SonarSample
 from nav_msgs.msg import Odometry
 import numpy as np

@@ -221,8 +221,9 @@ def office_world() -> World:
     Room outline (counter-clockwise, free inside): a 1.5 m x 0.6 m cabinet recess against the
     south wall, a 1.5 m x 0.1 m partition from the north wall, a 45 deg chamfer in the
     north-west corner; a free-standing 0.4 m x 0.4 m pillar rotated 20 deg; four table legs
-    (r = 0.025 m) of a 1.2 m x 0.8 m table. 17 corners (11 at 90 deg, 4 at 270 deg
-    free-space opening plus the pillar's 4, 2 at 135 deg).
+    (r = 0.025 m) of a 1.2 m x 0.8 m table. 17 corners: 7 concave with 90 deg free-space
+    opening (3 room, 2 cabinet recess, 2 partition root), 2 concave 135 deg (chamfer) and
+    8 convex with 270 deg opening (2 cabinet, 2 partition end, 4 pillar).
     """
     w = World('office')
     w.add_room([(0.0, 0.0), (6.0, 0.0), (6.0, 0.6), (7.5, 0.6), (7.5, 0.0), (9.0, 0.0),
