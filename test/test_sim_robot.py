@@ -2,16 +2,15 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from landmark_nav.sim.control import simulate_mission, straight_profile, TurnTo, Wait
 from landmark_nav.sim.robot import (dead_reckon, integrate, make_odometry, make_trajectory,
                                     measure_wheels, RobotParams, step_pose, wheel_to_twist)
 from landmark_nav.sim.world import wrap_angle
+import numpy as np
+import pytest
 
 T0 = 1_700_000_000_000_000_000
-EXACT = dict(k1=1.0, k2=1.0, k3=1.0, wheel_noise_gain=0.0, wheel_noise_floor=0.0)
+EXACT = {'k1': 1.0, 'k2': 1.0, 'k3': 1.0, 'wheel_noise_gain': 0.0, 'wheel_noise_floor': 0.0}
 
 
 def test_chapter_defaults():

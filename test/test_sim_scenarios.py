@@ -3,13 +3,12 @@
 import dataclasses
 import math
 
-import numpy as np
-import pytest
-import yaml
-
 from landmark_nav.sim import (dead_reckon, OdometrySample, run_scenario, RunMarker,
                               ScanSample, scenario_names, SonarSample, START_NS, TruthSample,
                               World, wrap_angle)
+import numpy as np
+import pytest
+import yaml
 
 EXACT = {'k1': 1.0, 'k2': 1.0, 'k3': 1.0, 'wheel_noise_gain': 0.0, 'wheel_noise_floor': 0.0}
 

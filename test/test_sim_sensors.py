@@ -3,17 +3,16 @@
 import dataclasses
 import math
 
-import numpy as np
-import pytest
-
 from landmark_nav.sim.laser import Laser, LaserConfig
 from landmark_nav.sim.robot import make_trajectory, RobotParams
 from landmark_nav.sim.sonar import SONAR_MOUNTS, SonarConfig, SonarRing
 from landmark_nav.sim.world import World
+import numpy as np
+import pytest
 
 T0 = 1_700_000_000_000_000_000
-QUIET = dict(sigma_range=0.0, sigma_angle=0.0, p_dropout=0.0, p_spurious=0.0,
-             keep_true_ranges=True)
+QUIET = {'sigma_range': 0.0, 'sigma_angle': 0.0, 'p_dropout': 0.0, 'p_spurious': 0.0,
+         'keep_true_ranges': True}
 
 
 def wall_world(x: float = 3.0) -> World:
@@ -135,8 +134,8 @@ def test_sonar_wall_ahead():
     ring = SonarRing(wall_world(1.5), single())
     assert ring.true_ranges([[0.0, 0.0, 0.0]])[0, 0] == pytest.approx(1.5, abs=1e-12)
     # Pioneer ring: sonars 3 and 4 (+-10 deg) see the wall's perpendicular inside their cone.
-    ring16 = SonarRing(wall_world(2.0), dataclasses.replace(SonarConfig(), sigma0=0.0,
-                                                              sigma1=0.0))
+    quiet = dataclasses.replace(SonarConfig(), sigma0=0.0, sigma1=0.0)
+    ring16 = SonarRing(wall_world(2.0), quiet)
     r = ring16.true_ranges([[0.0, 0.0, 0.0]])[0]
     assert r[3] == pytest.approx(2.0 - 0.166, abs=1e-12)
     assert r[4] == pytest.approx(2.0 - 0.166, abs=1e-12)

@@ -4,11 +4,10 @@ import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from landmark_nav.sim.world import HIT_CIRCLE, HIT_NONE, HIT_SEGMENT, World, wrap_angle
 import numpy as np
 import pytest
 import yaml
-
-from landmark_nav.sim.world import HIT_CIRCLE, HIT_NONE, HIT_SEGMENT, World, wrap_angle
 
 
 def square_room(half: float = 2.0) -> World:

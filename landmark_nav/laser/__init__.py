@@ -1,0 +1,1 @@
+"""Laser feature extraction: scan segmentation, corner detectors, line extractors."""

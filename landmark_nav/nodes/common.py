@@ -1,0 +1,81 @@
+"""Small helpers shared by the nodes: typed parameters with descriptors, QoS, main()."""
+
+import sys
+from typing import Callable, Optional, Sequence
+
+import rclpy
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+
+SENSOR_QOS = qos_profile_sensor_data
+WARN_THROTTLE_S = 5.0
+
+_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
+
+
+class ParameterError(ValueError):
+    """A node parameter has a bad value; the message names it."""
+
+
+def declare(node: Node, name: str, default, description: str,
+            limits: Optional[Sequence] = None, choices: Optional[Sequence[str]] = None):
+    """Declare a read-only typed parameter with a descriptor and return its value.
+
+    Args:
+        node: The node.
+        name: Parameter name (snake_case, unit in the name or description).
+        default: Default value; its Python type is the parameter type (list = double array).
+        description: Shown by ``ros2 param describe``.
+        limits: (low, high) inclusive range for numbers.
+        choices: Allowed values for strings.
+
+    Raises:
+        ParameterError: The value given at start-up is out of range or not a choice.
+
+    """
+    descriptor = ParameterDescriptor(description=description, read_only=True)
+    if isinstance(default, list):
+        descriptor.type = ParameterType.PARAMETER_DOUBLE_ARRAY
+    else:
+        descriptor.type = _TYPES[type(default)]
+    if limits is not None and isinstance(default, float):
+        descriptor.floating_point_range = [
+            FloatingPointRange(from_value=float(limits[0]), to_value=float(limits[1]))]
+    elif limits is not None and isinstance(default, int) and not isinstance(default, bool):
+        descriptor.integer_range = [
+            IntegerRange(from_value=int(limits[0]), to_value=int(limits[1]), step=1)]
+    if choices is not None:
+        descriptor.additional_constraints = 'one of: ' + ', '.join(choices)
+    try:
+        value = node.declare_parameter(name, default, descriptor).value
+    except InvalidParameterValueException as err:
+        raise ParameterError(f'parameter {name}: {err}') from err
+    if choices is not None and value not in choices:
+        raise ParameterError(f'parameter {name} = {value!r} is not one of {", ".join(choices)}')
+    if isinstance(default, list):
+        value = [float(v) for v in value]
+    return value
+
+
+def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
+    """Standard main: init, build the node, spin, shut down; bad parameters exit with 2."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
