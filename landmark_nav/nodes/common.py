@@ -3,9 +3,9 @@
 import sys
 from typing import Callable, Optional, Sequence
 
-import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
+import rclpy
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -63,7 +63,7 @@ def declare(node: Node, name: str, default, description: str,
 
 
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
-    """Standard main: init, build the node, spin, shut down; bad parameters exit with 2."""
+    """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2."""
     rclpy.init(args=args)
     node = None
     try:
