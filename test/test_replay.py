@@ -79,3 +79,32 @@ def test_replay_timing_follows_rate(tmp_path):
     assert seen == 20
     span = arrivals[-1] - arrivals[0]
     assert span == pytest.approx(1.9 / 2, abs=0.15)
+
+
+@pytest.mark.dds
+def test_replay_start_offset_clock_and_loop(tmp_path):
+    from rosgraph_msgs.msg import Clock
+    bag = tmp_path / 'b'
+    write_small_bag(bag, n=20)  # scans logged at 1.0, 1.1, ..., 2.9 s
+    with RosHarness() as ros:
+        got = ros.collect('/scan', LaserScan)
+        clock = ros.collect('/clock', Clock)
+        proc = subprocess.Popen(
+            [sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
+             '--topics', '/scan', '--rate', '4', '--start-offset', '1.0', '--clock', '50',
+             '--loop', '--wait-for-subscribers', '20'],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            # Offset 1.0 s skips the first 10 scans; looping replays the other 10 again.
+            assert ros.wait_until(lambda: len(got) >= 20, timeout=30), f'{len(got)} arrived'
+        finally:
+            proc.terminate()
+            proc.communicate(timeout=30)
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in got[:20]]
+    assert stamps[:10] == pytest.approx([1.0 + 0.1 * i for i in range(10, 20)])
+    assert stamps[10:20] == stamps[:10]
+    ticks = [c.clock.sec + c.clock.nanosec * 1e-9 for c in clock]
+    assert len(ticks) > 10
+    assert min(ticks) >= 2.0 - 1e-9 and max(ticks) <= 2.9 + 1e-9  # bag time, after offset
+    first_pass = ticks[:next(i for i in range(1, len(ticks)) if ticks[i] < ticks[i - 1])]
+    assert first_pass == sorted(first_pass)  # /clock never goes back within a pass

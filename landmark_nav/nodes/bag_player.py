@@ -78,6 +78,7 @@ class BagPlayer(Node):
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if options.clock_hz > 0 else None)
         self.published = 0
+        self._last_clock_ns = 0
 
     def wait_for_subscribers(self) -> bool:
         """Wait until every played topic has a subscriber, up to the configured time."""
@@ -92,13 +93,18 @@ class BagPlayer(Node):
         return not lonely
 
     def _publish_clock(self, bag_ns: int) -> None:
+        """Publish /clock, never going backwards within one pass over the bag."""
+        bag_ns = max(bag_ns, self._last_clock_ns)
+        self._last_clock_ns = bag_ns
         msg = Clock()
         msg.clock = ns_to_stamp(bag_ns)
         self._clock_pub.publish(msg)
 
-    def _sleep_until(self, wall_due: float, first_ns: int, wall_start: float) -> None:
-        """Sleep until a wall time, ticking /clock in bag time meanwhile."""
+    def _sleep_until(self, wall_due: float, due_log_ns: int, wall_start: float,
+                     first_ns: int) -> None:
+        """Sleep until a message is due, ticking /clock in bag time (not past it) meanwhile."""
         period = 1.0 / self.options.clock_hz if self._clock_pub else None
+        offset_ns = int(round(self.options.start_offset_s * 1e9))
         while rclpy.ok():
             remaining = wall_due - time.monotonic()
             if remaining <= 0:
@@ -107,9 +113,8 @@ class BagPlayer(Node):
                 time.sleep(remaining)
                 return
             time.sleep(min(remaining, period))
-            elapsed = (time.monotonic() - wall_start) * self.options.rate
-            offset = self.options.start_offset_s
-            self._publish_clock(first_ns + int((elapsed + offset) * 1e9))
+            elapsed_ns = int((time.monotonic() - wall_start) * self.options.rate * 1e9)
+            self._publish_clock(min(first_ns + offset_ns + elapsed_ns, due_log_ns))
 
     def play_once(self) -> int:
         """Play the bag once; return the number of messages published."""
@@ -117,11 +122,12 @@ class BagPlayer(Node):
         with BagReader(self.bag_path) as reader:
             first_ns = reader.start_ns
             wall_start = time.monotonic()
+            self._last_clock_ns = 0
             for item in reader.messages(tuple(self._topic_publishers)):
                 due = due_after_start_s(item.log_time_ns, first_ns, self.options)
                 if due < 0:
                     continue
-                self._sleep_until(wall_start + due, first_ns, wall_start)
+                self._sleep_until(wall_start + due, item.log_time_ns, wall_start, first_ns)
                 if not rclpy.ok():
                     break
                 if self._clock_pub:
