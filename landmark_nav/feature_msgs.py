@@ -139,7 +139,7 @@ def _clear() -> Marker:
 
 def make_corner_markers(stamp_ns: int, frame_id: str, corners,
                         arrow_length: float = 0.3) -> MarkerArray:
-    """RViz markers: corner points and a bisector tick per corner."""
+    """Build RViz markers: corner points and a bisector tick per corner."""
     points = _marker(stamp_ns, frame_id, 'corners', 0, Marker.SPHERE_LIST, (1.0, 0.5, 0.0), 0.08)
     ticks = _marker(stamp_ns, frame_id, 'corner_bisectors', 1, Marker.LINE_LIST,
                     (1.0, 0.5, 0.0), 0.015)
@@ -153,7 +153,7 @@ def make_corner_markers(stamp_ns: int, frame_id: str, corners,
 
 
 def make_line_markers(stamp_ns: int, frame_id: str, lines) -> MarkerArray:
-    """RViz markers: one LINE_LIST with every segment."""
+    """Build RViz markers: one LINE_LIST with every segment."""
     segs = _marker(stamp_ns, frame_id, 'lines', 0, Marker.LINE_LIST, (0.1, 0.6, 1.0), 0.03)
     for ln in lines:
         segs.points.append(Point(x=float(ln.start[0]), y=float(ln.start[1])))
