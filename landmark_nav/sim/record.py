@@ -88,15 +88,18 @@ def _wall_markers(world, stamp_ns: int) -> MarkerArray:
     return out
 
 
-def record_scenario(name: str, seed: int, out, force: bool = False) -> str:
+def record_scenario(name: str, seed: int, out, force: bool = False, **overrides) -> str:
     """Simulate a scenario and write it as a bag directory; return a one-paragraph summary.
+
+    ``overrides`` go to :func:`landmark_nav.sim.run_scenario` (e.g. ``laser={'sigma_range':
+    0.02}``).
 
     Raises:
         ValueError: Unknown scenario or bad seed (message lists the valid names).
         BagError: The output exists (without ``force``) or cannot be written.
 
     """
-    result = run_scenario(name, seed)
+    result = run_scenario(name, seed, **overrides)
     out = Path(out)
     if force and out.exists():
         if not (out / 'metadata.yaml').is_file():

@@ -35,7 +35,11 @@ def _seed(text: str) -> int:
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from landmark_nav.sim.record import record_scenario
-    summary = record_scenario(args.scenario, args.seed, args.out, force=args.force)
+    overrides = {}
+    if args.laser_sigma_range is not None:
+        overrides['laser'] = {'sigma_range': args.laser_sigma_range}
+    summary = record_scenario(args.scenario, args.seed, args.out, force=args.force,
+                              **overrides)
     print(summary)
     return 0
 
@@ -71,6 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--seed', type=_seed, default=1, help='random seed (default 1)')
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--force', action='store_true', help='replace an existing bag directory')
+    p.add_argument('--laser-sigma-range', type=float, default=None, metavar='METRES',
+                   help='laser range noise std (default 0.01 m)')
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser('replay', help='publish a bag into the ROS graph (like ros2 bag play)')

@@ -1,0 +1,1 @@
+"""Offline evaluation against the simulator's ground truth (pure numpy)."""
