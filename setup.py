@@ -12,6 +12,7 @@ PACKAGE = 'landmark_nav'
 EXECUTABLES = {
     'landmark_nav': 'landmark_nav.tools.cli:main',
     'bag_player': 'landmark_nav.nodes.bag_player:main',
+    'corner_extractor': 'landmark_nav.nodes.corner_extractor:main',
 }
 
 setup(

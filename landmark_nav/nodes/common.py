@@ -1,6 +1,9 @@
 """Small helpers shared by the nodes: typed parameters with descriptors, QoS, main()."""
 
+import math
+import re
 import sys
+import time
 from typing import Callable, Optional, Sequence
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -79,3 +82,54 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
+    """Declare one parameter per documented field of a parameter dataclass and build it.
+
+    The dataclass's defaults are the parameters' defaults (one source of truth); its
+    ``__post_init__`` validation turns into a :class:`ParameterError` naming the problem.
+
+    Args:
+        node: The node.
+        cls: A frozen dataclass of algorithm parameters.
+        docs: {field: (description, limits or None, choices or None)}; fields not listed
+            keep their defaults and are not exposed.
+        prefix: Prefix for the parameter names (e.g. ``'segmentation.'``).
+
+    """
+    defaults = cls()
+    values = {}
+    for name, (description, limits, choices) in docs.items():
+        default = getattr(defaults, name)
+        if isinstance(default, tuple):
+            default = [float(v) for v in default]
+        values[name] = declare(node, prefix + name, default, description, limits, choices)
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as err:
+        raise ParameterError(f'{node.get_name()}: {err}') from err
+
+
+class ProblemWarner:
+    """Warn about bad input, throttled per kind of problem (not per call site).
+
+    Repeats of the same problem (its message with the numbers masked) are reported at most
+    once per ``period_s``; a different problem is reported at once. The node keeps running.
+    """
+
+    def __init__(self, node: Node, period_s: float = WARN_THROTTLE_S) -> None:
+        """Attach to a node's logger."""
+        self._logger = node.get_logger()
+        self._period = period_s
+        self._last = {}
+        self.count = 0
+
+    def warn(self, message: str) -> None:
+        """Log a warning unless the same kind of problem was reported recently."""
+        self.count += 1
+        key = re.sub(r'[-+0-9.e]+', '#', message)
+        now = time.monotonic()
+        if now - self._last.get(key, -math.inf) >= self._period:
+            self._last[key] = now
+            self._logger.warning(message)

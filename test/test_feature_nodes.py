@@ -1,0 +1,153 @@
+"""corner_extractor and line_extractor nodes: bag replay through DDS and bad input."""
+
+import math
+from pathlib import Path
+
+from geometry_msgs.msg import PoseArray
+from landmark_nav.bag import BagReader
+from landmark_nav.conversions import make_scan, scan_to_data
+from landmark_nav.feature_msgs import feature_cloud_to_arrays
+from landmark_nav.laser.corners import CornerParams, detect_corners
+from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.nodes.common import ParameterError
+from landmark_nav.nodes.corner_extractor import CornerExtractor
+from landmark_nav.testing import RosHarness
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import LaserScan, PointCloud2
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+OFFICE = REPO / 'bags' / 'office'
+N_SCANS = 150  # the first 15 s of the office bag
+
+
+def first_scans(n=N_SCANS):
+    with BagReader(OFFICE) as reader:
+        out = []
+        for _, _, msg in reader.decoded(['/scan']):
+            out.append(msg)
+            if len(out) == n:
+                return out
+    return out
+
+
+def play_lockstep(ros, publisher, messages, outputs, timeout=10.0):
+    """Publish one message at a time and wait for the node's output to it."""
+    assert ros.wait_for_subscribers([publisher])
+    for i, msg in enumerate(messages, 1):
+        publisher.publish(msg)
+        assert ros.wait_until(lambda: len(outputs) >= i, timeout), f'no output for input {i}'
+
+
+@pytest.mark.dds
+def test_corner_extractor_replays_the_office_bag():
+    scans = first_scans()
+    with RosHarness() as ros:
+        node = ros.add_node(CornerExtractor(context=ros.context))
+        poses = ros.collect('corners', PoseArray)
+        clouds = ros.collect('corners/features', PointCloud2)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        play_lockstep(ros, pub, scans, poses)
+        assert ros.wait_until(lambda: len(clouds) == len(scans), 5)
+        params = node.params
+    assert len(poses) == len(scans)
+    total = 0
+    for scan, out, cloud in zip(scans, poses, clouds):
+        assert out.header == scan.header and cloud.header == scan.header
+        data = scan_to_data(scan)
+        expected = detect_corners(segment_scan(data.ranges, data.angles, data.valid,
+                                               data.angle_increment, 10.0, params.sigma_r, 5),
+                                  params)
+        got = np.array([[p.position.x, p.position.y] for p in out.poses]).reshape(-1, 2)
+        want = np.array([c.position for c in expected]).reshape(-1, 2)
+        np.testing.assert_allclose(got, want, atol=1e-9)
+        fields = feature_cloud_to_arrays(cloud)
+        np.testing.assert_allclose(fields['cov_xx'], [c.covariance[0, 0] for c in expected],
+                                   rtol=1e-6)
+        total += len(got)
+    assert total > 0
+
+
+def _bad_scans(good: LaserScan):
+    d = scan_to_data(good)
+
+    def scan(**changes):
+        msg = make_scan(d.stamp_ns, d.frame_id, d.angle_min, d.angle_increment, d.ranges,
+                        d.range_min, d.range_max)
+        for key, value in changes.items():
+            setattr(msg, key, value)
+        return msg
+
+    n = len(d.ranges)
+    weird = np.array(d.ranges, dtype=float)
+    weird[::7] = np.nan
+    weird[1::7] = np.inf
+    weird[2::7] = -np.inf
+    weird[3::7] = -1.0
+    return [
+        ('len(ranges)', scan(ranges=[1.0] * (n - 5))),
+        ('angle_increment', scan(angle_increment=0.0)),
+        ('repeat', scan(angle_increment=-0.01)),                 # same kind: throttled
+        ('range_max', scan(range_max=0.05)),
+        ('intensities', scan(intensities=[1.0] * 3)),
+        ('empty', scan(ranges=[], angle_max=d.angle_min)),
+        (None, scan(ranges=weird.astype(np.float32).tolist())),   # valid but ugly: processed
+    ]
+
+
+@pytest.mark.dds
+def test_corner_extractor_survives_bad_input():
+    good = first_scans(2)
+    with RosHarness() as ros:
+        node = ros.add_node(CornerExtractor(context=ros.context))
+        poses = ros.collect('corners', PoseArray)
+        logs = ros.collect('/rosout', Log)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub])
+        expected_outputs = 0
+        for needle, msg in _bad_scans(good[0]):
+            before, dropped = len(logs), node.warner.count
+            pub.publish(msg)
+            if needle is None:
+                expected_outputs += 1
+                assert ros.wait_until(lambda: len(poses) == expected_outputs, 5)
+            elif needle == 'repeat':
+                assert ros.wait_until(lambda: node.warner.count == dropped + 1, 5)
+                assert len(logs) == before, 'a repeated problem must be throttled'
+            else:
+                assert ros.wait_until(lambda: len(logs) > before, 5), f'no warning ({needle})'
+                text = logs[-1].msg
+                assert 'Dropping scan' in text and needle in text, text
+        pub.publish(good[1])  # the next good scan is processed normally
+        assert ros.wait_until(lambda: len(poses) == expected_outputs + 1, 5)
+    assert poses[-1].header == good[1].header
+
+
+def test_corner_extractor_rejects_bad_parameters():
+    with RosHarness() as ros:
+        for name, value in [('method', 'magic'), ('window', 3), ('f_min', 0.5),
+                            ('sigma_r', -1.0)]:
+            with pytest.raises(ParameterError, match=name.split('_')[0]):
+                CornerExtractor(context=ros.context,
+                                parameter_overrides=[Parameter(name, value=value)])
+
+
+def test_config_file_matches_declared_parameters():
+    config = yaml.safe_load((REPO / 'config' / 'corner_extractor.yaml').read_text())
+    values = config['corner_extractor']['ros__parameters']
+    with RosHarness() as ros:
+        node = CornerExtractor(context=ros.context)
+        declared = {name: p.value for name, p in node._parameters.items()
+                    if name not in ('use_sim_time', 'start_type_description_service')}
+        node.destroy_node()
+    assert set(values) == set(declared)
+    for name, value in values.items():
+        if isinstance(value, float):
+            assert declared[name] == pytest.approx(value)
+        else:
+            assert declared[name] == value
+    assert CornerParams().f_min == pytest.approx(-0.3436)
+    assert math.isclose(values['f_max'], 0.3515)
