@@ -56,6 +56,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_evaluate_features(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.evaluate_features import run
+    print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json))
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from landmark_nav.tools.demo import run_demo
     print(run_demo(args.bag, args.out))
@@ -86,6 +92,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('info', help='print the topics, counts and duration of a bag')
     p.add_argument('bag', help='rosbag2 directory')
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser('evaluate-features',
+                       help='score corner and line extractors against the ground truth of a bag')
+    p.add_argument('bag', help='rosbag2 directory recorded by `simulate`')
+    p.add_argument('--every', type=int, default=1, help='use every n-th scan')
+    p.add_argument('--sigma-r', type=float, default=None,
+                   help='range noise the extractors assume [m] (default: the simulated one)')
+    p.add_argument('--json', default=None, help='also write the figures to this JSON file')
+    p.set_defaults(func=_cmd_evaluate_features)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
     p.add_argument('--bag', default='bags/office', help='bag to evaluate')
