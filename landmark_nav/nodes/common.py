@@ -93,18 +93,22 @@ def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
     Args:
         node: The node.
         cls: A frozen dataclass of algorithm parameters.
-        docs: {field: (description, limits or None, choices or None)}; fields not listed
-            keep their defaults and are not exposed.
+        docs: {field: (description, limits or None, choices or None[, auto])}; fields not
+            listed keep their defaults and are not exposed. ``auto`` is the parameter value
+            standing for a field default of None ("choose automatically"), e.g. 0.0.
         prefix: Prefix for the parameter names (e.g. ``'segmentation.'``).
 
     """
     defaults = cls()
     values = {}
-    for name, (description, limits, choices) in docs.items():
+    for name, (description, limits, choices, *auto) in docs.items():
         default = getattr(defaults, name)
+        if default is None:
+            default = auto[0]
         if isinstance(default, tuple):
             default = [float(v) for v in default]
-        values[name] = declare(node, prefix + name, default, description, limits, choices)
+        value = declare(node, prefix + name, default, description, limits, choices)
+        values[name] = None if auto and value == auto[0] else value
     try:
         return cls(**values)
     except (TypeError, ValueError) as err:

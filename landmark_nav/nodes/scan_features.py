@@ -1,0 +1,57 @@
+"""Shared base of the laser feature nodes: validated scan in, clusters out.
+
+Subscribes ``scan`` (sensor_msgs/LaserScan) with the sensor-data QoS, converts it
+(REP 117 aware), drops malformed scans with a warning throttled per kind of problem, and
+segments the rest (parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``)
+before handing the clusters to :meth:`ScanFeatureNode.process`.
+"""
+
+import math
+
+from landmark_nav.conversions import ConversionError, scan_to_data, ScanData
+from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.nodes.common import declare, ProblemWarner, SENSOR_QOS
+from rclpy.node import Node
+from sensor_msgs.msg import LaserScan
+
+
+class ScanFeatureNode(Node):
+    """A node that extracts features from every scan it receives."""
+
+    def __init__(self, name: str, **kwargs) -> None:
+        """Declare the segmentation parameters (subscribe with :meth:`subscribe_scans`)."""
+        super().__init__(name, **kwargs)
+        self.sigma_r = 0.01
+        self.incidence_deg = declare(
+            self, 'segmentation.incidence_deg', 10.0,
+            'smallest surface incidence angle still treated as continuous [deg] '
+            '(adaptive breakpoint threshold)', (1.0, 89.0))
+        self.min_cluster_points = declare(
+            self, 'segmentation.min_points', 5, 'smallest cluster kept [points]', (1, 10000))
+        self.warner = ProblemWarner(self)
+
+    def subscribe_scans(self, sigma_r: float) -> None:
+        """Start receiving scans; ``sigma_r`` is the range noise used by the segmentation."""
+        self.sigma_r = sigma_r
+        self.create_subscription(LaserScan, 'scan', self.on_scan, SENSOR_QOS)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        """Validate and segment one scan, then process it."""
+        try:
+            scan = scan_to_data(msg)
+            if len(scan.ranges) == 0:
+                raise ConversionError('LaserScan: empty scan (no ranges)')
+            if math.degrees(scan.angle_increment) >= self.incidence_deg:
+                raise ConversionError(
+                    f'LaserScan: angle_increment {scan.angle_increment} rad is not below '
+                    f'segmentation.incidence_deg {self.incidence_deg} deg')
+        except ConversionError as err:
+            self.warner.warn(f'Dropping scan: {err}')
+            return
+        clusters = segment_scan(scan.ranges, scan.angles, scan.valid, scan.angle_increment,
+                                self.incidence_deg, self.sigma_r, self.min_cluster_points)
+        self.process(scan, clusters)
+
+    def process(self, scan: ScanData, clusters: list) -> None:
+        """Extract and publish the features of one scan (implemented by subclasses)."""
+        raise NotImplementedError
