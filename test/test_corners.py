@@ -1,13 +1,12 @@
 """Tests for landmark_nav.laser.corners: the three corner detectors of the corner chapter."""
 
-from dataclasses import dataclass
 import math
 from pathlib import Path
-import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from landmark_nav.evaluation.features import corner_truth, CornerScore, score_corners
 from landmark_nav.laser.corners import (Corner, CornerParams, detect_corners, extract_corners,
                                         METHODS, point_covariance)
 from landmark_nav.laser.segmentation import Cluster, segment_scan
@@ -18,7 +17,7 @@ import numpy as np
 import pytest
 
 T0 = 1_700_000_000_000_000_000
-CARMEN = Path('/work/shared/data/carmen')
+CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
 RIGHT = math.pi / 2.0
 
 
@@ -490,142 +489,35 @@ def test_covariance_matches_simulator_scans():
 
 
 # ---------------------------------------------------------------------------- office run
-@dataclass
-class Score:
-    """Detection figures of one method over a run."""
-
-    scans: int = 0
-    truth: int = 0
-    tp: int = 0
-    ghost: int = 0        # no true corner within the gate
-    wrong: int = 0        # nearest true corner is not a 70-110 deg corner (e.g. 135 deg)
-    duplicate: int = 0    # second detection of an already matched corner
-    ignored: int = 0      # right-angle corner outside the scored set (range, visibility)
-    sq_err: float = 0.0
-    seconds: float = 0.0
-
-    @property
-    def fp(self) -> int:
-        return self.ghost + self.wrong + self.duplicate
-
-    @property
-    def precision(self) -> float:
-        return self.tp / max(self.tp + self.fp, 1)
-
-    @property
-    def recall(self) -> float:
-        return self.tp / max(self.truth, 1)
-
-    @property
-    def rms(self) -> float:
-        return math.sqrt(self.sq_err / max(self.tp, 1))
-
-    def line(self, name: str) -> str:
-        return (f'{name:>16s}: P {self.precision:.3f} R {self.recall:.3f} '
-                f'RMS {100 * self.rms:.2f} cm ghosts/scan {self.ghost / self.scans:.3f} '
-                f'(tp {self.tp}/{self.truth}, wrong {self.wrong}, dup {self.duplicate}, '
-                f'ignored {self.ignored}, {1e3 * self.seconds / self.scans:.2f} ms/scan)')
-
-
-def arm_runs(ids: np.ndarray, cos_inc: np.ndarray, beam: int, max_run: int = 60,
-             min_cos: float = 0.2) -> Tuple[Tuple[int, int], Tuple[int, int]]:
-    """Return ``((segment, run), (segment, run))`` of the beams right and left of ``beam``.
-
-    A run counts consecutive beams that hit one segment at incidence <= ~78 deg (``|cos|``
-    >= ``min_cos``, the segmentation splits grazing surfaces at 80 deg).
-    """
-    out = []
-    for side in (-1, 1):
-        seq = np.arange(beam + side, beam + side * (max_run + 1), side)
-        seq = seq[(seq >= 0) & (seq < ids.size)]
-        if seq.size == 0:
-            out.append((-1, 0))
-            continue
-        seg = int(ids[seq[0]])
-        ok = (ids[seq] == seg) & (cos_inc[seq] >= min_cos)
-        out.append((seg, int(np.argmin(ok)) if not ok.all() else int(ok.size)))
-    return out[0], out[1]
-
-
-def scan_truth(res, scan: ScanSample, min_range: float = 0.3, max_range: float = 6.0,
-               min_beams: int = 5) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return all true corners in the laser frame, the scored mask and the right-angle mask.
-
-    Scored = visible (:meth:`World.visible_corners` with ``both_sides``, inside the field of
-    view), ``min_range`` .. ``max_range`` away, a 70-110 deg corner (concave 90 deg or
-    convex 270 deg opening) and sampled: on each side of the corner's beam the noise-free
-    scan hits that arm's segment with at least ``min_beams`` consecutive beams (the
-    chapter's half window) at incidence below ~78 deg. A face seen edge-on (e.g. the
-    cabinet top from across the room: 4 beams 0.5 m apart) is visible but not a corner any
-    window detector can see. Each corner is expressed in the laser pose at the time its
-    beam was taken (the robot moves during the 13 ms sweep).
-    """
-    world = res.world
-    truth = world.corners()
-    mount = res.laser.mount
-    pose0 = compose(res.truth_at(scan.stamp_ns), mount)
-    fov = scan.angle_max - scan.angle_min
-    rel = to_laser(truth.positions, pose0)
-    bearing = np.arctan2(rel[:, 1], rel[:, 0])
-    beam = np.clip(np.rint((bearing - scan.angle_min) / scan.angle_increment), 0,
-                   scan.ranges.size - 1).astype(np.int64)
-    stamps = scan.stamp_ns + np.rint(beam * scan.time_increment * 1e9).astype(np.int64)
-    poses = compose(res.truth_at(np.minimum(stamps, res.end_ns)), mount)
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    d = truth.positions - poses[:, :2]
-    pts = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
-    vis = np.zeros(len(truth), bool)
-    vis[np.searchsorted(truth.ids, world.visible_corners(pose0, max_range, fov,
-                                                         both_sides=True))] = True
-    dist = np.hypot(pts[:, 0], pts[:, 1])
-    theta = np.minimum(truth.openings, 2.0 * math.pi - truth.openings)
-    right = np.abs(theta - RIGHT) <= math.radians(20.0)
-    scored = vis & right & (dist >= min_range)
-    if scored.any():
-        angles = scan.angle_min + scan.angle_increment * np.arange(scan.ranges.size)
-        hits = world.raycast(pose0[None, :2], pose0[2] + angles)
-        for k in np.flatnonzero(scored):
-            (s1, n1), (s2, n2) = arm_runs(hits.ids, hits.cos_incidence, int(beam[k]))
-            arms = {int(v) for v in truth.segment_ids[k]}
-            scored[k] = {s1, s2} == arms and min(n1, n2) >= min_beams
-    return pts, scored, right
-
-
 def score_run(res, params: CornerParams, step: int = 1, gate: float = 0.1,
-              score: Optional[Score] = None) -> Score:
-    """Score one method on every ``step``-th scan of a scenario run."""
-    score = score or Score()
+              score: Optional[CornerScore] = None) -> CornerScore:
+    """Score one method on every ``step``-th scan of a scenario run (evaluation rules)."""
+    score = score or CornerScore()
+    mount = res.laser.mount
+
+    def sensor_pose_at(stamps):
+        return compose(res.truth_at(np.minimum(stamps, res.end_ns)), mount)
+
     for scan in res.of_type(ScanSample)[::step]:
         r = scan.ranges.astype(float)
         angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
-        t0 = time.perf_counter()
         corners = extract_corners(r, angles, np.isfinite(r), scan.angle_increment, params)
-        score.seconds += time.perf_counter() - t0
-        pts, scored, right = scan_truth(res, scan)
-        score.scans += 1
-        score.truth += int(scored.sum())
-        matched = np.zeros(len(pts), bool)
-        for c in sorted(corners, key=lambda c: float(np.min(np.hypot(*(pts - c.position).T)))):
-            d = np.hypot(*(pts - c.position).T)
-            k = int(np.argmin(d))
-            if d[k] > gate:
-                score.ghost += 1
-            elif not right[k]:
-                score.wrong += 1
-            elif matched[k]:
-                score.duplicate += 1
-            elif scored[k]:
-                matched[k] = True
-                score.tp += 1
-                score.sq_err += float(d[k] ** 2)
-            else:
-                matched[k] = True
-                score.ignored += 1
+        truth = corner_truth(res.world, sensor_pose_at, scan.stamp_ns, angles,
+                             scan.time_increment)
+        xy = np.array([c.position for c in corners]).reshape(-1, 2)
+        score_corners(score, xy, truth, gate)
     return score
 
 
+def describe(name: str, sc: CornerScore) -> str:
+    """One line of figures for the test log."""
+    return (f'{name:>16s}: P {sc.precision:.3f} R {sc.recall:.3f} '
+            f'RMS {100 * sc.rms_error:.2f} cm ghosts/scan {sc.ghosts_per_scan:.3f} '
+            f'(tp {sc.tp}/{sc.truth}, wrong {sc.wrong}, dup {sc.duplicate})')
+
+
 def office_scores(sigma_r: float, step: int, methods: Dict[str, CornerParams],
-                  seed: int = 1) -> Dict[str, Score]:
+                  seed: int = 1) -> Dict[str, CornerScore]:
     """Score several detector settings on the office run at range noise ``sigma_r``."""
     res = run_scenario('office', seed=seed, laser={'sigma_range': sigma_r})
     return {name: score_run(res, p, step) for name, p in methods.items()}
@@ -633,22 +525,22 @@ def office_scores(sigma_r: float, step: int, methods: Dict[str, CornerParams],
 
 def test_office_run_minus_cosine():
     sc = office_scores(0.01, 3, {'minus_cosine': CornerParams(sigma_r=0.01)})['minus_cosine']
-    print(sc.line('minus_cosine'))
+    print(describe('minus_cosine', sc))
     assert sc.scans >= 350 and sc.truth >= 550
     assert sc.precision >= 0.95
     assert sc.recall >= 0.90
-    assert sc.rms <= 0.03
-    assert sc.ghost / sc.scans <= 0.05
+    assert sc.rms_error <= 0.03
+    assert sc.ghosts_per_scan <= 0.05
 
 
 def test_office_run_baselines_are_worse():
     scores = office_scores(0.01, 12, {m: CornerParams(method=m, sigma_r=0.01)
                                       for m in METHODS})
     for name, sc in scores.items():
-        print(sc.line(name))
+        print(describe(name, sc))
     mc, sw = scores['minus_cosine'], scores['sliding_window']
     assert sw.ghost > 5 * max(mc.ghost, 1)
-    assert sw.precision < mc.precision and sw.rms > mc.rms
+    assert sw.precision < mc.precision and sw.rms_error > mc.rms_error
 
 
 # ---------------------------------------------------------------------------- real data

@@ -3,20 +3,25 @@
 Per scan, the ground truth visible to the laser is derived from the world and the true
 sensor pose by casting the scan's beams without noise (:func:`visible_truth`):
 
-* A true corner is *detectable* when its vertex is in line of sight within
-  [min_range, max_range] and the field of view, and each of its two walls is hit by at
-  least ``min_arm_beams`` beams within ``arm_length`` of the vertex (a detector needs
-  points on both arms). Its *corner angle* is the smaller of the free-space opening and
-  the wall-side angle (90 deg for both a room corner and a box corner).
+* A true corner is *scored* when it is visible from the sensor with both of its faces in
+  view (:meth:`World.visible_corners` with ``both_sides``, inside the field of view and
+  ``min_range`` .. ``max_range`` away), its corner angle (the smaller of the free-space
+  opening and the wall-side angle: 90 deg for a room corner and for a box corner) is in
+  the corner class (70-110 deg), and on each side of the corner's beam the noise-free
+  scan hits that arm's wall with at least ``min_arm_beams`` consecutive beams at an
+  incidence below ~78 deg (a face seen edge-on gives a visible corner that no window
+  detector can see). Corners are expressed in the laser pose at the time their beam was
+  taken (the robot moves during the sweep).
 * A true wall is *visible* with the extent between its outermost hit points.
 
 Matching (:func:`score_corners`, :func:`score_lines`):
 
-* Corners: one-to-one assignment (Hungarian) within ``match_distance``. A detection near
-  any true corner is correct (precision); a detection farther than ``match_distance`` from
-  every true corner is a ghost. Recall and position error are over detectable corners
-  whose angle lies in the corner class (70-110 deg by default) and whose range is within
-  the evaluated band.
+* Corners: each detection goes to its nearest true corner (any angle). Farther than
+  ``match_distance`` it is a *ghost*; nearest to a corner outside the class (e.g. a 135 deg
+  chamfer) it is *wrong*; a second detection of a matched corner is a *duplicate*; a
+  detection of an unscored class corner (out of range, an arm too short) is *ignored*.
+  Precision = true positives / (true positives + ghosts + wrong + duplicates); recall =
+  true positives / scored corners; the position error is over true positives.
 * Lines (Nguyen et al. 2007): a detection is a true positive for a visible wall when
   |d rho| <= ``max_drho`` and |d alpha| <= ``max_dalpha`` and their extents overlap;
   TruePos = matched walls / visible walls of at least ``min_wall_length``; FalsePos =
@@ -26,25 +31,32 @@ Matching (:func:`score_corners`, :func:`score_lines`):
 
 from dataclasses import dataclass, field
 import math
-from typing import List, Sequence
+from typing import Callable, List, Sequence, Tuple
 
 from landmark_nav.geometry import inverse_transform_points, wrap_angle
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+
+CORNER_CLASS = (math.radians(70.0), math.radians(110.0))
+GRAZING_COS = 0.2  # |cos| of ~78 deg incidence: the segmentation splits grazing surfaces
 
 
 @dataclass(frozen=True)
-class VisibleTruth:
-    """Ground truth seen by one scan, in the laser frame."""
+class CornerTruth:
+    """True corners for one scan, in the laser frame at each corner's beam time."""
 
-    corner_ids: np.ndarray        # (C,) ids of detectable corners
-    corner_xy: np.ndarray         # (C, 2)
-    corner_angle: np.ndarray      # (C,) corner angle [rad]
-    all_corner_xy: np.ndarray     # (A, 2) every true corner (for ghost/precision tests)
-    wall_ids: np.ndarray          # (W,) ids of walls hit by at least 2 beams
-    wall_rho_alpha: np.ndarray    # (W, 2) Hessian normal form in the laser frame
-    wall_extent: np.ndarray       # (W,) visible length [m]
-    wall_span: np.ndarray         # (W, 2, 2) visible end points in the laser frame
+    xy: np.ndarray        # (A, 2) every true corner
+    scored: np.ndarray    # (A,) bool: counted for recall
+    in_class: np.ndarray  # (A,) bool: corner angle inside the class band
+
+
+@dataclass(frozen=True)
+class WallTruth:
+    """True walls hit by one scan, in the laser frame."""
+
+    ids: np.ndarray          # (W,)
+    rho_alpha: np.ndarray    # (W, 2) Hessian normal form
+    extent: np.ndarray       # (W,) visible length [m]
+    span: np.ndarray         # (W, 2, 2) visible end points
 
 
 def normal_form(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
@@ -56,66 +68,99 @@ def normal_form(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     return np.column_stack([np.abs(rho), wrap_angle(alpha)])
 
 
-def visible_truth(world, sensor_pose: np.ndarray, angles: np.ndarray, max_range: float,
-                  min_range: float = 0.0, arm_length: float = 1.0,
-                  min_arm_beams: int = 5) -> VisibleTruth:
-    """Derive the ground truth visible from ``sensor_pose`` [x, y, yaw] (world frame)."""
+def _arm_runs(ids: np.ndarray, cos_inc: np.ndarray, beam: int,
+              max_run: int = 60) -> Tuple[Tuple[int, int], Tuple[int, int]]:
+    """Return ((wall id, run length), (wall id, run length)) right and left of ``beam``."""
+    out = []
+    for side in (-1, 1):
+        seq = np.arange(beam + side, beam + side * (max_run + 1), side)
+        seq = seq[(seq >= 0) & (seq < ids.size)]
+        if seq.size == 0:
+            out.append((-1, 0))
+            continue
+        wall = int(ids[seq[0]])
+        ok = (ids[seq] == wall) & (cos_inc[seq] >= GRAZING_COS)
+        out.append((wall, int(np.argmin(ok)) if not ok.all() else int(ok.size)))
+    return out[0], out[1]
+
+
+def corner_truth(world, sensor_pose_at: Callable[[np.ndarray], np.ndarray], stamp_ns: int,
+                 angles: np.ndarray, time_increment: float, min_range: float = 0.3,
+                 max_range: float = 6.0, min_arm_beams: int = 5,
+                 band: Sequence[float] = CORNER_CLASS) -> CornerTruth:
+    """Return the true corners of one scan and which of them are scored (module docstring).
+
+    Args:
+        world: The simulator world.
+        sensor_pose_at: Maps stamps (ns, array) to true laser poses (N, 3) in the world.
+        stamp_ns: Stamp of the scan's first beam.
+        angles: (N,) beam angles.
+        time_increment: Time between beams [s].
+        min_range: Closest scored corner [m].
+        max_range: Farthest scored corner [m].
+        min_arm_beams: Consecutive beams needed on each arm.
+        band: Corner-angle class [rad].
+
+    """
+    truth = world.corners()
+    n = len(angles)
+    pose0 = np.asarray(sensor_pose_at(np.array([stamp_ns])), dtype=float).reshape(3)
+    rel = inverse_transform_points(pose0, truth.positions).reshape(-1, 2)
+    bearing = np.arctan2(rel[:, 1], rel[:, 0])
+    beam = np.clip(np.rint((bearing - angles[0]) / (angles[1] - angles[0]) if n > 1 else 0),
+                   0, max(n - 1, 0)).astype(np.int64)
+    stamps = stamp_ns + np.rint(beam * time_increment * 1e9).astype(np.int64)
+    poses = np.asarray(sensor_pose_at(stamps), dtype=float).reshape(-1, 3)
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    d = truth.positions - poses[:, :2]
+    xy = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
+    fov = float(angles[-1] - angles[0]) if n > 1 else 0.0
+    center = pose0.copy()
+    center[2] += 0.5 * float(angles[0] + angles[-1]) if n else 0.0
+    visible = np.isin(truth.ids, world.visible_corners(center, max_range, fov + 1e-9,
+                                                       both_sides=True))
+    theta = np.minimum(truth.openings, 2.0 * math.pi - truth.openings)
+    in_class = (theta >= band[0]) & (theta <= band[1])
+    scored = visible & in_class & (np.hypot(xy[:, 0], xy[:, 1]) >= min_range)
+    if scored.any():
+        hits = world.raycast(np.repeat(pose0[None, :2], n, axis=0), pose0[2] + angles,
+                             max_range + 2.0)
+        for k in np.flatnonzero(scored):
+            (w1, n1), (w2, n2) = _arm_runs(hits.ids, hits.cos_incidence, int(beam[k]))
+            arms = {int(v) for v in truth.segment_ids[k]}
+            scored[k] = {w1, w2} == arms and min(n1, n2) >= min_arm_beams
+    return CornerTruth(xy=xy, scored=scored, in_class=in_class)
+
+
+def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray,
+               max_range: float) -> WallTruth:
+    """Return the walls hit by the noise-free beams from ``sensor_pose`` (laser frame)."""
     sensor_pose = np.asarray(sensor_pose, dtype=float)
     origins = np.repeat(sensor_pose[None, :2], len(angles), axis=0)
     hits = world.raycast(origins, sensor_pose[2] + angles, max_range)
     hit = np.isfinite(hits.ranges) & (hits.kind == 1)
-    hit_xy = origins[hit] + hits.ranges[hit, None] * np.column_stack(
+    xy = origins[hit] + hits.ranges[hit, None] * np.column_stack(
         [np.cos(sensor_pose[2] + angles[hit]), np.sin(sensor_pose[2] + angles[hit])])
-    hit_ids = hits.ids[hit]
-
-    corners = world.corners()
-    fov = float(angles[-1] - angles[0]) if len(angles) > 1 else 0.0
-    center = sensor_pose.copy()
-    center[2] += 0.5 * float(angles[0] + angles[-1]) if len(angles) else 0.0
-    visible = set(world.visible_corners(center, max_range, fov + 1e-9).tolist())
-    keep = []
-    for k, cid in enumerate(corners.ids):
-        if cid not in visible:
-            continue
-        vertex = corners.positions[k]
-        if np.hypot(*(vertex - sensor_pose[:2])) < min_range:
-            continue
-        ok = True
-        for seg_id in corners.segment_ids[k]:
-            near = hit_xy[hit_ids == seg_id]
-            if np.count_nonzero(np.hypot(*(near - vertex).T) <= arm_length) < min_arm_beams:
-                ok = False
-                break
-        if ok:
-            keep.append(k)
-    keep = np.array(keep, dtype=int)
-    angle = np.minimum(corners.openings, 2 * math.pi - corners.openings)
-
+    ids = hits.ids[hit]
     walls = world.walls()
-    wall_rows = {int(i): r for r, i in enumerate(walls.ids)}
-    w_ids, w_form, w_ext, w_span = [], [], [], []
-    for wid in np.unique(hit_ids):
-        pts = hit_xy[hit_ids == wid]
+    rows = {int(i): r for r, i in enumerate(walls.ids)}
+    w_ids, forms, extents, spans = [], [], [], []
+    for wid in np.unique(ids):
+        pts = xy[ids == wid]
         if len(pts) < 2:
             continue
-        seg = walls.segments[wall_rows[int(wid)]]
+        seg = walls.segments[rows[int(wid)]]
         direction = (seg[2:] - seg[:2]) / np.hypot(*(seg[2:] - seg[:2]))
         t = (pts - seg[:2]) @ direction
-        ends = seg[:2] + np.outer([t.min(), t.max()], direction)
-        ends_l = inverse_transform_points(sensor_pose, ends)
+        ends = inverse_transform_points(sensor_pose,
+                                        seg[:2] + np.outer([t.min(), t.max()], direction))
         w_ids.append(int(wid))
-        w_form.append(normal_form(ends_l[:1], ends_l[1:])[0])
-        w_ext.append(float(t.max() - t.min()))
-        w_span.append(ends_l)
-    return VisibleTruth(
-        corner_ids=corners.ids[keep],
-        corner_xy=inverse_transform_points(sensor_pose, corners.positions[keep]).reshape(-1, 2),
-        corner_angle=angle[keep],
-        all_corner_xy=inverse_transform_points(sensor_pose, corners.positions).reshape(-1, 2),
-        wall_ids=np.array(w_ids, dtype=np.int64),
-        wall_rho_alpha=np.array(w_form).reshape(-1, 2),
-        wall_extent=np.array(w_ext),
-        wall_span=np.array(w_span).reshape(-1, 2, 2))
+        forms.append(normal_form(ends[:1], ends[1:])[0])
+        extents.append(float(t.max() - t.min()))
+        spans.append(ends)
+    return WallTruth(ids=np.array(w_ids, dtype=np.int64),
+                     rho_alpha=np.array(forms).reshape(-1, 2), extent=np.array(extents),
+                     span=np.array(spans).reshape(-1, 2, 2))
 
 
 @dataclass
@@ -123,62 +168,69 @@ class CornerScore:
     """Accumulated corner-detection figures over many scans."""
 
     scans: int = 0
-    detections: int = 0
-    correct: int = 0          # detections within match distance of some true corner
-    ghosts: int = 0
-    relevant: int = 0         # detectable true corners in the class and range band
-    found: int = 0            # of those, matched
+    truth: int = 0
+    tp: int = 0
+    ghost: int = 0
+    wrong: int = 0
+    duplicate: int = 0
+    ignored: int = 0
     errors: List[float] = field(default_factory=list)
 
     @property
+    def false_positives(self) -> int:
+        """Ghosts, wrong-class and duplicate detections."""
+        return self.ghost + self.wrong + self.duplicate
+
+    @property
     def precision(self) -> float:
-        """Correct detections / detections."""
-        return self.correct / self.detections if self.detections else float('nan')
+        """True positives / (true positives + false positives)."""
+        total = self.tp + self.false_positives
+        return self.tp / total if total else float('nan')
 
     @property
     def recall(self) -> float:
-        """Matched relevant true corners / relevant true corners."""
-        return self.found / self.relevant if self.relevant else float('nan')
+        """True positives / scored true corners."""
+        return self.tp / self.truth if self.truth else float('nan')
 
     @property
     def ghosts_per_scan(self) -> float:
         """Ghost detections per scan."""
-        return self.ghosts / self.scans if self.scans else float('nan')
+        return self.ghost / self.scans if self.scans else float('nan')
 
     @property
     def rms_error(self) -> float:
-        """RMS position error of matched relevant corners [m]."""
+        """RMS position error of the true positives [m]."""
         return float(np.sqrt(np.mean(np.square(self.errors)))) if self.errors else float('nan')
 
 
-def score_corners(score: CornerScore, detected_xy: np.ndarray, truth: VisibleTruth,
-                  match_distance: float = 0.1,
-                  angle_band: Sequence[float] = (math.radians(70), math.radians(110)),
-                  range_band: Sequence[float] = (0.3, 6.0)) -> None:
+def score_corners(score: CornerScore, detected_xy: np.ndarray, truth: CornerTruth,
+                  match_distance: float = 0.1) -> None:
     """Add one scan's corner detections (laser frame, (D, 2)) to ``score``."""
     detected_xy = np.asarray(detected_xy, dtype=float).reshape(-1, 2)
     score.scans += 1
-    score.detections += len(detected_xy)
-    if len(detected_xy):
-        if len(truth.all_corner_xy):
-            d_all = np.hypot(*(detected_xy[:, None, :] - truth.all_corner_xy[None]).transpose(
-                2, 0, 1))
-            near = d_all.min(axis=1) <= match_distance
+    score.truth += int(truth.scored.sum())
+    if not len(detected_xy):
+        return
+    if not len(truth.xy):
+        score.ghost += len(detected_xy)
+        return
+    dist = np.hypot(*(detected_xy[:, None, :] - truth.xy[None]).transpose(2, 0, 1))
+    matched = np.zeros(len(truth.xy), bool)
+    for i in np.argsort(dist.min(axis=1), kind='stable'):
+        k = int(np.argmin(dist[i]))
+        if dist[i, k] > match_distance:
+            score.ghost += 1
+        elif not truth.in_class[k]:
+            score.wrong += 1
+        elif matched[k]:
+            score.duplicate += 1
         else:
-            near = np.zeros(len(detected_xy), bool)
-        score.correct += int(near.sum())
-        score.ghosts += int((~near).sum())
-    rng = np.hypot(truth.corner_xy[:, 0], truth.corner_xy[:, 1])
-    rel = ((truth.corner_angle >= angle_band[0]) & (truth.corner_angle <= angle_band[1])
-           & (rng >= range_band[0]) & (rng <= range_band[1]))
-    targets = truth.corner_xy[rel]
-    score.relevant += len(targets)
-    if len(targets) and len(detected_xy):
-        cost = np.hypot(*(targets[:, None, :] - detected_xy[None]).transpose(2, 0, 1))
-        rows, cols = linear_sum_assignment(cost)
-        ok = cost[rows, cols] <= match_distance
-        score.found += int(ok.sum())
-        score.errors.extend(cost[rows, cols][ok].tolist())
+            matched[k] = True
+            if truth.scored[k]:
+                score.tp += 1
+                score.errors.append(float(dist[i, k]))
+            else:
+                score.ignored += 1
 
 
 @dataclass
@@ -224,27 +276,27 @@ def _overlap(span: np.ndarray, start: np.ndarray, end: np.ndarray) -> bool:
     return t[1] > 0.0 and t[0] < 1.0
 
 
-def score_lines(score: LineScore, lines: Sequence, truth: VisibleTruth,
+def score_lines(score: LineScore, lines: Sequence, truth: WallTruth,
                 max_drho: float = 0.1, max_dalpha: float = math.radians(3.0),
                 min_wall_length: float = 1.0) -> None:
     """Add one scan's line detections (objects with rho, alpha, start, end) to ``score``."""
     score.scans += 1
     score.detections += len(lines)
-    n_w = len(truth.wall_ids)
+    n_w = len(truth.ids)
     match = np.zeros((len(lines), n_w), dtype=bool)
     err = np.zeros((len(lines), n_w, 2))
     for i, ln in enumerate(lines):
         for j in range(n_w):
-            rho, alpha = truth.wall_rho_alpha[j]
+            rho, alpha = truth.rho_alpha[j]
             drho = float(ln.rho - rho)
             dalpha = float(wrap_angle(ln.alpha - alpha))
             if abs(drho) <= max_drho and abs(dalpha) <= max_dalpha and _overlap(
-                    truth.wall_span[j], np.asarray(ln.start), np.asarray(ln.end)):
+                    truth.span[j], np.asarray(ln.start), np.asarray(ln.end)):
                 match[i, j] = True
                 err[i, j] = (drho, dalpha)
     score.false_pos += int((~match.any(axis=1)).sum()) if n_w else len(lines)
     for j in range(n_w):
-        if truth.wall_extent[j] < min_wall_length:
+        if truth.extent[j] < min_wall_length:
             continue
         score.relevant += 1
         cands = np.flatnonzero(match[:, j])

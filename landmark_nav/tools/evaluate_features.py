@@ -13,8 +13,8 @@ from typing import Dict, Optional, Sequence
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, scan_to_data
-from landmark_nav.evaluation.features import (CornerScore, LineScore, score_corners,
-                                              score_lines, visible_truth)
+from landmark_nav.evaluation.features import (corner_truth, CornerScore, LineScore,
+                                              score_corners, score_lines, wall_truth)
 from landmark_nav.geometry import compose, interpolate_pose
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.sim.record import load_ground_truth
@@ -68,6 +68,7 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
     sigma = float(meta['laser']['sigma_range'] if sigma_r is None else sigma_r)
     sigma_phi = float(meta['laser'].get('sigma_angle', 0.0))
     t_truth, truth = _truth_track(bag)
+    t_rel = (t_truth - t_truth[0]).astype(float)
     corner_params = {m: CornerParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
                      for m in corner_methods}
     line_params = {m: LineParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
@@ -87,12 +88,19 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
             if k % every:
                 continue
             scan = scan_to_data(msg)
-            t_mid = scan.stamp_ns + 0.5 * len(scan.ranges) * scan.time_increment * 1e9
-            if not t_truth[0] <= t_mid <= t_truth[-1]:
+            t_end = scan.stamp_ns + len(scan.ranges) * scan.time_increment * 1e9
+            if not (t_truth[0] <= scan.stamp_ns and t_end <= t_truth[-1]):
                 continue
-            pose = interpolate_pose(t_mid, t_truth, truth)
-            truth_seen = visible_truth(world, compose(pose, mount), scan.angles,
-                                       scan.range_max, scan.range_min)
+
+            def sensor_pose_at(stamps):
+                rel = (np.asarray(stamps, dtype=np.int64) - t_truth[0]).astype(float)
+                return compose(interpolate_pose(rel, t_rel, truth), mount)
+
+            corners_true = corner_truth(world, sensor_pose_at, scan.stamp_ns, scan.angles,
+                                        scan.time_increment)
+            t_mid = scan.stamp_ns + 0.5 * len(scan.ranges) * scan.time_increment * 1e9
+            walls_true = wall_truth(world, sensor_pose_at(np.array([t_mid]))[0], scan.angles,
+                                    scan.range_max)
             t0 = time.perf_counter()
             clusters = segment_scan(scan.ranges, scan.angles, scan.valid,
                                     scan.angle_increment, sigma_r=sigma)
@@ -102,19 +110,19 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
                 corners = detect_corners(clusters, params)
                 c_times[m].append(t_seg + time.perf_counter() - t0)
                 xy = np.array([c.position for c in corners]).reshape(-1, 2)
-                score_corners(c_scores[m], xy, truth_seen)
+                score_corners(c_scores[m], xy, corners_true)
             for m, params in line_params.items():
                 t0 = time.perf_counter()
                 lines = extract_lines(clusters, params)
                 l_times[m].append(t_seg + time.perf_counter() - t0)
-                score_lines(l_scores[m], lines, truth_seen)
+                score_lines(l_scores[m], lines, walls_true)
             n_used += 1
     result = {'scans': n_used, 'sigma_r': sigma, 'corners': {}, 'lines': {}}
     for m, s in c_scores.items():
         result['corners'][m] = {
             'precision': s.precision, 'recall': s.recall, 'rms_error_m': s.rms_error,
-            'ghosts_per_scan': s.ghosts_per_scan, 'detections': s.detections,
-            'relevant': s.relevant, 'found': s.found,
+            'ghosts_per_scan': s.ghosts_per_scan, 'true_positives': s.tp,
+            'scored_corners': s.truth, 'wrong_class': s.wrong, 'duplicates': s.duplicate,
             'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None}
     for m, s in l_scores.items():
         result['lines'][m] = {
