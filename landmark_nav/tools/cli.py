@@ -62,6 +62,14 @@ def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.calibrate_odometry import calibrate_odometry
+    _, report = calibrate_odometry(args.bags, write_params=args.write_params,
+                                   method=args.method, iterations=args.iterations)
+    print(report)
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from landmark_nav.tools.demo import run_demo
     print(run_demo(args.bag, args.out))
@@ -101,6 +109,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help='range noise the extractors assume [m] (default: the simulated one)')
     p.add_argument('--json', default=None, help='also write the figures to this JSON file')
     p.set_defaults(func=_cmd_evaluate_features)
+
+    p = sub.add_parser('calibrate-odometry',
+                       help='estimate the odometry factors k1, k2, k3 from calibration runs')
+    p.add_argument('bags', nargs='+', help='bag(s) recorded by `simulate calibration`')
+    p.add_argument('--write-params', default=None, metavar='FILE',
+                   help='write k1, k2, k3 into this ROS 2 parameter file under '
+                        'base_driver.ros__parameters (e.g. config/base_driver.yaml); '
+                        'other keys are kept')
+    p.add_argument('--method', choices=('chapter', 'joint'), default='chapter',
+                   help='chapter: Algorithm 1 per data set, averaged (default); '
+                        'joint: one weighted least-squares fit over all runs')
+    p.add_argument('--iterations', type=int, default=2,
+                   help='Algorithm 1 iterations (default 2, as in the chapter)')
+    p.set_defaults(func=_cmd_calibrate_odometry)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
     p.add_argument('--bag', default='bags/office', help='bag to evaluate')
