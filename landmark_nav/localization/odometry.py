@@ -182,3 +182,29 @@ def dead_reckoning(pose0: Any, controls: Any, midpoint: bool = True) -> np.ndarr
     for k in range(u.shape[0]):
         out[k + 1] = motion_model(out[k], u[k], midpoint=midpoint)
     return out
+
+
+def calibrate_control(u_nominal: Any, axle_length: float,
+                      k: Tuple[float, float, float] = (1.0, 1.0, 1.0)) -> np.ndarray:
+    """Apply calibration factors to control input(s) of the nominal model (eqs. 17-18).
+
+    A nominal odometry increment ``[D, dTheta]`` (eqs. 4-7 with k = 1, e.g. from two
+    successive poses of an uncalibrated odometry topic, :func:`control_from_poses`) is
+    split into the wheel arc lengths ``s_L = D - b dTheta / 2``, ``s_R = D + b dTheta / 2``,
+    which are then recombined with ``k1 R``, ``k2 R``, ``k3 b``. Equals
+    :func:`control_from_wheels` with ``k`` on the wheel speeds behind the nominal increment.
+
+    Args:
+        u_nominal: (..., 2) nominal ``[D, dTheta]`` [m, rad].
+        axle_length: nominal b [m].
+        k: calibration factors ``(k1, k2, k3)``.
+
+    Returns:
+        (..., 2) calibrated ``[D, dTheta]``.
+    """
+    u = np.asarray(u_nominal, dtype=float)
+    s_l = u[..., 0] - 0.5 * axle_length * u[..., 1]
+    s_r = u[..., 0] + 0.5 * axle_length * u[..., 1]
+    d = 0.5 * (k[0] * s_l + k[1] * s_r)  # eqs. 4, 17
+    dth = (k[1] * s_r - k[0] * s_l) / (k[2] * axle_length)  # eqs. 5, 18
+    return np.stack([d, dth], axis=-1)
