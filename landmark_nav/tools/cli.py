@@ -76,6 +76,32 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_evaluate_localization(args: argparse.Namespace) -> int:
+    import math
+    from landmark_nav.tools.localization_tools import evaluate_localization, format_evaluation
+    sx, sy, syaw_deg = args.initial_std
+    filters = ['ekf', 'ukf'] if args.filter == 'both' else [args.filter]
+    for filt in filters:
+        result = evaluate_localization(args.bag, filt, map_path=args.map,
+                                       seed_for_initial=args.seed,
+                                       initial_std=(sx, sy, math.radians(syaw_deg)),
+                                       out_dir=args.out, odometry_source=args.odometry_source)
+        print(format_evaluation(result))
+    return 0
+
+
+def _cmd_build_sonar_map(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.localization_tools import build_sonar_map, format_map_summary
+    print(format_map_summary(build_sonar_map(args.bag, args.poses, args.out, args.resolution)))
+    return 0
+
+
+def _cmd_rasterize_map(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.localization_tools import format_map_summary, rasterize_map
+    print(format_map_summary(rasterize_map(args.source, args.out, args.resolution)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser with every subcommand."""
     from landmark_nav.nodes.bag_player import add_replay_arguments
@@ -128,6 +154,41 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--bag', default='bags/office', help='bag to evaluate')
     p.add_argument('--out', default='out', help='output directory')
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser('evaluate-localization',
+                       help='run the sonar EKF / UKF offline on a simulator bag against its '
+                            'ground truth; writes JSON + PNGs')
+    p.add_argument('bag', help='rosbag2 directory recorded by `simulate` (e.g. bags/hallway)')
+    p.add_argument('--filter', choices=['ekf', 'ukf', 'both'], default='both',
+                   help='filter to evaluate (default both)')
+    p.add_argument('--map', default=None, metavar='YAML',
+                   help='map_server YAML (default: the world of ground_truth.yaml rasterised '
+                        'at 0.1 m)')
+    p.add_argument('--seed', type=_seed, default=None,
+                   help='seed of the initial estimate (default 1000 + the bag seed)')
+    p.add_argument('--initial-std', type=float, nargs=3, default=[0.055, 0.055, 5.0],
+                   metavar=('X_M', 'Y_M', 'YAW_DEG'),
+                   help='std of the initial estimate and covariance (default 0.055 0.055 5)')
+    p.add_argument('--odometry-source', choices=['joint_states', 'odom'], default=None,
+                   help='motion input (default joint_states if recorded)')
+    p.add_argument('--out', default='out/localization', help='output directory')
+    p.set_defaults(func=_cmd_evaluate_localization)
+
+    p = sub.add_parser('build-sonar-map',
+                       help='occupancy grid from the sonar readings of a bag at known poses')
+    p.add_argument('bag', help='rosbag2 directory with /sonar/range_0..15')
+    p.add_argument('--poses', default='/ground_truth/odom',
+                   help='nav_msgs/Odometry topic with the poses (default /ground_truth/odom)')
+    p.add_argument('--out', default='map.yaml', help='map YAML to write (PGM beside it)')
+    p.add_argument('--resolution', type=float, default=0.1, help='cell size [m] (default 0.1)')
+    p.set_defaults(func=_cmd_build_sonar_map)
+
+    p = sub.add_parser('rasterize-map',
+                       help="rasterise the simulator's world (bag or scenario) into a map file")
+    p.add_argument('source', help='bag directory with ground_truth.yaml, or a scenario name')
+    p.add_argument('--out', required=True, help='map YAML to write (PGM beside it)')
+    p.add_argument('--resolution', type=float, default=0.1, help='cell size [m] (default 0.1)')
+    p.set_defaults(func=_cmd_rasterize_map)
     return parser
 
 
