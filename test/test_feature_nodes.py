@@ -151,3 +151,75 @@ def test_config_file_matches_declared_parameters():
             assert declared[name] == value
     assert CornerParams().f_min == pytest.approx(-0.3436)
     assert math.isclose(values['f_max'], 0.3515)
+
+
+# ------------------------------------------------------------------------- line_extractor
+@pytest.mark.dds
+def test_line_extractor_replays_the_office_bag():
+    from landmark_nav.laser.lines import extract_lines
+    from landmark_nav.nodes.line_extractor import LineExtractor
+    scans = first_scans()
+    with RosHarness() as ros:
+        node = ros.add_node(LineExtractor(context=ros.context))
+        clouds = ros.collect('lines', PointCloud2)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        play_lockstep(ros, pub, scans, clouds)
+        params = node.params
+    assert len(clouds) == len(scans)
+    total = 0
+    for scan, cloud in zip(scans, clouds):
+        assert cloud.header == scan.header
+        data = scan_to_data(scan)
+        expected = extract_lines(segment_scan(data.ranges, data.angles, data.valid,
+                                              data.angle_increment, 10.0, params.sigma_r, 5),
+                                 params)
+        fields = feature_cloud_to_arrays(cloud)
+        np.testing.assert_allclose(fields['rho'], [ln.rho for ln in expected], atol=1e-5)
+        np.testing.assert_allclose(fields['alpha'], [ln.alpha for ln in expected], atol=1e-5)
+        np.testing.assert_allclose(fields['num_points'], [ln.num_points for ln in expected])
+        total += len(expected)
+    assert total > 0
+
+
+@pytest.mark.dds
+def test_line_extractor_survives_bad_input():
+    from landmark_nav.nodes.line_extractor import LineExtractor
+    good = first_scans(2)
+    with RosHarness() as ros:
+        node = ros.add_node(LineExtractor(context=ros.context))
+        clouds = ros.collect('lines', PointCloud2)
+        logs = ros.collect('/rosout', Log)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub])
+        outputs = 0
+        for needle, msg in _bad_scans(good[0]):
+            before, dropped = len(logs), node.warner.count
+            pub.publish(msg)
+            if needle is None:
+                outputs += 1
+                assert ros.wait_until(lambda: len(clouds) == outputs, 5)
+            elif needle == 'repeat':
+                assert ros.wait_until(lambda: node.warner.count == dropped + 1, 5)
+            else:
+                assert ros.wait_until(lambda: len(logs) > before, 5), f'no warning ({needle})'
+                assert needle in logs[-1].msg, logs[-1].msg
+        pub.publish(good[1])
+        assert ros.wait_until(lambda: len(clouds) == outputs + 1, 5)
+
+
+def test_line_extractor_parameters_and_config():
+    from landmark_nav.nodes.line_extractor import LineExtractor
+    with RosHarness() as ros:
+        for name, value in [('method', 'hough'), ('min_points', 1), ('rmse_min', 0.5)]:
+            with pytest.raises(ParameterError, match=name.split('_')[0]):
+                LineExtractor(context=ros.context,
+                              parameter_overrides=[Parameter(name, value=value)])
+        node = LineExtractor(context=ros.context)
+        declared = {name: p.value for name, p in node._parameters.items()
+                    if name not in ('use_sim_time', 'start_type_description_service')}
+        node.destroy_node()
+    config = yaml.safe_load((REPO / 'config' / 'line_extractor.yaml').read_text())
+    values = config['line_extractor']['ros__parameters']
+    assert set(values) == set(declared)
+    for name, value in values.items():
+        assert declared[name] == (pytest.approx(value) if isinstance(value, float) else value)

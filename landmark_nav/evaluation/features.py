@@ -31,7 +31,7 @@ Matching (:func:`score_corners`, :func:`score_lines`):
 
 from dataclasses import dataclass, field
 import math
-from typing import Callable, List, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import inverse_transform_points, wrap_angle
 import numpy as np
@@ -57,6 +57,7 @@ class WallTruth:
     rho_alpha: np.ndarray    # (W, 2) Hessian normal form
     extent: np.ndarray       # (W,) visible length [m]
     span: np.ndarray         # (W, 2, 2) visible end points
+    world_span: np.ndarray   # (W, 2, 2) the same end points in the world frame
 
 
 def normal_form(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
@@ -144,7 +145,7 @@ def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray,
     ids = hits.ids[hit]
     walls = world.walls()
     rows = {int(i): r for r, i in enumerate(walls.ids)}
-    w_ids, forms, extents, spans = [], [], [], []
+    w_ids, forms, extents, spans, world_spans = [], [], [], [], []
     for wid in np.unique(ids):
         pts = xy[ids == wid]
         if len(pts) < 2:
@@ -152,15 +153,17 @@ def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray,
         seg = walls.segments[rows[int(wid)]]
         direction = (seg[2:] - seg[:2]) / np.hypot(*(seg[2:] - seg[:2]))
         t = (pts - seg[:2]) @ direction
-        ends = inverse_transform_points(sensor_pose,
-                                        seg[:2] + np.outer([t.min(), t.max()], direction))
+        ends_world = seg[:2] + np.outer([t.min(), t.max()], direction)
+        ends = inverse_transform_points(sensor_pose, ends_world)
+        world_spans.append(ends_world)
         w_ids.append(int(wid))
         forms.append(normal_form(ends[:1], ends[1:])[0])
         extents.append(float(t.max() - t.min()))
         spans.append(ends)
     return WallTruth(ids=np.array(w_ids, dtype=np.int64),
                      rho_alpha=np.array(forms).reshape(-1, 2), extent=np.array(extents),
-                     span=np.array(spans).reshape(-1, 2, 2))
+                     span=np.array(spans).reshape(-1, 2, 2),
+                     world_span=np.array(world_spans).reshape(-1, 2, 2))
 
 
 @dataclass
@@ -278,16 +281,27 @@ def _overlap(span: np.ndarray, start: np.ndarray, end: np.ndarray) -> bool:
 
 def score_lines(score: LineScore, lines: Sequence, truth: WallTruth,
                 max_drho: float = 0.1, max_dalpha: float = math.radians(3.0),
-                min_wall_length: float = 1.0) -> None:
-    """Add one scan's line detections (objects with rho, alpha, start, end) to ``score``."""
+                min_wall_length: float = 1.0, line_poses: Optional[np.ndarray] = None
+                ) -> None:
+    """Add one scan's line detections (objects with rho, alpha, start, end) to ``score``.
+
+    ``line_poses`` (D, 3), when given, are the true laser poses at the time each line's
+    points were measured (its middle beam): the walls are then compared in that pose, so
+    the robot's motion during the sweep does not count as extraction error.
+    """
     score.scans += 1
     score.detections += len(lines)
     n_w = len(truth.ids)
     match = np.zeros((len(lines), n_w), dtype=bool)
     err = np.zeros((len(lines), n_w, 2))
     for i, ln in enumerate(lines):
+        forms = truth.rho_alpha
+        if line_poses is not None and n_w:
+            ends = inverse_transform_points(line_poses[i], truth.world_span.reshape(-1, 2))
+            ends = ends.reshape(-1, 2, 2)
+            forms = normal_form(ends[:, 0], ends[:, 1])
         for j in range(n_w):
-            rho, alpha = truth.rho_alpha[j]
+            rho, alpha = forms[j]
             drho = float(ln.rho - rho)
             dalpha = float(wrap_angle(ln.alpha - alpha))
             if abs(drho) <= max_drho and abs(dalpha) <= max_dalpha and _overlap(

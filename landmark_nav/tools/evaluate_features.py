@@ -115,7 +115,10 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
                 t0 = time.perf_counter()
                 lines = extract_lines(clusters, params)
                 l_times[m].append(t_seg + time.perf_counter() - t0)
-                score_lines(l_scores[m], lines, walls_true)
+                mid = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
+                line_poses = sensor_pose_at(scan.stamp_ns + np.rint(
+                    mid * scan.time_increment * 1e9).astype(np.int64)).reshape(-1, 3)
+                score_lines(l_scores[m], lines, walls_true, line_poses=line_poses)
             n_used += 1
     result = {'scans': n_used, 'sigma_r': sigma, 'corners': {}, 'lines': {}}
     for m, s in c_scores.items():

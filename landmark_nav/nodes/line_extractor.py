@@ -1,0 +1,72 @@
+"""Executable ``line_extractor``: line segments of each laser scan.
+
+Methods: ``split_merge`` (corner chapter section 2.1.2, eqs. 4-10) and ``alfa`` (the line
+chapter's adaptive line fitting: lowess smoothing, split and merge with binary search and
+the RMSE criterion). Subscribes ``scan`` (sensor_msgs/LaserScan, sensor-data QoS).
+Publishes, with the scan's stamp and frame:
+
+* ``lines`` (sensor_msgs/PointCloud2): one point per line with (rho, alpha), endpoints,
+  the (rho, alpha) covariance, point count and RMSE (see :mod:`landmark_nav.feature_msgs`);
+* ``lines/markers`` (visualization_msgs/MarkerArray) for RViz.
+
+A malformed scan is dropped with a warning naming the problem (throttled per kind).
+"""
+
+from landmark_nav.conversions import ScanData
+from landmark_nav.feature_msgs import make_line_cloud, make_line_markers
+from landmark_nav.laser.lines import extract_lines, LineParams
+from landmark_nav.nodes.common import declare_dataclass, run_node
+from landmark_nav.nodes.scan_features import ScanFeatureNode
+from sensor_msgs.msg import PointCloud2
+from visualization_msgs.msg import MarkerArray
+
+LINE_PARAMETERS = {
+    'method': ('line extractor: split_merge or alfa', None, ['split_merge', 'alfa']),
+    'split_threshold': ('split_merge: split distance tolerance [m] (eq. 4); 0 = automatic, '
+                        'max(0.03, 4 sigma_r)', (0.0, 10.0), None, 0.0),
+    'min_points': ('fewest points of a line', (2, 10000), None),
+    'min_length': ('shortest line [m]', (0.0, 100.0), None),
+    'merge_chi2': ('chi-square gate (2 dof) of the collinearity test for merging',
+                   (0.001, 1000.0), None),
+    'merge_gap': ('largest gap between collinear lines of neighbouring clusters merged '
+                  'into one [m]', (0.0, 100.0), None),
+    'sigma_r': ('laser range noise std [m] (covariances, thresholds, segmentation)',
+                (0.0001, 1.0), None),
+    'sigma_phi': ('laser bearing noise std [rad] (covariances)', (0.0, 0.1), None),
+    'lowess_span': ('alfa: lowess window [points] (odd)', (3, 1001), None),
+    'lowess_iterations': ('alfa: lowess robustness iterations', (0, 20), None),
+    'rmse_min': ('alfa: lowest floating RMSE threshold [m]; 0 = automatic, 0.3 sigma_r',
+                 (0.0, 1.0), None, 0.0),
+    'rmse_max': ('alfa: highest floating RMSE threshold [m]; 0 = automatic, sigma_r',
+                 (0.0, 1.0), None, 0.0),
+    'max_gradient': ('alfa: largest RMSE growth per added point, relative to the threshold',
+                     (0.0001, 100.0), None),
+}
+
+
+class LineExtractor(ScanFeatureNode):
+    """Thin node: LaserScan -> segmentation -> line extractor -> messages."""
+
+    def __init__(self, **kwargs) -> None:
+        """Declare and validate parameters, create the subscription and publishers."""
+        super().__init__('line_extractor', **kwargs)
+        self.params = declare_dataclass(self, LineParams, LINE_PARAMETERS)
+        self.pub_lines = self.create_publisher(PointCloud2, 'lines', 10)
+        self.pub_markers = self.create_publisher(MarkerArray, 'lines/markers', 10)
+        self.subscribe_scans(self.params.sigma_r)
+        self.get_logger().info(f'line_extractor: method {self.params.method}')
+
+    def process(self, scan: ScanData, clusters: list) -> None:
+        """Extract and publish the lines of one scan."""
+        lines = extract_lines(clusters, self.params)
+        self.pub_lines.publish(make_line_cloud(scan.stamp_ns, scan.frame_id, lines))
+        self.pub_markers.publish(make_line_markers(scan.stamp_ns, scan.frame_id, lines))
+
+
+def main(args=None) -> int:
+    """Run ``ros2 run landmark_nav line_extractor``."""
+    return run_node(LineExtractor, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
