@@ -208,13 +208,21 @@ def fit_line(points: np.ndarray, ranges: np.ndarray, angles: np.ndarray, sigma_r
     gap = lam1 - lam2
     if gap >= -1e-15:
         return rho, alpha, np.full((2, 2), np.inf), rmse
-    # First-order derivatives of the TLS solution w.r.t. each point (eigenvector perturbation).
-    j_alpha = ((q @ n)[:, None] * d + (q @ d)[:, None] * n) / gap
-    j_rho = float(d @ m) * j_alpha + n / len(points)
-    jac = np.stack([j_rho, j_alpha], axis=1)  # (N, 2, 2)
-    cov_pts = point_covariances(ranges, angles, sigma_r, sigma_phi)
-    cov = np.einsum('nij,njk,nlk->il', jac, cov_pts, jac)
-    return rho, alpha, 0.5 * (cov + cov.T), rmse
+    # First-order derivatives of the TLS solution w.r.t. each point (eigenvector
+    # perturbation): d alpha / d p_i = ((q_i.n) d + (q_i.d) n) / (lambda_min - lambda_max),
+    # d rho / d p_i = (d.m) d alpha / d p_i + n / N. With the eq. 7 noise
+    # Q_i = sigma_r^2 u u^T + (r sigma_phi)^2 v v^T (u along the beam, v across it),
+    # J Q J^T is a sum of two rank-one terms per point: only dot products are needed.
+    qn, qd = q @ n, q @ d
+    c, s = np.cos(angles), np.sin(angles)
+    cov = np.zeros((2, 2))
+    for ux, uy, weight in ((c, s, sigma_r ** 2), (-s, c, (ranges * sigma_phi) ** 2)):
+        a_u = (qn * (d[0] * ux + d[1] * uy) + qd * (n[0] * ux + n[1] * uy)) / gap
+        r_u = float(d @ m) * a_u + (n[0] * ux + n[1] * uy) / len(points)
+        cov += np.array([[np.sum(weight * r_u * r_u), np.sum(weight * r_u * a_u)],
+                         [0.0, np.sum(weight * a_u * a_u)]])
+    cov[1, 0] = cov[0, 1]
+    return rho, alpha, cov, rmse
 
 
 def _fit_segment(pts: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
