@@ -278,18 +278,16 @@ def _split(points: np.ndarray, threshold: np.ndarray) -> List[Tuple[int, int]]:
 
 
 def _merge(cluster: Cluster, pieces: List[Tuple[int, int]], params: LineParams
-           ) -> List[Tuple[int, int]]:
-    """Merge adjacent collinear pieces (chi-square test on rho, alpha)."""
-    merged = list(pieces)
+           ) -> List[Tuple[int, int, Optional[LineSegment]]]:
+    """Merge adjacent collinear pieces (chi-square test on rho, alpha); keep their fits."""
+    merged = [(lo, hi, _make_segment(cluster, lo, hi, params) if hi - lo >= 1 else None)
+              for lo, hi in pieces]
     i = 0
     while i + 1 < len(merged):
-        (a0, a1), (b0, b1) = merged[i], merged[i + 1]
-        if a1 - a0 + 1 >= 2 and b1 - b0 + 1 >= 2:
-            la = _make_segment(cluster, a0, a1, params)
-            lb = _make_segment(cluster, b0, b1, params)
-            if _collinear(la, lb, params.merge_chi2):
-                merged[i:i + 2] = [(a0, b1)]
-                continue
+        (a0, _, la), (_, b1, lb) = merged[i], merged[i + 1]
+        if la is not None and lb is not None and _collinear(la, lb, params.merge_chi2):
+            merged[i:i + 2] = [(a0, b1, _make_segment(cluster, a0, b1, params))]
+            continue
         i += 1
     return merged
 
@@ -439,16 +437,15 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
         else:
             pieces = _refine_breaks(cluster.points, _alfa_pieces(cluster, params),
                                     params.min_points)
-        for lo, hi in _merge(cluster, pieces, params):
+        for lo, hi, seg in _merge(cluster, pieces, params):
             if hi - lo + 1 >= params.min_points:
                 sl = slice(lo, hi + 1)
-                parts.append((cluster.points[sl], cluster.ranges[sl], cluster.angles[sl],
-                              cluster.indices[sl]))
+                parts.append(((cluster.points[sl], cluster.ranges[sl], cluster.angles[sl],
+                               cluster.indices[sl]), seg))
     # Lines of neighbouring clusters (a wall cut by a dropout or a spurious return) are
     # merged when collinear and their ends are less than merge_gap apart.
     lines, members = [], []
-    for part in parts:
-        seg = _fit_segment(*part, params)
+    for part, seg in parts:
         if lines and members[-1][-1][3][-1] < part[3][0]:
             prev = lines[-1]
             if (np.hypot(*(seg.start - prev.end)) <= params.merge_gap
