@@ -334,29 +334,37 @@ def lowess(x: np.ndarray, y: np.ndarray, span: int = 7, iterations: int = 2) -> 
     return smooth
 
 
-def _rmse_prefix(points: np.ndarray):
-    """Return a function rmse(lo, hi) of the TLS fit of points lo..hi, O(1) per call.
+class _Moments:
+    """Prefix sums of point moments: O(1) total-least-squares residuals of any run."""
 
-    The function's ``sse`` attribute gives the sum of squared perpendicular residuals.
-    """
-    c = np.vstack([np.zeros((1, 5)), np.cumsum(np.column_stack(
-        [points[:, 0], points[:, 1], points[:, 0] ** 2, points[:, 1] ** 2,
-         points[:, 0] * points[:, 1]]), axis=0)])
+    def __init__(self, points: np.ndarray) -> None:
+        """Accumulate x, y, x^2, y^2 and xy."""
+        x, y = points[:, 0], points[:, 1]
+        self.c = np.vstack([np.zeros((1, 5)), np.cumsum(
+            np.column_stack([x, y, x * x, y * y, x * y]), axis=0)])
 
-    def rmse(lo: int, hi: int) -> float:
-        s = c[hi + 1] - c[lo]
-        m = hi - lo + 1
-        mx, my = s[0] / m, s[1] / m
-        sxx, syy, sxy = s[2] / m - mx * mx, s[3] / m - my * my, s[4] / m - mx * my
+    def sse(self, lo, hi):
+        """Return the summed squared perpendicular residuals of points lo..hi (arrays ok)."""
+        lo, hi = np.asarray(lo), np.asarray(hi)
+        s = self.c[hi + 1] - self.c[lo]
+        m = (hi - lo + 1)[..., None] if s.ndim > 1 else hi - lo + 1
+        mean = s / m
+        sxx = mean[..., 2] - mean[..., 0] ** 2
+        syy = mean[..., 3] - mean[..., 1] ** 2
+        sxy = mean[..., 4] - mean[..., 0] * mean[..., 1]
         half = 0.5 * (sxx + syy)
-        lam = half - math.sqrt(max(half * half - (sxx * syy - sxy * sxy), 0.0))
+        lam = half - np.sqrt(np.maximum(half * half - (sxx * syy - sxy * sxy), 0.0))
+        return np.maximum(lam, 0.0) * (hi - lo + 1)
+
+    def rmse(self, lo: int, hi: int) -> float:
+        """Return the perpendicular RMSE of the TLS fit of points lo..hi (eq. 21)."""
+        sx, sy, sxx, syy, sxy = (self.c[hi + 1] - self.c[lo]).tolist()
+        m = hi - lo + 1
+        mx, my = sx / m, sy / m
+        vxx, vyy, vxy = sxx / m - mx * mx, syy / m - my * my, sxy / m - mx * my
+        half = 0.5 * (vxx + vyy)
+        lam = half - math.sqrt(max(half * half - (vxx * vyy - vxy * vxy), 0.0))
         return math.sqrt(max(lam, 0.0))
-
-    def sse(lo: int, hi: int) -> float:
-        return rmse(lo, hi) ** 2 * (hi - lo + 1)
-
-    rmse.sse = sse
-    return rmse
 
 
 def _refine_breaks(points: np.ndarray, pieces: List[Tuple[int, int]], reach: int
@@ -369,15 +377,16 @@ def _refine_breaks(points: np.ndarray, pieces: List[Tuple[int, int]], reach: int
     """
     if len(pieces) < 2:
         return pieces
-    sse = _rmse_prefix(points).sse
+    moments = _Moments(points)
     out = [list(p) for p in pieces]
     for i in range(len(out) - 1):
         lo, k, hi = out[i][0], out[i][1], out[i + 1][1]
-        best, best_k = math.inf, k
-        for cand in range(max(lo + 2, k - reach), min(hi - 2, k + reach) + 1):
-            cost = sse(lo, cand) + sse(cand, hi)
-            if cost < best:
-                best, best_k = cost, cand
+        cand = np.arange(max(lo + 2, k - reach), min(hi - 2, k + reach) + 1)
+        if cand.size == 0:
+            continue
+        cost = moments.sse(np.full(cand.size, lo), cand) + moments.sse(
+            cand, np.full(cand.size, hi))
+        best_k = int(cand[np.argmin(cost)])
         out[i][1] = best_k
         out[i + 1][0] = best_k
     return [tuple(p) for p in out]
@@ -390,7 +399,7 @@ def _alfa_pieces(cluster: Cluster, params: LineParams) -> List[Tuple[int, int]]:
                       params.lowess_iterations)
     pts = np.column_stack([smooth_r * np.cos(cluster.angles),
                            smooth_r * np.sin(cluster.angles)])
-    rmse = _rmse_prefix(pts)
+    rmse = _Moments(pts).rmse
     lo_thr, hi_thr = params.rmse_bounds
     least = params.min_points
     step = max(2, least // 2)
