@@ -1,0 +1,172 @@
+"""Time one EKF-SLAM step (prediction + ICNN association + update) against the map size.
+
+Run from the repository root::
+
+    python benchmarks/bench_slam.py [--landmarks 50 100 200] [--steps 200] [--threads 1]
+
+For each map size N a filter is built with N landmarks scattered over a 40 m x 40 m area
+(augmented with eqs. 38-48 from one pose) and then driven in a circle; every step is
+:meth:`EkfSlam.predict` + :meth:`EkfSlam.update` with 10 observations of the 10 landmarks
+nearest to the robot (all associated: the update is a 20-row batch), the PSD check of P
+included. The script prints the median and 90th percentile step time, the split into
+prediction / association / update, the growth against the ``(3 + 2N)^2`` of the covariance
+and, as the in-run reference on the same data, the dense textbook update (explicit ``H``,
+``K = P H^T S^-1``, Joseph form ``(I - K H) P (I - K H)^T + K R K^T``).
+
+BLAS threads: ``--threads`` (default 1) is exported as ``OPENBLAS_NUM_THREADS`` /
+``OMP_NUM_THREADS`` before numpy is imported; with a few hundred states the matrices are
+small and threading costs more than it gives. Targets: <= 1 ms (N = 50), <= 2 ms (100),
+<= 6 ms (200).
+"""
+
+import argparse
+import math
+import os
+from pathlib import Path
+import statistics
+import sys
+import time
+from typing import Dict, List
+
+
+def _threads_from_argv() -> str:
+    """Return the --threads value from argv (numpy is not imported yet)."""
+    for i, a in enumerate(sys.argv):
+        if a == '--threads' and i + 1 < len(sys.argv):
+            return sys.argv[i + 1]
+        if a.startswith('--threads='):
+            return a.split('=', 1)[1]
+    return '1'
+
+
+for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ[_var] = _threads_from_argv()
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from landmark_nav.geometry import compose, inverse_transform_points  # noqa: E402
+from landmark_nav.slam import EkfSlam, SlamParams  # noqa: E402
+from landmark_nav.slam.ekf_slam import (do_data_association, ekf_predict,  # noqa: E402
+                                        ekf_update, is_psd, observation_model,
+                                        odometry_noise)
+import numpy as np  # noqa: E402
+
+TARGET_MS = {50: 1.0, 100: 2.0, 200: 6.0}
+OBS = 10
+SIG = np.array([0.01, math.radians(0.3)])
+
+
+def build(n_lm: int, rng: np.random.Generator) -> EkfSlam:
+    """Return a filter whose map holds ``n_lm`` landmarks (all confirmed at once)."""
+    slam = EkfSlam(SlamParams(confirm_hits=1, confirm_window=1, max_landmarks=n_lm))
+    pts = rng.uniform(-20.0, 20.0, (n_lm, 2))
+    pts = pts[np.argsort(np.hypot(pts[:, 0], pts[:, 1]))]
+    p = inverse_transform_points(np.zeros(3), pts)
+    z = np.column_stack([np.hypot(p[:, 0], p[:, 1]), np.arctan2(p[:, 1], p[:, 0])])
+    slam.update(z, np.repeat(np.diag(SIG ** 2)[None], n_lm, axis=0))
+    assert slam.num_landmarks == n_lm
+    return slam
+
+
+def observations(slam: EkfSlam, u: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Return (10, 2) noisy observations of the landmarks nearest to the pose after ``u``."""
+    x = slam.state
+    x[:3] = compose(x[:3], u)
+    lm = slam.landmarks
+    near = np.argsort(np.hypot(*(lm - x[:2]).T))[:OBS]
+    z = observation_model(x, near)[0]
+    return z + rng.normal(0.0, SIG, z.shape)
+
+
+def dense_joseph(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
+                 idx: np.ndarray) -> np.ndarray:
+    """Return P after the textbook dense Joseph-form update (the reference)."""
+    zhat, hr, hf = observation_model(x, idx)
+    k = idx.size
+    h = np.zeros((2 * k, x.size))
+    rr = np.zeros((2 * k, 2 * k))
+    for i, j in enumerate(idx):
+        h[2 * i:2 * i + 2, :3] = hr[i]
+        h[2 * i:2 * i + 2, 3 + 2 * j:5 + 2 * j] = hf[i]
+        rr[2 * i:2 * i + 2, 2 * i:2 * i + 2] = r[i]
+    s = h @ p @ h.T + rr
+    gain = p @ h.T @ np.linalg.inv(s)
+    ikh = np.eye(x.size) - gain @ h
+    return ikh @ p @ ikh.T + gain @ rr @ gain.T
+
+
+def bench(n_lm: int, steps: int, seed: int) -> Dict[str, float]:
+    """Time ``steps`` filter steps with ``n_lm`` landmarks; return median timings [ms]."""
+    rng = np.random.default_rng(seed)
+    slam = build(n_lm, rng)
+    r = np.repeat(np.diag(SIG ** 2)[None], OBS, axis=0)
+    u = np.array([0.05, 0.0, 0.01])
+    total: List[float] = []
+    parts: Dict[str, List[float]] = {'predict': [], 'associate': [], 'update': [], 'psd': [],
+                                     'dense': []}
+    matched = 0
+    for _ in range(steps):
+        z = observations(slam, u, rng)
+        t0 = time.perf_counter()
+        slam.predict(u)
+        res = slam.update(z, r)
+        total.append(time.perf_counter() - t0)
+        matched += int(res.matched.sum())
+        # The parts, on a copy of the state (one step later, same kind of data).
+        x, p = slam.state, slam.covariance
+        z = observations(slam, u, rng)
+        t0 = time.perf_counter()
+        ekf_predict(x, p, u, odometry_noise(u, slam.params.odometry))
+        t1 = time.perf_counter()
+        pf = slam.params.position_floor
+        reff = r + np.einsum('k,ij->kij', np.ones(OBS), np.diag([pf ** 2, 0.0]))
+        reff[:, 1, 1] += (pf / z[:, 0]) ** 2  # as in EkfSlam.update
+        hyp, _, _ = do_data_association(x, p, z, reff)
+        t2 = time.perf_counter()
+        ok = hyp >= 0
+        p2, _ = ekf_update(x.copy(), p.copy(), z[ok], reff[ok], hyp[ok])
+        t3 = time.perf_counter()
+        is_psd(p2)
+        t4 = time.perf_counter()
+        dense_joseph(x, p, z[ok], reff[ok], hyp[ok])
+        t5 = time.perf_counter()
+        for name, a, b in (('predict', t0, t1), ('associate', t1, t2), ('update', t2, t3),
+                           ('psd', t3, t4), ('dense', t4, t5)):
+            parts[name].append(b - a)
+    out = {name: 1e3 * statistics.median(v) for name, v in parts.items()}
+    out['step'] = 1e3 * statistics.median(total)
+    out['p90'] = 1e3 * float(np.quantile(total, 0.9))
+    out['matched'] = matched / steps
+    return out
+
+
+def main() -> None:
+    """Run the benchmark and print a table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--landmarks', type=int, nargs='+', default=[50, 100, 200])
+    ap.add_argument('--steps', type=int, default=200, help='timed steps per map size')
+    ap.add_argument('--threads', default='1', help='BLAS threads (exported before numpy)')
+    ap.add_argument('--seed', type=int, default=0)
+    args = ap.parse_args()
+    print(f'EKF-SLAM step = predict + ICNN + update with {OBS} observations '
+          f'(BLAS threads: {os.environ["OPENBLAS_NUM_THREADS"]})')
+    head = (f'{"N":>4} {"n":>4} {"step ms":>8} {"p90":>6} {"target":>6} {"pred":>6} '
+            f'{"assoc":>6} {"upd":>6} {"psd":>6} {"t/t0":>6} {"(n/n0)^2":>8} '
+            f'{"dense Joseph":>12} {"dense/ours":>10} {"matched":>7}')
+    print(head)
+    base = None
+    for n_lm in args.landmarks:
+        r = bench(n_lm, args.steps, args.seed)
+        n = 3 + 2 * n_lm
+        if base is None:
+            base = (r['step'], n)
+        target = TARGET_MS.get(n_lm)
+        flag = '' if target is None else ('ok' if r['step'] <= target else 'MISS')
+        print(f'{n_lm:>4} {n:>4} {r["step"]:>8.3f} {r["p90"]:>6.2f} '
+              f'{(str(target) + " " + flag) if target else "-":>6} {r["predict"]:>6.3f} '
+              f'{r["associate"]:>6.3f} {r["update"]:>6.3f} {r["psd"]:>6.3f} '
+              f'{r["step"] / base[0]:>6.2f} {(n / base[1]) ** 2:>8.2f} {r["dense"]:>12.3f} '
+              f'{r["dense"] / r["update"]:>10.1f} {r["matched"]:>7.1f}')
+
+
+if __name__ == '__main__':
+    main()

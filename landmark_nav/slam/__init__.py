@@ -1,0 +1,28 @@
+"""EKF-SLAM with corner landmarks (corner chapter section 3): filter, association, checks.
+
+Modules:
+
+* :mod:`.ekf_slam` -- :class:`EkfSlam` (state layout, noise models, tentative landmarks in
+  its module docstring) and one function per filter step of Fig. 17.
+* :mod:`.association` -- ICNN (eqs. 49-55) and JCBB (Neira & Tardos 2001) on innovations.
+* :mod:`.consistency` -- NEES (eq. 59), NIS (eq. 60), chi-square gates and bands.
+* :mod:`.observations` -- laser corners to base_link range-bearing with propagated ``R``.
+* :mod:`.evaluate` -- run the filter on a simulated scenario and score it against truth.
+"""
+
+from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table
+from .consistency import chi2_band, chi2_gate, nees, nis, share_inside
+from .ekf_slam import (augment_map, do_data_association, ekf_predict, ekf_update, EkfSlam,
+                       map_initialization, observation_model, odometry_check,
+                       odometry_increment, odometry_noise, OdometryNoise, SlamParams,
+                       UpdateResult)
+from .observations import corner_descriptors, corners_to_observations, points_to_observations
+
+__all__ = [
+    'augment_map', 'chi2_band', 'chi2_gate', 'corner_descriptors', 'corners_to_observations',
+    'do_data_association',
+    'EkfSlam', 'ekf_predict', 'ekf_update', 'icnn', 'jcbb', 'joint_mahalanobis',
+    'mahalanobis_table', 'map_initialization', 'nees', 'nis', 'observation_model',
+    'odometry_check', 'odometry_increment', 'odometry_noise', 'OdometryNoise',
+    'points_to_observations', 'share_inside', 'SlamParams', 'UpdateResult',
+]
