@@ -70,6 +70,12 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.evaluate_slam import run as evaluate_slam
+    print(evaluate_slam(args.bag, args.association, args.out))
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from landmark_nav.tools.demo import run_demo
     print(run_demo(args.bag, args.out))
@@ -149,6 +155,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--iterations', type=int, default=2,
                    help='Algorithm 1 iterations (default 2, as in the chapter)')
     p.set_defaults(func=_cmd_calibrate_odometry)
+
+    p = sub.add_parser('evaluate', help='run EKF-SLAM on a simulator bag and score it')
+    p.add_argument('bag', help='rosbag2 directory recorded by `simulate`')
+    p.add_argument('--association', choices=['icnn', 'jcbb'], default='icnn',
+                   help='data association (default icnn)')
+    p.add_argument('--out', default=None,
+                   help='directory for the TUM trajectories, slam.json and the PNGs')
+    p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
     p.add_argument('--bag', default='bags/office', help='bag to evaluate')

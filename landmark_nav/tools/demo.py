@@ -1,8 +1,9 @@
-"""The main job at this stage: odometry drift on a recorded bag, as a plot and a summary.
+"""The main job: EKF-SLAM on a recorded bag against ground truth, and the odometry drift.
 
-Reads ``/ground_truth/odom`` and ``/odom`` straight from the bag (no DDS), draws the world
-from the bag's ``ground_truth.yaml`` with both paths, and writes ``world_paths.png`` and
-``summary.txt`` (also returned) into the output directory.
+Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png`` and
+``summary.txt`` (odometry drift against ``/ground_truth/odom``) and the EKF-SLAM evaluation
+of :func:`landmark_nav.tools.evaluate_slam.evaluate_bag` (``slam_map.png``,
+``slam_errors.png``, ``slam.json``, TUM trajectories); returns both summaries.
 """
 
 from pathlib import Path
@@ -124,4 +125,6 @@ def run_demo(bag, out) -> str:
     lines.append(f'plot: {out / "world_paths.png"}')
     summary = '\n'.join(lines)
     (out / 'summary.txt').write_text(summary + '\n')
-    return summary
+    from landmark_nav.tools.evaluate_slam import evaluate_bag, format_summary
+    slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=True))
+    return summary + '\n\nEKF-SLAM (ICNN):\n' + slam

@@ -1,0 +1,293 @@
+"""Executable ``ekf_slam``: EKF-SLAM with corner landmarks (corner chapter section 3).
+
+Subscribes:
+
+* ``odom`` (nav_msgs/Odometry, sensor-data QoS): wheel odometry, buffered;
+* ``corners/features`` (sensor_msgs/PointCloud2 from ``corner_extractor``). Not the
+  ``corners`` PoseArray: the cloud carries each corner's 2x2 position covariance (the
+  observation noise ``R``) and its opening angle and bisector, which the association
+  gate (descriptors) uses.
+
+Each corner set is processed once odometry at or after its stamp has arrived: the buffered
+odometry is linearly interpolated to the stamp (no message_filters), checked
+(:func:`~landmark_nav.slam.ekf_slam.odometry_check`), turned into a prediction, and the
+corners go through the laser mount (parameter ``laser_pose``) into the update; this is
+the per-scan step of :func:`landmark_nav.slam.evaluate.run_slam` without the sweep
+deskewing (the cloud has no beam times).
+
+Publishes (frame ``map_frame``, stamp of the corner set): ``pose``
+(PoseWithCovarianceStamped), ``odometry`` (nav_msgs/Odometry, child ``base_frame``),
+``path`` (nav_msgs/Path) and ``landmarks`` (MarkerArray: points and 2-sigma ellipses).
+
+Services (std_srvs/Trigger): ``save_map`` writes the landmarks and their covariances as
+YAML to parameter ``map_file``; ``reset`` restarts the filter at the next odometry.
+
+Bad input is reported with a throttled warning: odometry going back in time or jumping
+resets the filter cleanly; corners with NaN are dropped; corner sets before any odometry
+(or older than the buffered odometry) are skipped.
+"""
+
+from dataclasses import replace
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped
+from landmark_nav.conversions import (ConversionError, make_odometry,
+                                      make_pose_with_covariance_stamped, ns_to_stamp,
+                                      odometry_to_pose, pose_msg_from_2d, stamp_to_ns)
+from landmark_nav.feature_msgs import feature_cloud_to_arrays
+from landmark_nav.geometry import interpolate_pose
+from landmark_nav.nodes.common import (declare, declare_dataclass, ParameterError,
+                                       ProblemWarner, run_node, SENSOR_QOS)
+from landmark_nav.slam.ekf_slam import (EkfSlam, odometry_check, odometry_increment,
+                                        OdometryNoise, SlamParams)
+from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
+from nav_msgs.msg import Odometry, Path as PathMsg
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import PointCloud2
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+import yaml
+
+SLAM_PARAMETERS = {
+    'sigma_range': ('default range std when a corner has no covariance [m]', None, None),
+    'sigma_bearing': ('default bearing std [rad]', None, None),
+    'r_scale': ('factor on the corner covariances (>= 1 inflates)', None, None),
+    'range_floor': ('std added in quadrature to every range [m]', None, None),
+    'bearing_floor': ('std added in quadrature to every bearing [rad]', None, None),
+    'position_floor': ('isotropic corner position std added in quadrature [m]', None, None),
+    'max_range': ('observations farther than this are rejected [m]', None, None),
+    'association': ('data association: icnn or jcbb', None, ['icnn', 'jcbb']),
+    'bisector_gate': ('largest bisector difference of a corner pair [rad]', None, None),
+    'opening_gate': ('largest opening difference of a corner pair [rad]', None, None),
+    'min_view_margin': ('reject corners with an arm seen within this of edge-on [rad]',
+                        None, None),
+    'gate_probability': ('confidence of the compatibility gate (eq. 55)', None, None),
+    'new_landmark_probability': ('gate inside which an unmatched corner is ambiguous',
+                                 None, None),
+    'candidate_probability': ('gate confidence for matching candidates', None, None),
+    'confirm_hits': ('observations a candidate needs to enter the map', None, None),
+    'confirm_window': ('...within this many consecutive scans', None, None),
+    'max_landmarks': ('cap on the map size', None, None),
+    'jcbb_max_nodes': ('node budget of JCBB per scan', None, None),
+    'psd_tolerance': ('relative jitter of the PSD test of P', None, None),
+    'psd_check_interval': ('test P every this many updates', None, None),
+    'max_odometry_jump_m': ('odometry increment above this resets the filter [m]', None,
+                            None),
+    'max_odometry_jump_rad': ('odometry rotation above this resets the filter [rad]', None,
+                              None),
+}
+ODOMETRY_PARAMETERS = {
+    'sigma_xy_per_sqrt_m': ('odometry translation std per sqrt(m)', None, None),
+    'sigma_yaw_per_sqrt_m': ('odometry heading std per sqrt(m)', None, None),
+    'sigma_yaw_per_sqrt_rad': ('odometry heading std per sqrt(rad)', None, None),
+    'sigma_xy_floor': ('odometry translation std floor per step [m]', None, None),
+    'sigma_yaw_floor': ('odometry heading std floor per step [rad]', None, None),
+}
+MAX_BUFFER = 1000
+
+
+class EkfSlamNode(Node):
+    """Thin node: odometry + corner clouds -> :class:`EkfSlam` -> pose, path, map."""
+
+    def __init__(self, **kwargs) -> None:
+        """Declare the parameters, create subscriptions, publishers and services."""
+        super().__init__('ekf_slam', **kwargs)
+        params = declare_dataclass(self, SlamParams, SLAM_PARAMETERS)
+        noise = declare_dataclass(self, OdometryNoise, ODOMETRY_PARAMETERS, 'odometry.')
+        self.params = replace(params, odometry=noise)
+        self.laser_pose = np.array(declare(
+            self, 'laser_pose', [0.0, 0.0, 0.0], 'laser pose [x, y, yaw] in base_link'))
+        if self.laser_pose.shape != (3,) or not np.all(np.isfinite(self.laser_pose)):
+            raise ParameterError('parameter laser_pose must be 3 finite numbers [x, y, yaw]')
+        self.map_frame = declare(self, 'map_frame', 'map', 'frame of the estimates')
+        self.base_frame = declare(self, 'base_frame', 'base_link', 'robot frame')
+        self.map_file = declare(self, 'map_file', 'landmarks.yaml',
+                                'YAML file written by the save_map service')
+        self.warner = ProblemWarner(self)
+        self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10)
+        self.pub_odom = self.create_publisher(Odometry, 'odometry', 10)
+        self.pub_path = self.create_publisher(PathMsg, 'path', 10)
+        self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10)
+        self.create_subscription(Odometry, 'odom', self.on_odom, SENSOR_QOS)
+        self.create_subscription(PointCloud2, 'corners/features', self.on_corners, 10)
+        self.create_service(Trigger, 'save_map', self.on_save_map)
+        self.create_service(Trigger, 'reset', self.on_reset)
+        self.odom_count = 0
+        self.corner_count = 0
+        self.resets = 0
+        self._clear()
+        self.get_logger().info(f'ekf_slam: association {self.params.association}')
+
+    def _clear(self) -> None:
+        """Forget the filter, odometry buffer, pending corner sets and path."""
+        self.slam = None
+        self.t0 = None
+        self.odo_t, self.odo_p = [], []
+        self.pending = []
+        self.prev = None
+        self.path = PathMsg()
+        self.path.header.frame_id = self.map_frame
+
+    def _restart(self, reason: str) -> None:
+        self.warner.warn(f'Resetting EKF-SLAM: {reason}')
+        self.resets += 1
+        self._clear()
+
+    def on_odom(self, msg: Odometry) -> None:
+        """Buffer one odometry pose and process the corner sets it completes."""
+        self.odom_count += 1
+        try:
+            d = odometry_to_pose(msg)
+        except ConversionError as err:
+            self.warner.warn(f'Dropping odometry: {err}')
+            return
+        t, pose = int(d.stamp_ns), np.asarray(d.pose, dtype=float)
+        if not np.all(np.isfinite(pose)):
+            self.warner.warn('Dropping odometry: pose is not finite')
+            return
+        if self.odo_t and t <= self.odo_t[-1]:
+            self._restart(f'odometry went back in time ({self.odo_t[-1]} -> {t} ns)')
+        if self.slam is None:
+            self.slam = EkfSlam(self.params, initial_pose=pose)
+            self.t0, self.prev = t, (t, pose)
+        self.odo_t.append(t)
+        self.odo_p.append(pose)
+        if len(self.odo_t) > MAX_BUFFER:
+            del self.odo_t[0], self.odo_p[0]
+        while self.pending and self.pending[0][0] <= t:
+            self._step(*self.pending.pop(0))
+
+    def on_corners(self, msg: PointCloud2) -> None:
+        """Validate one corner set and queue it until odometry covers its stamp."""
+        self.corner_count += 1
+        try:
+            a = feature_cloud_to_arrays(msg)
+            names = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
+            missing = [n for n in names if n not in a]
+            if missing:
+                raise ConversionError(f'PointCloud2: missing fields {", ".join(missing)}')
+        except ConversionError as err:
+            self.warner.warn(f'Dropping corners: {err}')
+            return
+        t = stamp_to_ns(msg.header.stamp)
+        if self.slam is None:
+            self.warner.warn('Skipping corners: no odometry received yet')
+            return
+        if t < self.odo_t[0]:
+            self.warner.warn(f'Skipping corners: stamp {t} ns is older than the odometry')
+            return
+        cols = np.column_stack([a[n] for n in names]).reshape(-1, len(names))
+        ok = np.all(np.isfinite(cols), axis=1)
+        if not np.all(ok):
+            self.warner.warn(f'Dropping {int(np.sum(~ok))} corners with NaN or inf')
+            cols = cols[ok]
+        corners = [SimpleNamespace(position=c[:2], bisector=c[2], opening=c[3],
+                                   covariance=np.array([[c[4], c[5]], [c[5], c[6]]]))
+                   for c in cols]
+        self.pending.append((t, corners))
+        if t <= self.odo_t[-1]:
+            self._step(*self.pending.pop(0))
+
+    def _step(self, t: int, corners: list) -> None:
+        """Predict to the corner stamp with interpolated odometry and update."""
+        rel = (np.asarray(self.odo_t, dtype=np.int64) - self.t0) * 1e-9
+        odo = interpolate_pose((t - self.t0) * 1e-9, rel, np.array(self.odo_p))
+        odo = np.asarray(odo, dtype=float).reshape(3)
+        prm = self.params
+        bad = odometry_check(self.prev[0], self.prev[1], t, odo, prm.max_odometry_jump_m,
+                             prm.max_odometry_jump_rad)
+        if bad is not None:
+            self.warner.warn(f'Resetting EKF-SLAM: {bad}')
+            self.resets += 1
+            self.slam.reset(odo)
+            self.path.poses = []
+        else:
+            self.slam.predict(odometry_increment(self.prev[1], odo))
+        self.prev = (t, odo)
+        z, r = corners_to_observations(corners, self.laser_pose)
+        desc = corner_descriptors(corners, self.laser_pose)
+        self.slam.update(z, r, desc)
+        self._publish(t)
+
+    def _publish(self, t: int) -> None:
+        pose, cov = self.slam.pose, self.slam.pose_covariance
+        self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
+        self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
+        ps = PoseStamped()
+        ps.header.stamp = ns_to_stamp(t)
+        ps.header.frame_id = self.map_frame
+        ps.pose = pose_msg_from_2d(pose)
+        self.path.header.stamp = ps.header.stamp
+        self.path.poses.append(ps)
+        self.pub_path.publish(self.path)
+        self.pub_marks.publish(self.landmark_markers(t))
+
+    def landmark_markers(self, t: int) -> MarkerArray:
+        """Return the map as points plus one 2-sigma ellipse per landmark."""
+        out = MarkerArray()
+        clear = Marker()
+        clear.action = Marker.DELETEALL
+        out.markers.append(clear)
+        if self.slam is None:
+            return out
+        a = np.linspace(0.0, 2.0 * math.pi, 25)
+        for lid, m, c in zip(self.slam.landmark_ids, self.slam.landmarks,
+                             self.slam.landmark_covariances):
+            w, v = np.linalg.eigh(0.5 * (c + c.T))
+            e = m[:, None] + v @ (2.0 * np.sqrt(np.maximum(w, 0.0))[:, None]
+                                  * np.stack([np.cos(a), np.sin(a)]))
+            mk = Marker()
+            mk.header.stamp = ns_to_stamp(t)
+            mk.header.frame_id = self.map_frame
+            mk.ns = 'landmark_ellipses'
+            mk.id = int(lid)
+            mk.type = Marker.LINE_STRIP
+            mk.scale.x = 0.01
+            mk.color.b = mk.color.a = 1.0
+            mk.pose.orientation.w = 1.0
+            mk.points = [Point(x=float(x), y=float(y)) for x, y in e.T]
+            out.markers.append(mk)
+        return out
+
+    def map_dict(self) -> dict:
+        """Return the map as a YAML-able dict."""
+        if self.slam is None:
+            return {'frame_id': self.map_frame, 'landmarks': []}
+        return {'frame_id': self.map_frame, 'landmarks': [
+            {'id': int(i), 'x': float(m[0]), 'y': float(m[1]),
+             'covariance': [float(v) for v in np.asarray(c).reshape(4)]}
+            for i, m, c in zip(self.slam.landmark_ids, self.slam.landmarks,
+                               self.slam.landmark_covariances)]}
+
+    def on_save_map(self, request, response):
+        """Write the landmarks and covariances to ``map_file``."""
+        data = self.map_dict()
+        try:
+            path = Path(self.map_file)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(yaml.safe_dump(data, sort_keys=False))
+        except OSError as err:
+            response.success, response.message = False, f'cannot write {self.map_file}: {err}'
+            return response
+        response.success = True
+        response.message = f'saved {len(data["landmarks"])} landmarks to {self.map_file}'
+        return response
+
+    def on_reset(self, request, response):
+        """Forget the map; the filter restarts at the next odometry."""
+        self._clear()
+        self.resets += 1
+        response.success, response.message = True, 'EKF-SLAM reset'
+        return response
+
+
+def main(args=None) -> int:
+    """Run ``ros2 run landmark_nav ekf_slam``."""
+    return run_node(EkfSlamNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,134 @@
+"""ekf_slam node: office bag through DDS equals the offline filter; bad input; services."""
+
+from pathlib import Path
+
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from landmark_nav.bag import BagReader
+from landmark_nav.conversions import make_odometry, stamp_to_ns
+from landmark_nav.feature_msgs import make_feature_cloud
+from landmark_nav.laser.corners import CornerParams
+from landmark_nav.nodes.corner_extractor import CornerExtractor
+from landmark_nav.nodes.ekf_slam import EkfSlamNode
+from landmark_nav.slam.evaluate import run_slam
+from landmark_nav.testing import RosHarness
+from landmark_nav.tools.evaluate_slam import load_bag
+from nav_msgs.msg import Odometry
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import LaserScan, PointCloud2
+from std_srvs.srv import Trigger
+import yaml
+
+OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
+SECONDS = 40.0
+
+
+def bag_messages(seconds=SECONDS):
+    out = []
+    with BagReader(OFFICE) as reader:
+        t0 = None
+        for topic, _, msg in reader.decoded(['/odom', '/scan']):
+            t = stamp_to_ns(msg.header.stamp)
+            t0 = t if t0 is None else t0
+            if t - t0 > seconds * 1e9:
+                break
+            out.append((topic, msg))
+    return out
+
+
+def call(ros, node_name, srv):
+    """Call a Trigger service and return the response."""
+    client = ros._helper.create_client(Trigger, f'{node_name}')
+    assert client.wait_for_service(timeout_sec=5.0)
+    future = client.call_async(Trigger.Request())
+    assert ros.wait_until(future.done, 5.0)
+    return future.result()
+
+
+@pytest.mark.dds
+def test_node_equals_offline_and_services(tmp_path):
+    msgs = bag_messages()
+    with RosHarness() as ros:
+        ros.add_node(CornerExtractor(context=ros.context))
+        slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('map_file', value=str(tmp_path / 'map.yaml'))]))
+        poses = ros.collect('pose', PoseWithCovarianceStamped)
+        clouds = ros.collect('corners/features', PointCloud2)
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        pub_scan = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub_odom, pub_scan])
+        assert ros.wait_until(lambda: slam.count_publishers('corners/features') > 0, 5)
+        n_odom = n_scan = 0
+        for topic, msg in msgs:
+            if topic == '/odom':
+                n_odom += 1
+                pub_odom.publish(msg)
+                assert ros.wait_until(lambda: slam.odom_count >= n_odom, 5)
+            else:
+                n_scan += 1
+                pub_scan.publish(msg)
+                assert ros.wait_until(lambda: slam.corner_count >= n_scan, 5)
+        assert ros.wait_until(lambda: len(poses) >= n_scan - 1, 5)
+        res = call(ros, 'save_map', Trigger)
+        assert res.success, res.message
+        saved = yaml.safe_load((tmp_path / 'map.yaml').read_text())
+        n_landmarks = slam.slam.num_landmarks
+        assert call(ros, 'reset', Trigger).success
+        assert slam.slam is None
+    assert len(clouds) == n_scan
+    scenario = load_bag(OFFICE, max_seconds=SECONDS)
+    laser = scenario.laser
+    ref = run_slam(scenario, None, CornerParams(sigma_r=laser.sigma_range,
+                                                sigma_phi=laser.sigma_angle), deskew=False)
+    stamps = np.array([stamp_to_ns(p.header.stamp) for p in poses])
+    xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
+    k = np.searchsorted(ref.stamps, stamps)
+    assert len(poses) >= len(ref.stamps) - 1 and np.all(ref.stamps[k] == stamps)
+    err = np.hypot(*(xy - ref.poses[k, :2]).T)
+    print('max node-offline difference', err.max(), 'm over', len(k), 'poses')
+    assert err.max() < 1e-3
+    assert len(saved['landmarks']) == n_landmarks == ref.landmarks.shape[0] > 5
+    assert len(saved['landmarks'][0]['covariance']) == 4
+
+
+def corner_cloud(t, rows):
+    """Return a corner cloud with the given rows."""
+    names = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
+    rows = np.asarray(rows, dtype=float).reshape(-1, 8)
+    return make_feature_cloud(t, 'laser', names, dict(zip(names, rows.T)))
+
+
+@pytest.mark.dds
+def test_bad_input():
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = ros.add_node(EkfSlamNode(context=ros.context))
+        poses = ros.collect('pose', PoseWithCovarianceStamped)
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        pub_c = ros._helper.create_publisher(PointCloud2, 'corners/features', 10)
+        assert ros.wait_for_subscribers([pub_odom, pub_c])
+
+        def odom(t, x):
+            """Publish an odometry pose."""
+            pub_odom.publish(make_odometry(t, 'odom', 'base_link', [x, 0.0, 0.0]))
+
+        pub_c.publish(corner_cloud(t0, [good]))  # before any odometry: skipped
+        assert ros.wait_until(lambda: slam.corner_count == 1, 5)
+        assert slam.warner.count == 1 and not slam.pending
+        odom(t0, 0.0)
+        odom(t0 + 100_000_000, 0.01)
+        assert ros.wait_until(lambda: slam.odom_count == 2, 5)
+        pub_c.publish(corner_cloud(t0 + 50_000_000, [good, [np.nan] * 8]))  # NaN row dropped
+        assert ros.wait_until(lambda: len(poses) == 1, 5)
+        assert slam.warner.count == 2
+        assert abs(poses[0].pose.pose.position.x - 0.005) < 1e-9
+        odom(t0 + 50_000_000, 0.02)  # back in time: clean reset
+        assert ros.wait_until(lambda: slam.odom_count == 3, 5)
+        assert slam.resets == 1 and slam.slam.num_landmarks == 0 and len(slam.odo_t) == 1
+        odom(t0 + 200_000_000, 2.0)  # jump: reset at the scan step
+        assert ros.wait_until(lambda: slam.odom_count == 4, 5)
+        pub_c.publish(corner_cloud(t0 + 200_000_000, [good]))
+        assert ros.wait_until(lambda: len(poses) == 2, 5)
+        assert slam.resets == 2 and abs(poses[1].pose.pose.position.x - 2.0) < 1e-9
