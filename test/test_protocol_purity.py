@@ -1,0 +1,19 @@
+"""The protocol modules are pure: no clock, no I/O, no rclpy (bytes in, frames out)."""
+
+import ast
+
+from landmark_nav.drivers import lms2xx, p2os, scip2
+import pytest
+
+ALLOWED = {'dataclasses', 'math', 're', 'struct', 'typing', 'numpy', 'landmark_nav'}
+
+
+@pytest.mark.parametrize('module', [lms2xx, p2os, scip2], ids=lambda m: m.__name__)
+def test_module_is_pure(module):
+    with open(module.__file__, encoding='utf-8') as f:
+        tree = ast.parse(f.read())
+    imported = {alias.name.split('.')[0] for node in ast.walk(tree)
+                if isinstance(node, ast.Import) for alias in node.names}
+    imported |= {node.module.split('.')[0] for node in ast.walk(tree)
+                 if isinstance(node, ast.ImportFrom)}
+    assert imported <= ALLOWED, imported
