@@ -19,6 +19,7 @@ from typing import Dict, Sequence
 from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Point, Pose, PoseArray
 from landmark_nav.conversions import ConversionError, ns_to_stamp, quaternion_msg_from_yaw
+from landmark_nav.geometry import covariance_ellipse
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 from visualization_msgs.msg import Marker, MarkerArray
@@ -159,3 +160,16 @@ def make_line_markers(stamp_ns: int, frame_id: str, lines) -> MarkerArray:
         segs.points.append(Point(x=float(ln.start[0]), y=float(ln.start[1])))
         segs.points.append(Point(x=float(ln.end[0]), y=float(ln.end[1])))
     return MarkerArray(markers=[_clear(), segs])
+
+
+def make_landmark_markers(stamp_ns: int, frame_id: str, ids, positions, covariances,
+                          sigmas: float = 2.0) -> MarkerArray:
+    """Build RViz markers: a ``sigmas``-sigma ellipse (LINE_STRIP) per landmark, id = its id."""
+    out = MarkerArray(markers=[_clear()])
+    for lid, mean, cov in zip(ids, positions, covariances):
+        mk = _marker(stamp_ns, frame_id, 'landmark_ellipses', int(lid), Marker.LINE_STRIP,
+                     (0.0, 0.0, 1.0), 0.01)
+        mk.points = [Point(x=float(x), y=float(y))
+                     for x, y in covariance_ellipse(mean, cov, sigmas, 25)]
+        out.markers.append(mk)
+    return out

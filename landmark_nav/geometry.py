@@ -338,3 +338,14 @@ def interpolate_pose(t: ArrayLike, times: ArrayLike, poses: ArrayLike,
     th = wrap_angle(p0[:, 2] + frac * dth)
     out = np.column_stack([xy, th])
     return out[0] if scalar else out
+
+
+def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, k: float = 2.0,
+                       n: int = 40) -> np.ndarray:
+    """Return (n, 2) points of the k-sigma ellipse of a 2-D Gaussian (closed: last = first)."""
+    mean = np.asarray(mean, dtype=float).reshape(2)
+    cov = np.asarray(cov, dtype=float).reshape(2, 2)
+    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    a = np.linspace(0.0, 2.0 * math.pi, n)
+    circle = np.stack([np.cos(a), np.sin(a)])
+    return (mean[:, None] + v @ (k * np.sqrt(np.maximum(w, 0.0))[:, None] * circle)).T

@@ -304,3 +304,14 @@ def test_interpolate_duplicate_and_single_sample():
     assert one == pytest.approx([1.0, 2.0, 4.0 - 2 * math.pi], abs=1e-12)
     with pytest.raises(ValueError):
         g.interpolate_pose(3.5, [3.0], [[1.0, 2.0, 0.0]])
+
+
+def test_covariance_ellipse_lies_at_k_sigma():
+    from landmark_nav.geometry import covariance_ellipse
+    mean = np.array([1.0, -2.0])
+    cov = np.array([[0.04, 0.01], [0.01, 0.02]])
+    pts = covariance_ellipse(mean, cov, k=2.0, n=50)
+    d = pts - mean
+    m2 = np.einsum('ni,ij,nj->n', d, np.linalg.inv(cov), d)
+    np.testing.assert_allclose(m2, 4.0, rtol=1e-9)
+    np.testing.assert_allclose(pts[0], pts[-1], atol=1e-12)

@@ -28,15 +28,14 @@ resets the filter cleanly; corners with NaN are dropped; corner sets before any 
 """
 
 from dataclasses import replace
-import math
 from pathlib import Path
 from types import SimpleNamespace
 
-from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, make_odometry,
                                       make_pose_with_covariance_stamped, ns_to_stamp,
                                       odometry_to_pose, pose_msg_from_2d, stamp_to_ns)
-from landmark_nav.feature_msgs import feature_cloud_to_arrays
+from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.geometry import interpolate_pose
 from landmark_nav.nodes.common import (declare, declare_dataclass, ParameterError,
                                        ProblemWarner, run_node, SENSOR_QOS)
@@ -48,7 +47,7 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 import yaml
 
 SLAM_PARAMETERS = {
@@ -226,31 +225,11 @@ class EkfSlamNode(Node):
         self.pub_marks.publish(self.landmark_markers(t))
 
     def landmark_markers(self, t: int) -> MarkerArray:
-        """Return the map as points plus one 2-sigma ellipse per landmark."""
-        out = MarkerArray()
-        clear = Marker()
-        clear.action = Marker.DELETEALL
-        out.markers.append(clear)
+        """Return the map as one 2-sigma ellipse per landmark."""
         if self.slam is None:
-            return out
-        a = np.linspace(0.0, 2.0 * math.pi, 25)
-        for lid, m, c in zip(self.slam.landmark_ids, self.slam.landmarks,
-                             self.slam.landmark_covariances):
-            w, v = np.linalg.eigh(0.5 * (c + c.T))
-            e = m[:, None] + v @ (2.0 * np.sqrt(np.maximum(w, 0.0))[:, None]
-                                  * np.stack([np.cos(a), np.sin(a)]))
-            mk = Marker()
-            mk.header.stamp = ns_to_stamp(t)
-            mk.header.frame_id = self.map_frame
-            mk.ns = 'landmark_ellipses'
-            mk.id = int(lid)
-            mk.type = Marker.LINE_STRIP
-            mk.scale.x = 0.01
-            mk.color.b = mk.color.a = 1.0
-            mk.pose.orientation.w = 1.0
-            mk.points = [Point(x=float(x), y=float(y)) for x, y in e.T]
-            out.markers.append(mk)
-        return out
+            return make_landmark_markers(t, self.map_frame, [], [], [])
+        return make_landmark_markers(t, self.map_frame, self.slam.landmark_ids,
+                                     self.slam.landmarks, self.slam.landmark_covariances)
 
     def map_dict(self) -> dict:
         """Return the map as a YAML-able dict."""

@@ -20,7 +20,7 @@ from typing import Dict, List, Optional
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, scan_to_data
-from landmark_nav.geometry import interpolate_pose
+from landmark_nav.geometry import covariance_ellipse, interpolate_pose
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.sim.laser import LaserConfig, ScanSample
 from landmark_nav.sim.record import load_ground_truth
@@ -200,13 +200,6 @@ def write_tum(path: Path, stamps_ns: np.ndarray, poses: np.ndarray) -> None:
                     f'{math.sin(0.5 * yaw):.9f} {math.cos(0.5 * yaw):.9f}\n')
 
 
-def _ellipse(mean: np.ndarray, cov: np.ndarray, k: float = 2.0, n: int = 40) -> np.ndarray:
-    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
-    a = np.linspace(0.0, 2.0 * np.pi, n)
-    circle = np.stack([np.cos(a), np.sin(a)])
-    return (mean[:, None] + v @ (k * np.sqrt(np.maximum(w, 0.0))[:, None] * circle)).T
-
-
 def plot_run(scenario: BagScenario, run: SlamRun, out_dir: Path, title: str) -> None:
     """Write ``slam_map.png`` and ``slam_errors.png`` (Fig. 19 of the chapter)."""
     import matplotlib
@@ -225,7 +218,7 @@ def plot_run(scenario: BagScenario, run: SlamRun, out_dir: Path, title: str) -> 
         ax.plot(run.landmarks[:, 0], run.landmarks[:, 1], 'bo', mfc='none', ms=5,
                 label='mapped landmarks (2 sigma)')
         for m, c in zip(run.landmarks, run.landmark_covariances):
-            e = _ellipse(m, c)
+            e = covariance_ellipse(m, c)
             ax.plot(e[:, 0], e[:, 1], 'b-', lw=0.8)
     ax.set_aspect('equal')
     ax.set_xlabel('x [m]')
