@@ -1,4 +1,4 @@
-"""Line extractors: TLS fit, covariance, split-and-merge and ALFA, office and real logs."""
+"""Line extractors: TLS fit, covariance, lowess, split-and-merge and ALFA, office and real logs."""
 
 import math
 from pathlib import Path
@@ -7,86 +7,147 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from landmark_nav.evaluation.features import LineScore, score_lines, wall_truth
 from landmark_nav.geometry import compose, wrap_angle
-from landmark_nav.laser.lines import (extract_lines, fit_line, LineParams, lowess, METHODS,
-                                      point_covariances)
-from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.laser.lines import (explained_points, extract_lines, fit_line, LineParams,
+                                      lowess, METHODS, point_covariances, split_pieces)
+from landmark_nav.laser.segmentation import Cluster, segment_scan
 from landmark_nav.sim import run_scenario, ScanSample, World
 import numpy as np
 import pytest
 
 CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
+SIGMA_PHI = math.radians(0.1)
 
 
 def wall_points(rho, alpha, t, sigma_r=0.0, sigma_phi=0.0, rng=None):
-    """Beams hitting the line x cos a + y sin a = rho at parameters t along it."""
+    """Beams hitting the line x cos a + y sin a = rho at parameters t along it.
+
+    With noise, as the simulator does it: the beam is reported at its nominal bearing but
+    travels along a perturbed one (eq. 3) and its range gets eps_d (eq. 2).
+    """
     n = np.array([math.cos(alpha), math.sin(alpha)])
     d = np.array([-math.sin(alpha), math.cos(alpha)])
     pts = rho * n + np.outer(t, d)
     r, phi = np.hypot(pts[:, 0], pts[:, 1]), np.arctan2(pts[:, 1], pts[:, 0])
     if rng is not None:
-        r = r + rng.normal(0, sigma_r, r.shape)
-        phi_true = phi + rng.normal(0, sigma_phi, r.shape)
-        pts = np.column_stack([r * np.cos(phi_true), r * np.sin(phi_true)])
+        true_phi = phi + rng.normal(0.0, sigma_phi, r.shape)
+        r = rho / np.cos(true_phi - alpha) + rng.normal(0.0, sigma_r, r.shape)
+        pts = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
     return pts, r, phi
 
 
-@settings(max_examples=200, deadline=None)
-@given(st.floats(0.05, 8.0), st.floats(-math.pi, math.pi - 1e-9), st.floats(-3, 3),
+def cluster_of(r, phi):
+    """One cluster holding all beams."""
+    pts = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+    return Cluster(np.arange(len(r)), pts, np.asarray(r, float), np.asarray(phi, float))
+
+
+# ------------------------------------------------------------------------- TLS fit
+@settings(max_examples=300, deadline=None)
+@given(st.floats(0.0, 8.0), st.floats(-math.pi, math.pi - 1e-9), st.floats(-3, 3),
        st.floats(0.2, 3))
 def test_tls_fit_is_exact_on_noise_free_points(rho, alpha, t0, length):
     pts, r, phi = wall_points(rho, alpha, np.linspace(t0, t0 + length, 30))
     got_rho, got_alpha, cov, rmse = fit_line(pts, r, phi, 0.01, 0.0)
-    assert got_rho == pytest.approx(rho, abs=1e-9)
-    assert float(wrap_angle(got_alpha - alpha)) == pytest.approx(0.0, abs=1e-9)
+    assert got_rho >= 0.0 and -math.pi <= got_alpha < math.pi
     assert rmse == pytest.approx(0.0, abs=1e-9)
-    assert got_rho >= 0 and -math.pi <= got_alpha < math.pi
+    # the same line: every point on it, and (rho, alpha) equal up to the sign ambiguity of
+    # a line through the origin
+    n = np.array([math.cos(got_alpha), math.sin(got_alpha)])
+    np.testing.assert_allclose(pts @ n, got_rho, atol=1e-9)
+    if rho > 1e-6:
+        assert got_rho == pytest.approx(rho, abs=1e-9)
+        assert float(wrap_angle(got_alpha - alpha)) == pytest.approx(0.0, abs=1e-9)
+    assert np.all(np.linalg.eigvalsh(cov) >= -1e-18)
 
 
-def test_vertical_line_and_line_through_origin():
-    pts = np.column_stack([np.full(20, 2.0), np.linspace(-1, 1, 20)])
-    rho, alpha, _, _ = fit_line(pts, np.hypot(*pts.T), np.arctan2(pts[:, 1], pts[:, 0]),
-                                0.01, 0.0)
-    assert (rho, alpha) == (pytest.approx(2.0), pytest.approx(0.0, abs=1e-12))
+@pytest.mark.parametrize('rho,alpha', [(2.0, 0.0), (2.0, math.pi / 2), (2.0, -math.pi / 2),
+                                       (2.0, -math.pi), (0.5, 3.0), (1e-3, 1.0)])
+def test_axis_aligned_and_near_origin_lines(rho, alpha):
+    pts, r, phi = wall_points(rho, alpha, np.linspace(-1.0, 1.0, 21))
+    got_rho, got_alpha, _, _ = fit_line(pts)  # ranges and bearings from the points
+    assert got_rho == pytest.approx(rho, abs=1e-12)
+    assert float(wrap_angle(got_alpha - alpha)) == pytest.approx(0.0, abs=1e-12)
+    assert -math.pi <= got_alpha < math.pi
+
+
+def test_line_through_origin_has_zero_rho():
     pts = np.column_stack([np.linspace(-1, 1, 21), np.linspace(-1, 1, 21)])
-    rho, _, _, _ = fit_line(pts, np.hypot(*pts.T), np.arctan2(pts[:, 1], pts[:, 0]),
-                            0.01, 0.0)
+    rho, alpha, _, _ = fit_line(pts)
     assert rho == pytest.approx(0.0, abs=1e-12)
+    assert abs(float(wrap_angle(alpha - 3 * math.pi / 4))) < 1e-9 or abs(
+        float(wrap_angle(alpha + math.pi / 4))) < 1e-9
 
 
-@pytest.mark.parametrize('rho,alpha,t0,length', [(2.0, 0.3, -1.0, 2.0), (5.0, -1.2, 0.5, 1.5),
-                                                 (1.0, 2.5, -0.3, 0.6)])
+def test_fit_line_rejects_bad_input():
+    with pytest.raises(ValueError):
+        fit_line(np.zeros((1, 2)))
+    with pytest.raises(ValueError):
+        fit_line(np.zeros((3, 3)))
+
+
+# ------------------------------------------------------------------------- covariance
+@pytest.mark.parametrize('rho,alpha,t0,length', [
+    (2.0, 0.3, -1.0, 2.0),     # facing the laser
+    (5.0, -1.2, 0.5, 1.5),     # far, oblique
+    (1.0, 2.5, -0.3, 0.6),     # short
+    (1.5, 0.0, 2.0, 3.0),      # grazing: 53-76 deg incidence
+    (7.0, -2.0, -2.0, 4.0),    # far and long
+])
 def test_covariance_matches_monte_carlo(rho, alpha, t0, length):
     rng = np.random.default_rng(4)
-    sigma_r, sigma_phi = 0.01, math.radians(0.1)
+    sigma_r = 0.01
     t = np.linspace(t0, t0 + length, 40)
-    est, covs = [], []
+    err, covs = [], []
     for _ in range(500):
-        pts, r, phi = wall_points(rho, alpha, t, sigma_r, sigma_phi, rng)
-        got_rho, got_alpha, cov, _ = fit_line(pts, r, phi, sigma_r, sigma_phi)
-        est.append([got_rho - rho, float(wrap_angle(got_alpha - alpha))])
+        pts, r, phi = wall_points(rho, alpha, t, sigma_r, SIGMA_PHI, rng)
+        got_rho, got_alpha, cov, _ = fit_line(pts, r, phi, sigma_r, SIGMA_PHI)
+        err.append([got_rho - rho, float(wrap_angle(got_alpha - alpha))])
         covs.append(cov)
-    est, cov = np.array(est), np.mean(covs, axis=0)
-    emp = np.cov(est.T)
-    ratio = np.diag(emp) / np.diag(cov)
+    err, cov = np.array(err), np.mean(covs, axis=0)
+    ratio = np.diag(np.cov(err.T)) / np.diag(cov)
     assert np.all((ratio > 0.7) & (ratio < 1.3)), ratio
-    nees = np.einsum('ni,ij,nj->n', est, np.linalg.inv(cov), est)
-    assert nees.mean() == pytest.approx(2.0, abs=0.3)
+    nees = np.einsum('ni,nij,nj->n', err, np.linalg.inv(np.array(covs)), err)
+    assert nees.mean() == pytest.approx(2.0, abs=0.25)
 
 
 def test_point_covariance_is_eq7():
     cov = point_covariances(np.array([2.0]), np.array([0.0]), 0.01, 0.001)[0]
     np.testing.assert_allclose(cov, [[1e-4, 0], [0, 4e-6]], atol=1e-15)
+    phi = 0.7
+    cov = point_covariances(np.array([3.0]), np.array([phi]), 0.02, 0.003)[0]
+    s, c = math.sin(phi), math.cos(phi)
+    q = 9 * 0.003 ** 2 / 2 * np.array([[2 * s * s, -math.sin(2 * phi)],
+                                       [-math.sin(2 * phi), 2 * c * c]]) + 0.02 ** 2 / 2 * \
+        np.array([[2 * c * c, math.sin(2 * phi)], [math.sin(2 * phi), 2 * s * s]])
+    np.testing.assert_allclose(cov, q, atol=1e-15)
 
 
+# ------------------------------------------------------------------------- lowess
 def test_lowess_rejects_an_outlier():
     x = np.arange(41.0)
     y = 0.05 * x
     y[20] += 1.0
     smooth = lowess(x, y, span=7, iterations=2)
-    assert abs(smooth[20] - 1.0) < 0.01          # the outlier is ignored
+    assert abs(smooth[20] - 1.0) < 0.01          # the outlier is ignored (eq. 9)
     np.testing.assert_allclose(np.delete(smooth, 20), np.delete(0.05 * x, 20), atol=1e-9)
+    plain = lowess(x, y, span=7, iterations=0)   # without robustness it leaks
+    assert abs(plain[19] - 0.95) > 0.05
 
 
+def test_lowess_reproduces_lines_and_smooths_noise():
+    rng = np.random.default_rng(0)
+    x = np.linspace(0, 1, 200)
+    np.testing.assert_allclose(lowess(x, 3 * x - 1, 9, 2), 3 * x - 1, atol=1e-12)
+    y = np.sin(3 * x) + rng.normal(0, 0.05, x.size)
+    assert np.std(lowess(x, y, 15, 2) - np.sin(3 * x)) < 0.6 * np.std(y - np.sin(3 * x))
+    unsorted = rng.permutation(x.size)
+    np.testing.assert_allclose(lowess(x[unsorted], y[unsorted], 15, 2),
+                               lowess(x, y, 15, 2)[unsorted], atol=1e-12)
+    with pytest.raises(ValueError, match='span'):
+        lowess(x, y, 1)
+
+
+# ------------------------------------------------------------------------- extraction
 def room_scan(sigma_r=0.01, seed=0):
     world = World('room')
     world.add_room([(0, 0), (6, 0), (6, 4), (0, 4)])
@@ -102,12 +163,20 @@ def test_square_room_gives_four_walls(method):
     r, angles = room_scan()
     clusters = segment_scan(r, angles, np.isfinite(r), math.radians(0.5))
     lines = extract_lines(clusters, LineParams(method=method))
-    truth = {(3.0, 0.0), (2.0, math.pi / 2), (3.0, -math.pi), (2.0, -math.pi / 2)}
-    assert len(lines) in (4, 5)  # the wall behind the scan start may be cut in two
+    truth = [(3.0, 0.0), (2.0, math.pi / 2), (3.0, -math.pi), (2.0, -math.pi / 2)]
+    # the wall behind the scan's first and last beam is seen as two clusters
+    assert len(lines) in (4, 5)
     for rho, alpha in truth:
         best = min(lines, key=lambda ln: abs(ln.rho - rho) + abs(wrap_angle(ln.alpha - alpha)))
         assert best.rho == pytest.approx(rho, abs=0.01)
         assert abs(float(wrap_angle(best.alpha - alpha))) < math.radians(0.5)
+        assert best.rmse < 0.015
+    for ln in lines:
+        assert ln.rho >= 0 and -math.pi <= ln.alpha < math.pi
+        assert ln.first_index <= ln.last_index and ln.num_points >= 8
+        np.testing.assert_allclose(ln.covariance, ln.covariance.T)
+        assert np.all(np.linalg.eigvalsh(ln.covariance) > 0)
+        assert ln.length == pytest.approx(np.hypot(*(ln.end - ln.start)))
 
 
 @pytest.mark.parametrize('method', METHODS)
@@ -122,27 +191,91 @@ def test_l_shape_gives_two_lines(method):
     clusters = segment_scan(r, phi, np.ones(len(r), bool), float(np.median(np.diff(phi))))
     lines = extract_lines(clusters, LineParams(method=method, sigma_r=0.005))
     assert len(lines) == 2
+    got = sorted((round(ln.rho, 2), round(math.degrees(ln.alpha))) for ln in lines)
+    assert got == [(0.0, -90), (2.0, 0)] or got == [(0.0, 90), (2.0, 0)]
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_single_outlier_inside_a_wall_does_not_split_it(method):
+    """A 12 cm outlier inside a wall leaves one line.
+
+    ALFA: the robust lowess ignores the outlier. split_merge: eq. 4 splits at it, the pieces
+    beside it are too short and are dropped, and the two halves merge again.
+    """
+    rng = np.random.default_rng(3)
+    phi = np.radians(np.arange(-40, 40.01, 0.5))
+    r = 3.0 / np.cos(phi) + rng.normal(0, 0.01, phi.size)
+    r[87] -= 0.12  # inside the cluster (the breakpoint threshold is ~0.2 m here)
+    clusters = segment_scan(r, phi, np.ones(phi.size, bool), math.radians(0.5))
+    assert len(clusters) == 1
+    lines = extract_lines(clusters, LineParams(method=method))
+    assert len(lines) == 1
+    (ln,) = lines
+    assert (ln.first_index, ln.last_index) == (0, 160)
+    assert ln.rho == pytest.approx(3.0, abs=0.005)
+    assert abs(math.degrees(ln.alpha)) < 0.2
+    if method == 'alfa':
+        assert ln.num_points == 161  # every point supports the line (the outlier too)
+
+
+def test_split_pieces_eq4():
+    pts = np.array([[0, 0], [1, 0.01], [2, 0], [2.01, 1], [2, 2]], float)
+    assert split_pieces(pts, [0, 5], 0.05).tolist() == [[0, 2], [2, 4]]
+    assert split_pieces(pts, [0, 5], 5.0).tolist() == [[0, 4]]
+    assert split_pieces(pts, [0, 2, 5], 0.05).tolist() == [[0, 1], [2, 4]]
 
 
 @pytest.mark.parametrize('kwargs,name', [({'method': 'hough'}, 'method'),
-                                         ({'min_points': 1}, 'min_points'),
+                                         ({'min_points': 2}, 'min_points'),
+                                         ({'min_points': 8.0}, 'min_points'),
                                          ({'sigma_r': 0.0}, 'sigma_r'),
+                                         ({'sigma_phi': -1.0}, 'sigma_phi'),
                                          ({'lowess_span': 4}, 'lowess_span'),
+                                         ({'lowess_iterations': -1}, 'lowess_iterations'),
                                          ({'rmse_min': 0.05, 'rmse_max': 0.01}, 'rmse_min'),
-                                         ({'split_threshold': -1.0}, 'split_threshold')])
+                                         ({'rmse_max': float('nan')}, 'rmse_max'),
+                                         ({'split_threshold': -1.0}, 'split_threshold'),
+                                         ({'merge_chi2': 0.0}, 'merge_chi2'),
+                                         ({'merge_gap': -0.1}, 'merge_gap'),
+                                         ({'merge_gap_angle': -0.1}, 'merge_gap_angle'),
+                                         ({'min_length': float('inf')}, 'min_length'),
+                                         ({'max_gradient': 0.0}, 'max_gradient'),
+                                         ({'trim_sigma': 0.0}, 'trim_sigma')])
 def test_invalid_parameters_name_the_field(kwargs, name):
     with pytest.raises(ValueError, match=name):
         LineParams(**kwargs)
 
 
 @pytest.mark.parametrize('method', METHODS)
-def test_empty_input(method):
-    assert extract_lines([], LineParams(method=method)) == []
+def test_empty_and_tiny_input(method):
+    params = LineParams(method=method)
+    assert extract_lines([], params) == []
+    r = np.full(5, 2.0)
+    phi = np.radians(np.arange(5.0))
+    assert extract_lines([cluster_of(r, phi)], params) == []
 
 
-def office_line_scores(step: int = 4):
-    """Score both methods on the office run (sigma_r = 1 cm) with the evaluation rules."""
-    res = run_scenario('office', seed=1)
+def test_explained_points():
+    phi = np.radians(np.arange(-30, 30.01, 0.5))
+    r = 2.0 / np.cos(phi)
+    r[10] += 0.2
+    valid = np.ones(phi.size, bool)
+    valid[20] = False
+    lines = extract_lines([cluster_of(r, phi)], LineParams())
+    ex = explained_points(lines, r, phi, valid)
+    assert not ex[10] and not ex[20]
+    assert ex.sum() == phi.size - 2
+
+
+# ------------------------------------------------------------------------- office run
+def office_scores(sigma_r: float, step: int = 4):
+    """Score both methods on the office run with the evaluation rules (Nguyen et al. 2007).
+
+    A detection is a true positive for a visible wall when |d rho| <= 10 cm, |d alpha| <=
+    3 deg and their extents overlap, in the true laser pose at the time of the line's
+    middle beam; TruePos = matched visible walls with >= 1 m in view / such walls.
+    """
+    res = run_scenario('office', seed=1, laser={'sigma_range': sigma_r})
     mount = res.laser.mount
     scores = {m: LineScore() for m in METHODS}
     for scan in res.of_type(ScanSample)[::step]:
@@ -152,9 +285,9 @@ def office_line_scores(step: int = 4):
         truth = wall_truth(res.world, compose(res.truth_at(t_mid), mount), angles,
                            scan.range_max)
         valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
-        clusters = segment_scan(r, angles, valid, scan.angle_increment)
+        clusters = segment_scan(r, angles, valid, scan.angle_increment, sigma_r=sigma_r)
         for m in METHODS:
-            lines = extract_lines(clusters, LineParams(method=m))
+            lines = extract_lines(clusters, LineParams(method=m, sigma_r=sigma_r))
             mid = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
             stamps = scan.stamp_ns + np.rint(mid * scan.time_increment * 1e9).astype(np.int64)
             poses = compose(res.truth_at(np.minimum(stamps, res.end_ns)), mount)
@@ -163,30 +296,59 @@ def office_line_scores(step: int = 4):
 
 
 def test_office_run_line_targets():
-    for method, sc in office_line_scores().items():
+    for method, sc in office_scores(0.01).items():
         print(f'{method}: TruePos {sc.true_pos:.3f} FalsePos {sc.false_pos_rate:.3f} '
               f'sigma drho {100 * sc.sigma_rho:.2f} cm '
               f'sigma dalpha {math.degrees(sc.sigma_alpha):.3f} deg')
-        assert sc.relevant > 500
+        assert sc.relevant > 1000
         assert sc.true_pos >= 0.95
         assert sc.false_pos_rate <= 0.05
         assert math.degrees(sc.sigma_alpha) <= 0.5
-        # The issue's sigma drho <= 1 cm is not reached (about 1.2 cm, see the README);
-        # it is reported, not asserted.
+        # sigma d rho is dominated by short lines on far walls seen at grazing incidence,
+        # whose rho error is their angle error times a lever arm of metres; the errors agree
+        # with the lines' covariances. split_merge reaches the 1 cm target; ALFA does not
+        # (about 1.07 cm): that gap is reported in the README, not asserted at a looser level.
+        if method == 'split_merge':
+            assert sc.sigma_rho <= 0.010
+
+
+# ------------------------------------------------------------------------- real logs
+CARMEN_SIGMA_R = 0.02  # the SICK scanners of both logs: line RMSE 1-2 cm; one setting for both
+
+
+def carmen_figures(path: Path, method: str):
+    """Per scan: explained fraction of the valid points and RMSE of the supporting points."""
+    from landmark_nav.tools.carmen import read_carmen_scans
+    params = LineParams(method=method, sigma_r=CARMEN_SIGMA_R)
+    explained, rmse = [], []
+    for scan in read_carmen_scans(path):
+        valid = np.isfinite(scan.ranges) & (scan.ranges > 0)
+        clusters = segment_scan(scan.ranges, scan.angles, valid, scan.angle_increment,
+                                sigma_r=CARMEN_SIGMA_R, min_points=1)
+        lines = extract_lines(clusters, params)
+        for ln in lines:
+            assert np.isfinite([ln.rho, ln.alpha, ln.rmse]).all()
+            assert np.all(np.linalg.eigvalsh(ln.covariance) > 0)
+        ex = explained_points(lines, scan.ranges, scan.angles, valid, params.sigma_r,
+                              params.sigma_phi)
+        explained.append(ex.sum() / max(valid.sum(), 1))
+        n = sum(ln.num_points for ln in lines)
+        rmse.append(math.sqrt(sum(ln.num_points * ln.rmse ** 2 for ln in lines) / n) if n
+                    else 0.0)
+    return np.array(explained), np.array(rmse)
 
 
 @pytest.mark.parametrize('name', ['aces-corrected.log.gz', 'seattle-corrected.log.gz'])
-def test_carmen_logs_run_clean(name):
+def test_carmen_logs(name):
     path = CARMEN / name
     if not path.exists():
         pytest.skip(f'{path} not present')
-    from landmark_nav.tools.carmen import read_carmen_scans
     for method in METHODS:
-        params = LineParams(method=method, sigma_r=0.03, min_points=5)
-        for scan in read_carmen_scans(path):
-            valid = np.isfinite(scan.ranges) & (scan.ranges > 0)
-            clusters = segment_scan(scan.ranges, scan.angles, valid, scan.angle_increment,
-                                    sigma_r=params.sigma_r)
-            for ln in extract_lines(clusters, params):
-                assert np.isfinite([ln.rho, ln.alpha, ln.rmse]).all()
-                assert np.all(np.isfinite(ln.covariance))
+        explained, rmse = carmen_figures(path, method)
+        print(f'{name} {method}: explained mean {explained.mean():.3f} '
+              f'min {explained.min():.3f}, scans >= 0.85: {(explained >= 0.85).mean():.2f}; '
+              f'RMSE mean {100 * rmse.mean():.2f} cm max {100 * rmse.max():.2f} cm')
+        # The issue asks for >= 85 % explained and RMSE <= 3 cm on EVERY scan. Not reached
+        # (README): only the figures are reported; this test checks that every scan runs
+        # and gives finite lines with positive-definite covariances (asserted above).
+        assert len(explained) > 0 and np.all((explained >= 0) & (explained <= 1))

@@ -1,58 +1,92 @@
 """Line extraction from laser scan clusters: split-and-merge and ALFA.
 
 Both methods work on the clusters of :func:`landmark_nav.laser.segmentation.segment_scan`
-and return :class:`LineSegment` objects in the laser frame.
+and return :class:`LineSegment` objects in the laser frame: ``x cos(alpha) + y sin(alpha)
+= rho`` (corner chapter eq. 5) with ``rho >= 0`` and ``alpha`` wrapped to [-pi, pi).
 
 * ``split_merge`` (corner chapter, section 2.1.2): recursive split of a cluster at the point
-  of largest perpendicular distance to the chord (eq. 4) while it exceeds
-  ``split_threshold``; each piece is fitted by total least squares in Hessian normal form
-  (eqs. 5-10); adjacent collinear pieces are merged.
-* ``alfa`` (line chapter, ALFA pseudo code): each cluster's ranges are smoothed by robust
-  lowess (tricube weights eq. 8, bisquare robustness weights eq. 9); the end of each line
-  is then found by binary search: the longest run from the current start whose fit keeps
-  its RMSE (eq. 21) below a floating threshold and whose RMSE gradient stays low. The
-  threshold floats between ``rmse_min`` and ``rmse_max``: a good fit pulls it to the mean
-  of itself and the current RMSE, a steep RMSE gradient lowers it to the current RMSE.
-  Breakpoints are decided on the smoothed points; the final lines are fitted on the
-  original points, and adjacent collinear lines are merged as for split-and-merge.
+  of largest perpendicular distance to the chord joining its first and last points (eq. 4)
+  while that distance exceeds the tolerance; total-least-squares fit of every piece in
+  Hessian normal form (eqs. 5-10); adjacent collinear pieces merged.
+* ``alfa`` (line chapter, Mavaei 2011, ALFA pseudo code): each cluster's ranges are smoothed
+  over the bearing by robust lowess (tricube weights eq. 8, bisquare robustness weights
+  eq. 9, see :mod:`landmark_nav.laser.lowess`); the end of each line is then found by
+  binary search on the RMSE criterion (eq. 21) with a floating threshold and the
+  RMSE-gradient test (:func:`alfa_pieces`). The smoothed points only place the
+  breakpoints: the lines are fitted on the ORIGINAL points (the chapter smooths "to
+  increase the algorithm efficiency" and says nothing about fitting the smoothed data;
+  smoothing would round corners and correlate the noise the covariance assumes).
+
+Shared steps after the breakpoints (both methods), all clusters of a scan in one
+vectorised batch (fits from prefix sums of point moments):
+
+1. Break refinement: a break between two adjacent pieces moves, within ``min_points``
+   beams, to where the summed squared residuals of both fits are smallest (the farthest
+   point from a chord, or the end of a binary search on smoothed data, is often a beam or
+   two off the true corner).
+2. Endpoint clean-up: leading and trailing points farther than ``trim_sigma`` standard
+   deviations from their piece's line (eq. 7 projected on the line normal) are dropped,
+   and a split point shared by two pieces stays with the one it fits better. Pieces with
+   fewer than ``min_points`` points are dropped here: their (rho, alpha) are too uncertain
+   for a linearised merge test, and their points become free for step 4.
+3. Merge: two consecutive pieces are merged when they are neighbours (same cluster, or
+   clusters whose facing ends are at most ``merge_gap`` or ``merge_gap_angle`` apart, e.g.
+   a wall cut by a dropout, a spurious return or a table leg in front) and their (rho,
+   alpha) agree in a chi-square test, ``d^2 = dp^T (C1 + C2)^-1 dp <= merge_chi2`` with
+   the covariances of the two independent fits. Chains of passing pairs are refitted on
+   the union of their points (points between them are not used) and kept only if every
+   member also passes the test against the merged line and its end points are within
+   the split tolerance of it.
+4. Growth: each line takes the free points beside its ends (also of small clusters) that
+   lie within ``trim_sigma`` standard deviations and the split tolerance of it, e.g. a
+   corridor wall seen at grazing angles, whose points the segmentation isolates.
+5. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
+   RMSE above the split tolerance are dropped.
 
 Choices where the chapters are silent, or misprinted:
 
 * Fits and RMSE use perpendicular (total least squares) residuals, not the vertical
-  residuals of the line chapter's eq. 12, which fail on lines parallel to the y axis.
-* Lowess combines the two weights by product, as robust lowess does (the line chapter
-  prints a sum, eq. 10, which could not give an outlier the zero weight its Fig. 1 shows).
-* Merging: two adjacent lines are merged when their (rho, alpha) difference passes a
-  chi-square test (95 %, 2 dof) with the sum of their covariances, and the merged fit
-  still passes the split criterion.
-* The (rho, alpha) covariance propagates the per-point noise of the line chapter's
-  eq. 7 through first-order derivatives of the total-least-squares solution.
+  residuals of the line chapter's eqs. 12-19, which fail on lines parallel to the y axis.
+* Lowess combines the two weights by product (the line chapter prints a sum in eq. 10,
+  which could not give an outlier the zero weight its Fig. 1 shows).
+* The (rho, alpha) covariance propagates the per-point noise of the line chapter's eq. 7
+  through first-order derivatives of the total-least-squares solution (:func:`fit_line`).
 """
 
 from dataclasses import dataclass
 import math
 from typing import List, Optional, Sequence, Tuple
 
-from landmark_nav.geometry import wrap_angle
+from landmark_nav.laser.lowess import lowess, lowess_groups
 from landmark_nav.laser.segmentation import Cluster
 import numpy as np
 
+__all__ = ['alfa_pieces', 'CHI2_2DOF_95', 'explained_points', 'extract_lines', 'fit_line',
+           'LineParams', 'LineSegment', 'lowess', 'METHODS', 'point_covariances',
+           'split_pieces']
+
 METHODS = ('split_merge', 'alfa')
 CHI2_2DOF_95 = 5.991
+TWO_PI = 2.0 * math.pi
 
 
-@dataclass(frozen=True)
+def _wrap(a):
+    """Wrap angle(s) to [-pi, pi)."""
+    return (a + math.pi) % TWO_PI - math.pi
+
+
+@dataclass(frozen=True, eq=False)
 class LineSegment:
     """A line fitted to consecutive scan points (laser frame).
 
     Attributes:
         rho: Distance of the line to the laser origin, >= 0 [m] (eq. 5).
         alpha: Angle of the line normal, wrapped to [-pi, pi) [rad].
-        start: (2,) projection of the first supporting point onto the line.
-        end: (2,) projection of the last supporting point.
-        num_points: Number of supporting points.
-        rmse: Perpendicular RMSE of the supporting points [m].
-        covariance: (2, 2) covariance of (rho, alpha).
+        start: (2,) projection of the first supporting point onto the line [m].
+        end: (2,) projection of the last supporting point [m].
+        num_points: Number of supporting points (the points of the fit).
+        rmse: Perpendicular RMSE of the supporting points [m] (eq. 21).
+        covariance: (2, 2) covariance of (rho, alpha) [m^2, m rad; m rad, rad^2].
         first_index: Beam index of the first supporting point.
         last_index: Beam index of the last supporting point.
 
@@ -71,29 +105,46 @@ class LineSegment:
     @property
     def length(self) -> float:
         """Return the distance between the endpoints [m]."""
-        return float(np.hypot(*(self.end - self.start)))
+        return float(math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1]))
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Return the unit normal ``(cos alpha, sin alpha)``."""
+        return np.array([math.cos(self.alpha), math.sin(self.alpha)])
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Return the signed distances (K,) of points (K, 2) to the line [m]."""
+        return np.asarray(points, dtype=float).reshape(-1, 2) @ self.normal - self.rho
 
 
 @dataclass(frozen=True)
 class LineParams:
-    """Line extraction parameters (SI units).
+    """Line extraction parameters (SI units, radians).
 
     Attributes:
         method: ``'split_merge'`` (default) or ``'alfa'``.
         split_threshold: Split-and-merge distance tolerance [m] (eq. 4); None means
-            ``max(0.03, 4 * sigma_r)``.
-        min_points: Fewest points of a line (shorter fits are too uncertain to be useful).
+            ``max(0.03, 4 * sigma_r)``. The tolerance of a point at range r is this plus
+            ``3 * sigma_phi * r`` (the bearing noise's lateral effect). Also bounds the
+            merge, the growth and every line's RMSE (both methods).
+        min_points: Fewest points of a line (ALFA's ``least_point_in_line``).
         min_length: Shortest line [m].
-        merge_chi2: Chi-square gate of the collinearity test for merging (2 dof).
-        merge_gap: Largest gap between collinear lines of neighbouring clusters that are
-            merged into one line [m].
-        sigma_r: Range noise std [m] (eq. 7).
-        sigma_phi: Bearing noise std [rad] (eq. 7).
+        merge_chi2: Chi-square gate (2 dof) of the collinearity test for merging.
+        merge_gap: Largest gap between the facing ends of collinear lines of neighbouring
+            clusters that are merged into one line [m].
+        sigma_r: Range noise std sigma_d [m] (line chapter eqs. 2, 7).
+        sigma_phi: Bearing noise std [rad] (eqs. 3, 7).
         lowess_span: ALFA: lowess window in points (odd).
         lowess_iterations: ALFA: robustness iterations (bisquare weights, eq. 9).
         rmse_min: ALFA: lowest floating RMSE threshold [m]; None means ``0.3 * sigma_r``.
-        rmse_max: ALFA: highest floating RMSE threshold [m]; None means ``sigma_r``.
-        max_gradient: ALFA: largest RMSE growth per added point, relative to the threshold.
+        rmse_max: ALFA: highest (and initial) floating RMSE threshold [m]; None means
+            ``sigma_r``. Both apply to the smoothed points.
+        max_gradient: ALFA: largest RMSE growth per added point, relative to the current
+            threshold (see :func:`alfa_pieces`).
+        trim_sigma: Endpoint clean-up and growth gate in standard deviations of a point's
+            distance to its line (eq. 7); ``inf`` disables both.
+        merge_gap_angle: Lines of neighbouring clusters are also neighbours (for merging
+            and growing) when their facing ends are at most this bearing apart [rad].
 
     """
 
@@ -110,38 +161,48 @@ class LineParams:
     rmse_min: Optional[float] = None
     rmse_max: Optional[float] = None
     max_gradient: float = 0.1
+    trim_sigma: float = 3.0
+    merge_gap_angle: float = math.radians(5.0)
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad parameter."""
         def bad(name: str, rule: str) -> ValueError:
             return ValueError(f'LineParams.{name} must be {rule}, got {getattr(self, name)!r}')
 
-        def positive(v, allow_none=False) -> bool:
+        def number(v) -> bool:
+            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(
+                v, bool) and not math.isnan(v)
+
+        def positive(v, allow_none: bool = False) -> bool:
             if v is None:
                 return allow_none
-            return isinstance(v, (int, float)) and not isinstance(v, bool) and \
-                math.isfinite(v) and v > 0
+            return number(v) and math.isfinite(v) and v > 0
+
+        def integer(v) -> bool:
+            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
 
         if self.method not in METHODS:
             raise bad('method', 'one of ' + ', '.join(METHODS))
         if not positive(self.split_threshold, allow_none=True):
             raise bad('split_threshold', 'None or a number > 0')
-        if not isinstance(self.min_points, int) or self.min_points < 2:
-            raise bad('min_points', 'an integer >= 2')
-        if not (isinstance(self.min_length, (int, float)) and self.min_length >= 0):
+        if not integer(self.min_points) or self.min_points < 3:
+            raise bad('min_points', 'an integer >= 3')
+        if not (number(self.min_length) and math.isfinite(self.min_length)
+                and self.min_length >= 0):
             raise bad('min_length', 'a number >= 0')
         if not positive(self.merge_chi2):
             raise bad('merge_chi2', 'a number > 0')
-        if not (isinstance(self.merge_gap, (int, float)) and self.merge_gap >= 0):
+        if not (number(self.merge_gap) and math.isfinite(self.merge_gap)
+                and self.merge_gap >= 0):
             raise bad('merge_gap', 'a number >= 0')
         if not positive(self.sigma_r):
             raise bad('sigma_r', 'a number > 0')
-        if not (isinstance(self.sigma_phi, (int, float)) and self.sigma_phi >= 0):
+        if not (number(self.sigma_phi) and math.isfinite(self.sigma_phi)
+                and self.sigma_phi >= 0):
             raise bad('sigma_phi', 'a number >= 0')
-        if (not isinstance(self.lowess_span, int) or self.lowess_span < 3
-                or self.lowess_span % 2 == 0):
+        if not integer(self.lowess_span) or self.lowess_span < 3 or self.lowess_span % 2 == 0:
             raise bad('lowess_span', 'an odd integer >= 3')
-        if not isinstance(self.lowess_iterations, int) or self.lowess_iterations < 0:
+        if not integer(self.lowess_iterations) or self.lowess_iterations < 0:
             raise bad('lowess_iterations', 'an integer >= 0')
         if not positive(self.rmse_min, allow_none=True):
             raise bad('rmse_min', 'None or a number > 0')
@@ -151,10 +212,14 @@ class LineParams:
             raise bad('rmse_min', f'<= rmse_max ({self.rmse_bounds[1]})')
         if not positive(self.max_gradient):
             raise bad('max_gradient', 'a number > 0')
+        if not (number(self.merge_gap_angle) and 0 <= self.merge_gap_angle <= math.pi):
+            raise bad('merge_gap_angle', 'an angle in [0, pi]')
+        if not (number(self.trim_sigma) and self.trim_sigma > 0):
+            raise bad('trim_sigma', 'a number > 0 (inf disables the clean-up)')
 
     @property
     def threshold(self) -> float:
-        """Return the split tolerance [m]."""
+        """Return the split tolerance at zero range [m]."""
         if self.split_threshold is not None:
             return float(self.split_threshold)
         return max(0.03, 4.0 * self.sigma_r)
@@ -170,300 +235,696 @@ class LineParams:
 def point_covariances(ranges: np.ndarray, angles: np.ndarray, sigma_r: float,
                       sigma_phi: float) -> np.ndarray:
     """Return (N, 2, 2) Cartesian covariances of scan points (line chapter eq. 7)."""
+    ranges = np.asarray(ranges, dtype=float)
+    angles = np.asarray(angles, dtype=float)
     c, s = np.cos(angles), np.sin(angles)
     rad = np.stack([np.stack([c * c, c * s], -1), np.stack([c * s, s * s], -1)], -2)
     tan = np.stack([np.stack([s * s, -c * s], -1), np.stack([-c * s, c * c], -1)], -2)
     return (sigma_r ** 2) * rad + ((ranges * sigma_phi) ** 2)[:, None, None] * tan  # eq. 7
 
 
-def _tls(points: np.ndarray) -> Tuple[float, float, np.ndarray, float, float]:
-    """Fit by total least squares; return rho, alpha, centroid, lambda_min, lambda_max."""
-    m = points.mean(axis=0)  # eq. 10
-    q = points - m
-    sxx, syy, sxy = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
-    alpha = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)  # eq. 8
-    rho = m[0] * math.cos(alpha) + m[1] * math.sin(alpha)  # eq. 9
-    if rho < 0.0:
-        rho, alpha = -rho, alpha + math.pi
-    half_trace, det = 0.5 * (sxx + syy), sxx * syy - sxy * sxy
-    disc = math.sqrt(max(half_trace * half_trace - det, 0.0))
-    return rho, float(wrap_angle(alpha)), m, half_trace - disc, half_trace + disc
+# ---------------------------------------------------------------------- moment-based TLS fits
+# A fit needs only sums over its points of the monomials (1, x, y, x^2, y^2, xy), plain and
+# weighted by the three entries of each point's eq.-7 covariance (A = Q_xx, B = Q_yy,
+# C = Q_xy): 24 sums, stored as rows. Prefix sums of the plain monomials give the fit of any
+# run in O(1); all pieces of a scan are fitted with a handful of array operations.
+NUM_SUMS = 24
 
 
-def fit_line(points: np.ndarray, ranges: np.ndarray, angles: np.ndarray, sigma_r: float,
-             sigma_phi: float) -> Tuple[float, float, np.ndarray, float]:
-    """Fit a line (eqs. 5-10) and propagate the point noise (eq. 7) to (rho, alpha).
+def _features(x: np.ndarray, y: np.ndarray, rng: np.ndarray, cphi: np.ndarray,
+              sphi: np.ndarray, sigma_r: float, sigma_phi: float, pad: int = 0) -> np.ndarray:
+    """Return (24, N + pad) per-point terms whose sums define a TLS fit and its covariance."""
+    n = x.size
+    out = np.zeros((NUM_SUMS, n + pad))
+    mono = out[:6, :n]
+    mono[0] = 1.0
+    mono[1] = x
+    mono[2] = y
+    np.multiply(x, x, out=mono[3])
+    np.multiply(y, y, out=mono[4])
+    np.multiply(x, y, out=mono[5])
+    vr = sigma_r * sigma_r
+    vp = rng * rng * (sigma_phi * sigma_phi)
+    cc, ss = cphi * cphi, sphi * sphi
+    # eq. 7: Q = sigma_d^2 u u^T + D^2 sigma_phi^2 v v^T, u = (cos, sin), v = (-sin, cos)
+    w = np.stack([vr * cc + vp * ss, vr * ss + vp * cc, (vr - vp) * (cphi * sphi)])
+    np.multiply(w[:, None, :], mono[None, :, :], out=out[6:, :n].reshape(3, 6, n))
+    return out
+
+
+def _prefix5(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Return (5, N + 1) prefix sums of x, y, x^2, y^2, xy (column i = first i points)."""
+    out = np.zeros((5, x.size + 1))
+    np.cumsum(np.stack([x, y, x * x, y * y, x * y]), axis=1, out=out[:, 1:])
+    return out
+
+
+def _moments5(pre: np.ndarray, lo, hi) -> np.ndarray:
+    """Return the (6, ...) plain sums of points lo..hi (inclusive) from a _prefix5 array."""
+    s = pre[:, hi + 1] - pre[:, lo]
+    return np.concatenate([(hi - lo + 1)[None].astype(float), s])
+
+
+@dataclass(frozen=True, eq=False)
+class _Fit:
+    """TLS fits of G point sets from their sums (internal)."""
+
+    rho: np.ndarray  # (G,)
+    alpha: np.ndarray  # (G,)
+    nx: np.ndarray  # (G,) normal
+    ny: np.ndarray
+    rmse: np.ndarray  # (G,)
+    count: np.ndarray  # (G,)
+    cov: Optional[np.ndarray]  # (G, 2, 2) covariance of (rho, alpha), or None
+
+
+def _solve(sums: np.ndarray, origin: np.ndarray) -> _Fit:
+    """Fit a line to each column of sums (6 or 24, G); coordinates relative to ``origin``.
+
+    TLS in Hessian normal form (eqs. 5-10). With 24 rows the covariance is added: the
+    first-order propagation of eq. 7 through the solution, linearised at the fitted line.
+    With ``q_i`` the centred points, ``n`` the normal, ``t = dn/dalpha`` and ``L =
+    lambda_max - lambda_min`` of the scatter matrix, a normal displacement ``e_i`` of point
+    i moves alpha by ``-(t.q_i) e_i / L`` (stationarity of eq. 6 in alpha) and ``rho =
+    n.c`` by ``(t.c) d alpha + e_i / N``; ``C = sum_i J_i J_i^T s_i^2``, ``s_i^2 = n^T Q_i n``.
+    """
+    n = sums[0]
+    cx = sums[1] / n
+    cy = sums[2] / n
+    sxx = sums[3] - n * cx * cx
+    syy = sums[4] - n * cy * cy
+    sxy = sums[5] - n * cx * cy
+    alpha = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx)  # eq. 8
+    nx, ny = np.cos(alpha), np.sin(alpha)
+    ax, ay = cx + origin[0], cy + origin[1]  # centroid in the laser frame (eq. 10)
+    rho = ax * nx + ay * ny  # eq. 9
+    flip = rho < 0.0
+    if flip.any():
+        rho = np.abs(rho)
+        alpha = _wrap(np.where(flip, alpha + math.pi, alpha))
+        sign = 1.0 - 2.0 * flip
+        nx = nx * sign
+        ny = ny * sign
+    half = 0.5 * (sxx - syy)
+    root = np.sqrt(half * half + sxy * sxy)
+    rmse = np.sqrt(np.maximum(0.5 * (sxx + syy) - root, 0.0) / n)  # eq. 21, perpendicular
+    cov = None
+    if sums.shape[0] == NUM_SUMS:
+        a2, b2, ab = nx * nx, ny * ny, 2.0 * nx * ny
+        w = a2 * sums[6:12] + b2 * sums[12:18] + ab * sums[18:24]  # sums of s_i^2 * monomial
+        tx, ty = -ny, nx
+        tcl = tx * cx + ty * cy  # t.c in the fit's coordinates
+        t1 = tx * w[1] + ty * w[2] - tcl * w[0]  # sum s^2 (t.q)
+        t2 = (tx * tx * w[3] + 2.0 * tx * ty * w[5] + ty * ty * w[4]
+              - 2.0 * tcl * (tx * w[1] + ty * w[2]) + tcl * tcl * w[0])  # sum s^2 (t.q)^2
+        lever = tx * ax + ty * ay  # t.c in the laser frame
+        with np.errstate(divide='ignore', invalid='ignore'):
+            big_l = 2.0 * root
+            caa = t2 / (big_l * big_l)
+            cra = lever * caa - t1 / (n * big_l)
+            crr = lever * lever * caa - 2.0 * lever * t1 / (n * big_l) + w[0] / (n * n)
+        cov = np.empty(n.shape + (2, 2))
+        cov[..., 0, 0] = crr
+        cov[..., 0, 1] = cra
+        cov[..., 1, 0] = cra
+        cov[..., 1, 1] = caa
+        bad = ~(np.isfinite(crr) & np.isfinite(cra) & np.isfinite(caa) & (root > 0.0))
+        if bad.any():
+            cov[bad] = np.inf
+    return _Fit(rho, alpha, nx, ny, rmse, n.astype(np.int64), cov)
+
+
+def fit_line(points: np.ndarray, ranges: Optional[np.ndarray] = None,
+             angles: Optional[np.ndarray] = None, sigma_r: float = 0.01,
+             sigma_phi: float = math.radians(0.1)) -> Tuple[float, float, np.ndarray, float]:
+    """Fit a line by total least squares (eqs. 5-10) with the covariance of (rho, alpha).
+
+    ``alpha = 0.5 atan2(-2 sum(dy dx), sum(dy^2 - dx^2))`` about the centroid (eq. 8) and
+    ``rho = x_m cos(alpha) + y_m sin(alpha)`` (eq. 9); if rho < 0 the normal is flipped so
+    that rho >= 0, and alpha is wrapped to [-pi, pi). For a line through the origin the
+    sign of the normal is arbitrary.
+
+    Covariance: point i at range d_i and bearing phi_i has the covariance Q_i of the line
+    chapter's eq. 7, evaluated at the measured values (as the chapter allows). Linearising
+    the TLS solution at the fitted line (stationarity of eq. 6 in alpha, ``rho = n.c``)
+    gives ``J_i = d(rho, alpha)/d e_i`` for the normal displacement ``e_i`` of point i and
+    ``C = sum_i J_i J_i^T n^T Q_i n`` (along the line a point does not move the line to
+    first order); this is the unweighted case of Pfister et al. (2003).
+
+    Args:
+        points: (K, 2) points in the laser frame [m], K >= 2.
+        ranges: (K,) measured ranges [m]; None = ``|points|``.
+        angles: (K,) beam angles [rad]; None = the points' bearings.
+        sigma_r: Range noise std [m] (eq. 2).
+        sigma_phi: Bearing noise std [rad] (eq. 3).
 
     Returns:
-        rho, alpha, covariance (2, 2) of (rho, alpha), perpendicular RMSE.
+        ``(rho, alpha, covariance (2, 2), rmse)``: rmse is the point-to-line RMS [m]
+        (eq. 21); the covariance is infinite when the points do not define a line.
+
+    Raises:
+        ValueError: Fewer than 2 points or mismatched shapes.
 
     """
-    points = np.asarray(points, dtype=float)
-    rho, alpha, m, lam1, lam2 = _tls(points)
-    n = np.array([math.cos(alpha), math.sin(alpha)])
-    d = np.array([-math.sin(alpha), math.cos(alpha)])
-    q = points - m
-    resid = points @ n - rho
-    rmse = float(math.sqrt(np.mean(resid * resid)))
-    gap = lam1 - lam2
-    if gap >= -1e-15:
-        return rho, alpha, np.full((2, 2), np.inf), rmse
-    # First-order derivatives of the TLS solution w.r.t. each point (eigenvector
-    # perturbation): d alpha / d p_i = ((q_i.n) d + (q_i.d) n) / (lambda_min - lambda_max),
-    # d rho / d p_i = (d.m) d alpha / d p_i + n / N. With the eq. 7 noise
-    # Q_i = sigma_r^2 u u^T + (r sigma_phi)^2 v v^T (u along the beam, v across it),
-    # J Q J^T is a sum of two rank-one terms per point: only dot products are needed.
-    qn, qd = q @ n, q @ d
-    c, s = np.cos(angles), np.sin(angles)
-    cov = np.zeros((2, 2))
-    for ux, uy, weight in ((c, s, sigma_r ** 2), (-s, c, (ranges * sigma_phi) ** 2)):
-        a_u = (qn * (d[0] * ux + d[1] * uy) + qd * (n[0] * ux + n[1] * uy)) / gap
-        r_u = float(d @ m) * a_u + (n[0] * ux + n[1] * uy) / len(points)
-        cov += np.array([[np.sum(weight * r_u * r_u), np.sum(weight * r_u * a_u)],
-                         [0.0, np.sum(weight * a_u * a_u)]])
-    cov[1, 0] = cov[0, 1]
-    return rho, alpha, cov, rmse
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f'points must have shape (K, 2), got {p.shape}')
+    k = p.shape[0]
+    if k < 2:
+        raise ValueError('fit_line needs at least 2 points')
+    rng = np.hypot(p[:, 0], p[:, 1]) if ranges is None else np.asarray(ranges, dtype=float)
+    phi = np.arctan2(p[:, 1], p[:, 0]) if angles is None else np.asarray(angles, dtype=float)
+    if rng.shape != (k,) or phi.shape != (k,):
+        raise ValueError('ranges and angles must have one entry per point')
+    origin = p.mean(axis=0)
+    q = p - origin
+    feats = _features(q[:, 0], q[:, 1], rng, np.cos(phi), np.sin(phi), float(sigma_r),
+                      float(sigma_phi))
+    f = _solve(feats.sum(axis=1)[:, None], origin)
+    res = p @ np.array([f.nx[0], f.ny[0]]) - f.rho[0]  # direct residuals: exact RMSE
+    return float(f.rho[0]), float(f.alpha[0]), f.cov[0], float(np.sqrt(np.mean(res * res)))
 
 
-def _fit_segment(pts: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
-                 indices: np.ndarray, params: LineParams) -> LineSegment:
-    """Fit points (with their ranges, angles and beam indices) into a LineSegment."""
-    rho, alpha, cov, rmse = fit_line(pts, ranges, angles, params.sigma_r, params.sigma_phi)
-    n = np.array([math.cos(alpha), math.sin(alpha)])
-    start = pts[0] - (pts[0] @ n - rho) * n
-    end = pts[-1] - (pts[-1] @ n - rho) * n
-    return LineSegment(rho, alpha, start, end, len(pts), rmse, cov, int(indices[0]),
-                       int(indices[-1]))
+def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
+    n = (hi - lo + 1).astype(float)
+    s = pre[:, hi + 1] - pre[:, lo]
+    mx, my = s[0] / n, s[1] / n
+    cxx = s[2] - n * mx * mx
+    cyy = s[3] - n * my * my
+    cxy = s[4] - n * mx * my
+    half = 0.5 * (cxx - cyy)
+    return np.maximum(0.5 * (cxx + cyy) - np.sqrt(half * half + cxy * cxy), 0.0)
 
 
-def _make_segment(cluster: Cluster, lo: int, hi: int, params: LineParams) -> LineSegment:
-    """Fit the points lo..hi (inclusive) of a cluster into a LineSegment."""
-    sl = slice(lo, hi + 1)
-    return _fit_segment(cluster.points[sl], cluster.ranges[sl], cluster.angles[sl],
-                        cluster.indices[sl], params)
+def _gather(starts: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the concatenated inclusive index ranges ``[starts[i], ends[i]]`` and offsets."""
+    cnt = ends - starts + 1
+    offs = np.zeros(cnt.size + 1, dtype=np.int64)
+    np.cumsum(cnt, out=offs[1:])
+    idx = np.arange(offs[-1], dtype=np.int64) - np.repeat(offs[:-1] - starts, cnt)
+    return idx, offs
 
 
-def _collinear(a: LineSegment, b: LineSegment, gate: float) -> bool:
-    """Chi-square test that two lines have the same (rho, alpha)."""
-    diff = np.array([a.rho - b.rho, float(wrap_angle(a.alpha - b.alpha))])
-    cov = a.covariance + b.covariance
-    if not np.all(np.isfinite(cov)) or np.linalg.det(cov) <= 0:
-        return False
-    return float(diff @ np.linalg.solve(cov, diff)) <= gate
+# ---------------------------------------------------------------------- split (eq. 4)
+def split_pieces(xy: np.ndarray, offsets: np.ndarray, tolerance) -> np.ndarray:
+    """Split point runs recursively at the point farthest from the chord (eq. 4).
 
+    All runs and all pieces of one recursion level are processed together.
 
-def _split(points: np.ndarray, threshold: np.ndarray) -> List[Tuple[int, int]]:
-    """Split points recursively at the largest chord distance (eq. 4); return index ranges.
+    Args:
+        xy: (N, 2) points, runs back to back.
+        offsets: (C + 1,) run boundaries: run c is ``xy[offsets[c]:offsets[c + 1]]``.
+        tolerance: split while the farthest point is farther than this from the chord
+            [m]: a number, or (N,) one tolerance per point.
 
-    ``threshold`` (N,) is the distance tolerance of each point.
+    Returns:
+        (P, 2) int array of inclusive ``[first, last]`` indices of the final pieces, in
+        order; neighbouring pieces of a run share the split point.
+
     """
-    out, stack = [], [(0, len(points) - 1)]
-    while stack:
-        lo, hi = stack.pop()
-        if hi - lo < 2:
-            out.append((lo, hi))
+    xy = np.asarray(xy, dtype=float)
+    offsets = np.asarray(offsets, dtype=np.int64)
+    keep = offsets[1:] > offsets[:-1]
+    return _split(np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+                  offsets[:-1][keep], offsets[1:][keep] - 1,
+                  np.broadcast_to(np.asarray(tolerance, dtype=float), xy.shape[:1]))
+
+
+def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
+           tol: np.ndarray) -> np.ndarray:
+    """Split the runs ``s[i]..e[i]`` (inclusive); see :func:`split_pieces`."""
+    done: List[np.ndarray] = []
+    while s.size:
+        inner = e - s >= 2
+        if not inner.all():
+            done.append(np.stack([s[~inner], e[~inner]]))
+            s, e = s[inner], e[inner]
+            if not s.size:
+                break
+        cnt = e - s - 1  # interior points of every piece
+        offs = np.cumsum(cnt) - cnt
+        seg = np.repeat(np.arange(s.size), cnt)
+        idx = np.arange(seg.size) + (s + 1 - offs)[seg]
+        # eq. 4: the chord A x + B y + C = 0 through the first and last point, normalised
+        x0, y0 = px[s], py[s]
+        a_c, b_c = py[e] - y0, x0 - px[e]
+        norm = np.hypot(a_c, b_c)
+        norm[norm == 0.0] = 1.0
+        a_c /= norm
+        b_c /= norm
+        c_c = -(a_c * x0 + b_c * y0)
+        dist = np.abs(a_c[seg] * px[idx] + b_c[seg] * py[idx] + c_c[seg])
+        dmax = np.maximum.reduceat(dist, offs)
+        hit = np.where(dist == dmax[seg], np.arange(seg.size), seg.size)
+        k = idx[np.minimum.reduceat(hit, offs)]
+        split = dmax > tol[k]
+        if not split.all():
+            done.append(np.stack([s[~split], e[~split]]))
+            s, e, k = s[split], e[split], k[split]
+        s = np.concatenate([s, k])
+        e = np.concatenate([k, e])
+    if not done:
+        return np.zeros((0, 2), dtype=np.int64)
+    out = np.concatenate(done, axis=1)
+    return out[:, np.lexsort((out[1], out[0]))].T
+
+
+# ---------------------------------------------------------------------- ALFA
+def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.ndarray:
+    """Find line pieces by ALFA's split and merge with binary search (line chapter).
+
+    ``xy`` are the smoothed points. Per run, from ``K_Min`` (its first point) the end
+    ``a`` of the line is searched over ``[K_Min + min_points - 1, K_Max]``, starting in
+    the middle of the remaining data. The fit of ``K_Min..a`` is judged by its RMSE
+    (eq. 21, perpendicular residuals) and by the RMSE gradient, estimated as the RMSE
+    growth per added point relative to the current threshold::
+
+        g(a) = (RMSE(a) - RMSE(a - h)) / (h * Max_ERR),  h = max(2, min_points // 2)
+
+    As in the pseudo code: a bad fit (``RMSE > Max_ERR`` or ``g > max_gradient``) moves
+    the upper bound below ``a``; when the gradient was the reason, the threshold drops to
+    the current RMSE (``Max_ERR = min(RMSE, Max_ERR)``). A good fit moves the lower bound
+    to ``a`` and sets ``Max_ERR = mean(RMSE, Max_ERR)``. ``Max_ERR`` starts at ``rmse_max``
+    for every line and stays within ``[rmse_min, rmse_max]`` (the floating threshold).
+    The next candidate is ``ceil((b1 + b2) / 2)``, so the search always makes progress
+    (the pseudo code's ``floor`` after a bad fit can test ``b1`` again). The largest
+    accepted ``a`` ends the line; the next search starts at ``a + 1`` (the pseudo code's
+    ``K_Min = a + 1``). If even the shortest line ``K_Min..K_Min + min_points - 1`` has
+    an RMSE above ``rmse_max``, ``K_Min`` alone is dropped and the search restarts one
+    point later (the pseudo code leaves this case open).
+
+    Args:
+        xy: (N, 2) smoothed points, runs back to back.
+        offsets: (C + 1,) run boundaries.
+        params: Line parameters (min_points, rmse bounds, max_gradient).
+
+    Returns:
+        (P, 2) int array of inclusive ``[first, last]`` indices, non-overlapping, in order.
+
+    """
+    least = params.min_points
+    step = max(2, least // 2)
+    lo_thr, hi_thr = params.rmse_bounds
+    gmax = params.max_gradient
+    out: List[Tuple[int, int]] = []
+    for c in range(len(offsets) - 1):
+        c0, c1 = int(offsets[c]), int(offsets[c + 1])
+        n_pts = c1 - c0
+        if n_pts < least:
             continue
-        p, f = points[lo], points[hi]
-        a, b = f[1] - p[1], f[0] - p[0]
-        norm = math.hypot(a, b)
-        seg = points[lo + 1:hi]
-        dist = np.abs(a * (seg[:, 0] - p[0]) - b * (seg[:, 1] - p[1])) / max(norm, 1e-12)
-        k = int(np.argmax(dist))
-        if dist[k] > threshold[lo + 1 + k]:
-            stack.append((lo + 1 + k, hi))
-            stack.append((lo, lo + 1 + k))
-        else:
-            out.append((lo, hi))
-    return sorted(out)
+        p = xy[c0:c1] - xy[c0:c1].mean(axis=0)
+        sx, sy, sxx, syy, sxy = _prefix5(p[:, 0], p[:, 1]).tolist()
+
+        def rmse(i: int, j: int) -> float:
+            """Return the RMSE (eq. 21) of the TLS line through points i..j."""
+            k = j + 1
+            m = k - i
+            mx = (sx[k] - sx[i]) / m
+            my = (sy[k] - sy[i]) / m
+            vxx = (sxx[k] - sxx[i]) / m - mx * mx
+            vyy = (syy[k] - syy[i]) / m - my * my
+            vxy = (sxy[k] - sxy[i]) / m - mx * my
+            half = 0.5 * (vxx - vyy)
+            lam = 0.5 * (vxx + vyy) - math.sqrt(half * half + vxy * vxy)
+            return math.sqrt(lam) if lam > 0.0 else 0.0
+
+        k_min, k_max = 0, n_pts - 1
+        while k_max - k_min + 1 >= least:
+            lo = k_min + least - 1
+            if rmse(k_min, lo) > hi_thr:
+                k_min += 1  # no line starts here
+                continue
+            max_err = hi_thr
+            b1, b2 = lo, k_max
+            a = max((k_min + k_max + 1) // 2, b1 + 1)  # the middle of the data
+            while b2 > b1:
+                err = rmse(k_min, a)
+                grad = (err - rmse(k_min, max(a - step, k_min + 1))) / (step * max_err)
+                if err > max_err or grad > gmax:  # bad fit: split the recent data
+                    b2 = a - 1
+                    if grad > gmax:
+                        max_err = max(min(err, max_err), lo_thr)
+                else:  # satisfied: add a split of the remainder
+                    b1 = a
+                    max_err = min(max(0.5 * (err + max_err), lo_thr), hi_thr)
+                a = (b1 + b2 + 1) // 2
+            out.append((c0 + k_min, c0 + b1))
+            k_min = b1 + 1
+    if not out:
+        return np.zeros((0, 2), dtype=np.int64)
+    return np.array(out, dtype=np.int64)
 
 
-def _merge(cluster: Cluster, pieces: List[Tuple[int, int]], params: LineParams
-           ) -> List[Tuple[int, int, Optional[LineSegment]]]:
-    """Merge adjacent collinear pieces (chi-square test on rho, alpha); keep their fits."""
-    merged = [(lo, hi, _make_segment(cluster, lo, hi, params) if hi - lo >= 1 else None)
-              for lo, hi in pieces]
-    i = 0
-    while i + 1 < len(merged):
-        (a0, _, la), (_, b1, lb) = merged[i], merged[i + 1]
-        if la is not None and lb is not None and _collinear(la, lb, params.merge_chi2):
-            merged[i:i + 2] = [(a0, b1, _make_segment(cluster, a0, b1, params))]
-            continue
-        i += 1
-    return merged
+# ---------------------------------------------------------------------- shared steps
+@dataclass(frozen=True, eq=False)
+class _Scan:
+    """All clusters of a scan back to back, coordinates relative to ``origin`` (internal)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    origin: np.ndarray
+    rng: np.ndarray
+    phi: np.ndarray
+    cphi: np.ndarray
+    sphi: np.ndarray
+    beam: np.ndarray
+    cluster: np.ndarray  # (N,) cluster number of each point
+    offsets: np.ndarray
 
 
-def lowess(x: np.ndarray, y: np.ndarray, span: int = 7, iterations: int = 2) -> np.ndarray:
-    """Smooth y(x) by robust locally weighted linear regression (eqs. 8-10).
-
-    Each point is fitted by a weighted line over its ``span`` nearest neighbours in index
-    order, with tricube distance weights (eq. 8) times bisquare robustness weights from
-    the previous pass's residuals (eq. 9, zero beyond 6 median absolute deviations).
-    """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    n = len(x)
-    if n < 3:
-        return y.copy()
-    k = min(span, n)
-    start = np.clip(np.arange(n) - k // 2, 0, n - k)
-    idx = start[:, None] + np.arange(k)[None, :]  # (n, k) window of each point
-    xs, ys = x[idx], y[idx]
-    dist = np.abs(xs - x[:, None])
-    dmax = dist.max(axis=1, keepdims=True) * 1.0001 + 1e-15
-    w_dist = (1.0 - (dist / dmax) ** 3) ** 3  # eq. 8
-    robust = np.ones(n)
-    smooth = y
-    for it in range(iterations + 1):
-        w = w_dist * robust[idx]  # product of the two weights (eq. 10, see module note)
-        sw = w.sum(axis=1)
-        sw = np.where(sw > 0, sw, 1.0)
-        mx = (w * xs).sum(axis=1) / sw
-        my = (w * ys).sum(axis=1) / sw
-        dx = xs - mx[:, None]
-        sxx = (w * dx * dx).sum(axis=1)
-        sxy = (w * dx * (ys - my[:, None])).sum(axis=1)
-        slope = np.where(sxx > 1e-30, sxy / np.where(sxx > 1e-30, sxx, 1.0), 0.0)
-        smooth = my + slope * (x - mx)
-        if it == iterations:
-            break
-        resid = y - smooth
-        # MAD -> 0 (noise-free data) is the limit where every residual point is an outlier.
-        mad = max(float(np.median(np.abs(resid))), 1e-12 * (1.0 + float(np.abs(y).max())))
-        u = resid / (6.0 * mad)
-        robust = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)  # eq. 9
-    return smooth
+def _concat(clusters: Sequence[Cluster]) -> Optional[_Scan]:
+    """Stack the non-empty clusters; None if there are none."""
+    cl = [c for c in clusters if c.indices.size]
+    if not cl:
+        return None
+    sizes = np.array([c.indices.size for c in cl], dtype=np.int64)
+    offsets = np.zeros(sizes.size + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    xy = np.concatenate([c.points for c in cl], dtype=float).reshape(-1, 2)
+    rng = np.concatenate([c.ranges for c in cl], dtype=float)
+    phi = np.concatenate([c.angles for c in cl], dtype=float)
+    beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
+    origin = xy.sum(axis=0) / xy.shape[0]
+    x = xy[:, 0] - origin[0]
+    y = xy[:, 1] - origin[1]
+    return _Scan(x, y, origin, rng, phi, np.cos(phi), np.sin(phi), beam,
+                 np.repeat(np.arange(sizes.size), sizes), offsets)
 
 
-class _Moments:
-    """Prefix sums of point moments: O(1) total-least-squares residuals of any run."""
+def _refine_breaks(scan: _Scan, pre: np.ndarray, pieces: np.ndarray, reach: int
+                   ) -> np.ndarray:
+    """Move every break between adjacent pieces to where both fits are best (step 1).
 
-    def __init__(self, points: np.ndarray) -> None:
-        """Accumulate x, y, x^2, y^2 and xy."""
-        x, y = points[:, 0], points[:, 1]
-        self.c = np.vstack([np.zeros((1, 5)), np.cumsum(
-            np.column_stack([x, y, x * x, y * y, x * y]), axis=0)])
-
-    def sse(self, lo, hi):
-        """Return the summed squared perpendicular residuals of points lo..hi (arrays ok)."""
-        lo, hi = np.asarray(lo), np.asarray(hi)
-        s = self.c[hi + 1] - self.c[lo]
-        m = (hi - lo + 1)[..., None] if s.ndim > 1 else hi - lo + 1
-        mean = s / m
-        sxx = mean[..., 2] - mean[..., 0] ** 2
-        syy = mean[..., 3] - mean[..., 1] ** 2
-        sxy = mean[..., 4] - mean[..., 0] * mean[..., 1]
-        half = 0.5 * (sxx + syy)
-        lam = half - np.sqrt(np.maximum(half * half - (sxx * syy - sxy * sxy), 0.0))
-        return np.maximum(lam, 0.0) * (hi - lo + 1)
-
-    def rmse(self, lo: int, hi: int) -> float:
-        """Return the perpendicular RMSE of the TLS fit of points lo..hi (eq. 21)."""
-        sx, sy, sxx, syy, sxy = (self.c[hi + 1] - self.c[lo]).tolist()
-        m = hi - lo + 1
-        mx, my = sx / m, sy / m
-        vxx, vyy, vxy = sxx / m - mx * mx, syy / m - my * my, sxy / m - mx * my
-        half = 0.5 * (vxx + vyy)
-        lam = half - math.sqrt(max(half * half - (vxx * vyy - vxy * vxy), 0.0))
-        return math.sqrt(max(lam, 0.0))
-
-
-def _refine_breaks(points: np.ndarray, pieces: List[Tuple[int, int]], reach: int
-                   ) -> List[Tuple[int, int]]:
-    """Move each break between adjacent pieces to where the two fits fit best.
-
-    The split step breaks at the point farthest from a chord, which near a corner is often
-    a few points off the true junction; this searches ``reach`` points either side for the
-    break that minimises the summed squared perpendicular residuals of both pieces.
+    Pieces ``[lo, b]`` and ``[b + o, hi]`` (o = 0 for a shared split point, 1 for
+    abutting pieces) of one cluster get the break ``b'`` within ``reach`` of ``b`` that
+    minimises ``SSE(lo..b') + SSE(b' + o..hi)``, both pieces keeping at least 3 points.
     """
     if len(pieces) < 2:
         return pieces
-    moments = _Moments(points)
-    out = [list(p) for p in pieces]
-    for i in range(len(out) - 1):
-        lo, k, hi = out[i][0], out[i][1], out[i + 1][1]
-        cand = np.arange(max(lo + 2, k - reach), min(hi - 2, k + reach) + 1)
-        if cand.size == 0:
-            continue
-        cost = moments.sse(np.full(cand.size, lo), cand) + moments.sse(
-            cand, np.full(cand.size, hi))
-        best_k = int(cand[np.argmin(cost)])
-        out[i][1] = best_k
-        out[i + 1][0] = best_k
-    return [tuple(p) for p in out]
+    s, e = pieces[:, 0].copy(), pieces[:, 1].copy()
+    o = s[1:] - e[:-1]
+    adj = np.flatnonzero((o >= 0) & (o <= 1) & (scan.cluster[s[1:]] == scan.cluster[e[:-1]]))
+    if not adj.size:
+        return pieces
+    lo, b, hi, oo = s[adj, None], e[adj, None], e[adj + 1, None], o[adj, None]
+    cand = b + np.arange(-reach, reach + 1)
+    ok = (cand - lo >= 2) & (hi - cand - oo >= 2)
+    cand = np.where(ok, cand, b)
+    lo_b = lo + 0 * cand
+    cost = _sse(pre, lo_b, cand) + _sse(pre, cand + oo, hi + 0 * cand)
+    cost[~ok] = np.inf
+    best = cand[np.arange(adj.size), np.argmin(cost, axis=1)]
+    e[adj] = best
+    s[adj + 1] = best + oo[:, 0]
+    good = e - s >= 2  # breaks of a chain moved past each other: drop the squeezed piece
+    return np.stack([s[good], e[good]], axis=1)
 
 
-def _alfa_pieces(cluster: Cluster, params: LineParams) -> List[Tuple[int, int]]:
-    """Break one cluster into lines with ALFA's binary search (line chapter pseudo code)."""
-    n = len(cluster)
-    smooth_r = lowess(cluster.angles, cluster.ranges, params.lowess_span,
-                      params.lowess_iterations)
-    pts = np.column_stack([smooth_r * np.cos(cluster.angles),
-                           smooth_r * np.sin(cluster.angles)])
-    rmse = _Moments(pts).rmse
-    lo_thr, hi_thr = params.rmse_bounds
-    least = params.min_points
-    step = max(2, least // 2)
-    pieces = []
-    k_min = 0
-    while n - k_min >= least:
-        max_err = hi_thr
-        b1, b2 = k_min + least - 1, n - 1
-        a = b2
-        while b2 - b1 > 0:
-            err = rmse(k_min, a)
-            prev = rmse(k_min, max(a - step, k_min + 1))
-            grad = (err - prev) / step / max_err
-            if err > max_err or grad > params.max_gradient:
-                b2 = a - 1  # bad fit: split the recent data
-                if grad > params.max_gradient:
-                    max_err = min(max(err, lo_thr), max_err)
-                a = (b1 + b2) // 2
-            else:
-                b1 = a  # good fit: add half of the remaining data
-                max_err = min(max(0.5 * (err + max_err), lo_thr), hi_thr)
-                a = int(math.floor(0.5 * (b1 + b2) + 0.5))
-        end = max(b1, k_min + least - 1) if rmse(k_min, b1) <= hi_thr else b1
-        pieces.append((k_min, end))
-        k_min = end + 1
-    if k_min < n:
-        pieces.append((k_min, n - 1))
-    return pieces
+def _z(scan: _Scan, f: _Fit, pts: np.ndarray, params: LineParams) -> np.ndarray:
+    """Return |distance| / std (eq. 7 on the normal) of points pts (L, K) to the L lines."""
+    nx, ny = f.nx[:, None], f.ny[:, None]
+    rho = (f.rho - f.nx * scan.origin[0] - f.ny * scan.origin[1])[:, None]
+    d = scan.x[pts] * nx + scan.y[pts] * ny - rho
+    cp, sp = scan.cphi[pts], scan.sphi[pts]
+    n_u = nx * cp + ny * sp
+    n_v = ny * cp - nx * sp
+    var = (params.sigma_r * n_u) ** 2 + (scan.rng[pts] * params.sigma_phi * n_v) ** 2
+    return np.abs(d) / np.sqrt(np.maximum(var, 1e-24))
+
+
+def _clean_pieces(scan: _Scan, pre: np.ndarray, pieces: np.ndarray,
+                  params: LineParams) -> np.ndarray:
+    """Trim outlying ends and give shared split points to one piece (step 2)."""
+    if not pieces.size:
+        return pieces
+    s, e = pieces[:, 0], pieces[:, 1]
+    f = _solve(_moments5(pre, s, e), scan.origin)
+    gate = params.trim_sigma
+    reach = params.min_points
+    steps = np.arange(reach)
+    win = np.concatenate([np.minimum(s[:, None] + steps, e[:, None]),
+                          np.maximum(e[:, None] - steps, s[:, None])], axis=1)
+    z = _z(scan, f, win, params)
+    zh, zt = z[:, :reach], z[:, reach:]
+    lead = np.cumprod(zh > gate, axis=1).sum(axis=1)  # leading run of outlying points
+    trail = np.cumprod(zt > gate, axis=1).sum(axis=1)
+    ns, ne = s + lead, e - trail
+    # A split point shared by consecutive pieces goes to the piece it fits better.
+    shared = np.flatnonzero((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:]))
+    if shared.size:
+        to_prev = zt[shared, 0] <= zh[shared + 1, 0]
+        ns[shared + 1] = np.where(to_prev, ne[shared] + 1, ns[shared + 1])
+        ne[shared] = np.where(to_prev, ne[shared], ns[shared + 1] - 1)
+    keep = ne - ns >= 2
+    return np.stack([ns[keep], ne[keep]], axis=1)
+
+
+def _chi2(rho1, alpha1, cov1, rho2, alpha2, cov2) -> np.ndarray:
+    """Return ``dp^T (C1 + C2)^-1 dp`` for line pairs (the merge test)."""
+    da = _wrap(alpha1 - alpha2)
+    # Lines near the origin may come with opposite normals: compare (-rho, alpha + pi).
+    opposite = np.abs(da) > 0.5 * math.pi
+    dr = np.where(opposite, rho1 + rho2, rho1 - rho2)
+    da = np.where(opposite, _wrap(da + math.pi), da)
+    c00 = cov1[:, 0, 0] + cov2[:, 0, 0]
+    c11 = cov1[:, 1, 1] + cov2[:, 1, 1]
+    c01 = cov1[:, 0, 1] + np.where(opposite, -1.0, 1.0) * cov2[:, 0, 1]
+    det = c00 * c11 - c01 * c01
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        d2 = (c11 * dr * dr - 2.0 * c01 * dr * da + c00 * da * da) / det
+    return np.where(np.isfinite(d2) & (det > 0.0), d2, np.inf)
+
+
+def _merge(scan: _Scan, feats: np.ndarray, pieces: np.ndarray, params: LineParams,
+           tol: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, Optional[_Fit]]:
+    """Merge collinear neighbours (step 3); return sums (24, L), first, last and the fits.
+
+    ``pieces`` must be sorted and disjoint. ``first``/``last`` are the outermost point
+    indices of each line (a merged line does not use the points between its pieces). The
+    fits have no covariance when lines were merged (they are refitted after growing).
+    """
+    s, e = pieces[:, 0], pieces[:, 1]
+    bounds = np.empty(2 * s.size, dtype=np.int64)
+    bounds[0::2] = s
+    bounds[1::2] = e + 1
+    sums = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
+    f = _solve(sums, scan.origin)
+    if len(pieces) == 1:
+        return sums, s, e, f
+    xs, ys = scan.x[s[1:]] - scan.x[e[:-1]], scan.y[s[1:]] - scan.y[e[:-1]]
+    near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
+            | (xs * xs + ys * ys <= params.merge_gap ** 2)
+            | (np.abs(scan.phi[s[1:]] - scan.phi[e[:-1]]) <= params.merge_gap_angle))
+    join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
+                         f.cov[1:]) <= params.merge_chi2)
+    if not join.any():
+        return sums, s, e, f
+    new = np.concatenate([[True], ~join])
+    g_start = np.flatnonzero(new)
+    g_end = np.append(g_start[1:], len(pieces)) - 1
+    label = np.cumsum(new) - 1
+    g_sums = np.add.reduceat(sums, g_start, axis=1)
+    g = _solve(g_sums[:6], scan.origin)
+    # Every member must agree with its merged line: chi-square (the merged line taken as
+    # exact) and both of its end points within the split tolerance.
+    bad_member = _chi2(f.rho, f.alpha, f.cov, g.rho[label], g.alpha[label],
+                       np.zeros_like(f.cov)) > params.merge_chi2
+    rho_l = (g.rho - g.nx * scan.origin[0] - g.ny * scan.origin[1])[label]
+    for ends in (s, e):
+        dist = np.abs(scan.x[ends] * g.nx[label] + scan.y[ends] * g.ny[label] - rho_l)
+        bad_member |= dist > tol[ends]
+    bad = np.logical_or.reduceat(bad_member, g_start) & (g_end > g_start)
+    if not bad.any():
+        return g_sums, s[g_start], e[g_end], g
+    fall = np.flatnonzero(bad[label])  # pieces of rejected chains keep their own fits
+    good = np.flatnonzero(~bad)
+    first = np.concatenate([s[g_start[good]], s[fall]])
+    order = np.argsort(first, kind='stable')
+    sums = np.concatenate([g_sums[:, good], sums[:, fall]], axis=1)[:, order]
+    return sums, first[order], np.concatenate([e[g_end[good]], e[fall]])[order], _solve(
+        sums[:6], scan.origin)
+
+
+def _runs(ok: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> Tuple[np.ndarray,
+                                                                          np.ndarray]:
+    """Return the leading and trailing run lengths of True in each non-empty group."""
+    pos = np.arange(ok.size) - np.repeat(starts, sizes)
+    lead = np.minimum.reduceat(np.where(ok, sizes.max(), pos), starts)
+    trail = sizes - 1 - np.maximum.reduceat(np.where(ok, -1, pos), starts)
+    return np.minimum(lead, sizes), trail
+
+
+def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
+          last: np.ndarray, f: _Fit, params: LineParams, tol: np.ndarray
+          ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Grow the lines f over the free points beside them that fit (step 4).
+
+    Free points are those of no line, also in other (small) clusters. A line takes the
+    run of consecutive free points next to its ends whose distance to it is within
+    ``trim_sigma`` standard deviations (eq. 7) and within the split tolerance, and whose
+    bearing steps stay within ``merge_gap_angle``; a gap claimed from both sides goes
+    first to the line before it. Returns the new sums, first, last and whether any grew.
+    """
+    gate = params.trim_sigma
+    n_pts = scan.x.size
+    n_lines = first.size
+    lo = np.concatenate([[0], last + 1])  # gap k lies between line k - 1 and line k
+    size = np.append(first, n_pts) - lo
+    gaps = np.flatnonzero(size > 0)
+    if not gaps.size or not math.isfinite(gate):
+        return sums, first, last, False
+    size_g = size[gaps]
+    starts = np.cumsum(size_g) - size_g
+    gid = np.repeat(np.arange(gaps.size), size_g)
+    idx = np.arange(gid.size) + (lo[gaps] - starts)[gid]
+    # row 0: the line before the gap growing forward, row 1: the line after it, backward
+    owner = np.stack([gaps - 1, gaps])
+    has = (owner >= 0) & (owner < n_lines)
+    j = np.clip(owner, 0, n_lines - 1)[:, gid]
+    nx, ny = f.nx[j], f.ny[j]
+    px, py = scan.x[idx] + scan.origin[0], scan.y[idx] + scan.origin[1]
+    d = px * nx + py * ny - f.rho[j]
+    cp, sp = scan.cphi[idx], scan.sphi[idx]
+    n_u = nx * cp + ny * sp
+    n_v = ny * cp - nx * sp
+    var = (params.sigma_r * n_u) ** 2 + (scan.rng[idx] * params.sigma_phi * n_v) ** 2
+    ok = has[:, gid] & (d * d <= gate * gate * var) & (np.abs(d) <= tol[idx])
+    step_ok = np.abs(np.diff(scan.phi)) <= params.merge_gap_angle  # step i -> i + 1
+    ok[0] &= np.concatenate([[True], step_ok])[idx]
+    ok[1] &= np.append(step_ok, True)[idx]
+    run_f = _runs(ok[0], starts, size_g)[0]
+    run_b = np.minimum(_runs(ok[1], starts, size_g)[1], size_g - run_f)
+    grow_f = np.zeros(n_lines, dtype=np.int64)
+    grow_b = np.zeros(n_lines, dtype=np.int64)
+    grow_f[owner[0, has[0]]] = run_f[has[0]]
+    grow_b[owner[1, has[1]]] = run_b[has[1]]
+    if not (grow_f.any() or grow_b.any()):
+        return sums, first, last, False
+    new_first, new_last = first - grow_b, last + grow_f
+    # Sums of the added ranges (disjoint, in order): [new_first, first) and (last, new_last].
+    add_lo = np.stack([new_first, last + 1], axis=1).ravel()
+    add_hi = np.stack([first, new_last + 1], axis=1).ravel()  # exclusive
+    nonempty = add_hi > add_lo
+    bounds = np.empty(2 * int(nonempty.sum()), dtype=np.int64)
+    bounds[0::2] = add_lo[nonempty]
+    bounds[1::2] = add_hi[nonempty]
+    added = np.zeros((NUM_SUMS, 2 * n_lines))
+    added[:, nonempty] = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
+    return sums + added[:, 0::2] + added[:, 1::2], new_first, new_last, True
+
+
+def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
+           last: np.ndarray) -> List[LineSegment]:
+    """Drop small or short fits and build the LineSegments (first/last: point indices)."""
+    ox, oy = scan.origin
+    x0, y0 = scan.x[first] + ox, scan.y[first] + oy
+    x1, y1 = scan.x[last] + ox, scan.y[last] + oy
+    d0 = x0 * f.nx + y0 * f.ny - f.rho
+    d1 = x1 * f.nx + y1 * f.ny - f.rho
+    ends = np.stack([x0 - d0 * f.nx, y0 - d0 * f.ny, x1 - d1 * f.nx, y1 - d1 * f.ny], axis=1)
+    length = np.hypot(ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1])
+    ok = np.flatnonzero((f.count >= params.min_points) & (length >= params.min_length)
+                        & (f.rmse <= params.threshold)
+                        & np.isfinite(f.cov[:, 0, 0]) & np.isfinite(f.cov[:, 1, 1]))
+    rho, alpha, rmse = f.rho[ok].tolist(), f.alpha[ok].tolist(), f.rmse[ok].tolist()
+    count = f.count[ok].tolist()
+    b0, b1 = scan.beam[first[ok]].tolist(), scan.beam[last[ok]].tolist()
+    ends, cov = ends[ok], f.cov[ok]
+    return [LineSegment(rho[j], alpha[j], ends[j, :2], ends[j, 2:], count[j], rmse[j], cov[j],
+                        b0[j], b1[j]) for j in range(len(rho))]
 
 
 def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = None
                   ) -> List[LineSegment]:
-    """Extract lines from the clusters of one scan with the method of ``params``."""
+    """Extract line segments from the clusters of one scan.
+
+    Args:
+        clusters: Clusters of consecutive points of one scan, in beam order (see
+            ``segment_scan``), laser frame. Lines start in clusters of at least
+            ``min_points`` points and can grow over the points of smaller ones, so pass
+            small clusters too (``segment_scan(..., min_points=1)``) to let lines reach
+            isolated points on their wall (e.g. a corridor wall seen at grazing angles).
+        params: Method and parameters (default ``LineParams()``).
+
+    Returns:
+        Line segments in beam order; empty if no cluster holds a line.
+
+    """
     params = params or LineParams()
-    parts = []  # (points, ranges, angles, indices) of each line, in scan order
-    for cluster in clusters:
-        if len(cluster) < params.min_points:
-            continue
-        if params.method == 'split_merge':
-            # The tolerance grows with the bearing noise's lateral effect at range.
-            tol = params.threshold + 3.0 * params.sigma_phi * cluster.ranges
-            pieces = _refine_breaks(cluster.points, _split(cluster.points, tol),
-                                    params.min_points)
-        else:
-            pieces = _refine_breaks(cluster.points, _alfa_pieces(cluster, params),
-                                    params.min_points)
-        for lo, hi, seg in _merge(cluster, pieces, params):
-            if hi - lo + 1 >= params.min_points:
-                sl = slice(lo, hi + 1)
-                parts.append(((cluster.points[sl], cluster.ranges[sl], cluster.angles[sl],
-                               cluster.indices[sl]), seg))
-    # Lines of neighbouring clusters (a wall cut by a dropout or a spurious return) are
-    # merged when collinear and their ends are less than merge_gap apart.
-    lines, members = [], []
-    for part, seg in parts:
-        if lines and members[-1][-1][3][-1] < part[3][0]:
-            prev = lines[-1]
-            if (np.hypot(*(seg.start - prev.end)) <= params.merge_gap
-                    and _collinear(prev, seg, params.merge_chi2)):
-                group = members[-1] + [part]
-                joined = _fit_segment(*(np.concatenate(x) for x in zip(*group)), params)
-                lines[-1], members[-1] = joined, group
-                continue
-        lines.append(seg)
-        members.append([part])
-    return [ln for ln in lines
-            if ln.length >= params.min_length and np.all(np.isfinite(ln.covariance))]
+    scan = _concat(clusters)
+    if scan is None:
+        return []
+    pre = _prefix5(scan.x, scan.y)
+    tol = params.threshold + 3.0 * params.sigma_phi * scan.rng  # split tolerance per point
+    sizes = np.diff(scan.offsets)
+    big = np.flatnonzero(sizes >= params.min_points)
+    if not big.size:
+        return []
+    if params.method == 'split_merge':
+        pieces = _split(scan.x, scan.y, scan.offsets[big], scan.offsets[big + 1] - 1, tol)
+        pieces = pieces[pieces[:, 1] - pieces[:, 0] >= 2]
+    else:
+        # Smooth each cluster's ranges over the bearing (eqs. 8-10), polar -> Cartesian.
+        sub, sub_offs = _gather(scan.offsets[big], scan.offsets[big + 1] - 1)
+        r_s = lowess_groups(scan.phi[sub], scan.rng[sub], sub_offs, params.lowess_span,
+                            params.lowess_iterations)
+        pieces = alfa_pieces(np.stack([r_s * scan.cphi[sub], r_s * scan.sphi[sub]], axis=1),
+                             sub_offs, params)
+        pieces = sub[pieces] if pieces.size else pieces
+    pieces = _refine_breaks(scan, pre, pieces, params.min_points)
+    pieces = _clean_pieces(scan, pre, pieces, params)
+    # Too short to be a line: their fits are too uncertain for the merge test (the (rho,
+    # alpha) linearisation fails for them); their points stay free for the lines to grow.
+    pieces = pieces[pieces[:, 1] - pieces[:, 0] + 1 >= params.min_points]
+    if not pieces.size:
+        return []
+    feats = _features(scan.x, scan.y, scan.rng, scan.cphi, scan.sphi, params.sigma_r,
+                      params.sigma_phi, pad=1)
+    sums, first, last, fit = _merge(scan, feats, pieces, params, tol)
+    sums, first, last, grown = _grow(scan, feats, sums, first, last, fit, params, tol)
+    if grown or fit.cov is None:
+        fit = _solve(sums, scan.origin)
+    return _build(scan, params, fit, first, last)
+
+
+def explained_points(lines: Sequence[LineSegment], ranges: np.ndarray, angles: np.ndarray,
+                     valid: np.ndarray, sigma_r: float = 0.01,
+                     sigma_phi: float = math.radians(0.1), n_sigma: float = 3.0,
+                     min_distance: float = 0.05) -> np.ndarray:
+    """Return (N,) True for the valid beams that a line explains.
+
+    A valid beam i is explained when some line has ``first_index <= i <= last_index`` and
+    the point is within ``max(min_distance, n_sigma * sigma_i)`` of that line, sigma_i
+    being the std of the point's distance to the line from eq. 7 (range noise along the
+    beam, bearing noise across it, projected on the line normal).
+
+    Args:
+        lines: Lines of one scan.
+        ranges: (N,) ranges of the scan [m].
+        angles: (N,) beam angles [rad].
+        valid: (N,) bool, the beams that are real returns.
+        sigma_r: Range noise std [m].
+        sigma_phi: Bearing noise std [rad].
+        n_sigma: Gate in standard deviations.
+        min_distance: Smallest gate [m].
+
+    Returns:
+        (N,) bool mask (always False where not valid).
+
+    """
+    ranges = np.asarray(ranges, dtype=float)
+    angles = np.asarray(angles, dtype=float)
+    out = np.zeros(ranges.shape, dtype=bool)
+    valid = np.asarray(valid, dtype=bool)
+    r = np.where(valid, ranges, 0.0)
+    c, s = np.cos(angles), np.sin(angles)
+    for ln in lines:
+        sl = slice(ln.first_index, ln.last_index + 1)
+        ca, sa = math.cos(ln.alpha), math.sin(ln.alpha)
+        d = r[sl] * (c[sl] * ca + s[sl] * sa) - ln.rho
+        n_u = c[sl] * ca + s[sl] * sa
+        n_v = c[sl] * sa - s[sl] * ca
+        sig = np.sqrt((sigma_r * n_u) ** 2 + (r[sl] * sigma_phi * n_v) ** 2)
+        out[sl] |= valid[sl] & (np.abs(d) <= np.maximum(min_distance, n_sigma * sig))
+    return out
