@@ -33,7 +33,7 @@ from geometry_msgs.msg import Pose, PoseWithCovarianceStamped, Quaternion
 from landmark_nav.geometry import quaternion_to_yaw, yaw_to_quaternion
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
-from sensor_msgs.msg import Image, JointState, LaserScan, Range
+from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan, Range
 from std_msgs.msg import Header
 
 NS_PER_S = 1_000_000_000
@@ -530,6 +530,79 @@ def array_to_image(array: np.ndarray, encoding: str, stamp_ns: int = 0, frame_id
     return msg
 
 
+# ---------------------------------------------------------------------------- camera info
+
+
+def camera_info_to_model(msg: CameraInfo):
+    """Convert sensor_msgs/CameraInfo to a :class:`landmark_nav.vision.camera.CameraModel`.
+
+    ``distortion_model`` must be ``plumb_bob`` (D of 0, 4 or 5 values) or
+    ``rational_polynomial`` (0, 8, 12 or 14); an empty model name with an empty D is taken
+    as an undistorted pinhole. An all-zero R (left unset by some drivers) is read as the
+    identity and an all-zero P as ``[K | 0]``.
+
+    Raises:
+        ConversionError: size not positive, K with non-positive focal length or a bad last
+            row, unknown distortion model, wrong number of D values, non-finite values,
+            binning or a region of interest (not supported).
+    """
+    from landmark_nav.vision.camera import CameraModel, DISTORTION_MODELS
+    w, h = int(msg.width), int(msg.height)
+    if w <= 0 or h <= 0:
+        raise ConversionError(f'CameraInfo: width={w}, height={h} must be positive')
+    model = str(msg.distortion_model)
+    d = np.asarray(msg.d, dtype=float)
+    if model == '' and d.size == 0:
+        model = 'plumb_bob'
+    if model not in DISTORTION_MODELS:
+        raise ConversionError(f'CameraInfo: unknown distortion_model {model!r}; supported: '
+                              f'{sorted(DISTORTION_MODELS)}')
+    if d.size not in DISTORTION_MODELS[model]:
+        raise ConversionError(f'CameraInfo: {model} needs len(d) in {DISTORTION_MODELS[model]}; '
+                              f'got {d.size}')
+    k = np.asarray(msg.k, dtype=float).reshape(-1)
+    r = np.asarray(msg.r, dtype=float).reshape(-1)
+    p = np.asarray(msg.p, dtype=float).reshape(-1)
+    for name, arr in (('d', d), ('k', k), ('r', r), ('p', p)):
+        if not np.all(np.isfinite(arr)):
+            raise ConversionError(f'CameraInfo: {name} has non-finite values')
+    if k.size != 9 or r.size != 9 or p.size != 12:
+        raise ConversionError(f'CameraInfo: k, r, p need 9, 9, 12 values; got {k.size}, '
+                              f'{r.size}, {p.size}')
+    if k[0] <= 0 or k[4] <= 0:
+        raise ConversionError(f'CameraInfo: k has non-positive focal length fx={k[0]}, fy={k[4]}')
+    if int(msg.binning_x) > 1 or int(msg.binning_y) > 1:
+        raise ConversionError(f'CameraInfo: binning {msg.binning_x}x{msg.binning_y} is not '
+                              'supported')
+    roi = msg.roi
+    if int(roi.x_offset) or int(roi.y_offset) or (int(roi.width) and int(roi.width) != w) \
+            or (int(roi.height) and int(roi.height) != h):
+        raise ConversionError('CameraInfo: a region of interest is not supported')
+    R = np.eye(3) if not np.any(r) else r.reshape(3, 3)
+    P = None if not np.any(p) else p.reshape(3, 4)
+    try:
+        return CameraModel(width=w, height=h, K=k.reshape(3, 3), D=d, distortion_model=model,
+                           R=R, P=P)
+    except ValueError as err:
+        raise ConversionError(f'CameraInfo: {err}') from err
+
+
+def make_camera_info(model, stamp_ns: int = 0, frame_id: str = '') -> CameraInfo:
+    """Build sensor_msgs/CameraInfo from a :class:`landmark_nav.vision.camera.CameraModel`."""
+    from landmark_nav.vision.camera import CameraModel
+    if not isinstance(model, CameraModel):
+        raise ConversionError(f'CameraInfo: need a CameraModel; got {type(model).__name__}')
+    msg = CameraInfo()
+    msg.header = _header(stamp_ns, frame_id)
+    msg.width, msg.height = model.width, model.height
+    msg.distortion_model = model.distortion_model
+    msg.d = [float(v) for v in model.D]
+    msg.k = [float(v) for v in model.K.ravel()]
+    msg.r = [float(v) for v in model.R.ravel()]
+    msg.p = [float(v) for v in model.P.ravel()]
+    return msg
+
+
 # ---------------------------------------------------------------------------- grid
 
 
@@ -624,8 +697,9 @@ def make_joint_state(stamp_ns: int, names: Sequence[str], positions: Sequence[fl
 
 __all__ = [
     'ConversionError', 'GridData', 'PoseData', 'RangeReading', 'ScanData',
-    'array_to_image', 'classify_ranges', 'cov3_to_cov6', 'cov6_to_cov3', 'data_to_scan',
-    'grid_to_data', 'image_to_array', 'make_joint_state', 'make_occupancy_grid',
+    'array_to_image', 'camera_info_to_model', 'classify_ranges', 'cov3_to_cov6',
+    'cov6_to_cov3', 'data_to_scan', 'grid_to_data', 'image_to_array', 'make_camera_info',
+    'make_joint_state', 'make_occupancy_grid',
     'make_odometry', 'make_pose_with_covariance_stamped', 'make_range', 'make_scan',
     'ns_to_stamp', 'odometry_to_pose', 'pose_msg_from_2d', 'pose_msg_to_2d',
     'pose_with_covariance_to_pose', 'quaternion_msg_from_yaw', 'range_status',

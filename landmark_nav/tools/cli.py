@@ -108,6 +108,12 @@ def _cmd_rasterize_map(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_make_landmark(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.make_landmark import run
+    print(run(args.code, args.out, kind=args.kind, frame_width=args.frame_width, dpi=args.dpi))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser with every subcommand."""
     from landmark_nav.nodes.bag_player import add_replay_arguments
@@ -203,6 +209,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--out', required=True, help='map YAML to write (PGM beside it)')
     p.add_argument('--resolution', type=float, default=0.1, help='cell size [m] (default 0.1)')
     p.set_defaults(func=_cmd_rasterize_map)
+
+    from landmark_nav.tools.make_landmark import add_arguments as add_landmark_arguments
+    p = sub.add_parser('make-landmark',
+                       help='write a printable visual landmark (PNG, SVG or PDF) at true scale')
+    add_landmark_arguments(p)
+    p.set_defaults(func=_cmd_make_landmark)
     return parser
 
 
