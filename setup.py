@@ -12,8 +12,10 @@ PACKAGE = 'landmark_nav'
 EXECUTABLES = {
     'landmark_nav': 'landmark_nav.tools.cli:main',
     'bag_player': 'landmark_nav.nodes.bag_player:main',
+    'base_driver': 'landmark_nav.nodes.base_driver:main',
     'corner_extractor': 'landmark_nav.nodes.corner_extractor:main',
     'ekf_slam': 'landmark_nav.nodes.ekf_slam:main',
+    'laser_driver': 'landmark_nav.nodes.laser_driver:main',
     'line_extractor': 'landmark_nav.nodes.line_extractor:main',
     'sonar_localizer': 'landmark_nav.nodes.sonar_localizer:main',
 }

@@ -27,7 +27,8 @@ from landmark_nav.drivers.errors import (ChecksumError, EncodeError, FramingErro
 __all__ = [
     'ARGINT', 'ARGNINT', 'ARGSTR', 'COMMANDS', 'Command', 'HEADER', 'MAX_COUNT',
     'ODOMETRY_MODULUS', 'OdometryUnwrapper', 'P2DX', 'P2DX_SONAR_POSES', 'P2osDecoder',
-    'Packet', 'RobotParams', 'STATUS_MOVING', 'STATUS_STOPPED', 'StatusPacket', 'SyncReply',
+    'P3DX', 'P3DX_SH', 'Packet', 'ROBOT_MODELS', 'RobotParams', 'STATUS_MOVING',
+    'STATUS_STOPPED', 'StatusPacket', 'SyncReply',
     'checksum', 'decode_packet', 'decode_status', 'encode_command', 'encode_packet',
     'encode_status', 'encode_sync_reply', 'encode_vel2', 'parse_command', 'parse_sip',
     'status_from_state', 'vel2_split',
@@ -85,6 +86,13 @@ class RobotParams:
 
 
 P2DX = RobotParams()
+# ARIA p3dx.p / p3dx-sh.p: the same drive and heading units; a P3-DX reports positions in
+# 0.485 mm units, a P3-DX with an SH controller (AROS) in millimetres; both report sonar
+# ranges in millimetres. The sonar poses of P2DX are kept (ARIA's tables differ slightly).
+P3DX = RobotParams(dist_conv_factor=0.485, range_conv_factor=1.0)
+P3DX_SH = RobotParams(dist_conv_factor=1.0, range_conv_factor=1.0)
+#: Robot subclass (the third SYNC2 string, lower case) -> parameters.
+ROBOT_MODELS: Dict[str, RobotParams] = {'p2dx': P2DX, 'p3dx': P3DX, 'p3dx-sh': P3DX_SH}
 
 
 # ---------------------------------------------------------------------------- packets

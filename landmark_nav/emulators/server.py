@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import errno
 import os
 import select
+import signal
 import socket
 import threading
 import time
@@ -372,7 +373,11 @@ class DeviceServer:
 
 
 def serve_forever(server: DeviceServer, announce: Callable[[str], None] = print) -> None:
-    """Start ``server``, announce its endpoints and block until Ctrl-C."""
+    """Start ``server``, announce its endpoints and block until Ctrl-C or SIGTERM."""
+    def _terminate(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _terminate)
     server.start()
     if server.link is not None:
         announce(f'pty: {server.link} -> {server.pty_path}')

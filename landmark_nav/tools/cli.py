@@ -215,6 +215,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help='write a printable visual landmark (PNG, SVG or PDF) at true scale')
     add_landmark_arguments(p)
     p.set_defaults(func=_cmd_make_landmark)
+
+    from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
+    add_emulate_parsers(sub, _Parser)
     return parser
 
 
