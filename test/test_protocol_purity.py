@@ -1,14 +1,16 @@
-"""The protocol modules are pure: no clock, no I/O, no rclpy (bytes in, frames out)."""
+"""The protocol and session modules are pure: no clock, no I/O, no rclpy."""
 
 import ast
 
-from landmark_nav.drivers import lms2xx, p2os, scip2
+from landmark_nav.drivers import clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2
 import pytest
 
-ALLOWED = {'dataclasses', 'math', 're', 'struct', 'typing', 'numpy', 'landmark_nav'}
+ALLOWED = {'collections', 'dataclasses', 'math', 're', 'statistics', 'struct', 'typing', 'numpy',
+           'landmark_nav'}
 
 
-@pytest.mark.parametrize('module', [lms2xx, p2os, scip2], ids=lambda m: m.__name__)
+@pytest.mark.parametrize('module', [clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2],
+                         ids=lambda m: m.__name__)
 def test_module_is_pure(module):
     with open(module.__file__, encoding='utf-8') as f:
         tree = ast.parse(f.read())

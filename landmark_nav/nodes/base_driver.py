@@ -38,14 +38,13 @@ from landmark_nav.conversions import (make_joint_state, make_odometry, make_rang
 from landmark_nav.drivers.p2os import P2osDecoder
 from landmark_nav.drivers.p2os_client import ClientConfig, P2osClient, SipUpdate
 from landmark_nav.localization.wheel_odometry import WheelOdometry
-from landmark_nav.nodes.common import declare, ParameterError, ProblemWarner, run_node
+from landmark_nav.nodes.common import (declare, declare_strings, ParameterError, ProblemWarner,
+                                       run_node)
 from landmark_nav.nodes.driver_common import (declare_link_parameters, DeviceLink,
                                               DiagnosticsPublisher, ERROR, LinkHealth,
                                               make_transport, OK, Status, WARN)
 from landmark_nav.sim.sonar import SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from sensor_msgs.msg import BatteryState, JointState, Range
 from std_srvs.srv import SetBool
@@ -57,15 +56,6 @@ except ImportError:  # pragma: no cover - depends on the installation
 
 BAUD_CHOICES = (9600, 19200, 38400, 57600, 115200)
 NUM_SONARS = 16
-
-
-def _declare_strings(node: Node, name: str, default: list, description: str) -> list:
-    descriptor = ParameterDescriptor(description=description, read_only=True,
-                                     type=ParameterType.PARAMETER_STRING_ARRAY)
-    try:
-        return list(node.declare_parameter(name, default, descriptor).value)
-    except (InvalidParameterValueException, InvalidParameterTypeException) as err:
-        raise ParameterError(f'parameter {name}: {err}') from err
 
 
 class BaseDriver(Node):
@@ -141,9 +131,9 @@ class BaseDriver(Node):
                            '-inf (too close) [m]', (0.0, 100.0))
         self.sonar_max = d(self, 'sonar_max_range', SONAR_MAX_RANGE, 'longer readings are '
                            '+inf (no echo) [m]', (0.0, 100.0))
-        self.joints = _declare_strings(self, 'wheel_joints',
-                                       ['left_wheel_joint', 'right_wheel_joint'],
-                                       'left and right wheel joint names')
+        self.joints = declare_strings(self, 'wheel_joints',
+                                      ['left_wheel_joint', 'right_wheel_joint'],
+                                      'left and right wheel joint names')
         self.battery_period = d(self, 'battery_period', 1.0, 'period of battery [s]',
                                 (0.05, 60.0))
         self.battery_warn = d(self, 'battery_warn', 11.75, 'diagnostics WARN below this '

@@ -9,7 +9,7 @@ from typing import Callable, Optional, Sequence
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
 import rclpy
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -63,6 +63,16 @@ def declare(node: Node, name: str, default, description: str,
     if isinstance(default, list):
         value = [float(v) for v in value]
     return value
+
+
+def declare_strings(node: Node, name: str, default: list, description: str) -> list:
+    """Declare a read-only string-array parameter and return its value."""
+    descriptor = ParameterDescriptor(description=description, read_only=True,
+                                     type=ParameterType.PARAMETER_STRING_ARRAY)
+    try:
+        return list(node.declare_parameter(name, default, descriptor).value)
+    except (InvalidParameterValueException, InvalidParameterTypeException) as err:
+        raise ParameterError(f'parameter {name}: {err}') from err
 
 
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:

@@ -49,13 +49,11 @@ from landmark_nav.localization.grid import GridMap, load_map_yaml
 from landmark_nav.localization.odometry import ProcessNoise
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.tracking import sonar_reading, SonarTracker
-from landmark_nav.nodes.common import (declare, declare_dataclass, ParameterError,
+from landmark_nav.nodes.common import (declare, declare_dataclass, declare_strings, ParameterError,
                                        ProblemWarner, run_node, SENSOR_QOS)
 from landmark_nav.sim.sonar import SONAR_MOUNTS
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState, Range
@@ -105,16 +103,6 @@ NOISE_PARAMETERS = {
     'k_theta': ('heading std per metre travelled [rad/m] (extension of eq. 26)', (0.0, 10.0),
                 None),
 }
-
-
-def declare_strings(node: Node, name: str, default: list, description: str) -> list:
-    """Declare a read-only string-array parameter and return its value."""
-    descriptor = ParameterDescriptor(description=description, read_only=True,
-                                     type=ParameterType.PARAMETER_STRING_ARRAY)
-    try:
-        return list(node.declare_parameter(name, default, descriptor).value)
-    except (InvalidParameterValueException, InvalidParameterTypeException) as err:
-        raise ParameterError(f'parameter {name}: {err}') from err
 
 
 class SonarLocalizer(Node):
