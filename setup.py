@@ -15,6 +15,7 @@ EXECUTABLES = {
     'base_driver': 'landmark_nav.nodes.base_driver:main',
     'corner_extractor': 'landmark_nav.nodes.corner_extractor:main',
     'ekf_slam': 'landmark_nav.nodes.ekf_slam:main',
+    'landmark_detector': 'landmark_nav.nodes.landmark_detector:main',
     'laser_driver': 'landmark_nav.nodes.laser_driver:main',
     'line_extractor': 'landmark_nav.nodes.line_extractor:main',
     'sonar_localizer': 'landmark_nav.nodes.sonar_localizer:main',

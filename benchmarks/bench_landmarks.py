@@ -1,0 +1,185 @@
+"""Time the landmark detector against OpenCV ArUco on frames of the same size.
+
+Run from the repository root::
+
+    python benchmarks/bench_landmarks.py [--frames N] [--repeat R] [--threads T]
+
+Frames: 640 x 480 mono8, rendered by the camera simulator (f = 525 px, noise 2 DN,
+defocus 0.5 px) with one landmark (random valid code, 0.175 m frame) at 1.0-2.5 m, turned
+up to 40 deg and rolled at random, in front of a wall. The reference frames show an ArUco
+marker (DICT_4X4_50, printed as 6 x 6 modules with its black border) of the same printed
+module size as the landmark's blocks (2.5 cm) at the same poses, on the same wall, and are
+processed by ``cv2.aruco.ArucoDetector.detectMarkers`` (default parameters) -- the in-run
+reference of the same image size.
+
+Each frame's time is the best of ``--repeat`` runs, both wall clock and CPU time of this
+process (``time.process_time``; less sensitive to other load on the machine); the script
+prints the medians per frame, frames/s and the ratios to ArUco, for the detector alone, the
+detector with the chapter's plain eq. 2 corners (no sub-pixel refinement), and detection +
+Gauss-Newton pose (and cv2.solvePnP on the same corners). Targets: >= 30 frames/s and
+<= 3x ArUco.
+
+Before/after the vectorisation of the corner stage (eqs. 1-2): the same frames through a
+direct numpy (float64) + ``scipy.ndimage`` implementation of the chapter's filters and
+8-connected groups, against :func:`corner_pixels` + :func:`corner_groups` (OpenCV 8-bit
+array operations, one sparse scan, grouping of the sparse pixels only).
+"""
+
+import argparse
+import math
+from pathlib import Path
+import statistics
+import sys
+import time
+from typing import Callable, Tuple
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import cv2  # noqa: E402
+from landmark_nav.sim.camera import CameraSimulator, Photometry, Plane  # noqa: E402
+from landmark_nav.vision.camera import OPTICAL_FROM_BODY  # noqa: E402
+from landmark_nav.vision.detector import (corner_groups, corner_pixels,  # noqa: E402
+                                          detect_landmarks, DetectorParams, smooth)
+from landmark_nav.vision.evaluate import (backdrop, landmark_in_view, random_code,  # noqa: E402
+                                          VGA_CAMERA)
+from landmark_nav.vision.landmark import LandmarkDesign  # noqa: E402
+from landmark_nav.vision.pose import estimate_pose, rotation_matrix, solve_pnp  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import ndimage  # noqa: E402
+
+_M = np.asarray(OPTICAL_FROM_BODY)
+ARUCO_DICT = cv2.aruco.DICT_4X4_50
+
+
+def aruco_plane(v: np.ndarray, module: float) -> Plane:
+    """Return an ArUco marker (id 7, 6 x 6 modules of ``module`` m + 1 quiet module) at v."""
+    dictionary = cv2.aruco.getPredefinedDictionary(ARUCO_DICT)
+    px = 16
+    img = cv2.aruco.generateImageMarker(dictionary, 7, 6 * px)
+    tex = np.full((8 * px, 8 * px), 255, np.uint8)
+    tex[px:7 * px, px:7 * px] = img
+    return Plane(tex, module / px, _M @ rotation_matrix(v[3:]), _M @ v[:3], label='aruco')
+
+
+def best_ms(fn: Callable[[], object], repeat: int) -> Tuple[float, float]:
+    """Return the best-of-``repeat`` wall and CPU times of one call of ``fn`` [ms]."""
+    wall = cpu = math.inf
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall = min(wall, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
+    return 1e3 * wall, 1e3 * cpu
+
+
+def reference_corner_stage(img: np.ndarray) -> np.ndarray:
+    """Eqs. 1-2 written directly in numpy float64 and scipy.ndimage (the "before")."""
+    g = cv2.GaussianBlur(img.astype(np.float64), (3, 3), 0.95)
+    h, w = g.shape
+    o = 3
+    sets = [((-2, -2), (2, -2), (-2, 2), (2, 2)), ((2, -2), (-2, -2), (2, 2), (-2, 2)),
+            ((-3, 0), (0, -3), (0, 3), (3, 0)), ((0, -3), (-3, 0), (3, 0), (0, 3))]
+    centres = []
+    for offsets in sets:
+        y1, y2, y3, y4 = (g[o + dy:h - o + dy, o + dx:w - o + dx] for dy, dx in offsets)
+        stack = np.stack([y1, y2, y3, y4])
+        kc = (stack.max(axis=0) - stack.min(axis=0)) / 3.0 + 7.0
+        cond = (y1 - y2 > kc) & (y1 - y3 > kc) & (y4 - y2 > kc) & (y4 - y3 > kc)
+        weight = np.where(cond, y1 + y4 - y2 - y3, 0.0)
+        labels, n = ndimage.label(cond, structure=np.ones((3, 3)))
+        if n:
+            centres.append(np.array(ndimage.center_of_mass(weight, labels, range(1, n + 1))))
+    return np.vstack(centres)[:, ::-1] + o if centres else np.zeros((0, 2))
+
+
+def main() -> None:
+    """Render the frames, time both detectors and print the table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--frames', type=int, default=60, help='frames of each kind')
+    ap.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
+    ap.add_argument('--seed', type=int, default=1)
+    ap.add_argument('--threads', type=int, default=None,
+                    help='OpenCV threads (cv2.setNumThreads) for both detectors; default: '
+                         "OpenCV's choice")
+    args = ap.parse_args()
+    if args.threads is not None:
+        cv2.setNumThreads(args.threads)
+    rng = np.random.default_rng(args.seed)
+    design = LandmarkDesign()
+    camera = VGA_CAMERA
+    sim = CameraSimulator(camera)
+    ph = Photometry(noise_sigma=2.0, defocus_sigma=0.5)
+    lm_frames, ar_frames, codes = [], [], []
+    for _ in range(args.frames):
+        d = rng.uniform(1.0, 2.5)
+        v = np.array([d, rng.uniform(-0.25, 0.25) * d, rng.uniform(-0.15, 0.15) * d,
+                      rng.uniform(-math.pi, math.pi), math.radians(rng.uniform(-15, 15)),
+                      math.radians(rng.uniform(-40, 40))])
+        wall = backdrop(rng, d + 0.5)
+        code = random_code(rng, design)
+        codes.append(code)
+        lm_frames.append(sim.render([wall, landmark_in_view(code, design, v)], np.eye(3),
+                                    np.zeros(3), ph, rng))
+        ar_frames.append(sim.render([wall, aruco_plane(v, design.block_size)], np.eye(3),
+                                    np.zeros(3), ph, rng))
+    aruco = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(ARUCO_DICT),
+                                    cv2.aruco.DetectorParameters())
+    plain = DetectorParams(refine_corners=False, refine_edges=False)
+    full = DetectorParams()
+    names = ['aruco detectMarkers', 'landmark detector', 'landmark detector, eq. 2 corners only',
+             'landmark detector + GN pose', 'landmark detector + solvePnP (IPPE)',
+             'corner stage eqs. 1-2, numpy/scipy (before)',
+             'corner stage eqs. 1-2, OpenCV 8-bit (after)']
+    rows = {k: [] for k in names}
+    found = dict.fromkeys(names, 0)
+    for img_l, img_a, code in zip(lm_frames, ar_frames, codes):
+        rows[names[0]].append(best_ms(lambda: aruco.detectMarkers(img_a), args.repeat))
+        found[names[0]] += int(aruco.detectMarkers(img_a)[1] is not None)
+        rows[names[1]].append(best_ms(lambda: detect_landmarks(img_l, full, camera),
+                                      args.repeat))
+        found[names[1]] += any(d.code == code for d in detect_landmarks(img_l, full, camera))
+        rows[names[2]].append(best_ms(lambda: detect_landmarks(img_l, plain, camera),
+                                      args.repeat))
+        found[names[2]] += any(d.code == code for d in detect_landmarks(img_l, plain, camera))
+
+        def with_pose(method):
+            out = []
+            for d in detect_landmarks(img_l, full, camera):
+                out.append(estimate_pose(d.corners, camera, design) if method == 'gn'
+                           else solve_pnp(d.corners, camera, design))
+            return out
+
+        rows[names[3]].append(best_ms(lambda: with_pose('gn'), args.repeat))
+        rows[names[4]].append(best_ms(lambda: with_pose('pnp'), args.repeat))
+        found[names[3]] = found[names[4]] = found[names[1]]
+        before = reference_corner_stage(img_l)
+        after = corner_groups(corner_pixels(smooth(img_l))).points
+        rows[names[5]].append(best_ms(lambda: reference_corner_stage(img_l), args.repeat))
+        rows[names[6]].append(best_ms(lambda: corner_groups(corner_pixels(smooth(img_l))),
+                                      args.repeat))
+        found[names[5]] += len(before)
+        found[names[6]] += len(after)
+    ref_wall = statistics.median(t[0] for t in rows[names[0]])
+    ref_cpu = statistics.median(t[1] for t in rows[names[0]])
+    print(f'{args.frames} frames 640x480 mono8 per kind, best of {args.repeat}, '
+          f'{cv2.getNumThreads()} OpenCV threads, OpenCV {cv2.__version__}')
+    print(f'{"":44s} {"wall ms":>8s} {"frames/s":>9s} {"x aruco":>8s} {"cpu ms":>8s} '
+          f'{"x aruco":>8s} {"found":>8s}')
+    for name in names:
+        wall = statistics.median(t[0] for t in rows[name])
+        cpu = statistics.median(t[1] for t in rows[name])
+        what = (f'{found[name]:4d}/{args.frames}' if 'stage' not in name
+                else f'{found[name] / args.frames:5.1f} c')
+        print(f'{name:44s} {wall:8.2f} {1e3 / wall:9.1f} {wall / ref_wall:8.2f} {cpu:8.2f} '
+              f'{cpu / ref_cpu:8.2f} {what:>8s}')
+    wall = statistics.median(t[0] for t in rows[names[1]])
+    cpu = statistics.median(t[1] for t in rows[names[1]])
+    print('(found: frames with the right code; for the corner stage: corners per frame)')
+    print(f'targets: >= 30 frames/s {"met" if 1e3 / wall >= 30.0 else "NOT met"}; '
+          f'<= 3x ArUco: wall {wall / ref_wall:.2f}x '
+          f'{"met" if wall / ref_wall <= 3.0 else "NOT met"}, CPU {cpu / ref_cpu:.2f}x '
+          f'{"met" if cpu / ref_cpu <= 3.0 else "NOT met"}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,199 @@
+"""Executable ``landmark_detector``: artificial visual landmarks in camera images (§2.2).
+
+Subscribes (sensor-data QoS) ``camera/image_raw`` (sensor_msgs/Image: mono8, bgr8, rgb8,
+mono16) -- or ``camera/image_raw/compressed`` (sensor_msgs/CompressedImage) with
+``compressed: true`` -- and ``camera/camera_info`` (sensor_msgs/CameraInfo). Publishes, with
+the image's stamp and frame (the camera optical frame):
+
+* ``landmarks/markers`` (visualization_msgs/MarkerArray): per landmark a plate at its pose
+  (marker id = code) and a text marker with the code;
+* ``landmarks/poses`` (geometry_msgs/PoseArray): the landmark poses, same order as the
+  markers;
+* ``landmark_pose`` (geometry_msgs/PoseWithCovarianceStamped, frame ``map_frame``): when a
+  ``landmark_map`` is configured, the pose of ``base_link`` implied by each mapped landmark
+  (camera mount from ``camera_mount``), with its 6 x 6 covariance;
+* ``landmarks/debug_image`` (sensor_msgs/Image, bgr8) with ``publish_debug_image: true``.
+
+Bad input (unsupported encoding, undecodable data, size disagreeing with CameraInfo, no
+CameraInfo yet, an image without contrast) is dropped with a warning throttled per kind of
+problem; saturated images are processed with a warning.
+"""
+
+from dataclasses import replace
+import math
+
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from landmark_nav.conversions import (array_to_image, camera_info_to_model, ConversionError,
+                                      stamp_to_ns)
+from landmark_nav.landmark_msgs import (compressed_to_gray, draw_detections, image_to_gray,
+                                        make_landmark_markers, make_landmark_pose_array,
+                                        make_pose_with_covariance_6d)
+from landmark_nav.nodes.common import (declare, declare_dataclass, ParameterError,
+                                       ProblemWarner, run_node, SENSOR_QOS)
+from landmark_nav.vision.detector import detect_landmarks, DetectorParams, image_problem
+from landmark_nav.vision.landmark import LandmarkDesign
+from landmark_nav.vision.localize import (camera_mount_matrix, LandmarkMapError,
+                                          load_landmark_map, robot_pose_from_landmark)
+from landmark_nav.vision.pose import estimate_pose, PoseError, PoseParams
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from visualization_msgs.msg import MarkerArray
+
+DETECTOR_PARAMETERS = {
+    'sigma': ('std of the 3x3 Gaussian smoothing [px] (chapter: 0.95)', (0.1, 5.0), None),
+    'k_min': ('fixed part of the corner threshold k_c [grey levels] (eq. 1: 7)', (0, 255),
+              None),
+    'neighbour_fraction': ('neighbour search radius as a fraction of the image height '
+                           '(chapter: 0.2)', (0.01, 1.0), None),
+    'max_neighbours': ('neighbours per corner (chapter: 8)', (2, 32), None),
+    'neighbour_mode': ('closest: the closest corners (chapter); sectors: the closest per '
+                       'direction sector (finds foreshortened edges)', None,
+                       ['closest', 'sectors']),
+    'k_lim': ('eq. 3 corner prediction tolerance, fraction of the spacing (0.37)', (0.01, 1.0),
+              None),
+    'k_g': ('eq. 3 spacing gain (0.5)', (0.0, 1.0), None),
+    'k_p': ('eq. 4 tolerance on opposite edges parallel and equal (0.5)', (0.01, 2.0), None),
+    'min_contrast': ('smallest white minus black frame cell mean [grey levels]', (0.0, 255.0),
+                     None),
+    'min_margin': ('smallest cell distance from the threshold, fraction of half the '
+                   'contrast (rejects uncertain codes)', (0.0, 1.0), None),
+    'small_block_px': ('frames with a corner spacing below this [px] need small_block_margin',
+                       (0.0, 100.0), None),
+    'small_block_margin': ('min_margin for such small frames', (0.0, 1.0), None),
+    'refine_corners': ('refine the frame corners to sub-pixel saddle points', None, None),
+    'refine_edges': ('fit the frame edge lines to sub-pixel edge points', None, None),
+}
+POSE_PARAMETERS = {
+    'pixel_sigma': ('frame corner noise for the pose covariance [px]', (1e-4, 10.0), None),
+    'p_inf': ('eq. 19 position stop criterion [m]', (1e-12, 1.0), None),
+    'r_inf': ('eq. 19 rotation stop criterion [rad]', (1e-12, 1.0), None),
+    'max_iterations': ('Gauss-Newton iteration limit', (1, 1000), None),
+}
+
+
+class LandmarkDetector(Node):
+    """Thin node: image -> detect_landmarks -> estimate_pose -> messages (and robot fixes)."""
+
+    def __init__(self, **kwargs) -> None:
+        """Declare and validate parameters, load the landmark map, create the interfaces."""
+        super().__init__('landmark_detector', **kwargs)
+        kind = declare(self, 'landmark_kind', '3x3', 'landmark design: 3x3 (28-bit code) or '
+                       '2x2 (9 bits)', choices=['3x3', '2x2'])
+        width = declare(self, 'frame_width', 0.175, 'printed frame side [m]', (0.005, 10.0))
+        self.design = LandmarkDesign(kind=kind, frame_width=width)
+        self.params = replace(declare_dataclass(self, DetectorParams, DETECTOR_PARAMETERS,
+                                                'detector.'), kind=kind)
+        self.pose_params = declare_dataclass(self, PoseParams, POSE_PARAMETERS, 'pose.')
+        compressed = declare(self, 'compressed', False, 'subscribe camera/image_raw/compressed '
+                             '(sensor_msgs/CompressedImage) instead of camera/image_raw')
+        map_file = declare(self, 'landmark_map', '', 'YAML landmark map (code -> pose in '
+                           'map_frame); empty: no robot fixes')
+        self.map_frame = declare(self, 'map_frame', 'map', 'frame of the landmark map')
+        mount = declare(self, 'camera_mount', [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                        'pose of the camera body frame (x forward, z up; the optical frame is '
+                        'it rotated to z forward) in base_link: x, y, z [m], roll, pitch, '
+                        'yaw [rad]')
+        self.debug_image = declare(self, 'publish_debug_image', False,
+                                   'publish landmarks/debug_image (bgr8, grid drawn)')
+        if len(mount) != 6 or not all(math.isfinite(v) for v in mount):
+            raise ParameterError(f'parameter camera_mount must be 6 finite numbers; got {mount}')
+        self.mount = camera_mount_matrix(mount)
+        self.landmarks = {}
+        if map_file:
+            try:
+                self.landmarks = load_landmark_map(map_file)
+            except LandmarkMapError as err:
+                raise ParameterError(f'parameter landmark_map: {err}') from err
+        self.warner = ProblemWarner(self)
+        self.camera = None
+        self.info_frame = ''
+        self.frames = 0
+        self.pub_markers = self.create_publisher(MarkerArray, 'landmarks/markers', 10)
+        self.pub_poses = self.create_publisher(PoseArray, 'landmarks/poses', 10)
+        self.pub_fix = self.create_publisher(PoseWithCovarianceStamped, 'landmark_pose', 10)
+        self.pub_debug = self.create_publisher(Image, 'landmarks/debug_image', 2) \
+            if self.debug_image else None
+        self.create_subscription(CameraInfo, 'camera/camera_info', self.on_info, SENSOR_QOS)
+        if compressed:
+            self.create_subscription(CompressedImage, 'camera/image_raw/compressed',
+                                     self.on_compressed, SENSOR_QOS)
+        else:
+            self.create_subscription(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+        self.get_logger().info(f'landmark_detector: {kind} landmarks of {width} m, '
+                               f'{len(self.landmarks)} in the map')
+
+    def on_info(self, msg: CameraInfo) -> None:
+        """Keep the latest valid camera model."""
+        try:
+            self.camera = camera_info_to_model(msg)
+            self.info_frame = msg.header.frame_id
+        except ConversionError as err:
+            self.warner.warn(f'Ignoring camera_info: {err}')
+
+    def on_image(self, msg: Image) -> None:
+        """Convert and process one raw image."""
+        try:
+            gray = image_to_gray(msg)
+        except ConversionError as err:
+            self.warner.warn(f'Dropping image: {err}')
+            return
+        self.process(msg.header, gray)
+
+    def on_compressed(self, msg: CompressedImage) -> None:
+        """Decode and process one compressed image."""
+        try:
+            gray = compressed_to_gray(msg)
+        except ConversionError as err:
+            self.warner.warn(f'Dropping image: {err}')
+            return
+        self.process(msg.header, gray)
+
+    def process(self, header, gray: np.ndarray) -> None:
+        """Detect the landmarks of one grey image and publish them."""
+        cam = self.camera
+        if cam is None:
+            self.warner.warn('Dropping image: no CameraInfo received yet on camera/camera_info')
+            return
+        if gray.shape != (cam.height, cam.width):
+            self.warner.warn(f'Dropping image: size {gray.shape[1]}x{gray.shape[0]} disagrees '
+                             f'with CameraInfo {cam.width}x{cam.height}')
+            return
+        problem, usable = image_problem(gray, self.params.min_contrast)
+        if problem:
+            self.warner.warn(('' if usable else 'Dropping image: ') + problem)
+            if not usable:
+                return
+        stamp = stamp_to_ns(header.stamp)
+        frame = header.frame_id or self.info_frame
+        dets = detect_landmarks(gray, self.params, cam)
+        codes, poses = [], []
+        for det in dets:
+            try:
+                pose = estimate_pose(det.corners, cam, self.design, self.pose_params)
+            except PoseError as err:
+                self.warner.warn(f'No pose for landmark {det.code}: {err}')
+                continue
+            codes.append(det.code)
+            poses.append((pose.rotation_optical, pose.translation_optical))
+            if det.code in self.landmarks:
+                pose6, cov6 = robot_pose_from_landmark(pose, self.landmarks[det.code],
+                                                       self.mount)
+                self.pub_fix.publish(make_pose_with_covariance_6d(stamp, self.map_frame,
+                                                                  pose6, cov6))
+        self.pub_markers.publish(make_landmark_markers(stamp, frame, codes, poses,
+                                                       self.design.frame_width))
+        self.pub_poses.publish(make_landmark_pose_array(stamp, frame, poses))
+        if self.pub_debug is not None:
+            self.pub_debug.publish(array_to_image(draw_detections(gray, dets), 'bgr8', stamp,
+                                                  frame))
+        self.frames += 1
+
+
+def main(args=None) -> int:
+    """Run ``ros2 run landmark_nav landmark_detector``."""
+    return run_node(LandmarkDetector, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,1123 @@
+"""Detection of the artificial visual landmark in a grey image (visual navigation chapter §2.2).
+
+The four steps of §2.2, one function each:
+
+1. :func:`corner_pixels` and :func:`corner_groups` -- the corner filters C1..C4 (eq. 1) on
+   the 3 x 3 Gaussian-smoothed image and their 8-connected groups with intensity-weighted
+   centres (eq. 2);
+2. :func:`corner_neighbours`, :func:`frame_edges` and :func:`find_frames` -- up to eight
+   neighbours per corner within 1/5 of the image height, frame edges of six collinear
+   corners (eq. 3) and frames of four edges sharing their end corners (eq. 4);
+3. :func:`fit_frame` -- frame corners from line fits of the edges (eq. 5) and the code grid
+   (with :func:`refine_corners` and :func:`edge_points` for sub-pixel accuracy);
+4. :func:`read_code` -- per-cell mean intensities, the threshold from the frame's known black
+   and white cells, orientation from the mark and the code (§2.2.3).
+
+:func:`detect_landmarks` runs them all. Pose estimation (§2.2.4) is :mod:`.pose`.
+
+Conventions: pixel positions are OpenCV ``(x, y)`` = (column, row), pixel centres at integer
+coordinates (the chapter writes ``(r, c)``). Images are 2-D uint8 (mono8) arrays; eq. 1 runs
+on the 8-bit smoothed image with OpenCV array operations (saturating arithmetic, see
+:func:`_filter_pair`), everything after it on the few corner pixels only.
+
+Readings of the chapter that needed a decision (documented here, tested in
+``test/test_landmark_detector.py``):
+
+* The 45-degree filter set (C3, C4) samples the smoothed image at ``(r -+ d, c)`` and
+  ``(r, c -+ d)`` with ``d = diagonal_offset = 3`` pixels, the axial neighbours closest to the
+  ``2 sqrt 2`` distance of the C1/C2 samples that keep the one-pixel guard band between the
+  four 3 x 3 areas. C3 is bright above and below, C4 bright left and right.
+* Groups of different filters (C1 and C3 respond both at 22.5 degrees) whose centres are
+  closer than ``merge_distance`` are merged into one corner with the eq. 2 centre of their
+  union, so that a corner is not listed twice among a neighbour's eight.
+* The eight neighbours of a corner are the candidates for the second corner ``h_2`` of an
+  edge; the following corners are the corners closest to the eq. 3 prediction among all
+  corners (eq. 3 only asks ``h_i in h_n``). Under strong perspective the next corner of a
+  foreshortened edge is often not among the eight closest, code-area corners being nearer;
+  so by default (``neighbour_mode='sectors'``) the neighbours are the closest corner in each
+  of eight 45-degree sectors, still at most eight within 1/5 of the image height
+  (``'closest'`` is the chapter's rule; at 60 degrees turn and 2.2 m it finds 4 of 20
+  landmarks, the sectors 20 of 20 -- the chapter's own Table 1 has 24 samples of 100 there).
+* Eq. 3 is read as a tracker whose prediction starts from the matched corner:
+  ``h^_{i+1} = h_i + v_{i+1}`` with ``v_{i+1} = v_i + k_g (h_i - h^_i)``; the printed
+  recursion ``h^_{i+1} = h^_i + v_i`` never uses the measured positions and loses a
+  perspective-shortened edge after three steps. The test ``|h_i - h^_i| < k_lim |v_i|``
+  is applied to every corner after the second, the sixth included.
+* Eq. 4 lists three shared corners; the fourth (``F_{3,6} = F_{4,6}``) is required too, so
+  that every frame corner is the end point of two edges, as the text says.
+* Sub-pixel accuracy (after a frame has been read as a valid code): the eq. 2 centres carry
+  errors of 0.1-0.3 px that depend on the sub-pixel phase, the same in every frame, and at
+  2.2 m a landmark seen head-on turns by about a degree per 0.05 px of corner error. So the
+  frame's corners are refined by OpenCV's saddle-point refinement (``cv2.cornerSubPix`` on
+  G, window 0.45 of the corner spacing, ``refine_corners``), and each edge line of eq. 5 is
+  fitted to sub-pixel points of the straight ring boundary along the edge
+  (:func:`edge_points`, ``refine_edges``) instead of to its six corners only. On simulated
+  views the frame corners are then within 0.04 px RMS (0.12 px with eq. 2 alone).
+* With a camera model the line fits (eq. 5) are made on undistorted positions: the printed
+  edges are straight only in the ideal image.
+* Cells are sampled on an ``cell_samples`` x ``cell_samples`` lattice in the inner part of
+  each grid cell (a border of ``cell_margin`` of the cell side left out) of the unsmoothed
+  image, rather than over every pixel of the cell: at 5 pixels per block a cell is 2.5 pixels
+  wide and its border pixels mix both colours.
+* The grid must be consistent: every frame cell must fall on its known side of the threshold
+  and every cell by at least ``min_margin`` of half the black-white contrast (more,
+  ``small_block_margin``, when the corner spacing is under ``small_block_px``); otherwise the
+  candidate is rejected (no detection rather than a wrong code).
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import List, Optional, Sequence, Tuple
+
+import cv2
+from landmark_nav.vision.camera import CameraModel
+from landmark_nav.vision.landmark import LandmarkDesign
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Parameters of the landmark detector (chapter §2.2 values by default).
+
+    Attributes:
+        kind: landmark design, ``'3x3'`` (six corners per edge) or ``'2x2'`` (five).
+        sigma: standard deviation of the 3 x 3 Gaussian [px] (§2.2.1: 0.95).
+        k_min: fixed part of the corner threshold k_c [integer grey levels of 256] (eq. 1:
+            7).
+        axial_offset: row/column offset of the C1/C2 samples [px] (eq. 1: 2).
+        diagonal_offset: offset of the 45-degree C3/C4 samples [px] (see module docstring).
+        merge_distance: corner groups of different filters closer than this are one corner
+            [px].
+        neighbour_fraction: neighbour search radius as a fraction of the image height
+            (§2.2.2: 1/5).
+        max_neighbours: neighbours kept per corner (§2.2.2: 8).
+        neighbour_mode: ``'closest'`` (the chapter: the closest corners) or ``'sectors'``
+            (the closest corner in each of ``max_neighbours`` direction sectors), see
+            :func:`corner_neighbours`.
+        k_lim: eq. 3 tolerance of a predicted corner, fraction of the spacing (0.37).
+        k_g: eq. 3 gain of the spacing update (0.5).
+        k_p: eq. 4 tolerance on opposite edges being parallel and equal (0.5).
+        cell_samples: samples per side of each code-grid cell.
+        cell_margin: fraction of the cell side left out at each border when sampling.
+        min_contrast: smallest mean white minus mean black frame cell [grey levels].
+        min_margin: smallest distance of any cell from the threshold, as a fraction of half
+            the black-white contrast.
+        small_block_px: frames whose smallest corner spacing is below this [px] (code cells
+            under half of it) are read only with ``small_block_margin``.
+        small_block_margin: the ``min_margin`` for such small frames: blur mixes cells of
+            two pixels or less, and reads that would be wrong come with margins below 0.21
+            (simulated views at 3-4.5 px per block), so twice that is required.
+        max_corners: images with more corner groups than this are searched with the
+            strongest ones only (bounded time on noise).
+        refine_corners: refine the eq. 2 centres of a frame's corners with OpenCV's
+            saddle-point refinement (``cv2.cornerSubPix``) before the line fits.
+        refine_window: window half-size of the refinement as a fraction of the corner
+            spacing (at most 8 px; no refinement below 2 px).
+        refine_edges: fit each edge line (eq. 5) to sub-pixel points of the ring boundary
+            along the edge rather than to its corners only.
+    """
+
+    kind: str = '3x3'
+    sigma: float = 0.95
+    k_min: int = 7
+    axial_offset: int = 2
+    diagonal_offset: int = 3
+    merge_distance: float = 1.5
+    neighbour_fraction: float = 0.2
+    max_neighbours: int = 8
+    neighbour_mode: str = 'sectors'
+    k_lim: float = 0.37
+    k_g: float = 0.5
+    k_p: float = 0.5
+    cell_samples: int = 4
+    cell_margin: float = 0.2
+    min_contrast: float = 20.0
+    min_margin: float = 0.2
+    small_block_px: float = 4.5
+    small_block_margin: float = 0.4
+    max_corners: int = 4000
+    refine_corners: bool = True
+    refine_window: float = 0.45
+    refine_edges: bool = True
+
+    def __post_init__(self) -> None:
+        """Validate the values (ValueError naming the field)."""
+        if self.kind not in ('3x3', '2x2'):
+            raise ValueError(f"kind must be '3x3' or '2x2'; got {self.kind!r}")
+        if self.neighbour_mode not in ('closest', 'sectors'):
+            raise ValueError(f"neighbour_mode must be 'closest' or 'sectors'; got "
+                             f'{self.neighbour_mode!r}')
+        checks = {
+            'sigma': (0.1, 5.0), 'k_min': (0, 255), 'axial_offset': (1, 10),
+            'diagonal_offset': (1, 10), 'merge_distance': (0.0, 10.0),
+            'neighbour_fraction': (0.01, 1.0), 'max_neighbours': (2, 32),
+            'k_lim': (0.01, 1.0), 'k_g': (0.0, 1.0), 'k_p': (0.01, 2.0),
+            'cell_samples': (1, 16), 'cell_margin': (0.0, 0.45), 'min_contrast': (0.0, 255.0),
+            'min_margin': (0.0, 1.0), 'max_corners': (10, 10 ** 6),
+            'small_block_px': (0.0, 100.0), 'small_block_margin': (0.0, 1.0),
+            'refine_window': (0.1, 0.5)}
+        for name, (lo, hi) in checks.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) \
+                    or not math.isfinite(v) or not lo <= v <= hi:
+                raise ValueError(f'{name} = {v!r} must be a number in [{lo}, {hi}]')
+            if isinstance(lo, int) and not isinstance(v, int):
+                raise ValueError(f'{name} = {v!r} must be an integer')
+        for name in ('refine_corners', 'refine_edges'):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f'{name} = {getattr(self, name)!r} must be a bool')
+
+    @property
+    def design(self) -> LandmarkDesign:
+        """The landmark design of ``kind`` (frame width does not matter to the detector)."""
+        return LandmarkDesign(kind=self.kind)
+
+
+@dataclass(frozen=True, eq=False)
+class Corners:
+    """Corner groups of one image (eq. 2).
+
+    Attributes:
+        points: (N, 2) intensity-weighted centres ``(x, y)`` [px].
+        weights: (N,) summed filter weights ``w`` of each group.
+        filters: (N,) filter of the group, 0..3 for C1..C4 (the strongest of merged groups).
+    """
+
+    points: np.ndarray
+    weights: np.ndarray
+    filters: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """One decoded landmark.
+
+    Attributes:
+        code: the decoded code (valid for the design).
+        kind: ``'3x3'`` or ``'2x2'``.
+        corners: (4, 2) frame corners h'_1..h'_4 [px] (eq. 5) in the order of
+            :meth:`LandmarkDesign.frame_corners`: top-left, top-right, bottom-right,
+            bottom-left of the upright landmark.
+        edge_corners: (4, n, 2) the detected X-corner centres (eq. 2) of each edge [px], edge
+            ``e`` running from ``corners[e]`` to ``corners[(e + 1) % 4]`` as in
+            :meth:`LandmarkDesign.edge_corner_grid` (n = 6 or 5).
+        rotation: quarter turns ``k`` with ``np.rot90(image_bits, k)`` upright.
+        contrast: mean white minus mean black frame cell [grey levels].
+        margin: smallest distance of a cell from the threshold over half the contrast
+            (1 = every cell as far from the threshold as the mean colours; the detector
+            rejects below ``min_margin``).
+        line_rms: RMS distance of the edge corners from their fitted lines [px].
+        block_pixels: mean frame-edge corner spacing [px] (the chapter's "block pixels").
+        bits: (2m, 2m) upright code-area bits, True = black.
+    """
+
+    code: int
+    kind: str
+    corners: np.ndarray
+    edge_corners: np.ndarray
+    rotation: int
+    contrast: float
+    margin: float
+    line_rms: float
+    block_pixels: float
+    bits: np.ndarray = field(repr=False)
+
+
+# ---------------------------------------------------------------------- 2.2.1 corners
+
+
+def smooth(gray: np.ndarray, sigma: float = 0.95) -> np.ndarray:
+    """Return the 3 x 3 Gaussian-smoothed image G (§2.2.1), same dtype (uint8 or float32)."""
+    img = np.asarray(gray)
+    if img.dtype != np.uint8:
+        img = img.astype(np.float32)
+    return cv2.GaussianBlur(img, (3, 3), sigma, borderType=cv2.BORDER_REPLICATE)
+
+
+def _sample_offsets(axial_offset: int, diagonal_offset: int) -> List[np.ndarray]:
+    """Return per filter the (4, 2) (dy, dx) offsets of its samples y1, y2, y3, y4 (eq. 1).
+
+    y1 and y4 are the samples that must be bright, y2 and y3 the dark ones.
+    """
+    d, e = axial_offset, diagonal_offset
+    c1 = np.array([[-d, -d], [d, -d], [-d, d], [d, d]])   # eq. 1: y1, y2, y3, y4
+    c3 = np.array([[-e, 0], [0, -e], [0, e], [e, 0]])     # up, left, right, down
+    return [c1, c1[[1, 0, 3, 2]], c3, c3[[1, 0, 3, 2]]]
+
+
+def _filter_pair(y1: np.ndarray, y2: np.ndarray, y3: np.ndarray, y4: np.ndarray,
+                 k_min: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Apply eq. 1 and its intensity-reversed twin to four equally shaped uint8 sample arrays.
+
+    ``y1``, ``y4`` are the samples that are bright for the first filter, ``y2``, ``y3`` the
+    dark ones. Eq. 1 requires every bright-dark difference to exceed
+    ``k_c = (max - min) / 3 + k_min``, i.e. ``gap > span / 3 + k_min`` with
+    ``gap = min(y1, y4) - max(y2, y3)`` and ``span = max(y1, y4) - min(y2, y3)``. As
+    ``span = gap + |y1 - y4| + |y2 - y3|``, the test is ``2 gap > D + 3 k_min`` with
+    ``D = |y1 - y4| + |y2 - y3|``, the same D for the reversed filter (whose gap is
+    ``min(y2, y3) - max(y1, y4)``). In saturating 8-bit arithmetic this is exact: a positive
+    gap bounds ``D <= 255 - gap``, so D never saturates when it matters, ``2 gap`` saturates
+    only when the right side is far below 255, and a saturated right side means
+    ``2 gap < 255``.
+
+    Returns:
+        (mask_a, mask_b): uint8 masks (255 = corner pixel) of the filter and its reverse.
+    """
+    rhs = cv2.add(cv2.add(cv2.absdiff(y1, y4), cv2.absdiff(y2, y3)), 3 * int(k_min))
+    gap_a = cv2.subtract(cv2.min(y1, y4), cv2.max(y2, y3))
+    gap_b = cv2.subtract(cv2.min(y2, y3), cv2.max(y1, y4))
+    return (cv2.compare(cv2.add(gap_a, gap_a), rhs, cv2.CMP_GT),
+            cv2.compare(cv2.add(gap_b, gap_b), rhs, cv2.CMP_GT))
+
+
+def corner_pixels(g: np.ndarray, k_min: int = 7, axial_offset: int = 2,
+                  diagonal_offset: int = 3) -> List[np.ndarray]:
+    """Return the corner pixel sets C1..C4 of a smoothed image with their weights (eq. 1).
+
+    C1: bright upper-left and lower-right samples ``G(r -+ d, c -+ d)``, dark lower-left and
+    upper-right (eq. 1 with ``d = axial_offset``); C2 the reverse. C3: bright above and
+    below (``G(r -+ e, c)``), dark left and right (``G(r, c -+ e)``), ``e = diagonal_offset``;
+    C4 the reverse (Fig. 1 (c)). The whole image is filtered at once (OpenCV array
+    operations on 8-bit grey levels); pixels closer than the larger offset to the image
+    border are never corners.
+
+    Args:
+        g: (H, W) uint8 smoothed image (:func:`smooth`); other dtypes are rounded and
+            clipped to 0..255.
+        k_min: fixed minimum threshold [integer grey levels].
+        axial_offset: C1/C2 sample offset [px].
+        diagonal_offset: C3/C4 sample offset [px].
+
+    Returns:
+        Four (M_k, 3) float arrays, one per filter, of corner pixels ``(x, y, w)`` with the
+        eq. 1 weight ``w = y1 + y4 - y2 - y3 > 0`` (bright minus dark samples).
+    """
+    g = np.asarray(g)
+    if g.dtype != np.uint8:
+        g = np.clip(np.rint(g), 0, 255).astype(np.uint8)
+    h, w = g.shape
+    o = max(axial_offset, diagonal_offset)
+    empty = [np.zeros((0, 3)) for _ in range(4)]
+    if h <= 2 * o or w <= 2 * o:
+        return empty
+    offsets = _sample_offsets(axial_offset, diagonal_offset)
+    code = None
+    for pair in (0, 2):
+        samples = [g[o + dy:h - o + dy, o + dx:w - o + dx] for dy, dx in offsets[pair]]
+        ma, mb = _filter_pair(*samples, int(k_min))
+        bits = cv2.bitwise_or(cv2.bitwise_and(ma, 1 << pair), cv2.bitwise_and(mb, 2 << pair))
+        code = bits if code is None else cv2.bitwise_or(code, bits)
+    rows = np.flatnonzero(code.any(axis=1))
+    if not len(rows):
+        return empty
+    r0 = int(rows[0])
+    nz = cv2.findNonZero(code[r0:int(rows[-1]) + 1])
+    xy = nz.reshape(-1, 2)
+    xy[:, 1] += r0
+    which = code[xy[:, 1], xy[:, 0]]
+    xs, ys = xy[:, 0] + o, xy[:, 1] + o
+    gi = g.astype(np.int32) if len(xs) > 4096 else g
+    out = []
+    for k in range(4):
+        sel = (which & (1 << k)) != 0
+        x, y = xs[sel], ys[sel]
+        s = [gi[y + dy, x + dx].astype(np.float64) for dy, dx in offsets[k]]
+        out.append(np.column_stack([x, y, s[0] + s[3] - s[1] - s[2]]))
+    return out
+
+
+def _components(n: int, src: np.ndarray, dst: np.ndarray) -> Tuple[int, np.ndarray]:
+    """Label the connected components of an undirected graph (n nodes, edges src-dst).
+
+    Returns:
+        (count, labels) with labels 0..count-1.
+    """
+    lab = np.arange(n)
+    if len(src):
+        while True:
+            m = np.minimum(lab[src], lab[dst])
+            new = lab.copy()
+            np.minimum.at(new, src, m)
+            np.minimum.at(new, dst, m)
+            new = new[new]                     # pointer jumping
+            if np.array_equal(new, lab):
+                break
+            lab = new
+    uniq, inv = np.unique(lab, return_inverse=True)
+    return len(uniq), inv
+
+
+def corner_groups(pixels: Sequence[np.ndarray], merge_distance: float = 1.5) -> Corners:
+    """Group the corner pixels of each filter 8-connected; return the centres (eq. 2).
+
+    Each group's centre is the weight-averaged pixel position ``sum(a_i w_i) / sum(w_i)``
+    (eq. 2). Groups of different filters whose centres are closer than ``merge_distance``
+    pixels are merged (centre of the union by eq. 2).
+
+    Args:
+        pixels: the four (M_k, 3) arrays of :func:`corner_pixels`.
+        merge_distance: merge radius [px]; 0 disables merging.
+
+    Returns:
+        :class:`Corners`.
+    """
+    sizes = [len(p) for p in pixels]
+    if sum(sizes) == 0:
+        return Corners(np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8))
+    allp = np.vstack([p for p in pixels if len(p)])
+    filt = np.repeat(np.arange(len(pixels)), sizes)
+    xs, ys, ws = allp[:, 0].astype(np.int64), allp[:, 1].astype(np.int64), allp[:, 2]
+    width = int(xs.max()) + 3
+    height = int(ys.max()) + 3
+    key = (filt * height + ys) * width + xs       # unique per (filter, pixel)
+    order = np.argsort(key, kind='stable')
+    key, xs, ys, ws, filt = key[order], xs[order], ys[order], ws[order], filt[order]
+    m = len(key)
+    src, dst = [], []
+    for off in (1, width - 1, width, width + 1):  # forward 8-neighbours (E, SW, S, SE)
+        j = np.searchsorted(key, key + off)
+        j[j >= m] = m - 1
+        hit = key[j] == key + off
+        src.append(np.flatnonzero(hit))
+        dst.append(j[hit])
+    n_lab, lab = _components(m, np.concatenate(src), np.concatenate(dst))
+    wsum = np.bincount(lab, ws, n_lab)
+    sx = np.bincount(lab, ws * xs, n_lab)
+    sy = np.bincount(lab, ws * ys, n_lab)
+    gfilt = np.zeros(n_lab, np.int8)
+    gfilt[lab] = filt
+    keep = wsum > 0
+    sx, sy, wsum, gfilt = sx[keep], sy[keep], wsum[keep], gfilt[keep]
+    pts = np.column_stack([sx / wsum, sy / wsum])                 # eq. 2
+    if merge_distance > 0 and len(pts) > 1:
+        pairs = cKDTree(pts).query_pairs(merge_distance, output_type='ndarray')
+        if len(pairs):
+            pairs = pairs[gfilt[pairs[:, 0]] != gfilt[pairs[:, 1]]]
+        if len(pairs):
+            n_comp, comp = _components(len(pts), pairs[:, 0], pairs[:, 1])
+            gw = np.bincount(comp, wsum, n_comp)
+            strongest = np.zeros(n_comp, np.int64)
+            by_weight = np.argsort(wsum)     # the last write per component is the strongest
+            strongest[comp[by_weight]] = by_weight
+            pts = np.column_stack([np.bincount(comp, sx, n_comp) / gw,
+                                   np.bincount(comp, sy, n_comp) / gw])
+            wsum, gfilt = gw, gfilt[strongest]
+    return Corners(pts, wsum, gfilt)
+
+
+# ---------------------------------------------------------------------- 2.2.2 frames
+
+
+def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
+                      tree: Optional[cKDTree] = None, mode: str = 'closest') -> np.ndarray:
+    """Return up to k neighbours of every corner within ``max_distance`` (§2.2.2).
+
+    Args:
+        points: (N, 2) corner positions [px].
+        max_distance: search radius [px].
+        k: neighbours per corner.
+        tree: a ``cKDTree`` of ``points`` if one exists already.
+        mode: ``'closest'``: the k closest corners (the chapter); ``'sectors'``: the closest
+            corner in each of k equal direction sectors (k = 8: 45 degrees each), so that the
+            next corner of a foreshortened edge is not crowded out by nearer corners in other
+            directions.
+
+    Returns:
+        (N, k) indices; missing neighbours are N (one past the last corner).
+    """
+    n = len(points)
+    if n < 2:
+        return np.full((n, k), n, dtype=np.int64)
+    tree = cKDTree(points) if tree is None else tree
+    kk = min((k if mode == 'closest' else 3 * k) + 1, n)
+    dist, idx = tree.query(points, k=kk, distance_upper_bound=max_distance)
+    idx = np.asarray(idx).reshape(n, kk)[:, 1:]  # drop the corner itself (distance 0)
+    if mode == 'closest':
+        if idx.shape[1] < k:
+            idx = np.hstack([idx, np.full((n, k - idx.shape[1]), n)])
+        return idx.astype(np.int64)
+    valid = idx < n
+    ext = np.vstack([points, [[0.0, 0.0]]])
+    d = ext[np.where(valid, idx, n)] - points[:, None, :]
+    sector = np.floor((np.arctan2(d[..., 1], d[..., 0]) + math.pi) / (2 * math.pi) * k)
+    sector = np.clip(sector.astype(np.int64), 0, k - 1)
+    rows = np.broadcast_to(np.arange(n)[:, None], idx.shape)
+    key = (rows * k + sector)[valid]        # row-major: within a row nearest first
+    first = np.unique(key, return_index=True)[1]
+    out = np.full(n * k, n, dtype=np.int64)
+    out[key[first]] = idx[valid][first]
+    out = out.reshape(n, k)
+    return out.astype(np.int64)
+
+
+def frame_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
+                k_lim: float = 0.37, k_g: float = 0.5, tree: Optional[cKDTree] = None,
+                filters: Optional[np.ndarray] = None) -> np.ndarray:
+    """Return every chain of ``n_corners`` corners along a straight edge (eq. 3).
+
+    Each corner ``h_1`` and each of its neighbours ``h_2`` start a chain (``v_2 = h_2 -
+    h_1``); the next corner is the corner closest to the prediction ``h^_{i+1} = h_i +
+    v_{i+1}`` (any corner, ``h_i in h_n``); it must lie within ``k_lim |v|`` of it, and the
+    spacing is updated ``v <- v + k_g (h_{i+1} - h^_{i+1})`` (see the module docstring for
+    this reading of eq. 3). An edge found from either end is returned once in each
+    direction.
+
+    Args:
+        points: (N, 2) corner positions [px].
+        neighbours: (N, K) from :func:`corner_neighbours`.
+        n_corners: corners per edge (6, or 5 for the 2x2 landmark).
+        k_lim: prediction tolerance (eq. 3).
+        k_g: spacing gain (eq. 3).
+        tree: a ``cKDTree`` of ``points`` if one exists already.
+        filters: (N,) filter (0..3 for C1..C4) of each corner; if given, two corners of the
+            same filter do not start an edge: neighbouring X-corners of a frame edge have
+            opposite polarity (C1 next to C2, C3 next to C4, or one of each pair at
+            in-between rotations).
+
+    Returns:
+        (E, n_corners) int64 corner indices, ordered along each edge.
+    """
+    n = len(points)
+    if n < n_corners or neighbours.size == 0:
+        return np.zeros((0, n_corners), np.int64)
+    tree = cKDTree(points) if tree is None else tree
+    h2 = neighbours.ravel()
+    h1 = np.repeat(np.arange(n), neighbours.shape[1])
+    ok = h2 < n
+    if filters is not None:
+        f = np.append(np.asarray(filters), -1)
+        ok &= f[h1] != f[np.minimum(h2, n)]
+    chain = [h1[ok], h2[ok]]
+    v = points[chain[1]] - points[chain[0]]                       # v_2 = h_2 - h_1
+    for _ in range(n_corners - 2):
+        if not len(v):
+            break
+        pred = points[chain[-1]] + v                              # eq. 3 prediction
+        dist, best = tree.query(pred, k=1)
+        good = dist < k_lim * np.linalg.norm(v, axis=1)           # |h_i - h^_i| < k_lim |v_i|
+        chain = [c[good] for c in chain]
+        best, pred, v = best[good], pred[good], v[good]
+        v = v + k_g * (points[best] - pred)                       # v_{i+1} = v_i + k_g (...)
+        chain.append(best)
+    if len(chain) < n_corners or not len(chain[0]):
+        return np.zeros((0, n_corners), np.int64)
+    edges = np.column_stack(chain)
+    srt = np.sort(edges, axis=1)
+    edges = edges[np.all(srt[:, 1:] != srt[:, :-1], axis=1)]
+    # every edge in both directions, once each (a chain may be found from one end only)
+    both = np.vstack([edges, edges[:, ::-1]])
+    _, first = np.unique(both, axis=0, return_index=True)
+    return both[np.sort(first)]
+
+
+def find_frames(points: np.ndarray, edges: np.ndarray, k_p: float = 0.5) -> List[np.ndarray]:
+    """Return the frames: four edges sharing their end corners, opposite edges alike (eq. 4).
+
+    A frame is ``(f_1, f_2, f_3, f_4)`` with ``f_1`` from corner A to B, ``f_2`` from A to D,
+    ``f_3`` from D to C and ``f_4`` from B to C (eq. 4's ``F_{1,1} = F_{2,1}``,
+    ``F_{2,6} = F_{3,1}``, ``F_{1,6} = F_{4,1}``, and ``F_{3,6} = F_{4,6}``), with
+    ``|v_1 - v_3| <= k_p |v_1|`` and ``|v_2 - v_4| <= k_p |v_2|`` where ``v_n = F_{n,6} -
+    F_{n,1}``. ``f_2`` is clockwise of ``f_1`` in the image (y down) so mirror images are
+    not frames. Each frame is returned once.
+
+    Args:
+        points: (N, 2) corner positions [px].
+        edges: (E, n) from :func:`frame_edges`.
+        k_p: parallel/equal tolerance.
+
+    Returns:
+        List of (4, n) index arrays ``[f_1, f_2, f_3, f_4]``.
+    """
+    if len(edges) < 4:
+        return []
+    first, last = edges[:, 0], edges[:, -1]
+    vec = points[last] - points[first]
+    by_start = {}
+    for e, s in enumerate(first):
+        by_start.setdefault(int(s), []).append(e)
+    by_pair = {}
+    for e, (s, t) in enumerate(zip(first, last)):
+        by_pair.setdefault((int(s), int(t)), []).append(e)
+    frames, seen = [], set()
+    for e1 in range(len(edges)):
+        a, b = int(first[e1]), int(last[e1])
+        v1 = vec[e1]
+        n1 = math.hypot(v1[0], v1[1])
+        for e2 in by_start.get(a, ()):
+            v2 = vec[e2]
+            if v1[0] * v2[1] - v1[1] * v2[0] <= 0.0:   # f_2 clockwise of f_1 (image y down)
+                continue
+            d = int(last[e2])
+            n2 = math.hypot(v2[0], v2[1])
+            for e3 in by_start.get(d, ()):
+                c = int(last[e3])
+                if c in (a, b) or math.hypot(*(v1 - vec[e3])) > k_p * n1:   # eq. 4
+                    continue
+                for e4 in by_pair.get((b, c), ()):
+                    if math.hypot(*(v2 - vec[e4])) > k_p * n2:              # eq. 4
+                        continue
+                    ids = edges[[e1, e2, e3, e4]]
+                    key = frozenset(ids.ravel().tolist())
+                    if len(key) != 4 * (edges.shape[1] - 1) or key in seen:
+                        continue
+                    seen.add(key)
+                    frames.append(ids)
+    return frames
+
+
+# ---------------------------------------------------------------------- 2.2.3 code
+
+
+def _fit_line(pts: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Total least-squares line through points: (centroid, unit direction).
+
+    The direction is the principal axis of the 2 x 2 scatter matrix, in closed form.
+    """
+    c = pts.mean(axis=0)
+    q = pts - c
+    sxx, syy, sxy = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+    a = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    return c, np.array([math.cos(a), math.sin(a)])
+
+
+def _intersect(p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    """Intersection of lines p1 + s d1 and p2 + t d2 (arrays broadcast over leading axes)."""
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
+        w = p2 - p1
+        s = (w[..., 0] * d2[..., 1] - w[..., 1] * d2[..., 0]) / cross
+        return p1 + s[..., None] * d1
+
+
+@dataclass(frozen=True, eq=False)
+class FrameGrid:
+    """A frame with fitted edges and its code grid (image orientation, before decoding).
+
+    Attributes:
+        corners: (4, 2) frame corners A, B, C, D (eq. 5) [px]: start of f_1, end of f_1,
+            end of f_3, end of f_2, i.e. clockwise in the image.
+        edge_corners: (4, n, 2) corner centres of the edges A->B, B->C, C->D, D->A.
+        grid: (2n - 1, 2n - 1, 2) grid points at half-block steps, ``[row, col]``, row 0 on
+            edge A->B, col 0 on edge A->D.
+        line_rms: RMS distance of the corners from their fitted lines [px].
+    """
+
+    corners: np.ndarray
+    edge_corners: np.ndarray
+    grid: np.ndarray
+    line_rms: float
+
+
+def _ideal_to_distorted(camera: CameraModel, px: np.ndarray) -> np.ndarray:
+    """Map ideal (undistorted) pixels of ``camera`` to the pixels its lens records."""
+    shape = px.shape
+    p = px.reshape(-1, 2)
+    k = camera.K
+    y = (p[:, 1] - k[1, 2]) / k[1, 1]
+    x = (p[:, 0] - k[0, 2] - k[0, 1] * y) / k[0, 0]
+    return camera.normalized_to_pixels(np.column_stack([x, y]), distort=True).reshape(shape)
+
+
+def refine_corners(image: np.ndarray, points: np.ndarray, spacing: float,
+                   window_fraction: float = 0.45) -> np.ndarray:
+    """Refine X-corner positions with ``cv2.cornerSubPix`` (saddle point of the gradients).
+
+    Args:
+        image: (H, W) float32 image.
+        points: (N, 2) corner positions [px].
+        spacing: corner spacing [px]; the window half-size is ``window_fraction`` of it,
+            at most 8 px, so that a window never reaches the next corner.
+        window_fraction: see ``spacing``.
+
+    Returns:
+        (N, 2) refined positions; a corner that moves by more than the window half-size
+        keeps its input position, and with a window below 2 px (spacing under
+        ``2 / window_fraction``) nothing is refined.
+    """
+    w = int(min(8, math.floor(window_fraction * spacing)))
+    if w < 2:
+        return np.asarray(points, dtype=float).copy()
+    h, wd = image.shape
+    pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 1, 2)
+    inside = ((pts[:, 0, 0] >= w + 1) & (pts[:, 0, 0] <= wd - w - 2)
+              & (pts[:, 0, 1] >= w + 1) & (pts[:, 0, 1] <= h - w - 2))
+    out = np.asarray(points, dtype=float).copy()
+    if not inside.any():
+        return out
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 20, 0.005)
+    ref = cv2.cornerSubPix(image, pts[inside].copy(), (w, w), (-1, -1), crit).reshape(-1, 2)
+    moved = np.linalg.norm(ref - out[inside], axis=1) <= w
+    idx = np.flatnonzero(inside)[moved]
+    out[idx] = ref[moved]
+    return out
+
+
+def edge_points(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, depth: np.ndarray,
+                positions: int = 6, min_contrast: float = 20.0) -> Tuple[np.ndarray, np.ndarray]:
+    """Return sub-pixel points of straight grey-level edges between pairs of X-corners.
+
+    Between two neighbouring X-corners of a frame edge the outer and the inner ring meet
+    in a straight black-white edge (its polarity alternates from block to block). Across
+    it, at ``positions`` places in the middle half of every block, a profile of
+    ``+-0.4 depth`` is sampled (bilinear, half-pixel steps); the edge lies where the
+    profile's area matches a step between its two end levels (``s_e = L - sum(r) ds`` with
+    ``r`` the profile scaled to 0..1), which is exact for an area-sampled or symmetrically
+    blurred step, unlike a gradient peak.
+
+    Args:
+        image: (H, W) float32 image (a symmetric blur does not move the result).
+        starts: (S, 2) first corner of each block segment [px].
+        ends: (S, 2) second corner [px].
+        depth: (S,) block size across the edge at each segment [px]; segments under 2.5 px
+            are skipped.
+        positions: profiles per segment.
+        min_contrast: profiles whose end levels differ by less are dropped.
+
+    Returns:
+        (points, segment): (P, 2) edge points [px] and the (P,) index of their segment.
+    """
+    seg = ends - starts
+    length = np.linalg.norm(seg, axis=1)
+    ok = (length > 1e-9) & (depth >= 2.5)
+    if not ok.any():
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
+    index = np.flatnonzero(ok)
+    a, seg, length, depth = starts[ok], seg[ok], length[ok], depth[ok]
+    tang = seg / length[:, None]
+    normal = np.column_stack([-tang[:, 1], tang[:, 0]])
+    t = 0.25 + 0.5 * (np.arange(positions) + 0.5) / positions          # middle half
+    half = 0.4 * depth                                                  # (S,)
+    k = np.maximum(6, np.ceil(2.0 * half / 0.5).astype(int))
+    kmax = int(k.max())
+    ds = 2.0 * half / k                     # s_i = -L + (i + 0.5) ds, i < k (masked beyond)
+    i = np.arange(kmax)
+    valid_i = i[None, :] < k[:, None]
+    offs = np.where(valid_i, -half[:, None] + (i[None, :] + 0.5) * ds[:, None], 0.0)
+    base = a[:, None, :] + t[None, :, None] * seg[:, None, :]           # (S, J, 2)
+    pts = base[:, :, None, :] + offs[:, None, :, None] * normal[:, None, None, :]
+    if isinstance(image, _Shifted):
+        pts_img, image = pts - image.offset, image.image
+    else:
+        pts_img = pts
+    flat = pts_img.reshape(1, -1, 2).astype(np.float32)
+    vals = cv2.remap(image, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:3]).astype(float)
+    rows = np.arange(len(k))[:, None]
+    tail = k[:, None] - 1 - np.arange(3)[None, :]                       # last three samples
+    lo = vals[:, :, :3].mean(axis=2)                                   # (S, J)
+    hi = vals[rows, :, tail].mean(axis=1)
+    span = hi - lo
+    good = np.abs(span) >= min_contrast
+    with np.errstate(divide='ignore', invalid='ignore'):
+        r = (vals - lo[:, :, None]) / span[:, :, None]
+    r = np.where(valid_i[:, None, :], r, 0.0)
+    s_e = half[:, None] - ds[:, None] * r.sum(axis=2)                   # (S, J)
+    good &= np.abs(s_e) < half[:, None]
+    out = base + s_e[:, :, None] * normal[:, None, :]
+    segment = np.broadcast_to(index[:, None], good.shape)
+    return out[good], segment[good]
+
+
+def _robust_line(pts: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """TLS line through points, refitted once without points beyond 3 robust sigmas."""
+    c, d = _fit_line(pts)
+    q = pts - c
+    res = np.abs(q[:, 0] * d[1] - q[:, 1] * d[0])
+    mad = float(np.partition(res, len(res) // 2)[len(res) // 2])     # median |residual|
+    keep = res <= max(3.0 * 1.4826 * mad, 1e-3)
+    if keep.sum() >= 2 and not keep.all():
+        c, d = _fit_line(pts[keep])
+    return c, d
+
+
+def fit_frame(points: np.ndarray, frame: np.ndarray, camera: Optional[CameraModel] = None,
+              image: Optional[np.ndarray] = None, min_contrast: float = 20.0,
+              grid: bool = True) -> FrameGrid:
+    """Fit lines to the four edges, intersect them (eq. 5) and build the code grid.
+
+    The frame corners are the crossings of adjacent fitted edge lines (eq. 5). The corners
+    of each edge are projected onto its line, the end corners replaced by the crossings,
+    and every corner spacing is halved (§2.2.3: "dividing the distance between two adjacent
+    corners on every frame edge in two ... the distance between the corners are not
+    equalized"). Grid point ``[i, j]`` is the crossing of the line joining the j-th points of
+    the top and bottom edges with the line joining the i-th points of the left and right
+    edges.
+
+    Args:
+        points: (N, 2) corner positions [px].
+        frame: (4, n) ``[f_1, f_2, f_3, f_4]`` from :func:`find_frames`.
+        camera: if given, the fits are made in its ideal (undistorted) image, where the
+            printed edges are straight, and the corners and grid are mapped back to the
+            recorded (distorted) pixels.
+        image: if given (float32), each edge line is fitted to the sub-pixel
+            points of the ring boundary along the edge (:func:`edge_points`) instead of to
+            its six corners; the corners are still projected onto it for the grid.
+        min_contrast: contrast of a usable edge profile (with ``image``).
+        grid: False skips the code grid (``FrameGrid.grid`` is then the (2, 2, 2) array of
+            the frame corners).
+
+    Returns:
+        :class:`FrameGrid` (pixels of the recorded image).
+    """
+    measured = points[frame]                                  # (4, n, 2)
+    edges = measured if camera is None else \
+        camera.undistort_pixels(measured.reshape(-1, 2), 'ideal').reshape(measured.shape)
+    f1, f2, f3, f4 = edges
+    if image is not None:
+        lines = _edge_lines(image, measured, edges, camera, min_contrast)
+    else:
+        lines = [_fit_line(p) for p in (f1, f2, f3, f4)]
+    res = []
+    for (c, d), p in zip(lines, (f1, f2, f3, f4)):
+        q = p - c
+        res.append(q[:, 0] * d[1] - q[:, 1] * d[0])
+    line_rms = float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
+    a = _intersect(*lines[0], *lines[1])   # f_1 x f_2 (eq. 5)
+    b = _intersect(*lines[0], *lines[3])   # f_1 x f_4
+    c = _intersect(*lines[2], *lines[3])   # f_3 x f_4
+    d = _intersect(*lines[1], *lines[2])   # f_2 x f_3
+
+    def on_line(pts, line, start, end):
+        cen, dirn = line
+        t = (pts - cen) @ dirn
+        proj = cen + t[:, None] * dirn
+        proj[0], proj[-1] = start, end
+        full = np.empty((2 * len(proj) - 1, 2))
+        full[0::2] = proj
+        full[1::2] = 0.5 * (proj[:-1] + proj[1:])
+        return full
+
+    m1, m2, m3, m4 = measured
+    edge_corners = np.stack([m1, m4, m3[::-1], m2[::-1]])
+    corners = np.array([a, b, c, d])
+    if not grid:
+        if camera is not None:
+            corners = _ideal_to_distorted(camera, corners)
+        return FrameGrid(corners, edge_corners, corners[[0, 1, 3, 2]].reshape(2, 2, 2),
+                         line_rms)
+    top = on_line(f1, lines[0], a, b)
+    left = on_line(f2, lines[1], a, d)
+    bottom = on_line(f3, lines[2], d, c)
+    right = on_line(f4, lines[3], b, c)
+    # grid[i, j] = (left[i] -> right[i]) x (top[j] -> bottom[j])
+    shape = (len(left), len(top), 2)
+    grid_pts = _intersect(np.broadcast_to(left[:, None, :], shape),
+                          np.broadcast_to((right - left)[:, None, :], shape),
+                          np.broadcast_to(top[None, :, :], shape),
+                          np.broadcast_to((bottom - top)[None, :, :], shape))
+    if camera is not None:
+        corners = _ideal_to_distorted(camera, corners)
+        grid_pts = _ideal_to_distorted(camera, grid_pts)
+    return FrameGrid(corners, edge_corners, grid_pts, line_rms)
+
+
+def _edge_lines(image: np.ndarray, measured: np.ndarray, edges: np.ndarray,
+                camera: Optional[CameraModel], min_contrast: float) -> list:
+    """Refit the four edge lines to ring-boundary edge points (see :func:`fit_frame`)."""
+    n = measured.shape[1]
+    spacing = np.linalg.norm(np.diff(measured, axis=1), axis=2)        # (4, n - 1)
+    t = np.linspace(0.0, 1.0, n - 1)
+    depth = np.empty((4, n - 1))
+    # block size across edge e: the first/last block of the edges crossing it (f_1, f_3 are
+    # crossed by f_2, f_4 and vice versa), interpolated along e
+    for e, (cross, j) in enumerate((((1, 3), 0), ((0, 2), 0), ((1, 3), n - 2),
+                                    ((0, 2), n - 2))):
+        depth[e] = spacing[cross[0], j] + t * (spacing[cross[1], j] - spacing[cross[0], j])
+    pts, seg = edge_points(image, measured[:, :-1].reshape(-1, 2),
+                           measured[:, 1:].reshape(-1, 2), depth.ravel(),
+                           min_contrast=min_contrast)
+    if camera is not None and len(pts):
+        pts = camera.undistort_pixels(pts, 'ideal')
+    edge = seg // (n - 1)
+    out = []
+    for e in range(4):
+        p = pts[edge == e]
+        out.append(_robust_line(p) if len(p) >= 2 * (n - 1) else _fit_line(edges[e]))
+    return out
+
+
+def sample_cells(g: np.ndarray, grid: np.ndarray, samples: int = 4,
+                 margin: float = 0.2) -> np.ndarray:
+    """Return the mean intensity of every grid cell (§2.2.3).
+
+    Each cell (quadrilateral of four neighbouring grid points) is sampled bilinearly on a
+    ``samples`` x ``samples`` lattice spanning its inner part (``margin`` of the side left
+    out at each border).
+
+    Args:
+        g: (H, W) float32 image.
+        grid: (R, C, 2) grid points [px].
+        samples: lattice size per side.
+        margin: border fraction left out.
+
+    Returns:
+        (R - 1, C - 1) float mean intensities.
+    """
+    t = margin + (1.0 - 2.0 * margin) * (np.arange(samples) + 0.5) / samples
+    s, u = np.meshgrid(t, t, indexing='ij')      # s: along rows, u: along columns
+    s, u = s.ravel(), u.ravel()
+    p00, p01 = grid[:-1, :-1], grid[:-1, 1:]
+    p10, p11 = grid[1:, :-1], grid[1:, 1:]
+    w00 = ((1 - s) * (1 - u))[None, None, :, None]
+    w01 = ((1 - s) * u)[None, None, :, None]
+    w10 = (s * (1 - u))[None, None, :, None]
+    w11 = (s * u)[None, None, :, None]
+    pts = (w00 * p00[:, :, None] + w01 * p01[:, :, None] + w10 * p10[:, :, None]
+           + w11 * p11[:, :, None])
+    r, c = pts.shape[:2]
+    flat = pts.reshape(1, -1, 2).astype(np.float32)
+    vals = cv2.remap(g, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+    return vals.reshape(r, c, samples * samples).mean(axis=2)
+
+
+@dataclass(frozen=True, eq=False)
+class CodeReading:
+    """Result of :func:`read_code` for one frame grid."""
+
+    code: Optional[int]
+    rotation: int
+    bits: np.ndarray
+    contrast: float
+    margin: float
+    reason: str
+
+
+def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 20.0,
+              min_margin: float = 0.2) -> CodeReading:
+    """Classify the cells of a frame grid and decode them (§2.2.3).
+
+    ``cells`` covers the inner ring and the code area in half-block cells. Half of the frame
+    cells are known black, half white (block ``(i, j)`` black iff ``i + j`` even); the mean
+    of their two means is the threshold, below which a code cell is black (a set bit). The
+    orientation mark selects the rotation and the bit order (via
+    :meth:`LandmarkDesign.decode_with_rotation`). With an even number of blocks (the 2x2
+    design) a quarter turn inverts the frame colouring, so both colourings are tried and
+    the rotation found from the mark must have the parity the frame shows.
+
+    Args:
+        cells: (2(n - 1), 2(n - 1)) mean intensities, ``[row, col]``, row 0 along the edge
+            A->B of :class:`FrameGrid` (image orientation).
+        design: the landmark design.
+        min_contrast: smallest white-black difference of the frame cells.
+        min_margin: smallest distance from the threshold, fraction of half the contrast.
+
+    Returns:
+        :class:`CodeReading`; ``code`` is None with a ``reason`` when the grid is
+        inconsistent or the bits are not a valid code.
+    """
+    m2 = 2 * design.code_squares
+    k = cells.shape[0]
+    rows, cols = np.mgrid[0:k, 0:k]
+    bi, bj = 1 + cols // 2, 1 + rows // 2            # block (column, row) of each cell
+    colour = design.block_colours()[bj, bi]          # 1 black, 0 white, -1 code
+    code_cells = cells[2:2 + m2, 2:2 + m2]
+    empty = np.zeros((m2, m2), bool)
+    # an even number of blocks (2x2 design) makes the frame colouring change with every
+    # quarter turn: the frame cells then tell the parity of the rotation
+    parities = (0, 1) if design.n_blocks % 2 == 0 else (0,)
+    best = None
+    for parity in parities:
+        col = colour if parity == 0 else np.where(colour >= 0, 1 - colour, colour)
+        black, white = cells[col == 1], cells[col == 0]
+        c = float(white.mean()) - float(black.mean())
+        if best is None or c > best[0]:
+            best = (c, parity, black, white)
+    contrast, parity, black, white = best
+    if not contrast >= min_contrast:
+        return CodeReading(None, 0, empty, contrast, 0.0, 'low contrast')
+    thr = 0.5 * (float(black.mean()) + float(white.mean()))
+    half = 0.5 * contrast
+    ring_margin = min(float((thr - black).min()), float((white - thr).min())) / half
+    code_margin = float(np.abs(code_cells - thr).min()) / half
+    margin = min(ring_margin, code_margin)
+    if ring_margin < min_margin:
+        return CodeReading(None, 0, empty, contrast, margin, 'frame cells inconsistent')
+    bits = code_cells < thr
+    if code_margin < min_margin:
+        return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
+    got = design.decode_with_rotation(bits)
+    if got is None:
+        return CodeReading(None, 0, bits, contrast, margin, 'no valid code')
+    code, rot = got
+    if len(parities) == 2 and rot % 2 != parity:
+        return CodeReading(None, 0, bits, contrast, margin, 'orientation disagrees with frame')
+    return CodeReading(code, rot, np.rot90(bits, rot), contrast, margin, '')
+
+
+# ---------------------------------------------------------------------- all steps
+
+
+def image_problem(gray: np.ndarray, min_contrast: float = 20.0,
+                  saturated_fraction: float = 0.5) -> Tuple[str, bool]:
+    """Describe what is wrong with an image for landmark detection, if anything.
+
+    Args:
+        gray: (H, W) uint8 image.
+        min_contrast: an image whose grey levels span less than this has no usable content.
+        saturated_fraction: an image with more than this fraction of pixels at 255 (or 0)
+            is reported as over- (under-) exposed.
+
+    Returns:
+        ``(problem, usable)``: ``('', True)`` for a good image; an all-black, all-white or
+        flat image gives ``(description, False)``; a saturated one ``(description, True)``
+        (it may still show a landmark).
+    """
+    img = np.asarray(gray)
+    if img.size == 0:
+        return 'empty image', False
+    lo, hi = (float(v) for v in cv2.minMaxLoc(img)[:2])
+    if hi - lo < min_contrast:
+        return (f'image has no contrast (grey levels {lo:.0f}..{hi:.0f}): all black, all '
+                'white or a covered lens?', False)
+    n = float(img.size)
+    white = np.count_nonzero(img >= 255) / n
+    black = np.count_nonzero(img <= 0) / n
+    if white > saturated_fraction:
+        return f'image is overexposed: {100 * white:.0f} % of the pixels saturated', True
+    if black > saturated_fraction:
+        return f'image is underexposed: {100 * black:.0f} % of the pixels black', True
+    return '', True
+
+
+def _refined_frame(raw: np.ndarray, pts: np.ndarray, frame: np.ndarray,
+                   params: DetectorParams, camera: Optional[CameraModel]) -> FrameGrid:
+    """Fit a frame again after the sub-pixel steps, on float G of the frame's surroundings.
+
+    The code grid is not rebuilt (the code has been read); ``grid`` holds the corners.
+    """
+    ids = np.unique(frame)
+    spacing = float(np.median(np.linalg.norm(np.diff(pts[frame], axis=1), axis=2)))
+    reach = 1.5 * float(np.max(np.linalg.norm(np.diff(pts[frame], axis=1), axis=2))) + 4.0
+    h, w = raw.shape
+    x0 = max(0, int(pts[ids, 0].min() - reach))
+    y0 = max(0, int(pts[ids, 1].min() - reach))
+    x1 = min(w, int(pts[ids, 0].max() + reach) + 1)
+    y1 = min(h, int(pts[ids, 1].max() + reach) + 1)
+    off = np.array([x0, y0], dtype=float)
+    g = smooth(raw[y0:y1, x0:x1], params.sigma)     # float G for the sub-pixel steps
+    local = pts - off
+    if params.refine_corners:
+        local = local.copy()
+        local[ids] = refine_corners(g, local[ids], spacing, params.refine_window)
+    if camera is None:
+        fine = fit_frame(local, frame, None, g if params.refine_edges else None,
+                         params.min_contrast, grid=False)
+        return FrameGrid(fine.corners + off, fine.edge_corners + off, fine.grid + off,
+                         fine.line_rms)
+    # with a lens model the fit needs pixels of the whole image
+    fpts = pts.copy()
+    fpts[ids] = local[ids] + off
+    return fit_frame(fpts, frame, camera, _Shifted(g, off) if params.refine_edges else None,
+                     params.min_contrast, grid=False)
+
+
+class _Shifted:
+    """An image crop that :func:`edge_points` samples in full-image pixel coordinates."""
+
+    def __init__(self, image: np.ndarray, offset: np.ndarray) -> None:
+        """Keep the crop and its top-left pixel."""
+        self.image = image
+        self.offset = offset
+
+
+def _grid_inside(grid: np.ndarray, width: int, height: int) -> bool:
+    """Return whether every grid point is finite and inside the image."""
+    if not np.all(np.isfinite(grid)):
+        return False
+    gx, gy = grid[..., 0], grid[..., 1]
+    return bool(gx.min() >= 0 and gy.min() >= 0 and gx.max() <= width - 1
+                and gy.max() <= height - 1)
+
+
+def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams(),
+                     camera: Optional[CameraModel] = None,
+                     debug: Optional[dict] = None) -> List[Detection]:
+    """Detect and decode every landmark in a grey image (§2.2.1-2.2.3).
+
+    Args:
+        gray: (H, W) uint8 image (mono8); other numeric dtypes are used as grey levels of 256.
+        params: detector parameters.
+        camera: optional camera model; with a lens that distorts, the edge line fits (eq. 5)
+            are made on undistorted corner positions (see :func:`fit_frame`).
+        debug: if a dict, filled with the intermediate results (``corners``, ``edges``,
+            ``frames``, ``grids``, ``readings``).
+
+    Returns:
+        The detections, strongest (largest margin) first; overlapping detections (sharing
+        corners) are reduced to the best one.
+
+    Raises:
+        ValueError: ``gray`` is not a 2-D array.
+    """
+    img = np.asarray(gray)
+    if img.ndim != 2:
+        raise ValueError(f'detect_landmarks needs a 2-D grey image; got shape {img.shape}')
+    design = params.design
+    n = design.corners_per_edge
+    if img.dtype != np.uint8:
+        img = np.clip(np.nan_to_num(img.astype(np.float64)), 0, 255).astype(np.uint8)
+    g8 = smooth(img, params.sigma)
+    pixels = corner_pixels(g8, params.k_min, params.axial_offset, params.diagonal_offset)
+    corners = corner_groups(pixels, params.merge_distance)
+    pts, filt = corners.points, corners.filters
+    if len(pts) > params.max_corners:
+        keep = np.argsort(corners.weights)[::-1][:params.max_corners]
+        pts, filt = pts[keep], filt[keep]
+    tree = cKDTree(pts) if len(pts) else None
+    nbrs = corner_neighbours(pts, params.neighbour_fraction * img.shape[0],
+                             params.max_neighbours, tree, params.neighbour_mode)
+    edges = frame_edges(pts, nbrs, n, params.k_lim, params.k_g, tree, filt)
+    frames = find_frames(pts, edges, params.k_p)
+    if debug is not None:
+        debug.update(corners=corners, points=pts, edges=edges, frames=frames, grids=[],
+                     readings=[])
+    found = []
+    h, w = img.shape
+    use_camera = camera if camera is not None and camera.has_distortion else None
+    raw = img.astype(np.float32) if frames else None
+    for frame in frames:
+        # eq. 5 on the eq. 2 centres, cells and code; only a frame that reads as a valid code
+        # is refined and fitted again (most candidates in clutter are rejected here)
+        fg = fit_frame(pts, frame, use_camera)
+        if not _grid_inside(fg.grid, w, h):
+            continue
+        cells = sample_cells(raw, fg.grid, params.cell_samples, params.cell_margin)
+        smallest = float(np.min(np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2)))
+        margin = params.min_margin if smallest >= params.small_block_px else \
+            max(params.min_margin, params.small_block_margin)
+        reading = read_code(cells, design, params.min_contrast, margin)
+        if debug is not None:
+            debug['grids'].append(fg)
+            debug['readings'].append(reading)
+        if reading.code is None:
+            continue
+        if params.refine_corners or params.refine_edges:
+            fine = _refined_frame(raw, pts, frame, params, use_camera)
+            if _grid_inside(fine.corners, w, h):
+                fg = fine
+        # image order A, B, C, D is the upright order rolled by the rotation
+        order = [(i + reading.rotation) % 4 for i in range(4)]
+        edge_corners = fg.edge_corners[order]
+        spacing = np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2).mean()
+        found.append((frame, Detection(
+            code=reading.code, kind=design.kind, corners=fg.corners[order],
+            edge_corners=edge_corners, rotation=reading.rotation,
+            contrast=reading.contrast, margin=reading.margin, line_rms=fg.line_rms,
+            block_pixels=float(spacing), bits=reading.bits)))
+    found.sort(key=lambda fd: -fd[1].margin)
+    out, used = [], set()
+    for frame, det in found:
+        ids = set(frame.ravel().tolist())
+        if ids & used:
+            continue
+        used |= ids
+        out.append(det)
+    return out
+
+
+__all__ = ['CodeReading', 'Corners', 'Detection', 'DetectorParams', 'FrameGrid',
+           'corner_groups', 'corner_neighbours', 'corner_pixels', 'detect_landmarks',
+           'edge_points', 'find_frames', 'fit_frame', 'frame_edges', 'image_problem',
+           'read_code', 'refine_corners', 'sample_cells', 'smooth']

@@ -1,0 +1,278 @@
+"""Landmark detector core (visual navigation §2.2.1-2.2.3) against independent truth.
+
+Truth comes from the camera simulator's scene (corner pixels projected from the landmark
+pose) or from synthetic inputs built here, never from the detector itself.
+"""
+
+import math
+
+import cv2
+from landmark_nav.sim.camera import Photometry
+from landmark_nav.sim.camera_scenarios import default_camera, landmark_view, ViewOptions
+from landmark_nav.vision.camera import CameraModel
+from landmark_nav.vision.detector import (corner_groups, corner_neighbours, corner_pixels,
+                                          detect_landmarks, DetectorParams, find_frames,
+                                          frame_edges, image_problem, read_code, smooth)
+from landmark_nav.vision.landmark import LandmarkDesign
+import numpy as np
+import pytest
+
+CAMERA = default_camera()   # 640 x 480, f = 600 px, barrel distortion
+
+
+def view(code=156, roll=0.0, distance=1.0, turn=0.0, tilt=0.0, design=LandmarkDesign(),
+         centre=(330.0, 250.0), noise=1.0, camera=CAMERA, seed=5, index=0):
+    opts = ViewOptions(distance=distance, turn_deg=turn, tilt_deg=tilt, roll_deg=roll,
+                       quarter_turns=False, code=code, design=design, distractors=0,
+                       photometry=Photometry(noise_sigma=noise, defocus_sigma=0.4),
+                       centre_px=centre)
+    return landmark_view(seed, index, camera, opts)
+
+
+def x_corner(size=41, centre=(20.3, 19.6), angle=0.0, polarity=1, lo=30, hi=220, ss=8):
+    """Return an ideal X-corner (checkerboard crossing), area-sampled, rotated by angle."""
+    n = size * ss
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / ss - 0.5
+    c, s = math.cos(angle), math.sin(angle)
+    u = c * (x - centre[0]) + s * (y - centre[1])
+    v = -s * (x - centre[0]) + c * (y - centre[1])
+    bright = (u * v > 0) if polarity > 0 else (u * v < 0)
+    img = np.where(bright, float(hi), float(lo))
+    return cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA).astype(np.uint8)
+
+
+# ---------------------------------------------------------------------- eq. 1-2
+
+
+@pytest.mark.parametrize('angle, polarity, expected', [
+    (0.0, 1, 0), (0.0, -1, 1),                       # C1: bright upper-left / lower-right
+    (math.pi / 4, 1, 2), (math.pi / 4, -1, 3)])      # C3: bright above and below
+def test_corner_filter_sets_and_weighted_centre(angle, polarity, expected):
+    img = x_corner(angle=angle, polarity=polarity)
+    pix = corner_pixels(smooth(img))
+    counts = [len(p) for p in pix]
+    assert counts[expected] > 0
+    assert sum(counts) == counts[expected], counts      # no other filter responds
+    assert np.all(pix[expected][:, 2] > 0)               # eq. 1 weights are positive
+    groups = corner_groups(pix)
+    assert len(groups.points) == 1
+    assert groups.filters[0] == expected
+    np.testing.assert_allclose(groups.points[0], (20.3, 19.6), atol=0.5)   # eq. 2 centre
+
+
+def test_eight_bit_filter_is_exactly_eq1():
+    # eq. 1 evaluated directly (integers, every pixel) against the fast 8-bit filter
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (60, 70), dtype=np.uint8),
+              (rng.random((60, 70)) > 0.5).astype(np.uint8) * 255,
+              cv2.resize(rng.integers(0, 256, (8, 9), dtype=np.uint8), (70, 60),
+                         interpolation=cv2.INTER_NEAREST)]
+    offsets = {0: [(-2, -2), (2, -2), (-2, 2), (2, 2)], 1: [(2, -2), (-2, -2), (2, 2), (-2, 2)],
+               2: [(-3, 0), (0, -3), (0, 3), (3, 0)], 3: [(0, -3), (-3, 0), (3, 0), (0, 3)]}
+    for img in images:
+        for k_min in (0, 7, 40):
+            g = smooth(img)
+            got = corner_pixels(g, k_min)
+            h, w = g.shape
+            gi = g.astype(int)
+            for f, offs in offsets.items():
+                y1, y2, y3, y4 = (gi[3 + dy:h - 3 + dy, 3 + dx:w - 3 + dx] for dy, dx in offs)
+                stack = np.stack([y1, y2, y3, y4])
+                kc3 = stack.max(0) - stack.min(0) + 3 * k_min        # 3 k_c (eq. 1)
+                ok = ((3 * (y1 - y2) > kc3) & (3 * (y1 - y3) > kc3) & (3 * (y4 - y2) > kc3)
+                      & (3 * (y4 - y3) > kc3))
+                want = {(x + 3, y + 3) for y, x in zip(*np.nonzero(ok))}
+                assert {(int(x), int(y)) for x, y, _ in got[f]} == want, (f, k_min)
+
+
+def test_corner_filter_threshold_k_min():
+    # contrast of 2 * k_min passes, below k_min does not (eq. 1: differences > k_c)
+    assert sum(len(p) for p in corner_pixels(smooth(x_corner(lo=100, hi=100 + 30)))) > 0
+    assert sum(len(p) for p in corner_pixels(smooth(x_corner(lo=100, hi=100 + 6)))) == 0
+
+
+def test_corner_groups_merge_filters_at_22_5_degrees():
+    img = x_corner(angle=math.radians(22.5))
+    groups = corner_groups(corner_pixels(smooth(img)))
+    assert len(groups.points) == 1                      # C1 and C3 groups merged
+    np.testing.assert_allclose(groups.points[0], (20.3, 19.6), atol=0.5)
+
+
+# ---------------------------------------------------------------------- eq. 3-4
+
+
+def _grid_points(h, n=6, step=10.0, origin=(100.0, 80.0)):
+    """Points of an n x n grid mapped by homography h (rows: grid row, col)."""
+    j, i = np.mgrid[0:n, 0:n].astype(float)
+    p = np.stack([origin[0] + step * i, origin[1] + step * j, np.ones_like(i)], -1) @ h.T
+    return (p[..., :2] / p[..., 2:]).reshape(-1, 2)
+
+
+def test_frame_edges_follow_a_perspective_edge_and_reject_a_kink():
+    h = np.array([[1.0, 0.1, 0.0], [0.05, 1.0, 0.0], [0.005, 0.0004, 1.0]])
+    line = _grid_points(h)[:6]                    # six collinear, shrinking spacing
+    spacing = np.linalg.norm(np.diff(line, axis=0), axis=1)
+    assert spacing.max() / spacing.min() > 1.15   # a real perspective change
+    rng = np.random.default_rng(1)
+    clutter = rng.uniform(0, 200, (40, 2))
+    clutter = clutter[np.min(np.linalg.norm(clutter[:, None] - line[None], axis=2), 1) > 5]
+    pts = np.vstack([line, clutter])
+    nb = corner_neighbours(pts, 100.0, 8)
+    edges = frame_edges(pts, nb, 6)
+    as_sets = [tuple(e) for e in edges]
+    assert tuple(range(6)) in as_sets and tuple(range(5, -1, -1)) in as_sets
+    # move the fourth corner off the line by half a spacing: |h - h^| > k_lim |v|
+    kinked = pts.copy()
+    d = line[4] - line[3]
+    kinked[3] += 0.5 * np.array([-d[1], d[0]])
+    edges = frame_edges(kinked, corner_neighbours(kinked, 100.0, 8), 6)
+    assert tuple(range(6)) not in [tuple(e) for e in edges]
+
+
+def test_find_frames_on_a_corner_ring_but_not_its_mirror():
+    h = np.array([[1.0, 0.2, 0.0], [-0.1, 0.9, 0.0], [0.001, -0.0008, 1.0]])
+    grid = _grid_points(h).reshape(6, 6, 2)
+    ring = np.concatenate([grid[0, :], grid[1:, 5], grid[5, :5], grid[1:5, 0]])
+    nb = corner_neighbours(ring, 200.0, 8)
+    frames = find_frames(ring, frame_edges(ring, nb, 6))
+    assert len(frames) == 1
+    f = frames[0]
+    assert f[0][0] == f[1][0] and f[1][-1] == f[2][0] and f[0][-1] == f[3][0]   # eq. 4
+    assert f[2][-1] == f[3][-1]
+    # opposite edges made unequal by more than k_p: no frame
+    squeezed = ring.copy()
+    right = np.isin(np.arange(len(ring)), list(range(5, 11)))
+    squeezed[right, 1] = grid[0, 5, 1] + 0.3 * (squeezed[right, 1] - grid[0, 5, 1])
+    assert find_frames(squeezed, frame_edges(squeezed, corner_neighbours(squeezed, 200.0),
+                                             6)) == []
+
+
+# ---------------------------------------------------------------------- code (§2.2.3)
+
+
+def _ideal_cells(design, code, black=40.0, white=200.0):
+    """Cell means of a perfectly read frame: inner ring + code area in half blocks."""
+    k = 2 * (design.n_blocks - 2)
+    rows, cols = np.mgrid[0:k, 0:k]
+    colour = design.block_colours()[1 + rows // 2, 1 + cols // 2]
+    cells = np.where(colour == 1, black, white).astype(float)
+    m2 = 2 * design.code_squares
+    cells[2:2 + m2, 2:2 + m2] = np.where(design.encode(code), black, white)
+    return cells
+
+
+@pytest.mark.parametrize('kind, code', [('3x3', 156), ('3x3', 123456789), ('3x3', 0),
+                                        ('2x2', 0), ('2x2', 511), ('2x2', 300)])
+def test_read_code_in_all_rotations(kind, code):
+    design = LandmarkDesign(kind)
+    cells = _ideal_cells(design, code)
+    for k in range(4):
+        seen = np.rot90(cells, -k)                # the landmark turned by k quarter turns
+        r = read_code(seen, design)
+        assert r.code == code and r.rotation == k % 4
+        assert r.contrast == pytest.approx(160.0)
+        assert r.margin == pytest.approx(1.0)
+
+
+def test_read_code_rejects_inconsistent_grids():
+    design = LandmarkDesign()
+    cells = _ideal_cells(design, 156)
+    bad = cells.copy()
+    bad[0, 0] = 200.0                            # a black frame cell reads white
+    assert read_code(bad, design).reason == 'frame cells inconsistent'
+    grey = cells.copy()
+    grey[5, 5] = 120.0                           # a code cell right at the threshold
+    assert read_code(grey, design).reason == 'ambiguous code cell'
+    flat = np.full_like(cells, 120.0)
+    assert read_code(flat, design).reason == 'low contrast'
+    nomark = cells.copy()
+    nomark[2:4, 2:4] = 200.0                     # orientation mark erased
+    assert read_code(nomark, design).code is None
+
+
+# ---------------------------------------------------------------------- whole images
+
+
+@pytest.mark.parametrize('code', [156, 123456789])
+@pytest.mark.parametrize('roll', [0.0, 22.5, 45.0, 90.0, 200.0, 292.5])
+def test_figure_codes_round_trip_with_ordered_corners(code, roll):
+    frame = view(code, roll=roll)
+    truth = frame.landmarks[0]
+    dets = detect_landmarks(frame.image, camera=CAMERA)
+    assert [d.code for d in dets] == [code]
+    d = dets[0]
+    # corners in the order of LandmarkDesign.frame_corners(): the roll is resolved
+    np.testing.assert_allclose(d.corners, truth.corners_px, atol=0.15)
+    np.testing.assert_allclose(d.edge_corners, truth.edge_corners_px, atol=0.5)
+    assert d.block_pixels == pytest.approx(truth.block_px, rel=0.05)
+    assert d.bits.shape == (6, 6) and np.array_equal(d.bits, LandmarkDesign().encode(code))
+
+
+def test_small_landmark_variant():
+    design = LandmarkDesign('2x2')
+    params = DetectorParams(kind='2x2')
+    for i, code in enumerate((0, 5, 300, 511)):
+        frame = view(code, roll=30.0 * i, design=design, distance=0.8)
+        dets = detect_landmarks(frame.image, params, CAMERA)
+        assert [d.code for d in dets] == [code]
+        assert dets[0].edge_corners.shape == (4, 5, 2)
+        np.testing.assert_allclose(dets[0].corners, frame.landmarks[0].corners_px, atol=0.2)
+    # a large landmark is not a small one and vice versa
+    assert detect_landmarks(view(156).image, params, CAMERA) == []
+    assert detect_landmarks(view(5, design=design).image, camera=CAMERA) == []
+
+
+def test_mirror_image_is_not_a_landmark():
+    for code in (156, 123456789):
+        img = np.ascontiguousarray(view(code, centre=(319.5, 239.5)).image[:, ::-1])
+        assert detect_landmarks(img) == []
+
+
+def test_distortion_aware_fit_is_more_accurate():
+    cam = CameraModel(640, 480, CAMERA.K, np.array([-0.35, 0.15, 0.0, 0.0, 0.0]))
+    frame = view(156, distance=0.6, centre=(520.0, 380.0), camera=cam)
+    truth = frame.landmarks[0].corners_px
+    with_cam = detect_landmarks(frame.image, camera=cam)[0].corners
+    without = detect_landmarks(frame.image)[0].corners
+    err_with = np.abs(with_cam - truth).max()
+    err_without = np.abs(without - truth).max()
+    assert err_with < 0.15 < err_without
+
+
+def test_sub_pixel_steps_improve_on_plain_eq2_centres():
+    errs = {True: [], False: []}
+    for i in range(6):
+        frame = view(156, distance=2.0, roll=7.0 * i, turn=10.0 * i - 25, index=i)
+        truth = frame.landmarks[0].corners_px
+        for refine in (True, False):
+            params = DetectorParams(refine_corners=refine, refine_edges=refine)
+            d = detect_landmarks(frame.image, params, CAMERA)[0]
+            errs[refine].append(np.sqrt(np.mean(np.sum((d.corners - truth) ** 2, axis=1))))
+    assert np.mean(errs[True]) < 0.5 * np.mean(errs[False])
+    assert max(errs[True]) < 0.08
+
+
+def test_image_problems_and_bad_arrays():
+    assert image_problem(np.zeros((48, 64), np.uint8))[1] is False
+    assert image_problem(np.full((48, 64), 255, np.uint8))[1] is False
+    assert image_problem(np.full((48, 64), 128, np.uint8))[1] is False
+    sat = np.full((48, 64), 255, np.uint8)
+    sat[:10] = 0
+    problem, usable = image_problem(sat)
+    assert usable and 'overexposed' in problem
+    assert image_problem(view().image) == ('', True)
+    assert detect_landmarks(np.zeros((48, 64), np.uint8)) == []
+    assert detect_landmarks(np.zeros((3, 3), np.uint8)) == []
+    with pytest.raises(ValueError, match='2-D'):
+        detect_landmarks(np.zeros((4, 4, 3), np.uint8))
+    noisy = np.nan_to_num(view().image.astype(float))
+    noisy[0, 0] = np.nan                                # float input, NaN tolerated
+    assert [d.code for d in detect_landmarks(noisy, camera=CAMERA)] == [156]
+
+
+@pytest.mark.parametrize('field, value', [('kind', '4x4'), ('k_lim', 0.0), ('k_min', 7.5),
+                                          ('neighbour_mode', 'all'), ('max_neighbours', 1),
+                                          ('refine_edges', 1)])
+def test_detector_params_are_validated(field, value):
+    with pytest.raises(ValueError, match=field):
+        DetectorParams(**{field: value})
