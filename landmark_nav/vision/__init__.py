@@ -1,4 +1,4 @@
-"""Vision cores: the artificial landmark design and the camera model.
+"""Vision cores: the artificial landmark (design, detection, pose) and the camera model.
 
 Pure Python/numpy/OpenCV; no rclpy and no message types (see
 :mod:`landmark_nav.conversions` for CameraInfo <-> :class:`CameraModel`).
@@ -8,4 +8,11 @@ Pure Python/numpy/OpenCV; no rclpy and no message types (see
   :class:`InvalidCodeError`.
 * :mod:`.camera` -- :class:`CameraModel` (pinhole + plumb_bob distortion in the REP 103
   camera optical frame), :data:`OPTICAL_FROM_BODY`.
+* :mod:`.detector` -- corner filters, frame and code detection (chapter §2.2.1–2.2.3).
+* :mod:`.pose` -- 6-DOF landmark pose by Gauss–Newton (§2.2.4, eqs. 6–19) with covariance,
+  and the ``cv2.solvePnP`` reference.
+* :mod:`.localize` -- landmark map, camera mount, robot pose from a detection and the
+  odometry correction by landmark fixes (§2.3.3).
+* :mod:`.evaluate` -- Table 1 / Table 2 style statistics on rendered frames
+  (``python -m landmark_nav.vision.evaluate``).
 """
