@@ -1,5 +1,6 @@
 """Tests of the camera scenarios (landmark_views, landmark_shuttle) and their bag recording."""
 
+from dataclasses import replace
 import math
 
 from landmark_nav.bag import BagReader
@@ -119,6 +120,53 @@ def test_shuttle_odometry_drifts_and_fixes_bound_the_error():
     cal_err = np.array([a.error for a in _arrivals(
         iter_landmark_shuttle(1, cal, localize=oracle_localizer(cal)))[1:]])
     assert cal_err.mean() < 0.5 * fixed_err.mean()
+
+
+def test_shuttle_fixes_while_driving_steer_to_the_near_point():
+    cfg = ShuttleConfig(trips=3, image_rate=0.0, stop_frames=1, fix_while_driving=True,
+                        approach_image_rate=2.0)
+    oracle = oracle_localizer(cfg)
+    seen = []
+
+    def localize(frame):
+        seen.append(frame)
+        return oracle(frame)
+
+    events = list(iter_landmark_shuttle(1, cfg, localize=localize))
+    samples = [e for e in events if isinstance(e, ShuttleSample)]
+    frames = [e for e in events if isinstance(e, CameraFrame)]
+    arrivals = _arrivals(events)
+    assert [e.stamp_ns for e in events] == sorted(e.stamp_ns for e in events)
+    assert seen == frames          # every frame, stop or approach, went to the localizer
+    assert arrivals[0].approach_frames == 0
+    # between two arrivals: the approach frames, then the stop frames
+    approach, trip_frames = [], []
+    for e in events:
+        if isinstance(e, CameraFrame):
+            trip_frames.append(e)
+        elif isinstance(e, ShuttleArrival):
+            assert len(trip_frames) == e.approach_frames + cfg.stop_frames
+            approach += trip_frames[:e.approach_frames]
+            trip_frames = []
+    for a in arrivals[1:]:
+        # one frame standing at the far point, then 2 Hz over the >= 2 m drive at 0.35 m/s
+        assert a.approach_frames >= 1 + int(2.0 * 2.0 / cfg.robot.max_linear_speed)
+        assert a.approach_fixes == a.approach_frames
+    for f in approach:
+        # taken between the far and the near point, facing the landmark
+        s = max((s for s in samples if s.stamp_ns <= f.stamp_ns), key=lambda s: s.stamp_ns)
+        assert cfg.far_point[0] - 0.05 <= s.true_pose[0] <= cfg.near_point[0] + 0.05
+        assert abs(s.true_pose[2]) < 0.2 and f.landmarks[0].in_view
+    # perfect fixes on the way in leave only the last centimetres of drift
+    assert max(a.error for a in arrivals[1:]) < 0.01
+    stop_only = _arrivals(iter_landmark_shuttle(1, replace(cfg, fix_while_driving=False),
+                                                localize=oracle_localizer(cfg)))
+    assert all(a.approach_frames == 0 for a in stop_only)
+    assert max(a.error for a in arrivals[1:]) < 0.5 * max(a.error for a in stop_only[1:])
+    with pytest.raises(ValueError):
+        ShuttleConfig(approach_image_rate=-1.0)
+    with pytest.raises(ValueError):
+        ShuttleConfig(image_rate=math.nan)
 
 
 def test_shuttle_stream_is_consistent():

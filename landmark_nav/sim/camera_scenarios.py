@@ -427,7 +427,16 @@ class ShuttleConfig:
     28 cm off after 100 trips); an uncalibrated one (``odometry_factors=(1, 1, 1)``) within
     16.5 cm (mean 11.4 cm; 1.9 m off after 100 trips without fixes) -- the chapter reports
     10 cm. The arrival error is the odometry drift of one round trip: a landmark detector
-    cannot do better than the oracle.
+    cannot do better than the oracle (stop-only procedure, the chapter's).
+
+    With ``fix_while_driving`` the robot also takes fixes on the way back: one standing at
+    the far point once it has turned to face the landmark, then frames at
+    ``approach_image_rate`` while it drives to the near point (facing the landmark, turning
+    motion blurred as any moving frame). Each fix corrects the estimate the robot steers and
+    stops on, so the arrival error is the drift of the last few centimetres plus the fix
+    error instead of the drift of a whole round trip. Measured with the landmark detector and
+    the EKF of :mod:`landmark_nav.vision.localize` (2 Hz, 100 trips): max 1.8 cm (seed 1),
+    0.9 cm (seed 2), 1.3 cm (seed 3); with perfect fixes 0.2 cm (seed 2).
 
     Attributes:
         trips: number of round trips (near -> far -> near).
@@ -447,6 +456,12 @@ class ShuttleConfig:
         photometry: base photometry of every frame (noise, gamma ...).
         odometry_factors: (k1, k2, k3) the robot's odometry believes in; None (default) =
             the true ones of ``robot`` (a calibrated robot), (1, 1, 1) = uncalibrated.
+        fix_while_driving: also take landmark fixes at the far point (after turning to the
+            landmark) and while approaching the near point; False (default) = fixes only
+            while standing at the near point (the chapter's procedure).
+        approach_image_rate: camera rate [Hz] while approaching the near point with
+            ``fix_while_driving`` (replaces ``image_rate`` there; 0 = only the far-point
+            frame).
     """
 
     trips: int = 100
@@ -464,8 +479,18 @@ class ShuttleConfig:
     exposure_time: float = 0.01
     photometry: Photometry = Photometry(gamma=2.2, noise_sigma=2.0, shot_noise=0.02)
     odometry_factors: Optional[Tuple[float, float, float]] = None
+    fix_while_driving: bool = False
+    approach_image_rate: float = 2.0
 
     WALL_X = 5.0
+
+    def __post_init__(self) -> None:
+        """Validate the camera rates."""
+        for name in ('image_rate', 'approach_image_rate'):
+            v = getattr(self, name)
+            if not (isinstance(v, numbers.Real) and math.isfinite(v) and v >= 0):
+                raise ValueError(f'ShuttleConfig.{name} must be a finite rate >= 0 [Hz]; '
+                                 f'got {v!r}')
 
     @property
     def believed_factors(self) -> Tuple[float, float, float]:
@@ -608,6 +633,9 @@ class ShuttleArrival:
         error: distance true -> near point [m] (the chapter's "position at the one-meter
             point").
         fix: (3,) the landmark fix applied (mean of the stop frames' fixes), or None.
+        approach_frames: frames taken at the far point and on the approach since the last
+            stop (``fix_while_driving``).
+        approach_fixes: landmark fixes applied from them.
     """
 
     trip: int
@@ -616,6 +644,8 @@ class ShuttleArrival:
     estimate: np.ndarray
     error: float
     fix: Optional[np.ndarray]
+    approach_frames: int = 0
+    approach_fixes: int = 0
 
 
 ShuttleEvent = Union[ShuttleSample, CameraFrame, ShuttleArrival]
@@ -701,7 +731,11 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
     drives to the near point and turns to face the landmark -- all on its own estimate --,
     stops (a :class:`ShuttleArrival` with the true position error), takes
     ``stop_frames`` images and, if ``localize`` returns robot poses for them, resets its
-    estimate to their mean (a landmark fix).
+    estimate to their mean (a landmark fix). With ``config.fix_while_driving`` it also
+    takes a frame standing at the far point once it faces the landmark and frames at
+    ``approach_image_rate`` while driving to the near point, and resets its estimate to
+    each pose ``localize`` returns for them, right after the frame (the next control step
+    steers on it).
 
     Args:
         seed: non-negative int (encoder noise, image noise, scene textures).
@@ -715,7 +749,9 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
 
     Yields:
         :class:`ShuttleSample` every 0.1 s, :class:`CameraFrame` at ``image_rate`` while
-        moving and at the stops, :class:`ShuttleArrival` at each stop.
+        moving (``approach_image_rate`` on the approach with ``fix_while_driving``) and at
+        the stops, :class:`ShuttleArrival` at each stop. A frame is yielded before
+        ``localize`` sees it, and after the sample of its stamp.
     """
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise ValueError(f'seed must be a non-negative int; got {seed!r}')
@@ -730,6 +766,9 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
     frame_index = [0]
     next_image_ns = [START_NS]
     image_step_ns = int(round(NS_PER_S / cfg.image_rate)) if cfg.image_rate > 0 else 0
+    approach_step_ns = int(round(NS_PER_S / cfg.approach_image_rate)) \
+        if cfg.approach_image_rate > 0 else 0
+    approach = [0, 0]   # frames, fixes since the last stop
 
     def frame() -> CameraFrame:
         i = frame_index[0]
@@ -750,11 +789,23 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
                            landmarks=truths, camera_rotation=_ro(R_wc),
                            camera_position=_ro(t_wc), photometry=ph)
 
-    def tick(v: float, w: float) -> Iterator[ShuttleEvent]:
+    def drive_fix(f: CameraFrame) -> None:
+        # a fix taken on the move resets the estimate the next control step steers on
+        approach[0] += 1
+        res = localize(f) if localize is not None else None
+        if res is not None:
+            robot.apply_fix(np.asarray(res, dtype=float).reshape(3))
+            approach[1] += 1
+
+    def tick(v: float, w: float, fixing: bool = False) -> Iterator[ShuttleEvent]:
         yield robot.step(v, w)
-        if images and image_step_ns and robot.stamp_ns >= next_image_ns[0]:
-            next_image_ns[0] = robot.stamp_ns + image_step_ns
-            yield frame()
+        step_ns = approach_step_ns if fixing else image_step_ns
+        if images and step_ns and robot.stamp_ns >= next_image_ns[0]:
+            next_image_ns[0] = robot.stamp_ns + step_ns
+            f = frame()
+            yield f
+            if fixing:
+                drive_fix(f)
 
     def turn_rate(err: float) -> float:
         mag = min(p.max_angular_speed,
@@ -777,7 +828,7 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
             th_unwrapped += math.remainder(robot.estimate[2] - prev, 2 * math.pi)
         yield from brake()
 
-    def go_to(target: np.ndarray) -> Iterator[ShuttleEvent]:
+    def go_to(target: np.ndarray, fixing: bool = False) -> Iterator[ShuttleEvent]:
         for _ in range(20000):
             est = robot.estimate
             dx, dy = target[0] - est[0], target[1] - est[1]
@@ -791,12 +842,23 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
                     brake_speed(along, DECEL_MARGIN * p.max_linear_accel, dt), along / dt)
             w = 0.0 if dist < 0.15 else max(-p.max_angular_speed,
                                             min(p.max_angular_speed, 2.0 * err))
-            yield from tick(v * max(0.0, math.cos(err)), w)
-        yield from brake()
+            yield from tick(v * max(0.0, math.cos(err)), w, fixing)
+        yield from brake(fixing)
 
-    def brake() -> Iterator[ShuttleEvent]:
+    def brake(fixing: bool = False) -> Iterator[ShuttleEvent]:
         while abs(robot.v) > 1e-9 or abs(robot.w) > 1e-9:
-            yield from tick(0.0, 0.0)
+            yield from tick(0.0, 0.0, fixing)
+
+    def approach_near() -> Iterator[ShuttleEvent]:
+        fixing = bool(cfg.fix_while_driving and images)
+        if fixing:   # standing at the far point, facing the landmark
+            f = frame()
+            yield f
+            drive_fix(f)
+            next_image_ns[0] = robot.stamp_ns + approach_step_ns
+        yield from go_to(cfg.near_point, fixing)
+        if fixing:
+            next_image_ns[0] = robot.stamp_ns + image_step_ns
 
     def stop(trip: int) -> Iterator[ShuttleEvent]:
         true = robot.true.copy()
@@ -826,7 +888,9 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
         yield ShuttleArrival(trip=trip, stamp_ns=robot.stamp_ns, true_pose=_ro(
             [true[0], true[1], wrap_angle(true[2])]), estimate=_ro(robot.sample().estimate),
             error=float(math.hypot(true[0] - near[0], true[1] - near[1])),
-            fix=None if fix is None else _ro(fix))
+            fix=None if fix is None else _ro(fix), approach_frames=approach[0],
+            approach_fixes=approach[1])
+        approach[:] = [0, 0]
 
     yield robot.sample()
     if images and image_step_ns:
@@ -836,7 +900,7 @@ def iter_landmark_shuttle(seed: int, config: ShuttleConfig = ShuttleConfig(),
         yield from turn_to(math.pi, 1)
         yield from go_to(cfg.far_point)
         yield from turn_to(0.0, -1)
-        yield from go_to(cfg.near_point)
+        yield from approach_near()
         yield from turn_to(0.0, 1 if math.remainder(robot.estimate[2], 2 * math.pi) < 0 else -1)
         yield from stop(trip)
 

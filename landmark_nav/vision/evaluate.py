@@ -1,7 +1,8 @@
 """Offline evaluation of landmark detection and pose on rendered images (chapter §2.3).
 
 Run ``python -m landmark_nav.vision.evaluate [detection|false|repeatability|shuttle|all]``
-for the full-size statistics (tables on stdout, ``--json FILE`` for the figures); the
+(shuttle: ``--procedure stop|approach|both``, ``--approach-rate HZ``) for the full-size
+statistics (tables on stdout, ``--json FILE`` for the figures); the
 tests run the same functions with the counts the acceptance criteria name.
 
 Experiments (every image is rendered by :class:`~landmark_nav.sim.camera.CameraSimulator`
@@ -15,7 +16,8 @@ with a seeded generator; truth comes from the scene, never from the detector):
 * :func:`repeatability` -- Table 1: 100 frames each at 2.2 m and turn 0, 10, 30, 60
   degrees (f = 1050 px, 640 x 480, plumb-bob distortion, pixel noise); spread, absolute
   error, and the Gauss-Newton pose against ``cv2.solvePnP`` on the same corners.
-* :func:`shuttle` -- §2.3.3: odometry corrected by landmark fixes on ``landmark_shuttle``.
+* :func:`shuttle` -- §2.3.3: odometry corrected by landmark fixes on ``landmark_shuttle``,
+  fixes taken standing at the 1 m point (the chapter's procedure) or also on the way there.
 
 Geometry of a view: the camera sits at the world origin with world = its optical frame; the
 landmark pose is given by the pose parameters ``v`` of :mod:`.pose` (landmark centre in the
@@ -363,10 +365,13 @@ class ShuttleResult:
 
     trips: int
     correction: str             # 'ekf', 'reset', 'oracle' or 'none'
+    procedure: str              # 'stop' (fixes at the near point) or 'approach' (also driving)
     arrivals: int
     fixes: int                  # stops with at least one landmark fix
-    stop_frames: int
+    frames: int                 # frames given to the detector (stops, far point, approach)
     detected_frames: int
+    approach_frames: int        # frames at the far point and on the approach
+    approach_fixes: int         # fixes applied from them
     max_error: float            # max distance true position -> near point over the trips
     p95_error: float
     mean_error: float
@@ -437,9 +442,13 @@ class LandmarkLocalizer:
         return np.array([t_wb[0], t_wb[1], math.atan2(r_wb[1, 0], r_wb[0, 0])])
 
 
+SHUTTLE_PROCEDURES = ('stop', 'approach')
+
+
 def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
             config: Optional[ShuttleConfig] = None,
-            params: DetectorParams = DetectorParams()) -> ShuttleResult:
+            params: DetectorParams = DetectorParams(),
+            procedure: str = 'stop', approach_rate: float = 2.0) -> ShuttleResult:
     """Run ``landmark_shuttle`` with odometry corrected by landmark fixes (§2.3.3).
 
     The robot drives on its own estimate; at each stop at the near point it takes the
@@ -447,18 +456,28 @@ def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
     camera mount) correct it: ``'ekf'`` through :class:`~.localize.FixCorrectedOdometry`
     (odometry increments predict, each fix updates with its covariance), ``'reset'`` by the
     scenario's reset to the mean fix, ``'none'`` not at all; ``'oracle'`` resets to the true
-    pose (the scenario's perfect fixes: the best any detector can do). Images are rendered
-    only at the stops. The figure of merit is the chapter's: the true distance of the robot
-    from the near point when it arrives there (before that stop's fix), over all trips.
+    pose (the scenario's perfect fixes: the best any detector can do).
+
+    Procedures: ``'stop'`` (the chapter's) renders images only at the stops;
+    ``'approach'`` (``ShuttleConfig.fix_while_driving``) also takes a frame at the far
+    point once the robot faces the landmark and frames at ``approach_rate`` [Hz] while it
+    drives to the near point (motion blur of the moving robot included), each fix
+    correcting the estimate it steers on (with ``'ekf'``: the filter's estimate after the
+    update). The figure of merit is the chapter's: the true distance of the robot from the
+    near point when it arrives there (before that stop's fix), over all trips.
     """
     if correction not in ('ekf', 'reset', 'none', 'oracle'):
         raise ValueError(f"correction must be 'ekf', 'reset', 'none' or 'oracle'; got "
                          f'{correction!r}')
-    cfg = replace(config or ShuttleConfig(), trips=int(trips), image_rate=0.0)
+    if procedure not in SHUTTLE_PROCEDURES:
+        raise ValueError(f"procedure must be 'stop' or 'approach'; got {procedure!r}")
+    cfg = replace(config or ShuttleConfig(), trips=int(trips), image_rate=0.0,
+                  fix_while_driving=procedure == 'approach',
+                  approach_image_rate=float(approach_rate))
     loc = LandmarkLocalizer(cfg, ekf=correction == 'ekf', params=params)
     localize = {'none': None, 'oracle': oracle_localizer(cfg)}.get(correction, loc)
     errors = []
-    fixes = 0
+    fixes = approach_frames = approach_fixes = 0
     for ev in iter_landmark_shuttle(seed, cfg, localize):
         if isinstance(ev, ShuttleSample):
             loc.odometry(ev)
@@ -466,14 +485,18 @@ def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
             if ev.trip > 0:
                 errors.append(ev.error)
             fixes += ev.fix is not None
+            approach_frames += ev.approach_frames
+            approach_fixes += ev.approach_fixes
     err = np.array(errors) if errors else np.array([math.nan])
     fe = np.array([np.hypot(*(f[:2] - t[:2])) for f, t in loc.fixes]) if loc.fixes \
         else np.array([math.nan])
     fy = np.array([abs(math.remainder(f[2] - t[2], 2 * math.pi)) for f, t in loc.fixes]) \
         if loc.fixes else np.array([math.nan])
     return ShuttleResult(
-        trips=int(trips), correction=correction, arrivals=len(errors), fixes=fixes,
-        stop_frames=loc.frames, detected_frames=loc.detected, max_error=float(err.max()),
+        trips=int(trips), correction=correction, procedure=procedure, arrivals=len(errors),
+        fixes=fixes, frames=loc.frames, detected_frames=loc.detected,
+        approach_frames=approach_frames, approach_fixes=approach_fixes,
+        max_error=float(err.max()),
         p95_error=float(np.percentile(err, 95)), mean_error=float(err.mean()),
         final_error=float(err[-1]), max_fix_error=float(fe.max()),
         max_fix_yaw_error_deg=math.degrees(float(fy.max())))
@@ -481,10 +504,12 @@ def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
 
 def format_shuttle(res: ShuttleResult) -> str:
     """Return the shuttle figures as text (cm)."""
-    return (f'landmark_shuttle, {res.trips} round trips, correction {res.correction}: arrival '
-            f'at the 1 m point max {100 * res.max_error:.1f} cm, 95 % {100 * res.p95_error:.1f}'
-            f' cm, mean {100 * res.mean_error:.1f} cm, last {100 * res.final_error:.1f} cm; '
-            f'{res.detected_frames}/{res.stop_frames} stop frames detected, {res.fixes} fixes, '
+    return (f'landmark_shuttle, {res.trips} round trips, fixes {res.procedure:8s} '
+            f'correction {res.correction:6s}: arrival at the 1 m point max '
+            f'{100 * res.max_error:.2f} cm, 95 % {100 * res.p95_error:.2f} cm, mean '
+            f'{100 * res.mean_error:.2f} cm, last {100 * res.final_error:.2f} cm; '
+            f'{res.detected_frames}/{res.frames} frames detected, {res.fixes} stop fixes, '
+            f'{res.approach_fixes}/{res.approach_frames} approach fixes, '
             f'fix error max {100 * res.max_fix_error:.2f} cm / '
             f'{res.max_fix_yaw_error_deg:.2f} deg')
 
@@ -545,6 +570,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                          'repeatability: 100 per turn) or round trips (shuttle: 100)')
     ap.add_argument('--seed', type=int, default=1, help='random seed (default 1)')
     ap.add_argument('--json', default=None, help='also write the figures to this JSON file')
+    ap.add_argument('--procedure', default='both', choices=['stop', 'approach', 'both'],
+                    help='shuttle: landmark fixes only standing at the 1 m point (stop, the '
+                         "chapter's), also at the 3 m point and while approaching the 1 m "
+                         'point (approach), or both (default)')
+    ap.add_argument('--approach-rate', type=float, default=2.0,
+                    help='shuttle: camera rate on the approach [Hz] (default 2)')
     args = ap.parse_args(argv)
     out = {}
     todo = ['detection', 'false', 'repeatability', 'shuttle'] if args.experiment == 'all' \
@@ -571,10 +602,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 out[name][str(distance)] = [asdict(r) for r in rows]
         elif name == 'shuttle':
             out[name] = []
-            for corr in ('ekf', 'reset', 'oracle', 'none'):
-                res = shuttle(trips=args.frames or 100, seed=args.seed, correction=corr)
-                print(format_shuttle(res))
-                out[name].append(asdict(res))
+            procs = SHUTTLE_PROCEDURES if args.procedure == 'both' else (args.procedure,)
+            for proc in procs:
+                # without fixes both procedures are the same run: once, with 'stop'
+                for corr in ('ekf', 'reset', 'oracle') + (('none',) if proc == 'stop' else ()):
+                    res = shuttle(trips=args.frames or 100, seed=args.seed, correction=corr,
+                                  procedure=proc, approach_rate=args.approach_rate)
+                    print(format_shuttle(res), flush=True)
+                    out[name].append(asdict(res))
         print(f'({name}: {time.perf_counter() - t0:.1f} s)\n')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as fh:
