@@ -36,7 +36,7 @@ def assert_same_stream(a, b):
 
 
 def test_names_and_validation():
-    assert scenario_names() == ['calibration', 'hallway', 'office']
+    assert scenario_names() == ['ambiguous', 'calibration', 'hallway', 'office']
     with pytest.raises(ValueError, match='office'):
         run_scenario('kitchen', 1)
     for bad in (-1, 1.5, '3', True, None):

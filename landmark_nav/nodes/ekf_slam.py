@@ -77,6 +77,10 @@ SLAM_PARAMETERS = {
                             None),
     'max_odometry_jump_rad': ('odometry rotation above this resets the filter [rad]', None,
                               None),
+    'max_update_iterations': ('largest number of linearisations of one update (1 = plain EKF)',
+                              None, None),
+    'relinearize_ratio': ('re-linearise when a landmark moves by more than this fraction of its '
+                          'range', None, None),
 }
 ODOMETRY_PARAMETERS = {
     'sigma_xy_per_sqrt_m': ('odometry translation std per sqrt(m)', None, None),

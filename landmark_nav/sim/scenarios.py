@@ -118,6 +118,10 @@ class ScenarioSpec:
     robot: RobotParams
     laser: Optional[LaserConfig]
     sonar: Optional[SonarConfig]
+    #: Laser blackouts as half-open ranges ``(first, stop)`` of mission primitive indices:
+    #: every scan that starts while primitives ``first .. stop - 1`` run returns nothing
+    #: (all ranges ``+inf``, REP 117 "no return"), e.g. a blinded or obstructed scanner.
+    blackout: Tuple[Tuple[int, int], ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,6 +142,8 @@ class ScenarioResult:
         odometry: the full odometry track (same data as the OdometrySamples).
         events: time-ordered event stream.
         runs: RunMarkers (calibration scenario; empty otherwise).
+        blackout: laser blackouts as ``(start_ns, end_ns)`` stamp windows: the scans with
+            ``start_ns <= stamp_ns < end_ns`` have no returns (empty for most scenarios).
     """
 
     name: str
@@ -153,6 +159,7 @@ class ScenarioResult:
     odometry: OdometryTrack
     events: Tuple[Event, ...]
     runs: Tuple[RunMarker, ...]
+    blackout: Tuple[Tuple[int, int], ...] = ()
 
     @property
     def start_ns(self) -> int:
@@ -211,6 +218,8 @@ class ScenarioResult:
                       'start_pose': [float(v) for v in r.start_pose],
                       'end_pose': [float(v) for v in r.end_pose]} for r in self.runs],
             'counts': self.counts(),
+            **({'blackout': [[int(a), int(b)] for a, b in self.blackout]}
+               if self.blackout else {}),
         }
 
 
@@ -314,10 +323,70 @@ def _calibration() -> ScenarioSpec:
         waypoints=np.zeros((0, 2)), robot=params, laser=None, sonar=None)
 
 
+AMBIGUOUS_ROOM = (24.0, 14.0)
+AMBIGUOUS_POST_SIZE = 0.3
+AMBIGUOUS_POST_SPACING = (0.45, 0.75)
+AMBIGUOUS_ROW = (6.0, 15.0, 9.0, 0.25)  # x from, x to, y, lateral jitter [m]
+AMBIGUOUS_WORLD_SEED = 3
+AMBIGUOUS_LEG = ((4.0, 7.0), (16.0, 7.0))
+AMBIGUOUS_LOOP = ((21.0, 7.0), (21.0, 12.5), (3.0, 12.5), (3.0, 2.0), (21.0, 2.0), (21.0, 4.5),
+                  (10.5, 4.5), (10.5, 6.5))
+
+
+def ambiguous_world() -> World:
+    """24 m x 14 m hall with an irregular row of 0.3 m square posts (closely spaced corners).
+
+    Posts are centred every 0.45-0.75 m (uniform) along ``y = 9 m`` from ``x = 6 m`` to
+    ``15 m``, each shifted across the row by up to 0.25 m and turned by a uniform yaw in
+    [0, 90) deg, drawn from a fixed generator (the world is the same for every seed): 15
+    posts, 60 convex corners. Each post has a corner within 45 deg of any bisector direction,
+    so every corner has a corner of the same kind (bisector within 45 deg, opening 270 deg)
+    on a neighbouring post, 0.45-0.77 m away (median 0.64 m); the irregular pattern makes
+    only the true pairing of a group of corners fit jointly.
+    """
+    rng = np.random.default_rng(AMBIGUOUS_WORLD_SEED)
+    w = World('ambiguous')
+    width, height = AMBIGUOUS_ROOM
+    w.add_room([(0.0, 0.0), (width, 0.0), (width, height), (0.0, height)], label='room')
+    x, x_end, y, jitter = AMBIGUOUS_ROW
+    while x < x_end:
+        w.add_rectangle(x, y + rng.uniform(-jitter, jitter), AMBIGUOUS_POST_SIZE,
+                        AMBIGUOUS_POST_SIZE, yaw=rng.uniform(0.0, 0.5 * math.pi), label='post')
+        x += rng.uniform(*AMBIGUOUS_POST_SPACING)
+    return w
+
+
+def _ambiguous() -> ScenarioSpec:
+    """Map the post row, drive a 72 m loop with the laser blind, re-observe the row.
+
+    The robot (odometry calibrated, ``k1 = k2 = k3 = 1``: only the random wheel noise is
+    left, which the filter's odometry model describes) drives 12 m along the row 2 m from it,
+    then the laser returns nothing while it drives a 72 m loop around the hall, so the pose
+    uncertainty grows to tens of centimetres and degrees, comparable with the corner
+    spacing; it stops 2.5 m in front of the middle of the row, where the blackout ends, and
+    drives along the row again.
+    """
+    params = RobotParams(k1=1.0, k2=1.0, k3=1.0)
+    (x0, y0), leg_end = AMBIGUOUS_LEG
+    mission: List[Primitive] = [Wait(1.0), GoTo(*leg_end, tolerance=0.03)]
+    first = len(mission)
+    mission += [GoTo(x, y, tolerance=0.03) for x, y in AMBIGUOUS_LOOP]
+    stop = len(mission)
+    mission += [Wait(2.0), GoTo(*leg_end, tolerance=0.03), Wait(1.0)]
+    return ScenarioSpec(
+        name='ambiguous',
+        description='irregular row of 0.3 m posts; laser blackout during a 72 m loop, '
+                    'then re-observation',
+        world=ambiguous_world(), start_pose=(x0, y0, 0.0), mission=tuple(mission),
+        waypoints=np.array([leg_end, *AMBIGUOUS_LOOP, leg_end]), robot=params,
+        laser=LaserConfig(), sonar=None, blackout=((first, stop),))
+
+
 SCENARIOS: Dict[str, Callable[[], ScenarioSpec]] = {
     'office': _office,
     'hallway': _hallway,
     'calibration': _calibration,
+    'ambiguous': _ambiguous,
 }
 
 
@@ -372,7 +441,8 @@ def run_scenario(name: str, seed: int, **overrides: Any) -> ScenarioResult:
     """Simulate a named scenario.
 
     Args:
-        name: one of :func:`scenario_names` (``'calibration'``, ``'hallway'``, ``'office'``).
+        name: one of :func:`scenario_names` (``'ambiguous'``, ``'calibration'``, ``'hallway'``,
+            ``'office'``).
         seed: non-negative int; all randomness derives from ``np.random.default_rng(seed)``.
         **overrides: ``robot`` (RobotParams or dict of fields), ``laser`` / ``sonar``
             (config, dict of fields, True = default config, None / False = off).
@@ -419,8 +489,9 @@ def simulate(spec: ScenarioSpec, seed: int) -> ScenarioResult:
             wheel_positions=_ro(odom.wheel_positions[k])))
     if spec.sonar is not None:
         events.extend(SonarRing(spec.world, spec.sonar).cycles(traj, rng_sonar))
+    blackout = _blackout_windows(traj, spans, spec.blackout)
     if spec.laser is not None:
-        events.extend(Laser(spec.world, spec.laser).scans(traj, rng_laser))
+        events.extend(_blind(Laser(spec.world, spec.laser).scans(traj, rng_laser), blackout))
     runs = _run_markers(traj, spans)
     events.extend(runs)
     order = sorted(range(len(events)),
@@ -430,7 +501,34 @@ def simulate(spec: ScenarioSpec, seed: int) -> ScenarioResult:
         robot=spec.robot, laser=spec.laser, sonar=spec.sonar, start_pose=_ro(spec.start_pose),
         waypoints=_ro(np.asarray(spec.waypoints, dtype=float).reshape(-1, 2)),
         trajectory=traj, odometry=odom, events=tuple(events[i] for i in order),
-        runs=tuple(runs))
+        runs=tuple(runs), blackout=blackout)
+
+
+def _blackout_windows(traj: Trajectory, spans: Sequence[Any],
+                      ranges: Sequence[Tuple[int, int]]) -> Tuple[Tuple[int, int], ...]:
+    """Convert primitive index ranges ``(first, stop)`` to ``(start_ns, end_ns)`` windows."""
+    out = []
+    for first, stop in ranges:
+        if not 0 <= first < stop <= len(spans):
+            raise ValueError(f'blackout {(first, stop)} is not a primitive range of the mission '
+                             f'(0 <= first < stop <= {len(spans)})')
+        out.append((traj.start_ns + spans[first].start_step * traj.step_ns,
+                    traj.start_ns + spans[stop - 1].end_step * traj.step_ns))
+    return tuple(out)
+
+
+def _blind(scans: List[ScanSample], windows: Sequence[Tuple[int, int]]) -> List[ScanSample]:
+    """Return the scans with every range set to ``+inf`` inside the blackout windows."""
+    if not windows:
+        return scans
+    out = []
+    for scan in scans:
+        if any(a <= scan.stamp_ns < b for a, b in windows):
+            ranges = np.full_like(scan.ranges, math.inf)
+            ranges.setflags(write=False)
+            scan = replace(scan, ranges=ranges)
+        out.append(scan)
+    return out
 
 
 def _run_markers(traj: Trajectory, spans: Sequence[Any]) -> List[RunMarker]:
@@ -448,6 +546,6 @@ def _run_markers(traj: Trajectory, spans: Sequence[Any]) -> List[RunMarker]:
     return out
 
 
-__all__ = ['build_scenario', 'GoTo', 'OdometrySample', 'run_scenario', 'RunMarker',
-           'ScenarioResult', 'ScenarioSpec', 'scenario_names', 'simulate', 'START_NS',
-           'Straight', 'TruthSample', 'TurnTo', 'Wait']
+__all__ = ['ambiguous_world', 'build_scenario', 'GoTo', 'OdometrySample', 'run_scenario',
+           'RunMarker', 'ScenarioResult', 'ScenarioSpec', 'scenario_names', 'simulate',
+           'START_NS', 'Straight', 'TruthSample', 'TurnTo', 'Wait']

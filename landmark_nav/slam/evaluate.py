@@ -21,7 +21,8 @@ is initialised at the first odometry pose (odom == world at the start):
   corner claimed by two landmarks adds a ``duplicate``.
 * True visible corners: corners the laser sees with both arms in the detector's class
   (:func:`landmark_nav.evaluation.features.corner_truth`, scored) in at least
-  ``confirm_hits`` scans, the number of scans a landmark needs to be mapped.
+  ``confirm_hits`` scans, the number of scans a landmark needs to be mapped (scans without
+  any return, e.g. during a laser blackout, see nothing).
 * Wrong associations: the true identity of an observation is its nearest true corner
   (observation put in the world with the TRUE pose at its beam time) within
   ``match_distance``, else none
@@ -193,6 +194,8 @@ def _visible_counts(result: ScenarioResult) -> Tuple[np.ndarray, np.ndarray]:
         counts = np.zeros(len(world.corners()), dtype=np.int64)
         mount = tuple(float(v) for v in result.laser.mount)
         for scan in result.of_type(ScanSample):
+            if not np.any(np.isfinite(scan.ranges)):
+                continue  # a blind scan (laser blackout) sees no corner
             ct = corner_truth(world, lambda s: sensor_pose(result.truth_at(s), mount),
                               scan.stamp_ns, scan_angles(scan), scan.time_increment,
                               min_range=scan.range_min, max_range=scan.range_max)
