@@ -263,3 +263,64 @@ def test_noisy_rendered_frames_give_fixes_within_a_centimetre():
         truth = pose_from_optical(lt.rotation, lt.translation)
         assert np.linalg.norm(p.v[:3] - truth[:3]) < 0.01
         assert np.max(np.abs(np.degrees(angle_diff(p.v[3:], truth[3:])))) < 1.0
+
+
+def edge_corners_of(v, camera=CAMERA):
+    pts = DESIGN.edge_corners().reshape(-1, 3) @ rotation_matrix(v[3:]).T + v[:3]
+    return camera.project(pts @ M.T).reshape(4, -1, 2)
+
+
+def test_edge_corner_extension_is_exact_and_matches_solvepnp_on_the_same_points():
+    rng = np.random.default_rng(7)
+    params = PoseParams(point_set='edges', edge_corner_weight=1.0)
+    done = 0
+    for _ in range(60):
+        v = random_pose(rng, max_turn=60.0)
+        px, ec = corners_of(v), edge_corners_of(v)
+        if not np.all(CAMERA.in_image(ec.reshape(-1, 2))):
+            continue
+        done += 1
+        p = estimate_pose(px, CAMERA, params=params, edge_corners_px=ec)
+        assert p.converged and p.rms_px < 1e-6
+        np.testing.assert_allclose(p.v[:3], v[:3], atol=1e-8)
+        np.testing.assert_allclose(angle_diff(p.v[3:], v[3:]), 0, atol=1e-8)
+        # with noise and equal weights the same least-squares problem as solvePnP ITERATIVE
+        ecn = ec + rng.normal(0.0, 0.1, ec.shape)
+        ecn[:, 0] = px + rng.normal(0.0, 0.1, px.shape)
+        ecn[:, -1] = np.roll(ecn[:, 0], -1, axis=0)
+        p = estimate_pose(ecn[:, 0], CAMERA, params=params, edge_corners_px=ecn)
+        q = solve_pnp(ecn[:, 0], CAMERA, method='iterative', edge_corners_px=ecn)
+        assert p.rms_px <= q.rms_px + 1e-9
+        np.testing.assert_allclose(p.v[:3], q.v[:3], atol=1e-4)
+    assert done >= 20
+    with pytest.raises(PoseError):
+        solve_pnp(px, CAMERA, method='ippe_square', edge_corners_px=ec)
+    with pytest.raises(PoseError):
+        estimate_pose(px, CAMERA, params=params, edge_corners_px=ec[:, :3])
+
+
+def test_edge_corners_reduce_the_head_on_angle_spread():
+    # head-on at 2.2 m (Table 1 geometry, default camera): the interior X-corners as extra
+    # point equations shrink the spread of tilt and turn for the same per-corner pixel noise
+    rng = np.random.default_rng(8)
+    v = np.array([2.2, 0.1, 0.05, 0.0, 0.0, 0.0])
+    ec = edge_corners_of(v)
+    edges = PoseParams(point_set='edges', edge_corner_weight=1.0)
+    err = {'frame': [], 'edges': []}
+    for _ in range(200):
+        ecn = ec + rng.normal(0.0, 0.05, ec.shape)
+        ecn[:, -1] = np.roll(ecn[:, 0], -1, axis=0)
+        c = ecn[:, 0]
+        err['frame'].append(angle_diff(estimate_pose(c, CAMERA).v[3:], v[3:]))
+        err['edges'].append(angle_diff(
+            estimate_pose(c, CAMERA, params=edges, edge_corners_px=ecn).v[3:], v[3:]))
+    s_frame = np.std(err['frame'], axis=0)
+    s_edges = np.std(err['edges'], axis=0)
+    assert np.all(s_edges[1:] < 0.75 * s_frame[1:])       # tilt and turn
+
+
+@pytest.mark.parametrize('bad', [{'point_set': 'all'}, {'edge_corner_weight': 0.0},
+                                 {'edge_corner_weight': True}])
+def test_pose_params_reject_bad_point_set_values(bad):
+    with pytest.raises(ValueError):
+        PoseParams(**bad)

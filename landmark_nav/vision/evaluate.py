@@ -290,7 +290,9 @@ def repeatability(turns_deg: Sequence[float] = (0.0, 10.0, 30.0, 60.0), distance
     sight, fixed ``photometry``; frames differ by their pixel noise (and the distractors
     around the landmark). The Gauss-Newton pose is compared with ``cv2.solvePnP``
     (IPPE_SQUARE and ITERATIVE) on the same detected corners; the truth comes from the
-    scene.
+    scene. With ``pose_params.point_set == 'edges'`` the pose also uses the interior
+    X-corners of the frame edges, and so does the comparison (IPPE for planar points in
+    place of IPPE_SQUARE, and ITERATIVE, both unweighted).
 
     The images are rendered with ``supersample`` x ``supersample`` samples per pixel: at the
     simulator's default of 2 its edges are placed to about 0.05 px, and at 2.2 m a landmark
@@ -314,12 +316,15 @@ def repeatability(turns_deg: Sequence[float] = (0.0, 10.0, 30.0, 60.0), distance
             if not dets:
                 continue
             c = dets[0].corners
+            # the solvePnP comparison uses the same points as the Gauss-Newton pose
+            ec = dets[0].edge_corners if pose_params.point_set == 'edges' else None
             try:
                 t0 = time.perf_counter()
-                p = estimate_pose(c, camera, design, pose_params)
+                p = estimate_pose(c, camera, design, pose_params, edge_corners_px=ec)
                 t_pose += time.perf_counter() - t0
-                q = solve_pnp(c, camera, design, 'ippe_square')
-                r = solve_pnp(c, camera, design, 'iterative')
+                q = solve_pnp(c, camera, design, 'ippe_square' if ec is None else 'ippe',
+                              edge_corners_px=ec)
+                r = solve_pnp(c, camera, design, 'iterative', edge_corners_px=ec)
             except PoseError:
                 continue
             gn.append(p.v)
@@ -574,6 +579,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='shuttle: landmark fixes only standing at the 1 m point (stop, the '
                          "chapter's), also at the 3 m point and while approaching the 1 m "
                          'point (approach), or both (default)')
+    ap.add_argument('--point-set', default='frame', choices=['frame', 'edges'],
+                    help='repeatability: pose from the four frame corners (frame, the '
+                         "chapter's) or also the interior X-corners of the edges (edges)")
+    ap.add_argument('--supersample', type=int, default=4,
+                    help='repeatability: rendering samples per pixel and axis (default 4)')
     ap.add_argument('--approach-rate', type=float, default=2.0,
                     help='shuttle: camera rate on the approach [Hz] (default 2)')
     args = ap.parse_args(argv)
@@ -597,7 +607,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             out[name] = {}
             for distance in (2.2, 1.0):
                 rows = repeatability(distance=distance, frames=args.frames or 100,
-                                     seed=args.seed + 2)
+                                     seed=args.seed + 2, supersample=args.supersample,
+                                     pose_params=PoseParams(point_set=args.point_set))
                 print(format_repeatability(rows))
                 out[name][str(distance)] = [asdict(r) for r in rows]
         elif name == 'shuttle':
