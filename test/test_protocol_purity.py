@@ -2,14 +2,16 @@
 
 import ast
 
-from landmark_nav.drivers import clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2
+from landmark_nav.drivers import (clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2,
+                                  stream)
 import pytest
 
 ALLOWED = {'collections', 'dataclasses', 'math', 're', 'statistics', 'struct', 'typing', 'numpy',
            'landmark_nav'}
 
 
-@pytest.mark.parametrize('module', [clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2],
+@pytest.mark.parametrize('module', [clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2,
+                                    stream],
                          ids=lambda m: m.__name__)
 def test_module_is_pure(module):
     with open(module.__file__, encoding='utf-8') as f:

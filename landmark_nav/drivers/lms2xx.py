@@ -23,6 +23,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from landmark_nav.drivers.errors import (ChecksumError, EncodeError, FramingError,
                                          ProtocolError, TruncatedError)
+from landmark_nav.drivers.stream import StreamDecoder
 import numpy as np
 
 __all__ = [
@@ -585,7 +586,7 @@ def parse_telegram(telegram: Telegram, mode: str = DEFAULT_MODE) -> Frame:
     return telegram
 
 
-class Lms2xxDecoder:
+class Lms2xxDecoder(StreamDecoder):
     """Incremental decoder of an LMS2xx byte stream.
 
     :meth:`feed` returns, in stream order, :class:`Ack`/:class:`Nak` events, parsed replies
@@ -600,6 +601,8 @@ class Lms2xxDecoder:
 
     The output does not depend on how the stream is cut into chunks.
     """
+
+    unit = 'telegram'
 
     def __init__(self, mode: str = DEFAULT_MODE, address: int = LMS_ADDRESS,
                  parse: bool = True) -> None:
@@ -618,44 +621,22 @@ class Lms2xxDecoder:
             raise ValueError(f'measuring mode {mode!r} unknown')
         if not 0 <= address <= 0xFF:
             raise ValueError(f'address {address} is not a byte')
+        super().__init__()
         self.mode = mode
         self.address = address
         self.parse = parse
         self._min_len = _min_len(address)
-        self._buf = bytearray()
-        self._base = 0
         self._synced = True
-        self._garbage = 0
-        self._garbage_at = 0
-        self._quiet = False
-
-    @property
-    def buffered(self) -> int:
-        """Number of bytes held for an incomplete telegram."""
-        return len(self._buf)
 
     def reset(self) -> None:
         """Drop buffered bytes (e.g. after a reconnect); offsets keep counting."""
-        self._base += len(self._buf)
-        self._buf.clear()
+        super().reset()
         self._synced = True
-        self._garbage = 0
-        self._quiet = False
 
     def _skip(self, pos: int, end: int) -> None:
         if end > pos:
-            if not self._garbage:
-                self._garbage_at = self._base + pos
-            self._garbage += end - pos
             self._synced = False
-
-    def _report(self, out: list, item: object) -> None:
-        if self._garbage and not self._quiet:
-            out.append(FramingError(f'skipped {self._garbage} bytes before a valid telegram '
-                                    f'at offset {self._garbage_at}', self._garbage_at))
-        self._garbage = 0
-        self._quiet = False
-        out.append(item)
+        super()._skip(pos, end)
 
     def _header_ok(self, buf: bytearray, q: int) -> bool:
         return (buf[q] == STX and buf[q + 1] == self.address
@@ -714,6 +695,5 @@ class Lms2xxDecoder:
             self._report(out, item)
             self._synced = True
             pos += total
-        del buf[:pos]
-        self._base += pos
+        self._consume(pos)
         return out

@@ -23,6 +23,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from landmark_nav.drivers.errors import (ChecksumError, EncodeError, FramingError,
                                          ProtocolError, TruncatedError)
+from landmark_nav.drivers.stream import StreamDecoder
 
 __all__ = [
     'ARGINT', 'ARGNINT', 'ARGSTR', 'COMMANDS', 'Command', 'HEADER', 'MAX_COUNT',
@@ -580,7 +581,7 @@ class OdometryUnwrapper:
 # ---------------------------------------------------------------------------- stream decoder
 
 
-class P2osDecoder:
+class P2osDecoder(StreamDecoder):
     """Incremental decoder of a P2OS byte stream.
 
     :meth:`feed` returns, in stream order, the packets interpreted by ``parse`` (default
@@ -593,40 +594,12 @@ class P2osDecoder:
     not depend on how the stream is cut into chunks.
     """
 
+    unit = 'packet'
+
     def __init__(self, parse: Callable[[bytes], Any] = parse_sip) -> None:
         """Create a decoder returning ``parse(data)`` for every valid packet."""
+        super().__init__()
         self.parse = parse
-        self._buf = bytearray()
-        self._base = 0
-        self._garbage = 0
-        self._garbage_at = 0
-        self._quiet = False
-
-    @property
-    def buffered(self) -> int:
-        """Number of bytes held for an incomplete packet."""
-        return len(self._buf)
-
-    def reset(self) -> None:
-        """Drop buffered bytes (e.g. after a reconnect); offsets keep counting."""
-        self._base += len(self._buf)
-        self._buf.clear()
-        self._garbage = 0
-        self._quiet = False
-
-    def _skip(self, pos: int, end: int) -> None:
-        if end > pos:
-            if not self._garbage:
-                self._garbage_at = self._base + pos
-            self._garbage += end - pos
-
-    def _report(self, out: list, item: object) -> None:
-        if self._garbage and not self._quiet:
-            out.append(FramingError(f'skipped {self._garbage} bytes before a valid packet at '
-                                    f'offset {self._garbage_at}', self._garbage_at))
-        self._garbage = 0
-        self._quiet = False
-        out.append(item)
 
     def feed(self, data: bytes) -> List[Union[Any, ProtocolError]]:
         """Add bytes; return the decoded packets and the errors, in stream order."""
@@ -673,6 +646,5 @@ class P2osDecoder:
                 item = type(err)(f'packet 0x{data_[0]:02X} at offset {offset}: {err}', offset)
             self._report(out, item)
             pos = p + 3 + count
-        del buf[:pos]
-        self._base += pos
+        self._consume(pos)
         return out

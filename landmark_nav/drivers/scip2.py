@@ -29,6 +29,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from landmark_nav.drivers.errors import (ChecksumError, EncodeError, FramingError,
                                          ProtocolError, TruncatedError)
+from landmark_nav.drivers.stream import StreamDecoder
 import numpy as np
 
 __all__ = [
@@ -747,7 +748,7 @@ def decode_reply(data: bytes) -> Frame:
     return _parse_reply(m, data[m.end():t], 0)
 
 
-class Scip2Decoder:
+class Scip2Decoder(StreamDecoder):
     """Incremental decoder of the sensor -> host byte stream.
 
     :meth:`feed` returns the frames completed by the new bytes and, in stream order, the
@@ -763,31 +764,11 @@ class Scip2Decoder:
     count bytes since the decoder was created.
     """
 
+    unit = 'echo line'
+
     def __init__(self) -> None:
         """Create a decoder with an empty buffer."""
-        self._buf = bytearray()
-        self._base = 0  # stream offset of self._buf[0]
-        self._garbage = 0  # bytes skipped since the last reply
-        self._garbage_at = 0
-        self._quiet = False  # skipped bytes belong to an error already reported
-
-    @property
-    def buffered(self) -> int:
-        """Number of bytes held for an incomplete reply."""
-        return len(self._buf)
-
-    def reset(self) -> None:
-        """Drop buffered bytes (e.g. after the transport reconnected); offsets keep counting."""
-        self._base += len(self._buf)
-        self._buf.clear()
-        self._garbage = 0
-        self._quiet = False
-
-    def _skip(self, pos: int, end: int) -> None:
-        if end > pos:
-            if not self._garbage:
-                self._garbage_at = self._base + pos
-            self._garbage += end - pos
+        super().__init__()
 
     def feed(self, data: bytes) -> List[Union[Frame, ProtocolError]]:
         """Add bytes; return the completed frames and the errors, in stream order."""
@@ -833,15 +814,5 @@ class Scip2Decoder:
                 continue
             self._report(out, frame)
             pos = t + 2
-        del buf[:pos]
-        self._base += pos
+        self._consume(pos)
         return out
-
-    def _report(self, out: List[Union[Frame, ProtocolError]],
-                item: Union[Frame, ProtocolError]) -> None:
-        if self._garbage and not self._quiet:
-            out.append(FramingError(f'skipped {self._garbage} bytes before a valid echo line '
-                                    f'at offset {self._garbage_at}', self._garbage_at))
-        self._garbage = 0
-        self._quiet = False
-        out.append(item)
