@@ -226,6 +226,17 @@ def test_info_reply_checksum_errors_are_warnings():
     assert 'offset 7' in info.checksum_warnings[1] and 'offset 21' in info.checksum_warnings[2]
 
 
+def test_info_line_whose_checksum_is_a_semicolon():
+    # The checksum char ranges over 0x30..0x6F, so ';' (0x3B) is a valid one: "KEY:VALUE;;"
+    serial = next(f'H{n:07d}' for n in range(1000)
+                  if scip2.checksum(f'SERI:H{n:07d}'.encode()) == ord(';'))
+    reply = scip2.encode_info_reply('VV', [('VEND', 'Hokuyo'), ('SERI', serial)])
+    assert f'SERI:{serial};;'.encode() in reply
+    info = scip2.decode_reply(reply)
+    assert info.as_dict() == {'VEND': 'Hokuyo', 'SERI': serial}
+    assert info.checksum_warnings == ()
+
+
 def test_one_shot_errors_say_what_and_where():
     with pytest.raises(ChecksumError, match=r'status line at offset 13'):
         scip2.decode_reply(GD_EXAMPLE.replace(b'00P', b'00Q'))

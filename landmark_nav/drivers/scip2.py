@@ -651,8 +651,9 @@ def _parse_info(command: str, status: str, lines: List[bytes], offsets: List[int
                 warnings: List[str], tag: str, where: str) -> InfoReply:
     fields = []
     for line, off in zip(lines, offsets):
-        text, sep, ck = line.rpartition(b';')
-        if not sep or len(ck) != 1:
+        # "KEY:VALUE;C": the checksum C is the last byte and may itself be ';'
+        text, sep, ck = line[:-2], line[-2:-1], line[-1:]
+        if sep != b';':
             warnings.append(f'{where}: info line at offset {off} has no checksum')
             text = line
         elif ck[0] != checksum(text):
