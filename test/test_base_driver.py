@@ -271,6 +271,18 @@ def test_watchdog_stops_the_robot_when_cmd_vel_stops(tmp_path):
               f'{stopped - last:.3f} s after it')
 
 
+def test_watchdog_e_stop_has_the_wheels_at_rest_within_0_6_s(tmp_path):
+    with rig(tmp_path, cmd_vel_timeout_action='e_stop') as r:
+        assert r.ros.wait_until(lambda: r.node.client.is_open, 5.0)
+        last = r.drive(0.3, 0.0, 1.5)
+        assert r.ros.wait_until(lambda: any(e == 'stopped' and t > last
+                                            for t, e in list(r.device.events)), 3.0)
+        stopped = next(t for t, e in r.device.events if e == 'stopped' and t > last)
+        assert not any(c.name == 'STOP' and c.time > last for c in r.device.commands)
+        assert stopped - last <= 0.6, f'wheels at rest {stopped - last:.3f} s after cmd_vel'
+        print(f'watchdog e_stop: wheels at rest {stopped - last:.3f} s after the last cmd_vel')
+
+
 def test_enable_motors_service_and_diagnostics(tmp_path):
     with rig(tmp_path) as r:
         diag = r.ros.collect('/diagnostics', DiagnosticArray)

@@ -56,6 +56,9 @@ class ClientConfig:
         angular_decel: SETRA with a negative argument [rad/s^2].
         axle_length: Nominal axle length b [m] (VEL2 wheel speeds, lost-cycle check).
         cmd_timeout: STOP after this long without a velocity command [s].
+        watchdog_command: What the watchdog sends: ``STOP`` (the robot decelerates at
+            ``linear_decel``) or ``E_STOP`` (the robot stops at once, overriding the
+            deceleration limits).
         pulse_period: PULSE when nothing was sent for this long [s].
         sync_timeout: Wait this long for a SYNC echo [s].
         close_wait: After CLOSE to a still-open robot, wait this long before SYNC0 [s].
@@ -76,6 +79,7 @@ class ClientConfig:
     angular_decel: float = math.radians(90.0)
     axle_length: float = 0.33
     cmd_timeout: float = 0.5
+    watchdog_command: str = 'STOP'
     pulse_period: float = 1.0
     sync_timeout: float = 0.5
     close_wait: float = 0.3
@@ -88,6 +92,8 @@ class ClientConfig:
         if self.robot_model != 'auto' and self.robot_model not in ROBOT_MODELS:
             raise ValueError(f'robot_model {self.robot_model!r} is not auto or one of '
                              f'{", ".join(ROBOT_MODELS)}')
+        if self.watchdog_command not in ('STOP', 'E_STOP'):
+            raise ValueError(f'watchdog_command {self.watchdog_command!r} must be STOP or E_STOP')
         if self.command_mode not in ('vel', 'vel2'):
             raise ValueError(f'command_mode {self.command_mode!r} must be vel or vel2')
         for name in ('max_linear_speed', 'max_angular_speed', 'linear_accel', 'linear_decel',
@@ -302,8 +308,9 @@ class P2osClient:
             self._cmd_moving = False
             self._last_cmd = b''
             self.watchdog_stops += 1
-            self._note(f'no velocity command for {now - self._cmd_time:.2f} s: STOP')
-            out += encode_command('STOP')
+            self._note(f'no velocity command for {now - self._cmd_time:.2f} s: '
+                       f'{c.watchdog_command}')
+            out += encode_command(c.watchdog_command)
         if not out and now - self._last_sent >= c.pulse_period:
             out = encode_command('PULSE')
         return self._sent(out, now)

@@ -364,6 +364,8 @@ class P2osDevice(Device):
             self.mode = 'vel'
             self.vel_setpoint = self.rvel_setpoint = 0.0
         elif name == 'E_STOP':
+            if self.wheels != (0, 0):
+                self.events.append((now, 'stopped'))
             self.mode = 'vel'
             self.vel_setpoint = self.rvel_setpoint = 0.0
             self.wheel_setpoints = (0.0, 0.0)

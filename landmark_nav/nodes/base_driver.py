@@ -95,6 +95,10 @@ class BaseDriver(Node):
                               (0.01, 5.0)),
                 cmd_timeout=d(self, 'cmd_vel_timeout', 0.5, 'STOP when cmd_vel stops for '
                               'this long [s]', (0.05, 60.0)),
+                watchdog_command=d(self, 'cmd_vel_timeout_action', 'stop', 'what the '
+                                   'cmd_vel watchdog sends: stop (decelerate at '
+                                   'max_linear_decel) or e_stop (stop at once)',
+                                   choices=['stop', 'e_stop']).upper(),
                 pulse_period=d(self, 'pulse_period', 1.0, 'PULSE keep-alive when nothing was '
                                'sent for this long [s] (the robot stops after 2 s)',
                                (0.05, 1.9)),
