@@ -176,7 +176,7 @@ class BaseDriver(Node):
         self.link = DeviceLink(make_transport(link), P2osDecoder(), self.on_frame,
                                self.health, on_connect=self.on_connect,
                                on_disconnect=self.on_disconnect, on_tick=self.on_tick,
-                               logger=self.get_logger())
+                               logger=self.get_logger(), alive=self.context.ok)
         self.diagnostics = DiagnosticsPublisher(self, 'base_driver: connection',
                                                 link['port'], self.health,
                                                 link['diagnostics_period'],

@@ -332,6 +332,8 @@ class DeviceLink:
         logger: rclpy logger (or anything with ``info``/``warning``/``error``) or None.
         tick_s: Period of ``on_tick`` [s].
         clock: Monotonic clock [s].
+        alive: Whether the node can still publish (e.g. ``node.context.ok``); callback
+            failures after it turns False (shutdown in progress) are not logged.
     """
 
     def __init__(self, transport: SerialTransport, decoder: Any,
@@ -341,8 +343,10 @@ class DeviceLink:
                  on_tick: Optional[Callable[[float], None]] = None,
                  on_error: Optional[Callable[[ProtocolError, float], None]] = None,
                  logger: Any = None, tick_s: float = 0.02,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 alive: Optional[Callable[[], bool]] = None) -> None:
         """Configure; call :meth:`start` to run."""
+        self.alive = alive
         self.transport = transport
         self.decoder = decoder
         self.on_frame = on_frame
@@ -447,6 +451,8 @@ class DeviceLink:
         try:
             fn(*args)
         except Exception as err:  # the I/O thread must survive driver bugs
+            if self.alive is not None and not self.alive():
+                return  # shutting down: publishing fails by design
             self._log('error', f'{what} failed: {err!r}\n{traceback.format_exc(limit=4)}',
                       throttle_s=5.0)
 

@@ -103,7 +103,8 @@ class LaserDriver(Node):
             make_transport(link), s.decoder, lambda f, now: self.apply(s.frame(f, now)),
             self.health, on_connect=lambda: self.apply(s.connect(time.monotonic())),
             on_tick=lambda now: self.apply(s.tick(now)),
-            on_error=lambda e, now: self.apply(s.error(e, now)), logger=self.get_logger())
+            on_error=lambda e, now: self.apply(s.error(e, now)), logger=self.get_logger(),
+            alive=self.context.ok)
         self.link.start()
         self.get_logger().info(f'laser_driver: {protocol} on {link["port"]}')
 
