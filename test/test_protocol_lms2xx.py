@@ -3,6 +3,7 @@
 import math
 import random
 
+from fuzzing import mutated, random_chunks
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from landmark_nav.drivers import lms2xx
@@ -367,29 +368,15 @@ _POOL = [MODE_OK, WRONG_PASSWORD, b0(181, 3)[0], b0(361, 4, units='cm')[0],
          lms2xx.encode_measured_values([math.inf, math.nan, 1.0], mode='32_immediate')]
 
 
-@st.composite
-def mutated(draw, pool):
-    """Draw a valid frame of ``pool`` with up to 4 flips, truncations, insertions, deletions."""
-    data = bytearray(draw(st.sampled_from(pool)))
-    if draw(st.integers(0, 9)) == 0:
-        return bytes(draw(st.binary(max_size=200)))
-    for _ in range(draw(st.integers(1, 4))):
-        op = draw(st.sampled_from(['flip', 'truncate', 'insert', 'delete', 'header', 'fix']))
-        pos = draw(st.integers(0, len(data)))
-        if op == 'flip' and pos < len(data):
-            data[pos] ^= 1 << draw(st.integers(0, 7))
-        elif op == 'header' and pos < len(data):
-            data[pos] = draw(st.sampled_from([0x02, 0x80, 0x06, 0x15, 0xB0, 0xFF, 0x00]))
-        elif op == 'truncate':
-            del data[pos:]
-        elif op == 'insert':
-            data[pos:pos + 0] = draw(st.binary(min_size=1, max_size=8))
-        elif op == 'delete':
-            del data[pos:pos + draw(st.integers(1, 8))]
-        elif op == 'fix' and len(data) >= 6:  # recompute LEN and CRC: reach the parsers
-            data[2:4] = (len(data) - 6).to_bytes(2, 'little')
-            data[-2:] = lms2xx.crc16(bytes(data[:-2])).to_bytes(2, 'little')
-    return bytes(data)
+_SPECIAL = [0x02, 0x80, 0x06, 0x15, 0xB0, 0xFF, 0x00]
+
+
+def _fix(data: bytearray) -> bytearray:
+    """Recompute LEN and CRC, so that mutations reach the parsers."""
+    if len(data) >= 6:
+        data[2:4] = (len(data) - 6).to_bytes(2, 'little')
+        data[-2:] = lms2xx.crc16(bytes(data[:-2])).to_bytes(2, 'little')
+    return data
 
 
 def _decode_one(data, mode):
@@ -404,18 +391,18 @@ def _decode_one(data, mode):
 
 
 @settings(max_examples=10_000, deadline=None)
-@given(mutated(_POOL), st.sampled_from(sorted(lms2xx.MEASURING_MODES)))
+@given(mutated(_POOL, _SPECIAL, _fix), st.sampled_from(sorted(lms2xx.MEASURING_MODES)))
 def test_fuzz_decode_raises_only_protocol_errors(data, mode):
     _decode_one(data, mode)
 
 
 @settings(max_examples=1_000, deadline=None)
-@given(st.lists(mutated(_POOL), min_size=1, max_size=8), st.randoms(use_true_random=False))
+@given(st.lists(mutated(_POOL, _SPECIAL, _fix), min_size=1, max_size=8),
+       st.randoms(use_true_random=False))
 def test_fuzz_stream_never_raises_and_keeps_valid_frames(frames, rnd):
     # the padding resolves any header still waiting for the bytes its LEN announces
     stream = b''.join(frames) + MODE_OK + bytes(820)
-    cuts = sorted(rnd.sample(range(len(stream) + 1), min(5, len(stream))))
-    chunks = [stream[a:b] for a, b in zip([0] + cuts, cuts + [len(stream)])]
+    chunks = random_chunks(stream, rnd)
     out = decode_stream(chunks)
     assert out == decode_stream([stream])
     assert out[-1] == ('frame', lms2xx.ModeSwitchReply(0, 0x10))

@@ -3,6 +3,7 @@
 import math
 import random
 
+from fuzzing import mutated, random_chunks
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from landmark_nav.drivers import p2os
@@ -378,29 +379,15 @@ _POOL = [STATUS_EXAMPLE, SYNC2_EXAMPLE, stream_parts()[1], p2os.encode_sync_repl
                                               tuple((i, 100 * i) for i in range(16))))]
 
 
-@st.composite
-def mutated(draw, pool):
-    """Draw a valid packet of ``pool`` with up to 4 flips, truncations, insertions, deletions."""
-    data = bytearray(draw(st.sampled_from(pool)))
-    if draw(st.integers(0, 9)) == 0:
-        return bytes(draw(st.binary(max_size=200)))
-    for _ in range(draw(st.integers(1, 4))):
-        op = draw(st.sampled_from(['flip', 'truncate', 'insert', 'delete', 'byte', 'fix']))
-        pos = draw(st.integers(0, len(data)))
-        if op == 'flip' and pos < len(data):
-            data[pos] ^= 1 << draw(st.integers(0, 7))
-        elif op == 'byte' and pos < len(data):
-            data[pos] = draw(st.sampled_from([0xFA, 0xFB, 0x00, 0xFF, 0x32, 0x33, 0x3B, 0x2B]))
-        elif op == 'truncate':
-            del data[pos:]
-        elif op == 'insert':
-            data[pos:pos] = draw(st.binary(min_size=1, max_size=8))
-        elif op == 'delete':
-            del data[pos:pos + draw(st.integers(1, 8))]
-        elif op == 'fix' and 5 <= len(data) <= 202:  # recompute count and checksum
-            data[2] = len(data) - 3
-            data[-2:] = p2os.checksum(bytes(data[3:-2])).to_bytes(2, 'big')
-    return bytes(data)
+_SPECIAL = [0xFA, 0xFB, 0x00, 0xFF, 0x32, 0x33, 0x3B, 0x2B]
+
+
+def _fix(data: bytearray) -> bytearray:
+    """Recompute count and checksum, so that mutations reach the parsers."""
+    if 5 <= len(data) <= 202:
+        data[2] = len(data) - 3
+        data[-2:] = p2os.checksum(bytes(data[3:-2])).to_bytes(2, 'big')
+    return data
 
 
 def _decode_one(data):
@@ -414,7 +401,7 @@ def _decode_one(data):
 
 
 @settings(max_examples=10_000, deadline=None)
-@given(mutated(_POOL))
+@given(mutated(_POOL, _SPECIAL, _fix))
 def test_fuzz_decode_raises_only_protocol_errors(data):
     for frame in _decode_one(data):
         assert isinstance(frame, (p2os.StatusPacket, p2os.SyncReply, p2os.Packet,
@@ -422,12 +409,12 @@ def test_fuzz_decode_raises_only_protocol_errors(data):
 
 
 @settings(max_examples=1_000, deadline=None)
-@given(st.lists(mutated(_POOL), min_size=1, max_size=8), st.randoms(use_true_random=False))
+@given(st.lists(mutated(_POOL, _SPECIAL, _fix), min_size=1, max_size=8),
+       st.randoms(use_true_random=False))
 def test_fuzz_stream_never_raises_and_keeps_valid_frames(frames, rnd):
     # the padding resolves any header still waiting for the bytes its count announces
     stream = b''.join(frames) + SYNC2_EXAMPLE + bytes(205)
-    cuts = sorted(rnd.sample(range(len(stream) + 1), min(5, len(stream))))
-    chunks = [stream[a:b] for a, b in zip([0] + cuts, cuts + [len(stream)])]
+    chunks = random_chunks(stream, rnd)
     out = decode_stream(chunks)
     assert out == decode_stream([stream])
     assert out[-1] == ('frame', p2os.SyncReply(2, 'MyRobot', 'Pioneer', 'p2dx'))

@@ -3,6 +3,7 @@
 import math
 import random
 
+from fuzzing import mutated, random_chunks
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from landmark_nav.drivers import scip2
@@ -416,35 +417,19 @@ _POOL = [GD_EXAMPLE, PP_REPLY, b'BM\n02R\n\n', b'SCIP2.0\n0\n\n', b'MD0044072501
          scip2.encode_reply(b'TM1', '00', [b'm2@0']), b'QT;tag\n0Ee\n\n']
 
 
-@st.composite
-def mutated(draw, pool):
-    """Draw a valid frame of ``pool`` with up to 4 flips, truncations, insertions, deletions."""
-    data = bytearray(draw(st.sampled_from(pool)))
-    if draw(st.integers(0, 9)) == 0:
-        return bytes(draw(st.binary(max_size=200)))
-    for _ in range(draw(st.integers(1, 4))):
-        op = draw(st.sampled_from(['flip', 'truncate', 'insert', 'delete', 'byte', 'fix']))
-        pos = draw(st.integers(0, len(data)))
-        if op == 'flip' and pos < len(data):
-            data[pos] ^= 1 << draw(st.integers(0, 7))
-        elif op == 'byte' and pos < len(data):
-            data[pos] = draw(st.sampled_from([0x0A, 0x00, 0x30, 0x6F, 0xFF, 0x3B, 0x41]))
-        elif op == 'truncate':
-            del data[pos:]
-        elif op == 'insert':
-            data[pos:pos] = draw(st.binary(min_size=1, max_size=8))
-        elif op == 'delete':
-            del data[pos:pos + draw(st.integers(1, 8))]
-        elif op == 'fix':  # recompute the line checksums: reach the parsers behind them
-            lines = bytes(data).split(b'\n')
-            data = bytearray(b'\n'.join(lines[:1] + [
-                line[:-1] + bytes((scip2.checksum(line[:-1]),)) if len(line) > 1 else line
-                for line in lines[1:]]))
-    return bytes(data)
+_SPECIAL = [0x0A, 0x00, 0x30, 0x6F, 0xFF, 0x3B, 0x41]
+
+
+def _fix(data: bytearray) -> bytearray:
+    """Recompute the line checksums, so that mutations reach the parsers behind them."""
+    lines = bytes(data).split(b'\n')
+    return bytearray(b'\n'.join(lines[:1] + [
+        line[:-1] + bytes((scip2.checksum(line[:-1]),)) if len(line) > 1 else line
+        for line in lines[1:]]))
 
 
 @settings(max_examples=10_000, deadline=None)
-@given(mutated(_POOL))
+@given(mutated(_POOL, _SPECIAL, _fix))
 def test_fuzz_decode_reply_raises_only_protocol_errors(data):
     try:
         frame = scip2.decode_reply(data)
@@ -455,11 +440,11 @@ def test_fuzz_decode_reply_raises_only_protocol_errors(data):
 
 
 @settings(max_examples=1_000, deadline=None)
-@given(st.lists(mutated(_POOL), min_size=1, max_size=10), st.randoms(use_true_random=False))
+@given(st.lists(mutated(_POOL, _SPECIAL, _fix), min_size=1, max_size=10),
+       st.randoms(use_true_random=False))
 def test_fuzz_stream_never_raises_and_keeps_valid_frames(frames, rnd):
     stream = b''.join(frames) + GD_EXAMPLE
-    cuts = sorted(rnd.sample(range(len(stream) + 1), min(5, len(stream))))
-    chunks = [stream[a:b] for a, b in zip([0] + cuts, cuts + [len(stream)])]
+    chunks = random_chunks(stream, rnd)
     out = decode_stream(chunks)
     assert out == decode_stream([stream])
     assert out[-1][0] == 'scan' and out[-1][3] == 123456  # the final valid frame survives
