@@ -182,7 +182,31 @@ class ScipConfig:
             raise ValueError('tm_samples >= 1, reply_timeout > 0 and restart_after > 0')
 
 
-class ScipSession:
+class _Session:
+    """What both laser sessions share: (re)start the handshake by stopping the stream."""
+
+    def farewell(self) -> bytes:
+        """Return the bytes that stop the device's stream."""
+        raise NotImplementedError
+
+    def connect(self, now: float) -> Output:
+        """Start the handshake (after the port was opened or to recover): stop the stream."""
+        out = Output()
+        self._reset_timing()
+        self.decoder.reset()
+        self._send(out, 'stop', self.farewell(), now)
+        return out
+
+    def error(self, err: ProtocolError, now: float) -> Output:
+        """Note a protocol error; the decoder resynchronises by itself."""
+        return Output()
+
+    def _restart(self, now: float, out: Output) -> Output:
+        out.writes += self.connect(now).writes
+        return out
+
+
+class ScipSession(_Session):
     """SCIP 2.0 handshake and streaming (see the module docstring)."""
 
     def __init__(self, config: ScipConfig = ScipConfig()) -> None:
@@ -239,18 +263,6 @@ class ScipSession:
 
     # --- entry points ----------------------------------------------------------------------
 
-    def connect(self, now: float) -> Output:
-        """Start the handshake (after the port was opened or to recover)."""
-        out = Output()
-        self._reset_timing()
-        self.decoder.reset()
-        self._send(out, 'stop', scip2.encode_command('QT'), now)
-        return out
-
-    def error(self, err: ProtocolError, now: float) -> Output:
-        """Note a protocol error; the decoder resynchronises by itself."""
-        return Output()
-
     def tick(self, now: float) -> Output:
         """Retry requests that got no reply; restart a silent stream."""
         out = Output()
@@ -277,11 +289,6 @@ class ScipSession:
         self._sent_at = now
         if self.state == 'tm1':
             self._tm_sent = now
-        return out
-
-    def _restart(self, now: float, out: Output) -> Output:
-        more = self.connect(now)
-        out.writes += more.writes
         return out
 
     def _request_of(self, state: str) -> bytes:
@@ -534,7 +541,7 @@ class LmsConfig:
         return self.angle_deg * 100 // self.resolution_cdeg + 1
 
 
-class LmsSession:
+class LmsSession(_Session):
     """LMS2xx handshake and streaming (see the module docstring)."""
 
     _STEPS = ('stop', 'baud', 'variant', 'config', 'install', 'write', 'type', 'start')
@@ -585,18 +592,6 @@ class LmsSession:
 
     # --- entry points ----------------------------------------------------------------------
 
-    def connect(self, now: float) -> Output:
-        """Start the handshake."""
-        out = Output()
-        self._reset_timing()
-        self.decoder.reset()
-        self._send(out, 'stop', lms2xx.request_stop_continuous(), now)
-        return out
-
-    def error(self, err: ProtocolError, now: float) -> Output:
-        """Note a protocol error; the decoder resynchronises by itself."""
-        return Output()
-
     def tick(self, now: float) -> Output:
         """Retry requests that got no reply; restart a silent stream."""
         out = Output()
@@ -635,10 +630,6 @@ class LmsSession:
             return typical
         return LMS_PASSES[self.config.resolution_cdeg] * LMS_REVOLUTION + (
             (2 * self.config.count + 10) * 10.0 / self.line_baud)
-
-    def _restart(self, now: float, out: Output) -> None:
-        more = self.connect(now)
-        out.writes += more.writes
 
     # --- frames --------------------------------------------------------------------------------
 
