@@ -267,7 +267,10 @@ def _features(x: np.ndarray, y: np.ndarray, rng: np.ndarray, cphi: np.ndarray,
     vp = rng * rng * (sigma_phi * sigma_phi)
     cc, ss = cphi * cphi, sphi * sphi
     # eq. 7: Q = sigma_d^2 u u^T + D^2 sigma_phi^2 v v^T, u = (cos, sin), v = (-sin, cos)
-    w = np.stack([vr * cc + vp * ss, vr * ss + vp * cc, (vr - vp) * (cphi * sphi)])
+    w = np.empty((3, n))
+    np.add(vr * cc, vp * ss, out=w[0])
+    np.add(vr * ss, vp * cc, out=w[1])
+    np.multiply(vr - vp, cphi * sphi, out=w[2])
     np.multiply(w[:, None, :], mono[None, :, :], out=out[6:, :n].reshape(3, 6, n))
     return out
 
@@ -279,26 +282,58 @@ def _prefix5(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
-def _moments5(pre: np.ndarray, lo, hi) -> np.ndarray:
-    """Return the (6, ...) plain sums of points lo..hi (inclusive) from a _prefix5 array."""
-    s = pre[:, hi + 1] - pre[:, lo]
-    return np.concatenate([(hi - lo + 1)[None].astype(float), s])
-
-
 @dataclass(frozen=True, eq=False)
 class _Fit:
-    """TLS fits of G point sets from their sums (internal)."""
+    """TLS fits of G point sets from their sums (internal).
 
-    rho: np.ndarray  # (G,)
-    alpha: np.ndarray  # (G,)
-    nx: np.ndarray  # (G,) normal
-    ny: np.ndarray
-    rmse: np.ndarray  # (G,)
-    count: np.ndarray  # (G,)
+    ``params`` holds the rows rho, alpha, nx, ny (one gather takes all of them).
+    """
+
+    params: np.ndarray  # (4, G)
+    rmse: Optional[np.ndarray]  # (G,), or None when not asked for
+    count: np.ndarray  # (G,) number of points (float)
     cov: Optional[np.ndarray]  # (G, 2, 2) covariance of (rho, alpha), or None
 
+    @property
+    def rho(self) -> np.ndarray:
+        """Return the (G,) distances to the laser origin (>= 0)."""
+        return self.params[0]
 
-def _solve(sums: np.ndarray, origin: np.ndarray) -> _Fit:
+    @property
+    def alpha(self) -> np.ndarray:
+        """Return the (G,) normal angles."""
+        return self.params[1]
+
+    @property
+    def nx(self) -> np.ndarray:
+        """Return the (G,) x components of the normals."""
+        return self.params[2]
+
+    @property
+    def ny(self) -> np.ndarray:
+        """Return the (G,) y components of the normals."""
+        return self.params[3]
+
+
+def _scatter(sums: np.ndarray) -> Tuple[np.ndarray, ...]:
+    """Return the centroid (cx, cy) and the scatter sxx, syy, sxy of sums (>= 6, G)."""
+    n = sums[0]
+    cx = sums[1] / n
+    cy = sums[2] / n
+    ncx = n * cx
+    return cx, cy, sums[3] - ncx * cx, sums[4] - n * cy * cy, sums[5] - ncx * cy
+
+
+def _normal(sxx: np.ndarray, syy: np.ndarray, sxy: np.ndarray, out: np.ndarray
+            ) -> np.ndarray:
+    """Write the unit normal of the TLS lines (eq. 8) to ``out`` (2, G); return alpha."""
+    alpha = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx)  # eq. 8
+    np.cos(alpha, out=out[0])
+    np.sin(alpha, out=out[1])
+    return alpha
+
+
+def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     """Fit a line to each column of sums (6 or 24, G); coordinates relative to ``origin``.
 
     TLS in Hessian normal form (eqs. 5-10). With 24 rows the covariance is added: the
@@ -307,51 +342,58 @@ def _solve(sums: np.ndarray, origin: np.ndarray) -> _Fit:
     lambda_max - lambda_min`` of the scatter matrix, a normal displacement ``e_i`` of point
     i moves alpha by ``-(t.q_i) e_i / L`` (stationarity of eq. 6 in alpha) and ``rho =
     n.c`` by ``(t.c) d alpha + e_i / N``; ``C = sum_i J_i J_i^T s_i^2``, ``s_i^2 = n^T Q_i n``.
+    The RMSE (eq. 21) is left out unless ``rmse``.
     """
     n = sums[0]
-    cx = sums[1] / n
-    cy = sums[2] / n
-    sxx = sums[3] - n * cx * cx
-    syy = sums[4] - n * cy * cy
-    sxy = sums[5] - n * cx * cy
-    alpha = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx)  # eq. 8
-    nx, ny = np.cos(alpha), np.sin(alpha)
-    ax, ay = cx + origin[0], cy + origin[1]  # centroid in the laser frame (eq. 10)
-    rho = ax * nx + ay * ny  # eq. 9
+    cx, cy, sxx, syy, sxy = _scatter(sums)
+    out = np.empty((4, n.size))
+    alpha = _normal(sxx, syy, sxy, out[2:])
+    nx, ny = out[2], out[3]
+    ax, ay = cx + float(origin[0]), cy + float(origin[1])  # centroid in the laser frame (eq. 10)
+    rho = np.add(ax * nx, ay * ny, out=out[0])  # eq. 9
     flip = rho < 0.0
     if flip.any():
-        rho = np.abs(rho)
+        np.abs(rho, out=rho)
         alpha = _wrap(np.where(flip, alpha + math.pi, alpha))
-        sign = 1.0 - 2.0 * flip
-        nx = nx * sign
-        ny = ny * sign
+        np.negative(out[2:], out=out[2:], where=flip)
+    out[1] = alpha
     half = 0.5 * (sxx - syy)
     root = np.sqrt(half * half + sxy * sxy)
-    rmse = np.sqrt(np.maximum(0.5 * (sxx + syy) - root, 0.0) / n)  # eq. 21, perpendicular
+    err = np.sqrt(np.maximum(0.5 * (sxx + syy) - root, 0.0) / n) if rmse else None  # eq. 21
     cov = None
     if sums.shape[0] == NUM_SUMS:
-        a2, b2, ab = nx * nx, ny * ny, 2.0 * nx * ny
-        w = a2 * sums[6:12] + b2 * sums[12:18] + ab * sums[18:24]  # sums of s_i^2 * monomial
-        tx, ty = -ny, nx
-        tcl = tx * cx + ty * cy  # t.c in the fit's coordinates
-        t1 = tx * w[1] + ty * w[2] - tcl * w[0]  # sum s^2 (t.q)
-        t2 = (tx * tx * w[3] + 2.0 * tx * ty * w[5] + ty * ty * w[4]
-              - 2.0 * tcl * (tx * w[1] + ty * w[2]) + tcl * tcl * w[0])  # sum s^2 (t.q)^2
-        lever = tx * ax + ty * ay  # t.c in the laser frame
-        with np.errstate(divide='ignore', invalid='ignore'):
-            big_l = 2.0 * root
-            caa = t2 / (big_l * big_l)
-            cra = lever * caa - t1 / (n * big_l)
-            crr = lever * lever * caa - 2.0 * lever * t1 / (n * big_l) + w[0] / (n * n)
-        cov = np.empty(n.shape + (2, 2))
-        cov[..., 0, 0] = crr
-        cov[..., 0, 1] = cra
-        cov[..., 1, 0] = cra
-        cov[..., 1, 1] = caa
+        cov = _covariance(sums, n, cx, cy, ax, ay, nx, ny, root)
+    return _Fit(out, err, n, cov)
+
+
+def _covariance(sums: np.ndarray, n: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                ax: np.ndarray, ay: np.ndarray, nx: np.ndarray, ny: np.ndarray,
+                root: np.ndarray) -> np.ndarray:
+    """Return the (G, 2, 2) covariance of (rho, alpha) of the fits of :func:`_solve`."""
+    a2, b2, ab = nx * nx, ny * ny, 2.0 * nx * ny
+    w = a2 * sums[6:12] + b2 * sums[12:18] + ab * sums[18:24]  # sums of s_i^2 * monomial
+    tx, ty = -ny, nx  # t = (tx, ty): tx^2 = b2, ty^2 = a2, 2 tx ty = -ab (exactly)
+    tcl = tx * cx + ty * cy  # t.c in the fit's coordinates
+    tw = tx * w[1] + ty * w[2]
+    t1 = tw - tcl * w[0]  # sum s^2 (t.q)
+    t2 = (b2 * w[3] - ab * w[5] + a2 * w[4] - 2.0 * tcl * tw
+          + tcl * tcl * w[0])  # sum s^2 (t.q)^2
+    lever = tx * ax + ty * ay  # t.c in the laser frame
+    with np.errstate(divide='ignore', invalid='ignore'):
+        big_l = 2.0 * root
+        caa = t2 / (big_l * big_l)
+        nl = n * big_l
+        cra = lever * caa - t1 / nl
+        crr = lever * lever * caa - 2.0 * lever * t1 / nl + w[0] / (n * n)
+    cov = np.empty(n.shape + (2, 2))
+    cov[..., 0, 0] = crr
+    cov[..., 0, 1] = cra
+    cov[..., 1, 0] = cra
+    cov[..., 1, 1] = caa
+    if not (np.isfinite(cov).all() and (root > 0.0).all()):
         bad = ~(np.isfinite(crr) & np.isfinite(cra) & np.isfinite(caa) & (root > 0.0))
-        if bad.any():
-            cov[bad] = np.inf
-    return _Fit(rho, alpha, nx, ny, rmse, n.astype(np.int64), cov)
+        cov[bad] = np.inf
+    return cov
 
 
 def fit_line(points: np.ndarray, ranges: Optional[np.ndarray] = None,
@@ -405,18 +447,6 @@ def fit_line(points: np.ndarray, ranges: Optional[np.ndarray] = None,
     return float(f.rho[0]), float(f.alpha[0]), f.cov[0], float(np.sqrt(np.mean(res * res)))
 
 
-def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
-    n = (hi - lo + 1).astype(float)
-    s = pre[:, hi + 1] - pre[:, lo]
-    mx, my = s[0] / n, s[1] / n
-    cxx = s[2] - n * mx * mx
-    cyy = s[3] - n * my * my
-    cxy = s[4] - n * mx * my
-    half = 0.5 * (cxx - cyy)
-    return np.maximum(0.5 * (cxx + cyy) - np.sqrt(half * half + cxy * cxy), 0.0)
-
-
 def _gather(starts: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """Return the concatenated inclusive index ranges ``[starts[i], ends[i]]`` and offsets."""
     cnt = ends - starts + 1
@@ -448,46 +478,54 @@ def split_pieces(xy: np.ndarray, offsets: np.ndarray, tolerance) -> np.ndarray:
     keep = offsets[1:] > offsets[:-1]
     return _split(np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
                   offsets[:-1][keep], offsets[1:][keep] - 1,
-                  np.broadcast_to(np.asarray(tolerance, dtype=float), xy.shape[:1]))
+                  np.broadcast_to(np.asarray(tolerance, dtype=float), xy.shape[:1])).T
 
 
 def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
            tol: np.ndarray) -> np.ndarray:
-    """Split the runs ``s[i]..e[i]`` (inclusive); see :func:`split_pieces`."""
-    done: List[np.ndarray] = []
+    """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points."""
+    pxy = np.stack([px, py])
+    done_s: List[np.ndarray] = []  # final pieces
+    done_e: List[np.ndarray] = []
     while s.size:
         inner = e - s >= 2
         if not inner.all():
-            done.append(np.stack([s[~inner], e[~inner]]))
+            done_s.append(s[~inner])
+            done_e.append(e[~inner])
             s, e = s[inner], e[inner]
             if not s.size:
                 break
         cnt = e - s - 1  # interior points of every piece
         offs = np.cumsum(cnt) - cnt
-        seg = np.repeat(np.arange(s.size), cnt)
-        idx = np.arange(seg.size) + (s + 1 - offs)[seg]
+        pos = np.arange(offs[-1] + cnt[-1])
+        idx = np.repeat(s + 1 - offs, cnt) + pos
         # eq. 4: the chord A x + B y + C = 0 through the first and last point, normalised
-        x0, y0 = px[s], py[s]
-        a_c, b_c = py[e] - y0, x0 - px[e]
-        norm = np.hypot(a_c, b_c)
+        p0, p1 = pxy[:, s], pxy[:, e]
+        chord = np.empty((3, s.size))
+        np.subtract(p1[1], p0[1], out=chord[0])
+        np.subtract(p0[0], p1[0], out=chord[1])
+        norm = np.hypot(chord[0], chord[1])
         norm[norm == 0.0] = 1.0
-        a_c /= norm
-        b_c /= norm
-        c_c = -(a_c * x0 + b_c * y0)
-        dist = np.abs(a_c[seg] * px[idx] + b_c[seg] * py[idx] + c_c[seg])
+        chord[:2] /= norm
+        np.negative(chord[0] * p0[0] + chord[1] * p0[1], out=chord[2])
+        a_c, b_c, c_c = np.repeat(chord, cnt, axis=1)
+        q = pxy[:, idx]
+        dist = np.abs(a_c * q[0] + b_c * q[1] + c_c)
         dmax = np.maximum.reduceat(dist, offs)
-        hit = np.where(dist == dmax[seg], np.arange(seg.size), seg.size)
-        k = idx[np.minimum.reduceat(hit, offs)]
+        hit = np.where(dist == np.repeat(dmax, cnt), pos, pos.size)
+        k = idx[np.minimum.reduceat(hit, offs)]  # the first farthest point
         split = dmax > tol[k]
         if not split.all():
-            done.append(np.stack([s[~split], e[~split]]))
+            done_s.append(s[~split])
+            done_e.append(e[~split])
             s, e, k = s[split], e[split], k[split]
         s = np.concatenate([s, k])
         e = np.concatenate([k, e])
-    if not done:
-        return np.zeros((0, 2), dtype=np.int64)
-    out = np.concatenate(done, axis=1)
-    return out[:, np.lexsort((out[1], out[0]))].T
+    if not done_s:
+        return np.zeros((2, 0), dtype=np.int64)
+    s, e = np.concatenate(done_s), np.concatenate(done_e)
+    order = np.lexsort((e, s))
+    return np.stack([s[order], e[order]])
 
 
 # ---------------------------------------------------------------------- ALFA
@@ -579,21 +617,27 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
 # ---------------------------------------------------------------------- shared steps
 @dataclass(frozen=True, eq=False)
 class _Scan:
-    """All clusters of a scan back to back, coordinates relative to ``origin`` (internal)."""
+    """All clusters of a scan back to back, coordinates relative to ``origin`` (internal).
 
+    ``cols`` holds one row per point attribute (see the ``_X`` .. ``_PHI`` row numbers), so
+    that one gather takes all of them; ``x`` and ``y`` are views of its rows.
+    """
+
+    cols: np.ndarray  # (7, N)
     x: np.ndarray
     y: np.ndarray
-    origin: np.ndarray
-    rng: np.ndarray
-    phi: np.ndarray
-    cphi: np.ndarray
-    sphi: np.ndarray
+    origin: Tuple[float, float]
     beam: np.ndarray
     cluster: np.ndarray  # (N,) cluster number of each point
     offsets: np.ndarray
 
 
-def _concat(clusters: Sequence[Cluster]) -> Optional[_Scan]:
+# Rows of _Scan.cols: point coordinates relative to the origin, range, cos and sin of the
+# bearing, split tolerance (threshold + 3 sigma_phi r), bearing.
+_X, _Y, _RNG, _COS, _SIN, _TOL, _PHI = range(7)
+
+
+def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     """Stack the non-empty clusters; None if there are none."""
     cl = [c for c in clusters if c.indices.size]
     if not cl:
@@ -601,139 +645,213 @@ def _concat(clusters: Sequence[Cluster]) -> Optional[_Scan]:
     sizes = np.array([c.indices.size for c in cl], dtype=np.int64)
     offsets = np.zeros(sizes.size + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
-    xy = np.concatenate([c.points for c in cl], dtype=float).reshape(-1, 2)
-    rng = np.concatenate([c.ranges for c in cl], dtype=float)
-    phi = np.concatenate([c.angles for c in cl], dtype=float)
-    beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
-    origin = xy.sum(axis=0) / xy.shape[0]
-    x = xy[:, 0] - origin[0]
-    y = xy[:, 1] - origin[1]
-    return _Scan(x, y, origin, rng, phi, np.cos(phi), np.sin(phi), beam,
+    n = int(offsets[-1])
+    cols = np.empty((7, n))
+    whole = cl[0].scan
+    if whole is not None and all(c.scan is whole and c.points.base is whole.points
+                                 for c in cl):
+        # Clusters of one segment_scan call: gather from its whole-scan arrays.
+        beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
+        xy = np.take(whole.points, beam, axis=0)
+        np.take(whole.ranges, beam, out=cols[_RNG])
+        np.take(whole.cos, beam, out=cols[_COS])
+        np.take(whole.sin, beam, out=cols[_SIN])
+        np.take(whole.angles, beam, out=cols[_PHI])
+    else:
+        beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
+        xy = np.concatenate([c.points for c in cl], dtype=float).reshape(-1, 2)
+        cols[_RNG] = np.concatenate([c.ranges for c in cl], dtype=float)
+        cols[_PHI] = np.concatenate([c.angles for c in cl], dtype=float)
+        np.cos(cols[_PHI], out=cols[_COS])
+        np.sin(cols[_PHI], out=cols[_SIN])
+    ox, oy = (np.cumsum(xy, axis=0)[-1] / n).tolist()  # the mean (summed in point order)
+    np.subtract(xy[:, 0], ox, out=cols[_X])
+    np.subtract(xy[:, 1], oy, out=cols[_Y])
+    np.multiply(cols[_RNG], 3.0 * params.sigma_phi, out=cols[_TOL])  # split tolerance
+    cols[_TOL] += params.threshold
+    return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
                  np.repeat(np.arange(sizes.size), sizes), offsets)
 
 
-def _refine_breaks(scan: _Scan, pre: np.ndarray, pieces: np.ndarray, reach: int
-                   ) -> np.ndarray:
+def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
+    n = (hi - lo + 1).astype(float)
+    s = pre[:, hi + 1] - pre[:, lo]
+    mx, my = s[0] / n, s[1] / n
+    cxx = s[2] - n * mx * mx
+    cyy = s[3] - n * my * my
+    cxy = s[4] - n * mx * my
+    half = 0.5 * (cxx - cyy)
+    return np.maximum(0.5 * (cxx + cyy) - np.sqrt(half * half + cxy * cxy), 0.0)
+
+
+def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, reach: int
+                   ) -> Tuple[np.ndarray, np.ndarray]:
     """Move every break between adjacent pieces to where both fits are best (step 1).
 
     Pieces ``[lo, b]`` and ``[b + o, hi]`` (o = 0 for a shared split point, 1 for
     abutting pieces) of one cluster get the break ``b'`` within ``reach`` of ``b`` that
     minimises ``SSE(lo..b') + SSE(b' + o..hi)``, both pieces keeping at least 3 points.
+    Returns the new first and last points of the pieces.
     """
-    if len(pieces) < 2:
-        return pieces
-    s, e = pieces[:, 0].copy(), pieces[:, 1].copy()
+    if s.size < 2:
+        return s, e
     o = s[1:] - e[:-1]
     adj = np.flatnonzero((o >= 0) & (o <= 1) & (scan.cluster[s[1:]] == scan.cluster[e[:-1]]))
     if not adj.size:
-        return pieces
+        return s, e
+    s, e = s.copy(), e.copy()
     lo, b, hi, oo = s[adj, None], e[adj, None], e[adj + 1, None], o[adj, None]
     cand = b + np.arange(-reach, reach + 1)
     ok = (cand - lo >= 2) & (hi - cand - oo >= 2)
     cand = np.where(ok, cand, b)
-    lo_b = lo + 0 * cand
-    cost = _sse(pre, lo_b, cand) + _sse(pre, cand + oo, hi + 0 * cand)
-    cost[~ok] = np.inf
+    # Both pieces of every candidate break in one batch: [lo, b'] and [b' + o, hi].
+    first = np.empty((2,) + cand.shape, dtype=np.int64)
+    last = np.empty_like(first)
+    first[0] = lo
+    np.add(cand, oo, out=first[1])
+    last[0] = cand
+    last[1] = hi
+    sse = _sse(pre, first, last)
+    cost = np.where(ok, sse[0] + sse[1], np.inf)
     best = cand[np.arange(adj.size), np.argmin(cost, axis=1)]
     e[adj] = best
     s[adj + 1] = best + oo[:, 0]
     good = e - s >= 2  # breaks of a chain moved past each other: drop the squeezed piece
-    return np.stack([s[good], e[good]], axis=1)
+    if good.all():
+        return s, e
+    return s[good], e[good]
 
 
-def _z(scan: _Scan, f: _Fit, pts: np.ndarray, params: LineParams) -> np.ndarray:
-    """Return |distance| / std (eq. 7 on the normal) of points pts (L, K) to the L lines."""
-    nx, ny = f.nx[:, None], f.ny[:, None]
-    rho = (f.rho - f.nx * scan.origin[0] - f.ny * scan.origin[1])[:, None]
-    d = scan.x[pts] * nx + scan.y[pts] * ny - rho
-    cp, sp = scan.cphi[pts], scan.sphi[pts]
-    n_u = nx * cp + ny * sp
-    n_v = ny * cp - nx * sp
-    var = (params.sigma_r * n_u) ** 2 + (scan.rng[pts] * params.sigma_phi * n_v) ** 2
-    return np.abs(d) / np.sqrt(np.maximum(var, 1e-24))
+def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
+                  params: LineParams) -> Tuple[np.ndarray, np.ndarray]:
+    """Trim outlying ends, give shared split points to one piece, drop short ones (step 2).
 
-
-def _clean_pieces(scan: _Scan, pre: np.ndarray, pieces: np.ndarray,
-                  params: LineParams) -> np.ndarray:
-    """Trim outlying ends and give shared split points to one piece (step 2)."""
-    if not pieces.size:
-        return pieces
-    s, e = pieces[:, 0], pieces[:, 1]
-    f = _solve(_moments5(pre, s, e), scan.origin)
+    Returns the first and last points of the pieces of at least ``min_points`` points.
+    """
+    if not s.size:
+        return s, e
+    sums = np.empty((6, s.size))
+    sums[0] = e - s + 1
+    np.subtract(pre[:, e + 1], pre[:, s], out=sums[1:])
+    cx, cy, sxx, syy, sxy = _scatter(sums)
+    nrm = np.empty((2, s.size))
+    _normal(sxx, syy, sxy, nrm)
+    nx, ny = nrm
+    # rho of the line relative to the scan origin (|distances| do not depend on the sign
+    # of the normal, so the fit is not flipped to rho >= 0 here)
+    ox, oy = scan.origin
+    rho = (cx + ox) * nx + (cy + oy) * ny - nx * ox - ny * oy
     gate = params.trim_sigma
     reach = params.min_points
     steps = np.arange(reach)
-    win = np.concatenate([np.minimum(s[:, None] + steps, e[:, None]),
-                          np.maximum(e[:, None] - steps, s[:, None])], axis=1)
-    z = _z(scan, f, win, params)
-    zh, zt = z[:, :reach], z[:, reach:]
-    lead = np.cumprod(zh > gate, axis=1).sum(axis=1)  # leading run of outlying points
-    trail = np.cumprod(zt > gate, axis=1).sum(axis=1)
+    win = np.empty((s.size, 2 * reach), dtype=np.int64)
+    np.minimum(s[:, None] + steps, e[:, None], out=win[:, :reach])
+    np.maximum(e[:, None] - steps, s[:, None], out=win[:, reach:])
+    z = _z(scan, nx, ny, rho, win, params)
+    # leading (head) and trailing (tail) runs of outlying points
+    lead, trail = np.cumprod((z > gate).reshape(s.size, 2, reach), axis=2).sum(axis=2).T
     ns, ne = s + lead, e - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
     shared = np.flatnonzero((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:]))
     if shared.size:
-        to_prev = zt[shared, 0] <= zh[shared + 1, 0]
+        to_prev = z[shared, reach] <= z[shared + 1, 0]
         ns[shared + 1] = np.where(to_prev, ne[shared] + 1, ns[shared + 1])
         ne[shared] = np.where(to_prev, ne[shared], ns[shared + 1] - 1)
-    keep = ne - ns >= 2
-    return np.stack([ns[keep], ne[keep]], axis=1)
+    # Too short to be a line (min_points >= 3): their fits are too uncertain for the merge
+    # test (the (rho, alpha) linearisation fails for them); their points stay free for
+    # the lines to grow.
+    keep = ne - ns + 1 >= params.min_points
+    return ns[keep], ne[keep]
 
 
-def _chi2(rho1, alpha1, cov1, rho2, alpha2, cov2) -> np.ndarray:
-    """Return ``dp^T (C1 + C2)^-1 dp`` for line pairs (the merge test)."""
+def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.ndarray,
+       params: LineParams) -> np.ndarray:
+    """Return |distance| / std (eq. 7 on the normal) of points pts (L, K) to the L lines.
+
+    ``rho`` is relative to the scan origin.
+    """
+    x, y, rng, cp, sp = scan.cols[:_TOL, pts]
+    nx, ny = nx[:, None], ny[:, None]
+    d = x * nx + y * ny - rho[:, None]
+    n_u = nx * cp + ny * sp
+    n_v = ny * cp - nx * sp
+    var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
+    return np.abs(d) / np.sqrt(np.maximum(var, 1e-24))
+
+
+def _agree(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarray,
+           alpha2: np.ndarray, cov2: Optional[np.ndarray], gate: float) -> np.ndarray:
+    """Return ``dp^T (C1 + C2)^-1 dp <= gate`` for line pairs (the merge test).
+
+    ``cov2`` None means exact lines 2 (``C2 = 0``).
+    """
     da = _wrap(alpha1 - alpha2)
     # Lines near the origin may come with opposite normals: compare (-rho, alpha + pi).
     opposite = np.abs(da) > 0.5 * math.pi
-    dr = np.where(opposite, rho1 + rho2, rho1 - rho2)
-    da = np.where(opposite, _wrap(da + math.pi), da)
-    c00 = cov1[:, 0, 0] + cov2[:, 0, 0]
-    c11 = cov1[:, 1, 1] + cov2[:, 1, 1]
-    c01 = cov1[:, 0, 1] + np.where(opposite, -1.0, 1.0) * cov2[:, 0, 1]
+    dr = rho1 - rho2
+    c00, c11, c01 = cov1[:, 0, 0], cov1[:, 1, 1], cov1[:, 0, 1]
+    if cov2 is not None:
+        c00 = c00 + cov2[:, 0, 0]
+        c11 = c11 + cov2[:, 1, 1]
+    if opposite.any():
+        dr = np.where(opposite, rho1 + rho2, dr)
+        da = np.where(opposite, _wrap(da + math.pi), da)
+        if cov2 is not None:
+            c01 = c01 + np.where(opposite, -1.0, 1.0) * cov2[:, 0, 1]
+    elif cov2 is not None:
+        c01 = c01 + cov2[:, 0, 1]
     det = c00 * c11 - c01 * c01
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         d2 = (c11 * dr * dr - 2.0 * c01 * dr * da + c00 * da * da) / det
-    return np.where(np.isfinite(d2) & (det > 0.0), d2, np.inf)
+    return (d2 <= gate) & (d2 > -np.inf) & (det > 0.0)
 
 
-def _merge(scan: _Scan, feats: np.ndarray, pieces: np.ndarray, params: LineParams,
-           tol: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, Optional[_Fit]]:
+def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
+           ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit]:
     """Merge collinear neighbours (step 3); return sums (24, L), first, last and the fits.
 
-    ``pieces`` must be sorted and disjoint. ``first``/``last`` are the outermost point
-    indices of each line (a merged line does not use the points between its pieces). The
-    fits have no covariance when lines were merged (they are refitted after growing).
+    The pieces ``[s, e]`` must be sorted and disjoint. ``first``/``last`` are the outermost
+    point indices of each line (a merged line does not use the points between its pieces).
+    The fits have no covariance when lines were merged (they are refitted after growing).
     """
-    s, e = pieces[:, 0], pieces[:, 1]
     bounds = np.empty(2 * s.size, dtype=np.int64)
     bounds[0::2] = s
     bounds[1::2] = e + 1
     sums = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
     f = _solve(sums, scan.origin)
-    if len(pieces) == 1:
+    if s.size == 1:
         return sums, s, e, f
-    xs, ys = scan.x[s[1:]] - scan.x[e[:-1]], scan.y[s[1:]] - scan.y[e[:-1]]
+    gap = scan.cols[:, s[1:]] - scan.cols[:, e[:-1]]
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
-            | (xs * xs + ys * ys <= params.merge_gap ** 2)
-            | (np.abs(scan.phi[s[1:]] - scan.phi[e[:-1]]) <= params.merge_gap_angle))
-    join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
-                         f.cov[1:]) <= params.merge_chi2)
+            | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
+            | (np.abs(gap[_PHI]) <= params.merge_gap_angle))
+    join = near & _agree(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
+                         f.cov[1:], params.merge_chi2)
     if not join.any():
         return sums, s, e, f
-    new = np.concatenate([[True], ~join])
+    new = np.empty(s.size, dtype=bool)
+    new[0] = True
+    np.logical_not(join, out=new[1:])
     g_start = np.flatnonzero(new)
-    g_end = np.append(g_start[1:], len(pieces)) - 1
+    g_end = np.empty_like(g_start)
+    np.subtract(g_start[1:], 1, out=g_end[:-1])
+    g_end[-1] = s.size - 1
     label = np.cumsum(new) - 1
     g_sums = np.add.reduceat(sums, g_start, axis=1)
-    g = _solve(g_sums[:6], scan.origin)
+    g = _solve(g_sums[:6], scan.origin, rmse=False)
     # Every member must agree with its merged line: chi-square (the merged line taken as
     # exact) and both of its end points within the split tolerance.
-    bad_member = _chi2(f.rho, f.alpha, f.cov, g.rho[label], g.alpha[label],
-                       np.zeros_like(f.cov)) > params.merge_chi2
-    rho_l = (g.rho - g.nx * scan.origin[0] - g.ny * scan.origin[1])[label]
-    for ends in (s, e):
-        dist = np.abs(scan.x[ends] * g.nx[label] + scan.y[ends] * g.ny[label] - rho_l)
-        bad_member |= dist > tol[ends]
+    rho_g, alpha_g, nx, ny = g.params[:, label]
+    bad_member = ~_agree(f.rho, f.alpha, f.cov, rho_g, alpha_g, None, params.merge_chi2)
+    ox, oy = scan.origin
+    rho_l = rho_g - nx * ox - ny * oy
+    ends = np.empty((2, s.size), dtype=np.int64)
+    ends[0] = s
+    ends[1] = e
+    x, y, _, _, _, tol = scan.cols[:_PHI, ends]
+    dist = np.abs(x * nx + y * ny - rho_l)
+    bad_member |= (dist > tol).any(axis=0)
     bad = np.logical_or.reduceat(bad_member, g_start) & (g_end > g_start)
     if not bad.any():
         return g_sums, s[g_start], e[g_end], g
@@ -743,20 +861,11 @@ def _merge(scan: _Scan, feats: np.ndarray, pieces: np.ndarray, params: LineParam
     order = np.argsort(first, kind='stable')
     sums = np.concatenate([g_sums[:, good], sums[:, fall]], axis=1)[:, order]
     return sums, first[order], np.concatenate([e[g_end[good]], e[fall]])[order], _solve(
-        sums[:6], scan.origin)
-
-
-def _runs(ok: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> Tuple[np.ndarray,
-                                                                          np.ndarray]:
-    """Return the leading and trailing run lengths of True in each non-empty group."""
-    pos = np.arange(ok.size) - np.repeat(starts, sizes)
-    lead = np.minimum.reduceat(np.where(ok, sizes.max(), pos), starts)
-    trail = sizes - 1 - np.maximum.reduceat(np.where(ok, -1, pos), starts)
-    return np.minimum(lead, sizes), trail
+        sums[:6], scan.origin, rmse=False)
 
 
 def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
-          last: np.ndarray, f: _Fit, params: LineParams, tol: np.ndarray
+          last: np.ndarray, f: _Fit, params: LineParams
           ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Grow the lines f over the free points beside them that fit (step 4).
 
@@ -769,42 +878,57 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     gate = params.trim_sigma
     n_pts = scan.x.size
     n_lines = first.size
-    lo = np.concatenate([[0], last + 1])  # gap k lies between line k - 1 and line k
-    size = np.append(first, n_pts) - lo
+    lo = np.empty(n_lines + 1, dtype=np.int64)  # gap k: points lo[k] .. hi[k] - 1, between
+    hi = np.empty(n_lines + 1, dtype=np.int64)  # line k - 1 and line k
+    lo[0] = 0
+    np.add(last, 1, out=lo[1:])
+    hi[:-1] = first
+    hi[-1] = n_pts
+    size = hi - lo
     gaps = np.flatnonzero(size > 0)
     if not gaps.size or not math.isfinite(gate):
         return sums, first, last, False
     size_g = size[gaps]
     starts = np.cumsum(size_g) - size_g
-    gid = np.repeat(np.arange(gaps.size), size_g)
-    idx = np.arange(gid.size) + (lo[gaps] - starts)[gid]
+    pos = np.arange(starts[-1] + size_g[-1])
+    within = pos - np.repeat(starts, size_g)  # position in the gap
+    idx = within + np.repeat(lo[gaps], size_g)
     # row 0: the line before the gap growing forward, row 1: the line after it, backward
-    owner = np.stack([gaps - 1, gaps])
+    owner = np.empty((2, gaps.size), dtype=np.int64)
+    np.subtract(gaps, 1, out=owner[0])
+    owner[1] = gaps
     has = (owner >= 0) & (owner < n_lines)
-    j = np.clip(owner, 0, n_lines - 1)[:, gid]
-    nx, ny = f.nx[j], f.ny[j]
-    px, py = scan.x[idx] + scan.origin[0], scan.y[idx] + scan.origin[1]
-    d = px * nx + py * ny - f.rho[j]
-    cp, sp = scan.cphi[idx], scan.sphi[idx]
+    rho, _, nx, ny = f.params[:, np.repeat(np.clip(owner, 0, n_lines - 1), size_g, axis=1)]
+    x, y, rng, cp, sp, tol = scan.cols[:_PHI, idx]
+    ox, oy = scan.origin
+    d = (x + ox) * nx + (y + oy) * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
-    var = (params.sigma_r * n_u) ** 2 + (scan.rng[idx] * params.sigma_phi * n_v) ** 2
-    ok = has[:, gid] & (d * d <= gate * gate * var) & (np.abs(d) <= tol[idx])
-    step_ok = np.abs(np.diff(scan.phi)) <= params.merge_gap_angle  # step i -> i + 1
-    ok[0] &= np.concatenate([[True], step_ok])[idx]
-    ok[1] &= np.append(step_ok, True)[idx]
-    run_f = _runs(ok[0], starts, size_g)[0]
-    run_b = np.minimum(_runs(ok[1], starts, size_g)[1], size_g - run_f)
-    grow_f = np.zeros(n_lines, dtype=np.int64)
-    grow_b = np.zeros(n_lines, dtype=np.int64)
-    grow_f[owner[0, has[0]]] = run_f[has[0]]
-    grow_b[owner[1, has[1]]] = run_b[has[1]]
-    if not (grow_f.any() or grow_b.any()):
+    var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
+    ok = np.repeat(has, size_g, axis=1) & (d * d <= gate * gate * var) & (np.abs(d) <= tol)
+    # Bearing steps: step[i] is the step from point i - 1 to i (True at both scan ends);
+    # row 0 steps onto each point, row 1 off it.
+    phi = scan.cols[_PHI]
+    step = np.ones(n_pts + 1, dtype=bool)
+    np.less_equal(np.abs(phi[1:] - phi[:-1]), params.merge_gap_angle, out=step[1:-1])
+    ok &= step[idx + _NEXT]
+    # run_f: leading run of row 0 (to the first miss), run_b: trailing run of row 1
+    run_f = np.minimum(np.minimum.reduceat(np.where(ok[0], pos.size, within), starts), size_g)
+    run_b = np.minimum(size_g - 1 - np.maximum.reduceat(np.where(ok[1], -1, within), starts),
+                       size_g - run_f)
+    if not (run_f.any() or run_b.any()):
         return sums, first, last, False
-    new_first, new_last = first - grow_b, last + grow_f
+    grow = np.zeros((2, n_lines + 1), dtype=np.int64)  # by gap: forward, backward
+    grow[0, gaps] = run_f
+    grow[1, gaps] = run_b
+    new_first, new_last = first - grow[1, :-1], last + grow[0, 1:]
     # Sums of the added ranges (disjoint, in order): [new_first, first) and (last, new_last].
-    add_lo = np.stack([new_first, last + 1], axis=1).ravel()
-    add_hi = np.stack([first, new_last + 1], axis=1).ravel()  # exclusive
+    add_lo = np.empty(2 * n_lines, dtype=np.int64)
+    add_hi = np.empty(2 * n_lines, dtype=np.int64)  # exclusive
+    add_lo[0::2] = new_first
+    add_lo[1::2] = lo[1:]
+    add_hi[0::2] = first
+    np.add(new_last, 1, out=add_hi[1::2])
     nonempty = add_hi > add_lo
     bounds = np.empty(2 * int(nonempty.sum()), dtype=np.int64)
     bounds[0::2] = add_lo[nonempty]
@@ -814,24 +938,34 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     return sums + added[:, 0::2] + added[:, 1::2], new_first, new_last, True
 
 
+_NEXT = np.array([[0], [1]])
+
+
 def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
            last: np.ndarray) -> List[LineSegment]:
     """Drop small or short fits and build the LineSegments (first/last: point indices)."""
     ox, oy = scan.origin
-    x0, y0 = scan.x[first] + ox, scan.y[first] + oy
-    x1, y1 = scan.x[last] + ox, scan.y[last] + oy
-    d0 = x0 * f.nx + y0 * f.ny - f.rho
-    d1 = x1 * f.nx + y1 * f.ny - f.rho
-    ends = np.stack([x0 - d0 * f.nx, y0 - d0 * f.ny, x1 - d1 * f.nx, y1 - d1 * f.ny], axis=1)
-    length = np.hypot(ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1])
+    ends = np.empty((2, first.size), dtype=np.int64)
+    ends[0] = first
+    ends[1] = last
+    x, y = scan.cols[:_RNG, ends]
+    x += ox
+    y += oy
+    rho, alpha, nx, ny = f.params
+    d = x * nx + y * ny - rho
+    proj = np.empty((2, first.size, 2))  # end point (first, last), line, (x, y)
+    np.subtract(x, d * nx, out=proj[..., 0])
+    np.subtract(y, d * ny, out=proj[..., 1])
+    length = np.hypot(proj[1, :, 0] - proj[0, :, 0], proj[1, :, 1] - proj[0, :, 1])
+    cov = f.cov
     ok = np.flatnonzero((f.count >= params.min_points) & (length >= params.min_length)
                         & (f.rmse <= params.threshold)
-                        & np.isfinite(f.cov[:, 0, 0]) & np.isfinite(f.cov[:, 1, 1]))
-    rho, alpha, rmse = f.rho[ok].tolist(), f.alpha[ok].tolist(), f.rmse[ok].tolist()
-    count = f.count[ok].tolist()
-    b0, b1 = scan.beam[first[ok]].tolist(), scan.beam[last[ok]].tolist()
-    ends, cov = ends[ok], f.cov[ok]
-    return [LineSegment(rho[j], alpha[j], ends[j, :2], ends[j, 2:], count[j], rmse[j], cov[j],
+                        & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1]))
+    rho, alpha, rmse = rho[ok].tolist(), alpha[ok].tolist(), f.rmse[ok].tolist()
+    count = f.count[ok].astype(np.int64).tolist()
+    b0, b1 = scan.beam[ends[:, ok]].tolist()
+    proj, cov = proj[:, ok], cov[ok]
+    return [LineSegment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
                         b0[j], b1[j]) for j in range(len(rho))]
 
 
@@ -852,37 +986,38 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
 
     """
     params = params or LineParams()
-    scan = _concat(clusters)
+    scan = _concat(clusters, params)
     if scan is None:
         return []
-    pre = _prefix5(scan.x, scan.y)
-    tol = params.threshold + 3.0 * params.sigma_phi * scan.rng  # split tolerance per point
-    sizes = np.diff(scan.offsets)
-    big = np.flatnonzero(sizes >= params.min_points)
+    offsets = scan.offsets
+    big = np.flatnonzero(offsets[1:] - offsets[:-1] >= params.min_points)
     if not big.size:
         return []
+    cols = scan.cols
+    n = scan.x.size
+    feats = _features(scan.x, scan.y, cols[_RNG], cols[_COS], cols[_SIN], params.sigma_r,
+                      params.sigma_phi, pad=1)
+    pre = np.zeros((5, n + 1))  # prefix sums of x, y, x^2, y^2, xy (= _prefix5(x, y))
+    np.cumsum(feats[1:6, :n], axis=1, out=pre[:, 1:])
     if params.method == 'split_merge':
-        pieces = _split(scan.x, scan.y, scan.offsets[big], scan.offsets[big + 1] - 1, tol)
-        pieces = pieces[pieces[:, 1] - pieces[:, 0] >= 2]
+        s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL])
+        keep = e - s >= 2
+        s, e = s[keep], e[keep]
     else:
         # Smooth each cluster's ranges over the bearing (eqs. 8-10), polar -> Cartesian.
-        sub, sub_offs = _gather(scan.offsets[big], scan.offsets[big + 1] - 1)
-        r_s = lowess_groups(scan.phi[sub], scan.rng[sub], sub_offs, params.lowess_span,
+        sub, sub_offs = _gather(offsets[big], offsets[big + 1] - 1)
+        r_s = lowess_groups(cols[_PHI, sub], cols[_RNG, sub], sub_offs, params.lowess_span,
                             params.lowess_iterations)
-        pieces = alfa_pieces(np.stack([r_s * scan.cphi[sub], r_s * scan.sphi[sub]], axis=1),
+        pieces = alfa_pieces(np.stack([r_s * cols[_COS, sub], r_s * cols[_SIN, sub]], axis=1),
                              sub_offs, params)
         pieces = sub[pieces] if pieces.size else pieces
-    pieces = _refine_breaks(scan, pre, pieces, params.min_points)
-    pieces = _clean_pieces(scan, pre, pieces, params)
-    # Too short to be a line: their fits are too uncertain for the merge test (the (rho,
-    # alpha) linearisation fails for them); their points stay free for the lines to grow.
-    pieces = pieces[pieces[:, 1] - pieces[:, 0] + 1 >= params.min_points]
-    if not pieces.size:
+        s, e = pieces[:, 0], pieces[:, 1]
+    s, e = _refine_breaks(scan, pre, s, e, params.min_points)
+    s, e = _clean_pieces(scan, pre, s, e, params)
+    if not s.size:
         return []
-    feats = _features(scan.x, scan.y, scan.rng, scan.cphi, scan.sphi, params.sigma_r,
-                      params.sigma_phi, pad=1)
-    sums, first, last, fit = _merge(scan, feats, pieces, params, tol)
-    sums, first, last, grown = _grow(scan, feats, sums, first, last, fit, params, tol)
+    sums, first, last, fit = _merge(scan, feats, s, e, params)
+    sums, first, last, grown = _grow(scan, feats, sums, first, last, fit, params)
     if grown or fit.cov is None:
         fit = _solve(sums, scan.origin)
     return _build(scan, params, fit, first, last)

@@ -12,11 +12,34 @@ split. Invalid readings (NaN, +-inf, outside [range_min, range_max]) always brea
 cluster. Clusters with fewer than ``min_points`` points are dropped.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
-from typing import List
+from typing import List, Optional
 
 import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class ScanArrays:
+    """Whole-scan arrays shared by the clusters of one :func:`segment_scan` call.
+
+    Feature extractors gather all clusters of a scan from these with one index array
+    instead of concatenating per-cluster copies and recomputing the trigonometry.
+
+    Attributes:
+        points: (N, 2) Cartesian points in the laser frame [m] (origin at invalid beams).
+        ranges: (N,) ranges [m].
+        angles: (N,) beam angles [rad].
+        cos: (N,) ``cos(angles)``.
+        sin: (N,) ``sin(angles)``.
+
+    """
+
+    points: np.ndarray
+    ranges: np.ndarray
+    angles: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -28,6 +51,8 @@ class Cluster:
         points: (K, 2) Cartesian points in the laser frame [m].
         ranges: (K,) measured ranges [m].
         angles: (K,) beam angles [rad].
+        scan: The arrays of the whole scan when ``points``, ``ranges`` and ``angles`` are
+            the slices ``indices`` of them (set by :func:`segment_scan`), else None.
 
     """
 
@@ -35,6 +60,7 @@ class Cluster:
     points: np.ndarray
     ranges: np.ndarray
     angles: np.ndarray
+    scan: Optional[ScanArrays] = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         """Return the number of points."""
@@ -80,16 +106,18 @@ def segment_scan(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
     if n == 0 or not valid.any():
         return []
     r = np.where(valid, ranges, 0.0)
-    xy = np.column_stack([r * np.cos(angles), r * np.sin(angles)])
+    cos, sin = np.cos(angles), np.sin(angles)
+    xy = np.column_stack([r * cos, r * sin])
     gaps = np.hypot(*(xy[1:] - xy[:-1]).T)
     limits = breakpoint_threshold(r[:-1], angle_increment, incidence_deg, sigma_r)
     joined = valid[:-1] & valid[1:] & (gaps <= limits)  # beam i and i+1 in one cluster
     # Cluster starts: valid beams not joined to their predecessor.
     starts = np.flatnonzero(valid & np.concatenate([[True], ~joined]))
     ends = np.flatnonzero(valid & np.concatenate([~joined, [True]])) + 1
+    scan = ScanArrays(xy, ranges, angles, cos, sin)
     clusters = []
     for s, e in zip(starts, ends):
         if e - s >= min_points:
             idx = np.arange(s, e)
-            clusters.append(Cluster(idx, xy[s:e], ranges[s:e], angles[s:e]))
+            clusters.append(Cluster(idx, xy[s:e], ranges[s:e], angles[s:e], scan))
     return clusters
