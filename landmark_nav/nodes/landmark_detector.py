@@ -69,6 +69,11 @@ POSE_PARAMETERS = {
     'p_inf': ('eq. 19 position stop criterion [m]', (1e-12, 1.0), None),
     'r_inf': ('eq. 19 rotation stop criterion [rad]', (1e-12, 1.0), None),
     'max_iterations': ('Gauss-Newton iteration limit', (1, 1000), None),
+    'point_set': ('edges: the frame corners and the interior X-corners of the frame edges; '
+                  "frame: the four frame corners only (the chapter's eight equations)", None,
+                  ['edges', 'frame']),
+    'edge_corner_weight': ('weight of an interior X-corner relative to a frame corner (ratio '
+                           'of their pixel precisions)', (0.01, 10.0), None),
 }
 
 
@@ -170,7 +175,8 @@ class LandmarkDetector(Node):
         codes, poses = [], []
         for det in dets:
             try:
-                pose = estimate_pose(det.corners, cam, self.design, self.pose_params)
+                pose = estimate_pose(det.corners, cam, self.design, self.pose_params,
+                                     edge_corners_px=det.edge_corners)
             except PoseError as err:
                 self.warner.warn(f'No pose for landmark {det.code}: {err}')
                 continue

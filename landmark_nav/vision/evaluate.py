@@ -45,8 +45,8 @@ from landmark_nav.vision.detector import detect_landmarks, DetectorParams
 from landmark_nav.vision.landmark import LandmarkDesign
 from landmark_nav.vision.localize import (camera_mount_matrix, FixCorrectedOdometry, planar,
                                           robot_pose_from_landmark)
-from landmark_nav.vision.pose import (estimate_pose, pose_from_optical, PoseError, PoseParams,
-                                      rotation_matrix, solve_pnp)
+from landmark_nav.vision.pose import (estimate_pose, POINT_SETS, pose_from_optical, PoseError,
+                                      PoseParams, rotation_matrix, solve_pnp)
 import numpy as np
 
 _M = np.asarray(OPTICAL_FROM_BODY, dtype=float)
@@ -281,7 +281,7 @@ def repeatability(turns_deg: Sequence[float] = (0.0, 10.0, 30.0, 60.0), distance
                   pose_params: PoseParams = PoseParams(),
                   photometry: Photometry = DEFAULT_PHOTOMETRY,
                   centre_px: Tuple[float, float] = (400.0, 190.0),
-                  supersample: int = 4) -> List[RepeatabilityRow]:
+                  supersample: int = 16) -> List[RepeatabilityRow]:
     """Measure the pose spread and error over repeated frames of a static view (Table 1).
 
     Each frame is a ``landmark_views`` view with fixed parameters: the landmark (code 156)
@@ -294,10 +294,11 @@ def repeatability(turns_deg: Sequence[float] = (0.0, 10.0, 30.0, 60.0), distance
     X-corners of the frame edges, and so does the comparison (IPPE for planar points in
     place of IPPE_SQUARE, and ITERATIVE, both unweighted).
 
-    The images are rendered with ``supersample`` x ``supersample`` samples per pixel: at the
-    simulator's default of 2 its edges are placed to about 0.05 px, and at 2.2 m a landmark
-    seen head-on turns by about 1 degree per 0.05 px of corner error, so the rendering and
-    not the estimator would set the angle error.
+    The images are rendered with ``supersample`` x ``supersample`` samples per pixel: with
+    fewer the simulator places its edges only to a few hundredths of a pixel (at 4 x 4 the
+    mean frame corner errors are up to 0.04 px, at 16 x 16 0.01 px), and at 2.2 m a
+    landmark seen head-on turns by about 1 degree per 0.05 px of corner error, so the
+    rendering and not the estimator would set the angle error.
     """
     design = LandmarkDesign()
     render = RenderOptions(supersample=supersample)
@@ -428,7 +429,7 @@ class LandmarkLocalizer:
             return None
         try:
             pose = estimate_pose(dets[0].corners, frame.camera, self.cfg.design,
-                                 self.pose_params)
+                                 self.pose_params, edge_corners_px=dets[0].edge_corners)
         except PoseError:
             return None
         self.detected += 1
@@ -579,11 +580,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='shuttle: landmark fixes only standing at the 1 m point (stop, the '
                          "chapter's), also at the 3 m point and while approaching the 1 m "
                          'point (approach), or both (default)')
-    ap.add_argument('--point-set', default='frame', choices=['frame', 'edges'],
+    ap.add_argument('--point-set', default=PoseParams().point_set, choices=POINT_SETS,
                     help='repeatability: pose from the four frame corners (frame, the '
-                         "chapter's) or also the interior X-corners of the edges (edges)")
-    ap.add_argument('--supersample', type=int, default=4,
-                    help='repeatability: rendering samples per pixel and axis (default 4)')
+                         "chapter's) or also the interior X-corners of the edges (edges, "
+                         'the default)')
+    ap.add_argument('--supersample', type=int, default=16,
+                    help='repeatability: rendering samples per pixel and axis (default 16)')
     ap.add_argument('--approach-rate', type=float, default=2.0,
                     help='shuttle: camera rate on the approach [Hz] (default 2)')
     args = ap.parse_args(argv)
