@@ -770,7 +770,8 @@ def fit_frame(points: np.ndarray, frame: np.ndarray, camera: Optional[CameraMode
         camera.undistort_pixels(measured.reshape(-1, 2), 'ideal').reshape(measured.shape)
     f1, f2, f3, f4 = edges
     if image is not None:
-        lines = _edge_lines(image, measured, edges, camera, min_contrast)
+        along, across = _edge_samples(image, measured, camera, min_contrast)
+        lines = _edge_lines(*along, measured.shape[1], edges)
     else:
         lines = [_fit_line(p) for p in (f1, f2, f3, f4)]
     res = []
@@ -794,7 +795,7 @@ def fit_frame(points: np.ndarray, frame: np.ndarray, camera: Optional[CameraMode
         return full
 
     if image is not None:
-        measured = _edge_crossings(image, measured, lines, camera, min_contrast)
+        measured = _edge_crossings(*across, measured, lines, camera)
     m1, m2, m3, m4 = measured
     edge_corners = np.stack([m1, m4, m3[::-1], m2[::-1]])
     corners = np.array([a, b, c, d])
@@ -835,16 +836,51 @@ def _block_depth(measured: np.ndarray) -> np.ndarray:
     return depth
 
 
-def _edge_lines(image: np.ndarray, measured: np.ndarray, edges: np.ndarray,
-                camera: Optional[CameraModel], min_contrast: float) -> list:
-    """Refit the four edge lines to ring-boundary edge points (see :func:`fit_frame`)."""
+def _edge_samples(image: np.ndarray, measured: np.ndarray, camera: Optional[CameraModel],
+                  min_contrast: float) -> Tuple[Tuple[np.ndarray, np.ndarray],
+                                                Tuple[np.ndarray, np.ndarray]]:
+    """Sample the straight grey-level edges of a frame with one :func:`edge_points` call.
+
+    Returns ``(points, segment)`` pairs in the fit's image (ideal with a lens model): first
+    of the ring boundary along each edge (segment ``e * (n - 1) + j``: block j of edge e),
+    then of the block boundaries across the ring at the interior corners (segment ``side *
+    4 * (n - 2) + e * (n - 2) + j - 1``: corner j of edge e, side 0 outward, 1 inward,
+    profiles along the edge; see :func:`_edge_crossings`).
+    """
     n = measured.shape[1]
     depth = _block_depth(measured)
-    pts, seg = edge_points(image, measured[:, :-1].reshape(-1, 2),
-                           measured[:, 1:].reshape(-1, 2), depth.ravel(),
-                           min_contrast=min_contrast)
+    starts = [measured[:, :-1].reshape(-1, 2)]
+    ends = [measured[:, 1:].reshape(-1, 2)]
+    sizes = [depth.ravel()]
+    if n >= 3:
+        inner = measured[:, 1:-1]                                      # (4, n - 2, 2)
+        tang = measured[:, 2:] - measured[:, :-2]
+        tang = tang / np.maximum(np.linalg.norm(tang, axis=2, keepdims=True), 1e-9)
+        normal = np.stack([-tang[..., 1], tang[..., 0]], axis=-1)
+        across = 0.5 * (depth[:, :-1] + depth[:, 1:])                  # at the corners
+        along = np.linalg.norm(np.diff(measured, axis=1), axis=2)
+        along = 0.5 * (along[:, :-1] + along[:, 1:])
+        reach = (across[..., None] * normal)[None] * np.array([1.0, -1.0])[:, None, None, None]
+        first = np.broadcast_to(inner, reach.shape).reshape(-1, 2)
+        starts.append(first)
+        ends.append(first + reach.reshape(-1, 2))
+        sizes.append(np.broadcast_to(along, reach.shape[:3]).ravel())
+    pts, seg = edge_points(image, np.concatenate(starts), np.concatenate(ends),
+                           np.concatenate(sizes), min_contrast=min_contrast)
     if camera is not None and len(pts):
         pts = camera.undistort_pixels(pts, 'ideal')
+    split = 4 * (n - 1)
+    first_set = seg < split
+    return ((pts[first_set], seg[first_set]),
+            (pts[~first_set], seg[~first_set] - split))
+
+
+def _edge_lines(pts: np.ndarray, seg: np.ndarray, n: int, edges: np.ndarray) -> list:
+    """Fit the four edge lines to ring-boundary edge points (see :func:`fit_frame`).
+
+    ``pts``/``seg`` are the first pair of :func:`_edge_samples`; an edge with fewer than
+    two points per block keeps the line through its corners ``edges[e]``.
+    """
     edge = seg // (n - 1)
     out = []
     for e in range(4):
@@ -853,27 +889,28 @@ def _edge_lines(image: np.ndarray, measured: np.ndarray, edges: np.ndarray,
     return out
 
 
-def _edge_crossings(image: np.ndarray, measured: np.ndarray, lines: list,
-                    camera: Optional[CameraModel], min_contrast: float) -> np.ndarray:
+def _edge_crossings(pts: np.ndarray, seg: np.ndarray, measured: np.ndarray, lines: list,
+                    camera: Optional[CameraModel]) -> np.ndarray:
     """Place the interior X-corners of each edge where the block boundaries cross its line.
 
     At an interior X-corner of an edge the boundary between two neighbouring blocks runs
     straight across the ring: through the outer and the inner block row, with opposite
     polarity in the two. It is measured with :func:`edge_points` on the two half-segments
     from the corner across the ring (profiles along the edge, in the middle half of each
-    row), a total-least-squares line is fitted to those points, and the corner becomes its
-    crossing with the fitted edge line (both in the ideal image when there is a lens
-    model). The saddle-point refinement alone leaves these corners 0.04-0.07 px off on
-    simulated views, in a pattern that tilts a head-on pose by tenths of a degree; the
-    crossings are within 0.01 px. Corners with fewer than four usable points keep their
-    measured position; so do the end corners (the frame corners come from eq. 5).
+    row; the second pair of :func:`_edge_samples`), a total-least-squares line is fitted to
+    those points, and the corner becomes its crossing with the fitted edge line (both in
+    the ideal image when there is a lens model). The saddle-point refinement alone leaves
+    these corners 0.04-0.07 px off on simulated views, in a pattern that tilts a head-on
+    pose by tenths of a degree; the crossings are within 0.01 px. Corners with fewer than
+    four usable points keep their measured position; so do the end corners (the frame
+    corners come from eq. 5).
 
     Args:
-        image: (H, W) float32 image (or the crop :func:`edge_points` accepts).
+        pts: (P, 2) boundary points in the fit's image.
+        seg: (P,) their half-segment index (see :func:`_edge_samples`).
         measured: (4, n, 2) corners of the edges f_1..f_4 [px, recorded image].
         lines: the four fitted edge lines (centre, unit direction) in the fit's image.
         camera: lens model of the fit (None: the fit is in recorded pixels).
-        min_contrast: contrast of a usable profile.
 
     Returns:
         (4, n, 2) corners [px, recorded image].
@@ -881,25 +918,10 @@ def _edge_crossings(image: np.ndarray, measured: np.ndarray, lines: list,
     n = measured.shape[1]
     if n < 3:
         return measured
-    inner = measured[:, 1:-1]                                          # (4, n - 2, 2)
-    tang = measured[:, 2:] - measured[:, :-2]
-    tang = tang / np.maximum(np.linalg.norm(tang, axis=2, keepdims=True), 1e-9)
-    normal = np.stack([-tang[..., 1], tang[..., 0]], axis=-1)
-    depth = _block_depth(measured)
-    across = 0.5 * (depth[:, :-1] + depth[:, 1:])                      # at the corners
-    along = np.linalg.norm(np.diff(measured, axis=1), axis=2)
-    along = 0.5 * (along[:, :-1] + along[:, 1:])
-    reach = (across[..., None] * normal)[None] * np.array([1.0, -1.0])[:, None, None, None]
-    starts = np.broadcast_to(inner, reach.shape).reshape(-1, 2)
-    pts, seg = edge_points(image, starts, starts + reach.reshape(-1, 2),
-                           np.broadcast_to(along, reach.shape[:3]).ravel(),
-                           min_contrast=min_contrast)
     out = measured.copy()
     if not len(pts):
         return out
-    if camera is not None:
-        pts = camera.undistort_pixels(pts, 'ideal')
-    k = inner.shape[0] * inner.shape[1]
+    k = 4 * (n - 2)
     corner = seg % k                                   # (edge, corner) index of each point
     count = np.bincount(corner, minlength=k)
     ok = count >= 4
@@ -922,7 +944,7 @@ def _edge_crossings(image: np.ndarray, measured: np.ndarray, lines: list,
     ok &= np.isfinite(cross).all(axis=1)
     flat = out[:, 1:-1].reshape(-1, 2)
     flat[ok] = cross[ok]
-    out[:, 1:-1] = flat.reshape(inner.shape)
+    out[:, 1:-1] = flat.reshape(4, n - 2, 2)
     return out
 
 
