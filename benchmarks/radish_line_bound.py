@@ -17,6 +17,7 @@ import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from landmark_nav.laser.lines import _prefix5, _sse  # noqa: E402
 from landmark_nav.tools.carmen import read_carmen_scans  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -24,14 +25,9 @@ CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
 
 
 def window_rmse(x: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
-    """Return the TLS RMSE of every window of k consecutive points (sliding sums)."""
-    def sums(v):
-        c = np.concatenate([[0.0], np.cumsum(v)])
-        return (c[k:] - c[:-k]) / k
-    mx, my = sums(x), sums(y)
-    cxx, cyy, cxy = sums(x * x) - mx * mx, sums(y * y) - my * my, sums(x * y) - mx * my
-    half = 0.5 * (cxx - cyy)
-    return np.sqrt(np.maximum(0.5 * (cxx + cyy) - np.sqrt(half * half + cxy * cxy), 0.0))
+    """Return the TLS RMSE of every window of k consecutive points."""
+    lo = np.arange(x.size - k + 1)
+    return np.sqrt(_sse(_prefix5(x, y), lo, lo + k - 1) / k)
 
 
 def coverage(ranges: np.ndarray, angles: np.ndarray, k: int, rmse: float) -> float:
