@@ -218,6 +218,29 @@ def test_single_outlier_inside_a_wall_does_not_split_it(method):
         assert ln.num_points == 161  # every point supports the line (the outlier too)
 
 
+@pytest.mark.parametrize('method', METHODS)
+def test_a_piece_off_the_wall_leaves_the_chain_and_the_rest_merges(method):
+    """Wall y = 1 m in four clusters (dropouts between them); the second, 40 beams, is a
+    panel 5 mm proud of the wall.
+
+    Neighbours pass the pairwise test (the panel's fit is uncertain enough), but the panel
+    fails against the merged line, so it leaves the chain: it stays a line of its own and
+    the two pieces after it, which agree, become one line (they used to stay apart).
+    """
+    phi = np.radians(np.arange(30.0, 150.01, 0.5))
+    y = np.ones(phi.size)
+    y[81:121] += 0.005
+    valid = np.ones(phi.size, bool)
+    valid[[80, 121, 161]] = False
+    clusters = segment_scan(1.0 * y / np.sin(phi), phi, valid, math.radians(0.5))
+    assert [(c.indices[0], c.indices[-1]) for c in clusters] == [
+        (0, 79), (81, 120), (122, 160), (162, 240)]
+    lines = extract_lines(clusters, LineParams(method=method))
+    assert [(ln.first_index, ln.last_index) for ln in lines] == [(0, 79), (81, 120),
+                                                                 (122, 240)]
+    assert [round(ln.rho, 4) for ln in lines] == [1.0, 1.005, 1.0]
+
+
 def test_split_pieces_eq4():
     pts = np.array([[0, 0], [1, 0.01], [2, 0], [2.01, 1], [2, 2]], float)
     assert split_pieces(pts, [0, 5], 0.05).tolist() == [[0, 2], [2, 4]]

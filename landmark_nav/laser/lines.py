@@ -780,11 +780,12 @@ def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.nda
     return np.abs(d) / np.sqrt(np.maximum(var, 1e-24))
 
 
-def _agree(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarray,
-           alpha2: np.ndarray, cov2: Optional[np.ndarray], gate: float) -> np.ndarray:
-    """Return ``dp^T (C1 + C2)^-1 dp <= gate`` for line pairs (the merge test).
+def _chi2(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarray,
+          alpha2: np.ndarray, cov2: Optional[np.ndarray]) -> np.ndarray:
+    """Return ``d^2 = dp^T (C1 + C2)^-1 dp`` for line pairs (the merge test statistic).
 
-    ``cov2`` None means exact lines 2 (``C2 = 0``).
+    ``cov2`` None means exact lines 2 (``C2 = 0``). Pairs whose summed covariance is not
+    positive definite get ``inf``.
     """
     da = _wrap(alpha1 - alpha2)
     # Lines near the origin may come with opposite normals: compare (-rho, alpha + pi).
@@ -804,7 +805,7 @@ def _agree(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndar
     det = c00 * c11 - c01 * c01
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         d2 = (c11 * dr * dr - 2.0 * c01 * dr * da + c00 * da * da) / det
-    return (d2 <= gate) & (d2 > -np.inf) & (det > 0.0)
+    return np.where((det > 0.0) & (d2 > -np.inf) & ~np.isnan(d2), d2, np.inf)
 
 
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
@@ -826,42 +827,43 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
             | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
             | (np.abs(gap[_PHI]) <= params.merge_gap_angle))
-    join = near & _agree(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
-                         f.cov[1:], params.merge_chi2)
-    if not join.any():
-        return sums, s, e, f
-    new = np.empty(s.size, dtype=bool)
-    new[0] = True
-    np.logical_not(join, out=new[1:])
-    g_start = np.flatnonzero(new)
-    g_end = np.empty_like(g_start)
-    np.subtract(g_start[1:], 1, out=g_end[:-1])
-    g_end[-1] = s.size - 1
-    label = np.cumsum(new) - 1
-    g_sums = np.add.reduceat(sums, g_start, axis=1)
-    g = _solve(g_sums[:6], scan.origin, rmse=False)
-    # Every member must agree with its merged line: chi-square (the merged line taken as
-    # exact) and both of its end points within the split tolerance.
-    rho_g, alpha_g, nx, ny = g.params[:, label]
-    bad_member = ~_agree(f.rho, f.alpha, f.cov, rho_g, alpha_g, None, params.merge_chi2)
-    ox, oy = scan.origin
-    rho_l = rho_g - nx * ox - ny * oy
+    gate = params.merge_chi2
+    join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
+                         f.cov[1:]) <= gate)
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
     x, y, _, _, _, tol = scan.cols[:_PHI, ends]
-    dist = np.abs(x * nx + y * ny - rho_l)
-    bad_member |= (dist > tol).any(axis=0)
-    bad = np.logical_or.reduceat(bad_member, g_start) & (g_end > g_start)
-    if not bad.any():
-        return g_sums, s[g_start], e[g_end], g
-    fall = np.flatnonzero(bad[label])  # pieces of rejected chains keep their own fits
-    good = np.flatnonzero(~bad)
-    first = np.concatenate([s[g_start[good]], s[fall]])
-    order = np.argsort(first, kind='stable')
-    sums = np.concatenate([g_sums[:, good], sums[:, fall]], axis=1)[:, order]
-    return sums, first[order], np.concatenate([e[g_end[good]], e[fall]])[order], _solve(
-        sums[:6], scan.origin, rmse=False)
+    ox, oy = scan.origin
+    while join.any():
+        new = np.empty(s.size, dtype=bool)
+        new[0] = True
+        np.logical_not(join, out=new[1:])
+        g_start = np.flatnonzero(new)
+        g_end = np.empty_like(g_start)
+        np.subtract(g_start[1:], 1, out=g_end[:-1])
+        g_end[-1] = s.size - 1
+        label = np.cumsum(new) - 1
+        g_sums = np.add.reduceat(sums, g_start, axis=1)
+        g = _solve(g_sums[:6], scan.origin, rmse=False)
+        # Every member must agree with its merged line: chi-square (the merged line taken
+        # as exact) and both of its end points within the split tolerance. badness > 1
+        # fails either test.
+        rho_g, alpha_g, nx, ny = g.params[:, label]
+        badness = _chi2(f.rho, f.alpha, f.cov, rho_g, alpha_g, None) / gate
+        dist = np.abs(x * nx + y * ny - (rho_g - nx * ox - ny * oy)) / tol
+        np.fmax(badness, dist.max(axis=0), out=badness)
+        badness[~(g_end > g_start)[label]] = 0.0  # single pieces are not merged
+        worst = np.maximum.reduceat(badness, g_start)
+        if not (worst > 1.0).any():
+            return g_sums, s[g_start], e[g_end], g
+        # The worst member of a failing chain leaves it; the rest are merged again (a
+        # piece off its wall, e.g. a short noisy fit between two pieces of the wall, no
+        # longer keeps the wall in pieces).
+        out = np.flatnonzero((badness == worst[label]) & (worst > 1.0)[label])
+        join[out[out < s.size - 1]] = False
+        join[out[out > 0] - 1] = False
+    return sums, s, e, f
 
 
 def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
