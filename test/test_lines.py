@@ -220,10 +220,10 @@ def test_single_outlier_inside_a_wall_does_not_split_it(method):
 
 @pytest.mark.parametrize('method', METHODS)
 def test_a_piece_off_the_wall_leaves_the_chain_and_the_rest_merges(method):
-    """Wall y = 1 m in four clusters (dropouts between them); the second, 40 beams, is a
-    panel 5 mm proud of the wall.
+    """A panel 5 mm proud of a wall leaves the merge chain; the wall pieces after it merge.
 
-    Neighbours pass the pairwise test (the panel's fit is uncertain enough), but the panel
+    Wall y = 1 m in four clusters (dropouts between them); the second, 40 beams, is the
+    panel. Neighbours pass the pairwise test (the panel's fit is uncertain enough), but the panel
     fails against the merged line, so it leaves the chain: it stays a line of its own and
     the two pieces after it, which agree, become one line (they used to stay apart).
     """
