@@ -5,7 +5,8 @@ from pathlib import Path
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from landmark_nav.evaluation.features import LineScore, score_lines, wall_truth
+from landmark_nav.evaluation.features import (_cut_variance, line_crlb, LineScore,
+                                              score_lines, wall_truth)
 from landmark_nav.geometry import compose, wrap_angle
 from landmark_nav.laser.lines import (explained_points, extract_lines, fit_line, LineParams,
                                       lowess, METHODS, point_covariances, split_pieces)
@@ -108,6 +109,41 @@ def test_covariance_matches_monte_carlo(rho, alpha, t0, length):
     assert np.all((ratio > 0.7) & (ratio < 1.3)), ratio
     nees = np.einsum('ni,nij,nj->n', err, np.linalg.inv(np.array(covs)), err)
     assert nees.mean() == pytest.approx(2.0, abs=0.25)
+
+
+@pytest.mark.parametrize('rho, alpha, t0, length', [
+    (2.0, 0.3, -1.0, 2.0),     # about the normal
+    (1.5, 0.0, 2.0, 3.0),      # grazing: 53-76 deg incidence
+    (7.0, -2.0, -2.0, 4.0),    # far and long
+])
+def test_crlb_bounds_the_fit_and_is_nearly_reached(rho, alpha, t0, length):
+    """line_crlb: the TLS fit's Monte Carlo variances are at least the bound, and close to it.
+
+    With equal weights TLS is not the ML estimator when the points' noise differs, so it
+    can only be above the bound; on these walls by at most a few percent.
+    """
+    rng = np.random.default_rng(5)
+    t = np.linspace(t0, t0 + length, 40)
+    _, r, phi = wall_points(rho, alpha, t)
+    bound = line_crlb(r, phi, rho, alpha, 0.01, SIGMA_PHI)
+    assert np.all(np.linalg.eigvalsh(bound) > 0)
+    err = []
+    for _ in range(2000):
+        pts, r_n, _ = wall_points(rho, alpha, t, 0.01, SIGMA_PHI, rng)
+        got_rho, got_alpha, _, _ = fit_line(pts, r_n, phi, 0.01, SIGMA_PHI)
+        err.append([got_rho - rho, float(wrap_angle(got_alpha - alpha))])
+    ratio = np.var(np.array(err), axis=0) / np.diag(bound)
+    assert np.all((ratio > 0.9) & (ratio < 1.15)), ratio  # 2000 draws: +-6 % (2 sigma)
+
+
+def test_cut_variance_is_the_truncated_normal_variance():
+    rng = np.random.default_rng(6)
+    x = rng.normal(0.0, 2.0, 2_000_000)
+    for limit in (1.0, 3.0, 8.0):
+        kept = x[np.abs(x) <= limit]
+        assert _cut_variance(4.0, limit) == pytest.approx(np.var(kept), rel=0.01)
+    assert _cut_variance(0.0, 1.0) == 0.0
+    assert _cut_variance(math.inf, 0.3) == pytest.approx(0.03)
 
 
 def test_point_covariance_is_eq7():
@@ -306,7 +342,7 @@ def office_scores(sigma_r: float, step: int = 4):
         angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
         t_mid = scan.stamp_ns + int(0.5 * r.size * scan.time_increment * 1e9)
         truth = wall_truth(res.world, compose(res.truth_at(t_mid), mount), angles,
-                           scan.range_max)
+                           scan.range_max, sigma_r=sigma_r, sigma_phi=SIGMA_PHI)
         valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
         clusters = segment_scan(r, angles, valid, scan.angle_increment, sigma_r=sigma_r)
         for m in METHODS:
@@ -321,16 +357,22 @@ def office_scores(sigma_r: float, step: int = 4):
 def test_office_run_line_targets():
     for method, sc in office_scores(0.01).items():
         print(f'{method}: TruePos {sc.true_pos:.3f} FalsePos {sc.false_pos_rate:.3f} '
-              f'sigma drho {100 * sc.sigma_rho:.2f} cm '
-              f'sigma dalpha {math.degrees(sc.sigma_alpha):.3f} deg')
+              f'sigma drho {100 * sc.sigma_rho:.2f} cm (floor {100 * sc.floor_sigma_rho:.2f}) '
+              f'sigma dalpha {math.degrees(sc.sigma_alpha):.3f} deg '
+              f'(floor {math.degrees(sc.floor_sigma_alpha):.3f})')
         assert sc.relevant > 1000
         assert sc.true_pos >= 0.95
         assert sc.false_pos_rate <= 0.05
         assert math.degrees(sc.sigma_alpha) <= 0.5
         # sigma d rho is dominated by short lines on far walls seen at grazing incidence,
-        # whose rho error is their angle error times a lever arm of metres; the errors agree
-        # with the lines' covariances. split_merge reaches the 1 cm target; ALFA does not
-        # (about 1.07 cm): that gap is reported in the README, not asserted at a looser level.
+        # whose rho error is their angle error times a lever arm of metres. The floor, what
+        # an efficient extractor would get on the same walls (Cramer-Rao bound from all
+        # their beams), is itself 1.00 cm here (0.98-1.03 cm on seeds 1-6), so the 1 cm
+        # target cannot be met reliably: ALFA is at 1.07 cm, split_merge at 0.99 cm on this
+        # seed (1.02-1.22 cm on seeds 2-6), reported in the README. Asserted: both stay
+        # near-efficient (ratios 0.99-1.22 on seeds 1-6).
+        assert 0.0095 <= sc.floor_sigma_rho <= 0.0105
+        assert sc.sigma_rho <= 1.25 * sc.floor_sigma_rho
         if method == 'split_merge':
             assert sc.sigma_rho <= 0.010
 

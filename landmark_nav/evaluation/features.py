@@ -58,6 +58,7 @@ class WallTruth:
     extent: np.ndarray       # (W,) visible length [m]
     span: np.ndarray         # (W, 2, 2) visible end points
     world_span: np.ndarray   # (W, 2, 2) the same end points in the world frame
+    crlb: Optional[np.ndarray] = None  # (W, 2, 2) Cramer-Rao bound of (rho, alpha)
 
 
 def normal_form(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
@@ -67,6 +68,30 @@ def normal_form(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     rho = p1[:, 0] * np.cos(alpha) + p1[:, 1] * np.sin(alpha)
     alpha = np.where(rho < 0.0, alpha + math.pi, alpha)
     return np.column_stack([np.abs(rho), wrap_angle(alpha)])
+
+
+def line_crlb(ranges: np.ndarray, angles: np.ndarray, rho: float, alpha: float,
+              sigma_r: float, sigma_phi: float) -> np.ndarray:
+    """Return the (2, 2) Cramer-Rao bound of (rho, alpha) from beams hitting a line.
+
+    The beams (noise-free ``ranges`` and ``angles``, laser frame) end on the line
+    ``x cos(alpha) + y sin(alpha) = rho``. Each measured point is off the line by a normal
+    error of variance ``s_i^2 = n^T Q_i n`` (line chapter eq. 7: ``sigma_r`` along the
+    beam, ``r_i sigma_phi`` across it); its residual ``p_i.n - rho`` has the derivatives
+    -1 and ``p_i.t`` (``t = dn/dalpha``), so the Fisher information is ``sum_i [1, -a_i;
+    -a_i, a_i^2] / s_i^2`` with ``a_i = p_i.t``. No unbiased extractor that fits these
+    beams has a smaller covariance; a line fitted to part of them has a larger one.
+    """
+    r = np.asarray(ranges, dtype=float)
+    phi = np.asarray(angles, dtype=float)
+    n_u = np.cos(phi - alpha)  # n . u_i: u_i the beam direction
+    n_v = np.sin(phi - alpha)  # n . v_i up to sign: v_i across the beam
+    w = 1.0 / np.maximum((sigma_r * n_u) ** 2 + (r * sigma_phi * n_v) ** 2, 1e-24)
+    a = r * n_v  # p_i . t
+    info = np.array([[w.sum(), -(w * a).sum()], [-(w * a).sum(), (w * a * a).sum()]])
+    if np.linalg.det(info) <= 0.0:
+        return np.full((2, 2), np.inf)
+    return np.linalg.inv(info)
 
 
 def _arm_runs(ids: np.ndarray, cos_inc: np.ndarray, beam: int,
@@ -133,9 +158,13 @@ def corner_truth(world, sensor_pose_at: Callable[[np.ndarray], np.ndarray], stam
     return CornerTruth(xy=xy, scored=scored, in_class=in_class)
 
 
-def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray,
-               max_range: float) -> WallTruth:
-    """Return the walls hit by the noise-free beams from ``sensor_pose`` (laser frame)."""
+def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray, max_range: float,
+               sigma_r: Optional[float] = None, sigma_phi: float = 0.0) -> WallTruth:
+    """Return the walls hit by the noise-free beams from ``sensor_pose`` (laser frame).
+
+    With ``sigma_r`` the walls carry the Cramer-Rao bound of (rho, alpha) from their beams
+    (:func:`line_crlb`, the laser's range and bearing noise).
+    """
     sensor_pose = np.asarray(sensor_pose, dtype=float)
     origins = np.repeat(sensor_pose[None, :2], len(angles), axis=0)
     hits = world.raycast(origins, sensor_pose[2] + angles, max_range)
@@ -145,7 +174,7 @@ def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray,
     ids = hits.ids[hit]
     walls = world.walls()
     rows = {int(i): r for r, i in enumerate(walls.ids)}
-    w_ids, forms, extents, spans, world_spans = [], [], [], [], []
+    w_ids, forms, extents, spans, world_spans, bounds = [], [], [], [], [], []
     for wid in np.unique(ids):
         pts = xy[ids == wid]
         if len(pts) < 2:
@@ -160,10 +189,15 @@ def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray,
         forms.append(normal_form(ends[:1], ends[1:])[0])
         extents.append(float(t.max() - t.min()))
         spans.append(ends)
+        if sigma_r is not None:
+            on = ids == wid
+            bounds.append(line_crlb(hits.ranges[hit][on], angles[hit][on], *forms[-1],
+                                    sigma_r, sigma_phi))
     return WallTruth(ids=np.array(w_ids, dtype=np.int64),
                      rho_alpha=np.array(forms).reshape(-1, 2), extent=np.array(extents),
                      span=np.array(spans).reshape(-1, 2, 2),
-                     world_span=np.array(world_spans).reshape(-1, 2, 2))
+                     world_span=np.array(world_spans).reshape(-1, 2, 2),
+                     crlb=np.array(bounds).reshape(-1, 2, 2) if sigma_r is not None else None)
 
 
 @dataclass
@@ -247,6 +281,8 @@ class LineScore:
     found: int = 0
     d_rho: List[float] = field(default_factory=list)
     d_alpha: List[float] = field(default_factory=list)
+    floor_rho: List[float] = field(default_factory=list)    # see floor_sigma_rho
+    floor_alpha: List[float] = field(default_factory=list)
 
     @property
     def true_pos(self) -> float:
@@ -267,6 +303,34 @@ class LineScore:
     def sigma_alpha(self) -> float:
         """Std of alpha errors of matched relevant walls [rad]."""
         return float(np.std(self.d_alpha)) if self.d_alpha else float('nan')
+
+    @property
+    def floor_sigma_rho(self) -> float:
+        """Sigma d rho an efficient extractor would get on the same matched walls [m].
+
+        Each matched wall's rho error drawn from its Cramer-Rao bound (all beams on the
+        wall, :func:`line_crlb`), cut at the matching window as the measured errors are:
+        the RMS over the walls. NaN without bounds (``wall_truth`` without ``sigma_r``).
+        """
+        return math.sqrt(float(np.mean(self.floor_rho))) if self.floor_rho else float('nan')
+
+    @property
+    def floor_sigma_alpha(self) -> float:
+        """The same for sigma d alpha [rad]."""
+        return (math.sqrt(float(np.mean(self.floor_alpha))) if self.floor_alpha
+                else float('nan'))
+
+
+def _cut_variance(var: float, limit: float) -> float:
+    """Return the variance of N(0, var) restricted to [-limit, limit]."""
+    if not var > 0.0:
+        return 0.0
+    if not math.isfinite(var):
+        return limit * limit / 3.0  # uniform over the window
+    k = limit / math.sqrt(var)
+    mass = math.erf(k / math.sqrt(2.0))  # 2 Phi(k) - 1
+    pdf = math.exp(-0.5 * k * k) / math.sqrt(2.0 * math.pi)
+    return var * (1.0 - 2.0 * k * pdf / mass) if mass > 0.0 else 0.0
 
 
 def _overlap(span: np.ndarray, start: np.ndarray, end: np.ndarray) -> bool:
@@ -319,3 +383,7 @@ def score_lines(score: LineScore, lines: Sequence, truth: WallTruth,
             score.found += 1
             score.d_rho.append(float(err[best, j, 0]))
             score.d_alpha.append(float(err[best, j, 1]))
+            if truth.crlb is not None:
+                score.floor_rho.append(_cut_variance(float(truth.crlb[j, 0, 0]), max_drho))
+                score.floor_alpha.append(_cut_variance(float(truth.crlb[j, 1, 1]),
+                                                       max_dalpha))
