@@ -39,7 +39,7 @@ import numpy as np
 from . import textures
 from .camera import (CameraSimulator, landmark_plane, Photometry, Plane, RenderOptions,
                      rotation_x, rotation_y, rotation_z)
-from .control import brake_speed, DECEL_MARGIN
+from .control import brake_speed, DECEL_MARGIN, limit_twist
 from .robot import (measure_wheels, NS_PER_S, propagate_covariance, RobotParams, step_pose,
                     twist_to_wheels, wheel_to_twist)
 from .scenarios import START_NS
@@ -685,11 +685,7 @@ class _ShuttleRobot:
     def step(self, v_des: float, w_des: float) -> ShuttleSample:
         p = self.p
         dt = p.sample_time
-        dv, dw = p.max_linear_accel * dt, p.max_angular_accel * dt
-        v = min(max(v_des, self.v - dv, -p.max_linear_speed), self.v + dv, p.max_linear_speed)
-        w = min(max(w_des, self.w - dw, -p.max_angular_speed), self.w + dw,
-                p.max_angular_speed)
-        self.v, self.w = v, w
+        v, w = self.v, self.w = limit_twist(p, v_des, w_des, self.v, self.w)
         wl, wr = twist_to_wheels(v, w, p.wheel_radius, p.axle_length)
         cmd = np.array([[float(wl), float(wr)]])
         r, b = p.wheel_radius, p.axle_length

@@ -160,6 +160,19 @@ def brake_speed(dist: float, accel: float, dt: float, final: float = 0.0) -> flo
     return dv * (-0.5 + math.sqrt(0.25 + 2.0 * (dist / dt + extra) / dv))
 
 
+def limit_twist(p: RobotParams, v_des: float, w_des: float, v: float, w: float
+                ) -> Tuple[float, float]:
+    """Return the command (v, w) closest to the desired one within one step of (v, w).
+
+    Each speed changes by at most its acceleration times ``p.sample_time`` and stays within
+    its maximum.
+    """
+    dt = p.sample_time
+    dv, dw = p.max_linear_accel * dt, p.max_angular_accel * dt
+    return (min(max(v_des, v - dv, -p.max_linear_speed), v + dv, p.max_linear_speed),
+            min(max(w_des, w - dw, -p.max_angular_speed), w + dw, p.max_angular_speed))
+
+
 class _Controller:
     """Stepwise controller state (true pose feedback, last nominal command)."""
 
@@ -174,10 +187,7 @@ class _Controller:
         """Limit, convert to wheel speeds and advance the internal true pose one step."""
         p = self.p
         dt = p.sample_time
-        dv, dw = p.max_linear_accel * dt, p.max_angular_accel * dt
-        v = min(max(v_des, self.v - dv, -p.max_linear_speed), self.v + dv, p.max_linear_speed)
-        w = min(max(w_des, self.w - dw, -p.max_angular_speed), self.w + dw,
-                p.max_angular_speed)
+        v, w = limit_twist(p, v_des, w_des, self.v, self.w)
         wl, wr = twist_to_wheels(v, w, p.wheel_radius, p.axle_length)
         wl, wr = float(wl), float(wr)
         r, b = p.wheel_radius, p.axle_length
