@@ -28,7 +28,7 @@ from landmark_nav.nodes.base_driver import BaseDriver
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.sim.robot import RobotParams
 from landmark_nav.sim.sonar import SonarRing
-from landmark_nav.testing import RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from landmark_nav.tools.calibrate_odometry import write_base_driver_params
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -479,12 +479,10 @@ def test_fault_is_survived_and_reported(faulty, kind, duration):
 
 
 def test_config_file_matches_declared_parameters_and_calibration_writes_it(tmp_path):
-    config = yaml.safe_load((REPO / 'config' / 'base_driver.yaml').read_text())
-    values = config['base_driver']['ros__parameters']
+    values = parameter_file(REPO, 'base_driver')
     with RosHarness() as ros:
         node = BaseDriver(context=ros.context)
-        declared = {name: p.value for name, p in node._parameters.items()
-                    if name not in ('use_sim_time', 'start_type_description_service')}
+        declared = declared_parameters(node)
         node.destroy_node()
     assert set(values) == set(declared)
     for name, value in values.items():

@@ -11,13 +11,12 @@ from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
-from landmark_nav.testing import RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import LaserScan, PointCloud2
-import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 OFFICE = REPO / 'bags' / 'office'
@@ -136,12 +135,10 @@ def test_corner_extractor_rejects_bad_parameters():
 
 
 def test_config_file_matches_declared_parameters():
-    config = yaml.safe_load((REPO / 'config' / 'corner_extractor.yaml').read_text())
-    values = config['corner_extractor']['ros__parameters']
+    values = parameter_file(REPO, 'corner_extractor')
     with RosHarness() as ros:
         node = CornerExtractor(context=ros.context)
-        declared = {name: p.value for name, p in node._parameters.items()
-                    if name not in ('use_sim_time', 'start_type_description_service')}
+        declared = declared_parameters(node)
         node.destroy_node()
     assert set(values) == set(declared)
     for name, value in values.items():
@@ -215,11 +212,9 @@ def test_line_extractor_parameters_and_config():
                 LineExtractor(context=ros.context,
                               parameter_overrides=[Parameter(name, value=value)])
         node = LineExtractor(context=ros.context)
-        declared = {name: p.value for name, p in node._parameters.items()
-                    if name not in ('use_sim_time', 'start_type_description_service')}
+        declared = declared_parameters(node)
         node.destroy_node()
-    config = yaml.safe_load((REPO / 'config' / 'line_extractor.yaml').read_text())
-    values = config['line_extractor']['ros__parameters']
+    values = parameter_file(REPO, 'line_extractor')
     assert set(values) == set(declared)
     for name, value in values.items():
         assert declared[name] == (pytest.approx(value) if isinstance(value, float) else value)

@@ -13,7 +13,7 @@ from landmark_nav.nodes.landmark_detector import LandmarkDetector
 from landmark_nav.sim.camera_record import (IMAGE_TOPIC, INFO_TOPIC, LANDMARKS_TOPIC,
                                             record_camera_scenario)
 from landmark_nav.sim.camera_scenarios import ViewOptions
-from landmark_nav.testing import RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
@@ -79,12 +79,10 @@ def _rot(q):
 
 
 def test_config_file_matches_declared_parameters():
-    config = yaml.safe_load((REPO / 'config' / 'landmark_detector.yaml').read_text())
-    values = config['landmark_detector']['ros__parameters']
+    values = parameter_file(REPO, 'landmark_detector')
     with RosHarness() as ros:
         node = LandmarkDetector(context=ros.context)
-        declared = {name: p.value for name, p in node._parameters.items()
-                    if name not in ('use_sim_time', 'start_type_description_service')}
+        declared = declared_parameters(node)
         node.destroy_node()
     assert set(values) == set(declared)
     for name, value in values.items():

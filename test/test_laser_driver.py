@@ -24,13 +24,12 @@ from landmark_nav.emulators.urg import URG_04LX, UrgDevice
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.driver_common import ERROR, LinkHealth, OK, WARN
 from landmark_nav.nodes.laser_driver import LaserDriver
-from landmark_nav.testing import RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -444,13 +443,11 @@ def test_bad_parameter_exits_with_2_and_a_message():
 
 
 def test_config_file_matches_declared_parameters():
-    config = yaml.safe_load((REPO / 'config' / 'laser_driver.yaml').read_text())
-    values = config['laser_driver']['ros__parameters']
+    values = parameter_file(REPO, 'laser_driver')
     with RosHarness() as ros:
         node = LaserDriver(context=ros.context,
                            parameter_overrides=[Parameter('port', value='/dev/ttyNOPE_LN')])
-        declared = {name: p.value for name, p in node._parameters.items()
-                    if name not in ('use_sim_time', 'start_type_description_service')}
+        declared = declared_parameters(node)
         node.destroy_node()
     declared['port'] = values['port']
     assert set(values) == set(declared)

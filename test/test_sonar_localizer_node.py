@@ -15,7 +15,7 @@ from landmark_nav.localization.evaluate import (draw_initial_pose, first_motion_
 from landmark_nav.localization.tracking import SonarTracker
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.sonar_localizer import SonarLocalizer
-from landmark_nav.testing import RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from landmark_nav.testing.harness import reliable_qos
 from landmark_nav.tools.localization_tools import (INITIAL_STD, load_bag_input,
                                                    run_bag_localization, world_map)
@@ -25,7 +25,6 @@ import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, Range
-import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 HALLWAY = REPO / 'bags' / 'hallway'
@@ -315,12 +314,10 @@ def test_map_file_parameter(tmp_path, hallway):
 
 
 def test_config_file_matches_declared_parameters():
-    config = yaml.safe_load((REPO / 'config' / 'sonar_localizer.yaml').read_text())
-    values = config['sonar_localizer']['ros__parameters']
+    values = parameter_file(REPO, 'sonar_localizer')
     with RosHarness() as ros:
         node = SonarLocalizer(context=ros.context)
-        declared = {name: p.value for name, p in node._parameters.items()
-                    if name not in ('use_sim_time', 'start_type_description_service')}
+        declared = declared_parameters(node)
         node.destroy_node()
     assert set(values) == set(declared)
     for name, value in values.items():

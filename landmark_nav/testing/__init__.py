@@ -1,5 +1,5 @@
 """Test support: run nodes in-process on an isolated DDS domain, feed bags, collect output."""
 
-from .harness import isolate_dds, RosHarness
+from .harness import declared_parameters, isolate_dds, parameter_file, RosHarness
 
-__all__ = ['RosHarness', 'isolate_dds']
+__all__ = ['declared_parameters', 'isolate_dds', 'parameter_file', 'RosHarness']

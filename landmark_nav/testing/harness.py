@@ -6,9 +6,10 @@ restricted to localhost, so parallel test runs and robots on the network never m
 """
 
 import os
+from pathlib import Path
 import threading
 import time
-from typing import Callable, Dict, Iterable, List, Optional
+from typing import Any, Callable, Dict, Iterable, List, Optional
 
 from landmark_nav.bag import BagReader, message_class
 import rclpy
@@ -35,6 +36,19 @@ def reliable_qos(depth: int = 10000, latched: bool = False) -> QoSProfile:
         history=HistoryPolicy.KEEP_LAST, depth=depth,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def declared_parameters(node: Node) -> Dict[str, Any]:
+    """Return the values of the parameters a node declared (without rclpy's own)."""
+    return {name: p.value for name, p in node._parameters.items()
+            if name not in ('use_sim_time', 'start_type_description_service')}
+
+
+def parameter_file(repo: Path, node_name: str) -> Dict[str, Any]:
+    """Return the ``ros__parameters`` of ``config/<node_name>.yaml`` in the repository."""
+    import yaml
+    config = yaml.safe_load((Path(repo) / 'config' / f'{node_name}.yaml').read_text())
+    return config[node_name]['ros__parameters']
 
 
 class RosHarness:
