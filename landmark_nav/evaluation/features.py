@@ -172,11 +172,13 @@ def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray, max_range: fl
     xy = origins[hit] + hits.ranges[hit, None] * np.column_stack(
         [np.cos(sensor_pose[2] + angles[hit]), np.sin(sensor_pose[2] + angles[hit])])
     ids = hits.ids[hit]
+    r_hit, phi_hit = hits.ranges[hit], angles[hit]
     walls = world.walls()
     rows = {int(i): r for r, i in enumerate(walls.ids)}
     w_ids, forms, extents, spans, world_spans, bounds = [], [], [], [], [], []
     for wid in np.unique(ids):
-        pts = xy[ids == wid]
+        on = ids == wid
+        pts = xy[on]
         if len(pts) < 2:
             continue
         seg = walls.segments[rows[int(wid)]]
@@ -190,9 +192,7 @@ def wall_truth(world, sensor_pose: np.ndarray, angles: np.ndarray, max_range: fl
         extents.append(float(t.max() - t.min()))
         spans.append(ends)
         if sigma_r is not None:
-            on = ids == wid
-            bounds.append(line_crlb(hits.ranges[hit][on], angles[hit][on], *forms[-1],
-                                    sigma_r, sigma_phi))
+            bounds.append(line_crlb(r_hit[on], phi_hit[on], *forms[-1], sigma_r, sigma_phi))
     return WallTruth(ids=np.array(w_ids, dtype=np.int64),
                      rho_alpha=np.array(forms).reshape(-1, 2), extent=np.array(extents),
                      span=np.array(spans).reshape(-1, 2, 2),

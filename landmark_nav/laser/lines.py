@@ -830,6 +830,8 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     gate = params.merge_chi2
     join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
                          f.cov[1:]) <= gate)
+    if not join.any():
+        return sums, s, e, f
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
