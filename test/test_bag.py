@@ -94,3 +94,17 @@ def test_writer_refuses_to_overwrite(tmp_path):
     (tmp_path / 'b').mkdir()
     with pytest.raises(BagError, match='exists'):
         BagWriter(tmp_path / 'b')
+
+
+def test_custom_data_round_trip(tmp_path):
+    with BagWriter(tmp_path / 'b') as bag:
+        bag.add_topic('/scan', LaserScan)
+        bag.write('/scan', 1, LaserScan())
+        bag.set_custom_data('landmark_nav.laser_mount', '0.25 0 0')
+        with pytest.raises(BagError, match='must be a string'):
+            bag.set_custom_data('landmark_nav.seed', 3)
+    with BagReader(tmp_path / 'b') as reader:
+        assert reader.custom_data == {'landmark_nav.laser_mount': '0.25 0 0'}
+    write_small_bag(tmp_path / 'c')
+    with BagReader(tmp_path / 'c') as reader:
+        assert reader.custom_data == {}

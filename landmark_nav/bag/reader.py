@@ -95,6 +95,12 @@ class BagReader:
         """Duration covered by the messages."""
         return int(self._reader.duration)
 
+    @property
+    def custom_data(self) -> dict:
+        """Return the ``custom_data`` strings of ``metadata.yaml`` (empty dict when none)."""
+        metadata = getattr(self._reader.storage, 'metadata', None)  # rosbag2 directory
+        return dict(getattr(metadata, 'custom', None) or {})
+
     def topics(self) -> dict:
         """Return {topic: TopicInfo}."""
         result = {}

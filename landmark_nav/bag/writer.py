@@ -91,3 +91,13 @@ class BagWriter:
         if connection is None:
             raise BagError(f'Topic {topic} was not added to {self.path}')
         self._writer.write(connection, int(stamp_ns), serialize(msg))
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Store a string in the bag's ``metadata.yaml`` ``custom_data`` (rosbag2 >= 6).
+
+        The package's keys start with ``landmark_nav.`` (e.g. ``landmark_nav.laser_mount``:
+        ``"x y yaw"`` in m, m, rad, the ``base_link -> laser`` transform).
+        """
+        if not isinstance(value, str):
+            raise BagError(f'custom_data value for {key!r} must be a string, got {value!r}')
+        self._writer.set_custom_data(key, value)
