@@ -36,12 +36,12 @@ from typing import Callable, Tuple
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import cv2  # noqa: E402
+from landmark_nav.evaluation.vision import (backdrop, landmark_in_view, random_code,  # noqa: E402
+                                            VGA_CAMERA)
 from landmark_nav.sim.camera import CameraSimulator, Photometry, Plane  # noqa: E402
 from landmark_nav.vision.camera import OPTICAL_FROM_BODY  # noqa: E402
 from landmark_nav.vision.detector import (corner_groups, corner_pixels,  # noqa: E402
                                           detect_landmarks, DetectorParams, smooth)
-from landmark_nav.vision.evaluate import (backdrop, landmark_in_view, random_code,  # noqa: E402
-                                          VGA_CAMERA)
 from landmark_nav.vision.landmark import LandmarkDesign  # noqa: E402
 from landmark_nav.vision.pose import estimate_pose, rotation_matrix, solve_pnp  # noqa: E402
 import numpy as np  # noqa: E402

@@ -43,7 +43,7 @@ def main() -> int:
     runs = max(200, args.runs)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
     from landmark_nav.localization import ekf, ukf
-    from landmark_nav.localization.evaluate import LocalizationInput
+    from landmark_nav.evaluation.localization import LocalizationInput
     from landmark_nav.localization.grid import rasterize_world, raycast_grid
     from landmark_nav.localization.params import LocalizationParams
     from landmark_nav.sim import run_scenario

@@ -10,7 +10,7 @@ then drives a 72 m loop with the laser blind, so that its pose error grows to te
 centimetres and degrees, and re-observes the row from 2.5 m. For every seed the same
 simulated run goes through the filter twice with the default :class:`SlamParams`, once with
 ``association='icnn'`` and once with ``'jcbb'`` (nothing else differs), and is scored by
-:func:`landmark_nav.slam.evaluate.score_run` (wrong associations via the ground-truth corner
+:func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth corner
 ids). Printed per seed: the odometry error accumulated over the blackout (position, heading),
 then per method the wrong associations out of all associations, the ATE RMSE over the scans
 after the blackout, the mapped landmarks against the true visible corners, duplicated and
@@ -25,10 +25,10 @@ from typing import Dict, List
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from landmark_nav.evaluation.slam import run_slam, score_run  # noqa: E402
 from landmark_nav.geometry import wrap_angle  # noqa: E402
 from landmark_nav.sim import run_scenario  # noqa: E402
 from landmark_nav.slam import SlamParams  # noqa: E402
-from landmark_nav.slam.evaluate import run_slam, score_run  # noqa: E402
 import numpy as np  # noqa: E402
 
 METHODS = ('icnn', 'jcbb')

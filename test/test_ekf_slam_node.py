@@ -5,13 +5,13 @@ from pathlib import Path
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import make_odometry, stamp_to_ns
+from landmark_nav.evaluation.bags import load_bag
+from landmark_nav.evaluation.slam import run_slam
 from landmark_nav.feature_msgs import make_feature_cloud
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
-from landmark_nav.slam.evaluate import run_slam
 from landmark_nav.testing import RosHarness
-from landmark_nav.tools.evaluate_slam import load_bag
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest

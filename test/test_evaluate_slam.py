@@ -1,15 +1,25 @@
-"""``evaluate_bag`` on the office bag: files, targets of the issue, bad input."""
+"""``evaluate_bag`` on the office bag and on bags without the simulator's extras."""
 
 import json
 from pathlib import Path
 
-from landmark_nav.tools.evaluate_slam import evaluate_bag, relative_pose_error
+from landmark_nav.bag import BagError, BagReader, BagWriter
+from landmark_nav.conversions import make_odometry, odometry_to_pose
+from landmark_nav.evaluation.slam import evaluate_bag, format_summary
+from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
+from landmark_nav.geometry import compose, relative
+from landmark_nav.tools.cli import main as cli_main
+from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
+from sensor_msgs.msg import LaserScan
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'office'
 FILES = ('trajectory_slam.tum', 'trajectory_odom.tum', 'trajectory_gt.tum', 'slam.json',
-         'slam_map.png', 'slam_errors.png')
+         'slam_map.png', 'slam_trajectory.png', 'slam_errors.png')
+#: Where the re-encoded office bag's odometry frame starts (a real log's odometry starts
+#: anywhere, not at the reference pose).
+ODOM_START = np.array([5.0, -3.0, 1.0])
 
 
 @pytest.fixture(scope='module', params=['icnn', 'jcbb'])
@@ -39,22 +49,131 @@ def test_targets(evaluated):
     assert abs(r['mapped'] - r['true_visible']) <= 0.1 * r['true_visible']
     assert r['wrong_associations'] == 0
     assert r['rpe_trans_rmse'] < r['odom_rpe_trans_rmse']
-    assert 0.0 <= r['nees_share_band'] <= 1.0
+    # the se2-aligned ATE never exceeds the unaligned one (the identity is a candidate)
+    assert r['ate_se2_rmse'] <= r['ate_rmse']
+    assert r['resets'] == 0
     # Real-time factor is reported, not asserted (machine dependent).
     assert r['real_time_factor'] > 1.0
 
 
 def test_rpe_of_truth_is_zero():
     t = np.linspace(0, 5, 51)
-    truth = np.column_stack([t, np.zeros_like(t), np.zeros_like(t)])
-    r = relative_pose_error(truth, truth)
-    assert r['pairs'] > 0 and r['trans_rmse'] == 0.0
+    truth = Trajectory.from_planar(np.rint(t * 1e9).astype(np.int64),
+                                   np.column_stack([t, np.zeros_like(t), np.zeros_like(t)]))
+    r = rpe(truth, truth, 1.0)
+    assert r['pairs'] > 0 and r['rmse'] == 0.0
+
+
+def reencode(src: Path, dst: Path, reference_topic: bool, custom: dict,
+             odom_start=ODOM_START) -> None:
+    """Write ``src``'s /scan, /odom (and /ground_truth/odom) into a bag without its yaml.
+
+    The odometry is re-expressed in a frame where it starts at ``odom_start`` (a rigid
+    change of frame: every increment is unchanged).
+    """
+    with BagReader(src) as reader, BagWriter(dst) as out:
+        out.add_topic('/scan', LaserScan)
+        out.add_topic('/odom', Odometry)
+        if reference_topic:
+            out.add_topic('/ground_truth/odom', Odometry)
+        first = None
+        for topic, t, msg in reader.decoded(['/scan', '/odom', '/ground_truth/odom']):
+            if topic == '/odom':
+                p = odometry_to_pose(msg)
+                first = p.pose if first is None else first
+                pose = compose(odom_start, relative(first, p.pose))
+                msg = make_odometry(p.stamp_ns, 'odom', 'base_link', pose, p.covariance)
+            elif topic == '/ground_truth/odom' and not reference_topic:
+                continue
+            out.write(topic, t, msg)
+        for k, v in custom.items():
+            out.set_custom_data(k, v)
+
+
+@pytest.fixture(scope='module')
+def office_result(tmp_path_factory):
+    out = tmp_path_factory.mktemp('office_ref')
+    return evaluate_bag(BAG, 'icnn', out, progress=False, plots=False), out
+
+
+def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_result):
+    """Evaluate a re-encoded office bag: same filter path, same figures.
+
+    No ground_truth.yaml, odometry starting elsewhere, the reference from a TUM file, laser
+    facts in custom_data.
+    """
+    ref, ref_out = office_result
+    bag = tmp_path / 'real'
+    reencode(BAG, bag, reference_topic=False,
+             custom={'landmark_nav.laser_mount': '0 0 0',
+                     'landmark_nav.laser_sigma_range': '0.01'})
+    tum = tmp_path / 'reference.tum'
+    with BagReader(BAG) as reader:
+        gt = [odometry_to_pose(m) for _, _, m in reader.decoded(['/ground_truth/odom'])]
+    write_tum(tum, Trajectory.from_planar(np.array([p.stamp_ns for p in gt]),
+                                          np.array([p.pose for p in gt])))
+    with pytest.raises(ValueError, match='--reference'):
+        evaluate_bag(bag, progress=False)
+    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, reference=tum)
+    assert r['simulator_truth'] is False and r['reference'] == str(tum)
+    assert any('re-expressed' in n for n in r['notes'])
+    assert any('custom_data landmark_nav.laser_mount' in n for n in r['notes'])
+    for k in ('landmark_rmse', 'true_visible', 'wrong_associations', 'ghost_landmarks'):
+        assert r[k] is None, k
+    assert r['scans'] == ref['scans'] and r['mapped'] == ref['mapped']
+    assert r['associations'] == ref['associations'] and r['resets'] == 0
+    # a rigid change of the odometry frame: the same path up to rounding
+    for k in ('ate_rmse', 'ate_max', 'odom_ate_rmse', 'ate_se2_rmse', 'rpe_trans_rmse'):
+        assert r[k] == pytest.approx(ref[k], abs=1e-9), k
+    a, b = read_tum(tmp_path / 'out' / 'trajectory_slam.tum'), read_tum(
+        ref_out / 'trajectory_slam.tum')
+    assert np.abs(a.positions - b.positions).max() < 1e-8
+    assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
+    assert 'no true corners' in format_summary(r)
+
+
+def test_laser_facts_precedence(tmp_path):
+    """custom_data wins over the option; the option over the default; the default is noted."""
+    stated = tmp_path / 'stated'
+    reencode(BAG, stated, reference_topic=True,
+             custom={'landmark_nav.laser_mount': '0.2 0 0',
+                     'landmark_nav.laser_sigma_range': '0.02'})
+    r = evaluate_bag(stated, progress=False, max_seconds=5, laser_pose=(1, 2, 3),
+                     sigma_r=0.5)
+    assert r['laser_mount'] == [0.2, 0.0, 0.0] and r['laser_sigma_range'] == 0.02
+    assert any('--laser-pose ignored' in n for n in r['notes'])
+    bare = tmp_path / 'bare'
+    reencode(BAG, bare, reference_topic=True, custom={})
+    r = evaluate_bag(bare, progress=False, max_seconds=5, laser_pose=(0.1, 0, 0.5),
+                     sigma_r=0.03)
+    assert r['laser_mount'] == [0.1, 0.0, 0.5] and r['laser_sigma_range'] == 0.03
+    r = evaluate_bag(bare, progress=False, max_seconds=5)
+    assert r['laser_mount'] == [0.0, 0.0, 0.0]
+    assert any('using 0 0 0' in n for n in r['notes'])
+    bad = tmp_path / 'bad'
+    reencode(BAG, bad, reference_topic=True, custom={'landmark_nav.laser_mount': '0.2 0'})
+    with pytest.raises(ValueError, match='laser_mount: expected 3 finite numbers'):
+        evaluate_bag(bad, progress=False, max_seconds=5)
+
+
+def test_cli_prints_figures(tmp_path, capsys):
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress', '--align',
+                     'se3', '--out', str(tmp_path / 'o')]) == 0
+    text = capsys.readouterr().out
+    assert 'ATE se3 aligned' in text and '0 filter resets' in text
+    assert (tmp_path / 'o' / 'slam_trajectory.png').is_file()
 
 
 def test_bad_input(tmp_path):
     with pytest.raises(ValueError, match='association'):
         evaluate_bag(BAG, 'nearest', progress=False)
+    with pytest.raises(ValueError, match='align must be one of'):
+        evaluate_bag(BAG, align='affine', progress=False)
     with pytest.raises(ValueError, match='not a bag directory'):
         evaluate_bag(tmp_path / 'missing', progress=False)
-    with pytest.raises(ValueError, match='ground_truth.yaml'):
+    with pytest.raises((BagError, ValueError), match=str(tmp_path)):
         evaluate_bag(tmp_path, progress=False)
+    bad = tmp_path / 'bad.tum'
+    bad.write_text('0 0 0 0 0 0 0 1\n0.5 0 0\n')
+    with pytest.raises(ValueError, match=r'bad\.tum:2: expected 8 fields'):
+        evaluate_bag(BAG, reference=bad, progress=False)

@@ -1,14 +1,14 @@
 """Acceptance figures of the landmark detector on rendered data (visual navigation §2.3).
 
 The same functions run the full-size statistics from the command line
-(``python -m landmark_nav.vision.evaluate``). Sizes here: the 2000 reads and 500 frames the
+(``python -m landmark_nav.evaluation.vision``). Sizes here: the 2000 reads and 500 frames the
 issue names; Table 1 with 25 instead of 100 frames per turn and the shuttle with 20 (fixes
 at the stops) and 40 (fixes also on the approach) instead of 100 round trips (the full runs
 are reported by the tool).
 """
 
-from landmark_nav.vision.evaluate import (detection_vs_size, false_detections, repeatability,
-                                          shuttle)
+from landmark_nav.evaluation.vision import (detection_vs_size, false_detections, repeatability,
+                                            shuttle)
 import pytest
 
 

@@ -1,6 +1,6 @@
 """Acceptance targets of sonar localization on the simulated hallway (issue 6).
 
-Protocol (see :func:`landmark_nav.localization.evaluate.hallway_study`, which runs it on
+Protocol (see :func:`landmark_nav.evaluation.localization.hallway_study`, which runs it on
 10 seeds): map ``rasterize_world(result.world, 0.1)``; calibrated odometry (the
 simulator's true k1, k2, k3); initial estimate drawn from N(truth, diag(5.5 cm, 5.5 cm,
 5.1 deg)^2) and initial covariance the same (chapter section 6.1); errors measured from the
@@ -10,12 +10,12 @@ to the end. A few seeds here to stay fast.
 
 import math
 
-from landmark_nav.localization.evaluate import (CHAPTER_P0, distance_index,
-                                                draw_initial_pose, first_motion_index,
-                                                last_exceedance, localization_errors,
-                                                LocalizationInput, localize,
-                                                odometry_trajectory, run_localization,
-                                                TARGETS)
+from landmark_nav.evaluation.localization import (CHAPTER_P0, distance_index,
+                                                  draw_initial_pose, first_motion_index,
+                                                  last_exceedance, localization_errors,
+                                                  LocalizationInput, localize,
+                                                  odometry_trajectory, run_localization,
+                                                  TARGETS)
 from landmark_nav.localization.grid import rasterize_world
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.sonar_model import build_sonar_map

@@ -3,8 +3,8 @@
 import dataclasses
 import math
 
+from landmark_nav.evaluation.localization import CHAPTER_P0, LocalizationInput
 from landmark_nav.localization import ekf, ukf
-from landmark_nav.localization.evaluate import CHAPTER_P0, LocalizationInput
 from landmark_nav.localization.grid import GridMap, rasterize_world
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.sonar_model import predict_ranges, sonar_global_poses

@@ -93,7 +93,7 @@ def test_predict_matches_simulated_sonar_on_hallway():
 
 def test_build_sonar_map_recovers_hallway_walls():
     res = run_scenario('hallway', 3)
-    from landmark_nav.localization.evaluate import LocalizationInput
+    from landmark_nav.evaluation.localization import LocalizationInput
     inp = LocalizationInput.from_result(res)
     m = build_sonar_map(inp.truth, inp.sonar_ranges, inp.mounts, 0.1)
     assert m.occupancy.dtype == np.int8

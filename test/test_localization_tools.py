@@ -6,7 +6,7 @@ from pathlib import Path
 import shutil
 
 from landmark_nav.bag import BagError
-from landmark_nav.localization.evaluate import TARGETS
+from landmark_nav.evaluation.localization import TARGETS
 from landmark_nav.localization.grid import load_map_yaml, rasterize_world
 from landmark_nav.sim.scenarios import build_scenario
 from landmark_nav.tools.localization_tools import (build_sonar_map, evaluate_localization,

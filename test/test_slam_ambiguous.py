@@ -5,7 +5,7 @@ row of 0.3 m posts whose corners of the same kind are 0.45-0.77 m apart is mappe
 is blind during a 72 m loop (the odometry error grows to tens of centimetres and degrees)
 and the row is re-observed. The same simulated run goes through the filter with the default
 parameters twice, once per association method. Wrong associations are counted against the
-ground-truth corner ids (:func:`landmark_nav.slam.evaluate.score_run`). Seeds 0-2 here; the
+ground-truth corner ids (:func:`landmark_nav.evaluation.slam.score_run`). Seeds 0-2 here; the
 10-seed table comes from ``benchmarks/bench_slam_ambiguous.py``.
 """
 
@@ -13,10 +13,10 @@ from dataclasses import replace
 import math
 from typing import Dict, Tuple
 
+from landmark_nav.evaluation.slam import run_slam, score_run
 from landmark_nav.sim import build_scenario, run_scenario, ScanSample, simulate
 from landmark_nav.sim.scenarios import AMBIGUOUS_LOOP, ambiguous_world
 from landmark_nav.slam import SlamParams
-from landmark_nav.slam.evaluate import run_slam, score_run
 import numpy as np
 import pytest
 import yaml

@@ -1,7 +1,7 @@
 """End-to-end EKF-SLAM on the simulated office: the issue's accuracy and consistency targets.
 
 Corners come from the package's extractor on every ScanSample, odometry is interpolated to
-the scan stamps (see :mod:`landmark_nav.slam.evaluate` for the pipeline and the scoring).
+the scan stamps (see :mod:`landmark_nav.evaluation.slam` for the pipeline and the scoring).
 Targets (issue 4): ATE RMSE <= 5 cm and >= 10x better than odometry alone; max position
 error <= 15 cm; landmark RMSE <= 5 cm; mapped landmarks within 10 % of the true visible
 corners; no wrong association; robot-pose NEES inside the two-sided 95 % chi-square band on
@@ -13,9 +13,9 @@ below the band for hundreds of scans). Two seeds with ICNN and one with JCBB her
 
 from typing import Dict, Tuple
 
+from landmark_nav.evaluation.slam import run_slam, score_run, SlamRun, SlamScore
 from landmark_nav.sim import run_scenario
 from landmark_nav.slam import SlamParams
-from landmark_nav.slam.evaluate import run_slam, score_run, SlamRun, SlamScore
 import numpy as np
 import pytest
 

@@ -9,9 +9,9 @@ from landmark_nav.bag import BagReader
 from landmark_nav.conversions import (make_occupancy_grid, make_pose_with_covariance_stamped,
                                       make_range, odometry_to_pose,
                                       pose_with_covariance_to_pose, stamp_to_ns)
+from landmark_nav.evaluation.localization import (draw_initial_pose, first_motion_index,
+                                                  localization_errors, TARGETS)
 from landmark_nav.geometry import wrap_angle
-from landmark_nav.localization.evaluate import (draw_initial_pose, first_motion_index,
-                                                localization_errors, TARGETS)
 from landmark_nav.localization.tracking import SonarTracker
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.sonar_localizer import SonarLocalizer

@@ -24,6 +24,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 from landmark_nav.drivers.errors import (ChecksumError, EncodeError, FramingError,
                                          ProtocolError, TruncatedError)
 from landmark_nav.drivers.stream import StreamDecoder
+from landmark_nav.hardware import P2DX_SONAR_MM_DEG
 
 __all__ = [
     'ARGINT', 'ARGNINT', 'ARGSTR', 'COMMANDS', 'Command', 'HEADER', 'MAX_COUNT',
@@ -63,11 +64,7 @@ for _name, (_code, _kind) in COMMANDS.items():
 _NAMES.update({0: 'PULSE', 1: 'OPEN', 2: 'CLOSE'})
 
 # Pioneer 2-DX sonar poses (x mm, y mm, heading deg) relative to the centre of rotation.
-P2DX_SONAR_POSES: Tuple[Tuple[float, float, float], ...] = (
-    (69, 136, 90), (114, 119, 50), (148, 78, 30), (166, 27, 10), (166, -27, -10),
-    (148, -78, -30), (114, -119, -50), (69, -136, -90), (-157, -136, -90),
-    (-203, -119, -130), (-237, -78, -150), (-255, -27, -170), (-255, 27, 170),
-    (-237, 78, 150), (-203, 119, 130), (-157, 136, 90))
+P2DX_SONAR_POSES: Tuple[Tuple[float, float, float], ...] = P2DX_SONAR_MM_DEG
 
 
 @dataclass(frozen=True)

@@ -10,13 +10,14 @@ from dataclasses import dataclass, replace
 import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
+from landmark_nav.geometry import wrap_angle
+from landmark_nav.localization import ekf, ukf
+from landmark_nav.localization.grid import GridMap, rasterize_world
+from landmark_nav.localization.odometry import control_from_wheels, dead_reckoning
+from landmark_nav.localization.params import LocalizationParams
+from landmark_nav.localization.sonar_model import build_sonar_map
+from landmark_nav.sim import OdometrySample, run_scenario, SonarSample
 import numpy as np
-
-from . import ekf, ukf
-from .grid import GridMap
-from .odometry import control_from_wheels, dead_reckoning
-from .params import LocalizationParams
-from ..geometry import wrap_angle
 
 #: Initial pose covariance of the chapter's experiments (section 6.1):
 #: diag(0.3 dm^2, 0.3 dm^2, 0.008 rad^2), i.e. 5.5 cm and 5.1 deg standard deviation.
@@ -53,7 +54,6 @@ class LocalizationInput:
     @classmethod
     def from_result(cls, result: Any) -> 'LocalizationInput':
         """Extract the arrays from a :class:`landmark_nav.sim.ScenarioResult`."""
-        from ..sim import OdometrySample, SonarSample  # numpy-only, imported lazily
         odo = result.of_type(OdometrySample)
         stamps = np.array([e.stamp_ns for e in odo], dtype=np.int64)
         wheels = np.array([e.wheel_velocities for e in odo], dtype=float).reshape(-1, 2)
@@ -282,9 +282,6 @@ def hallway_study(seeds: Sequence[int], params: Optional[LocalizationParams] = N
         Dict of per-seed lists (``'ekf'``, ``'ukf'``, ``'odometry_calibrated'``,
         ``'odometry_uncalibrated'``: error dicts; ``'two_sigma'``; ``'built_map'``).
     """
-    from ..sim import run_scenario  # imported lazily: the core does not need the simulator
-    from .grid import rasterize_world
-    from .sonar_model import build_sonar_map
     params = params or LocalizationParams()
     out: Dict[str, Any] = {k: [] for k in ('seeds', 'ekf', 'ukf', 'odometry_calibrated',
                                            'odometry_uncalibrated', 'two_sigma',
@@ -347,7 +344,7 @@ def _parse_seeds(text: str) -> List[int]:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Print the hallway study (``python -m landmark_nav.localization``)."""
+    """Print the hallway study (``python -m landmark_nav.evaluation.localization``)."""
     import argparse
     ap = argparse.ArgumentParser(description=main.__doc__)
     ap.add_argument('--seeds', default='1-10', help='e.g. 1-10 or 1,3,5')

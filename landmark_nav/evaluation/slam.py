@@ -1,14 +1,15 @@
-"""Run :class:`~.ekf_slam.EkfSlam` on a simulated scenario and score it against ground truth.
+"""Run :class:`~landmark_nav.slam.ekf_slam.EkfSlam` on a scenario and score it against truth.
 
 Pipeline per :class:`~landmark_nav.sim.ScanSample` (time order): the odometry is linearly
 interpolated to the scan stamp (:func:`landmark_nav.geometry.interpolate_pose`), checked
-(:func:`~.ekf_slam.odometry_check`; a failed check resets the filter) and turned into the
-increment of eq. 13 for :meth:`~.ekf_slam.EkfSlam.predict`; the scan's corners
+(:func:`~landmark_nav.slam.ekf_slam.odometry_check`; a failed check resets the filter) and
+turned into the increment of eq. 13 for :meth:`~landmark_nav.slam.ekf_slam.EkfSlam.predict`;
+the scan's corners
 (:func:`~landmark_nav.laser.corners.extract_corners` on ``angle_min + i * increment``,
 ``valid = isfinite``) go through the laser mount and, with ``deskew``, through the odometry
 motion between the scan stamp and each corner's beam time (``stamp + index *
-time_increment``) into :func:`~.observations.corners_to_observations` and
-:meth:`~.ekf_slam.EkfSlam.update`. The estimate is for the scan stamp.
+time_increment``) into :func:`~landmark_nav.slam.observations.corners_to_observations` and
+:meth:`~landmark_nav.slam.ekf_slam.EkfSlam.update`. The estimate is for the scan stamp.
 
 Scores (:func:`score_run`), all in the map frame, which is the world frame because the map
 is initialised at the first odometry pose (odom == world at the start):
@@ -33,21 +34,33 @@ is initialised at the first odometry pose (odom == world at the start):
   band ``[chi2_3(0.025), chi2_3(0.975)]`` (and below the one-sided ``chi2_3(0.95)``).
 """
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
+import json
 import math
+from pathlib import Path
 import time
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
+from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.features import corner_truth
-from landmark_nav.geometry import interpolate_pose, relative, transform_points
+from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
+                                                Trajectory, write_tum)
+from landmark_nav.geometry import (covariance_ellipse, interpolate_pose, relative,
+                                   transform_points)
 from landmark_nav.laser.corners import CornerParams, extract_corners
 from landmark_nav.sim import OdometrySample, run_scenario, ScanSample, ScenarioResult
 from landmark_nav.sim.laser import compose as sensor_pose
+from landmark_nav.slam.consistency import chi2_band, chi2_gate, nees
+from landmark_nav.slam.ekf_slam import (EkfSlam, odometry_check, odometry_increment, SlamParams,
+                                        UpdateResult)
+from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
 import numpy as np
 
-from .consistency import chi2_band, chi2_gate, nees
-from .ekf_slam import EkfSlam, odometry_check, odometry_increment, SlamParams, UpdateResult
-from .observations import corner_descriptors, corners_to_observations
+ASSOCIATIONS = ('icnn', 'jcbb')
+#: Default ATE alignment of ``evaluate`` (the unaligned ATE is always reported too).
+ALIGN_DEFAULT = 'se2'
+#: Default RPE distance [m].
+RPE_DISTANCE_M = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,13 +94,13 @@ class SlamScore:
     ate_max: float
     odom_ate_rmse: float
     odom_ate_max: float
-    landmark_rmse: float
+    landmark_rmse: float               # NaN without a world (real logs)
     mapped: int
-    true_visible: int
-    ghost_landmarks: int
-    duplicates: int
+    true_visible: Optional[int]        # None without a world
+    ghost_landmarks: Optional[int]     # None without a world
+    duplicates: Optional[int]          # None without a world
     associations: int
-    wrong_associations: int
+    wrong_associations: Optional[int]  # None without a world
     nees_share_band: float
     nees_share_gate: float
     mean_nees: float
@@ -230,10 +243,11 @@ def _nearest(points: np.ndarray, targets: np.ndarray) -> Tuple[np.ndarray, np.nd
 
 def score_run(result: ScenarioResult, run: SlamRun, params: Optional[SlamParams] = None,
               match_distance: float = 0.15) -> SlamScore:
-    """Score a run against the ground truth (module docstring).
+    """Score a run against the ground truth or a reference (module docstring).
 
     Args:
-        result: The scenario run.
+        result: The scenario run, or a :class:`~landmark_nav.evaluation.bags.BagScenario`;
+            without a world (a real log) the landmark scores are NaN / None.
         run: Output of :func:`run_slam`.
         params: The filter parameters used (for ``confirm_hits``).
         match_distance: Largest distance of a landmark / observation to its true corner [m].
@@ -242,36 +256,42 @@ def score_run(result: ScenarioResult, run: SlamRun, params: Optional[SlamParams]
         The scores.
     """
     params = params or SlamParams()
-    truth = result.world.corners()
-    err = np.hypot(*(run.poses[:, :2] - run.truth[:, :2]).T)
-    oerr = np.hypot(*(run.odometry[:, :2] - run.truth[:, :2]).T)
-    j, d = _nearest(run.landmarks, truth.positions)
-    good = d <= match_distance
-    lm_true = np.where(good, truth.ids[j], -1)
-    dup = len(lm_true[good]) - len(set(lm_true[good].tolist()))
-    rmse = float(np.sqrt(np.mean(d[good] ** 2))) if np.any(good) else math.nan
-    jo, do = _nearest(run.obs_world_true, truth.positions)
-    obs_true = np.where(do <= match_distance, truth.ids[jo], -1)
+    err = position_errors(run.poses, run.truth)
+    oerr = position_errors(run.odometry, run.truth)
     assoc = np.isin(run.obs_status, ('matched', 'confirmed'))
-    lut = dict(zip(run.landmark_ids.tolist(), lm_true.tolist()))
-    lm_of_obs = np.array([lut.get(int(i), -1) for i in run.obs_landmark[assoc]], dtype=np.int64)
-    wrong = int(np.sum((lm_of_obs != obs_true[assoc]) | (obs_true[assoc] < 0)))
+    landmarks: Dict[str, Optional[float]] = {
+        'landmark_rmse': math.nan, 'true_visible': None, 'ghost_landmarks': None,
+        'duplicates': None, 'wrong_associations': None}
+    if result.world is not None:
+        truth = result.world.corners()
+        j, d = _nearest(run.landmarks, truth.positions)
+        good = d <= match_distance
+        lm_true = np.where(good, truth.ids[j], -1)
+        dup = len(lm_true[good]) - len(set(lm_true[good].tolist()))
+        rmse = float(np.sqrt(np.mean(d[good] ** 2))) if np.any(good) else math.nan
+        jo, do = _nearest(run.obs_world_true, truth.positions)
+        obs_true = np.where(do <= match_distance, truth.ids[jo], -1)
+        lut = dict(zip(run.landmark_ids.tolist(), lm_true.tolist()))
+        lm_of_obs = np.array([lut.get(int(i), -1) for i in run.obs_landmark[assoc]],
+                             dtype=np.int64)
+        wrong = int(np.sum((lm_of_obs != obs_true[assoc]) | (obs_true[assoc] < 0)))
+        landmarks = {'landmark_rmse': rmse,
+                     'true_visible': int(true_visible_corners(result, params.confirm_hits).size),
+                     'ghost_landmarks': int(np.sum(~good)), 'duplicates': int(dup),
+                     'wrong_associations': wrong}
     ne = np.array([nees(t, p, c) for t, p, c in zip(run.truth, run.poses, run.covariances)])
     lo, hi = chi2_band(3, 0.95)
     dof = run.nis_dof
     return SlamScore(
         ate_rmse=float(np.sqrt(np.mean(err ** 2))), ate_max=float(err.max()),
         odom_ate_rmse=float(np.sqrt(np.mean(oerr ** 2))), odom_ate_max=float(oerr.max()),
-        landmark_rmse=rmse, mapped=int(run.landmarks.shape[0]),
-        true_visible=int(true_visible_corners(result, params.confirm_hits).size),
-        ghost_landmarks=int(np.sum(~good)), duplicates=int(dup),
-        associations=int(assoc.sum()), wrong_associations=wrong,
+        mapped=int(run.landmarks.shape[0]), associations=int(assoc.sum()),
         nees_share_band=float(np.mean((ne >= lo) & (ne <= hi))),
         nees_share_gate=float(np.mean(ne <= chi2_gate(3, 0.95))),
         mean_nees=float(np.mean(ne)),
         mean_nis_per_dof=float(run.nis[dof > 0].sum() / max(dof.sum(), 1)),
         psd_repairs=int(run.stats['psd_repairs']),
-        ms_per_scan=1e3 * run.seconds / max(len(run.stamps), 1))
+        ms_per_scan=1e3 * run.seconds / max(len(run.stamps), 1), **landmarks)
 
 
 def evaluate(name: str, seeds: List[int], params: Optional[SlamParams] = None,
@@ -294,5 +314,252 @@ def evaluate(name: str, seeds: List[int], params: Optional[SlamParams] = None,
     return out
 
 
-__all__ = ['evaluate', 'run_slam', 'scan_angles', 'score_run', 'SlamRun', 'SlamScore',
-           'true_visible_corners']
+def _scan_points(scenario, run: SlamRun, max_points: int = 200_000) -> np.ndarray:
+    """(P, 2) scan end points in the map frame through the filter poses (a subsample)."""
+    scans = scenario.of_type(ScanSample)
+    n = sum(int(np.isfinite(s.ranges).sum()) for s in scans)
+    step = max(1, int(math.ceil(n / max_points)))
+    mount = tuple(float(v) for v in scenario.laser.mount)
+    out = []
+    for k, scan in enumerate(scans):
+        ok = np.isfinite(scan.ranges)
+        if not np.any(ok):
+            continue
+        r = scan.ranges[ok].astype(float)
+        a = scan_angles(scan)[ok]
+        pts = np.column_stack([r * np.cos(a), r * np.sin(a)])[::step]
+        out.append(transform_points(sensor_pose(run.poses[k], mount), pts))
+    return np.concatenate(out) if out else np.zeros((0, 2))
+
+
+def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALIGN_DEFAULT
+             ) -> List[str]:
+    """Write the figures of a run; return their file names.
+
+    * ``slam_map.png``: the scans' end points through the filter poses (the map over the
+      scans), the mapped landmarks with 2-sigma ellipses and the filter path; with a world,
+      also its walls and true corners (Fig. 19 of the chapter).
+    * ``slam_trajectory.png``: filter and odometry paths against the reference after the
+      ``align`` alignment (each aligned on its own, as the ATE is computed).
+    * ``slam_errors.png``: x, y, heading error against the reference with the filter's
+      +-2 sigma (unaligned, in the map frame).
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 7.5))
+    pts = _scan_points(scenario, run)
+    ax.plot(pts[:, 0], pts[:, 1], ',', color='0.55', alpha=0.6)
+    ax.plot([], [], '.', color='0.55', label='scans through the EKF-SLAM poses')
+    if scenario.world is not None:
+        for x1, y1, x2, y2 in scenario.world.walls().segments:
+            ax.plot([x1, x2], [y1, y2], color='0.3', lw=1.5)
+        tc = scenario.world.corners().positions
+        ax.plot(tc[:, 0], tc[:, 1], 'k+', ms=9, label='true corners')
+    ax.plot(run.poses[:, 0], run.poses[:, 1], 'b-', lw=1, label='EKF-SLAM path')
+    if run.landmarks.shape[0]:
+        ax.plot(run.landmarks[:, 0], run.landmarks[:, 1], 'ro', mfc='none', ms=5,
+                label='mapped landmarks (2 sigma)')
+        for m, c in zip(run.landmarks, run.landmark_covariances):
+            e = covariance_ellipse(m, c)
+            ax.plot(e[:, 0], e[:, 1], 'r-', lw=0.8)
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    ax.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out_dir / 'slam_map.png', dpi=120)
+    plt.close(fig)
+
+    ref = Trajectory.from_planar(run.stamps, run.truth)
+    fig, ax = plt.subplots(figsize=(9, 7.5))
+    ax.plot(run.truth[:, 0], run.truth[:, 1], 'g-', lw=1.2, label='reference')
+    for poses, style, name in ((run.odometry, 'r:', 'odometry'), (run.poses, 'b-', 'EKF-SLAM')):
+        try:
+            _, est = aligned(Trajectory.from_planar(run.stamps, poses), ref, align)
+        except ValueError:
+            continue
+        ax.plot(est[:, 0], est[:, 1], style, lw=1, label=f'{name} ({align} aligned)')
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    ax.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out_dir / 'slam_trajectory.png', dpi=120)
+    plt.close(fig)
+
+    t = (run.stamps - run.stamps[0]) * 1e-9
+    err = run.poses - run.truth
+    err[:, 2] = np.angle(np.exp(1j * err[:, 2]))
+    sig = np.sqrt(np.maximum(np.diagonal(run.covariances, axis1=1, axis2=2), 0.0))
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    scale = (100.0, 100.0, 180.0 / math.pi)
+    for k, (ax, lab) in enumerate(zip(axes, ('x error [cm]', 'y error [cm]',
+                                             'psi error [deg]'))):
+        ax.plot(t, scale[k] * err[:, k], 'b-', lw=1, label='error')
+        ax.plot(t, 2 * scale[k] * sig[:, k], 'r--', lw=0.8, label='+-2 sigma')
+        ax.plot(t, -2 * scale[k] * sig[:, k], 'r--', lw=0.8)
+        ax.set_ylabel(lab)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc='upper right', fontsize=8)
+    axes[-1].set_xlabel('time [s]')
+    axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(out_dir / 'slam_errors.png', dpi=120)
+    plt.close(fig)
+    return ['slam_map.png', 'slam_trajectory.png', 'slam_errors.png']
+
+
+def _clean(v):
+    return None if isinstance(v, float) and math.isnan(v) else v
+
+
+def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = True,
+                 params: Optional[SlamParams] = None, max_seconds: Optional[float] = None,
+                 reference=None, align: str = ALIGN_DEFAULT,
+                 laser_pose: Optional[Sequence[float]] = None, sigma_r: Optional[float] = None,
+                 rpe_delta: float = RPE_DISTANCE_M, plots: bool = True) -> dict:
+    """Run EKF-SLAM over a bag and score it against its reference.
+
+    Any bag with ``/scan``, ``/odom`` and a reference (``/ground_truth/odom`` or
+    ``reference``, a TUM file) will do (:func:`landmark_nav.evaluation.bags.load_bag`);
+    the landmark scores need the simulator's ``ground_truth.yaml`` and are None without it.
+
+    Figures (``slam.json``): the :class:`SlamScore` fields (``ate_rmse`` / ``ate_max``:
+    unaligned, in the map frame, as the README's office table); ``ate_<align>_<stat>`` and
+    ``odom_ate_<align>_<stat>`` with the chosen alignment; ``rpe_trans_<stat>``,
+    ``rpe_rot_<stat>_deg``, ``rpe_pairs`` and the ``odom_`` equivalents over ``rpe_delta`` m
+    (:mod:`landmark_nav.evaluation.trajectory`: evo's metrics); ``resets`` (filter resets
+    after failed odometry checks); timing; the laser facts used and ``notes``.
+
+    Args:
+        bag: rosbag2 directory.
+        association: ``'icnn'`` or ``'jcbb'``.
+        out_dir: Directory for the TUM files, ``slam.json`` and the PNGs (None: nothing
+            written).
+        progress: Show a tqdm progress bar.
+        params: Filter parameters (default :class:`SlamParams`; ``association`` wins).
+        max_seconds: Use only the first seconds of the bag.
+        reference: TUM file of the reference (None: ``/ground_truth/odom``).
+        align: ATE alignment, one of :data:`~landmark_nav.evaluation.trajectory.ALIGNMENTS`.
+        laser_pose: ``(x, y, yaw)`` laser mount when the bag does not state it.
+        sigma_r: Laser range noise [m] when the bag does not state it.
+        rpe_delta: RPE distance [m].
+        plots: Write the PNGs (with ``out_dir``).
+
+    Returns:
+        The figures (see ``slam.json``).
+
+    Raises:
+        ValueError: Bad option or unusable bag (one-line message).
+    """
+    if association not in ASSOCIATIONS:
+        raise ValueError(f'association must be one of {", ".join(ASSOCIATIONS)}, '
+                         f'got {association!r}')
+    if align not in ALIGNMENTS:
+        raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
+    scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r)
+    prm = params or SlamParams()
+    prm = SlamParams(**{**{f.name: getattr(prm, f.name) for f in fields(SlamParams)},
+                        'association': association})
+    corner_params = CornerParams(sigma_r=float(scenario.laser.sigma_range),
+                                 sigma_phi=float(scenario.laser.sigma_angle))
+    n_scans = len(scenario.of_type(ScanSample))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=n_scans, unit='scan', desc=f'{Path(bag).name} {association}')
+    callback = None if bar is None else (lambda k, slam, res: bar.update(1))
+    tic = time.perf_counter()
+    try:
+        run = run_slam(scenario, prm, corner_params, callback=callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - tic
+    score = score_run(scenario, run, prm)
+    duration = (run.stamps[-1] - run.stamps[0]) * 1e-9 + scenario.scan_period
+    result = {'bag': str(bag), 'association': association, 'scans': int(len(run.stamps)),
+              'duration_s': float(duration), 'resets': int(run.resets),
+              'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
+              'laser_mount': [float(v) for v in scenario.laser.mount],
+              'laser_sigma_range': float(scenario.laser.sigma_range)}
+    result.update({k: _clean(v) for k, v in asdict(score).items()})
+    ref = Trajectory.from_planar(run.stamps, run.truth)
+    est = {'': Trajectory.from_planar(run.stamps, run.poses),
+           'odom_': Trajectory.from_planar(run.stamps, run.odometry)}
+    result['align'] = align
+    for key, traj in est.items():
+        for k, v in ate(traj, ref, align).items():
+            result[f'{key}ate_{align}_{k}'] = v
+    result['rpe_distance_m'] = float(rpe_delta)
+    for key, traj in est.items():
+        r = rpe(traj, ref, rpe_delta)
+        for k, v in r.items():
+            name = k if k.startswith('rot_') or k == 'pairs' else f'trans_{k}'
+            result[f'{key}rpe_{name}'] = _clean(v)
+    result['ate_improvement'] = (score.odom_ate_rmse / score.ate_rmse
+                                 if score.ate_rmse > 0 else None)
+    result['seconds_total'] = float(wall)
+    result['ms_per_step_total'] = 1e3 * wall / max(len(run.stamps), 1)
+    result['real_time_factor'] = float(duration / wall) if wall > 0 else None
+    result['filter_real_time_factor'] = (float(duration / run.seconds) if run.seconds > 0
+                                         else None)
+    result['stats'] = {k: int(v) for k, v in run.stats.items()}
+    result['notes'] = list(scenario.notes)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        write_tum(out / 'trajectory_slam.tum', est[''])
+        write_tum(out / 'trajectory_odom.tum', est['odom_'])
+        write_tum(out / 'trajectory_gt.tum', ref)
+        (out / 'slam.json').write_text(json.dumps(result, indent=2))
+        if plots:
+            plot_run(scenario, run, out, f'EKF-SLAM ({association}) on {Path(bag).name}: ATE '
+                     f'{100 * score.ate_rmse:.1f} cm, odometry '
+                     f'{100 * score.odom_ate_rmse:.1f} cm', align)
+    return result
+
+
+def format_summary(r: dict) -> str:
+    """Render the main figures as a few lines of text."""
+    def cm(v):
+        return 'n/a' if v is None else f'{100 * v:.2f} cm'
+
+    def num(v, fmt='{}'):
+        return 'n/a' if v is None else fmt.format(v)
+    a = r['align']
+    lines = [f'{r["bag"]} ({r["association"]}): {r["scans"]} scans, {r["duration_s"]:.1f} s, '
+             f'reference {r["reference"]}, {r["resets"]} filter resets']
+    lines += [f'note: {n}' for n in r.get('notes', [])]
+    lines += [
+        f'ATE RMSE {cm(r["ate_rmse"])} (max {cm(r["ate_max"])}); odometry '
+        f'{cm(r["odom_ate_rmse"])} (max {cm(r["odom_ate_max"])})',
+        f'ATE {a} aligned: RMSE {cm(r[f"ate_{a}_rmse"])} (mean {cm(r[f"ate_{a}_mean"])}, '
+        f'median {cm(r[f"ate_{a}_median"])}, max {cm(r[f"ate_{a}_max"])}); odometry RMSE '
+        f'{cm(r[f"odom_ate_{a}_rmse"])}',
+        f'RPE over {r["rpe_distance_m"]:g} m ({r["rpe_pairs"]} pairs): '
+        f'{cm(r["rpe_trans_rmse"])} / {num(r["rpe_rot_rmse_deg"], "{:.2f}")} deg (odometry '
+        f'{cm(r["odom_rpe_trans_rmse"])} / {num(r["odom_rpe_rot_rmse_deg"], "{:.2f}")} deg)']
+    if r['true_visible'] is not None:
+        lines.append(
+            f'landmarks: {r["mapped"]} mapped / {r["true_visible"]} true visible, RMSE '
+            f'{cm(r["landmark_rmse"])}, ghosts {r["ghost_landmarks"]}, duplicates '
+            f'{r["duplicates"]}')
+        lines.append(f'associations {r["associations"]}, wrong {r["wrong_associations"]}; '
+                     f'NEES in 95 % band {100 * r["nees_share_band"]:.1f} %')
+    else:
+        lines.append(f'landmarks: {r["mapped"]} mapped (no true corners: not a simulator bag); '
+                     f'associations {r["associations"]}; NEES against the reference in the '
+                     f'95 % band {100 * r["nees_share_band"]:.1f} %')
+    lines.append(f'filter {r["ms_per_scan"]:.2f} ms/step, total {r["ms_per_step_total"]:.2f} '
+                 f'ms/step, real-time factor {num(r["real_time_factor"], "{:.0f}")}x')
+    return '\n'.join(lines)
+
+
+__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'evaluate', 'evaluate_bag', 'format_summary',
+           'plot_run', 'RPE_DISTANCE_M', 'run_slam', 'scan_angles', 'score_run', 'SlamRun',
+           'SlamScore', 'true_visible_corners']

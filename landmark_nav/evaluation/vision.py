@@ -1,6 +1,6 @@
 """Offline evaluation of landmark detection and pose on rendered images (chapter §2.3).
 
-Run ``python -m landmark_nav.vision.evaluate [detection|false|repeatability|shuttle|all]``
+Run ``python -m landmark_nav.evaluation.vision [detection|false|repeatability|shuttle|all]``
 (shuttle: ``--procedure stop|approach|both``, ``--approach-rate HZ``) for the full-size
 statistics (tables on stdout, ``--json FILE`` for the figures); the
 tests run the same functions with the counts the acceptance criteria name.
@@ -20,8 +20,8 @@ with a seeded generator; truth comes from the scene, never from the detector):
   fixes taken standing at the 1 m point (the chapter's procedure) or also on the way there.
 
 Geometry of a view: the camera sits at the world origin with world = its optical frame; the
-landmark pose is given by the pose parameters ``v`` of :mod:`.pose` (landmark centre in the
-camera body frame, turn/tilt/roll).
+landmark pose is given by the pose parameters ``v`` of :mod:`landmark_nav.vision.pose`
+(landmark centre in the camera body frame, turn/tilt/roll).
 """
 
 import argparse
@@ -389,9 +389,9 @@ class ShuttleResult:
 class LandmarkLocalizer:
     """Robot fixes from camera frames: detect, estimate the pose, chain with map and mount.
 
-    With ``ekf=True`` a :class:`~.localize.FixCorrectedOdometry` integrates the odometry
-    increments (:meth:`odometry`) and is updated with each fix and its covariance; the
-    robot is then reset to the filter's estimate instead of the plain fix.
+    With ``ekf=True`` a :class:`~landmark_nav.vision.localize.FixCorrectedOdometry`
+    integrates the odometry increments (:meth:`odometry`) and is updated with each fix and
+    its covariance; the robot is then reset to the filter's estimate instead of the plain fix.
     """
 
     def __init__(self, config: ShuttleConfig, ekf: bool = True,
@@ -459,9 +459,10 @@ def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
 
     The robot drives on its own estimate; at each stop at the near point it takes the
     scenario's stop frames, and the fixes from them (detector + Gauss-Newton pose + map +
-    camera mount) correct it: ``'ekf'`` through :class:`~.localize.FixCorrectedOdometry`
-    (odometry increments predict, each fix updates with its covariance), ``'reset'`` by the
-    scenario's reset to the mean fix, ``'none'`` not at all; ``'oracle'`` resets to the true
+    camera mount) correct it: ``'ekf'`` through
+    :class:`~landmark_nav.vision.localize.FixCorrectedOdometry` (odometry increments predict,
+    each fix updates with its covariance), ``'reset'`` by the scenario's reset to the mean
+    fix, ``'none'`` not at all; ``'oracle'`` resets to the true
     pose (the scenario's perfect fixes: the best any detector can do).
 
     Procedures: ``'stop'`` (the chapter's) renders images only at the stops;
@@ -567,7 +568,7 @@ def format_false(res: FalseDetectionResult) -> str:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the evaluation from the command line; print the tables."""
-    ap = argparse.ArgumentParser(prog='python -m landmark_nav.vision.evaluate',
+    ap = argparse.ArgumentParser(prog='python -m landmark_nav.evaluation.vision',
                                  description=__doc__.splitlines()[0])
     ap.add_argument('experiment', nargs='?', default='all',
                     choices=['detection', 'false', 'repeatability', 'shuttle', 'all'])

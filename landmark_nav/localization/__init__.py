@@ -26,13 +26,12 @@ Modules:
 * :mod:`.ekf` -- ``time_update`` (eqs. 29-30), ``measurement_update`` (eqs. 31-36).
 * :mod:`.ukf` -- ``weights``, ``sigma_points``, ``time_update`` (eqs. 37-48),
   ``measurement_update`` (eqs. 49-54).
-* :mod:`.evaluate` -- ``run_localization``, ``odometry_trajectory``,
-  ``localization_errors``; ``python -m landmark_nav.localization`` prints the
-  hallway study.
+
+The offline runners and scorers (``run_localization``, ``localize``,
+``odometry_trajectory``, ``localization_errors``, the hallway study) live in
+:mod:`landmark_nav.evaluation.localization`.
 """
 
-from .evaluate import (CHAPTER_P0, localization_errors, LocalizationInput, localize,
-                       odometry_trajectory, run_localization)
 from .grid import GridMap, load_map_yaml, rasterize_world, raycast_grid, save_map_yaml
 from .odometry import (control_from_poses, control_from_wheels, motion_jacobians,
                        motion_model, process_noise, ProcessNoise)
@@ -41,10 +40,8 @@ from .sonar_model import (angular_modulation, build_sonar_map, predict_ranges,
                           radial_modulation, sonar_global_poses)
 
 __all__ = [
-    'angular_modulation', 'build_sonar_map', 'CHAPTER_P0', 'control_from_poses',
-    'control_from_wheels', 'GridMap', 'load_map_yaml', 'localization_errors',
-    'LocalizationInput', 'LocalizationParams', 'localize', 'motion_jacobians', 'motion_model',
-    'odometry_trajectory', 'predict_ranges', 'process_noise', 'ProcessNoise',
-    'radial_modulation', 'rasterize_world', 'raycast_grid', 'run_localization',
-    'save_map_yaml', 'sonar_global_poses',
+    'angular_modulation', 'build_sonar_map', 'control_from_poses', 'control_from_wheels',
+    'GridMap', 'load_map_yaml', 'LocalizationParams', 'motion_jacobians', 'motion_model',
+    'predict_ranges', 'process_noise', 'ProcessNoise', 'radial_modulation',
+    'rasterize_world', 'raycast_grid', 'save_map_yaml', 'sonar_global_poses',
 ]

@@ -2,7 +2,7 @@
 
 The ROS-free half of the ``sonar_localizer`` node (the node converts messages, calls this
 and publishes). Everything runs on message stamps, never on the wall clock, so replaying a
-bag gives what the offline loop of :func:`~.evaluate.localize` gives.
+bag gives what the offline loop of :func:`landmark_nav.evaluation.localization.localize` gives.
 
 Odometry: each sample (wheel angles, or a pose of an odometry topic) yields the calibrated
 control of the interval since the previous sample (eqs. 4-7, 17-18), queued with its two

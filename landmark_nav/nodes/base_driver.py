@@ -37,13 +37,13 @@ from landmark_nav.conversions import (make_joint_state, make_odometry, make_rang
                                       ns_to_stamp, quaternion_msg_from_yaw)
 from landmark_nav.drivers.p2os import P2osDecoder
 from landmark_nav.drivers.p2os_client import ClientConfig, P2osClient, SipUpdate
+from landmark_nav.hardware import SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE
 from landmark_nav.localization.wheel_odometry import WheelOdometry
 from landmark_nav.nodes.common import (declare, declare_strings, ParameterError, ProblemWarner,
                                        run_node)
 from landmark_nav.nodes.driver_common import (declare_link_parameters, DeviceLink,
                                               DiagnosticsPublisher, ERROR, LinkHealth,
                                               make_transport, OK, Status, WARN)
-from landmark_nav.sim.sonar import SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import BatteryState, JointState, Range

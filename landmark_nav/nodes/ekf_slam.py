@@ -12,7 +12,7 @@ Each corner set is processed once odometry at or after its stamp has arrived: th
 odometry is linearly interpolated to the stamp (no message_filters), checked
 (:func:`~landmark_nav.slam.ekf_slam.odometry_check`), turned into a prediction, and the
 corners go through the laser mount (parameter ``laser_pose``) into the update; this is
-the per-scan step of :func:`landmark_nav.slam.evaluate.run_slam` without the sweep
+the per-scan step of :func:`landmark_nav.evaluation.slam.run_slam` without the sweep
 deskewing (the cloud has no beam times).
 
 Publishes (frame ``map_frame``, stamp of the corner set): ``pose``

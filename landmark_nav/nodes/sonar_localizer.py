@@ -45,13 +45,13 @@ from landmark_nav.conversions import (ConversionError, grid_to_data, make_odomet
                                       make_pose_with_covariance_stamped, odometry_to_pose,
                                       pose_with_covariance_to_pose, range_to_value,
                                       stamp_to_ns)
+from landmark_nav.hardware import SONAR_MOUNTS
 from landmark_nav.localization.grid import GridMap, load_map_yaml
 from landmark_nav.localization.odometry import ProcessNoise
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.tracking import sonar_reading, SonarTracker
 from landmark_nav.nodes.common import (declare, declare_dataclass, declare_strings, ParameterError,
                                        ProblemWarner, run_node, SENSOR_QOS)
-from landmark_nav.sim.sonar import SONAR_MOUNTS
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 from rclpy.node import Node

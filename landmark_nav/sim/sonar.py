@@ -14,29 +14,13 @@ from dataclasses import asdict, dataclass, fields
 import math
 from typing import Any, Dict, List, Optional, Tuple
 
+from landmark_nav.hardware import (SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE,
+                                   SONAR_MOUNTS)
 import numpy as np
 
 from .laser import compose
 from .robot import Trajectory
 from .world import World
-
-# ARIA p2dx.p sonar mounting: x [mm], y [mm], heading [deg] in base_link.
-_P2DX_SONAR_MM_DEG = (
-    (69, 136, 90), (114, 119, 50), (148, 78, 30), (166, 27, 10),
-    (166, -27, -10), (148, -78, -30), (114, -119, -50), (69, -136, -90),
-    (-157, -136, -90), (-203, -119, -130), (-237, -78, -150), (-255, -27, -170),
-    (-255, 27, 170), (-237, 78, 150), (-203, 119, 130), (-157, 136, 90),
-)
-
-#: (16, 3) sonar poses ``[x, y, yaw]`` in base_link [m, m, rad], ARIA p2dx order.
-SONAR_MOUNTS = np.array([(x / 1000.0, y / 1000.0, math.radians(h))
-                         for x, y, h in _P2DX_SONAR_MM_DEG])
-SONAR_MOUNTS.setflags(write=False)
-#: Cone width of one transducer [rad].
-SONAR_FIELD_OF_VIEW = math.radians(25.0)
-#: Default minimum and maximum reported range [m].
-SONAR_MIN_RANGE = 0.1
-SONAR_MAX_RANGE = 5.0
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,8 @@ Modules:
 * :mod:`.association` -- ICNN (eqs. 49-55) and JCBB (Neira & Tardos 2001) on innovations.
 * :mod:`.consistency` -- NEES (eq. 59), NIS (eq. 60), chi-square gates and bands.
 * :mod:`.observations` -- laser corners to base_link range-bearing with propagated ``R``.
-* :mod:`.evaluate` -- run the filter on a simulated scenario and score it against truth.
+* :mod:`landmark_nav.evaluation.slam` (not in this package) -- runs the filter on a simulated
+  scenario or a bag and scores it against a reference.
 """
 
 from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table

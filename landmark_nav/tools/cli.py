@@ -71,8 +71,15 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from landmark_nav.tools.evaluate_slam import run as evaluate_slam
-    print(evaluate_slam(args.bag, args.association, args.out))
+    from landmark_nav.evaluation.slam import evaluate_bag, format_summary
+    result = evaluate_bag(args.bag, args.association, args.out, progress=not args.no_progress,
+                          max_seconds=args.max_seconds, reference=args.reference,
+                          align=args.align, laser_pose=args.laser_pose, sigma_r=args.sigma_r,
+                          rpe_delta=args.rpe_delta)
+    print(format_summary(result))
+    if args.out is not None:
+        print(f'written: {args.out}/slam.json, trajectory_{{slam,odom,gt}}.tum, slam_map.png, '
+              f'slam_trajectory.png, slam_errors.png')
     return 0
 
 
@@ -164,12 +171,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help='Algorithm 1 iterations (default 2, as in the chapter)')
     p.set_defaults(func=_cmd_calibrate_odometry)
 
-    p = sub.add_parser('evaluate', help='run EKF-SLAM on a simulator bag and score it')
-    p.add_argument('bag', help='rosbag2 directory recorded by `simulate`')
+    p = sub.add_parser('evaluate', help='run EKF-SLAM on a bag and score it against a reference')
+    p.add_argument('bag', help='rosbag2 directory with /scan, /odom and a reference '
+                   '(/ground_truth/odom or --reference)')
     p.add_argument('--association', choices=['icnn', 'jcbb'], default='icnn',
                    help='data association (default icnn)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
+    p.add_argument('--reference', default=None, metavar='FILE.tum',
+                   help='reference trajectory (TUM file) instead of /ground_truth/odom')
+    p.add_argument('--align', choices=['none', 'se2', 'se3', 'sim3'], default='se2',
+                   help='alignment of the aligned ATE (default se2; the unaligned ATE is '
+                        'always printed)')
+    p.add_argument('--laser-pose', type=float, nargs=3, default=None,
+                   metavar=('X', 'Y', 'YAW'),
+                   help='laser mount in base_link [m m rad] when the bag does not state it '
+                        '(default 0 0 0)')
+    p.add_argument('--sigma-r', type=float, default=None,
+                   help='laser range noise [m] when the bag does not state it')
+    p.add_argument('--rpe-delta', type=float, default=1.0,
+                   help='RPE distance along the reference [m] (default 1)')
+    p.add_argument('--max-seconds', type=float, default=None,
+                   help='use only the first seconds of the bag')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')

@@ -2,7 +2,7 @@
 
 Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png`` and
 ``summary.txt`` (odometry drift against ``/ground_truth/odom``) and the EKF-SLAM evaluation
-of :func:`landmark_nav.tools.evaluate_slam.evaluate_bag` (``slam_map.png``,
+of :func:`landmark_nav.evaluation.slam.evaluate_bag` (``slam_map.png``,
 ``slam_errors.png``, ``slam.json``, TUM trajectories); returns both summaries.
 """
 
@@ -125,6 +125,6 @@ def run_demo(bag, out) -> str:
     lines.append(f'plot: {out / "world_paths.png"}')
     summary = '\n'.join(lines)
     (out / 'summary.txt').write_text(summary + '\n')
-    from landmark_nav.tools.evaluate_slam import evaluate_bag, format_summary
+    from landmark_nav.evaluation.slam import evaluate_bag, format_summary
     slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=True))
     return summary + '\n\nEKF-SLAM (ICNN):\n' + slam

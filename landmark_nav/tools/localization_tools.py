@@ -1,7 +1,7 @@
 """Sonar localization tools: offline evaluation on a bag, sonar mapping, world rasterising.
 
 * :func:`evaluate_localization` -- ``landmark_nav evaluate-localization <bag>``: runs the
-  EKF or UKF core (:func:`landmark_nav.localization.evaluate.localize`) directly on a
+  EKF or UKF core (:func:`landmark_nav.evaluation.localization.localize`) directly on a
   bag's odometry and sonar (no DDS) against ``/ground_truth/odom``, with the protocol of
   the core's hallway study: map rasterised from the world in ``ground_truth.yaml`` (or a
   map file), initial estimate drawn from N(truth, diag(initial_std)^2), errors from the
@@ -24,11 +24,11 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, stamp_to_ns
+from landmark_nav.evaluation.localization import (draw_initial_pose, first_motion_index,
+                                                  localization_errors, LocalizationInput,
+                                                  LocalizationRun, localize,
+                                                  odometry_trajectory, TARGETS)
 from landmark_nav.geometry import interpolate_pose, wrap_angle
-from landmark_nav.localization.evaluate import (draw_initial_pose, first_motion_index,
-                                                localization_errors, LocalizationInput,
-                                                LocalizationRun, localize,
-                                                odometry_trajectory, TARGETS)
 from landmark_nav.localization.grid import (GridMap, load_map_yaml, rasterize_world,
                                             save_map_yaml)
 from landmark_nav.localization.odometry import control_from_poses

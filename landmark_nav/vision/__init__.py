@@ -13,6 +13,7 @@ Pure Python/numpy/OpenCV; no rclpy and no message types (see
   and the ``cv2.solvePnP`` reference.
 * :mod:`.localize` -- landmark map, camera mount, robot pose from a detection and the
   odometry correction by landmark fixes (§2.3.3).
-* :mod:`.evaluate` -- Table 1 / Table 2 style statistics on rendered frames
-  (``python -m landmark_nav.vision.evaluate``).
+* :mod:`landmark_nav.evaluation.vision` (not in this package) -- Table 1 / Table 2 style
+  statistics on rendered frames
+  (``python -m landmark_nav.evaluation.vision``).
 """
