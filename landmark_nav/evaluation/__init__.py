@@ -1,1 +1,19 @@
-"""Offline evaluation against the simulator's ground truth (pure numpy)."""
+"""Offline evaluation: every scorer and runner of the package, above the algorithm cores.
+
+The cores (laser, slam, localization, vision, ...) never import this package nor the
+simulator; the tools and tests call these modules, so a figure printed by a command and
+the one a test asserts come from the same code.
+
+Modules:
+
+* :mod:`.trajectory` -- ATE / RPE through ``evo``'s metrics, stamp association, TUM files.
+* :mod:`.bags` -- a bag with ``/scan``, ``/odom`` and a reference seen as a scenario
+  (laser facts from ``custom_data``, ``ground_truth.yaml`` or options).
+* :mod:`.slam` -- EKF-SLAM runner and scores on simulated runs and bags
+  (``landmark_nav evaluate``).
+* :mod:`.features` -- corner and line extractor scores.
+* :mod:`.localization` -- sonar EKF / UKF runs and errors, the hallway study
+  (``python -m landmark_nav.evaluation.localization``).
+* :mod:`.vision` -- landmark detection and pose statistics on rendered frames
+  (``python -m landmark_nav.evaluation.vision``).
+"""

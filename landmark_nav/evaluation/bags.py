@@ -22,10 +22,11 @@ The simulator's extras (the world: walls and true corners) are used only when th
 
 Frames: the filter's map frame starts at the first odometry pose. In a simulator bag that
 is the world frame (odom == world at the start). When the first odometry pose differs from
-the reference at its stamp (a real log: raw odometry starts anywhere), the odometry is
-re-expressed so that it starts at the reference pose (``odometry <- ref_0 (+) (odo_0 (-)
-odo)``, a rigid change of frame that leaves every odometry increment unchanged) and a note
-says so; unaligned ATE and NEES are then measured from a common start.
+the reference at its stamp (a real log: raw odometry starts anywhere), the odometry is re-
+expressed so that it coincides with the reference at the first stamp both cover (``odometry
+<- ref_a (+) (odo_a (-) odo)``, a rigid change of frame that leaves every odometry
+increment unchanged) and a note says so; unaligned ATE and NEES are then measured from a
+common start.
 """
 
 from dataclasses import dataclass, fields
@@ -279,19 +280,21 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
     if not kept:
         raise ValueError(f'{bag}: no /scan message inside the odometry / reference span')
     if len(kept) < len(scans):
-        notes.append(f'{len(scans) - len(kept)} of {len(scans)} scans lie outside the '
-                     f'odometry / reference time span and are not used')
+        why = '' if max_seconds is None else f' or after the first {max_seconds:g} s'
+        notes.append(f'{len(scans) - len(kept)} of {len(scans)} scans are not used (outside '
+                     f'the odometry / reference time span{why})')
     op = np.array([e.pose for e in odo], dtype=float)
     truth_poses = np.array([e.pose for e in truth])
-    if ts[0] <= odo[0].stamp_ns <= ts[-1]:
-        ref0 = interpolate_pose(float(odo[0].stamp_ns - ts[0]), (ts - ts[0]).astype(float),
-                                truth_poses)
-        d = relative(op[0], ref0)
+    t_a = max(odo[0].stamp_ns, int(ts[0]))  # first stamp with odometry and reference
+    if t_a <= min(odo[-1].stamp_ns, int(ts[-1])):
+        o_t = np.array([e.stamp_ns for e in odo], dtype=np.int64)
+        odo_a = interpolate_pose(float(t_a - o_t[0]), (o_t - o_t[0]).astype(float), op)
+        ref_a = interpolate_pose(float(t_a - ts[0]), (ts - ts[0]).astype(float), truth_poses)
+        d = relative(odo_a, ref_a)
         if np.hypot(d[0], d[1]) > ANCHOR_TOLERANCE or abs(d[2]) > ANCHOR_TOLERANCE:
-            op = compose(ref0, relative(op[0], op))
-            notes.append('odometry re-expressed to start at the reference pose (its first '
-                         f'pose was {np.hypot(d[0], d[1]):.3f} m / {np.degrees(d[2]):.1f} deg '
-                         'away)')
+            op = compose(ref_a, relative(odo_a, op))
+            notes.append('odometry re-expressed to start at the reference pose (it was '
+                         f'{np.hypot(d[0], d[1]):.3f} m / {np.degrees(d[2]):.1f} deg away)')
     zero3 = np.zeros(3)
     events = [OdometrySample(stamp_ns=e.stamp_ns, pose=p, covariance=np.zeros((3, 3)),
                              twist=zero3, wheel_velocities=np.zeros(2),

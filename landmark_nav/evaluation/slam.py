@@ -3,23 +3,31 @@
 Pipeline per :class:`~landmark_nav.sim.ScanSample` (time order): the odometry is linearly
 interpolated to the scan stamp (:func:`landmark_nav.geometry.interpolate_pose`), checked
 (:func:`~landmark_nav.slam.ekf_slam.odometry_check`; a failed check resets the filter) and
-turned into the increment of eq. 13 for :meth:`~landmark_nav.slam.ekf_slam.EkfSlam.predict`;
-the scan's corners
+turned into the increment of eq. 13 for
+:meth:`~landmark_nav.slam.ekf_slam.EkfSlam.predict`; the scan's corners
 (:func:`~landmark_nav.laser.corners.extract_corners` on ``angle_min + i * increment``,
 ``valid = isfinite``) go through the laser mount and, with ``deskew``, through the odometry
 motion between the scan stamp and each corner's beam time (``stamp + index *
 time_increment``) into :func:`~landmark_nav.slam.observations.corners_to_observations` and
 :meth:`~landmark_nav.slam.ekf_slam.EkfSlam.update`. The estimate is for the scan stamp.
 
-Scores (:func:`score_run`), all in the map frame, which is the world frame because the map
-is initialised at the first odometry pose (odom == world at the start):
+The scenario is a simulated run (:func:`landmark_nav.sim.run_scenario`) or a bag
+(:func:`landmark_nav.evaluation.bags.load_bag`: any bag with ``/scan``, ``/odom`` and a
+reference); :func:`evaluate_bag` adds the aligned ATE and the RPE
+(:mod:`landmark_nav.evaluation.trajectory`, evo's metrics), TUM files, ``slam.json`` and
+the figures (``landmark_nav evaluate``).
+
+Scores (:func:`score_run`), all in the map frame, which is the world (reference) frame
+because the map is initialised at the first odometry pose (odom == world at the start; a
+bag's odometry is re-expressed to start at the reference pose when it does not):
 
 * ATE: robot position error ``|p_est - p_true|`` at the scan stamps (RMSE and max), the
-  same for odometry alone.
-* Landmarks: every mapped landmark is paired with its nearest true corner at the end of
-  the run; ``landmark_rmse`` is the RMSE of those distances over landmarks whose nearest
-  corner is within ``match_distance`` (the others count as ``ghost_landmarks``); a true
-  corner claimed by two landmarks adds a ``duplicate``.
+  same for odometry alone (unaligned).
+* Landmarks (only with a world, i.e. the simulator's truth; None / NaN otherwise): every
+  mapped landmark is paired with its nearest true corner at the end of the run;
+  ``landmark_rmse`` is the RMSE of those distances over landmarks whose nearest corner is
+  within ``match_distance`` (the others count as ``ghost_landmarks``); a true corner
+  claimed by two landmarks adds a ``duplicate``.
 * True visible corners: corners the laser sees with both arms in the detector's class
   (:func:`landmark_nav.evaluation.features.corner_truth`, scored) in at least
   ``confirm_hits`` scans, the number of scans a landmark needs to be mapped (scans without
@@ -519,8 +527,9 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         (out / 'slam.json').write_text(json.dumps(result, indent=2))
         if plots:
             plot_run(scenario, run, out, f'EKF-SLAM ({association}) on {Path(bag).name}: ATE '
-                     f'{100 * score.ate_rmse:.1f} cm, odometry '
-                     f'{100 * score.odom_ate_rmse:.1f} cm', align)
+                     f'{100 * score.ate_rmse:.1f} cm ({align} aligned '
+                     f'{100 * result[f"ate_{align}_rmse"]:.1f} cm), odometry '
+                     f'{100 * score.odom_ate_rmse:.1f} cm, {run.resets} resets', align)
     return result
 
 
