@@ -62,8 +62,9 @@ def test_shifted_segment_gives_known_residuals():
     beyond = np.flatnonzero(0.03 / np.cos(PHI) > 0.05)
     assert beyond.size == 14
     np.testing.assert_array_equal(near.false_surface, beyond)
-    # With sigma_r = 2 cm the margin is 6 cm: cos(phi) < 0.5, |phi| > 60 deg: none.
-    assert ray_metrics(r, PHI, valid, wall(1.97), sigma_r=0.02).false_surface.size == 0
+    np.testing.assert_allclose(near.false_surface_excess, 0.03 / np.cos(PHI[beyond]))
+    # With sigma_r = 2.1 cm the margin is 6.3 cm: |phi| > 61.6 deg: none of the beams.
+    assert ray_metrics(r, PHI, valid, wall(1.97), sigma_r=0.021).false_surface.size == 0
 
 
 def test_segment_bridging_a_doorway_counts_the_beams_seen_through_it():
@@ -74,6 +75,7 @@ def test_segment_bridging_a_doorway_counts_the_beams_seen_through_it():
     valid = np.ones(PHI.size, bool)
     bridged = ray_metrics(r, PHI, valid, wall(2.0))
     np.testing.assert_array_equal(bridged.false_surface, np.flatnonzero(door))
+    np.testing.assert_allclose(bridged.false_surface_excess, 6.0 / np.cos(PHI[door]))
     assert door.sum() == 25  # |phi| <= 12 deg
     assert bridged.f == 1.0 and bridged.rmse > 1.0
     # The same wall as two segments that end at the last beams on the wall (+-13 deg): no

@@ -38,7 +38,8 @@ Choices stated (the paper leaves them open or its script differs from its text):
 
 from dataclasses import dataclass
 import math
-from typing import Optional, Sequence, Tuple
+import time
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
 import numpy as np
@@ -46,6 +47,7 @@ import numpy as np
 ANGLE_TOL = 1e-3        # rad: bearing tolerance of a ray hitting a segment (xpm.m)
 FALSE_SURFACE_MIN = 0.05  # m: smallest see-through margin (max(3 sigma_r, 5 cm))
 FIT_WINDOW = 0.2        # m: beams within this of their segment count for the fit residual
+SEE_THROUGH = 0.3       # m: false-surface beams also counted apart beyond this (openings)
 
 
 def segments_of(lines: Sequence) -> np.ndarray:
@@ -94,6 +96,9 @@ class RayMetrics:
         no_return: Beams without a return (+inf).
         no_return_clear: Of those, beams whose ray hits no segment.
         false_surface: Indices of the beams seen through a segment (increasing).
+        false_surface_excess: (len(false_surface),) how far each of them was measured
+            beyond the nearest segment it crossed [m] (a few cm at grazing incidence; an
+            opening bridged by a line gives metres).
         fit_residuals: Perpendicular residuals of the hitting beams within ``FIT_WINDOW``
             of their first-hit segment's line [m].
 
@@ -105,6 +110,7 @@ class RayMetrics:
     no_return: int
     no_return_clear: int
     false_surface: np.ndarray
+    false_surface_excess: np.ndarray
     fit_residuals: np.ndarray
 
     @property
@@ -161,7 +167,10 @@ def ray_metrics(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
     s_first = cast[np.arange(r.size), first] if seg.size else np.full(r.size, np.inf)
     hit = valid & np.isfinite(s_first)
     margin = max(3.0 * sigma_r, min_margin)
-    seen_through = (np.isfinite(cast) & (r[:, None] > cast + margin)).any(axis=1) & valid
+    with np.errstate(invalid='ignore'):
+        excess = np.where(np.isfinite(cast), r[:, None] - cast, -np.inf).max(axis=1,
+                                                                             initial=-np.inf)
+    seen_through = valid & (excess > margin)
     # Fit residual: distance of the point to the first-hit segment's line.
     fit = np.zeros(0)
     if hit.any():
@@ -174,7 +183,8 @@ def ray_metrics(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
     return RayMetrics(valid=int(valid.sum()), hits=int(hit.sum()),
                       residuals=r[hit] - s_first[hit], no_return=int(nr.sum()),
                       no_return_clear=int((nr & ~np.isfinite(s_first)).sum()),
-                      false_surface=np.flatnonzero(seen_through), fit_residuals=fit)
+                      false_surface=np.flatnonzero(seen_through),
+                      false_surface_excess=excess[seen_through], fit_residuals=fit)
 
 
 # ---------------------------------------------------------------------------- baseline
@@ -357,3 +367,246 @@ def corner_repeatability(score: Repeatability, corners_k: np.ndarray, pose_k: np
     other = transform_points(view_next.pose, c_n).reshape(-1, 2)
     dist = np.hypot(*(world[look][:, None, :] - other[None]).transpose(2, 0, 1))
     score.redetected += int((dist.min(axis=1) <= max_distance).sum())
+
+
+# ---------------------------------------------------------------------------- runner
+BASELINE = 'approxPolyDP'
+BASELINE_MIN = 'approxPolyDP_min_size'
+
+
+@dataclass(frozen=True)
+class MetricScan:
+    """One scan for the truth-free metrics.
+
+    Attributes:
+        ranges: (N,) ranges [m].
+        angles: (N,) beam angles [rad], evenly spaced.
+        valid: (N,) beams with a return in [range_min, range_max].
+        no_return: (N,) beams without a return (REP 117 +inf).
+        range_min: Closest valid range [m].
+        range_max: Farthest valid range [m].
+        pose: (3,) laser pose in the map frame from the reference, or None.
+
+    """
+
+    ranges: np.ndarray
+    angles: np.ndarray
+    valid: np.ndarray
+    no_return: np.ndarray
+    range_min: float
+    range_max: float
+    pose: Optional[np.ndarray] = None
+
+    @property
+    def angle_increment(self) -> float:
+        """Beam spacing [rad]."""
+        return float(self.angles[1] - self.angles[0]) if len(self.angles) > 1 else 0.0
+
+    def view(self) -> ScanView:
+        """Return the scan as a :class:`ScanView` (needs ``pose``)."""
+        return ScanView(np.asarray(self.pose, dtype=float), self.ranges, self.angles,
+                        self.valid, self.no_return, self.range_min, self.range_max)
+
+
+def sample_scans(n: int, count: int, seed: int) -> np.ndarray:
+    """Return the sorted indices of ``count`` of ``n`` scans drawn without replacement.
+
+    ``numpy.random.default_rng(seed).choice(n, min(count, n), replace=False)``: the scans
+    of the PLE figures (issue protocol: 20 scans, seed 0).
+    """
+    rng = np.random.default_rng(seed)
+    return np.sort(rng.choice(n, size=min(count, n), replace=False))
+
+
+class _LineTally:
+    """Truth-free line figures of one method over a run."""
+
+    def __init__(self) -> None:
+        self.f: List[float] = []
+        self.rmse: List[float] = []
+        self.f_nr: List[float] = []
+        self.fit: List[np.ndarray] = []
+        self.fs_sample = 0
+        self.fs_beams = 0
+        self.fs_far = 0
+        self.fs_scans: List[Tuple[int, List[int]]] = []
+        self.repeat = Repeatability()
+        self.times: List[float] = []
+        self.count = 0
+
+    def add(self, k: int, m: RayMetrics, sampled: bool) -> None:
+        n_fs = int(m.false_surface.size)
+        self.fs_beams += n_fs
+        self.fs_far += int((m.false_surface_excess > SEE_THROUGH).sum())
+        if n_fs:
+            self.fs_scans.append((k, [int(i) for i in m.false_surface]))
+        if sampled:
+            self.fs_sample += n_fs
+            self.f.append(m.f)
+            self.rmse.append(m.rmse)
+            self.f_nr.append(m.f_no_return)
+            self.fit.append(m.fit_residuals)
+
+    def figures(self, scans: int) -> dict:
+        fit = np.concatenate(self.fit) if self.fit else np.zeros(0)
+        rmse = np.asarray(self.rmse, dtype=float)
+        rmse = rmse[np.isfinite(rmse)]
+        f_nr = np.asarray(self.f_nr, dtype=float)
+        f_nr = f_nr[np.isfinite(f_nr)]
+        return {
+            'f': float(np.mean(self.f)) if self.f else float('nan'),
+            'ray_rmse_mean_m': float(rmse.mean()) if rmse.size else float('nan'),
+            'ray_rmse_median_m': float(np.median(rmse)) if rmse.size else float('nan'),
+            'f_no_return': float(f_nr.mean()) if f_nr.size else float('nan'),
+            'fit_rms_m': float(np.sqrt(np.mean(fit ** 2))) if fit.size else float('nan'),
+            'fit_beams': int(fit.size),
+            'false_surface_beams_sample': self.fs_sample,
+            'false_surface_beams': self.fs_beams,
+            'false_surface_scans': len(self.fs_scans),
+            'false_surface_beams_over_30cm': self.fs_far,
+            'false_surface_list': [[k, b] for k, b in self.fs_scans],
+            'line_opportunities': self.repeat.opportunities,
+            'line_redetected': self.repeat.redetected,
+            'line_repeatability': self.repeat.fraction,
+            'segments_per_scan': self.count / scans if scans else float('nan'),
+            'median_ms_per_scan': 1e3 * float(np.median(self.times)) if self.times else None,
+            'mean_ms_per_scan': 1e3 * float(np.mean(self.times)) if self.times else None}
+
+
+def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
+                   ple_scans: int = 20, seed: int = 0,
+                   corner_methods: Sequence[str] = ('minus_cosine', 'sliding_window',
+                                                    'split_merge'),
+                   line_methods: Sequence[str] = ('split_merge', 'alfa'),
+                   extractor_sigma_r: Optional[float] = None,
+                   progress: Optional[str] = None) -> dict:
+    """Score the extractors and the baseline on real scans with the truth-free metrics.
+
+    Every method runs on every scan with the node defaults (``LineParams`` /
+    ``CornerParams`` with ``extractor_sigma_r``, the segmentation's defaults), one
+    segmentation per scan shared by all methods and counted in each method's time. The
+    PLE figures (f, ray RMSE mean and median over scans, f_no_return, fit residual) come
+    from ``ple_scans`` scans drawn by :func:`sample_scans` with ``seed``; false-surface
+    beams are counted on every scan (and on the sample); repeatability is over every
+    pair of consecutive scans that both have a reference pose. The baseline
+    (:func:`approx_poly_segments`, epsilon 5 cm) is reported in full and restricted to the
+    line extractor's minimum size (``min_points``, ``min_length``).
+
+    Args:
+        scans: The scans, in time order.
+        sigma_r: The sensor's range noise [m] (false-surface margin).
+        ple_scans: Scans drawn for the PLE figures.
+        seed: Seed of the draw.
+        corner_methods: Corner detectors.
+        line_methods: Line extractors.
+        extractor_sigma_r: Range noise the extractors and the segmentation assume [m];
+            None: the node default (0.01 m).
+        progress: Label of a tqdm progress bar, or None for none.
+
+    Returns:
+        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r', 'repeat_pairs',
+        'lines': {method: figures}, 'corners': {method: figures}}.
+
+    """
+    from landmark_nav.laser.corners import CornerParams, detect_corners
+    from landmark_nav.laser.lines import extract_lines, LineParams
+    from landmark_nav.laser.segmentation import segment_scan
+
+    ext_sigma = LineParams().sigma_r if extractor_sigma_r is None else float(extractor_sigma_r)
+    line_params = {m: LineParams(method=m, sigma_r=ext_sigma) for m in line_methods}
+    corner_params = {m: CornerParams(method=m, sigma_r=ext_sigma) for m in corner_methods}
+    min_points, min_length = LineParams().min_points, LineParams().min_length
+    sample = set(int(i) for i in sample_scans(len(scans), ple_scans, seed))
+    tallies = {m: _LineTally() for m in (*line_methods, BASELINE, BASELINE_MIN)}
+    c_repeat = {m: Repeatability() for m in corner_methods}
+    c_times = {m: [] for m in corner_methods}
+    c_count = dict.fromkeys(corner_methods, 0)
+    prev = None  # (scan, {method: segments}, {method: corners})
+    pairs = 0
+    items = enumerate(scans)
+    if progress:
+        from tqdm import tqdm
+        items = tqdm(items, total=len(scans), unit='scan', desc=progress)
+    for k, scan in items:
+        t0 = time.perf_counter()
+        clusters = segment_scan(scan.ranges, scan.angles, scan.valid, scan.angle_increment,
+                                sigma_r=ext_sigma)
+        t_seg = time.perf_counter() - t0
+        segs: Dict[str, np.ndarray] = {}
+        for m, params in line_params.items():
+            t0 = time.perf_counter()
+            lines = extract_lines(clusters, params)
+            tallies[m].times.append(t_seg + time.perf_counter() - t0)
+            segs[m] = segments_of(lines)
+        t0 = time.perf_counter()
+        base, idx = approx_poly_segments(clusters, 0.05)
+        tallies[BASELINE].times.append(t_seg + time.perf_counter() - t0)
+        tallies[BASELINE_MIN].times.append(tallies[BASELINE].times[-1])
+        segs[BASELINE] = base
+        size_ok = ((idx[:, 1] - idx[:, 0] + 1 >= min_points)
+                   & (np.hypot(*(base[:, 1] - base[:, 0]).T) >= min_length))
+        segs[BASELINE_MIN] = base[size_ok]
+        corners: Dict[str, np.ndarray] = {}
+        for m, params in corner_params.items():
+            t0 = time.perf_counter()
+            found = detect_corners(clusters, params)
+            c_times[m].append(t_seg + time.perf_counter() - t0)
+            corners[m] = np.array([c.position for c in found]).reshape(-1, 2)
+            c_count[m] += len(found)
+        for m, tally in tallies.items():
+            tally.count += len(segs[m])
+            tally.add(k, ray_metrics(scan.ranges, scan.angles, scan.valid, segs[m], sigma_r,
+                                     scan.no_return), k in sample)
+        if prev is not None and prev[0].pose is not None and scan.pose is not None:
+            pairs += 1
+            view = scan.view()
+            for m, tally in tallies.items():
+                line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], view)
+            for m in corner_methods:
+                corner_repeatability(c_repeat[m], prev[2][m], prev[0].pose, corners[m], view)
+        prev = (scan, segs, corners)
+    n = len(scans)
+    return {
+        'scans': n, 'ple_scans': len(sample), 'sample': sorted(sample), 'seed': seed,
+        'sigma_r': sigma_r, 'extractor_sigma_r': ext_sigma, 'repeat_pairs': pairs,
+        'false_surface_margin_m': max(3.0 * sigma_r, FALSE_SURFACE_MIN),
+        'lines': {m: t.figures(n) for m, t in tallies.items()},
+        'corners': {m: {
+            'corner_opportunities': c_repeat[m].opportunities,
+            'corner_redetected': c_repeat[m].redetected,
+            'corner_repeatability': c_repeat[m].fraction,
+            'corners_per_scan': c_count[m] / n if n else float('nan'),
+            'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None,
+            'mean_ms_per_scan': 1e3 * float(np.mean(c_times[m])) if c_times[m] else None}
+            for m in corner_methods}}
+
+
+def format_scan_metrics(result: dict, title: str = '') -> str:
+    """Render :func:`evaluate_scans` figures as two Markdown tables."""
+    out = [f'{title}scans: {result["scans"]} ({result["ple_scans"]} drawn with seed '
+           f'{result["seed"]} for f / ray RMSE / fit), {result["repeat_pairs"]} consecutive '
+           f'pairs with reference poses; false-surface margin '
+           f'{100 * result["false_surface_margin_m"]:.1f} cm (sigma_r '
+           f'{100 * result["sigma_r"]:.1f} cm); extractors at sigma_r '
+           f'{100 * result["extractor_sigma_r"]:.1f} cm', '',
+           '| line method | f | ray RMSE mean / median | f no-return | false-surface beams '
+           '(scans) [sample] {> 30 cm} | fit RMS (beams) | lines >= 1 m re-detected | '
+           'segments/scan | ms/scan median |',
+           '| --- | --- | --- | --- | --- | --- | --- | --- | --- |']
+    for m, f in result['lines'].items():
+        out.append(
+            f'| {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
+            f'{100 * f["ray_rmse_median_m"]:.2f} cm | {f["f_no_return"]:.3f} | '
+            f'{f["false_surface_beams"]} ({f["false_surface_scans"]}) '
+            f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]}}} | '
+            f'{100 * f["fit_rms_m"]:.2f} cm '
+            f'({f["fit_beams"]}) | {f["line_repeatability"]:.3f} '
+            f'({f["line_redetected"]}/{f["line_opportunities"]}) | '
+            f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
+    out += ['', '| corner method | corners re-detected within 10 cm | corners/scan | '
+            'ms/scan median |', '| --- | --- | --- | --- |']
+    for m, f in result['corners'].items():
+        out.append(f'| {m} | {f["corner_repeatability"]:.3f} ({f["corner_redetected"]}/'
+                   f'{f["corner_opportunities"]}) | {f["corners_per_scan"]:.2f} | '
+                   f'{f["median_ms_per_scan"]:.2f} |')
+    return '\n'.join(out)
