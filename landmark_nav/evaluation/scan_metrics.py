@@ -516,7 +516,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     line_params = {m: LineParams(method=m, sigma_r=ext_sigma) for m in line_methods}
     corner_params = {m: CornerParams(method=m, sigma_r=ext_sigma) for m in corner_methods}
     min_points, min_length = LineParams().min_points, LineParams().min_length
-    sample = set(int(i) for i in sample_scans(len(scans), ple_scans, seed))
+    sample = {int(i) for i in sample_scans(len(scans), ple_scans, seed)}
     tallies = {m: _LineTally() for m in (*line_methods, BASELINE, BASELINE_MIN)}
     c_repeat = {m: Repeatability() for m in corner_methods}
     c_times = {m: [] for m in corner_methods}

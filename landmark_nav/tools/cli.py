@@ -58,7 +58,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     from landmark_nav.tools.evaluate_features import run
-    print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json))
+    print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json,
+              reference=args.reference, mount=args.mount, sensor_sigma_r=args.sensor_sigma_r,
+              scans=args.scans, seed=args.seed, truth_free=args.truth_free))
     return 0
 
 
@@ -142,11 +144,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser('evaluate-features',
-                       help='score corner and line extractors against the ground truth of a bag')
-    p.add_argument('bag', help='rosbag2 directory recorded by `simulate`')
+                       help='score corner and line extractors on a bag: against the ground '
+                            'truth of a simulator bag, else with truth-free metrics (PLE ray '
+                            'metric, false-surface beams, fit, repeatability)')
+    p.add_argument('bag', help='rosbag2 directory with /scan (simulator or imported)')
     p.add_argument('--every', type=int, default=1, help='use every n-th scan')
     p.add_argument('--sigma-r', type=float, default=None,
-                   help='range noise the extractors assume [m] (default: the simulated one)')
+                   help='range noise the extractors assume [m] (default: the simulated one; '
+                        'truth-free: the node default 0.01)')
+    p.add_argument('--truth-free', action='store_true',
+                   help='truth-free metrics even on a simulator bag')
+    p.add_argument('--reference', default=None, metavar='FILE.tum',
+                   help='truth-free: reference poses (base_link in map, TUM) for '
+                        'repeatability (default: /ground_truth/odom of the bag)')
+    p.add_argument('--mount', type=float, nargs=3, default=None, metavar=('X', 'Y', 'YAW'),
+                   help='truth-free: laser mount base_link -> laser [m m rad] when the bag '
+                        'states none (default 0 0 0)')
+    p.add_argument('--sensor-sigma-r', type=float, default=None,
+                   help='truth-free: the sensor range noise [m] for the false-surface margin '
+                        'max(3 sigma_r, 5 cm) when the bag states none (default 0.01)')
+    p.add_argument('--scans', type=int, default=20,
+                   help='truth-free: scans drawn for f / ray RMSE / fit (default 20)')
+    p.add_argument('--seed', type=int, default=0,
+                   help='truth-free: seed of numpy.random.default_rng for the draw (default 0)')
     p.add_argument('--json', default=None, help='also write the figures to this JSON file')
     p.set_defaults(func=_cmd_evaluate_features)
 
