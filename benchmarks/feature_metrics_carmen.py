@@ -23,10 +23,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.scan_metrics import (evaluate_scans,  # noqa: E402
                                                   format_scan_metrics, MetricScan)
+from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 from landmark_nav.tools.carmen import read_carmen_scans  # noqa: E402
 import numpy as np  # noqa: E402
 
-CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
+CARMEN = SHARED_DATA / 'carmen'
 LOGS = ('aces', 'seattle', 'belgioioso', 'fhw', 'freiburg-101', 'acapulco')
 MAX_RANGE = 40.0  # the reader's no-return cut [m]
 

@@ -123,3 +123,47 @@ def test_run_prints_the_truth_free_tables_and_json(tmp_path):
     assert '| approxPolyDP_min_size |' in text and '| minus_cosine |' in text
     assert 'scans: 6 (3 drawn with seed 1' in text
     assert (tmp_path / 'out.json').read_text().startswith('{')
+
+
+def test_bag_path_equals_the_offline_path_on_a_real_log(tmp_path):
+    # 80 scans of a real log written as an imported bag (REP 117 +inf, /ground_truth/odom at
+    # the scan stamps, the facts in custom_data) score as the same scans fed directly.
+    from landmark_nav.evaluation.scan_metrics import evaluate_scans, MetricScan
+    from landmark_nav.testing import shared_data
+    from landmark_nav.tools.carmen import read_carmen_scans
+    raw = []
+    for s in read_carmen_scans(shared_data('carmen', 'seattle-corrected.log.gz')):
+        raw.append(s)
+        if len(raw) == 80:
+            break
+    direct = []
+    with BagWriter(tmp_path / 'b') as bag:
+        bag.add_topic('/scan', LaserScan)
+        bag.add_topic('/ground_truth/odom', Odometry)
+        for k, s in enumerate(raw):
+            stamp = T0 + k * 100_000_000
+            msg = make_scan(stamp, 'laser', s.angle_min, s.angle_increment, s.ranges, 1e-3,
+                            40.0)
+            bag.write('/scan', stamp, msg)
+            bag.write('/ground_truth/odom', stamp, make_odometry(stamp, 'map', 'base_link',
+                                                                 s.pose))
+            r = np.asarray(msg.ranges, dtype=float)  # float32 as in the bag
+            angles = np.float32(s.angle_min) + np.float32(s.angle_increment) * np.arange(r.size)
+            direct.append(MetricScan(r, angles, np.isfinite(r) & (r > 0.0), np.isposinf(r),
+                                     1e-3, 40.0, np.asarray(s.pose, dtype=float)))
+        bag.set_custom_data('landmark_nav.laser_mount', '0 0 0')
+        bag.set_custom_data('landmark_nav.laser_sigma_range', '0.01')
+    via_bag, notes = evaluate_truth_free(tmp_path / 'b', scans=20, seed=0)
+    offline = evaluate_scans(direct, sigma_r=0.01, ple_scans=20, seed=0)
+    assert notes == [] and via_bag['repeat_pairs'] == offline['repeat_pairs'] == 79
+    for kind in ('lines', 'corners'):
+        for m, figures in offline[kind].items():
+            for key, value in figures.items():
+                if 'ms_per_scan' in key:
+                    continue
+                got = via_bag[kind][m][key]
+                if isinstance(value, float):
+                    assert got == pytest.approx(value, rel=1e-9, abs=1e-12), (m, key)
+                else:
+                    assert got == value, (m, key)
+    assert offline['lines']['split_merge']['line_opportunities'] > 100

@@ -109,8 +109,9 @@ def test_first_hit_is_the_nearest_along_the_ray():
     segs = np.concatenate([wall(3.0), wall(2.0)])  # the far one first in the list
     cast = ray_ranges(PHI, segs)
     np.testing.assert_allclose(cast[:, 0], 3.0 / np.cos(PHI))
-    m = ray_metrics(r, PHI, np.ones(PHI.size, bool), segs)
-    assert m.rmse == pytest.approx(0.0, abs=1e-12)
+    for order in (segs, segs[::-1]):
+        m = ray_metrics(r, PHI, np.ones(PHI.size, bool), order)
+        assert m.rmse == pytest.approx(0.0, abs=1e-12)
     # Rays pointing away from a segment, or parallel to it, do not hit it.
     assert np.isinf(ray_ranges(PHI, wall(-2.0))).all()
     parallel = np.array([[[1.0, 1.0], [1.0, 3.0]]])
