@@ -45,7 +45,8 @@ def carmen_metric_scans(path: Path) -> list:
 
 def summary(results: dict) -> str:
     """One table, one row per log and method: the issue's figures side by side."""
-    rows = ['| log | method | f | ray RMSE mean / median | false-surface beams (scans) | '
+    rows = ['| log | method | f | ray RMSE mean / median | false-surface beams (scans) '
+            '{> 30 cm (scans)} | '
             'fit RMS | lines re-detected | corners re-detected | ms/scan |',
             '| --- | --- | --- | --- | --- | --- | --- | --- | --- |']
     for log, res in results.items():
@@ -54,7 +55,8 @@ def summary(results: dict) -> str:
             rows.append(
                 f'| {log} | {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
                 f'{100 * f["ray_rmse_median_m"]:.2f} cm | {f["false_surface_beams"]} '
-                f'({f["false_surface_scans"]}) | {100 * f["fit_rms_m"]:.2f} cm | '
+                f'({f["false_surface_scans"]}) {{{f["false_surface_beams_over_30cm"]} '
+                f'({f["false_surface_scans_over_30cm"]})}} | {100 * f["fit_rms_m"]:.2f} cm | '
                 f'{f["line_repeatability"]:.3f} ({f["line_opportunities"]}) | | '
                 f'{f["median_ms_per_scan"]:.2f} |')
         for m in ('minus_cosine',):

@@ -429,6 +429,7 @@ class _LineTally:
         self.fs_sample = 0
         self.fs_beams = 0
         self.fs_far = 0
+        self.fs_far_scans = 0
         self.fs_scans: List[Tuple[int, List[int]]] = []
         self.repeat = Repeatability()
         self.times: List[float] = []
@@ -437,7 +438,9 @@ class _LineTally:
     def add(self, k: int, m: RayMetrics, sampled: bool) -> None:
         n_fs = int(m.false_surface.size)
         self.fs_beams += n_fs
-        self.fs_far += int((m.false_surface_excess > SEE_THROUGH).sum())
+        far = int((m.false_surface_excess > SEE_THROUGH).sum())
+        self.fs_far += far
+        self.fs_far_scans += bool(far)
         if n_fs:
             self.fs_scans.append((k, [int(i) for i in m.false_surface]))
         if sampled:
@@ -464,6 +467,7 @@ class _LineTally:
             'false_surface_beams': self.fs_beams,
             'false_surface_scans': len(self.fs_scans),
             'false_surface_beams_over_30cm': self.fs_far,
+            'false_surface_scans_over_30cm': self.fs_far_scans,
             'false_surface_list': [[k, b] for k, b in self.fs_scans],
             'line_opportunities': self.repeat.opportunities,
             'line_redetected': self.repeat.redetected,
@@ -590,7 +594,7 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
            f'{100 * result["sigma_r"]:.1f} cm); extractors at sigma_r '
            f'{100 * result["extractor_sigma_r"]:.1f} cm', '',
            '| line method | f | ray RMSE mean / median | f no-return | false-surface beams '
-           '(scans) [sample] {> 30 cm} | fit RMS (beams) | lines >= 1 m re-detected | '
+           '(scans) [sample] {> 30 cm (scans)} | fit RMS (beams) | lines >= 1 m re-detected | '
            'segments/scan | ms/scan median |',
            '| --- | --- | --- | --- | --- | --- | --- | --- | --- |']
     for m, f in result['lines'].items():
@@ -598,7 +602,8 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
             f'| {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
             f'{100 * f["ray_rmse_median_m"]:.2f} cm | {f["f_no_return"]:.3f} | '
             f'{f["false_surface_beams"]} ({f["false_surface_scans"]}) '
-            f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]}}} | '
+            f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]} '
+            f'({f["false_surface_scans_over_30cm"]})}} | '
             f'{100 * f["fit_rms_m"]:.2f} cm '
             f'({f["fit_beams"]}) | {f["line_repeatability"]:.3f} '
             f'({f["line_redetected"]}/{f["line_opportunities"]}) | '
