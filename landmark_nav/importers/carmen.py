@@ -1,0 +1,346 @@
+"""Parse Carmen logs (Radish data sets): ``FLASER``, ``RLASER``, ``ODOM``, ``ROBOTLASER1``.
+
+Line formats (ranges in m, angles in rad, stamps in s)::
+
+    FLASER n r1 .. rn x y theta odom_x odom_y odom_theta ipc_timestamp hostname logger_ts
+    RLASER (same as FLASER, the rear laser)
+    ODOM x y theta tv rv accel ipc_timestamp hostname logger_ts
+    ROBOTLASER1 laser_type start_angle field_of_view angular_resolution maximum_range
+        accuracy remission_mode n r1 .. rn m e1 .. em laser_x laser_y laser_theta
+        robot_x robot_y robot_theta tv rv forward_safety_dist side_safety_dist turn_axis
+        ipc_timestamp hostname logger_ts
+    PARAM name value hostname timestamp
+
+The ``ipc_timestamp`` is used. Other line types (``NEFF``, ``SYNC``, ``TRUEPOS``,
+``RAWLASER*``, ...) are counted and not imported. When a log has ``ROBOTLASER1`` lines they
+are the front scans and ``FLASER`` lines (Carmen writes both for the same reading) are
+ignored.
+
+Beam geometry: ``ROBOTLASER1`` carries its own (``start_angle``, ``angular_resolution``)
+and ``maximum_range``; the laser mount is the median of ``robot_pose^-1 (+) laser_pose``.
+``FLASER`` spans 180 deg from -90 deg: 180 readings are 1 deg steps to +89 deg, 360 are
+0.5 deg steps to +89.5 deg, 181 and 361 readings end at +90 deg (:func:`scan_geometry`);
+its mount is ``(robot_frontlaser_offset, 0, 0)`` from the ``PARAM`` lines (0 when absent;
+``RLASER``: ``(robot_rearlaser_offset, 0, pi)``). The robot pose of a laser line is its
+``odom_x odom_y odom_theta`` (``FLASER``) or ``robot_*`` (``ROBOTLASER1``) fields.
+
+Poses: in a *raw* log the robot pose fields are the raw odometry (``/odom`` comes from the
+``ODOM`` lines when there are any, else from the laser lines); in a *corrected* log
+(Radish "corrected" variants) they are the scan-matched pose, which becomes the reference
+(``/ground_truth/odom``); the ``ODOM`` lines of such logs follow the corrected trajectory
+too (they stay within a few cm of it after kilometres) and are not imported.
+
+Ranges (SICK LMS in cm mode, 1 cm steps): the LMS reserved codes (81.83 .. 81.91 m) map per
+:func:`landmark_nav.importers.common.lms_cm_ranges`; other readings at or above the maximum
+range are the logger's "no return" (+inf, REP 117). The maximum is ``maximum_range`` of a
+``ROBOTLASER1`` line, else ``PARAM robot_front_laser_max``, else 50 m (Carmen's default cap:
+the Radish logs without that PARAM write 50, 51.05 or 51.15 m for beams without echo).
+
+Range noise: SICK LMS200 / LMS291 technical data, statistical error (1 sigma) typ. 5 mm
+(mm mode, up to 8 m); these logs are in cm mode (1 cm reading steps, +-4 cm systematic
+error stated for cm mode), so ``laser_sigma_range`` is written as 0.01 m.
+"""
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Dict, Iterator, List, Optional
+
+import numpy as np
+
+from .common import LineSource, lms_cm_ranges, open_text, ParsedLog, ScanRecord, Sensor
+
+__all__ = ['CARMEN_DEFAULT_MAX_RANGE', 'CarmenScan', 'LMS_SIGMA_RANGE', 'default_poses',
+           'pair_with_reference', 'parse_carmen', 'read_carmen_scans', 'scan_geometry']
+
+CARMEN_DEFAULT_MAX_RANGE = 50.0  # [m] when neither ROBOTLASER1 nor PARAM states it
+LMS_SIGMA_RANGE = 0.01  # [m] SICK LMS2xx, cm mode (see the module docstring)
+_LASER_TYPES = {'FLASER', 'RLASER'}
+
+
+def scan_geometry(n: int):
+    """Return (angle_min, angle_increment) of an n-beam Carmen front laser."""
+    if n <= 0:
+        raise ValueError(f'FLASER with {n} readings')
+    if n % 2 == 0:  # 180 readings: 1 deg steps from -90 deg, the last at +89 deg
+        return -math.pi / 2, math.pi / n
+    return -math.pi / 2, math.pi / (n - 1)
+
+
+def default_poses(path) -> str:
+    """Return ``'corrected'`` for files named ``*corrected*``, else ``'raw'``."""
+    return 'corrected' if 'corrected' in Path(path).name.lower() else 'raw'
+
+
+def _floats(tokens: List[str]) -> np.ndarray:
+    values = np.array(tokens, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise ValueError('non-finite value')
+    return values
+
+
+def _key(values: np.ndarray) -> str:
+    """Return a key equal for scans with identical readings (mm, formatting-proof)."""
+    return np.rint(np.asarray(values) * 1000.0).astype(np.int64).tobytes().hex()
+
+
+@dataclass
+class _Laser:
+    lineno: int
+    stamp: float
+    values: np.ndarray  # readings as printed [m]
+    angle_min: float
+    angle_increment: float
+    max_range: Optional[float]
+    robot: np.ndarray  # robot pose fields
+    laser: Optional[np.ndarray] = None  # laser pose fields (ROBOTLASER1)
+
+
+def _parse_flaser(tokens: List[str]) -> _Laser:
+    n = int(tokens[1])
+    if n <= 0:
+        raise ValueError(f'{n} readings')
+    if len(tokens) < n + 9:
+        raise ValueError(f'{len(tokens)} fields for {n} readings (need >= {n + 9})')
+    values = _floats(tokens[2:2 + n])
+    poses = _floats(tokens[2 + n:8 + n])
+    stamp = float(tokens[8 + n])
+    a0, inc = scan_geometry(n)
+    return _Laser(0, stamp, values, a0, inc, None, poses[3:6])
+
+
+def _parse_robotlaser(tokens: List[str]) -> _Laser:
+    head = _floats(tokens[2:7])
+    start, fov, res, max_range, _accuracy = head
+    n = int(tokens[8])
+    if n <= 0 or len(tokens) < 10 + n:
+        raise ValueError(f'{len(tokens)} fields for {n} readings')
+    values = _floats(tokens[9:9 + n])
+    m = int(tokens[9 + n])
+    base = 10 + n + max(m, 0)
+    if m < 0 or len(tokens) < base + 12:
+        raise ValueError(f'{len(tokens)} fields for {n} readings and {m} remissions')
+    poses = _floats(tokens[base:base + 6])
+    stamp = float(tokens[base + 11])
+    if not res > 0:
+        raise ValueError(f'angular resolution {res}')
+    if abs(n * res - fov) > 1.5 * res and abs((n - 1) * res - fov) > 1.5 * res:
+        raise ValueError(f'{n} readings at {res} rad do not span the field of view {fov} rad')
+    return _Laser(0, stamp, values, float(start), float(res), float(max_range), poses[3:6],
+                  poses[0:3])
+
+
+def _parse_odom(tokens: List[str]):
+    if len(tokens) < 8:
+        raise ValueError(f'{len(tokens)} fields (need >= 8)')
+    pose = _floats(tokens[1:4])
+    return float(tokens[7]), pose
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    d = b[:2] - a[:2]
+    return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1],
+                     math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))])
+
+
+def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
+                 max_scans: Optional[int] = None) -> ParsedLog:
+    """Parse a Carmen log (``.log``, ``.clf``, optionally gzipped).
+
+    Args:
+        path: The log.
+        poses: ``'raw'`` or ``'corrected'`` (what the pose fields hold); default from the
+            file name (:func:`default_poses`).
+        lenient: Skip and count malformed lines instead of raising.
+        max_scans: Keep only the first front scans (and the odometry up to the last one).
+
+    Raises:
+        LineError: A malformed line (file and line number), unless ``lenient``.
+        ValueError: The log has no laser scans, or ``poses`` is unknown.
+
+    """
+    path = Path(path)
+    poses = poses or default_poses(path)
+    if poses not in ('raw', 'corrected'):
+        raise ValueError(f"--poses must be 'raw' or 'corrected', got {poses!r}")
+    source = LineSource(path, lenient)
+    params: Dict[str, List[str]] = {}
+    front: Dict[str, List[_Laser]] = {'FLASER': [], 'ROBOTLASER1': []}
+    rear: List[_Laser] = []
+    odom: List[tuple] = []
+    ignored: Dict[str, int] = {}
+    for lineno, tokens in source.lines():
+        kind = tokens[0]
+        try:
+            if kind in ('FLASER', 'RLASER'):
+                laser = _parse_flaser(tokens)
+            elif kind == 'ROBOTLASER1':
+                laser = _parse_robotlaser(tokens)
+            elif kind == 'ODOM':
+                stamp, pose = _parse_odom(tokens)
+                odom.append((lineno, stamp, pose))
+                continue
+            else:
+                if kind == 'PARAM' and len(tokens) >= 3:
+                    params.setdefault(tokens[1], []).append(tokens[2])
+                else:
+                    ignored[kind] = ignored.get(kind, 0) + 1
+                continue
+        except (IndexError, ValueError) as err:
+            source.fail(lineno, f'malformed {kind} line ({err})')
+            continue
+        laser.lineno = lineno
+        (rear if kind == 'RLASER' else front[kind]).append(laser)
+
+    use = 'ROBOTLASER1' if front['ROBOTLASER1'] else 'FLASER'
+    lasers = front[use]
+    if use == 'ROBOTLASER1' and front['FLASER']:
+        ignored['FLASER'] = len(front['FLASER'])
+    if not lasers:
+        raise ValueError(f'{path}: no FLASER or ROBOTLASER1 lines (not a Carmen log?)')
+    if max_scans is not None:
+        lasers = lasers[:max_scans]
+
+    notes = []
+
+    def param(name: str, default: float) -> float:
+        values = params.get(name)
+        if not values:
+            return default
+        if len(set(values)) > 1:
+            notes.append(f'PARAM {name} given as {", ".join(values)}: using the last')
+        try:
+            return float(values[-1])
+        except ValueError:
+            raise ValueError(f'{path}: PARAM {name} {values[-1]!r} is not a number') from None
+
+    log_max = param('robot_front_laser_max', CARMEN_DEFAULT_MAX_RANGE)
+    if use == 'ROBOTLASER1':
+        rel = np.array([_relative(s.robot, s.laser) for s in lasers])
+        mount = tuple(float(v) for v in np.median(rel, axis=0))
+        spread = float(np.max(np.hypot(*(rel[:, :2] - np.array(mount[:2])).T)))
+        if spread > 0.01:
+            notes.append(f'laser mount varies by up to {spread:.3f} m between ROBOTLASER1 '
+                         'lines: the median is used')
+    else:
+        mount = (param('robot_frontlaser_offset', 0.0), 0.0, 0.0)
+    maxima = {s.max_range or log_max for s in lasers}
+    sensor = Sensor(model='SICK LMS (cm mode)', range_min=0.0, range_max=float(max(maxima)),
+                    sigma_range=LMS_SIGMA_RANGE)
+
+    def record(s: _Laser) -> ScanRecord:
+        ranges = lms_cm_ranges(s.values * 100.0, s.max_range or log_max)
+        return ScanRecord(s.stamp, s.lineno, s.angle_min, s.angle_increment, ranges,
+                          _key(s.values))
+
+    log = ParsedLog('carmen', path, sensor, mount, notes=notes)
+    log.scans = [record(s) for s in lasers]
+    last_line = lasers[-1].lineno
+    robot = np.array([s.robot for s in lasers])
+    if poses == 'corrected':
+        log.reference_index = np.arange(len(lasers))
+        log.reference_poses = robot
+        if odom:
+            log.ignored['ODOM (corrected log: follows the reference)'] = len(odom)
+    else:
+        if odom:
+            kept = [o for o in odom if max_scans is None or o[0] <= last_line]
+            log.odom_stamps = np.array([o[1] for o in kept], dtype=float)
+            log.odom_poses = np.array([o[2] for o in kept], dtype=float).reshape(-1, 3)
+        else:
+            log.odom_stamps = log.scan_stamps
+            log.odom_poses = robot
+    if rear:
+        rear = [s for s in rear if max_scans is None or s.lineno <= last_line]
+        log.rear_scans = [record(s) for s in rear]
+        log.rear_mount = (param('robot_rearlaser_offset', 0.0), 0.0, math.pi)
+    for kind, count in ignored.items():
+        log.ignored[kind] += count
+    log.skipped, log.first_skipped = source.skipped, source.first_skipped
+    return log
+
+
+def pair_with_reference(log: ParsedLog, reference: ParsedLog) -> int:
+    """Give a raw log the corrected poses of the same run's corrected log; return matches.
+
+    A corrected log keeps a subset of the raw scans: scan j of ``reference`` is paired with
+    the next raw scan (in order) whose readings are identical.
+
+    Raises:
+        ValueError: ``reference`` has no reference poses, or no scan matches.
+
+    """
+    if not reference.has_reference:
+        raise ValueError(f'{reference.path} holds no corrected poses (use a corrected log '
+                         'or --poses corrected for it)')
+    by_key: Dict[str, List[int]] = {}
+    for i, scan in enumerate(log.scans):
+        by_key.setdefault(scan.key, []).append(i)
+    index, poses = [], []
+    last = -1
+    for j, k in enumerate(reference.reference_index):
+        candidates = [i for i in by_key.get(reference.scans[k].key, ()) if i > last]
+        if candidates:
+            last = candidates[0]
+            index.append(last)
+            poses.append(reference.reference_poses[j])
+    if not index:
+        raise ValueError(f'no scan of {reference.path} has the readings of a scan of '
+                         f'{log.path}: not the same run?')
+    log.reference_index = np.array(index, dtype=int)
+    log.reference_poses = np.array(poses, dtype=float).reshape(-1, 3)
+    unmatched = len(reference.reference_index) - len(index)
+    log.notes.append(f'reference {reference.path.name}: {len(index)} scans paired, '
+                     f'{unmatched} reference scans without an identical raw scan')
+    return len(index)
+
+
+# ------------------------------------------------------------------------ simple reader
+
+
+@dataclass(frozen=True)
+class CarmenScan:
+    """One FLASER reading (the simple reader used by the feature tests and benchmarks)."""
+
+    stamp: float
+    ranges: np.ndarray
+    angle_min: float
+    angle_increment: float
+    pose: np.ndarray
+    odom_pose: np.ndarray
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Return the beam angles [rad]."""
+        return self.angle_min + self.angle_increment * np.arange(len(self.ranges))
+
+
+def read_carmen_scans(path, max_range: float = 40.0) -> Iterator[CarmenScan]:
+    """Yield the FLASER scans of a (optionally gzipped) Carmen log, stamps as printed.
+
+    Readings at or beyond ``max_range`` are reported as +inf (REP 117); no code mapping and
+    no stamp repair (use :func:`parse_carmen` for that).
+
+    Raises:
+        ValueError: A FLASER line is malformed (message names the line number).
+
+    """
+    path = Path(path)
+    with open_text(path) as f:
+        for lineno, line in enumerate(f, 1):
+            if not line.startswith('FLASER '):
+                continue
+            fields = line.split()
+            try:
+                n = int(fields[1])
+                values = np.array(fields[2:2 + n], dtype=float)
+                rest = np.array(fields[2 + n:8 + n], dtype=float)
+                stamp = float(fields[8 + n])
+            except (IndexError, ValueError) as err:
+                raise ValueError(f'{path}:{lineno}: malformed FLASER line ({err})') from err
+            if len(values) != n or len(rest) != 6:
+                raise ValueError(f'{path}:{lineno}: FLASER line too short')
+            ranges = np.where(values >= max_range, np.inf, values)
+            angle_min, inc = scan_geometry(n)
+            yield CarmenScan(stamp, ranges, angle_min, inc, rest[:3], rest[3:])
