@@ -12,9 +12,9 @@ Real logs carry three kinds of bad stamps, each repaired and counted:
   distinct stamp is spread at the nominal period.
 
 Missing stamps are then interpolated linearly (by index) between their good neighbours and
-extrapolated at the nominal period at the ends. The nominal period is the median positive
-step of the stamps as read, divided by the run length; ``fallback_period`` when the stream
-has no two distinct stamps.
+extrapolated at the nominal period at the ends. The nominal period is the median of the
+positive steps between successive distinct good stamps, each divided by the number of
+entries it spans; ``fallback_period`` when the stream has no two distinct stamps.
 """
 
 from dataclasses import dataclass
@@ -50,19 +50,21 @@ class StampRepairs:
         return text
 
 
-def _nominal_period(t: np.ndarray) -> float:
-    """Return the median step between distinct stamps per stamp, or 0 when undefined."""
+def _nominal_period(t: np.ndarray, idx: np.ndarray) -> float:
+    """Return the median step per index between distinct increasing stamps, 0 if none.
+
+    ``t`` are the good stamps and ``idx`` their positions in the stream (missing stamps in
+    between count as steps).
+    """
     if len(t) < 2:
         return 0.0
-    values, first = np.unique(t, return_index=True)
-    order = np.argsort(first)
-    first, values = first[order], values[order]
-    steps = np.diff(values)
-    runs = np.diff(first)
-    ok = (steps > 0) & (runs > 0)
+    first = np.concatenate(([True], np.diff(t) != 0))
+    t, idx = t[first], idx[first]
+    steps, gaps = np.diff(t), np.diff(idx)
+    ok = steps > 0
     if not ok.any():
         return 0.0
-    return float(np.median(steps[ok] / runs[ok]))
+    return float(np.median(steps[ok] / gaps[ok]))
 
 
 def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, StampRepairs]:
@@ -82,15 +84,14 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
     n = len(t)
     bad = ~np.isfinite(t) | (t == 0.0)
     n_zero = int(np.count_nonzero(t == 0.0))
-    good_in = t[~bad]
-    period = _nominal_period(good_in)
+    good_idx = np.flatnonzero(~bad)
+    period = _nominal_period(t[good_idx], good_idx)
     fallback = period <= 0.0
     if fallback:
         period = float(fallback_period)
 
     # Backward stamps: isolated glitches become missing, lasting jumps shift the rest.
     n_back = n_reset = 0
-    good_idx = np.flatnonzero(~bad)
     last = None
     for pos, i in enumerate(good_idx):
         if last is not None and t[i] < t[last]:
@@ -106,6 +107,8 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
 
     # Runs of equal stamps: spread between the run's value and the next distinct stamp.
     good_idx = np.flatnonzero(~bad)
+    if not fallback:  # again, without the backward stamps
+        period = _nominal_period(t[good_idx], good_idx) or period
     n_rep = 0
     if len(good_idx) > 1:
         g = t[good_idx]
@@ -115,8 +118,9 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
             k = b - a
             if k < 2:
                 continue
-            step = (g[b] - g[a]) / k if b < len(g) else period
-            t[good_idx[a:b]] = g[a] + step * np.arange(k)
+            gap = good_idx[a:b] - good_idx[a]  # missing stamps in between count too
+            step = (g[b] - g[a]) / (good_idx[b] - good_idx[a]) if b < len(g) else period
+            t[good_idx[a:b]] = g[a] + step * gap
             n_rep += k - 1
 
     # Missing stamps: interpolate by index, extrapolate at the nominal period.
