@@ -15,7 +15,7 @@ from landmark_nav.tools.cli import main as cli_main
 import numpy as np
 import pytest
 
-F32 = dict(rtol=1e-6, atol=1e-6)
+F32 = {'rtol': 1e-6, 'atol': 1e-6}
 
 
 def _read(bag):
@@ -72,8 +72,10 @@ def test_carmen_corrected_round_trip(tmp_path):
     assert scans[0].angle_min == pytest.approx(-math.pi / 2, abs=1e-6)
     assert scans[0].angle_increment == pytest.approx(math.radians(1.0), abs=1e-7)
     assert scans[0].range_max == pytest.approx(50.0)
-    gt = [odometry_to_pose(m) for _, m in topics['/ground_truth/odom']]
-    np.testing.assert_allclose([g.pose for g in gt], poses, atol=1e-9)
+    gt = np.array([odometry_to_pose(m).pose for _, m in topics['/ground_truth/odom']])
+    # the pose fields are the laser's: the robot is 0.12 m behind it
+    back = np.column_stack((-0.12 * np.cos(gt[:, 2]), -0.12 * np.sin(gt[:, 2]), 0 * gt[:, 2]))
+    np.testing.assert_allclose(gt, np.array(poses) + back, atol=1e-9)
     assert topics['/ground_truth/odom'][0][1].header.frame_id == 'map'
     odom = topics['/odom']
     assert odom[0][1].header.frame_id == 'odom' and odom[0][1].child_frame_id == 'base_link'
@@ -366,7 +368,7 @@ def test_synthetic_odometry_in_bag_follows_seed(tmp_path):
     log = _write(tmp_path / 's-corrected.log', text)
     import_log(log, tmp_path / 'a', seed=7)
     import_log(log, tmp_path / 'b', seed=7, drift='k_d=0.1')
-    (ta, ca), (tb, cb) = _read(tmp_path / 'a'), _read(tmp_path / 'b')
+    (ta, ca), (_, cb) = _read(tmp_path / 'a'), _read(tmp_path / 'b')
     pa = np.array([odometry_to_pose(m).pose for _, m in ta['/odom']])
     ref = np.array([odometry_to_pose(m).pose for _, m in ta['/ground_truth/odom']])
     np.testing.assert_allclose(pa, synthetic_odometry(ref, DriftModel(), 7), atol=1e-9)

@@ -21,14 +21,18 @@ and ``maximum_range``; the laser mount is the median of ``robot_pose^-1 (+) lase
 ``FLASER`` spans 180 deg from -90 deg: 180 readings are 1 deg steps to +89 deg, 360 are
 0.5 deg steps to +89.5 deg, 181 and 361 readings end at +90 deg (:func:`scan_geometry`);
 its mount is ``(robot_frontlaser_offset, 0, 0)`` from the ``PARAM`` lines (0 when absent;
-``RLASER``: ``(robot_rearlaser_offset, 0, pi)``). The robot pose of a laser line is its
-``odom_x odom_y odom_theta`` (``FLASER``) or ``robot_*`` (``ROBOTLASER1``) fields.
+``RLASER``: ``(robot_rearlaser_offset, 0, pi)``). In a ``FLASER`` line ``x y theta`` is the
+laser's pose and ``odom_*`` the robot's odometry; ``ROBOTLASER1`` gives both poses.
 
 Poses: in a *raw* log the robot pose fields are the raw odometry (``/odom`` comes from the
-``ODOM`` lines when there are any, else from the laser lines); in a *corrected* log
-(Radish "corrected" variants) they are the scan-matched pose, which becomes the reference
-(``/ground_truth/odom``); the ``ODOM`` lines of such logs follow the corrected trajectory
-too (they stay within a few cm of it after kilometres) and are not imported.
+``ODOM`` lines when there are any, else from the laser lines' ``odom_*`` / ``robot_*``
+fields); in a *corrected* log (Radish "corrected" variants) the poses are the scan-matched
+ones and the reference (``/ground_truth/odom``) is the robot pose under the laser pose,
+``laser (+) mount^-1`` (``FLASER``) or ``robot_*`` (``ROBOTLASER1``). The Radish corrected
+logs print the same pose in both triples; read as the laser's pose they align consecutive
+scans best (freiburg-101, belgioioso: laser 4 cm behind the centre). The ``ODOM`` lines of
+such logs follow the corrected trajectory too (they stay within a few tens of cm of it
+after kilometres) and are not imported.
 
 Ranges (SICK LMS in cm mode, 1 cm steps): the LMS reserved codes (81.83 .. 81.91 m) map per
 :func:`landmark_nav.importers.common.lms_cm_ranges`; other readings at or above the maximum
@@ -106,7 +110,7 @@ def _parse_flaser(tokens: List[str]) -> _Laser:
     poses = _floats(tokens[2 + n:8 + n])
     stamp = float(tokens[8 + n])
     a0, inc = scan_geometry(n)
-    return _Laser(0, stamp, values, a0, inc, None, poses[3:6])
+    return _Laser(0, stamp, values, a0, inc, None, poses[3:6], poses[0:3])
 
 
 def _parse_robotlaser(tokens: List[str]) -> _Laser:
@@ -142,6 +146,16 @@ def _relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d = b[:2] - a[:2]
     return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1],
                      math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))])
+
+
+def _robot_from_laser(laser: np.ndarray, mount) -> np.ndarray:
+    """Return the robot poses whose laser (mounted at ``mount``) has the poses ``laser``."""
+    mx, my, myaw = mount
+    th = laser[:, 2] - myaw
+    c, s = np.cos(th), np.sin(th)
+    out = np.column_stack((laser[:, 0] - (c * mx - s * my), laser[:, 1] - (s * mx + c * my),
+                           np.arctan2(np.sin(th), np.cos(th))))
+    return out
 
 
 def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
@@ -240,7 +254,11 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
     robot = np.array([s.robot for s in lasers])
     if poses == 'corrected':
         log.reference_index = np.arange(len(lasers))
-        log.reference_poses = robot
+        if use == 'FLASER':  # x y theta is the laser's pose: robot = laser (+) mount^-1
+            log.reference_poses = _robot_from_laser(np.array([s.laser for s in lasers]),
+                                                    mount)
+        else:
+            log.reference_poses = robot
         if odom:
             log.ignored['ODOM (corrected log: follows the reference)'] = len(odom)
     else:
