@@ -2,6 +2,9 @@
 
 import gzip
 import math
+from pathlib import Path
+import subprocess
+import sys
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, scan_to_data
@@ -295,6 +298,24 @@ def test_malformed_line_names_file_and_line(tmp_path, capsys, name, good, bad, r
     assert parsed.skipped == 1
     assert cli_main(['import', str(log), '--out', str(tmp_path / 'bag'), '--lenient']) == 0
     assert 'skipped 1 malformed lines (--lenient)' in capsys.readouterr().out
+
+
+def test_bad_param_names_its_line(tmp_path):
+    log = _write(tmp_path / 'p-corrected.log', 'PARAM robot_frontlaser_offset 0.0 h 0\n'
+                 'PARAM robot_frontlaser_offset abc h 0\n'
+                 + _flaser(np.ones(180), (0, 0, 0), 1.0))
+    with pytest.raises(LineError, match=r'p-corrected.log:2: PARAM robot_frontlaser_offset'):
+        parse_log(log)
+
+
+def test_parsers_do_not_import_ros():
+    code = ('import sys; import landmark_nav.importers.carmen, landmark_nav.importers.wean, '
+            'landmark_nav.importers.breezyslam, landmark_nav.importers; '
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('rclpy', 'rosbags', 'sensor_msgs', 'nav_msgs') or m == 'landmark_nav.sim'))")
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.strip() == '[]'
 
 
 def test_cli_errors_are_one_line(tmp_path, capsys):

@@ -52,7 +52,8 @@ from typing import Dict, Iterator, List, Optional
 
 import numpy as np
 
-from .common import LineSource, lms_cm_ranges, open_text, ParsedLog, ScanRecord, Sensor
+from .common import LineError, LineSource, lms_cm_ranges, open_text, ParsedLog, \
+    ScanRecord, Sensor
 
 __all__ = ['CARMEN_DEFAULT_MAX_RANGE', 'CarmenScan', 'LMS_SIGMA_RANGE', 'default_poses',
            'pair_with_reference', 'parse_carmen', 'read_carmen_scans', 'scan_geometry']
@@ -179,7 +180,7 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
     if poses not in ('raw', 'corrected'):
         raise ValueError(f"--poses must be 'raw' or 'corrected', got {poses!r}")
     source = LineSource(path, lenient)
-    params: Dict[str, List[str]] = {}
+    params: Dict[str, List[tuple]] = {}  # name -> [(line number, value)]
     front: Dict[str, List[_Laser]] = {'FLASER': [], 'ROBOTLASER1': []}
     rear: List[_Laser] = []
     odom: List[tuple] = []
@@ -197,7 +198,7 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
                 continue
             else:
                 if kind == 'PARAM' and len(tokens) >= 3:
-                    params.setdefault(tokens[1], []).append(tokens[2])
+                    params.setdefault(tokens[1], []).append((lineno, tokens[2]))
                 else:
                     ignored[kind] = ignored.get(kind, 0) + 1
                 continue
@@ -219,15 +220,19 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
     notes = []
 
     def param(name: str, default: float) -> float:
-        values = params.get(name)
-        if not values:
+        given = params.get(name)
+        if not given:
             return default
+        values = [v for _, v in given]
         if len(set(values)) > 1:
             notes.append(f'PARAM {name} given as {", ".join(values)}: using the last')
         try:
-            return float(values[-1])
+            value = float(values[-1])
         except ValueError:
-            raise ValueError(f'{path}: PARAM {name} {values[-1]!r} is not a number') from None
+            value = math.nan
+        if not math.isfinite(value):
+            raise LineError(path, given[-1][0], f'PARAM {name} {values[-1]!r} is not a number')
+        return value
 
     log_max = param('robot_front_laser_max', CARMEN_DEFAULT_MAX_RANGE)
     if use == 'ROBOTLASER1':
