@@ -108,6 +108,17 @@ def test_carmen_raw_uses_odom_lines(tmp_path):
         import_log(log, tmp_path / 'bag2', drift='pioneer')
 
 
+def test_carmen_max_range_option(tmp_path):
+    ranges = np.array([1.0, 8.19, 8.191, 20.0] + [2.0] * 176)
+    log = _write(tmp_path / 'mm-corrected.log', _flaser(ranges, (0, 0, 0), 1.0))
+    assert np.isfinite(parse_log(log).scans[0].ranges[:4]).all()  # default cap 50 m
+    scan = parse_log(log, max_range=8.191).scans[0]
+    np.testing.assert_array_equal(scan.ranges[:4], [1.0, 8.19, np.inf, np.inf])
+    with pytest.raises(ValueError, match='Carmen logs only'):
+        parse_log(_write(tmp_path / 'exp3.dat', _breezy_line(1, 0, 0, np.ones(682) * 900)),
+                  max_range=4.0)
+
+
 @pytest.mark.parametrize('n, angle_max_deg', [(180, 89.0), (181, 90.0), (360, 89.5),
                                               (361, 90.0)])
 def test_flaser_beam_geometry(n, angle_max_deg):

@@ -36,16 +36,17 @@ after kilometres) and are not imported.
 
 Ranges (SICK LMS in cm mode, 1 cm steps): the LMS reserved codes (81.83 .. 81.91 m) map per
 :func:`landmark_nav.importers.common.lms_cm_ranges`; other readings at or above the maximum
-range are the logger's "no return" (+inf, REP 117). The maximum is ``maximum_range`` of a
-``ROBOTLASER1`` line, else ``PARAM robot_front_laser_max``, else 50 m (Carmen's default cap:
-the Radish logs without that PARAM write 50, 51.05 or 51.15 m for beams without echo).
+range are the logger's "no return" (+inf, REP 117). The maximum is ``--max-range`` when
+given, else ``maximum_range`` of a ``ROBOTLASER1`` line, else ``PARAM
+robot_front_laser_max``, else 50 m (Carmen's default cap: the Radish logs without that
+PARAM write 50, 51.05 or 51.15 m for beams without echo).
 
 Range noise: SICK LMS200 / LMS291 technical data, statistical error (1 sigma) typ. 5 mm
 (mm mode, up to 8 m); these logs are in cm mode (1 cm reading steps, +-4 cm systematic
 error stated for cm mode), so ``laser_sigma_range`` is written as 0.01 m.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace as _replace
 import math
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional
@@ -160,7 +161,8 @@ def _robot_from_laser(laser: np.ndarray, mount) -> np.ndarray:
 
 
 def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
-                 max_scans: Optional[int] = None) -> ParsedLog:
+                 max_scans: Optional[int] = None,
+                 max_range: Optional[float] = None) -> ParsedLog:
     """Parse a Carmen log (``.log``, ``.clf``, optionally gzipped).
 
     Args:
@@ -169,6 +171,8 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
             file name (:func:`default_poses`).
         lenient: Skip and count malformed lines instead of raising.
         max_scans: Keep only the first front scans (and the odometry up to the last one).
+        max_range: Readings at or above it are "no return" [m] (overrides what the log
+            states, e.g. 8.191 or 32.767 for logs of an LMS in a mm mode).
 
     Raises:
         LineError: A malformed line (file and line number), unless ``lenient``.
@@ -235,6 +239,11 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         return value
 
     log_max = param('robot_front_laser_max', CARMEN_DEFAULT_MAX_RANGE)
+    if max_range is not None:
+        if not 0 < max_range < math.inf:
+            raise ValueError(f'max range must be > 0, got {max_range}')
+        log_max = float(max_range)
+        lasers = [_replace(s, max_range=None) for s in lasers]
     if use == 'ROBOTLASER1':
         rel = np.array([_relative(s.robot, s.laser) for s in lasers])
         mount = tuple(float(v) for v in np.median(rel, axis=0))

@@ -76,7 +76,8 @@ def guess_format(path) -> str:
 
 
 def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
-              lenient: bool = False, max_scans: Optional[int] = None) -> ParsedLog:
+              lenient: bool = False, max_scans: Optional[int] = None,
+              max_range: Optional[float] = None) -> ParsedLog:
     """Parse a log of any supported format (``fmt`` guessed when None).
 
     Raises:
@@ -95,7 +96,10 @@ def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
         raise ValueError(f'--max-scans must be >= 1, got {max_scans}')
     if fmt == 'carmen':
         from .carmen import parse_carmen
-        return parse_carmen(path, poses=poses, lenient=lenient, max_scans=max_scans)
+        return parse_carmen(path, poses=poses, lenient=lenient, max_scans=max_scans,
+                            max_range=max_range)
+    if max_range is not None:
+        raise ValueError(f'--max-range applies to Carmen logs only ({fmt} codes are fixed)')
     if poses not in (None, 'raw'):
         raise ValueError(f'--poses {poses} applies to Carmen logs only ({fmt} odometry is raw)')
     if fmt == 'wean':
@@ -150,7 +154,8 @@ def _fmt_pose(p) -> str:
 def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None,
                reference=None, drift: Optional[str] = None, seed: Optional[int] = None,
                lenient: bool = False, force: bool = False, max_scans: Optional[int] = None,
-               fallback_period: float = 1.0, progress: bool = False) -> ImportResult:
+               fallback_period: float = 1.0, progress: bool = False,
+               max_range: Optional[float] = None) -> ImportResult:
     """Import a log into a bag directory ``out``; return what was written.
 
     Args:
@@ -168,6 +173,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         fallback_period: Scan / odometry period [s] assumed when a stream has no two
             distinct stamps.
         progress: Show a tqdm progress bar while writing.
+        max_range: Carmen only: readings at or above it are "no return" [m].
 
     Raises:
         LineError: A malformed line, unless ``lenient``.
@@ -188,7 +194,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError(f'seed must be in [0, 2**32), got {seed}')
     if out.exists() and not force:
         raise BagError(f'{out} exists already; use --force to replace it')
-    log = parse_log(path, fmt, poses, lenient, max_scans)
+    log = parse_log(path, fmt, poses, lenient, max_scans, max_range)
     if reference is not None:
         if log.fmt != 'carmen':
             raise ValueError(f'--reference applies to Carmen logs only, not {log.fmt}')
@@ -196,7 +202,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
             raise ValueError(f'{path} already holds corrected poses; --reference pairs a raw '
                              'log (--poses raw) with its corrected log')
         from .carmen import pair_with_reference, parse_carmen
-        ref_log = parse_carmen(reference, poses='corrected', lenient=lenient)
+        ref_log = parse_carmen(reference, poses='corrected', lenient=lenient,
+                               max_range=max_range)
         pair_with_reference(log, ref_log)
 
     repairs: Dict[str, StampRepairs] = {}

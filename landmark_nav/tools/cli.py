@@ -67,7 +67,8 @@ def _cmd_import(args: argparse.Namespace) -> int:
     result = import_log(args.log, args.out, fmt=args.format, poses=args.poses,
                         reference=args.reference, drift=args.drift, seed=args.seed,
                         lenient=args.lenient, force=args.force, max_scans=args.max_scans,
-                        fallback_period=args.period, progress=sys.stderr.isatty())
+                        fallback_period=args.period, progress=sys.stderr.isatty(),
+                        max_range=args.max_range)
     print(result.summary)
     return 0
 
@@ -196,6 +197,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help='skip and count malformed lines instead of failing')
     p.add_argument('--max-scans', type=_positive_int, default=None, metavar='N',
                    help='import only the first N scans (and the odometry up to the last)')
+    p.add_argument('--max-range', type=_positive_float, default=None, metavar='METRES',
+                   help='Carmen: readings at or above this are "no return" (default: the '
+                        "log's ROBOTLASER1 maximum_range or PARAM robot_front_laser_max, "
+                        'else 50)')
     p.add_argument('--period', type=_positive_float, default=1.0, metavar='SECONDS',
                    help='scan period assumed when a log has no two distinct stamps '
                         '(default 1.0)')
