@@ -31,8 +31,10 @@ ones and the reference (``/ground_truth/odom``) is the robot pose under the lase
 ``laser (+) mount^-1`` (``FLASER``) or ``robot_*`` (``ROBOTLASER1``). The Radish corrected
 logs print the same pose in both triples; read as the laser's pose they align consecutive
 scans best (freiburg-101, belgioioso: laser 4 cm behind the centre). The ``ODOM`` lines of
-such logs follow the corrected trajectory too (they stay within a few tens of cm of it
-after kilometres) and are not imported.
+such logs are re-anchored to the corrected pose after every scan (an ``ODOM`` line with
+stamp 0 repeating the scan's pose, then the wheel odometry since): they are not imported as
+such (the importer writes synthetic drift instead), but ``odom_lines=True``
+(``--odom-lines``) chains their increments into the raw odometry (:func:`rebuild_odometry`).
 
 Ranges (SICK LMS in cm mode, 1 cm steps): the LMS reserved codes (81.83 .. 81.91 m) map per
 :func:`landmark_nav.importers.common.lms_cm_ranges`; other readings at or above the maximum
@@ -57,7 +59,8 @@ from .common import LineError, LineSource, lms_cm_ranges, open_text, ParsedLog, 
     ScanRecord, Sensor
 
 __all__ = ['CARMEN_DEFAULT_MAX_RANGE', 'CarmenScan', 'LMS_SIGMA_RANGE', 'default_poses',
-           'pair_with_reference', 'parse_carmen', 'read_carmen_scans', 'scan_geometry']
+           'pair_with_reference', 'parse_carmen', 'read_carmen_scans', 'rebuild_odometry',
+           'scan_geometry']
 
 CARMEN_DEFAULT_MAX_RANGE = 50.0  # [m] when neither ROBOTLASER1 nor PARAM states it
 LMS_SIGMA_RANGE = 0.01  # [m] SICK LMS2xx, cm mode (see the module docstring)
@@ -161,8 +164,8 @@ def _robot_from_laser(laser: np.ndarray, mount) -> np.ndarray:
 
 
 def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
-                 max_scans: Optional[int] = None,
-                 max_range: Optional[float] = None) -> ParsedLog:
+                 max_scans: Optional[int] = None, max_range: Optional[float] = None,
+                 odom_lines: bool = False) -> ParsedLog:
     """Parse a Carmen log (``.log``, ``.clf``, optionally gzipped).
 
     Args:
@@ -173,6 +176,8 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         max_scans: Keep only the first front scans (and the odometry up to the last one).
         max_range: Readings at or above it are "no return" [m] (overrides what the log
             states, e.g. 8.191 or 32.767 for logs of an LMS in a mm mode).
+        odom_lines: Corrected logs: rebuild the raw odometry at the scans from the ``ODOM``
+            lines (:func:`rebuild_odometry`) instead of leaving it to synthetic drift.
 
     Raises:
         LineError: A malformed line (file and line number), unless ``lenient``.
@@ -273,8 +278,18 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
                                                     mount)
         else:
             log.reference_poses = robot
-        if odom:
-            log.ignored['ODOM (corrected log: follows the reference)'] = len(odom)
+        if odom and odom_lines:
+            log.odom_stamps = log.scan_stamps
+            log.odom_poses, anchors = rebuild_odometry(lasers, odom, path)
+            log.notes.append(f'odometry rebuilt from the ODOM increments between scans '
+                             f'({anchors} re-anchoring ODOM lines dropped)')
+        elif odom_lines:
+            raise ValueError(f'{path}: no ODOM lines to rebuild the odometry from')
+        elif odom:
+            log.ignored['ODOM (corrected log: re-anchored to the reference; '
+                        '--odom-lines rebuilds odometry from them)'] = len(odom)
+    elif odom_lines:
+        raise ValueError('--odom-lines applies to corrected logs (--poses corrected)')
     else:
         if odom:
             kept = [o for o in odom if max_scans is None or o[0] <= last_line]
@@ -291,6 +306,57 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         log.ignored[kind] += count
     log.skipped, log.first_skipped = source.skipped, source.first_skipped
     return log
+
+
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    th = a[2] + b[2]
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1],
+                     math.atan2(math.sin(th), math.cos(th))])
+
+
+def rebuild_odometry(lasers: List['_Laser'], odom: List[tuple], path) -> tuple:
+    """Rebuild raw odometry at each scan from the re-anchored ``ODOM`` lines of a log.
+
+    In the Radish corrected logs the ``ODOM`` line right after each scan repeats the scan's
+    corrected pose (stamp 0: the odometry was re-anchored there) and the following ones add
+    the wheel odometry measured since. So the raw increment from scan k to scan k+1 is
+    ``relative(anchor_k, last ODOM before scan k+1)``, and chaining these increments gives
+    the raw odometry (eq. 13 / eq. 16). Returns (poses at the scans (n, 3), anchors
+    dropped).
+
+    Raises:
+        ValueError: An ODOM line after a scan does not repeat its pose (not re-anchored).
+
+    """
+    events = sorted([(s.lineno, 0, i) for i, s in enumerate(lasers)]
+                    + [(o[0], 1, j) for j, o in enumerate(odom)])
+    base_a = np.zeros(3)  # ODOM pose that maps to base_b in the rebuilt frame
+    base_b = np.zeros(3)
+    last = None  # last ODOM pose
+    out = np.zeros((len(lasers), 3))
+    after_scan = None
+    anchors = 0
+    for lineno, kind, i in events:
+        if kind == 0:
+            out[i] = (_compose(base_b, _relative(base_a, last)) if last is not None
+                      else lasers[i].robot)
+            after_scan = i
+            continue
+        pose = odom[i][2]
+        if after_scan is not None:
+            scan = lasers[after_scan]
+            if np.max(np.abs(pose - scan.robot)) > 1e-6:
+                raise ValueError(f'{path}:{lineno}: this ODOM line does not repeat the pose of '
+                                 f'the scan at line {scan.lineno}: the log does not re-anchor '
+                                 'its odometry, --odom-lines does not apply')
+            base_a, base_b = pose, out[after_scan]
+            after_scan = None
+            anchors += 1
+            last = pose
+            continue
+        last = pose
+    return out, anchors
 
 
 def pair_with_reference(log: ParsedLog, reference: ParsedLog) -> int:

@@ -36,6 +36,7 @@ CUSTOM_KEYS = {
     'landmark_nav.drift_model': 'noise model of /odom: its covariance, and the drift when '
                                 'synthetic',
     'landmark_nav.drift_seed': 'seed of the synthetic drift (synthetic odometry only)',
+    'landmark_nav.odometry_source': 'how raw odometry was rebuilt (Carmen --odom-lines only)',
     'landmark_nav.reference': 'where /ground_truth/odom comes from (when present)',
     'landmark_nav.repairs': 'the stamp repairs, per stream',
     'landmark_nav.laser_rear_mount': '"x y yaw" of the rear laser (Carmen RLASER only)',
@@ -77,7 +78,7 @@ def guess_format(path) -> str:
 
 def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
               lenient: bool = False, max_scans: Optional[int] = None,
-              max_range: Optional[float] = None) -> ParsedLog:
+              max_range: Optional[float] = None, odom_lines: bool = False) -> ParsedLog:
     """Parse a log of any supported format (``fmt`` guessed when None).
 
     Raises:
@@ -97,7 +98,9 @@ def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
     if fmt == 'carmen':
         from .carmen import parse_carmen
         return parse_carmen(path, poses=poses, lenient=lenient, max_scans=max_scans,
-                            max_range=max_range)
+                            max_range=max_range, odom_lines=odom_lines)
+    if odom_lines:
+        raise ValueError(f'--odom-lines applies to Carmen logs only, not {fmt}')
     if max_range is not None:
         raise ValueError(f'--max-range applies to Carmen logs only ({fmt} codes are fixed)')
     if poses not in (None, 'raw'):
@@ -155,7 +158,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                reference=None, drift: Optional[str] = None, seed: Optional[int] = None,
                lenient: bool = False, force: bool = False, max_scans: Optional[int] = None,
                fallback_period: float = 1.0, progress: bool = False,
-               max_range: Optional[float] = None) -> ImportResult:
+               max_range: Optional[float] = None, odom_lines: bool = False) -> ImportResult:
     """Import a log into a bag directory ``out``; return what was written.
 
     Args:
@@ -174,6 +177,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
             distinct stamps.
         progress: Show a tqdm progress bar while writing.
         max_range: Carmen only: readings at or above it are "no return" [m].
+        odom_lines: Carmen corrected logs only: rebuild the raw odometry from the
+            re-anchored ``ODOM`` lines instead of synthetic drift.
 
     Raises:
         LineError: A malformed line, unless ``lenient``.
@@ -194,7 +199,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError(f'seed must be in [0, 2**32), got {seed}')
     if out.exists() and not force:
         raise BagError(f'{out} exists already; use --force to replace it')
-    log = parse_log(path, fmt, poses, lenient, max_scans, max_range)
+    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines)
     if reference is not None:
         if log.fmt != 'carmen':
             raise ValueError(f'--reference applies to Carmen logs only, not {log.fmt}')
@@ -295,6 +300,9 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         }
         if used_seed is not None:
             custom['landmark_nav.drift_seed'] = str(used_seed)
+        if odom_lines:
+            custom['landmark_nav.odometry_source'] = (
+                'Carmen ODOM lines re-anchored at each scan: increments between scans chained')
         if log.has_reference:
             custom['landmark_nav.reference'] = (
                 f'corrected poses of {Path(reference).resolve()}' if reference is not None

@@ -68,7 +68,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
                         reference=args.reference, drift=args.drift, seed=args.seed,
                         lenient=args.lenient, force=args.force, max_scans=args.max_scans,
                         fallback_period=args.period, progress=sys.stderr.isatty(),
-                        max_range=args.max_range)
+                        max_range=args.max_range, odom_lines=args.odom_lines)
     print(result.summary)
     return 0
 
@@ -187,6 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--reference', default=None, metavar='FILE',
                    help='Carmen: the corrected log of the same run, paired with a raw log '
                         'scan by scan (identical readings) as /ground_truth/odom')
+    p.add_argument('--odom-lines', action='store_true',
+                   help='Carmen corrected logs: rebuild the raw odometry from the ODOM lines '
+                        '(re-anchored at each scan) instead of synthetic drift')
     p.add_argument('--drift', default=None, metavar='MODEL',
                    help='drift model of the synthetic odometry of logs without raw '
                         'odometry: pioneer (default), none, or gains such as '
