@@ -85,7 +85,8 @@ def test_carmen_corrected_round_trip(tmp_path):
     assert custom['landmark_nav.laser_mount'] == '0.12 0 0'
     assert custom['landmark_nav.odometry'] == 'synthetic'
     assert custom['landmark_nav.drift_seed'] == '0'
-    assert custom['landmark_nav.drift_model'].startswith('pioneer: k_d=0.05')
+    assert custom['landmark_nav.drift_model'] == 'k_d=0.05 k_theta=0.05 k_dtheta=0.1'
+    assert parse_drift_model(custom['landmark_nav.drift_model']) == DriftModel(name='custom')
     assert custom['landmark_nav.laser_sigma_range'] == '0.01'
     assert custom['landmark_nav.source'] == f'carmen {log.resolve()}'
     assert 'seed 0' in result.summary and 'NEFF x1' in result.summary
@@ -448,7 +449,7 @@ def test_synthetic_odometry_in_bag_follows_seed(tmp_path):
     np.testing.assert_allclose(cov, propagate_covariance(pa, DriftModel()), rtol=1e-6,
                                atol=1e-15)
     assert ca['landmark_nav.drift_seed'] == '7'
-    assert cb['landmark_nav.drift_model'] == 'custom: k_d=0.1 k_theta=0.05 k_dtheta=0.1'
+    assert cb['landmark_nav.drift_model'] == 'k_d=0.1 k_theta=0.05 k_dtheta=0.1'
 
 
 # --------------------------------------------------------------------------- real logs

@@ -52,10 +52,13 @@ class DriftModel:
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f'drift model: {key} must be finite and >= 0, got {value}')
 
+    def gains(self) -> str:
+        """Return ``'k_d=0.05 k_theta=0.05 k_dtheta=0.1'`` (custom_data; parses back)."""
+        return f'k_d={self.k_d:g} k_theta={self.k_theta:g} k_dtheta={self.k_dtheta:g}'
+
     def describe(self) -> str:
-        """Return ``'pioneer: k_d=0.05 k_theta=0.05 k_dtheta=0.1'`` (as in custom_data)."""
-        return (f'{self.name}: k_d={self.k_d:g} k_theta={self.k_theta:g} '
-                f'k_dtheta={self.k_dtheta:g}')
+        """Return ``'pioneer: k_d=0.05 k_theta=0.05 k_dtheta=0.1'`` (printed summary)."""
+        return f'{self.name}: {self.gains()}'
 
     def step_variances(self, increments: np.ndarray):
         """Return (var_D, var_theta) of each (dx, dy, dth) increment, shape (n,) each."""

@@ -295,7 +295,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
             'landmark_nav.laser_model': sensor.model,
             'landmark_nav.source': f'{log.fmt} {path}',
             'landmark_nav.odometry': odometry,
-            'landmark_nav.drift_model': model.describe(),
+            'landmark_nav.drift_model': model.gains(),
             'landmark_nav.repairs': repairs_text,
         }
         if used_seed is not None:
