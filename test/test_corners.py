@@ -545,7 +545,7 @@ def test_carmen_logs_run_clean(name):
     path = CARMEN / name
     if not path.exists():
         pytest.skip(f'{path} not present')
-    from landmark_nav.tools.carmen import read_carmen_scans
+    from landmark_nav.importers.carmen import read_carmen_scans
     counts = dict.fromkeys(METHODS, 0)
     n = 0
     for scan in read_carmen_scans(path):

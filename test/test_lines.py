@@ -378,7 +378,7 @@ CARMEN_SIGMA_R = 0.02  # the SICK scanners of both logs: line RMSE 1-2 cm; one s
 
 def carmen_figures(path: Path, method: str):
     """Per scan: explained fraction of the valid points and RMSE of the supporting points."""
-    from landmark_nav.tools.carmen import read_carmen_scans
+    from landmark_nav.importers.carmen import read_carmen_scans
     params = LineParams(method=method, sigma_r=CARMEN_SIGMA_R)
     explained, rmse = [], []
     for scan in read_carmen_scans(path):
