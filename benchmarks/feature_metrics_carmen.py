@@ -5,26 +5,31 @@ Run from the repository root (needs ``../shared/data/carmen``)::
     python benchmarks/feature_metrics_carmen.py [--scans 20] [--seed 0] [--json out.json]
         [LOG ...]
 
-Per log: every extractor with the node defaults and the approxPolyDP baseline (epsilon
-5 cm, per breakpoint cluster; in full and restricted to the line extractor's minimum size)
-on every scan; f, ray RMSE, fit residual on ``--scans`` scans drawn with
-``numpy.random.default_rng(--seed)``; false-surface beams on every scan; repeatability
-between consecutive scans through the corrected poses (the FLASER pose fields, taken as
-the laser pose: laser mount 0 0 0); milliseconds per scan (segmentation included). See
-:mod:`landmark_nav.evaluation.scan_metrics` for the definitions.
+Each log is imported (``landmark_nav import``, defaults, into a temporary directory) and
+scored as ``landmark_nav evaluate-features BAG`` does: every extractor with the node
+defaults and the approxPolyDP baseline (epsilon 5 cm, per breakpoint cluster; in full and
+restricted to the line extractor's minimum size) on every scan; f, ray RMSE, fit residual
+on ``--scans`` scans drawn with ``numpy.random.default_rng(--seed)``; false-surface beams
+on every scan; repeatability between consecutive scans through the corrected poses
+(``/ground_truth/odom`` composed with the laser mount); milliseconds per scan
+(segmentation included). See :mod:`landmark_nav.evaluation.scan_metrics` for the
+definitions. ``--direct`` reads the logs with the simple FLASER reader instead (FLASER pose
+= laser pose, readings >= 40 m = no return), without the importer.
 """
-
 import argparse
 import json
 from pathlib import Path
 import sys
+import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.scan_metrics import (evaluate_scans,  # noqa: E402
                                                   format_scan_metrics, MetricScan)
+from landmark_nav.importers.carmen import read_carmen_scans  # noqa: E402
+from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
-from landmark_nav.tools.carmen import read_carmen_scans  # noqa: E402
+from landmark_nav.tools.evaluate_features import evaluate_truth_free  # noqa: E402
 import numpy as np  # noqa: E402
 
 CARMEN = SHARED_DATA / 'carmen'
@@ -73,8 +78,11 @@ def main() -> None:
     ap.add_argument('--scans', type=int, default=20, help='scans drawn for the PLE figures')
     ap.add_argument('--seed', type=int, default=0, help='seed of the draw')
     ap.add_argument('--sigma-r', type=float, default=0.01,
-                    help='sensor range noise for the false-surface margin [m]')
+                    help='--direct: sensor range noise for the false-surface margin [m] '
+                         '(imported bags state theirs)')
     ap.add_argument('--json', default=None, help='write all figures to this file')
+    ap.add_argument('--direct', action='store_true',
+                    help='read the logs with the simple FLASER reader, not the importer')
     args = ap.parse_args()
     results = {}
     for name in args.logs:
@@ -82,8 +90,16 @@ def main() -> None:
         if not path.exists():
             print(f'{path}: not present')
             continue
-        res = evaluate_scans(carmen_metric_scans(path), sigma_r=args.sigma_r,
-                             ple_scans=args.scans, seed=args.seed, progress=name)
+        if args.direct:
+            res = evaluate_scans(carmen_metric_scans(path), sigma_r=args.sigma_r,
+                                 ple_scans=args.scans, seed=args.seed, progress=name)
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                import_log(path, Path(tmp) / name)
+                res, notes = evaluate_truth_free(Path(tmp) / name, scans=args.scans,
+                                                 seed=args.seed, progress=True)
+            for note in notes:
+                print(note)
         results[name] = res
         print(format_scan_metrics(res, f'{name}: '), '\n', flush=True)
     print(summary(results))

@@ -130,7 +130,7 @@ def test_bag_path_equals_the_offline_path_on_a_real_log(tmp_path):
     # the scan stamps, the facts in custom_data) score as the same scans fed directly.
     from landmark_nav.evaluation.scan_metrics import evaluate_scans, MetricScan
     from landmark_nav.testing import shared_data
-    from landmark_nav.tools.carmen import read_carmen_scans
+    from landmark_nav.importers.carmen import read_carmen_scans
     raw = []
     for s in read_carmen_scans(shared_data('carmen', 'seattle-corrected.log.gz')):
         raw.append(s)
