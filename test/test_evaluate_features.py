@@ -167,3 +167,17 @@ def test_bag_path_equals_the_offline_path_on_a_real_log(tmp_path):
                 else:
                     assert got == value, (m, key)
     assert offline['lines']['split_merge']['line_opportunities'] > 100
+
+
+def test_imported_real_bag_states_its_facts(tmp_path):
+    # A bag written by `landmark_nav import` carries the mount, the noise and the reference:
+    # no fallback note, every consecutive pair scored.
+    from landmark_nav.importers.writer import import_log
+    from landmark_nav.testing import shared_data
+    import_log(shared_data('carmen', 'belgioioso-corrected.log.gz'), tmp_path / 'b',
+               max_scans=40)
+    res, notes = evaluate_truth_free(tmp_path / 'b', scans=10)
+    assert notes == []
+    assert res['laser_mount'] == pytest.approx([-0.04, 0.0, 0.0])  # PARAM front laser offset
+    assert res['scans'] == 40 and res['repeat_pairs'] == 39 and res['ple_scans'] == 10
+    assert res['lines']['split_merge']['line_opportunities'] > 50
