@@ -2,11 +2,11 @@
 
 import math
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from landmark_nav.evaluation.features import corner_truth, CornerScore, score_corners
+from landmark_nav.evaluation.features import CornerScore, FeatureRun, score_scan
 from landmark_nav.laser.corners import (Corner, CornerParams, detect_corners, extract_corners,
                                         METHODS, point_covariance)
 from landmark_nav.laser.segmentation import Cluster, segment_scan
@@ -493,24 +493,23 @@ def test_covariance_matches_simulator_scans():
 
 
 # ---------------------------------------------------------------------------- office run
-def score_run(res, params: CornerParams, step: int = 1, gate: float = 0.1,
-              score: Optional[CornerScore] = None) -> CornerScore:
-    """Score one method on every ``step``-th scan of a scenario run (evaluation rules)."""
-    score = score or CornerScore()
+def office_scores(sigma_r: float, step: int, methods: Dict[str, CornerParams],
+                  seed: int = 1) -> Dict[str, CornerScore]:
+    """Score several detector settings on the office run at range noise ``sigma_r``.
+
+    Every ``step``-th scan goes through the scoring path of ``landmark_nav
+    evaluate-features`` (:func:`landmark_nav.evaluation.features.score_scan`).
+    """
+    res = run_scenario('office', seed=seed, laser={'sigma_range': sigma_r})
     mount = res.laser.mount
 
     def sensor_pose_at(stamps):
         return compose(res.truth_at(np.minimum(stamps, res.end_ns)), mount)
 
+    run = FeatureRun(corner_params=methods, line_params={}, segment_sigma_r=sigma_r)
     for scan in res.of_type(ScanSample)[::step]:
-        r = scan.ranges.astype(float)
-        angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
-        corners = extract_corners(r, angles, np.isfinite(r), scan.angle_increment, params)
-        truth = corner_truth(res.world, sensor_pose_at, scan.stamp_ns, angles,
-                             scan.time_increment)
-        xy = np.array([c.position for c in corners]).reshape(-1, 2)
-        score_corners(score, xy, truth, gate)
-    return score
+        score_scan(run, res.world, sensor_pose_at, scan)
+    return run.corners
 
 
 def describe(name: str, sc: CornerScore) -> str:
@@ -518,13 +517,6 @@ def describe(name: str, sc: CornerScore) -> str:
     return (f'{name:>16s}: P {sc.precision:.3f} R {sc.recall:.3f} '
             f'RMS {100 * sc.rms_error:.2f} cm ghosts/scan {sc.ghosts_per_scan:.3f} '
             f'(tp {sc.tp}/{sc.truth}, wrong {sc.wrong}, dup {sc.duplicate})')
-
-
-def office_scores(sigma_r: float, step: int, methods: Dict[str, CornerParams],
-                  seed: int = 1) -> Dict[str, CornerScore]:
-    """Score several detector settings on the office run at range noise ``sigma_r``."""
-    res = run_scenario('office', seed=seed, laser={'sigma_range': sigma_r})
-    return {name: score_run(res, p, step) for name, p in methods.items()}
 
 
 def test_office_run_minus_cosine():
@@ -553,7 +545,7 @@ def test_carmen_logs_run_clean(name):
     path = CARMEN / name
     if not path.exists():
         pytest.skip(f'{path} not present')
-    from landmark_nav.tools.carmen import read_carmen_scans
+    from landmark_nav.importers.carmen import read_carmen_scans
     counts = dict.fromkeys(METHODS, 0)
     n = 0
     for scan in read_carmen_scans(path):

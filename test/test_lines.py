@@ -5,8 +5,7 @@ from pathlib import Path
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from landmark_nav.evaluation.features import (_cut_variance, line_crlb, LineScore,
-                                              score_lines, wall_truth)
+from landmark_nav.evaluation.features import _cut_variance, FeatureRun, line_crlb, score_scan
 from landmark_nav.geometry import compose, wrap_angle
 from landmark_nav.laser.lines import (explained_points, extract_lines, fit_line, LineParams,
                                       lowess, METHODS, point_covariances, split_pieces)
@@ -332,26 +331,22 @@ def office_scores(sigma_r: float, step: int = 4):
 
     A detection is a true positive for a visible wall when |d rho| <= 10 cm, |d alpha| <=
     3 deg and their extents overlap, in the true laser pose at the time of the line's
-    middle beam; TruePos = matched visible walls with >= 1 m in view / such walls.
+    middle beam; TruePos = matched visible walls with >= 1 m in view / such walls. The
+    scoring path of ``landmark_nav evaluate-features``
+    (:func:`landmark_nav.evaluation.features.score_scan`).
     """
     res = run_scenario('office', seed=1, laser={'sigma_range': sigma_r})
     mount = res.laser.mount
-    scores = {m: LineScore() for m in METHODS}
+
+    def sensor_pose_at(stamps):
+        return compose(res.truth_at(np.minimum(stamps, res.end_ns)), mount)
+
+    run = FeatureRun(corner_params={},
+                     line_params={m: LineParams(method=m, sigma_r=sigma_r) for m in METHODS},
+                     segment_sigma_r=sigma_r, truth_sigma_r=sigma_r, truth_sigma_phi=SIGMA_PHI)
     for scan in res.of_type(ScanSample)[::step]:
-        r = scan.ranges.astype(float)
-        angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
-        t_mid = scan.stamp_ns + int(0.5 * r.size * scan.time_increment * 1e9)
-        truth = wall_truth(res.world, compose(res.truth_at(t_mid), mount), angles,
-                           scan.range_max, sigma_r=sigma_r, sigma_phi=SIGMA_PHI)
-        valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
-        clusters = segment_scan(r, angles, valid, scan.angle_increment, sigma_r=sigma_r)
-        for m in METHODS:
-            lines = extract_lines(clusters, LineParams(method=m, sigma_r=sigma_r))
-            mid = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
-            stamps = scan.stamp_ns + np.rint(mid * scan.time_increment * 1e9).astype(np.int64)
-            poses = compose(res.truth_at(np.minimum(stamps, res.end_ns)), mount)
-            score_lines(scores[m], lines, truth, line_poses=np.reshape(poses, (-1, 3)))
-    return scores
+        score_scan(run, res.world, sensor_pose_at, scan)
+    return run.lines
 
 
 def test_office_run_line_targets():
@@ -383,7 +378,7 @@ CARMEN_SIGMA_R = 0.02  # the SICK scanners of both logs: line RMSE 1-2 cm; one s
 
 def carmen_figures(path: Path, method: str):
     """Per scan: explained fraction of the valid points and RMSE of the supporting points."""
-    from landmark_nav.tools.carmen import read_carmen_scans
+    from landmark_nav.importers.carmen import read_carmen_scans
     params = LineParams(method=method, sigma_r=CARMEN_SIGMA_R)
     explained, rmse = [], []
     for scan in read_carmen_scans(path):

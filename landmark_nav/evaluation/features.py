@@ -31,7 +31,8 @@ Matching (:func:`score_corners`, :func:`score_lines`):
 
 from dataclasses import dataclass, field
 import math
-from typing import Callable, List, Optional, Sequence, Tuple
+import time
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import inverse_transform_points, wrap_angle
 import numpy as np
@@ -387,3 +388,91 @@ def score_lines(score: LineScore, lines: Sequence, truth: WallTruth,
                 score.floor_rho.append(_cut_variance(float(truth.crlb[j, 0, 0]), max_drho))
                 score.floor_alpha.append(_cut_variance(float(truth.crlb[j, 1, 1]),
                                                        max_dalpha))
+
+
+@dataclass
+class FeatureRun:
+    """Scores and per-scan times of several extractors over the scans of one run.
+
+    Attributes:
+        corner_params: Corner detector settings by name.
+        line_params: Line extractor settings by name.
+        segment_sigma_r: Range noise the segmentation assumes [m].
+        truth_sigma_r: The sensor's true range noise [m] (Cramer-Rao floor of the walls).
+        truth_sigma_phi: The sensor's true bearing noise [rad].
+
+    """
+
+    corner_params: Dict[str, object]
+    line_params: Dict[str, object]
+    segment_sigma_r: float = 0.01
+    truth_sigma_r: Optional[float] = None
+    truth_sigma_phi: float = 0.0
+    corners: Dict[str, CornerScore] = field(default_factory=dict)
+    lines: Dict[str, LineScore] = field(default_factory=dict)
+    corner_times: Dict[str, List[float]] = field(default_factory=dict)
+    line_times: Dict[str, List[float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Create an empty score and time list per method."""
+        for m in self.corner_params:
+            self.corners.setdefault(m, CornerScore())
+            self.corner_times.setdefault(m, [])
+        for m in self.line_params:
+            self.lines.setdefault(m, LineScore())
+            self.line_times.setdefault(m, [])
+
+
+def score_scan(run: FeatureRun, world, sensor_pose_at: Callable[[np.ndarray], np.ndarray],
+               scan, corner_gate: float = 0.1) -> None:
+    """Extract features from one simulated scan and add their scores to ``run``.
+
+    The one scoring path of the simulator figures (``landmark_nav evaluate-features`` and
+    the office tests): valid beams per REP 117, the segmentation with
+    ``run.segment_sigma_r``, each extractor, then :func:`score_corners` against
+    :func:`corner_truth` and :func:`score_lines` against :func:`wall_truth` (true laser
+    pose at the middle of the sweep; each line compared in the pose of its middle beam).
+
+    Args:
+        run: Settings and accumulated scores.
+        world: The simulator world.
+        sensor_pose_at: Maps stamps (ns, array) to true laser poses (N, 3) in the world.
+        scan: Object with ``stamp_ns``, ``ranges``, ``angle_min``, ``angle_increment``,
+            ``time_increment``, ``range_min``, ``range_max`` (a LaserScan's fields).
+        corner_gate: Corner match distance [m].
+
+    """
+    from landmark_nav.conversions import classify_ranges
+    from landmark_nav.laser.corners import detect_corners
+    from landmark_nav.laser.lines import extract_lines
+    from landmark_nav.laser.segmentation import segment_scan
+
+    r = np.asarray(scan.ranges, dtype=float)
+    angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
+    valid = classify_ranges(r, scan.range_min, scan.range_max)[0]
+    t0 = time.perf_counter()
+    clusters = segment_scan(r, angles, valid, scan.angle_increment,
+                            sigma_r=run.segment_sigma_r)
+    t_seg = time.perf_counter() - t0
+    if run.corner_params:
+        truth = corner_truth(world, sensor_pose_at, scan.stamp_ns, angles,
+                             scan.time_increment)
+        for m, params in run.corner_params.items():
+            t0 = time.perf_counter()
+            corners = detect_corners(clusters, params)
+            run.corner_times[m].append(t_seg + time.perf_counter() - t0)
+            xy = np.array([c.position for c in corners]).reshape(-1, 2)
+            score_corners(run.corners[m], xy, truth, corner_gate)
+    if run.line_params:
+        t_mid = scan.stamp_ns + int(0.5 * r.size * scan.time_increment * 1e9)
+        walls = wall_truth(world, np.reshape(sensor_pose_at(np.array([t_mid])), 3), angles,
+                           scan.range_max, sigma_r=run.truth_sigma_r,
+                           sigma_phi=run.truth_sigma_phi)
+        for m, params in run.line_params.items():
+            t0 = time.perf_counter()
+            lines = extract_lines(clusters, params)
+            run.line_times[m].append(t_seg + time.perf_counter() - t0)
+            mid = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
+            stamps = scan.stamp_ns + np.rint(mid * scan.time_increment * 1e9).astype(np.int64)
+            score_lines(run.lines[m], lines, walls,
+                        line_poses=np.reshape(sensor_pose_at(stamps), (-1, 3)))

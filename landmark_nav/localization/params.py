@@ -42,9 +42,9 @@ class LocalizationParams:
             (eq. 27 literally: distance to the fixed hit point ``p_i``).
         jac_step_xy: position step of the numerical Jacobian [m].
         jac_step_theta: heading step of the numerical Jacobian [rad].
-        jac_max_jump: EKF: a reading whose second difference over the perturbations
-            (first difference without ``jac_central``) exceeds this [m] straddles a
-            discontinuity (edge, corner) and is not used.
+        jac_max_jump: EKF and UKF: a reading whose second difference over the Jacobian's
+            perturbations (first difference without ``jac_central``) exceeds this [m]
+            straddles a discontinuity (edge, corner) and is not used.
         jac_central: EKF: central differences (6 perturbed poses) instead of forward
             differences (3 perturbed poses).
         jac_active_ray: EKF with ``cone_rays > 1``: differentiate only the lobe ray that
@@ -56,6 +56,9 @@ class LocalizationParams:
             grid's range discontinuities instead of differentiating them.
         ukf_beta: beta (eq. 47), 2 is optimal for Gaussians.
         ukf_kappa: kappa (eq. 40).
+        map_sigma: UKF: std of the map's surface positions in x and in y [m], augmented
+            measurement noise (see :mod:`.ukf`); None = ``resolution / sqrt(12)`` of the
+            grid (a surface anywhere inside its cell); 0 = off (the chapter's UKF).
         midpoint: motion model heading, see :mod:`.odometry`.
         unknown: treatment of unknown map cells by the ray caster.
     """
@@ -80,6 +83,7 @@ class LocalizationParams:
     ukf_alpha: float = 1.0
     ukf_beta: float = 2.0
     ukf_kappa: float = 1.0
+    map_sigma: Optional[float] = None
     midpoint: bool = True
     unknown: str = 'invalid'
 
@@ -91,6 +95,8 @@ class LocalizationParams:
             raise ValueError('ukf_alpha must be in [1e-4, 1]')
         if self.gate <= 0.0:
             raise ValueError('gate must be > 0')
+        if self.map_sigma is not None and not 0.0 <= self.map_sigma < math.inf:
+            raise ValueError('map_sigma must be None or a finite value >= 0')
 
     def measurement_variance(self, z: np.ndarray) -> np.ndarray:
         """Variances r_i (eq. 28) of readings ``z``."""

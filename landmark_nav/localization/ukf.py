@@ -11,16 +11,37 @@ Angles: the mean of Theta over sigma points is the weighted circular mean
 ``atan2(sum W sin, sum W cos)``; Theta residuals are wrapped to [-pi, pi).
 
 The measurement sigma points (eq. 49) are the ray-cast ranges of all 16 sonars at all
-``2L + 1`` propagated sigma points, in one :func:`~.sonar_model.predict_ranges` call. A
-sonar is used only if every sigma point has a prediction and the acceptance test of
+``2L + 1`` sigma points, in one :func:`~.sonar_model.predict_ranges` call. A sonar is used
+only if every sigma point has a prediction, the acceptance test of
 :func:`~.params.accept_readings` passes on the mean prediction (the chapter's corner /
-outlier threshold, section 4.3).
+outlier threshold, section 4.3), and its prediction is continuous around the prior mean:
+the same discontinuity test as the EKF's (:func:`~.ekf.measurement_prediction`, second
+difference over +-``jac_step_xy`` / +-``jac_step_theta`` at most ``jac_max_jump``). Without
+that test a reading whose lobe straddles an edge, a corner or a niche opening is used, and
+the sigma point that crosses the edge (its range jumps by up to a metre) is read as a steep
+slope by eqs. 51-52: strong, wrong information along the hallway.
+
+Map noise (departure from the chapter): the occupancy grid places every surface only to
+within its cell, a position error uniform over the cell, std ``sigma_m = res / sqrt(12)``
+in x and in y (``LocalizationParams.map_sigma`` overrides it). It is not additive in the
+range (a range changes with it as fast as with the robot's position: little on a wall seen
+head-on, a lot near an edge), so, like the process noise, it enters through augmentation:
+the measurement sigma points are drawn from ``[x, y, Theta, m_x, m_y]`` with covariance
+``diag(P^-, sigma_m^2, sigma_m^2)`` (again L = 5, the same weights), and each is predicted at
+the pose shifted by ``(m_x, m_y)`` (a shift of the map against the robot, common to the
+readings of one cycle). Without it the state sigma points, +-sqrt(6) sigma = +-2.4 cm apart
+along the hallway, resolve the grid's structure below its cell, which the map does not
+define; with it they sample the map over +-7 cm, about one cell. ``map_sigma = 0`` gives
+the chapter's UKF: the propagated sigma points X_{k|k-1} are used (eq. 49) and R alone
+enters P_z (eq. 51).
 """
 
+import math
 from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
+from . import ekf
 from .grid import GridMap
 from .odometry import motion_model, process_noise
 from .params import (accept_readings, LocalizationParams, prediction_kwargs,
@@ -143,7 +164,8 @@ def time_update(x: Any, p: Any, u: Any, params: LocalizationParams = Localizatio
 
     Returns:
         ``(x_prior (3,), P_prior (3, 3), X (2L+1, 3))``, X the propagated state sigma
-        points ``X^x_{k|k-1}`` used again by :func:`measurement_update` (eq. 49).
+        points ``X^x_{k|k-1}``, used again by :func:`measurement_update` (eq. 49) when the
+        map noise is off.
     """
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
@@ -174,6 +196,39 @@ def state_sigma_points(x: Any, p: Any, params: LocalizationParams = Localization
     return chi[:, :3]
 
 
+def map_noise_std(grid: GridMap, params: LocalizationParams = LocalizationParams()) -> float:
+    """Std of the map's surface positions in x and y [m]: ``map_sigma`` or ``res / sqrt(12)``."""
+    if params.map_sigma is not None:
+        return float(params.map_sigma)
+    return float(grid.resolution) / math.sqrt(12.0)
+
+
+def measurement_sigma_points(x: Any, p: Any, map_std: float,
+                             params: LocalizationParams = LocalizationParams()
+                             ) -> Tuple[np.ndarray, np.ndarray]:
+    """Sigma points of the state augmented with the map noise (see the module docstring).
+
+    Args:
+        x: (3,) prior mean.
+        p: (3, 3) prior covariance.
+        map_std: std ``sigma_m`` of the map offset in x and in y [m].
+        params: filter parameters (alpha, beta, kappa).
+
+    Returns:
+        ``(X (2L+1, 3), poses (2L+1, 3))``: the state sigma points and the poses at which
+        the readings are predicted (``X`` shifted by the map offset ``(m_x, m_y)``).
+    """
+    p_a = np.zeros((L_AUG, L_AUG))
+    p_a[:3, :3] = np.asarray(p, dtype=float)
+    p_a[3, 3] = p_a[4, 4] = map_std ** 2
+    chi = sigma_points(np.concatenate([np.asarray(x, dtype=float), np.zeros(2)]), p_a,
+                       _weights(params)[2])  # eqs. 39-41 with [x, m] in place of [x, v]
+    chi[:, THETA] = wrap_angle(chi[:, THETA])
+    poses = chi[:, :3].copy()
+    poses[:, :2] += chi[:, 3:]
+    return chi[:, :3], poses
+
+
 def measurement_update(x_prior: Any, p_prior: Any, x_sigma: Optional[np.ndarray], z: Any,
                        grid: GridMap, mounts: Any,
                        params: LocalizationParams = LocalizationParams()
@@ -183,8 +238,10 @@ def measurement_update(x_prior: Any, p_prior: Any, x_sigma: Optional[np.ndarray]
     Args:
         x_prior: (3,) prior mean.
         p_prior: (3, 3) prior covariance.
-        x_sigma: (2L+1, 3) propagated sigma points from :func:`time_update`; None = draw
-            them from the prior (:func:`state_sigma_points`).
+        x_sigma: (2L+1, 3) propagated sigma points from :func:`time_update`, used when
+            the map noise is off (``map_sigma = 0``); None = draw them from the prior
+            (:func:`state_sigma_points`). With map noise the sigma points are drawn from
+            the prior augmented with it (:func:`measurement_sigma_points`).
         z: (S,) sonar readings [m] (``+inf`` no echo, ``-inf`` too close, ``nan`` missing).
         grid: the occupancy grid.
         mounts: (S, 3) sonar poses in base_link.
@@ -197,17 +254,25 @@ def measurement_update(x_prior: Any, p_prior: Any, x_sigma: Optional[np.ndarray]
     x_pri = np.asarray(x_prior, dtype=float)
     p_pri = np.asarray(p_prior, dtype=float)
     z = np.asarray(z, dtype=float).reshape(-1)
-    if x_sigma is None:
-        x_sigma = state_sigma_points(x_pri, p_pri, params)
+    map_std = map_noise_std(grid, params)
+    if map_std > 0.0:
+        x_sigma, poses = measurement_sigma_points(x_pri, p_pri, map_std, params)
+    else:
+        if x_sigma is None:
+            x_sigma = state_sigma_points(x_pri, p_pri, params)
+        poses = x_sigma
     w_m, w_c, _ = _weights(params)
     mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
     # Only readings that can pass the acceptance test are predicted (saves ray casts).
     cand = np.flatnonzero(usable_readings(z, params))
     zs = np.full((x_sigma.shape[0], z.size), np.nan)
+    smooth = np.zeros(z.size, dtype=bool)
     if cand.size:
-        zs[:, cand] = predict_ranges(grid, x_sigma, mounts[cand],
+        zs[:, cand] = predict_ranges(grid, poses, mounts[cand],
                                      **prediction_kwargs(params))  # eq. 49, one call
-    complete = np.isfinite(zs).all(axis=0)
+        # The EKF's discontinuity test (edges, corners: no usable derivative, no Gaussian).
+        smooth[cand] = ekf.measurement_prediction(grid, x_pri, mounts[cand], params)[2]
+    complete = np.isfinite(zs).all(axis=0) & smooth
     zs = np.where(complete, zs, 0.0)
     z_hat = w_m @ zs  # eq. 50
     z_hat = np.where(complete, z_hat, np.nan)

@@ -82,14 +82,17 @@ FILTER_PARAMETERS = {
                  'point (eq. 27 literally)', None, ['raycast', 'point']),
     'jac_step_xy': ('EKF Jacobian position step [m]', (1e-4, 1.0), None),
     'jac_step_theta': ('EKF Jacobian heading step [rad]', (1e-4, 1.0), None),
-    'jac_max_jump': ('EKF: readings whose perturbed predictions jump more than this are not '
-                     'used [m]', (0.0, 10.0), None),
+    'jac_max_jump': ('EKF and UKF: readings whose perturbed predictions jump more than this '
+                     'are not used [m]', (0.0, 10.0), None),
     'jac_central': ('EKF: central (true) or forward (false) differences', None, None),
     'jac_active_ray': ('EKF with cone_rays > 1: differentiate only the echoing ray', None,
                        None),
     'ukf_alpha': ('UKF sigma-point spread alpha (eq. 40)', (1e-4, 1.0), None),
     'ukf_beta': ('UKF beta (eq. 47), 2 for Gaussians', (0.0, 10.0), None),
     'ukf_kappa': ('UKF kappa (eq. 40)', (-4.0, 100.0), None),
+    'map_sigma': ('UKF: std of the map surface positions in x and y [m], augmented '
+                  'measurement noise; -1 = map resolution / sqrt(12); 0 = off',
+                  (-1.0, 1.0), None, -1.0),
     'midpoint': ('motion model moves along the mean heading (eqs. 1-3); false = eq. 25 as '
                  'printed', None, None),
     'unknown': ('unknown map cells: invalid (no prediction through them), occupied or free '

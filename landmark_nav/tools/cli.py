@@ -58,8 +58,43 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     from landmark_nav.tools.evaluate_features import run
-    print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json))
+    print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json,
+              reference=args.reference, mount=args.mount, sensor_sigma_r=args.sensor_sigma_r,
+              scans=args.scans, seed=args.seed, truth_free=args.truth_free))
     return 0
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    from landmark_nav.importers import import_log
+    result = import_log(args.log, args.out, fmt=args.format, poses=args.poses,
+                        reference=args.reference, drift=args.drift, seed=args.seed,
+                        lenient=args.lenient, force=args.force, max_scans=args.max_scans,
+                        fallback_period=args.period, progress=sys.stderr.isatty(),
+                        max_range=args.max_range, odom_lines=args.odom_lines)
+    print(result.summary)
+    return 0
+
+
+def _positive_int(text: str) -> int:
+    """Parse an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be >= 1, got {value}')
+    return value
+
+
+def _positive_float(text: str) -> float:
+    """Parse a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not 0 < value < float('inf'):
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
+    return value
 
 
 def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
@@ -148,12 +183,66 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('bag', help='rosbag2 directory')
     p.set_defaults(func=_cmd_info)
 
+    p = sub.add_parser('import', help='turn a real laser log (Carmen, CMU Wean, BreezySLAM) '
+                                      'into a rosbag2 (MCAP) bag')
+    p.add_argument('log', help='log file (.gz or plain): Carmen .log/.clf, Wean robotdata*.log, '
+                               'BreezySLAM .dat')
+    p.add_argument('--out', required=True, help='bag directory to create')
+    p.add_argument('--format', choices=['carmen', 'wean', 'breezyslam'], default=None,
+                   help='log format (default: guessed from the file name, else its content)')
+    p.add_argument('--poses', choices=['raw', 'corrected'], default=None,
+                   help='Carmen: what the pose fields hold (default corrected for files '
+                        'named *corrected*, else raw)')
+    p.add_argument('--reference', default=None, metavar='FILE',
+                   help='Carmen: the corrected log of the same run, paired with a raw log '
+                        'scan by scan (identical readings) as /ground_truth/odom')
+    p.add_argument('--odom-lines', action='store_true',
+                   help='Carmen corrected logs: rebuild the raw odometry from the ODOM lines '
+                        '(re-anchored at each scan) instead of synthetic drift')
+    p.add_argument('--drift', default=None, metavar='MODEL',
+                   help='drift model of the synthetic odometry of logs without raw '
+                        'odometry: pioneer (default), none, or gains such as '
+                        '"k_d=0.05 k_theta=0.05 k_dtheta=0.1"')
+    p.add_argument('--seed', type=_seed, default=None,
+                   help='seed of the synthetic drift (default 0)')
+    p.add_argument('--lenient', action='store_true',
+                   help='skip and count malformed lines instead of failing')
+    p.add_argument('--max-scans', type=_positive_int, default=None, metavar='N',
+                   help='import only the first N scans (and the odometry up to the last)')
+    p.add_argument('--max-range', type=_positive_float, default=None, metavar='METRES',
+                   help='Carmen: readings at or above this are "no return" (default: the '
+                        "log's ROBOTLASER1 maximum_range or PARAM robot_front_laser_max, "
+                        'else 50)')
+    p.add_argument('--period', type=_positive_float, default=1.0, metavar='SECONDS',
+                   help='scan period assumed when a log has no two distinct stamps '
+                        '(default 1.0)')
+    p.add_argument('--force', action='store_true', help='replace an existing bag directory')
+    p.set_defaults(func=_cmd_import)
+
     p = sub.add_parser('evaluate-features',
-                       help='score corner and line extractors against the ground truth of a bag')
-    p.add_argument('bag', help='rosbag2 directory recorded by `simulate`')
+                       help='score corner and line extractors on a bag: against the ground '
+                            'truth of a simulator bag, else with truth-free metrics (PLE ray '
+                            'metric, false-surface beams, fit, repeatability)')
+    p.add_argument('bag', help='rosbag2 directory with /scan (simulator or imported)')
     p.add_argument('--every', type=int, default=1, help='use every n-th scan')
     p.add_argument('--sigma-r', type=float, default=None,
-                   help='range noise the extractors assume [m] (default: the simulated one)')
+                   help='range noise the extractors assume [m] (default: the simulated one; '
+                        'truth-free: the node default 0.01)')
+    p.add_argument('--truth-free', action='store_true',
+                   help='truth-free metrics even on a simulator bag')
+    p.add_argument('--reference', default=None, metavar='FILE.tum',
+                   help='truth-free: reference poses (base_link in map, TUM) for '
+                        'repeatability (default: /ground_truth/odom of the bag)')
+    p.add_argument('--mount', type=float, nargs=3, default=None, metavar=('X', 'Y', 'YAW'),
+                   help='truth-free: laser mount base_link -> laser [m m rad] when the bag '
+                        'states none (default 0 0 0)')
+    p.add_argument('--sensor-sigma-r', type=float, default=None,
+                   help='truth-free: the sensor range noise [m] for the false-surface margin '
+                        'max(3 sigma_r, 5 cm) when the bag states none (default 0.01)')
+    p.add_argument('--scans', type=int, default=20,
+                   help='truth-free: scans drawn for f / ray RMSE / fit (default 20)')
+    p.add_argument('--seed', type=int, default=0,
+                   help='truth-free: seed of numpy.random.default_rng for the draw (default 0)')
     p.add_argument('--json', default=None, help='also write the figures to this JSON file')
     p.set_defaults(func=_cmd_evaluate_features)
 

@@ -1,33 +1,46 @@
 """``landmark_nav evaluate-features <bag>``: score corner and line extractors per method.
 
-Runs the extractors directly on the bag's scans (no DDS) and compares every scan with the
-ground truth the simulator recorded beside the bag (see
-:mod:`landmark_nav.evaluation.features` for the matching rules). Prints one table per
-feature type and returns the figures as a dict.
+Runs the extractors directly on the bag's scans (no DDS). Two kinds of bag:
+
+* **Simulator bags** (``ground_truth.yaml`` beside the bag): every scan is compared with
+  the ground-truth corners and walls (see :mod:`landmark_nav.evaluation.features` for the
+  matching rules); prints the corner and line tables of the README.
+* **Any other bag with** ``/scan`` (e.g. written by ``landmark_nav import`` from a real
+  log), or a simulator bag with ``--truth-free``: the metrics that need no ground-truth
+  features (:mod:`landmark_nav.evaluation.scan_metrics`): the PLE ray metric (f, ray
+  RMSE) and fit residual on ``--scans`` scans drawn with ``--seed``, false-surface beams
+  on every scan, repeatability of lines and corners between consecutive scans through the
+  reference poses (``/ground_truth/odom`` or ``--reference FILE.tum``), per method and for
+  the approxPolyDP baseline. The laser mount and the sensor's range noise come from the
+  bag's custom_data (``landmark_nav.laser_mount``, ``landmark_nav.laser_sigma_range``),
+  else from ``ground_truth.yaml``, else from ``--mount`` / ``--sigma-r`` (default 0 0 0 and
+  0.01 m, with a printed note).
 """
 
 import json
 from pathlib import Path
-import time
-from typing import Dict, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, scan_to_data
-from landmark_nav.evaluation.features import (corner_truth, CornerScore, LineScore,
-                                              score_corners, score_lines, wall_truth)
-from landmark_nav.geometry import compose, interpolate_pose
-from landmark_nav.laser.segmentation import segment_scan
-from landmark_nav.sim.record import load_ground_truth
-from landmark_nav.sim.world import World
+from landmark_nav.evaluation.features import FeatureRun, score_scan
+from landmark_nav.evaluation.scan_metrics import (evaluate_scans, format_scan_metrics,
+                                                  MetricScan)
+from landmark_nav.geometry import compose, interpolate_pose, quaternion_to_yaw
+from landmark_nav.sim.record import GROUND_TRUTH_FILE, load_ground_truth
 import numpy as np
 
 CORNER_METHODS = ('minus_cosine', 'sliding_window', 'split_merge')
 LINE_METHODS = ('split_merge', 'alfa')
+MOUNT_KEY = 'landmark_nav.laser_mount'
+SIGMA_KEY = 'landmark_nav.laser_sigma_range'
 
 
 def _truth_track(bag):
     stamps, poses = [], []
     with BagReader(bag) as reader:
+        if '/ground_truth/odom' not in reader.topics():
+            raise ValueError(f'{bag} has no /ground_truth/odom topic')
         for _, _, msg in reader.decoded(['/ground_truth/odom']):
             d = odometry_to_pose(msg)
             stamps.append(d.stamp_ns)
@@ -35,6 +48,38 @@ def _truth_track(bag):
     if not stamps:
         raise ValueError(f'{bag} has no /ground_truth/odom messages')
     return np.asarray(stamps, dtype=np.int64), np.asarray(poses)
+
+
+def read_tum(path) -> Tuple[np.ndarray, np.ndarray]:
+    """Read a TUM trajectory ``t x y z qx qy qz qw`` (s, m) as stamps [ns] and (N, 3) poses.
+
+    Lines starting with ``#`` and blank lines are skipped; stamps must increase.
+
+    Raises:
+        ValueError: A malformed line (message names file and line) or no pose at all.
+
+    """
+    stamps, poses = [], []
+    with open(path) as f:
+        for lineno, line in enumerate(f, 1):
+            text = line.strip()
+            if not text or text.startswith('#'):
+                continue
+            fields = text.split()
+            try:
+                if len(fields) != 8:
+                    raise ValueError(f'{len(fields)} fields, expected 8')
+                t, x, y, _, qx, qy, qz, qw = (float(v) for v in fields)
+            except ValueError as err:
+                raise ValueError(f'{path}:{lineno}: malformed TUM line ({err})') from err
+            stamp = int(round(t * 1e9))
+            if stamps and stamp <= stamps[-1]:
+                raise ValueError(f'{path}:{lineno}: stamp {t} does not increase')
+            stamps.append(stamp)
+            poses.append((x, y, float(quaternion_to_yaw(qx, qy, qz, qw))))
+    if not stamps:
+        raise ValueError(f'{path}: no poses')
+    return np.asarray(stamps, dtype=np.int64), np.asarray(poses, dtype=float)
 
 
 def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
@@ -55,8 +100,9 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
         {'corners': {method: figures}, 'lines': {method: figures}, 'scans': n}.
 
     """
-    from landmark_nav.laser.corners import CornerParams, detect_corners
-    from landmark_nav.laser.lines import extract_lines, LineParams
+    from landmark_nav.laser.corners import CornerParams
+    from landmark_nav.laser.lines import LineParams
+    from landmark_nav.sim.world import World
 
     if every < 1:
         raise ValueError(f'every must be >= 1, got {every}')
@@ -70,14 +116,17 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
     sigma_phi = float(meta['laser'].get('sigma_angle', 0.0))
     t_truth, truth = _truth_track(bag)
     t_rel = (t_truth - t_truth[0]).astype(float)
-    corner_params = {m: CornerParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
-                     for m in corner_methods}
-    line_params = {m: LineParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
-                   for m in line_methods}
-    c_scores = {m: CornerScore() for m in corner_methods}
-    l_scores = {m: LineScore() for m in line_methods}
-    c_times = {m: [] for m in corner_methods}
-    l_times = {m: [] for m in line_methods}
+    run = FeatureRun(
+        corner_params={m: CornerParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
+                       for m in corner_methods},
+        line_params={m: LineParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
+                     for m in line_methods},
+        segment_sigma_r=sigma, truth_sigma_r=true_sigma, truth_sigma_phi=sigma_phi)
+
+    def sensor_pose_at(stamps):
+        rel = (np.asarray(stamps, dtype=np.int64) - t_truth[0]).astype(float)
+        return compose(interpolate_pose(rel, t_rel, truth), mount)
+
     with BagReader(bag) as reader:
         total = reader.topics()['/scan'].count
         messages = reader.decoded(['/scan'])
@@ -92,50 +141,25 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
             t_end = scan.stamp_ns + len(scan.ranges) * scan.time_increment * 1e9
             if not (t_truth[0] <= scan.stamp_ns and t_end <= t_truth[-1]):
                 continue
-
-            def sensor_pose_at(stamps):
-                rel = (np.asarray(stamps, dtype=np.int64) - t_truth[0]).astype(float)
-                return compose(interpolate_pose(rel, t_rel, truth), mount)
-
-            corners_true = corner_truth(world, sensor_pose_at, scan.stamp_ns, scan.angles,
-                                        scan.time_increment)
-            t_mid = scan.stamp_ns + 0.5 * len(scan.ranges) * scan.time_increment * 1e9
-            walls_true = wall_truth(world, sensor_pose_at(np.array([t_mid]))[0], scan.angles,
-                                    scan.range_max, sigma_r=true_sigma, sigma_phi=sigma_phi)
-            t0 = time.perf_counter()
-            clusters = segment_scan(scan.ranges, scan.angles, scan.valid,
-                                    scan.angle_increment, sigma_r=sigma)
-            t_seg = time.perf_counter() - t0
-            for m, params in corner_params.items():
-                t0 = time.perf_counter()
-                corners = detect_corners(clusters, params)
-                c_times[m].append(t_seg + time.perf_counter() - t0)
-                xy = np.array([c.position for c in corners]).reshape(-1, 2)
-                score_corners(c_scores[m], xy, corners_true)
-            for m, params in line_params.items():
-                t0 = time.perf_counter()
-                lines = extract_lines(clusters, params)
-                l_times[m].append(t_seg + time.perf_counter() - t0)
-                mid = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
-                line_poses = sensor_pose_at(scan.stamp_ns + np.rint(
-                    mid * scan.time_increment * 1e9).astype(np.int64)).reshape(-1, 3)
-                score_lines(l_scores[m], lines, walls_true, line_poses=line_poses)
+            score_scan(run, world, sensor_pose_at, scan)
             n_used += 1
     result = {'scans': n_used, 'sigma_r': sigma, 'corners': {}, 'lines': {}}
-    for m, s in c_scores.items():
+    for m, s in run.corners.items():
+        times = run.corner_times[m]
         result['corners'][m] = {
             'precision': s.precision, 'recall': s.recall, 'rms_error_m': s.rms_error,
             'ghosts_per_scan': s.ghosts_per_scan, 'true_positives': s.tp,
             'scored_corners': s.truth, 'wrong_class': s.wrong, 'duplicates': s.duplicate,
-            'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None}
-    for m, s in l_scores.items():
+            'median_ms_per_scan': 1e3 * float(np.median(times)) if times else None}
+    for m, s in run.lines.items():
+        times = run.line_times[m]
         result['lines'][m] = {
             'true_pos': s.true_pos, 'false_pos': s.false_pos_rate,
             'sigma_drho_m': s.sigma_rho, 'sigma_dalpha_deg': float(np.degrees(s.sigma_alpha)),
             'floor_sigma_drho_m': s.floor_sigma_rho,
             'floor_sigma_dalpha_deg': float(np.degrees(s.floor_sigma_alpha)),
             'detections': s.detections, 'relevant': s.relevant, 'found': s.found,
-            'median_ms_per_scan': 1e3 * float(np.median(l_times[m])) if l_times[m] else None}
+            'median_ms_per_scan': 1e3 * float(np.median(times)) if times else None}
     return result
 
 
@@ -160,9 +184,144 @@ def format_tables(result: dict) -> str:
     return '\n'.join(lines)
 
 
-def run(bag, every: int = 1, sigma_r: Optional[float] = None, json_out=None) -> str:
-    """Evaluate, optionally write JSON, and return the tables."""
-    result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=True)
+def _parse_mount(text: str, where: str) -> np.ndarray:
+    try:
+        mount = np.array([float(v) for v in str(text).split()], dtype=float)
+    except ValueError as err:
+        raise ValueError(f'{where}: laser mount {text!r} is not "x y yaw" ({err})') from err
+    if mount.shape != (3,) or not np.all(np.isfinite(mount)):
+        raise ValueError(f'{where}: laser mount {text!r} is not three finite numbers "x y yaw"')
+    return mount
+
+
+def _parse_sigma(text, where: str) -> float:
+    try:
+        sigma = float(text)
+    except ValueError as err:
+        raise ValueError(f'{where}: laser sigma_range {text!r} is not a number') from err
+    if not (np.isfinite(sigma) and sigma > 0.0):
+        raise ValueError(f'{where}: laser sigma_range {text!r} must be > 0')
+    return sigma
+
+
+def sensor_facts(bag, mount: Optional[Sequence[float]] = None,
+                 sigma_r: Optional[float] = None) -> Tuple[np.ndarray, float, List[str]]:
+    """Return the laser mount (x, y, yaw), the range noise [m] and notes on their sources.
+
+    Order: the bag's custom_data, then ``ground_truth.yaml`` (simulator bags), then the
+    given ``mount`` / ``sigma_r``, then 0 0 0 and 0.01 m (with a note).
+    """
+    with BagReader(bag) as reader:
+        custom = reader.custom_data
+    meta = {}
+    if (Path(bag) / GROUND_TRUTH_FILE).is_file():
+        meta = (load_ground_truth(bag) or {}).get('laser') or {}
+    notes = []
+    if MOUNT_KEY in custom:
+        m = _parse_mount(custom[MOUNT_KEY], f'{bag} custom_data {MOUNT_KEY}')
+    elif 'mount' in meta:
+        m = np.asarray(meta['mount'], dtype=float)
+    elif mount is not None:
+        m = np.asarray(mount, dtype=float)
+    else:
+        m = np.zeros(3)
+        notes.append(f'note: {bag} states no laser mount; using 0 0 0 (base_link = laser)')
+    if SIGMA_KEY in custom:
+        s = _parse_sigma(custom[SIGMA_KEY], f'{bag} custom_data {SIGMA_KEY}')
+    elif 'sigma_range' in meta:
+        s = float(meta['sigma_range'])
+    elif sigma_r is not None:
+        s = float(sigma_r)
+    else:
+        s = 0.01
+        notes.append(f'note: {bag} states no laser range noise; using sigma_r = 0.01 m')
+    return m, s, notes
+
+
+def bag_metric_scans(bag, mount: np.ndarray, reference: Optional[str] = None,
+                     every: int = 1) -> Tuple[List[MetricScan], List[str]]:
+    """Read a bag's ``/scan`` as :class:`MetricScan` with laser poses from the reference.
+
+    The reference is ``reference`` (a TUM file) or the bag's ``/ground_truth/odom``;
+    without either, or for scans outside its time span, the poses are None (no
+    repeatability). The pose is the reference at the scan's stamp composed with ``mount``.
+    """
+    notes = []
+    track = None
+    if reference is not None:
+        track = read_tum(reference)
+    else:
+        with BagReader(bag) as reader:
+            has_truth = '/ground_truth/odom' in reader.topics()
+        if has_truth:
+            track = _truth_track(bag)
+        else:
+            notes.append(f'note: {bag} has no /ground_truth/odom and no --reference was '
+                         'given: no repeatability')
+    scans = []
+    with BagReader(bag) as reader:
+        if '/scan' not in reader.topics():
+            raise ValueError(f'{bag} has no /scan topic')
+        for k, (_, _, msg) in enumerate(reader.decoded(['/scan'])):
+            if k % every:
+                continue
+            s = scan_to_data(msg)
+            pose = None
+            if track is not None and track[0][0] <= s.stamp_ns <= track[0][-1]:
+                rel = float(s.stamp_ns - track[0][0])
+                pose = compose(interpolate_pose(rel, (track[0] - track[0][0]).astype(float),
+                                                track[1]), mount)
+            scans.append(MetricScan(s.ranges, s.angles, s.valid, s.no_return, s.range_min,
+                                    s.range_max, pose))
+    if track is not None:
+        missing = sum(s.pose is None for s in scans)
+        if missing:
+            notes.append(f'note: {missing} of {len(scans)} scans lie outside the reference '
+                         'and take no part in repeatability')
+    return scans, notes
+
+
+def evaluate_truth_free(bag, reference: Optional[str] = None,
+                        mount: Optional[Sequence[float]] = None,
+                        sigma_r: Optional[float] = None,
+                        extractor_sigma_r: Optional[float] = None, scans: int = 20,
+                        seed: int = 0, every: int = 1, progress: bool = False
+                        ) -> Tuple[dict, List[str]]:
+    """Score every method on a bag with the truth-free metrics (module docstring).
+
+    Returns:
+        (figures of :func:`landmark_nav.evaluation.scan_metrics.evaluate_scans` plus
+        'laser_mount', notes on the sources of the mount and noise).
+
+    """
+    if every < 1:
+        raise ValueError(f'every must be >= 1, got {every}')
+    m, s, notes = sensor_facts(bag, mount, sigma_r)
+    items, more = bag_metric_scans(bag, m, reference, every)
+    result = evaluate_scans(items, sigma_r=s, ple_scans=scans, seed=seed,
+                            extractor_sigma_r=extractor_sigma_r,
+                            progress=Path(bag).name if progress else None)
+    result['laser_mount'] = [float(v) for v in m]
+    return result, notes + more
+
+
+def run(bag, every: int = 1, sigma_r: Optional[float] = None, json_out=None,
+        reference: Optional[str] = None, mount: Optional[Sequence[float]] = None,
+        sensor_sigma_r: Optional[float] = None, scans: int = 20, seed: int = 0,
+        truth_free: bool = False) -> str:
+    """Evaluate, optionally write JSON, and return the tables.
+
+    With ground-truth features (a simulator bag) and not ``truth_free``: the simulator
+    tables; otherwise the truth-free tables, ``sigma_r`` then being the range noise the
+    extractors assume (default: the node default) and ``sensor_sigma_r`` the sensor's.
+    """
+    if not truth_free and (Path(bag) / GROUND_TRUTH_FILE).is_file():
+        result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=True)
+        text = format_tables(result)
+    else:
+        result, notes = evaluate_truth_free(bag, reference, mount, sensor_sigma_r, sigma_r,
+                                            scans, seed, every, progress=True)
+        text = '\n'.join(notes + [format_scan_metrics(result)])
     if json_out:
         Path(json_out).write_text(json.dumps(result, indent=2))
-    return format_tables(result)
+    return text

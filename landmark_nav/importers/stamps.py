@@ -1,0 +1,140 @@
+"""Repair the time stamps of real logs (pure numpy).
+
+Real logs carry three kinds of bad stamps, each repaired and counted:
+
+* **zero** stamps (the logger had no clock yet): treated as missing;
+* stamps going **backwards**: an isolated one (the next good stamp is again later than the
+  previous one) is treated as missing; a lasting one (every following stamp is earlier, as
+  when two runs were concatenated or the clock was reset) is a **clock reset**: the rest of
+  the stream is shifted to continue one nominal period after the last good stamp;
+* **repeated** stamps (printed with too few digits, e.g. ``1.01893e+09``): a run of k equal
+  stamps is spread evenly between its value and the next distinct stamp; a run with no later
+  distinct stamp is spread at the nominal period.
+
+Missing stamps are then interpolated linearly (by index) between their good neighbours and
+extrapolated at the nominal period at the ends. The nominal period is the median of the
+positive steps between successive distinct good stamps, each divided by the number of
+entries it spans; ``fallback_period`` when the stream has no two distinct stamps.
+"""
+
+from dataclasses import dataclass
+from typing import Tuple
+
+import numpy as np
+
+__all__ = ['StampRepairs', 'repair_stamps']
+
+
+@dataclass(frozen=True)
+class StampRepairs:
+    """What :func:`repair_stamps` changed in one stream."""
+
+    repeated: int = 0  # stamps moved off a run of equal stamps
+    zero: int = 0
+    backward: int = 0  # isolated backward stamps, interpolated
+    resets: int = 0  # lasting backward jumps, later stamps shifted
+    period: float = 0.0  # nominal period used [s]
+    period_fallback: bool = False  # no two distinct stamps: fallback_period used
+
+    @property
+    def total(self) -> int:
+        """Return the number of stamps changed (resets count once each)."""
+        return self.repeated + self.zero + self.backward + self.resets
+
+    def describe(self) -> str:
+        """Return e.g. ``'12 repeated stamps spread, 0 zero, 1 backward, 0 clock resets'``."""
+        text = (f'{self.repeated} repeated stamps spread, {self.zero} zero, '
+                f'{self.backward} backward, {self.resets} clock resets')
+        if self.period_fallback:
+            text += f' (no distinct stamps: {self.period:g} s period assumed)'
+        return text
+
+
+def _nominal_period(t: np.ndarray, idx: np.ndarray) -> float:
+    """Return the median step per index between distinct increasing stamps, 0 if none.
+
+    ``t`` are the good stamps and ``idx`` their positions in the stream (missing stamps in
+    between count as steps).
+    """
+    if len(t) < 2:
+        return 0.0
+    first = np.concatenate(([True], np.diff(t) != 0))
+    t, idx = t[first], idx[first]
+    steps, gaps = np.diff(t), np.diff(idx)
+    ok = steps > 0
+    if not ok.any():
+        return 0.0
+    return float(np.median(steps[ok] / gaps[ok]))
+
+
+def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, StampRepairs]:
+    """Return (repaired stamps, what was repaired) for one stream of stamps [s].
+
+    The result is non-decreasing, has no zeros and no runs of equal values (unless the
+    stream has fewer than two entries); good stamps keep their values up to clock-reset
+    shifts.
+
+    Raises:
+        ValueError: ``fallback_period`` is not positive.
+
+    """
+    if not fallback_period > 0:
+        raise ValueError(f'fallback period must be > 0, got {fallback_period}')
+    t = np.array(stamps, dtype=float).ravel()
+    n = len(t)
+    bad = ~np.isfinite(t) | (t == 0.0)
+    n_zero = int(np.count_nonzero(t == 0.0))
+    good_idx = np.flatnonzero(~bad)
+    period = _nominal_period(t[good_idx], good_idx)
+    fallback = period <= 0.0
+    if fallback:
+        period = float(fallback_period)
+
+    # Backward stamps: isolated glitches become missing, lasting jumps shift the rest.
+    n_back = n_reset = 0
+    last = None
+    for pos, i in enumerate(good_idx):
+        if last is not None and t[i] < t[last]:
+            later = good_idx[pos + 1:]
+            if len(later) and t[later[0]] >= t[last]:
+                bad[i] = True
+                n_back += 1
+                continue
+            shift = t[last] - t[i] + period
+            t[good_idx[pos:]] += shift
+            n_reset += 1
+        last = i
+
+    # Runs of equal stamps: spread between the run's value and the next distinct stamp.
+    good_idx = np.flatnonzero(~bad)
+    if not fallback:  # again, without the backward stamps
+        period = _nominal_period(t[good_idx], good_idx) or period
+    n_rep = 0
+    if len(good_idx) > 1:
+        g = t[good_idx]
+        starts = np.flatnonzero(np.concatenate(([True], np.diff(g) != 0)))
+        ends = np.concatenate((starts[1:], [len(g)]))
+        for a, b in zip(starts, ends):
+            k = b - a
+            if k < 2:
+                continue
+            gap = good_idx[a:b] - good_idx[a]  # missing stamps in between count too
+            step = (g[b] - g[a]) / (good_idx[b] - good_idx[a]) if b < len(g) else period
+            t[good_idx[a:b]] = g[a] + step * gap
+            n_rep += k - 1
+
+    # Missing stamps: interpolate by index, extrapolate at the nominal period.
+    if bad.any():
+        good_idx = np.flatnonzero(~bad)
+        idx = np.arange(n, dtype=float)
+        if len(good_idx) == 0:
+            t = period * (idx + 1.0)
+        else:
+            filled = np.interp(idx, good_idx, t[good_idx])
+            lo, hi = good_idx[0], good_idx[-1]
+            filled[:lo] = t[lo] - period * (lo - idx[:lo])
+            filled[hi + 1:] = t[hi] + period * (idx[hi + 1:] - hi)
+            t = filled
+    repairs = StampRepairs(repeated=n_rep, zero=n_zero, backward=n_back, resets=n_reset,
+                           period=period, period_fallback=bool(fallback and n > 1))
+    return t, repairs
