@@ -1,6 +1,6 @@
 """Consistency (NEES) of the sonar EKF and UKF on the simulated hallway (issue 13, item 5).
 
-Protocol of :func:`landmark_nav.localization.evaluate.hallway_study` and
+Protocol of :func:`landmark_nav.evaluation.localization.hallway_study` and
 ``test_loc_accuracy.py``: map ``rasterize_world(result.world, 0.1)``, calibrated odometry,
 initial estimate drawn from N(truth, CHAPTER_P0) with generator seed ``1000 + seed`` and
 initial covariance CHAPTER_P0; full runs (607 stamps, 20 m), the same runs the README's
@@ -28,10 +28,10 @@ so no shortened runs are needed.
 import dataclasses
 import math
 
+from landmark_nav.evaluation.localization import (CHAPTER_P0, draw_initial_pose,
+                                                  first_motion_index, LocalizationInput,
+                                                  localize)
 from landmark_nav.localization import ekf, ukf
-from landmark_nav.localization.evaluate import (CHAPTER_P0, draw_initial_pose,
-                                                first_motion_index, LocalizationInput,
-                                                localize)
 from landmark_nav.localization.grid import GridMap, rasterize_world
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.sonar_model import predict_ranges

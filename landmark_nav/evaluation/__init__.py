@@ -11,7 +11,9 @@ Modules:
   (laser facts from ``custom_data``, ``ground_truth.yaml`` or options).
 * :mod:`.slam` -- EKF-SLAM runner and scores on simulated runs and bags
   (``landmark_nav evaluate``).
-* :mod:`.features` -- corner and line extractor scores.
+* :mod:`.features` -- corner and line extractor scores against the simulator's truth.
+* :mod:`.scan_metrics` -- truth-free feature metrics for real scans (PLE ray metric,
+  false-surface beams, repeatability).
 * :mod:`.localization` -- sonar EKF / UKF runs and errors, the hallway study
   (``python -m landmark_nav.evaluation.localization``).
 * :mod:`.vision` -- landmark detection and pose statistics on rendered frames
