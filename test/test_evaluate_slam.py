@@ -8,6 +8,8 @@ from landmark_nav.conversions import make_odometry, odometry_to_pose
 from landmark_nav.evaluation.slam import evaluate_bag, format_summary
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
+from landmark_nav.importers import import_log
+from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -130,6 +132,20 @@ def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_
     assert np.abs(a.positions - b.positions).max() < 1e-8
     assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
     assert 'no true corners' in format_summary(r)
+
+
+def test_evaluate_imported_carmen_log(tmp_path):
+    """A real log through ``landmark_nav import``: the facts come from the bag's custom_data."""
+    log = shared_data('carmen', 'freiburg-101-corrected.log.gz')
+    imported = import_log(log, tmp_path / 'bag')
+    r = evaluate_bag(tmp_path / 'bag', out_dir=tmp_path / 'out', progress=False)
+    assert r['simulator_truth'] is False and r['reference'] == '/ground_truth/odom'
+    assert r['laser_mount'] == [-0.04, 0.0, 0.0] and r['laser_sigma_range'] == 0.01
+    assert r['scans'] == imported.counts['/scan'] == r['ate_se2_pairs']
+    assert r['true_visible'] is None and r['wrong_associations'] is None
+    assert f'{r["resets"]} filter resets' in format_summary(r)
+    for name in FILES:
+        assert (tmp_path / 'out' / name).stat().st_size > 0, name
 
 
 def test_laser_facts_precedence(tmp_path):

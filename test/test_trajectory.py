@@ -1,8 +1,9 @@
 """Trajectory metrics (landmark_nav.evaluation.trajectory) against the evo command line.
 
-The agreement tests run evo's own ``evo_ape`` / ``evo_rpe`` (reading the TUM files,
-associating the stamps, aligning) on the same TUM files our functions read, and compare
-every statistic to 1e-6 m (1e-6 deg for the RPE rotation).
+The agreement tests (a synthetic pair, the office bag, an imported Carmen log) run evo's
+own ``evo_ape`` / ``evo_rpe`` (reading the TUM files, associating the stamps, aligning) on
+the same TUM files our functions read, and compare every statistic to 1e-6 m (1e-6 deg for
+the RPE rotation).
 """
 
 import math
@@ -15,6 +16,8 @@ from landmark_nav.evaluation.slam import evaluate_bag
 from landmark_nav.evaluation.trajectory import (ate, read_tum, rpe, STATISTICS, Trajectory,
                                                 write_tum)
 from landmark_nav.geometry import compose
+from landmark_nav.importers import import_log
+from landmark_nav.testing import shared_data
 import numpy as np
 import pytest
 
@@ -98,6 +101,16 @@ def test_agrees_with_evo_office(office_files, tmp_path):
     rp, ep = office_files
     r = _check_agreement(rp, ep, tmp_path)
     assert r['pairs'] > 1000
+
+
+def test_agrees_with_evo_imported_carmen(tmp_path):
+    """The output of ``evaluate`` on a real log imported with ``landmark_nav import``."""
+    log = shared_data('carmen', 'freiburg-101-corrected.log.gz')
+    import_log(log, tmp_path / 'bag')
+    evaluate_bag(tmp_path / 'bag', out_dir=tmp_path / 'out', progress=False, plots=False)
+    r = _check_agreement(tmp_path / 'out' / 'trajectory_gt.tum',
+                         tmp_path / 'out' / 'trajectory_slam.tum', tmp_path)
+    assert r['pairs'] > 150
 
 
 def test_rigid_offset_removed_by_alignment():

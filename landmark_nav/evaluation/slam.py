@@ -526,7 +526,7 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         write_tum(out / 'trajectory_gt.tum', ref)
         (out / 'slam.json').write_text(json.dumps(result, indent=2))
         if plots:
-            plot_run(scenario, run, out, f'EKF-SLAM ({association}) on {Path(bag).name}: ATE '
+            plot_run(scenario, run, out, f'EKF-SLAM ({association}) on {Path(bag).name}\nATE '
                      f'{100 * score.ate_rmse:.1f} cm ({align} aligned '
                      f'{100 * result[f"ate_{align}_rmse"]:.1f} cm), odometry '
                      f'{100 * score.odom_ate_rmse:.1f} cm, {run.resets} resets', align)
