@@ -53,7 +53,7 @@ def test_targets(evaluated):
     assert r['rpe_trans_rmse'] < r['odom_rpe_trans_rmse']
     # the se2-aligned ATE never exceeds the unaligned one (the identity is a candidate)
     assert r['ate_se2_rmse'] <= r['ate_rmse']
-    assert r['resets'] == 0
+    assert r['resets'] == 0 and r['reset_reasons'] == {}
     # Real-time factor is reported, not asserted (machine dependent).
     assert r['real_time_factor'] > 1.0
 
@@ -144,6 +144,7 @@ def test_evaluate_imported_carmen_log(tmp_path):
     assert r['scans'] == imported.counts['/scan'] == r['ate_se2_pairs']
     assert r['true_visible'] is None and r['wrong_associations'] is None
     assert f'{r["resets"]} filter resets' in format_summary(r)
+    assert sum(r['reset_reasons'].values()) == r['resets']
     for name in FILES:
         assert (tmp_path / 'out' / name).stat().st_size > 0, name
 

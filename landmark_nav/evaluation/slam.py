@@ -42,7 +42,7 @@ bag's odometry is re-expressed to start at the reference pose when it does not):
   band ``[chi2_3(0.025), chi2_3(0.975)]`` (and below the one-sided ``chi2_3(0.95)``).
 """
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 import json
 import math
 from pathlib import Path
@@ -92,6 +92,7 @@ class SlamRun:
     stats: Dict[str, int]
     resets: int
     seconds: float            # filter time (predict + update) [s]
+    reset_reasons: Dict[str, int] = field(default_factory=dict)  # failed odometry checks
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,11 @@ class SlamScore:
     mean_nis_per_dof: float
     psd_repairs: int
     ms_per_scan: float
+
+
+#: Words of :func:`~landmark_nav.slam.ekf_slam.odometry_check`'s messages -> reset kind.
+_RESET_KINDS = {'jumped': 'odometry jump', 'turned': 'odometry turn',
+                'back in time': 'odometry back in time', 'not finite': 'odometry not finite'}
 
 
 def scan_angles(scan: ScanSample) -> np.ndarray:
@@ -156,6 +162,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     poses, covs, nis_v, nis_d = [], [], [], []
     o_scan, o_world, o_status, o_lm = [], [], [], []
     resets = 0
+    reasons: Dict[str, int] = {}
     seconds = 0.0
     for k, scan in enumerate(scans):
         corners = extract_corners(scan.ranges, scan_angles(scan), np.isfinite(scan.ranges),
@@ -173,6 +180,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         if bad is not None:
             slam.reset(odo_at[k])
             resets += 1
+            kind = _RESET_KINDS.get(next((w for w in _RESET_KINDS if w in bad), ''), 'other')
+            reasons[kind] = reasons.get(kind, 0) + 1
         else:
             slam.predict(odometry_increment(prev_pose, odo_at[k]))
         res: UpdateResult = slam.update(z, r, desc)
@@ -201,7 +210,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    obs_landmark=cat(o_lm, (0,), np.int64), nis=np.array(nis_v),
                    nis_dof=np.array(nis_d), landmark_ids=slam.landmark_ids,
                    landmarks=slam.landmarks, landmark_covariances=slam.landmark_covariances,
-                   stats=dict(slam.stats), resets=resets, seconds=seconds)
+                   stats=dict(slam.stats), resets=resets, seconds=seconds,
+                   reset_reasons=reasons)
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
@@ -492,6 +502,7 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     duration = (run.stamps[-1] - run.stamps[0]) * 1e-9 + scenario.scan_period
     result = {'bag': str(bag), 'association': association, 'scans': int(len(run.stamps)),
               'duration_s': float(duration), 'resets': int(run.resets),
+              'reset_reasons': dict(run.reset_reasons),
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
               'laser_sigma_range': float(scenario.laser.sigma_range)}
@@ -541,8 +552,10 @@ def format_summary(r: dict) -> str:
     def num(v, fmt='{}'):
         return 'n/a' if v is None else fmt.format(v)
     a = r['align']
+    why = ', '.join(f'{k}: {v}' for k, v in sorted(r.get('reset_reasons', {}).items()))
     lines = [f'{r["bag"]} ({r["association"]}): {r["scans"]} scans, {r["duration_s"]:.1f} s, '
-             f'reference {r["reference"]}, {r["resets"]} filter resets']
+             f'reference {r["reference"]}, {r["resets"]} filter resets'
+             + (f' ({why})' if why else '')]
     lines += [f'note: {n}' for n in r.get('notes', [])]
     lines += [
         f'ATE RMSE {cm(r["ate_rmse"])} (max {cm(r["ate_max"])}); odometry '
