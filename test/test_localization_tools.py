@@ -7,10 +7,10 @@ import shutil
 
 from landmark_nav.bag import BagError
 from landmark_nav.evaluation.localization import TARGETS
+from landmark_nav.evaluation.localization_bags import evaluate_localization, format_evaluation
 from landmark_nav.localization.grid import load_map_yaml, rasterize_world
 from landmark_nav.sim.scenarios import build_scenario
-from landmark_nav.tools.localization_tools import (build_sonar_map, evaluate_localization,
-                                                   format_evaluation, format_map_summary,
+from landmark_nav.tools.localization_tools import (build_sonar_map, format_map_summary,
                                                    rasterize_map)
 import numpy as np
 import pytest

@@ -11,14 +11,14 @@ from landmark_nav.conversions import (make_occupancy_grid, make_pose_with_covari
                                       pose_with_covariance_to_pose, stamp_to_ns)
 from landmark_nav.evaluation.localization import (draw_initial_pose, first_motion_index,
                                                   localization_errors, TARGETS)
+from landmark_nav.evaluation.localization_bags import (INITIAL_STD, load_bag_input,
+                                                       run_bag_localization, world_map)
 from landmark_nav.geometry import wrap_angle
 from landmark_nav.localization.tracking import SonarTracker
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.sonar_localizer import SonarLocalizer
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from landmark_nav.testing.harness import reliable_qos
-from landmark_nav.tools.localization_tools import (INITIAL_STD, load_bag_input,
-                                                   run_bag_localization, world_map)
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 import pytest

@@ -16,6 +16,7 @@ Modules:
   false-surface beams, repeatability).
 * :mod:`.localization` -- sonar EKF / UKF runs and errors, the hallway study
   (``python -m landmark_nav.evaluation.localization``).
+* :mod:`.localization_bags` -- the same on a bag (``landmark_nav evaluate-localization``).
 * :mod:`.vision` -- landmark detection and pose statistics on rendered frames
   (``python -m landmark_nav.evaluation.vision``).
 """

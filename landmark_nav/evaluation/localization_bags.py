@@ -1,4 +1,4 @@
-"""Sonar localization tools: offline evaluation on a bag, sonar mapping, world rasterising.
+"""Sonar localization on a bag: the offline evaluation behind ``evaluate-localization``.
 
 * :func:`evaluate_localization` -- ``landmark_nav evaluate-localization <bag>``: runs the
   EKF or UKF core (:func:`landmark_nav.evaluation.localization.localize`) directly on a
@@ -8,10 +8,9 @@
   first stamp at which the robot moves to the end; odometry alone from the true start,
   calibrated (the bag's true k1, k2, k3) and uncalibrated. Writes a JSON and two PNGs
   (trajectory with the map, heading vs time; the chapter's Figs. 16-17).
-* :func:`build_sonar_map` -- ``landmark_nav build-sonar-map``: occupancy grid from the
-  sonar readings at known poses (section 2.2), saved as map_server YAML + PGM.
-* :func:`rasterize_map` -- ``landmark_nav rasterize-map``: the simulator's world of a bag
-  or a scenario as a map_server map.
+* :func:`load_bag_input`, :func:`sonar_topics`, :func:`read_track` -- a bag's odometry,
+  sonar and poses as arrays (also used by the map tools of
+  :mod:`landmark_nav.tools.localization_tools`).
 
 Bad input (missing bag, bag without sonar or ground truth, unknown filter or scenario)
 raises :class:`~landmark_nav.bag.BagError` or ``ValueError`` with a one-line message.
@@ -29,15 +28,12 @@ from landmark_nav.evaluation.localization import (draw_initial_pose, first_motio
                                                   LocalizationRun, localize,
                                                   odometry_trajectory, TARGETS)
 from landmark_nav.geometry import interpolate_pose, wrap_angle
-from landmark_nav.localization.grid import (GridMap, load_map_yaml, rasterize_world,
-                                            save_map_yaml)
+from landmark_nav.hardware import SONAR_MOUNTS
+from landmark_nav.localization.grid import GridMap, load_map_yaml, rasterize_world
 from landmark_nav.localization.odometry import control_from_poses
 from landmark_nav.localization.params import LocalizationParams
-from landmark_nav.localization.sonar_model import build_sonar_map as map_from_sonar
 from landmark_nav.localization.tracking import sonar_reading
 from landmark_nav.sim.record import load_ground_truth
-from landmark_nav.sim.scenarios import build_scenario, scenario_names
-from landmark_nav.sim.sonar import SONAR_MOUNTS
 from landmark_nav.sim.world import World
 import numpy as np
 
@@ -48,7 +44,7 @@ WHEEL_JOINTS = ('left_wheel_joint', 'right_wheel_joint')
 
 
 # ---------------------------------------------------------------------- bag reading
-def _sonar_topics(bag: Path, available: Sequence[str], meta: Optional[dict]) -> list:
+def sonar_topics(bag: Path, available: Sequence[str], meta: Optional[dict]) -> list:
     """Sonar topics of a bag in mount order (ground_truth.yaml, else /sonar/range_<i>)."""
     listed = ((meta or {}).get('topics') or {}).get('sonar')
     if listed:
@@ -64,7 +60,7 @@ def _sonar_topics(bag: Path, available: Sequence[str], meta: Optional[dict]) -> 
     return topics
 
 
-def _track(reader: BagReader, topic: str) -> Tuple[np.ndarray, np.ndarray]:
+def read_track(reader: BagReader, topic: str) -> Tuple[np.ndarray, np.ndarray]:
     """Header stamps (N,) and poses (N, 3) of an Odometry topic."""
     stamps, poses = [], []
     for _, _, msg in reader.decoded([topic]):
@@ -118,7 +114,7 @@ def load_bag_input(bag: Any, odometry_source: Optional[str] = None
     with BagReader(bag) as reader:
         meta = load_ground_truth(bag)
         infos = reader.topics()
-        topics = _sonar_topics(bag, list(infos), meta)
+        topics = sonar_topics(bag, list(infos), meta)
         if odometry_source is None:
             odometry_source = 'joint_states' if '/joint_states' in infos else 'odom'
         if odometry_source not in ('joint_states', 'odom'):
@@ -134,7 +130,7 @@ def load_bag_input(bag: Any, odometry_source: Optional[str] = None
         if odometry_source == 'joint_states':
             stamps, wheels = _wheel_velocities(reader, bag, WHEEL_JOINTS)
         else:
-            stamps, odo = _track(reader, '/odom')
+            stamps, odo = read_track(reader, '/odom')
             u = control_from_poses(odo[:-1], odo[1:])
             dt = np.diff(stamps) * 1e-9
             wheels = np.zeros((stamps.size, 2))
@@ -152,7 +148,7 @@ def load_bag_input(bag: Any, odometry_source: Optional[str] = None
                 continue
             ranges[i, column[name]] = sonar_reading(msg.range, msg.min_range,
                                                     msg.max_range)[0]
-        t_truth, truth = _track(reader, '/ground_truth/odom')
+        t_truth, truth = read_track(reader, '/ground_truth/odom')
     if np.isnan(ranges).all():
         raise ValueError(f'{bag}: no sonar reading on an odometry stamp')
     truth_rows = interpolate_pose(stamps.astype(float), t_truth.astype(float), truth,
@@ -375,111 +371,6 @@ def _plot(inp: LocalizationInput, est: np.ndarray, odo_cal: np.ndarray, odo_raw:
     plt.close(fig)
 
 
-# ---------------------------------------------------------------------- maps
-def _map_summary(grid: GridMap, yaml_path: Path, image: Path) -> Dict[str, Any]:
-    states = grid.cell_states
-    return {'yaml': str(yaml_path), 'image': str(image), 'width': grid.shape[1],
-            'height': grid.shape[0], 'resolution': grid.resolution,
-            'origin': list(grid.origin), 'occupied': int((states == 1).sum()),
-            'free': int((states == 0).sum()), 'unknown': int((states == 2).sum())}
-
-
-def _check_out(out: Any) -> Path:
-    out = Path(out)
-    if out.suffix.lower() not in ('.yaml', '.yml'):
-        raise ValueError(f'map output must be a .yaml file, got {out}')
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return out
-
-
-def build_sonar_map(bag: Any, poses_topic: str = '/ground_truth/odom', out: Any = 'map.yaml',
-                    resolution: float = 0.1) -> Dict[str, Any]:
-    """Build an occupancy grid from a bag's sonar readings at known poses; write YAML + PGM.
-
-    The poses (nav_msgs/Odometry on ``poses_topic``, interpolated to the sonar stamps) and
-    the readings go through the core's sonar mapping
-    (:func:`landmark_nav.localization.sonar_model.build_sonar_map`, log-odds with the
-    sonar model of eqs. 10-11). Unexplored gaps stay unknown: localize on such a map with
-    unknown cells treated as free (the evaluation does so for map files with unknown
-    cells). Mounts from ``ground_truth.yaml`` if present, else the Pioneer 2-DX ring.
-
-    Returns:
-        Summary: paths, size, resolution, origin, cell counts, cycles used.
-
-    Raises:
-        BagError: missing or unreadable bag, missing poses topic.
-        ValueError: no sonar, no poses, bad resolution or output name.
-    """
-    if not (math.isfinite(resolution) and resolution > 0.0):
-        raise ValueError(f'resolution must be > 0, got {resolution}')
-    out = _check_out(out)
-    bag = Path(bag)
-    with BagReader(bag) as reader:
-        infos = reader.topics()
-        try:
-            meta: Optional[dict] = load_ground_truth(bag)
-        except ValueError:
-            meta = None
-        topics = _sonar_topics(bag, list(infos), meta)
-        if poses_topic not in infos:
-            raise ValueError(f'{bag} has no {poses_topic} topic')
-        t_pose, poses = _track(reader, poses_topic)
-        column = {t: j for j, t in enumerate(topics)}
-        cycles: Dict[int, np.ndarray] = {}
-        for name, _, msg in reader.decoded(topics):
-            s = stamp_to_ns(msg.header.stamp)
-            row = cycles.setdefault(s, np.full(len(topics), np.nan))
-            row[column[name]] = sonar_reading(msg.range, msg.min_range, msg.max_range)[0]
-    if t_pose.size == 0:
-        raise ValueError(f'{bag}: no messages on {poses_topic}')
-    stamps = np.array(sorted(s for s in cycles if t_pose[0] <= s <= t_pose[-1]),
-                      dtype=np.int64)
-    if stamps.size == 0:
-        raise ValueError(f'{bag}: no sonar cycle within the time span of {poses_topic}')
-    at = interpolate_pose(stamps.astype(float), t_pose.astype(float), poses)
-    ranges = np.array([cycles[int(s)] for s in stamps])
-    mounts = np.asarray(((meta or {}).get('sonar') or {}).get('mounts', SONAR_MOUNTS),
-                        dtype=float).reshape(-1, 3)[:len(topics)]
-    grid = map_from_sonar(at, ranges, mounts, resolution)
-    image = save_map_yaml(grid, out)
-    summary = _map_summary(grid, out, image)
-    summary.update(bag=str(bag), poses_topic=poses_topic, cycles=int(stamps.size))
-    return summary
-
-
-def rasterize_map(bag_or_scenario: Any, out: Any, resolution: float = 0.1) -> Dict[str, Any]:
-    """Rasterise the simulator's world (of a bag's ground_truth.yaml or a scenario) to a map.
-
-    Args:
-        bag_or_scenario: bag directory with ``ground_truth.yaml``, or a scenario name
-            (``office``, ``hallway``, ``calibration``).
-        out: map YAML to write (the PGM goes beside it).
-        resolution: cell size [m].
-
-    Returns:
-        Summary: paths, size, resolution, origin, cell counts, source.
-
-    Raises:
-        ValueError: neither a simulator bag nor a scenario, bad resolution or output name.
-    """
-    if not (math.isfinite(resolution) and resolution > 0.0):
-        raise ValueError(f'resolution must be > 0, got {resolution}')
-    src = str(bag_or_scenario)
-    if Path(src).is_dir():
-        world = World.from_dict(load_ground_truth(src)['world'])
-    elif src in scenario_names():
-        world = build_scenario(src).world
-    else:
-        raise ValueError(f'{src} is neither a bag directory with ground_truth.yaml nor a '
-                         f'scenario ({", ".join(scenario_names())})')
-    out = _check_out(out)
-    grid = rasterize_world(world, resolution)
-    image = save_map_yaml(grid, out)
-    summary = _map_summary(grid, out, image)
-    summary['source'] = src
-    return summary
-
-
 # ---------------------------------------------------------------------- reports
 def format_evaluation(result: Dict[str, Any]) -> str:
     """Return the figures of :func:`evaluate_localization` as a small text table."""
@@ -505,12 +396,3 @@ def format_evaluation(result: Dict[str, Any]) -> str:
         if key in result.get('files', {}):
             lines.append(f'wrote {result["files"][key]}')
     return '\n'.join(lines)
-
-
-def format_map_summary(summary: Dict[str, Any]) -> str:
-    """Return one line describing a map written by :func:`build_sonar_map` / ``rasterize_map``."""
-    ox, oy = summary['origin'][:2]
-    return (f'wrote {summary["yaml"]} + {Path(summary["image"]).name}: {summary["width"]} x '
-            f'{summary["height"]} cells of {summary["resolution"]} m, origin ({ox:.3f}, '
-            f'{oy:.3f}); {summary["occupied"]} occupied, {summary["free"]} free, '
-            f'{summary["unknown"]} unknown')

@@ -126,7 +126,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate_localization(args: argparse.Namespace) -> int:
     import math
-    from landmark_nav.tools.localization_tools import evaluate_localization, format_evaluation
+    from landmark_nav.evaluation.localization_bags import (evaluate_localization,
+                                                           format_evaluation)
     sx, sy, syaw_deg = args.initial_std
     filters = ['ekf', 'ukf'] if args.filter == 'both' else [args.filter]
     for filt in filters:
