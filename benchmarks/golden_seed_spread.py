@@ -50,7 +50,7 @@ def _figures(data: Dict[str, Any], bag: Path, out: Path) -> Dict[str, float]:
 
 
 def _round(v: float) -> float:
-    return float(f'{v:.4g}')
+    return float(f'{v:.6g}')
 
 
 def main() -> int:

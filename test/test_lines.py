@@ -434,4 +434,4 @@ def test_carmen_logs(name):
                                                    241),
         }[name, method]
         got = (explained.mean(), explained.min(), rmse.mean(), rmse.max(), explained.size)
-        np.testing.assert_allclose(got, want, rtol=1e-6, atol=0)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=0)
