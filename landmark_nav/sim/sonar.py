@@ -20,7 +20,8 @@ from .laser import compose
 from .robot import Trajectory
 from .world import World
 
-# ARIA p2dx.p sonar mounting: x [mm], y [mm], heading [deg] in base_link.
+# Pioneer 2-DX sonar mounting (ARIA p2dx.p, docs/protocols/p2os.md §6): x [mm], y [mm],
+# heading [deg] in base_link.
 _P2DX_SONAR_MM_DEG = (
     (69, 136, 90), (114, 119, 50), (148, 78, 30), (166, 27, 10),
     (166, -27, -10), (148, -78, -30), (114, -119, -50), (69, -136, -90),
