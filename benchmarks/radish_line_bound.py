@@ -19,9 +19,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.importers.carmen import read_carmen_scans  # noqa: E402
 from landmark_nav.laser.lines import _prefix5, _sse  # noqa: E402
+from landmark_nav.testing import shared_data  # noqa: E402
 import numpy as np  # noqa: E402
-
-CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
 
 
 def window_rmse(x: np.ndarray, y: np.ndarray, k: int) -> np.ndarray:
@@ -54,9 +53,10 @@ def main() -> None:
     ap.add_argument('--rmse', type=float, default=0.03, help='largest window RMSE [m]')
     args = ap.parse_args()
     for name in ('aces-corrected.log.gz', 'seattle-corrected.log.gz'):
-        path = CARMEN / name
-        if not path.exists():
-            print(f'{path}: not present')
+        try:
+            path = shared_data('carmen', name)
+        except FileNotFoundError as e:
+            print(e)
             continue
         scans = list(read_carmen_scans(path))
         for k in args.window:

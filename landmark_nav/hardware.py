@@ -11,8 +11,8 @@ from typing import Tuple
 
 import numpy as np
 
-#: ARIA p2dx.p sonar mounting: x [mm], y [mm], heading [deg] in base_link (relative to the
-#: centre of rotation), in ARIA's transducer order.
+#: ARIA p2dx.p sonar mounting (docs/protocols/p2os.md §6): x [mm], y [mm], heading [deg] in
+#: base_link (relative to the centre of rotation), in ARIA's transducer order.
 P2DX_SONAR_MM_DEG: Tuple[Tuple[float, float, float], ...] = (
     (69, 136, 90), (114, 119, 50), (148, 78, 30), (166, 27, 10),
     (166, -27, -10), (148, -78, -30), (114, -119, -50), (69, -136, -90),

@@ -244,7 +244,7 @@ def test_cmd_vel_gives_vel2_bytes(tmp_path):
         r.twist(0.0, 0.4 / 0.33)  # wheels -0.2 / +0.2 m/s = -10 / +10 units of 20 mm/s
         assert r.ros.wait_until(lambda: r.device.commands_named('VEL2'), 2.0)
         got = r.device.commands_named('VEL2')[-1]
-        assert got.raw == bytes.fromhex('FA FB 06 20 1B F6 09 16 24')  # PROTOCOLS.md
+        assert got.raw == bytes.fromhex('FA FB 06 20 1B F6 09 16 24')  # p2os.md §4
         assert p2os.vel2_split(got.command.value) == (-10, 10)
         r.twist(0.3, 0.0)
         assert r.ros.wait_until(lambda: len(r.device.commands_named('VEL2')) == 2, 2.0)
@@ -400,9 +400,16 @@ def test_emulate_command_over_tcp():
             ros.add_node(node)
             odom = ros.collect('/odom', Odometry)
             sonar = ros.collect('/sonar/range_3', Range)
-            assert ros.wait_until(lambda: len(odom) >= 5 and sonar, 10.0)
+            sonar4 = ros.collect('/sonar/range_4', Range)
+            assert ros.wait_until(lambda: len(odom) >= 5 and sonar and sonar4, 10.0)
             assert node.client.robot.subclass == 'p2dx'
-            assert math.isfinite(sonar[-1].range) or sonar[-1].range == math.inf
+            # The robot stands at the emulator's default start pose: its noise-free ray
+            # caster gives sonar 3 no echo (+inf, REP 117) and sonar 4 a wall at 4.67 m,
+            # sent in raw units of 0.268 mm.
+            still = P2osDevice(sonar_noise=False)
+            truth = still.sonar_ring.true_ranges(still.true_pose[None, :])[0]
+            assert truth[3] == math.inf and sonar[-1].range == math.inf
+            assert sonar4[-1].range == pytest.approx(truth[4], abs=0.134e-3 + 1e-6)
     finally:
         proc.send_signal(signal.SIGINT)
         try:

@@ -358,16 +358,26 @@ def test_ghost_rejection_on_noisy_walls():
     rng = np.random.default_rng(11)
     angles = np.radians(np.arange(-30.0, 30.01, 0.5))
     d = world.raycast(np.zeros((1, 2)), angles).ranges
-    fired = {'sliding_window': 0, 'minus_cosine': 0}
+    # The chapter's minus-cosine detector (eq. 11 + midpoint shift, no refinement: the arm
+    # fits of the refinement would reject these ghosts on their own) is run with and
+    # without the shift, so removing the midpoint-shift check fails this test.
+    chapter = {'sigma_r': 0.005, 'refine': False, 'min_arm_length': 0.1}
+    params = {'sliding_window': CornerParams(method='sliding_window', sigma_r=0.005),
+              'minus_cosine': CornerParams(sigma_r=0.005),
+              'chapter': CornerParams(midpoint_shift=1, **chapter),
+              'chapter_without_shift': CornerParams(midpoint_shift=0, **chapter)}
+    fired = dict.fromkeys(params, 0)
     trials = 40
     for _ in range(trials):
         r = d + rng.normal(0.0, 0.005, d.size)
         r[60] -= rng.uniform(0.10, 0.14)
         clusters = segment_scan(r, angles, np.ones(r.size, bool), math.radians(0.5),
                                 sigma_r=0.005)
-        for m in fired:
-            fired[m] += bool(detect_corners(clusters, CornerParams(method=m, sigma_r=0.005)))
+        for m, p in params.items():
+            fired[m] += bool(detect_corners(clusters, p))
     assert fired['sliding_window'] >= 0.8 * trials
+    assert fired['chapter_without_shift'] == trials  # eq. 11 alone accepts every ghost
+    assert fired['chapter'] == 0  # the midpoint shift (Figs. 11-12) rejects them all
     assert fired['minus_cosine'] == 0
 
 

@@ -87,7 +87,7 @@ def test_node_equals_offline_and_services(tmp_path):
     assert len(poses) >= len(ref.stamps) - 1 and np.all(ref.stamps[k] == stamps)
     err = np.hypot(*(xy - ref.poses[k, :2]).T)
     print('max node-offline difference', err.max(), 'm over', len(k), 'poses')
-    assert err.max() < 1e-3
+    assert err.max() < 1e-7  # README; measured 6.6e-8 m (float32 fields of the corner cloud)
     assert len(saved['landmarks']) == n_landmarks == ref.landmarks.shape[0] > 5
     assert len(saved['landmarks'][0]['covariance']) == 4
 

@@ -41,16 +41,25 @@ def test_files_written(evaluated):
     assert np.all(np.diff(rows[:, 0]) > 0)
 
 
+# Worst of the 10 office seeds (0-9) in the README's EKF-SLAM table, per association: ATE
+# RMSE, max position error, landmark RMSE [m], lowest per-seed share of steps with the robot
+# NEES inside the 95 % band. The bag is one more recording of the same scenario; its exact
+# ICNN figures are guarded by test_golden.py (bags/office/expected.yaml).
+WORST_SEED = {'icnn': (0.0072, 0.0175, 0.0055, 0.868), 'jcbb': (0.0070, 0.0168, 0.0054, 0.880)}
+
+
 def test_targets(evaluated):
     r, _ = evaluated
     print({k: v for k, v in r.items() if k != 'stats'})
-    assert r['ate_rmse'] <= 0.05
+    ate, ate_max, landmark, nees = WORST_SEED[r['association']]
+    assert r['ate_rmse'] <= ate
     assert r['ate_rmse'] * 10 <= r['odom_ate_rmse']
-    assert r['ate_max'] <= 0.15
-    assert r['landmark_rmse'] <= 0.05
-    assert abs(r['mapped'] - r['true_visible']) <= 0.1 * r['true_visible']
+    assert r['ate_max'] <= ate_max
+    assert r['landmark_rmse'] <= landmark
+    assert r['mapped'] == r['true_visible'] == 13
     assert r['wrong_associations'] == 0
     assert r['rpe_trans_rmse'] < r['odom_rpe_trans_rmse']
+    assert r['nees_share_band'] >= nees
     # the se2-aligned ATE never exceeds the unaligned one (the identity is a candidate)
     assert r['ate_se2_rmse'] <= r['ate_rmse']
     assert r['resets'] == 0 and r['reset_reasons'] == {}

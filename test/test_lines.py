@@ -409,6 +409,24 @@ def test_carmen_logs(name):
               f'min {explained.min():.3f}, scans >= 0.85: {(explained >= 0.85).mean():.2f}; '
               f'RMSE mean {100 * rmse.mean():.2f} cm max {100 * rmse.max():.2f} cm')
         # The issue asks for >= 85 % explained and RMSE <= 3 cm on EVERY scan. Not reached
-        # (README): only the figures are reported; this test checks that every scan runs
-        # and gives finite lines with positive-definite covariances (asserted above).
-        assert len(explained) > 0 and np.all((explained >= 0) & (explained <= 1))
+        # (README); every scan runs and gives finite lines with positive-definite
+        # covariances (asserted above), and the README's figures are guarded: explained
+        # mean / worst scan, RMSE mean / max [m], scans. A fixed log gives the same figures
+        # on every run, so the margin only covers floating-point differences.
+        want = {
+            ('aces-corrected.log.gz', 'split_merge'): (0.7031459332512069, 0.21910112359550563,
+                                                       0.018987486766454037,
+                                                       0.031265941737127614, 440),
+            ('aces-corrected.log.gz', 'alfa'): (0.700241232116932, 0.2303370786516854,
+                                                0.01882050701790788, 0.035715968482469614,
+                                                440),
+            ('seattle-corrected.log.gz', 'split_merge'): (0.8655742424711134,
+                                                          0.6179775280898876,
+                                                          0.01094874233304139,
+                                                          0.031823791497243466, 241),
+            ('seattle-corrected.log.gz', 'alfa'): (0.8586905662383004, 0.6066481994459834,
+                                                   0.00835231283117609, 0.01562691175120255,
+                                                   241),
+        }[name, method]
+        got = (explained.mean(), explained.min(), rmse.mean(), rmse.max(), explained.size)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=0)

@@ -1,4 +1,4 @@
-"""Tests of the SICK LMS2xx protocol module against PROTOCOLS.md, round trips, streams, fuzzing."""
+"""SICK LMS2xx protocol module: docs/protocols/lms2xx.md, round trips, streams, fuzzing."""
 
 import math
 import random
@@ -48,7 +48,7 @@ def decode_stream(chunks, **kwargs):
     return [key(item) for item in out]
 
 
-# ---------------------------------------------------------------------------- PROTOCOLS.md
+# --------------------------------- published byte dumps, docs/protocols/lms2xx.md §3-§5
 
 
 def test_crc_test_vector():

@@ -1,4 +1,4 @@
-"""Tests of the P2OS protocol module against PROTOCOLS.md, round trips, streams, fuzzing."""
+"""P2OS protocol module: docs/protocols/p2os.md, round trips, streams, fuzzing."""
 
 import math
 import random
@@ -44,7 +44,7 @@ def decode_stream(chunks, **kwargs):
     return [key(item) for item in out]
 
 
-# ---------------------------------------------------------------------------- PROTOCOLS.md
+# ----------------------------------- published byte dumps, docs/protocols/p2os.md §3-§5
 
 
 @pytest.mark.parametrize('built, dump', [

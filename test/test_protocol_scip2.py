@@ -1,4 +1,4 @@
-"""Tests of the SCIP 2.0 protocol module against PROTOCOLS.md, round trips, streams, fuzzing."""
+"""SCIP 2.0 protocol module: docs/protocols/scip2.md, round trips, streams, fuzzing."""
 
 import math
 import random
@@ -48,7 +48,7 @@ def decode_stream(chunks):
     return [key(item) for item in out]
 
 
-# ---------------------------------------------------------------------------- PROTOCOLS.md
+# ---------------------------------- published examples, docs/protocols/scip2.md §3-§4
 
 
 @pytest.mark.parametrize('text, char', [(b'00', b'P'), (b'99', b'b'), (b'01', b'Q'),

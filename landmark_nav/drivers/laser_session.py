@@ -7,7 +7,7 @@ Each returns an :class:`Output`: bytes to write, scans to publish, problems (WAR
 events), log lines, the sensor's health, diagnostic values, and requests to change the
 port's baud rate or reopen the port. The decoder to feed is :attr:`decoder`.
 
-:class:`ScipSession` (Hokuyo SCIP 2.0, ``PROTOCOLS.md`` section 1), as urg_c connects: ``QT``
+:class:`ScipSession` (Hokuyo SCIP 2.0, ``docs/protocols/scip2.md`` §7), as urg_c connects: ``QT``
 (a bare ``E`` means SCIP 1.1: send ``SCIP2.0``; ``0E`` means time-adjust mode: send
 ``TM2``; no answer: try the next baud rate on a serial link), ``PP`` (geometry), ``VV``
 (identity; checksum errors only warned), ``II`` (``STAT`` = hardware status), optionally
@@ -17,12 +17,12 @@ While streaming it publishes every scan; a gap in the sensor timestamps (more th
 scan periods) is reported as lost scans; no scan for ``restart_after`` restarts the
 handshake.
 
-:class:`LmsSession` (SICK LMS2xx, section 2), as ARIA connects: ``20 25`` (stop a stream;
-no reply: try the next baud rate), baud switch to the target (always sent, harmless when
-already there), variant ``3B``, configuration ``74``; if the units differ, installation
-mode ``20 00 SICK_LMS`` and ``77``; type ``3A``; ``20 24`` continuous. A missing ACK is
-tolerated (only replies count), a NAK resends the request, a ``B0`` during configuration
-stops the stream again and retries the step, a ``90`` (power-on) restarts.
+:class:`LmsSession` (SICK LMS2xx, ``docs/protocols/lms2xx.md`` §7), as ARIA connects: ``20 25``
+(stop a stream; no reply: try the next baud rate), baud switch to the target (always sent, harmless
+when already there), variant ``3B``, configuration ``74``; if the units differ, installation mode
+``20 00 SICK_LMS`` and ``77``; type ``3A``; ``20 24`` continuous. A missing ACK is tolerated (only
+replies count), a NAK resends the request, a ``B0`` during configuration stops the stream again and
+retries the step, a ``90`` (power-on) restarts.
 
 Ranges (REP 117): SCIP error codes are +inf or NaN as :mod:`.scip2` maps them, distances
 below DMIN (20 mm < d < DMIN: the UTM-30LX's 23 mm) are -inf, beyond DMAX +inf. LMS: "above

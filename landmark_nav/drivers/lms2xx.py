@@ -1,10 +1,10 @@
 """SICK LMS2xx binary telegrams (RS-232/422): builders, CRC, decoders, ``B0`` measured values.
 
-Pure byte-level code following ``PROTOCOLS.md`` section 2: bytes in, frames out; no clock, no
-I/O. A telegram is ``STX 0x02 | ADR | LEN u16 LE | CMD | DATA | STATUS | CRC u16 LE``: ADR is
-0x00 from the host and 0x80 from the LMS, LEN counts CMD through STATUS (replies only carry
-STATUS), the CRC covers STX through the last payload byte. A reply code is the request code
-+ 0x80. The LMS acknowledges a request with ACK 0x06 (NAK 0x15 on a CRC error).
+Pure byte-level code following ``docs/protocols/lms2xx.md`` (§2-§6): bytes in, frames out; no
+clock, no I/O. A telegram is ``STX 0x02 | ADR | LEN u16 LE | CMD | DATA | STATUS | CRC u16 LE``:
+ADR is 0x00 from the host and 0x80 from the LMS, LEN counts CMD through STATUS (replies only carry
+STATUS), the CRC covers STX through the last payload byte. A reply code is the request code + 0x80.
+The LMS acknowledges a request with ACK 0x06 (NAK 0x15 on a CRC error).
 
 ``B0`` measured values: info word (bits 0-9 value count, 11-12 partial-scan index, 13 partial
 scan, 14-15 units 00 cm / 01 mm / 10 = 10 cm), one u16 per value (distance in the low bits,
@@ -73,9 +73,9 @@ class MeasuringMode:
     flags: Tuple[Tuple[str, int, int], ...] = ()
 
 
-# Measuring modes. PROTOCOLS.md gives the distance bits per range (13/14/15/16); the flag
-# assignment and the mode codes follow SICK's LMS2xx telegram listing as implemented by
-# sicktoolbox (SICK_MS_MODE_*), since PROTOCOLS.md is silent on them.
+# Measuring modes (docs/protocols/lms2xx.md §4-§5): distance bits per range (13/14/15/16);
+# the flag assignment and the mode codes as sicktoolbox implements SICK's telegram listing
+# (SICK_MS_MODE_*).
 MEASURING_MODES: Dict[str, MeasuringMode] = {
     '8_or_80_fa_fb_dazzle': MeasuringMode(0x00, 13, (('field_a', 13, 1), ('field_b', 14, 1),
                                                      ('dazzle', 15, 1))),
@@ -90,10 +90,10 @@ MEASURING_MODES: Dict[str, MeasuringMode] = {
 }
 DEFAULT_MODE = '8_or_80_fa_fb_dazzle'
 
-# Special distance values, as offsets below the all-ones distance (13-bit: 0x1FFF ...).
-# PROTOCOLS.md lists them for 13 bits; the same offsets below the mask are used for 14, 15 and
-# 16 bits (SICK's telegram listing). The whole band [mask - 8, mask] is reserved: the codes
-# PROTOCOLS.md does not name (mask - 3, - 6, - 7) are treated as errors too.
+# Special distance values, as offsets below the all-ones distance (13-bit: 0x1FFF ...), see
+# docs/protocols/lms2xx.md §5: named for 13 bits, the same offsets below the mask are used for
+# 14, 15 and 16 bits. The whole band [mask - 8, mask] is reserved: the codes without a name
+# (mask - 3, - 6, - 7) are treated as errors too (our choice).
 SPECIAL_VALUES: Dict[int, str] = {
     0: 'invalid', 1: 'dazzle', 2: 'overflow', 4: 'S/N too low', 5: 'read error',
     8: 'above maximum range',
@@ -231,7 +231,7 @@ def scan_angles(count: int, angle_deg: int = 180, resolution_cdeg: int = 50) -> 
 
 
 def crc16(data: bytes) -> int:
-    """Return SICK's CRC16 of ``data`` (PROTOCOLS.md: 0x8005 with the previous byte mixed in).
+    """Return SICK's CRC16 of ``data`` (docs/protocols/lms2xx.md §3).
 
     register = 0, prev = 0; per byte b: if bit 15 is set, clear it, shift left and XOR 0x8005,
     else shift left (16 bits); then XOR ``prev << 8 | b``; prev = b. ASCII ``123456789`` gives
@@ -365,7 +365,7 @@ def config_units(block: bytes) -> str:
 
 
 def config_measuring_mode(block: bytes) -> str:
-    """Return the measuring mode of a configuration block (byte 5, per sicktoolbox).
+    """Return the measuring mode of a configuration block (byte 5, docs/protocols/lms2xx.md §4).
 
     Raises:
         FramingError: If the block is too short or the code unknown.
@@ -382,7 +382,7 @@ def with_config(block: bytes, units: Optional[str] = None,
                 measuring_mode: Optional[str] = None) -> bytes:
     """Return a copy of a configuration block (from ``F4``) with units and/or mode replaced.
 
-    Byte 6 holds the units (PROTOCOLS.md); byte 5 the measuring mode (sicktoolbox).
+    Byte 6 holds the units, byte 5 the measuring mode (docs/protocols/lms2xx.md §4).
 
     Raises:
         EncodeError: For unknown units or modes, or a block shorter than 7 bytes.
@@ -589,15 +589,15 @@ def parse_telegram(telegram: Telegram, mode: str = DEFAULT_MODE) -> Frame:
 class Lms2xxDecoder(StreamDecoder):
     """Incremental decoder of an LMS2xx byte stream.
 
-    :meth:`feed` returns, in stream order, :class:`Ack`/:class:`Nak` events, parsed replies
-    (see :func:`parse_telegram`) and the errors met as :class:`ProtocolError` objects (not
-    raised). Resynchronisation follows PROTOCOLS.md: hunt for STX + ADR, reject LEN > 812,
-    check the CRC, and after a failure restart one byte after that STX. A telegram with a bad
-    CRC is reported as a :class:`ChecksumError`, or as a :class:`TruncatedError` when another
-    telegram header lies inside it. Skipped bytes are reported once, as a
-    :class:`FramingError`, before the next valid telegram. ACK/NAK bytes are recognised only
-    between frames (at the start of the stream or right after a frame), never while hunting
-    for STX, since 0x06 and 0x15 are common in measured values.
+    :meth:`feed` returns, in stream order, :class:`Ack`/:class:`Nak` events, parsed replies (see
+    :func:`parse_telegram`) and the errors met as :class:`ProtocolError` objects (not raised).
+    Resynchronisation (docs/protocols/lms2xx.md §7): hunt for STX + ADR, reject LEN > 812, check
+    the CRC, and after a failure restart one byte after that STX. A telegram with a bad CRC is
+    reported as a :class:`ChecksumError`, or as a :class:`TruncatedError` when another telegram
+    header lies inside it. Skipped bytes are reported once, as a :class:`FramingError`, before the
+    next valid telegram. ACK/NAK bytes are recognised only between frames (at the start of the
+    stream or right after a frame), never while hunting for STX, since 0x06 and 0x15 are common in
+    measured values.
 
     The output does not depend on how the stream is cut into chunks.
     """

@@ -1,9 +1,9 @@
 """Pioneer P2OS (Pioneer 2-DX): packets, commands, SYNC replies, status packets (SIPs).
 
-Pure byte-level code following ``PROTOCOLS.md`` section 3: bytes in, frames out; no clock, no
-I/O. A packet is ``0xFA 0xFB | count N | data (N - 2 bytes) | checksum (2 bytes, high byte
-first)``, N <= 200. The checksum sums the data as big-endian 16-bit words (16 bits kept); an
-odd last byte is XORed into the low byte. Multi-byte data fields are little-endian.
+Pure byte-level code following ``docs/protocols/p2os.md`` (§2-§6): bytes in, frames out; no clock,
+no I/O. A packet is ``0xFA 0xFB | count N | data (N - 2 bytes) | checksum (2 bytes, high byte
+first)``, N <= 200. The checksum sums the data as big-endian 16-bit words (16 bits kept); an odd
+last byte is XORed into the low byte. Multi-byte data fields are little-endian.
 
 Commands are a command byte, optionally followed by an argument: 0x3B + positive int16,
 0x1B + magnitude of a negative int16, or 0x2B + string. Status packets (type 0x32 stopped,
@@ -43,7 +43,7 @@ ARGNINT = 0x1B  # magnitude of a negative int16 follows (LE)
 ARGSTR = 0x2B  # string follows
 STATUS_STOPPED = 0x32
 STATUS_MOVING = 0x33
-ODOMETRY_MODULUS = 4096  # PROTOCOLS.md wrap rule, valid for 12- and 15-bit firmware
+ODOMETRY_MODULUS = 4096  # wrap rule of docs/protocols/p2os.md §5 (12- and 15-bit firmware)
 
 # Command name -> (code, argument: None, 'int' or 'str'). SYNC0..2 share codes 0..2 with
 # PULSE, OPEN and CLOSE; they are told apart by when they are sent.
@@ -199,7 +199,8 @@ def encode_command(command: Union[str, int], argument: Union[None, int, str, byt
         command: Name from :data:`COMMANDS` or a raw command byte.
         argument: None, an int16 (sent as ARGINT value or ARGNINT magnitude) or a string.
         string_format: ``'length'`` (length byte first, as ARIA sends it) or ``'nul'``
-            (NUL-terminated, as the manual describes); PROTOCOLS.md leaves it unconfirmed.
+            (NUL-terminated, as the operations manual describes); docs/protocols/p2os.md
+            §4.
 
     Raises:
         EncodeError: For an unknown command, a missing or wrong argument, or a value out of
@@ -542,7 +543,7 @@ def encode_sync_reply(sync: int, name: str = '', robot_class: str = 'Pioneer',
 class OdometryUnwrapper:
     """Turn successive raw XPOS/YPOS into continuous positions.
 
-    PROTOCOLS.md rule: ``delta = ((new - old + 2048) mod 4096) - 2048``, valid for 12- and
+    docs/protocols/p2os.md §5: ``delta = ((new - old + 2048) mod 4096) - 2048``, valid for 12- and
     15-bit firmware as long as the robot moves less than 2048 units (1.7 m on a 2-DX) between
     two packets. The first sample sets the position to its raw value.
     """

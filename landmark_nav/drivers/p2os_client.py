@@ -1,7 +1,8 @@
 """Host side of a P2OS connection: handshake, keep-alive, velocity commands, watchdog.
 
 A pure state machine (the clock is passed in, bytes come back to be written; no I/O) used
-by the ``base_driver`` node; ``PROTOCOLS.md`` section 3 describes the protocol.
+by the ``base_driver`` node; ``docs/protocols/p2os.md`` describes the protocol (§7: this
+session).
 
 States: ``disconnected`` -> ``sync`` (SYNC0, SYNC1, SYNC2, each sent after the previous
 echo; a missing echo restarts at SYNC0 after ``sync_timeout``, every third retry preceded

@@ -1,11 +1,11 @@
 """Hokuyo SCIP 2.0 (URG laser range finders): command encoders and reply decoders.
 
-Pure byte-level code following ``PROTOCOLS.md`` section 1: bytes in, frames out; no clock, no
-I/O. The host sends a 2-letter command with fixed-width decimal parameters, an optional tag
-(``;`` + up to 16 characters) and LF. The sensor answers with LF-terminated lines: the echo of
-the command, a status line (2 status characters + checksum character), data lines (each
-ending in its checksum character) and an empty line. Measurement data is cut into 64-character
-blocks; a value may straddle two lines.
+Pure byte-level code following ``docs/protocols/scip2.md`` (§2-§6): bytes in, frames out; no clock,
+no I/O. The host sends a 2-letter command with fixed-width decimal parameters, an optional tag
+(``;`` + up to 16 characters) and LF. The sensor answers with LF-terminated lines: the echo of the
+command, a status line (2 status characters + checksum character), data lines (each ending in its
+checksum character) and an empty line. Measurement data is cut into 64-character blocks; a value
+may straddle two lines.
 
 Checksum of a line: ``(sum of its bytes & 0x3F) + 0x30``. Values are groups of 6 bits, most
 significant first, each + 0x30: 2 characters (12 bits, ``MS``/``GS``), 3 characters (18 bits,
@@ -46,14 +46,13 @@ BLOCK_CHARS = 64  # data characters per line (the last line of a reply may be sh
 DMIN_MM = 20  # URG-04LX: values below this are error codes, not distances
 _LF = 0x0A
 
-# Scan commands -> characters per value. ME/GE (distance + intensity, 3 + 3 characters) are not
-# in PROTOCOLS.md (the URG-04LX lacks them); they follow the vendor's SCIP 2.0 specification of
-# the UTM-30LX.
+# Scan commands -> characters per value (docs/protocols/scip2.md §4-§5). ME/GE (distance +
+# intensity, 3 + 3 characters) exist on the UTM-30LX only (the URG-04LX lacks them).
 SCAN_COMMANDS: Dict[str, int] = {'MD': 3, 'MS': 2, 'ME': 6, 'GD': 3, 'GS': 2, 'GE': 6}
 _CONTINUOUS = ('MD', 'MS', 'ME')
 _INFO_COMMANDS = ('VV', 'PP', 'II')
 _SIMPLE_COMMANDS = ('VV', 'PP', 'II', 'BM', 'QT', 'RS', 'SCIP2.0')
-BAUD_RATES = (19200, 38400, 57600, 115200, 250000, 500000, 750000)  # SS (vendor spec)
+BAUD_RATES = (19200, 38400, 57600, 115200, 250000, 500000, 750000)  # SS, scip2.md §5
 
 _TAG_RE = re.compile(r'[A-Za-z0-9 ._+@]{0,16}')
 # One echo line: command with its fixed-width parameters, optional tag, LF.
@@ -62,13 +61,13 @@ _ECHO_RE = re.compile(
     rb'|VV|PP|II|BM|QT|RS)(;[A-Za-z0-9 ._+@]{0,16})?\n')
 _MAX_ECHO = 15 + 1 + 16 + 1  # longest echo line (MD + tag + LF)
 
-# URG error codes (range values < DMIN_MM) -> REP 117 value. PROTOCOLS.md lists the codes and
-# says "map them per REP 117"; the classification is ours: codes saying the target is beyond
-# the measurable range or returned too little light (0 possibly at 22 m, 1-5 low intensity,
-# 6 possibly at 5.7 m) mean "no return" (+inf); codes saying a measurement failed (7 neighbour
-# steps in error, 8 intensity difference, 9 erred twice, 16 possibly within 4096 mm, 18 strong
-# reflector, 19 non-measurable) and the unspecified ones are errors (NaN). No code means "too
-# close", so -inf never appears.
+# URG error codes (range values < DMIN_MM) -> REP 117 value (docs/protocols/scip2.md §6). The
+# sensor documents give the codes' meanings only; the classification is ours: codes saying the
+# target is beyond the measurable range or returned too little light (0 possibly at 22 m, 1-5
+# low intensity, 6 possibly at 5.7 m) mean "no return" (+inf); codes saying a measurement
+# failed (7 neighbour steps in error, 8 intensity difference, 9 erred twice, 16 possibly within
+# 4096 mm, 18 strong reflector, 19 non-measurable) and the unspecified ones are errors (NaN).
+# No code means "too close", so -inf never appears.
 ERROR_CODE_RANGES: Tuple[float, ...] = tuple(
     math.inf if code <= 6 else math.nan for code in range(DMIN_MM))
 _CODE_LUT = np.array(ERROR_CODE_RANGES, dtype=np.float64)
@@ -78,8 +77,7 @@ _ERROR_CODE = 19  # encoder: NaN -> "non-measurable distance"
 
 # ---------------------------------------------------------------------------- status codes
 
-# (command, status) -> meaning. PROTOCOLS.md gives the ranges and BM/GD codes; the per-field
-# parameter errors (01-07), SS and TM codes follow the vendor's SCIP 2.0 specification.
+# (command, status) -> meaning, as docs/protocols/scip2.md §6 lists them.
 _SCAN_PARAM_ERRORS = {
     '01': 'starting step has a non-numeric value',
     '02': 'end step has a non-numeric value',
@@ -218,7 +216,7 @@ Frame = Union[ScanFrame, InfoReply, TimeReply, StatusReply]
 
 @dataclass(frozen=True)
 class SensorParams:
-    """Sensor geometry from the ``PP`` reply (defaults: URG-04LX, PROTOCOLS.md)."""
+    """Sensor geometry from the ``PP`` reply (defaults: URG-04LX, docs/protocols/scip2.md §5)."""
 
     model: str = 'URG-04LX'
     dmin_mm: int = 20
@@ -685,8 +683,8 @@ def _parse_scan(command: str, params: str, status: str, lines: List[bytes],
         chunks.append(_check_line(line, f'{where}: data line {i}', off))
     data = b''.join(chunks)
     n = _value_count(start, end, cluster)
-    # The vendor documents ceil((end - start + 1) / cluster) values; a final partial cluster
-    # dropped by some firmware (floor) is tolerated.
+    # ceil((end - start + 1) / cluster) values (docs/protocols/scip2.md §5); a final partial
+    # cluster dropped by some firmware (floor) is tolerated.
     n_floor = max(0, (end - start + 1) // cluster)
     if len(data) not in (n * width, n_floor * width):
         kind = TruncatedError if len(data) < n_floor * width else FramingError

@@ -1,8 +1,8 @@
 """SICK LMS200 emulator speaking LMS2xx telegrams, measuring the simulator world.
 
-:class:`LmsDevice` is the scanner as seen through its RS-232/422 line (``PROTOCOLS.md``
-section 2); :class:`~landmark_nav.emulators.server.DeviceServer` serves it on a pty and a TCP
-port (``landmark_nav emulate lms200``).
+:class:`LmsDevice` is the scanner as seen through its RS-232/422 line
+(``docs/protocols/lms2xx.md``); :class:`~landmark_nav.emulators.server.DeviceServer` serves
+it on a pty and a TCP port (``landmark_nav emulate lms200``).
 
 Requests (CRC checked; a bad CRC is answered with NAK 0x15, a good request with ACK 0x06
 after ``ack_delay``, then the reply): ``20 00 'SICK_LMS'`` installation mode (``A0 00``, a

@@ -1,7 +1,7 @@
 """Pioneer base emulator speaking P2OS, driven by the simulator world.
 
 :class:`P2osDevice` is the robot's microcontroller as seen through its serial port
-(``PROTOCOLS.md`` section 3); :class:`~landmark_nav.emulators.server.DeviceServer` serves it
+(``docs/protocols/p2os.md``); :class:`~landmark_nav.emulators.server.DeviceServer` serves it
 on a pty and a TCP port (``landmark_nav emulate p2os``, MobileSim-style on port 8101).
 
 Connection states, as the firmware behaves:

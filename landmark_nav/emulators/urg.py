@@ -1,10 +1,10 @@
 """Hokuyo URG / UTM laser emulator speaking SCIP 2.0, measuring the simulator world.
 
-:class:`UrgDevice` is the sensor as seen through its port (``PROTOCOLS.md`` section 1);
+:class:`UrgDevice` is the sensor as seen through its port (``docs/protocols/scip2.md``);
 :class:`~landmark_nav.emulators.server.DeviceServer` serves it on a pty and a TCP port
 (``landmark_nav emulate urg``). Models: UTM-30LX (default: 1081 steps over 270 deg, 1440
 steps per revolution, 40 scans/s, 23 mm .. 60 m, intensities with ``ME``/``GE``, USB) and
-URG-04LX (682 steps over 239.4 deg as PROTOCOLS.md gives AMIN 44 / AMAX 725, 1024 steps per
+URG-04LX (682 steps over 239.4 deg from AMIN 44 / AMAX 725 and 1024 steps per
 revolution, 10 scans/s, 20 mm .. 5.6 m, RS-232 at 19200 baud after power-up, optionally
 booting in SCIP 1.1).
 

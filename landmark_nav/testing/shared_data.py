@@ -5,6 +5,7 @@ there (a machine without the data), pytest skips with a reason naming the missin
 """
 
 from pathlib import Path
+import sys
 
 #: ``<repository>/../shared/data``: where the real logs and images are looked for.
 SHARED_DATA = Path(__file__).resolve().parents[2].parent / 'shared' / 'data'
@@ -13,14 +14,14 @@ SHARED_DATA = Path(__file__).resolve().parents[2].parent / 'shared' / 'data'
 def shared_data(*parts: str) -> Path:
     """Return ``../shared/data/<parts>``, or skip the calling test naming the missing path.
 
-    Outside pytest (benchmarks, tools) a missing path raises :class:`FileNotFoundError`.
+    Outside pytest (benchmarks, tools: pytest not imported) a missing path raises
+    :class:`FileNotFoundError` with the same message.
     """
     path = SHARED_DATA.joinpath(*parts)
     if not path.exists():
         reason = f'real data not found: {path} (see ../shared/data/README.md)'
-        try:
-            import pytest
-        except ImportError:  # pragma: no cover - benchmarks without pytest
-            raise FileNotFoundError(reason) from None
+        pytest = sys.modules.get('pytest')
+        if pytest is None:  # a benchmark or tool, even where pytest is installed
+            raise FileNotFoundError(reason)
         pytest.skip(reason)
     return path

@@ -1,11 +1,13 @@
 """The main job: EKF-SLAM on a recorded bag against ground truth, and the odometry drift.
 
-Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png`` and
-``summary.txt`` (odometry drift against ``/ground_truth/odom``) and the EKF-SLAM evaluation
-of :func:`landmark_nav.evaluation.slam.evaluate_bag` (``slam_map.png``,
-``slam_errors.png``, ``slam.json``, TUM trajectories); returns both summaries.
+Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png``,
+``summary.txt`` and ``drift.json`` (odometry drift against ``/ground_truth/odom``) and the
+EKF-SLAM evaluation of :func:`landmark_nav.evaluation.slam.evaluate_bag`
+(``slam_map.png``, ``slam_errors.png``, ``slam.json``, TUM trajectories); returns both
+summaries.
 """
 
+import json
 from pathlib import Path
 
 from landmark_nav.bag import BagReader
@@ -89,7 +91,7 @@ def plot_world_paths(world: World, truth: np.ndarray, odom: np.ndarray, path: Pa
 
 
 def run_demo(bag, out) -> str:
-    """Write world_paths.png and summary.txt for a simulator bag; return the summary."""
+    """Write world_paths.png, summary.txt, drift.json and the SLAM files; return the summary."""
     bag, out = Path(bag), Path(out)
     truth_meta = load_ground_truth(bag)
     t_truth, truth = read_poses(bag, '/ground_truth/odom')
@@ -125,6 +127,8 @@ def run_demo(bag, out) -> str:
     lines.append(f'plot: {out / "world_paths.png"}')
     summary = '\n'.join(lines)
     (out / 'summary.txt').write_text(summary + '\n')
+    (out / 'drift.json').write_text(json.dumps(
+        {k: v for k, v in drift.items() if k != 'position_error_m'}, indent=2) + '\n')
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
     slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=True))
     return summary + '\n\nEKF-SLAM (ICNN):\n' + slam
