@@ -60,7 +60,8 @@ def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     from landmark_nav.tools.evaluate_features import run
     print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json,
               reference=args.reference, mount=args.mount, sensor_sigma_r=args.sensor_sigma_r,
-              scans=args.scans, seed=args.seed, truth_free=args.truth_free))
+              scans=args.scans, seed=args.seed, truth_free=args.truth_free,
+              progress=sys.stderr.isatty()))
     return 0
 
 
