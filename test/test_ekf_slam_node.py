@@ -132,3 +132,25 @@ def test_bad_input():
         pub_c.publish(corner_cloud(t0 + 200_000_000, [good]))
         assert ros.wait_until(lambda: len(poses) == 2, 5)
         assert slam.resets == 2 and abs(poses[1].pose.pose.position.x - 2.0) < 1e-9
+
+
+def test_out_of_order_corner_sets_are_processed_in_stamp_order():
+    """A corner set older than one already queued used to crash the node (extrapolation)."""
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t: stamps.append(t)
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
+        slam.on_corners(corner_cloud(t0 + 200_000_000, [good]))  # waits for odometry
+        slam.on_corners(corner_cloud(t0 + 50_000_000, [good]))  # older, covered: processed
+        assert stamps == [t0 + 50_000_000]
+        assert [p[0] for p in slam.pending] == [t0 + 200_000_000]
+        slam.on_corners(corner_cloud(t0 + 20_000_000, [good]))  # before the last step
+        assert stamps == [t0 + 50_000_000] and slam.stats.dropped['out_of_order'] == 1
+        slam.on_odom(make_odometry(t0 + 300_000_000, 'odom', 'base_link', [0.03, 0.0, 0.0]))
+        assert stamps == [t0 + 50_000_000, t0 + 200_000_000] and not slam.pending
+        assert abs(slam.slam.pose[0] - 0.02) < 1e-12
+        slam.destroy_node()
