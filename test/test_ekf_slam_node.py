@@ -12,7 +12,7 @@ from landmark_nav.nodes.ekf_slam import EkfSlamNode
 from landmark_nav.slam.evaluate import run_slam
 from landmark_nav.testing import RosHarness
 from landmark_nav.tools.evaluate_slam import load_bag
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -154,3 +154,49 @@ def test_out_of_order_corner_sets_are_processed_in_stamp_order():
         assert stamps == [t0 + 50_000_000, t0 + 200_000_000] and not slam.pending
         assert abs(slam.slam.pose[0] - 0.02) < 1e-12
         slam.destroy_node()
+
+
+@pytest.mark.dds
+def test_path_is_bounded_and_published_at_the_display_rate():
+    """The path was republished whole at every step and never trimmed (cost grew per scan)."""
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    steps, keep = 300, 50
+    with RosHarness() as ros:
+        slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('path_max_poses', value=keep), Parameter('display_period', value=0.2)]))
+        paths = ros.collect('path', PathMsg)
+        poses = ros.collect('pose', PoseWithCovarianceStamped)
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        pub_c = ros._helper.create_publisher(PointCloud2, 'corners/features', 10)
+        assert ros.wait_for_subscribers([pub_odom, pub_c])
+        stamps = [t0 + k * 25_000_000 for k in range(steps)]
+        for k, t in enumerate(stamps):
+            pub_odom.publish(make_odometry(t, 'odom', 'base_link', [0.01 * k, 0.0, 0.0]))
+            assert ros.wait_until(lambda: slam.odom_count == k + 1, 10)
+            if k:
+                pub_c.publish(corner_cloud(t, [good]))
+                assert ros.wait_until(lambda: len(poses) == k, 10)
+        assert ros.wait_until(
+            lambda: paths and stamp_to_ns(paths[-1].header.stamp) == stamps[-1], 10)
+    last = paths[-1]
+    assert [stamp_to_ns(p.header.stamp) for p in last.poses] == stamps[-keep:]
+    assert max(len(p.poses) for p in paths) == keep
+    assert len(paths) < steps // 4  # at the display rate, not once per step
+    assert slam.stats.processed_count == steps - 1 and slam.stats.dropped_count == 0
+
+
+def test_save_map_puts_a_relative_map_file_under_ros_home(tmp_path, monkeypatch):
+    """A relative map_file used to land in whatever directory the node was started from."""
+    (tmp_path / 'cwd').mkdir()
+    monkeypatch.chdir(tmp_path / 'cwd')
+    monkeypatch.setenv('ROS_HOME', str(tmp_path / 'ros_home'))
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('map_file', value='maps/office.yaml')])
+        res = slam.on_save_map(Trigger.Request(), Trigger.Response())
+        slam.destroy_node()
+    target = tmp_path / 'ros_home' / 'landmark_nav' / 'maps' / 'office.yaml'
+    assert res.success and str(target) in res.message, res.message
+    assert yaml.safe_load(target.read_text()) == {'frame_id': 'map', 'landmarks': []}
+    assert not any((tmp_path / 'cwd').iterdir())

@@ -112,8 +112,10 @@ def limit_threads(default: int = 1) -> Optional[int]:
     A node handles one small message at a time: BLAS threads spinning on 3x3 to 100x100
     matrices cost far more CPU than they save. The number of threads is ``default``
     unless configured: the environment variable ``LANDMARK_NAV_THREADS`` sets it for every
-    library; if it is unset and one of ``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
-    ``MKL_NUM_THREADS`` or ``BLIS_NUM_THREADS`` is set, the libraries are left as configured.
+    library (threadpoolctl for BLAS / OpenMP, ``cv2.setNumThreads`` or
+    ``OPENCV_FOR_THREADS_NUM`` for OpenCV); if it is unset and one of ``OMP_NUM_THREADS``,
+    ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` or ``BLIS_NUM_THREADS`` is set, the
+    libraries are left as configured.
 
     Returns:
         The thread limit applied, or None when the libraries were left as configured.
@@ -139,6 +141,8 @@ def limit_threads(default: int = 1) -> Optional[int]:
     threadpool_limits(limits=n)
     if 'cv2' in sys.modules:
         sys.modules['cv2'].setNumThreads(n)
+    else:  # read by OpenCV when it is imported
+        os.environ['OPENCV_FOR_THREADS_NUM'] = str(n)
     return n
 
 
