@@ -73,9 +73,10 @@ def main() -> int:
                 break
             scans += 1
     procs = {n: subprocess.Popen([sys.executable, '-m', f'landmark_nav.nodes.{n}'], env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                                 cwd=args.repo, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
              for n in NODES}
-    diag = subprocess.Popen([sys.executable, '-c', DIAG_LISTENER], env=env,
+    diag = subprocess.Popen([sys.executable, '-c', DIAG_LISTENER], env=env, cwd=args.repo,
                             stdout=subprocess.PIPE, text=True)
     time.sleep(5.0)
     cpu0 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
@@ -85,9 +86,10 @@ def main() -> int:
     wall = time.monotonic()
     try:
         if args.seconds is None:
-            subprocess.run(player, env=env, check=True, stdout=subprocess.DEVNULL)
+            subprocess.run(player, env=env, cwd=args.repo, check=True,
+                           stdout=subprocess.DEVNULL)
         else:
-            play = subprocess.Popen(player, env=env, stdout=subprocess.DEVNULL)
+            play = subprocess.Popen(player, env=env, cwd=args.repo, stdout=subprocess.DEVNULL)
             time.sleep(args.seconds / args.rate + 2.0)
             play.send_signal(signal.SIGINT)
             play.wait(30)

@@ -59,3 +59,51 @@ def test_thread_limit_can_be_configured():
     assert all(n == 2 for _, n in pools) and line.endswith('cv2 2'), line
     line = probe_pools('ekf_slam', OPENBLAS_NUM_THREADS='2')  # the user's own setting stays
     assert ('openblas', 2) in eval(line.split(' ', 1)[1].rsplit(' cv2', 1)[0]), line
+
+
+def run_main(node: str, *ros_args: str, cwd=None) -> subprocess.CompletedProcess:
+    """Run a node's main with ROS arguments until it exits (it must exit by itself)."""
+    return subprocess.run([sys.executable, '-m', f'landmark_nav.nodes.{node}', '--ros-args',
+                           *ros_args], env=node_env(), capture_output=True, text=True,
+                          timeout=120, cwd=cwd or REPO)
+
+
+@pytest.mark.parametrize('node, name, value, expected', [
+    ('ekf_slam', 'confirm_hits', '2.5', 'expected an integer, got 2.5 (a double'),
+    ('ekf_slam', 'r_scale', '5', 'expected a double (write 5.0, not 5), got 5 (an integer)'),
+    ('sonar_localizer', 'filter', '3', 'expected a string, got 3 (an integer)'),
+    ('sonar_localizer', 'sonar_topics', '5', 'expected a list of strings, got 5'),
+    ('corner_extractor', 'refine', '1.0', 'expected a bool (true / false), got 1.0'),
+])
+def test_wrong_parameter_types_are_one_line_errors(node, name, value, expected):
+    """A wrong type used to print a 20-line traceback."""
+    out = run_main(node, '-p', f'{name}:={value}')
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1, out.stderr
+    assert lines[0] == f'error: parameter {name}: ' + lines[0].split(': ', 2)[2]
+    assert expected in lines[0], lines[0]
+
+
+def test_parameters_say_they_are_read_only():
+    from landmark_nav.nodes.ekf_slam import EkfSlamNode
+    from landmark_nav.testing import RosHarness
+    from rclpy.parameter import Parameter
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context)
+        described = node.describe_parameter('r_scale')
+        result = node.set_parameters([Parameter('r_scale', value=2.0)])[0]
+        node.destroy_node()
+    assert described.read_only and 'read-only: set at start-up' in described.description
+    assert not result.successful and 'read-only' in result.reason and 'r_scale' in result.reason
+
+
+def test_config_paths_work_from_any_directory(tmp_path):
+    """README commands with config/... paths only worked from the repository root."""
+    out = subprocess.run([sys.executable, '-m', 'landmark_nav.tools.cli', 'config', 'ekf_slam'],
+                         env=node_env(), capture_output=True, text=True, timeout=60,
+                         cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    path = Path(out.stdout.strip())
+    assert path.is_absolute() and path.read_text() == (REPO / 'config/ekf_slam.yaml').read_text()
+    readme = (REPO / 'README.md').read_text()
+    assert '--params-file config/' not in readme and '$(landmark_nav config' in readme

@@ -98,8 +98,8 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
         return node.declare_parameter(name, default, descriptor).value
     except InvalidParameterTypeException as err:
         given = node._parameter_overrides.get(name)
-        got = '' if given is None else (
-            f', got {given.value!r} ({_TYPE_NAMES.get(given.type_, given.type_.name.lower())})')
+        kind = None if given is None else _TYPE_NAMES.get(given.type_.value, 'another type')
+        got = '' if given is None else f', got {given.value!r} ({kind.split(" (")[0]})'
         raise ParameterError(f'parameter {name}: expected '
                              f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
     except InvalidParameterValueException as err:
