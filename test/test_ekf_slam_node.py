@@ -1,6 +1,7 @@
 """ekf_slam node: office bag through DDS equals the offline filter; bad input; services."""
 
 from pathlib import Path
+from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.bag import BagReader
@@ -200,3 +201,23 @@ def test_save_map_puts_a_relative_map_file_under_ros_home(tmp_path, monkeypatch)
     assert res.success and str(target) in res.message, res.message
     assert yaml.safe_load(target.read_text()) == {'frame_id': 'map', 'landmarks': []}
     assert not any((tmp_path / 'cwd').iterdir())
+
+
+def test_negative_corner_covariance_is_warned_with_its_value():
+    """A corner with a negative covariance used to go into the filter without a word."""
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    bad = [4.0, 1.0, 0.0, 3.0, 1.57, -1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        warnings = []
+        slam.warner._logger = SimpleNamespace(warning=warnings.append)
+        updates = []
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
+        real_update = slam.slam.update
+        slam.slam.update = lambda z, r, d: (updates.append(len(z)), real_update(z, r, d))
+        slam.on_corners(corner_cloud(t0 + 50_000_000, [good, bad]))
+        assert updates == [1]  # the good corner only
+        assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings
+        slam.destroy_node()
