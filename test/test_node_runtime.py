@@ -2,8 +2,10 @@
 
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -107,3 +109,29 @@ def test_config_paths_work_from_any_directory(tmp_path):
     assert path.is_absolute() and path.read_text() == (REPO / 'config/ekf_slam.yaml').read_text()
     readme = (REPO / 'README.md').read_text()
     assert '--params-file config/' not in readme and '$(landmark_nav config' in readme
+
+
+def _start(args, env):
+    return subprocess.Popen([sys.executable, '-m', *args], env=env, cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
+    """Ctrl-C or kill printed tracebacks (bag_player, ekf_slam while processing)."""
+    env = node_env()
+    nodes = {n: _start([f'landmark_nav.nodes.{n}'], env) for n in NODES}
+    time.sleep(8.0)  # start-up, generous on a loaded machine
+    player = _start(['landmark_nav.nodes.bag_player', str(REPO / 'bags' / 'office'),
+                     '--rate', '2'], env)
+    time.sleep(6.0)  # data flowing through every node
+    procs = dict(nodes, bag_player=player)
+    assert all(p.poll() is None for p in procs.values()), {
+        n: p.stderr.read() for n, p in procs.items() if p.poll() is not None}
+    for p in procs.values():
+        p.send_signal(sig)
+    for name, p in procs.items():
+        _, err = p.communicate(timeout=60)
+        assert 'Traceback' not in err and 'Error' not in err, f'{name}:\n{err}'
+        assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
