@@ -135,3 +135,32 @@ def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
         _, err = p.communicate(timeout=60)
         assert 'Traceback' not in err and 'Error' not in err, f'{name}:\n{err}'
         assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_drivers_stop_cleanly_on_signals(tmp_path, sig):
+    env = node_env()
+    urg, p2os = str(tmp_path / 'urg'), str(tmp_path / 'p2os')
+    emulators = [_start(['landmark_nav.tools.cli', 'emulate', 'urg', '--link', urg], env),
+                 _start(['landmark_nav.tools.cli', 'emulate', 'p2os', '--link', p2os], env)]
+    time.sleep(4.0)
+    drivers = {'laser_driver': _start(['landmark_nav.nodes.laser_driver', '--ros-args', '-p',
+                                       f'port:={urg}'], env),
+               'base_driver': _start(['landmark_nav.nodes.base_driver', '--ros-args', '-p',
+                                      f'port:={p2os}'], env)}
+    try:
+        time.sleep(8.0)  # connected and publishing
+        assert all(p.poll() is None for p in drivers.values()), {
+            n: p.stderr.read() for n, p in drivers.items() if p.poll() is not None}
+        for p in drivers.values():
+            p.send_signal(sig)
+        for name, p in drivers.items():
+            _, err = p.communicate(timeout=60)
+            assert 'Traceback' not in err, f'{name}:\n{err}'
+            assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
+            assert 'connected' in err or 'opened' in err.lower(), f'{name} never connected:\n{err}'
+    finally:
+        for p in emulators:
+            p.send_signal(signal.SIGINT)
+            p.communicate(timeout=30)
