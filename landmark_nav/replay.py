@@ -22,8 +22,9 @@ class ReplayOptions:
         clock_hz: Publish /clock (rosgraph_msgs/Clock) at this rate in bag time; 0 = off.
         delay_s: Wait this long before the first message (after the wait for subscribers).
         wait_for_subscribers_s: Before playing, wait up to this long until the subscribers
-            already running are connected: some played topic has a subscriber and every
-            subscriber in the ROS graph on a played topic is matched (for 0.2 s in a row,
+            already running are connected: some played topic has a subscriber (every one
+            when ``topics`` names them) and every subscriber in the ROS graph on a played
+            topic is matched (for 0.2 s in a row,
             so a late-discovered node is not missed); 0 = start at once.
 
     """

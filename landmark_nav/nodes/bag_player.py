@@ -10,9 +10,10 @@ truth).
 Unlike ``ros2 bag play``, the first messages are not lost to DDS discovery by default: the
 player waits up to ``--wait-for-subscribers`` seconds (default 5; discovery took about 3 s
 on a loaded 2-core machine) until the subscribers already running in the ROS graph on the
-played topics are connected, then plays; with no subscriber at all it plays after that time
-(a warning says so). ``--wait-for-subscribers 0`` starts at once, like ``ros2 bag play``.
-SIGINT (Ctrl-C) and SIGTERM stop playing cleanly. Also available as ``landmark_nav replay``.
+played topics are connected (with ``--topics``: until each named topic has one), then
+plays; with no subscriber at all it plays after that time (a warning says so).
+``--wait-for-subscribers 0`` starts at once, like ``ros2 bag play``. SIGINT (Ctrl-C) and
+SIGTERM stop playing cleanly. Also available as ``landmark_nav replay``.
 """
 
 import argparse
@@ -93,9 +94,14 @@ class BagPlayer(Node):
         self._last_clock_ns = 0
 
     def _connected(self) -> bool:
-        """Return whether some played topic is subscribed and every known subscriber matched."""
+        """Return whether the subscribers are connected (see :class:`ReplayOptions`).
+
+        Some played topic is subscribed (every one when ``--topics`` names them) and every
+        subscriber the ROS graph knows on a played topic is matched.
+        """
         matched = {t: p.get_subscription_count() for t, p in self._topic_publishers.items()}
-        return any(matched.values()) and all(
+        wanted = all if self.options.topics else any
+        return wanted(matched.values()) and all(
             matched[t] >= self.count_subscribers(t) for t in matched)
 
     def wait_for_subscribers(self, settle_s: float = 0.2) -> bool:

@@ -232,6 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('node', nargs='?', default=None, help='node name, e.g. ekf_slam')
     p.set_defaults(func=_cmd_config)
 
+    from landmark_nav.tools.pipeline import add_parser as add_pipeline_parser
+    add_pipeline_parser(sub, _Parser)
+
     from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
     add_emulate_parsers(sub, _Parser)
     return parser
