@@ -321,10 +321,10 @@ class InputStats:
             return
         last = self._last_seq.get(topic)
         self._last_seq[topic] = seq
-        if last is None or seq <= last or self._node.count_publishers(topic) != 1:
+        if last is None or seq <= last + 1:
             return
         lost = seq - last - 1
-        if lost > 0:
+        if self._node.count_publishers(topic) == 1:  # one sequence: a gap is a loss
             self.drop('lost', f'Lost {lost} messages on {topic} before processing (the '
                       'queue overflowed: input faster than the node)', lost)
 
