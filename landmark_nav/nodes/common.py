@@ -35,7 +35,7 @@ LIBRARY_THREAD_ENVS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREA
                        'BLIS_NUM_THREADS')
 _TYPE_NAMES = {ParameterType.PARAMETER_BOOL: 'a bool (true / false)',
                ParameterType.PARAMETER_INTEGER: 'an integer',
-               ParameterType.PARAMETER_DOUBLE: 'a double (write 5.0, not 5)',
+               ParameterType.PARAMETER_DOUBLE: 'a double',
                ParameterType.PARAMETER_STRING: 'a string',
                ParameterType.PARAMETER_DOUBLE_ARRAY: 'a list of doubles',
                ParameterType.PARAMETER_STRING_ARRAY: 'a list of strings'}
@@ -100,6 +100,9 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
         given = node._parameter_overrides.get(name)
         kind = None if given is None else _TYPE_NAMES.get(given.type_.value, 'another type')
         got = '' if given is None else f', got {given.value!r} ({kind.split(" (")[0]})'
+        if (given is not None and descriptor.type == ParameterType.PARAMETER_DOUBLE
+                and given.type_.value == ParameterType.PARAMETER_INTEGER):
+            got += f'; write {given.value}.0 for a double'
         raise ParameterError(f'parameter {name}: expected '
                              f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
     except InvalidParameterValueException as err:
