@@ -150,6 +150,15 @@ def _cmd_make_landmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_config(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.config_files import available, config_path
+    if args.node is None:
+        print('\n'.join(available()))
+        return 0
+    print(config_path(args.node))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser with every subcommand."""
     from landmark_nav.nodes.bag_player import add_replay_arguments
@@ -307,6 +316,14 @@ def build_parser() -> argparse.ArgumentParser:
                        help='write a printable visual landmark (PNG, SVG or PDF) at true scale')
     add_landmark_arguments(p)
     p.set_defaults(func=_cmd_make_landmark)
+
+    p = sub.add_parser('config', help="print the path of a node's shipped parameter file "
+                       '(for --params-file; no NODE: list the nodes)')
+    p.add_argument('node', nargs='?', default=None, help='node name, e.g. ekf_slam')
+    p.set_defaults(func=_cmd_config)
+
+    from landmark_nav.tools.pipeline import add_parser as add_pipeline_parser
+    add_pipeline_parser(sub, _Parser)
 
     from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
     add_emulate_parsers(sub, _Parser)
