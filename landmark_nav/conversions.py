@@ -435,9 +435,15 @@ def range_to_value(msg: Range) -> RangeReading:
     +inf (no detection) and finite values > max_range are 'no_return'; -inf (detection
     too close, also "detected" for fixed-distance rangers) and finite values < min_range
     are 'too_close'; NaN is 'error'.
+
+    Raises:
+        ConversionError: On bad range limits or a field of view that is not finite, >= 0.
     """
     lo, hi, value = _f32(msg.min_range), _f32(msg.max_range), _f32(msg.range)
     _check_range_limits(lo, hi)
+    fov = _f32(msg.field_of_view)
+    if not (math.isfinite(fov) and fov >= 0.0):
+        raise ConversionError(f'Range: field_of_view={fov!r} must be finite, >= 0')
     return RangeReading(stamp_to_ns(msg.header.stamp), msg.header.frame_id, value,
                         range_status(value, lo, hi))
 

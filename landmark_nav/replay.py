@@ -20,9 +20,12 @@ class ReplayOptions:
         topics: Only these topics (None = all).
         loop: Start again at the end, until interrupted.
         clock_hz: Publish /clock (rosgraph_msgs/Clock) at this rate in bag time; 0 = off.
-        delay_s: Wait this long before the first message (lets DDS discovery finish).
-        wait_for_subscribers_s: Before playing, wait up to this long until every played
-            topic has at least one subscriber; 0 = do not wait.
+        delay_s: Wait this long before the first message (after the wait for subscribers).
+        wait_for_subscribers_s: Before playing, wait up to this long until the subscribers
+            already running are connected: some played topic has a subscriber (every one
+            when ``topics`` names them) and every subscriber in the ROS graph on a played
+            topic is matched (for 0.2 s in a row,
+            so a late-discovered node is not missed); 0 = start at once.
 
     """
 
@@ -32,7 +35,7 @@ class ReplayOptions:
     loop: bool = False
     clock_hz: float = 0.0
     delay_s: float = 0.0
-    wait_for_subscribers_s: float = 0.0
+    wait_for_subscribers_s: float = 5.0
 
     def __post_init__(self) -> None:
         """Validate the options.
@@ -49,7 +52,7 @@ class ReplayOptions:
              f'clock rate must be >= 0 Hz, got {self.clock_hz}'),
             (self.delay_s >= 0 and math.isfinite(self.delay_s),
              f'delay must be >= 0 s, got {self.delay_s}'),
-            (self.wait_for_subscribers_s >= 0,
+            (self.wait_for_subscribers_s >= 0 and math.isfinite(self.wait_for_subscribers_s),
              f'wait for subscribers must be >= 0 s, got {self.wait_for_subscribers_s}'),
         ]
         for ok, message in checks:

@@ -49,3 +49,7 @@ def test_colcon_build_installs_executables_into_lib(tmp_path):
     installed = sorted(p.name for p in (prefix / 'share' / 'landmark_nav' / 'config').glob(
         '*.yaml'))
     assert installed == configs
+    launches = sorted(p.name for p in (REPO / 'launch').glob('*.launch.py'))
+    installed = sorted(p.name for p in (prefix / 'share' / 'landmark_nav' / 'launch').glob(
+        '*.launch.py'))
+    assert launches and installed == launches

@@ -1,7 +1,6 @@
 """Tests for landmark_nav.laser.corners: the three corner detectors of the corner chapter."""
 
 import math
-from pathlib import Path
 from typing import Dict, List, Sequence, Tuple
 
 from hypothesis import assume, given, settings
@@ -13,11 +12,11 @@ from landmark_nav.laser.segmentation import Cluster, segment_scan
 from landmark_nav.sim import Laser, LaserConfig, run_scenario, ScanSample, World, wrap_angle
 from landmark_nav.sim.laser import compose
 from landmark_nav.sim.robot import make_trajectory, RobotParams
+from landmark_nav.testing import shared_data
 import numpy as np
 import pytest
 
 T0 = 1_700_000_000_000_000_000
-CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
 RIGHT = math.pi / 2.0
 
 
@@ -552,9 +551,7 @@ def test_office_run_baselines_are_worse():
 # ---------------------------------------------------------------------------- real data
 @pytest.mark.parametrize('name', ['aces-corrected.log.gz', 'seattle-corrected.log.gz'])
 def test_carmen_logs_run_clean(name):
-    path = CARMEN / name
-    if not path.exists():
-        pytest.skip(f'{path} not present')
+    path = shared_data('carmen', name)
     from landmark_nav.importers.carmen import read_carmen_scans
     counts = dict.fromkeys(METHODS, 0)
     n = 0

@@ -1,6 +1,7 @@
 """ekf_slam node: office bag through DDS equals the offline filter; bad input; services."""
 
 from pathlib import Path
+from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.bag import BagReader
@@ -12,7 +13,7 @@ from landmark_nav.laser.corners import CornerParams
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
 from landmark_nav.testing import RosHarness
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -132,3 +133,91 @@ def test_bad_input():
         pub_c.publish(corner_cloud(t0 + 200_000_000, [good]))
         assert ros.wait_until(lambda: len(poses) == 2, 5)
         assert slam.resets == 2 and abs(poses[1].pose.pose.position.x - 2.0) < 1e-9
+
+
+def test_out_of_order_corner_sets_are_processed_in_stamp_order():
+    """A corner set older than one already queued used to crash the node (extrapolation)."""
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t: stamps.append(t)
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
+        slam.on_corners(corner_cloud(t0 + 200_000_000, [good]))  # waits for odometry
+        slam.on_corners(corner_cloud(t0 + 50_000_000, [good]))  # older, covered: processed
+        assert stamps == [t0 + 50_000_000]
+        assert [p[0] for p in slam.pending] == [t0 + 200_000_000]
+        slam.on_corners(corner_cloud(t0 + 20_000_000, [good]))  # before the last step
+        assert stamps == [t0 + 50_000_000] and slam.stats.dropped['out_of_order'] == 1
+        slam.on_odom(make_odometry(t0 + 300_000_000, 'odom', 'base_link', [0.03, 0.0, 0.0]))
+        assert stamps == [t0 + 50_000_000, t0 + 200_000_000] and not slam.pending
+        assert abs(slam.slam.pose[0] - 0.02) < 1e-12
+        slam.destroy_node()
+
+
+@pytest.mark.dds
+def test_path_is_bounded_and_published_at_the_display_rate():
+    """The path was republished whole at every step and never trimmed (cost grew per scan)."""
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    steps, keep = 300, 50
+    with RosHarness() as ros:
+        slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('path_max_poses', value=keep), Parameter('display_period', value=0.2)]))
+        paths = ros.collect('path', PathMsg)
+        poses = ros.collect('pose', PoseWithCovarianceStamped)
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        pub_c = ros._helper.create_publisher(PointCloud2, 'corners/features', 10)
+        assert ros.wait_for_subscribers([pub_odom, pub_c])
+        stamps = [t0 + k * 25_000_000 for k in range(steps)]
+        for k, t in enumerate(stamps):
+            pub_odom.publish(make_odometry(t, 'odom', 'base_link', [0.01 * k, 0.0, 0.0]))
+            assert ros.wait_until(lambda: slam.odom_count == k + 1, 10)
+            if k:
+                pub_c.publish(corner_cloud(t, [good]))
+                assert ros.wait_until(lambda: len(poses) == k, 10)
+        assert ros.wait_until(
+            lambda: paths and stamp_to_ns(paths[-1].header.stamp) == stamps[-1], 10)
+    last = paths[-1]
+    assert [stamp_to_ns(p.header.stamp) for p in last.poses] == stamps[-keep:]
+    assert max(len(p.poses) for p in paths) == keep
+    assert len(paths) < steps // 4  # at the display rate, not once per step
+    assert slam.stats.processed_count == steps - 1 and slam.stats.dropped_count == 0
+
+
+def test_save_map_puts_a_relative_map_file_under_ros_home(tmp_path, monkeypatch):
+    """A relative map_file used to land in whatever directory the node was started from."""
+    (tmp_path / 'cwd').mkdir()
+    monkeypatch.chdir(tmp_path / 'cwd')
+    monkeypatch.setenv('ROS_HOME', str(tmp_path / 'ros_home'))
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('map_file', value='maps/office.yaml')])
+        res = slam.on_save_map(Trigger.Request(), Trigger.Response())
+        slam.destroy_node()
+    target = tmp_path / 'ros_home' / 'landmark_nav' / 'maps' / 'office.yaml'
+    assert res.success and str(target) in res.message, res.message
+    assert yaml.safe_load(target.read_text()) == {'frame_id': 'map', 'landmarks': []}
+    assert not any((tmp_path / 'cwd').iterdir())
+
+
+def test_negative_corner_covariance_is_warned_with_its_value():
+    """A corner with a negative covariance used to go into the filter without a word."""
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    bad = [4.0, 1.0, 0.0, 3.0, 1.57, -1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        warnings = []
+        slam.warner._logger = SimpleNamespace(warning=warnings.append)
+        updates = []
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
+        real_update = slam.slam.update
+        slam.slam.update = lambda z, r, d: (updates.append(len(z)), real_update(z, r, d))
+        slam.on_corners(corner_cloud(t0 + 50_000_000, [good, bad]))
+        assert updates == [1]  # the good corner only
+        assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings
+        slam.destroy_node()

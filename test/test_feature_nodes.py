@@ -2,7 +2,9 @@
 
 import math
 from pathlib import Path
+import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import make_scan, scan_to_data
@@ -88,8 +90,9 @@ def _bad_scans(good: LaserScan):
     weird[3::7] = -1.0
     return [
         ('len(ranges)', scan(ranges=[1.0] * (n - 5))),
-        ('angle_increment', scan(angle_increment=0.0)),
-        ('repeat', scan(angle_increment=-0.01)),                 # same kind: throttled
+        ('angle_increment=0.0', scan(angle_increment=0.0)),
+        ('angle_increment=-0.0099', scan(angle_increment=-0.01)),  # another value: reported
+        ('repeat', scan(angle_increment=0.0)),                   # same kind: throttled
         ('range_max', scan(range_max=0.05)),
         ('intensities', scan(intensities=[1.0] * 3)),
         ('empty', scan(ranges=[], angle_max=d.angle_min)),
@@ -123,6 +126,69 @@ def test_corner_extractor_survives_bad_input():
         pub.publish(good[1])  # the next good scan is processed normally
         assert ros.wait_until(lambda: len(poses) == expected_outputs + 1, 5)
     assert poses[-1].header == good[1].header
+
+
+@pytest.mark.dds
+def test_scan_problems_are_warned_with_their_values():
+    """Negative ranges were accepted silently and a 1 000 000-beam scan never answered."""
+    good = first_scans(2)
+    d = scan_to_data(good[0])
+    negative = np.array(d.ranges)
+    negative[3] = -0.5
+    with RosHarness() as ros:
+        node = ros.add_node(CornerExtractor(context=ros.context))
+        poses = ros.collect('corners', PoseArray)
+        logs = ros.collect('/rosout', Log)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub])
+        pub.publish(make_scan(d.stamp_ns, d.frame_id, d.angle_min, d.angle_increment,
+                              negative, d.range_min, d.range_max))
+        assert ros.wait_until(lambda: len(poses) == 1, 10)
+        assert ros.wait_until(lambda: any('ranges[3]=-0.5' in m.msg for m in logs), 10)
+        huge = make_scan(d.stamp_ns, d.frame_id, -math.pi, 2 * math.pi / 999_999,
+                         np.full(1_000_000, 5.0), d.range_min, d.range_max)
+        pub.publish(huge)
+        assert ros.wait_until(lambda: any('1000000 beams' in m.msg for m in logs), 30)
+        pub.publish(good[1])  # the node keeps running
+        assert ros.wait_until(lambda: len(poses) == 2, 10)
+        assert node.stats.dropped['malformed'] == 1 and node.stats.processed_count == 2
+
+
+@pytest.mark.dds
+def test_scans_lost_in_a_burst_are_counted_warned_and_on_diagnostics():
+    """A node slower than its input lost scans in the full queue without a word."""
+    scans = first_scans(100)
+    with RosHarness() as ros:
+        node = ros.add_node(CornerExtractor(context=ros.context))
+        poses = ros.collect('corners', PoseArray)
+        logs = ros.collect('/rosout', Log)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub])
+        pub.publish(scans[0])  # the first message of a publisher starts its sequence
+        assert ros.wait_until(lambda: len(poses) == 1, 10)
+        for msg in scans[1:-1]:
+            pub.publish(msg)
+        time.sleep(1.0)
+        pub.publish(scans[-1])  # reveals a loss at the end of the burst
+        assert ros.wait_until(lambda: poses and poses[-1].header == scans[-1].header, 30)
+        stats = node.stats
+        assert stats.processed_count == len(poses)
+        assert stats.dropped['lost'] == len(scans) - len(poses) > 0
+        assert ros.wait_until(lambda: any(m.msg.startswith('Lost ') for m in logs), 10)
+
+        def reported():
+            for array in diagnostics:
+                for status in array.status:
+                    values = {v.key: v.value for v in status.values}
+                    if (status.name == 'corner_extractor: input'
+                            and values['processed'] == str(len(poses))):
+                        return status, values
+            return None
+        assert ros.wait_until(reported, 10)
+    status, values = reported()
+    assert values['dropped.lost'] == str(len(scans) - len(poses))
+    assert 0.0 < float(values['latency_p50_ms']) <= float(values['latency_p95_ms'])
 
 
 def test_corner_extractor_rejects_bad_parameters():

@@ -5,7 +5,7 @@ from, the seed-1 value and its tolerance (see its ``tolerance_policy``). Each ru
 once per module (the Python entry point the command line calls, writing the same JSON
 files), and every figure is one test case; a second case per figure checks that the
 number quoted in expected.yaml is the value as the README rounds it and that the README
-prints it.
+prints it in the one line that ``readme_line`` (a regular expression) picks out.
 """
 
 import re
@@ -75,4 +75,7 @@ def test_readme_quotes_the_value(name, fid):
     elif unit == '%' and abs(fig['value']) <= 1.0:
         scale = 100.0
     assert round(fig['value'] * scale, digits) == float(text), (fid, fig['value'])
-    assert text in README, f'README.md does not quote {text} ({fig["readme"]})'
+    lines = [line for line in README.splitlines() if re.search(fig['readme_line'], line)]
+    assert len(lines) == 1, f'readme_line {fig["readme_line"]!r} picks {len(lines)} README lines'
+    number = re.compile(r'(?<![\w.])' + re.escape(text) + r'(?![\w])')
+    assert number.search(lines[0]), f'README line {lines[0]!r} does not quote {text} ({fid})'

@@ -229,13 +229,17 @@ def test_bad_input_warns_and_the_next_good_frame_is_processed(views_bag):
         info_pub.publish(bad_info)
         assert ros.wait_until(lambda: node.warner.count > count, 5)
         assert any('Ignoring camera_info' in t for t in _warnings(logs))
-        # the same kind of problem again (all white after all black) is throttled: counted,
-        # not logged, and dropped
+        # the same problem again (all black) is throttled: counted, not logged, and dropped
         n_logs, count, n_out = len(logs), node.warner.count, len(poses)
-        img_pub.publish(array_to_image(np.full_like(gray, 255), 'mono8', stamp, 'cam'))
+        img_pub.publish(array_to_image(np.zeros_like(gray), 'mono8', stamp, 'cam'))
         assert ros.wait_until(lambda: node.warner.count == count + 1, 5)
         assert not any('no contrast' in t for t in _warnings(logs[n_logs:]))
         assert len(poses) == n_out
+        # another value of it (all white after all black) is reported at once, and dropped
+        img_pub.publish(array_to_image(np.full_like(gray, 255), 'mono8', stamp, 'cam'))
+        assert ros.wait_until(lambda: any('grey levels 255..255' in t
+                                          for t in _warnings(logs[n_logs:])), 5)
+        assert len(poses) == n_out and node.stats.dropped['unusable'] == 3
         # a colour image of the same scene is processed like the mono one
         bgr = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
         n = len(poses)

@@ -11,10 +11,10 @@ from landmark_nav.laser.lines import (explained_points, extract_lines, fit_line,
                                       lowess, METHODS, point_covariances, split_pieces)
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 from landmark_nav.sim import run_scenario, ScanSample, World
+from landmark_nav.testing import shared_data
 import numpy as np
 import pytest
 
-CARMEN = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'carmen'
 SIGMA_PHI = math.radians(0.1)
 
 
@@ -400,9 +400,7 @@ def carmen_figures(path: Path, method: str):
 
 @pytest.mark.parametrize('name', ['aces-corrected.log.gz', 'seattle-corrected.log.gz'])
 def test_carmen_logs(name):
-    path = CARMEN / name
-    if not path.exists():
-        pytest.skip(f'{path} not present')
+    path = shared_data('carmen', name)
     for method in METHODS:
         explained, rmse = carmen_figures(path, method)
         print(f'{name} {method}: explained mean {explained.mean():.3f} '

@@ -108,3 +108,43 @@ def test_replay_start_offset_clock_and_loop(tmp_path):
     assert min(ticks) >= 2.0 - 1e-9 and max(ticks) <= 2.9 + 1e-9  # bag time, after offset
     first_pass = ticks[:next(i for i in range(1, len(ticks)) if ticks[i] < ticks[i - 1])]
     assert first_pass == sorted(first_pass)  # /clock never goes back within a pass
+
+
+def _replay(bag, *options):
+    return subprocess.Popen([sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
+                             *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+@pytest.mark.dds
+def test_replay_waits_for_running_subscribers_by_default(tmp_path):
+    """Without --wait-for-subscribers the first messages were lost to DDS discovery."""
+    bag = tmp_path / 'b'
+    write_small_bag(bag, n=20)
+    with RosHarness() as ros:
+        got = ros.collect('/scan', LaserScan)
+        proc = _replay(bag, '--rate', '5')  # no option: the default waits
+        out, _ = proc.communicate(timeout=60)
+        assert proc.returncode == 0, out
+        assert ros.wait_until(lambda: len(got) >= 20, timeout=10), f'{len(got)} of 20 arrived'
+    assert [m.ranges[0] for m in got] == [float(i) for i in range(20)]
+
+
+@pytest.mark.dds
+def test_replay_start_offset_still_publishes_the_latched_topics(tmp_path):
+    """--start-offset skipped the latched ground truth recorded at the start of the bag."""
+    from geometry_msgs.msg import PoseArray
+    from landmark_nav.testing.harness import reliable_qos
+    bag = tmp_path / 'b'
+    write_small_bag(bag, n=20)  # the latched PoseArray is logged at 1.0 s, the scans after
+    with RosHarness() as ros:
+        got = ros.collect('/scan', LaserScan)
+        latched = ros.collect('/ground_truth/corners', PoseArray, reliable_qos(latched=True))
+        proc = _replay(bag, '--rate', '5', '--start-offset', '1.5', '--wait-for-subscribers',
+                       '20')
+        out, _ = proc.communicate(timeout=60)
+        assert proc.returncode == 0, out
+        assert ros.wait_until(lambda: len(got) >= 5 and latched, timeout=10), \
+            (len(got), len(latched), out)
+    assert len(latched) == 1
+    assert [m.ranges[0] for m in got] == [float(i) for i in range(15, 20)]

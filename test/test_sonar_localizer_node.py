@@ -339,3 +339,33 @@ def test_calibrating_nominal_odometry_equals_calibrated_wheel_odometry():
     np.testing.assert_allclose(calibrate_control(nominal, 0.33, k),
                                control_from_wheels(w, 0.0955, 0.33, 0.1, k), atol=1e-15)
     np.testing.assert_allclose(calibrate_control(nominal, 0.33), nominal, rtol=1e-12, atol=0)
+
+
+class _Recorder:
+    """A logger stand-in that keeps the warnings."""
+
+    def __init__(self):
+        self.warnings = []
+
+    def warning(self, text):
+        self.warnings.append(text)
+
+
+def test_nan_field_of_view_is_warned_with_its_value():
+    """A Range with a NaN field of view used to be accepted without a word."""
+    with RosHarness() as ros:
+        node = SonarLocalizer(context=ros.context)
+        log = node.warner._logger = _Recorder()
+        msg = Range(header=make_range(1_000_000_000, 'sonar_0', 1.0, 0.5, 0.1, 5.0).header,
+                    radiation_type=Range.ULTRASOUND, field_of_view=math.nan, min_range=0.1,
+                    max_range=5.0, range=1.0)
+        node.on_range(0, msg)
+        msg.field_of_view = -0.2
+        node.on_range(0, msg)  # another value class right after: reported too
+        msg.field_of_view = 0.5
+        node.on_range(0, msg)  # a good reading goes on
+        assert len(log.warnings) == 2, log.warnings
+        assert 'field_of_view=nan' in log.warnings[0] and '/sonar/range_0' in log.warnings[0]
+        assert 'field_of_view=-0.2' in log.warnings[1]
+        assert node.stats.dropped['malformed'] == 2
+        node.destroy_node()

@@ -41,6 +41,7 @@ import math
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
+from landmark_nav.evaluation.features import normal_form
 from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
 import numpy as np
 
@@ -295,15 +296,6 @@ class Repeatability:
         return self.redetected / self.opportunities if self.opportunities else float('nan')
 
 
-def _normal_form(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Return (N, 2) [rho >= 0, alpha] of the lines through p1 (N, 2) and p2 (N, 2)."""
-    d = p2 - p1
-    alpha = np.arctan2(d[:, 0], -d[:, 1])
-    rho = p1[:, 0] * np.cos(alpha) + p1[:, 1] * np.sin(alpha)
-    alpha = np.where(rho < 0.0, alpha + math.pi, alpha)
-    return np.column_stack([np.abs(rho), wrap_angle(alpha)])
-
-
 def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.ndarray,
                        segments_next: np.ndarray, view_next: ScanView,
                        min_length: float = 1.0, max_drho: float = 0.05,
@@ -333,8 +325,8 @@ def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.
     other = np.asarray(segments_next, dtype=float).reshape(-1, 2, 2)
     if not len(other):
         return
-    f_k = _normal_form(mine[:, 0], mine[:, 1])                          # (A, 2)
-    f_n = _normal_form(other[:, 0], other[:, 1])                        # (B, 2)
+    f_k = normal_form(mine[:, 0], mine[:, 1])                          # (A, 2)
+    f_n = normal_form(other[:, 0], other[:, 1])                        # (B, 2)
     close = ((np.abs(f_k[:, None, 0] - f_n[None, :, 0]) <= max_drho)
              & (np.abs(wrap_angle(f_k[:, None, 1] - f_n[None, :, 1])) <= max_dalpha))
     d = mine[:, 1] - mine[:, 0]                                          # (A, 2)

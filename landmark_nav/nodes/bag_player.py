@@ -3,7 +3,17 @@
 Like ``ros2 bag play``: recorded timing scaled by a rate factor, a start offset, a topic
 filter, optional /clock and looping. Messages go out as the recorded CDR bytes, so the
 original header stamps are kept exactly. Latched topics (transient local in the bag's QoS)
-are published transient local. Also available as ``landmark_nav replay``.
+are published transient local; with a start offset, the last message of each latched topic
+before the offset is published at the start (a late joiner still gets the map or ground
+truth).
+
+Unlike ``ros2 bag play``, the first messages are not lost to DDS discovery by default: the
+player waits up to ``--wait-for-subscribers`` seconds (default 5; discovery took about 3 s
+on a loaded 2-core machine) until the subscribers already running in the ROS graph on the
+played topics are connected (with ``--topics``: until each named topic has one), then
+plays; with no subscriber at all it plays after that time (a warning says so).
+``--wait-for-subscribers 0`` starts at once, like ``ros2 bag play``. SIGINT (Ctrl-C) and
+SIGTERM stop playing cleanly. Also available as ``landmark_nav replay``.
 """
 
 import argparse
@@ -33,8 +43,10 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar='HZ', help='publish /clock (default 100 Hz when given)')
     parser.add_argument('--delay', type=float, default=0.0,
                         help='seconds to wait before the first message')
-    parser.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
-                        help='wait up to this long for a subscriber on every played topic')
+    parser.add_argument('--wait-for-subscribers', type=float, default=5.0, metavar='SECONDS',
+                        help='wait up to this long (default 5) until the running subscribers '
+                        'of the played topics are connected, so the first messages are not '
+                        'lost; 0 = start at once like ros2 bag play')
 
 
 def options_from_args(args: argparse.Namespace) -> ReplayOptions:
@@ -65,6 +77,7 @@ class BagPlayer(Node):
         if missing:
             raise BagError(f'{bag_path} has no topic {", ".join(missing)}')
         self._topic_publishers = {}
+        self._latched = {name for name in wanted if topics[name].latched}
         for name in wanted:
             info = topics[name]
             qos = QoSProfile(
@@ -80,17 +93,41 @@ class BagPlayer(Node):
         self.published = 0
         self._last_clock_ns = 0
 
-    def wait_for_subscribers(self) -> bool:
-        """Wait until every played topic has a subscriber, up to the configured time."""
-        deadline = time.monotonic() + self.options.wait_for_subscribers_s
-        while time.monotonic() < deadline:
-            if all(p.get_subscription_count() > 0 for p in self._topic_publishers.values()):
+    def _connected(self) -> bool:
+        """Return whether the subscribers are connected (see :class:`ReplayOptions`).
+
+        Some played topic is subscribed (every one when ``--topics`` names them) and every
+        subscriber the ROS graph knows on a played topic is matched.
+        """
+        matched = {t: p.get_subscription_count() for t, p in self._topic_publishers.items()}
+        wanted = all if self.options.topics else any
+        return wanted(matched.values()) and all(
+            matched[t] >= self.count_subscribers(t) for t in matched)
+
+    def wait_for_subscribers(self, settle_s: float = 0.2) -> bool:
+        """Wait until the running subscribers are connected, up to the configured time.
+
+        Returns:
+            Whether they were (the condition held for ``settle_s`` in a row).
+
+        """
+        now = time.monotonic()
+        deadline, since = now + self.options.wait_for_subscribers_s, None
+        while now < deadline and rclpy.ok():
+            if not self._connected():
+                since = None
+            elif since is None:
+                since = now
+            elif now - since >= settle_s:
                 return True
             time.sleep(0.02)
-        lonely = [t for t, p in self._topic_publishers.items() if p.get_subscription_count() == 0]
-        if lonely:
-            self.get_logger().warning(f'No subscriber yet on {", ".join(lonely)}; playing')
-        return not lonely
+            now = time.monotonic()
+        if not any(p.get_subscription_count() for p in self._topic_publishers.values()):
+            self.get_logger().warning(
+                f'No subscriber on the played topics after '
+                f'{self.options.wait_for_subscribers_s:g} s; playing')
+            return False
+        return self._connected()
 
     def _publish_clock(self, bag_ns: int) -> None:
         """Publish /clock, never going backwards within one pass over the bag."""
@@ -123,16 +160,26 @@ class BagPlayer(Node):
             first_ns = reader.start_ns
             wall_start = time.monotonic()
             self._last_clock_ns = 0
+            held = {}  # the last message of each latched topic before the start offset
             for item in reader.messages(tuple(self._topic_publishers)):
                 due = due_after_start_s(item.log_time_ns, first_ns, self.options)
                 if due < 0:
+                    if item.topic in self._latched:
+                        held[item.topic] = item
                     continue
+                for old in sorted(held.values(), key=lambda m: m.log_time_ns):
+                    self._topic_publishers[old.topic].publish(old.data)
+                    count += 1
+                held = {}
                 self._sleep_until(wall_start + due, item.log_time_ns, wall_start, first_ns)
                 if not rclpy.ok():
                     break
                 if self._clock_pub:
                     self._publish_clock(item.log_time_ns)
                 self._topic_publishers[item.topic].publish(item.data)
+                count += 1
+            for old in sorted(held.values(), key=lambda m: m.log_time_ns):
+                self._topic_publishers[old.topic].publish(old.data)
                 count += 1
         self.published += count
         return count
@@ -152,21 +199,30 @@ class BagPlayer(Node):
 
 def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> int:
     """Initialise rclpy, play the bag, shut down; return messages published."""
-    rclpy.init(args=args)
+    rclpy.init(args=args)  # SIGINT / SIGTERM shut the context down: playing stops
     player = None
     try:
         player = BagPlayer(bag, options)
         published = player.play()
-        # Give reliable transports a moment to deliver the tail of the stream.
-        for pub in player._topic_publishers.values():
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2.0))
-        player.get_logger().info(f'Published {published} messages from {bag}')
+        if rclpy.ok():
+            # Give reliable transports a moment to deliver the tail of the stream.
+            for pub in player._topic_publishers.values():
+                pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2.0))
+            player.get_logger().info(f'Published {published} messages from {bag}')
         return published
     except (KeyboardInterrupt, ExternalShutdownException):
         return player.published if player else 0
+    except Exception:
+        if rclpy.ok():
+            raise
+        # A publish racing the shutdown by SIGINT / SIGTERM: stopped, not an error.
+        return player.published if player else 0
     finally:
         if player is not None:
-            player.destroy_node()
+            try:
+                player.destroy_node()
+            except Exception:  # already invalid after the shutdown
+                pass
         rclpy.try_shutdown()
 
 

@@ -1,11 +1,24 @@
-"""Small helpers shared by the nodes: typed parameters with descriptors, QoS, main()."""
+"""Small helpers shared by the nodes: typed parameters, QoS, warnings, statistics, main().
 
+* :func:`declare` / :func:`declare_dataclass`: read-only typed parameters with descriptors;
+  a wrong value or type is a :class:`ParameterError` naming the parameter (one line, exit 2).
+* :class:`ProblemWarner`: bad-input warnings throttled per kind of problem.
+* :class:`InputStats`: processed / dropped inputs and latency percentiles of a node, on
+  ``/diagnostics`` and in throttled warnings.
+* :func:`limit_threads`: numerical libraries single-threaded unless configured.
+* :func:`run_node`: the standard main (threads, spin, clean shutdown on SIGINT / SIGTERM).
+"""
+
+from collections import Counter, deque
 import math
+import os
+from pathlib import Path
 import re
 import sys
 import time
 from typing import Callable, Optional, Sequence
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
 import rclpy
@@ -16,6 +29,16 @@ from rclpy.qos import qos_profile_sensor_data
 
 SENSOR_QOS = qos_profile_sensor_data
 WARN_THROTTLE_S = 5.0
+READ_ONLY_NOTE = ' (read-only: set at start-up, e.g. -p or --params-file)'
+THREADS_ENV = 'LANDMARK_NAV_THREADS'
+LIBRARY_THREAD_ENVS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
+                       'BLIS_NUM_THREADS')
+_TYPE_NAMES = {ParameterType.PARAMETER_BOOL: 'a bool (true / false)',
+               ParameterType.PARAMETER_INTEGER: 'an integer',
+               ParameterType.PARAMETER_DOUBLE: 'a double',
+               ParameterType.PARAMETER_STRING: 'a string',
+               ParameterType.PARAMETER_DOUBLE_ARRAY: 'a list of doubles',
+               ParameterType.PARAMETER_STRING_ARRAY: 'a list of strings'}
 
 _TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
           float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
@@ -41,7 +64,7 @@ def declare(node: Node, name: str, default, description: str,
         ParameterError: The value given at start-up is out of range or not a choice.
 
     """
-    descriptor = ParameterDescriptor(description=description, read_only=True)
+    descriptor = ParameterDescriptor(description=description + READ_ONLY_NOTE, read_only=True)
     if isinstance(default, list):
         descriptor.type = ParameterType.PARAMETER_DOUBLE_ARRAY
     else:
@@ -54,10 +77,7 @@ def declare(node: Node, name: str, default, description: str,
             IntegerRange(from_value=int(limits[0]), to_value=int(limits[1]), step=1)]
     if choices is not None:
         descriptor.additional_constraints = 'one of: ' + ', '.join(choices)
-    try:
-        value = node.declare_parameter(name, default, descriptor).value
-    except InvalidParameterValueException as err:
-        raise ParameterError(f'parameter {name}: {err}') from err
+    value = _declare(node, name, default, descriptor)
     if choices is not None and value not in choices:
         raise ParameterError(f'parameter {name} = {value!r} is not one of {", ".join(choices)}')
     if isinstance(default, list):
@@ -67,19 +87,79 @@ def declare(node: Node, name: str, default, description: str,
 
 def declare_strings(node: Node, name: str, default: list, description: str) -> list:
     """Declare a read-only string-array parameter and return its value."""
-    descriptor = ParameterDescriptor(description=description, read_only=True,
+    descriptor = ParameterDescriptor(description=description + READ_ONLY_NOTE, read_only=True,
                                      type=ParameterType.PARAMETER_STRING_ARRAY)
+    return list(_declare(node, name, default, descriptor))
+
+
+def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
+    """Declare one parameter; a bad value or type raises a one-line :class:`ParameterError`."""
     try:
-        return list(node.declare_parameter(name, default, descriptor).value)
-    except (InvalidParameterValueException, InvalidParameterTypeException) as err:
+        return node.declare_parameter(name, default, descriptor).value
+    except InvalidParameterTypeException as err:
+        given = node._parameter_overrides.get(name)
+        kind = None if given is None else _TYPE_NAMES.get(given.type_.value, 'another type')
+        got = '' if given is None else f', got {given.value!r} ({kind.split(" (")[0]})'
+        if (given is not None and descriptor.type == ParameterType.PARAMETER_DOUBLE
+                and given.type_.value == ParameterType.PARAMETER_INTEGER):
+            got += f'; write {given.value}.0 for a double'
+        raise ParameterError(f'parameter {name}: expected '
+                             f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
+    except InvalidParameterValueException as err:
         raise ParameterError(f'parameter {name}: {err}') from err
 
 
+def limit_threads(default: int = 1) -> Optional[int]:
+    """Limit the thread pools of the numerical libraries (BLAS, OpenMP, OpenCV) of a node.
+
+    A node handles one small message at a time: BLAS threads spinning on 3x3 to 100x100
+    matrices cost far more CPU than they save. The number of threads is ``default``
+    unless configured: the environment variable ``LANDMARK_NAV_THREADS`` sets it for every
+    library (threadpoolctl for BLAS / OpenMP, ``cv2.setNumThreads`` or
+    ``OPENCV_FOR_THREADS_NUM`` for OpenCV); if it is unset and one of ``OMP_NUM_THREADS``,
+    ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` or ``BLIS_NUM_THREADS`` is set, the
+    libraries are left as configured.
+
+    Returns:
+        The thread limit applied, or None when the libraries were left as configured.
+
+    Raises:
+        ParameterError: ``LANDMARK_NAV_THREADS`` is not a positive integer.
+
+    """
+    from threadpoolctl import threadpool_limits
+    text = os.environ.get(THREADS_ENV, '').strip()
+    if text:
+        try:
+            n = int(text)
+            if n < 1:
+                raise ValueError
+        except ValueError:
+            raise ParameterError(f'environment variable {THREADS_ENV}={text!r}: expected a '
+                                 'positive integer') from None
+    elif any(os.environ.get(v) for v in LIBRARY_THREAD_ENVS):
+        return None
+    else:
+        n = default
+    threadpool_limits(limits=n)
+    if 'cv2' in sys.modules:
+        sys.modules['cv2'].setNumThreads(n)
+    else:  # read by OpenCV when it is imported
+        os.environ['OPENCV_FOR_THREADS_NUM'] = str(n)
+    return n
+
+
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
-    """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2."""
-    rclpy.init(args=args)
+    """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2.
+
+    Numerical libraries run single-threaded unless configured (:func:`limit_threads`).
+    SIGINT (Ctrl-C) and SIGTERM shut rclpy down (its signal handlers) and end the spin; the
+    node is then destroyed without a traceback, exit status 0.
+    """
     node = None
     try:
+        limit_threads()
+        rclpy.init(args=args)
         node = factory()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -87,9 +167,16 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
     except ParameterError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # A callback running while SIGINT / SIGTERM shut the context down: not an error.
     finally:
         if node is not None:
-            node.destroy_node()
+            try:
+                node.destroy_node()
+            except Exception:  # already invalid after the shutdown
+                pass
         rclpy.try_shutdown()
     return 0
 
@@ -125,11 +212,36 @@ def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
         raise ParameterError(f'{node.get_name()}: {err}') from err
 
 
+_NUMBER = re.compile(r'(?<![\w.])[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|nan)(?![\w.])')
+
+
+def _sign_class(match: re.Match) -> str:
+    """Replace a number in a message by its class: 0, +, -, +inf, -inf or nan."""
+    value = float(match.group(0))
+    if math.isnan(value):
+        return 'nan'
+    if math.isinf(value):
+        return '+inf' if value > 0 else '-inf'
+    return '0' if value == 0 else ('+' if value > 0 else '-')
+
+
+def problem_kind(message: str) -> str:
+    """Return the kind of a problem: its message with each number reduced to its class.
+
+    ``angle_increment=0.0`` and ``angle_increment=-0.01`` are different kinds (zero,
+    negative); ``stamp 12 ns`` and ``stamp 15 ns`` are the same kind.
+    """
+    return _NUMBER.sub(_sign_class, message)
+
+
 class ProblemWarner:
     """Warn about bad input, throttled per kind of problem (not per call site).
 
-    Repeats of the same problem (its message with the numbers masked) are reported at most
-    once per ``period_s``; a different problem is reported at once. The node keeps running.
+    The kind of a problem is its message with every number reduced to its class (zero,
+    positive, negative, infinite, NaN; :func:`problem_kind`): repeats of one kind are
+    reported at most once per ``period_s``, with the number of repeats suppressed since the
+    last report; a problem of another kind, or another class of value (a negative
+    ``angle_increment`` after a zero one), is reported at once. The node keeps running.
     """
 
     def __init__(self, node: Node, period_s: float = WARN_THROTTLE_S) -> None:
@@ -137,13 +249,138 @@ class ProblemWarner:
         self._logger = node.get_logger()
         self._period = period_s
         self._last = {}
+        self._suppressed = Counter()
         self.count = 0
 
     def warn(self, message: str) -> None:
         """Log a warning unless the same kind of problem was reported recently."""
         self.count += 1
-        key = re.sub(r'[-+0-9.e]+', '#', message)
+        key = problem_kind(message)
         now = time.monotonic()
         if now - self._last.get(key, -math.inf) >= self._period:
             self._last[key] = now
+            more = self._suppressed.pop(key, 0)
+            if more:
+                message += f' ({more} more like this in the last {self._period:g} s)'
             self._logger.warning(message)
+        else:
+            self._suppressed[key] += 1
+
+
+def _percentile_ms(values: Sequence[float], q: float) -> float:
+    """Return a percentile of latencies [s] in milliseconds (0 when there are none)."""
+    if not values:
+        return 0.0
+    ordered = sorted(values)
+    return 1e3 * ordered[min(len(ordered) - 1, int(math.ceil(q / 100.0 * len(ordered))) - 1)]
+
+
+class InputStats:
+    """Count a node's processed and dropped inputs and its latency; report them.
+
+    Subscriptions made with :meth:`subscribe` record when DDS received each message and
+    detect messages lost before the callback (gaps in the publisher's sequence numbers,
+    e.g. a full queue when the node is slower than its input) while the topic has one
+    publisher. The node calls :meth:`processed` when an input has produced its output and
+    :meth:`drop` (with a warning naming the problem) when it skips one. Every
+    ``period_s`` a diagnostic_msgs/DiagnosticArray goes out on ``/diagnostics`` with one
+    DiagnosticStatus ``<node>: input``: the counts ``processed``, ``dropped`` and
+    ``dropped.<reason>`` since start, and ``latency_p50_ms`` / ``latency_p95_ms`` /
+    ``latency_max_ms`` over the last ``window`` processed inputs (from the reception of the
+    input, or of the later message it waited for, to the end of its processing). Level WARN
+    while inputs were dropped in the last period, else OK.
+    """
+
+    def __init__(self, node: Node, warner: ProblemWarner, period_s: float = 1.0,
+                 window: int = 1000) -> None:
+        """Create the ``/diagnostics`` publisher and its timer."""
+        self._node = node
+        self.warner = warner
+        self.processed_count = 0
+        self.dropped = Counter()
+        self.latencies = deque(maxlen=window)
+        self.received_ns = 0
+        self._last_seq = {}
+        self._reported_drops = 0
+        self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._timer = node.create_timer(period_s, self.publish)
+
+    @property
+    def dropped_count(self) -> int:
+        """Return the number of inputs dropped since start (all reasons)."""
+        return sum(self.dropped.values())
+
+    def subscribe(self, msg_type, topic: str, callback: Callable, qos):
+        """Create a subscription whose callback(msg) runs with the reception recorded."""
+        def on_message(msg, info, topic=topic):
+            self.received_ns = int(info.get('received_timestamp') or time.time_ns())
+            self._check_sequence(topic, info.get('publication_sequence_number'))
+            callback(msg)
+        return self._node.create_subscription(msg_type, topic, on_message, qos)
+
+    def _check_sequence(self, topic: str, seq: Optional[int]) -> None:
+        """Count the messages lost between two of one publisher (sequence number gap)."""
+        if seq is None:
+            return
+        last = self._last_seq.get(topic)
+        self._last_seq[topic] = seq
+        if last is None or seq <= last + 1:
+            return
+        lost = seq - last - 1
+        if self._node.count_publishers(topic) == 1:  # one sequence: a gap is a loss
+            self.drop('lost', f'Lost {lost} messages on {topic} before processing (the '
+                      'queue overflowed: input faster than the node)', lost)
+
+    def processed(self, received_ns: Optional[int] = None) -> None:
+        """Count one processed input; its latency runs from ``received_ns`` (wall clock)."""
+        self.processed_count += 1
+        start = self.received_ns if received_ns is None else received_ns
+        if start:
+            self.latencies.append(max(0.0, (time.time_ns() - start) * 1e-9))
+
+    def drop(self, reason: str, message: str, count: int = 1) -> None:
+        """Count ``count`` dropped inputs for ``reason`` and warn (throttled per kind)."""
+        self.dropped[reason] += count
+        self.warner.warn(message)
+
+    def status(self) -> DiagnosticStatus:
+        """Return the DiagnosticStatus of the inputs so far."""
+        lat = list(self.latencies)
+        dropped = self.dropped_count
+        recent = dropped - self._reported_drops
+        values = {'processed': self.processed_count, 'dropped': dropped}
+        values.update({f'dropped.{k}': v for k, v in sorted(self.dropped.items())})
+        values.update({'latency_p50_ms': f'{_percentile_ms(lat, 50):.2f}',
+                       'latency_p95_ms': f'{_percentile_ms(lat, 95):.2f}',
+                       'latency_max_ms': f'{1e3 * max(lat, default=0.0):.2f}'})
+        level = DiagnosticStatus.WARN if recent else DiagnosticStatus.OK
+        message = (f'{recent} inputs dropped in the last period' if recent else
+                   f'{self.processed_count} inputs processed, {dropped} dropped')
+        return DiagnosticStatus(
+            level=level, name=f'{self._node.get_name()}: input', message=message,
+            hardware_id=self._node.get_fully_qualified_name(),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+    def publish(self) -> None:
+        """Publish the status on ``/diagnostics``."""
+        status = self.status()
+        self._reported_drops = self.dropped_count
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.status = [status]
+        self._pub.publish(msg)
+
+
+def ros_home() -> Path:
+    """Return ``$ROS_HOME`` (default ``~/.ros``), where ROS tools keep their files."""
+    return Path(os.environ.get('ROS_HOME') or Path.home() / '.ros').expanduser()
+
+
+def output_path(name: str) -> Path:
+    """Resolve a file name a node writes: relative names go under ``$ROS_HOME/landmark_nav``.
+
+    Absolute paths and ``~`` are kept; a relative name does not depend on the directory the
+    node was started from.
+    """
+    path = Path(name).expanduser()
+    return path if path.is_absolute() else ros_home() / 'landmark_nav' / path

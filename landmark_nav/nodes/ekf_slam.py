@@ -15,20 +15,31 @@ corners go through the laser mount (parameter ``laser_pose``) into the update; t
 the per-scan step of :func:`landmark_nav.evaluation.slam.run_slam` without the sweep
 deskewing (the cloud has no beam times).
 
+Corner sets are queued in stamp order, so one arriving late (older than a set still
+waiting for odometry) is processed before the newer one; a set older than the last
+processed step is skipped (the filter cannot go back in time).
+
 Publishes (frame ``map_frame``, stamp of the corner set): ``pose``
-(PoseWithCovarianceStamped), ``odometry`` (nav_msgs/Odometry, child ``base_frame``),
-``path`` (nav_msgs/Path) and ``landmarks`` (MarkerArray: points and 2-sigma ellipses).
+(PoseWithCovarianceStamped) and ``odometry`` (nav_msgs/Odometry, child ``base_frame``) per
+step; ``path`` (nav_msgs/Path: the last ``path_max_poses`` poses) and ``landmarks``
+(MarkerArray: points and 2-sigma ellipses) every ``display_period`` seconds when they have
+changed, so the cost per step and the memory do not grow with the length of the run.
 
 Services (std_srvs/Trigger): ``save_map`` writes the landmarks and their covariances as
-YAML to parameter ``map_file``; ``reset`` restarts the filter at the next odometry.
+YAML to parameter ``map_file`` (a relative name is under ``$ROS_HOME/landmark_nav``,
+``~/.ros/landmark_nav`` by default); ``reset`` restarts the filter at the next odometry.
 
-Bad input is reported with a throttled warning: odometry going back in time or jumping
-resets the filter cleanly; corners with NaN are dropped; corner sets before any odometry
-(or older than the buffered odometry) are skipped.
+Bad input is reported with a warning throttled per kind of problem and counted on
+``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry going back in
+time or jumping resets the filter cleanly; corners with NaN or with a covariance that is
+not positive semi-definite are dropped; corner sets before any odometry, older than the
+buffered odometry or than the last step are skipped; the oldest waiting set is dropped when
+more than ``MAX_PENDING`` wait for odometry.
 """
 
+import bisect
+from collections import deque
 from dataclasses import replace
-from pathlib import Path
 from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
@@ -37,8 +48,9 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
                                       odometry_to_pose, pose_msg_from_2d, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.geometry import interpolate_pose
-from landmark_nav.nodes.common import (declare, declare_dataclass, ParameterError,
-                                       ProblemWarner, run_node, SENSOR_QOS)
+from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
+                                       output_path, ParameterError, ProblemWarner, run_node,
+                                       SENSOR_QOS)
 from landmark_nav.slam.ekf_slam import (EkfSlam, odometry_check, odometry_increment,
                                         OdometryNoise, SlamParams)
 from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
@@ -90,6 +102,7 @@ ODOMETRY_PARAMETERS = {
     'sigma_yaw_floor': ('odometry heading std floor per step [rad]', None, None),
 }
 MAX_BUFFER = 1000
+MAX_PENDING = 100
 
 
 class EkfSlamNode(Node):
@@ -108,14 +121,23 @@ class EkfSlamNode(Node):
         self.map_frame = declare(self, 'map_frame', 'map', 'frame of the estimates')
         self.base_frame = declare(self, 'base_frame', 'base_link', 'robot frame')
         self.map_file = declare(self, 'map_file', 'landmarks.yaml',
-                                'YAML file written by the save_map service')
+                                'YAML file written by the save_map service (relative: under '
+                                '$ROS_HOME/landmark_nav, default ~/.ros/landmark_nav)')
+        self.path_max_poses = declare(self, 'path_max_poses', 2000,
+                                      'poses kept in the published path (the latest)',
+                                      (1, 1000000))
+        display_period = declare(self, 'display_period', 0.5, 'period of the path and '
+                                 'landmarks topics (published when changed) [s]',
+                                 (0.01, 3600.0))
         self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner)
         self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10)
         self.pub_odom = self.create_publisher(Odometry, 'odometry', 10)
         self.pub_path = self.create_publisher(PathMsg, 'path', 10)
         self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10)
-        self.create_subscription(Odometry, 'odom', self.on_odom, SENSOR_QOS)
-        self.create_subscription(PointCloud2, 'corners/features', self.on_corners, 10)
+        self.stats.subscribe(Odometry, 'odom', self.on_odom, SENSOR_QOS)
+        self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10)
+        self.create_timer(display_period, self.publish_display)
         self.create_service(Trigger, 'save_map', self.on_save_map)
         self.create_service(Trigger, 'reset', self.on_reset)
         self.odom_count = 0
@@ -131,8 +153,8 @@ class EkfSlamNode(Node):
         self.odo_t, self.odo_p = [], []
         self.pending = []
         self.prev = None
-        self.path = PathMsg()
-        self.path.header.frame_id = self.map_frame
+        self.path_poses = deque(maxlen=self.path_max_poses)
+        self.display_stamp = None
 
     def _restart(self, reason: str) -> None:
         self.warner.warn(f'Resetting EKF-SLAM: {reason}')
@@ -149,7 +171,7 @@ class EkfSlamNode(Node):
             return
         t, pose = int(d.stamp_ns), np.asarray(d.pose, dtype=float)
         if not np.all(np.isfinite(pose)):
-            self.warner.warn('Dropping odometry: pose is not finite')
+            self.warner.warn(f'Dropping odometry: pose {pose.tolist()} is not finite')
             return
         if self.odo_t and t <= self.odo_t[-1]:
             self._restart(f'odometry went back in time ({self.odo_t[-1]} -> {t} ns)')
@@ -160,8 +182,9 @@ class EkfSlamNode(Node):
         self.odo_p.append(pose)
         if len(self.odo_t) > MAX_BUFFER:
             del self.odo_t[0], self.odo_p[0]
+        received = self.stats.received_ns
         while self.pending and self.pending[0][0] <= t:
-            self._step(*self.pending.pop(0))
+            self._step(*self.pending.pop(0), received)
 
     def on_corners(self, msg: PointCloud2) -> None:
         """Validate one corner set and queue it until odometry covers its stamp."""
@@ -173,28 +196,55 @@ class EkfSlamNode(Node):
             if missing:
                 raise ConversionError(f'PointCloud2: missing fields {", ".join(missing)}')
         except ConversionError as err:
-            self.warner.warn(f'Dropping corners: {err}')
+            self.stats.drop('malformed', f'Dropping corners: {err}')
             return
         t = stamp_to_ns(msg.header.stamp)
         if self.slam is None:
-            self.warner.warn('Skipping corners: no odometry received yet')
+            self.stats.drop('no_odometry', 'Skipping corners: no odometry received yet')
             return
         if t < self.odo_t[0]:
-            self.warner.warn(f'Skipping corners: stamp {t} ns is older than the odometry')
+            self.stats.drop('too_old', f'Skipping corners: stamp {t} ns is older than the '
+                            f'buffered odometry (from {self.odo_t[0]} ns)')
             return
-        cols = np.column_stack([a[n] for n in names]).reshape(-1, len(names))
-        ok = np.all(np.isfinite(cols), axis=1)
-        if not np.all(ok):
-            self.warner.warn(f'Dropping {int(np.sum(~ok))} corners with NaN or inf')
-            cols = cols[ok]
+        if t < self.prev[0]:
+            self.stats.drop('out_of_order', f'Skipping corners: stamp {t} ns is older than '
+                            f'the last step at {self.prev[0]} ns (arrived out of order)')
+            return
+        cols = self._valid_corners(np.column_stack([a[n] for n in names]).reshape(
+            -1, len(names)))
         corners = [SimpleNamespace(position=c[:2], bisector=c[2], opening=c[3],
                                    covariance=np.array([[c[4], c[5]], [c[5], c[6]]]))
                    for c in cols]
-        self.pending.append((t, corners))
-        if t <= self.odo_t[-1]:
+        received = self.stats.received_ns
+        bisect.insort(self.pending, (t, received, corners), key=lambda item: item[0])
+        if len(self.pending) > MAX_PENDING:
+            old = self.pending.pop(0)
+            self.stats.drop('not_covered', f'Dropping corners at {old[0]} ns: more than '
+                            f'{MAX_PENDING} corner sets wait for odometry (newest {t} ns, '
+                            f'odometry up to {self.odo_t[-1]} ns)')
+        while self.pending and self.pending[0][0] <= self.odo_t[-1]:
             self._step(*self.pending.pop(0))
 
-    def _step(self, t: int, corners: list) -> None:
+    def _valid_corners(self, cols: np.ndarray) -> np.ndarray:
+        """Drop corner rows with NaN / inf or a covariance that is not PSD (with a warning)."""
+        finite = np.all(np.isfinite(cols), axis=1)
+        if not np.all(finite):
+            bad = cols[~finite][0]
+            self.warner.warn(f'Dropping {int(np.sum(~finite))} corners with NaN or inf '
+                             f'(first: {bad.tolist()})')
+        with np.errstate(invalid='ignore'):
+            psd = (cols[:, 4] >= 0) & (cols[:, 6] >= 0) & (
+                cols[:, 4] * cols[:, 6] - cols[:, 5] ** 2 >= 0)
+        bad = finite & ~psd
+        if np.any(bad):
+            c = cols[bad][0]
+            self.warner.warn(f'Dropping {int(np.sum(bad))} corners whose covariance is not '
+                             f'positive semi-definite (first: cov_xx={c[4]:g}, '
+                             f'cov_xy={c[5]:g}, cov_yy={c[6]:g})')
+        return cols[finite & psd]
+
+    def _step(self, t: int, received_ns: int, corners: list,
+              odometry_received_ns: int = 0) -> None:
         """Predict to the corner stamp with interpolated odometry and update."""
         rel = (np.asarray(self.odo_t, dtype=np.int64) - self.t0) * 1e-9
         odo = interpolate_pose((t - self.t0) * 1e-9, rel, np.array(self.odo_p))
@@ -206,7 +256,7 @@ class EkfSlamNode(Node):
             self.warner.warn(f'Resetting EKF-SLAM: {bad}')
             self.resets += 1
             self.slam.reset(odo)
-            self.path.poses = []
+            self.path_poses.clear()
         else:
             self.slam.predict(odometry_increment(self.prev[1], odo))
         self.prev = (t, odo)
@@ -214,18 +264,36 @@ class EkfSlamNode(Node):
         desc = corner_descriptors(corners, self.laser_pose)
         self.slam.update(z, r, desc)
         self._publish(t)
+        self.stats.processed(max(received_ns, odometry_received_ns))
 
     def _publish(self, t: int) -> None:
+        """Publish the pose of one step and remember it for the path."""
         pose, cov = self.slam.pose, self.slam.pose_covariance
         self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
         self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
-        ps = PoseStamped()
-        ps.header.stamp = ns_to_stamp(t)
-        ps.header.frame_id = self.map_frame
-        ps.pose = pose_msg_from_2d(pose)
-        self.path.header.stamp = ps.header.stamp
-        self.path.poses.append(ps)
-        self.pub_path.publish(self.path)
+        self.path_poses.append((t, pose.copy()))
+        self.display_stamp = t
+
+    def path_message(self) -> PathMsg:
+        """Return the path of the last ``path_max_poses`` steps."""
+        path = PathMsg()
+        path.header.frame_id = self.map_frame
+        for t, pose in self.path_poses:
+            ps = PoseStamped()
+            ps.header.stamp = ns_to_stamp(t)
+            ps.header.frame_id = self.map_frame
+            ps.pose = pose_msg_from_2d(pose)
+            path.poses.append(ps)
+        if path.poses:
+            path.header.stamp = path.poses[-1].header.stamp
+        return path
+
+    def publish_display(self) -> None:
+        """Publish the path and the landmarks if a step was made since the last time."""
+        if self.display_stamp is None:
+            return
+        t, self.display_stamp = self.display_stamp, None
+        self.pub_path.publish(self.path_message())
         self.pub_marks.publish(self.landmark_markers(t))
 
     def landmark_markers(self, t: int) -> MarkerArray:
@@ -249,14 +317,14 @@ class EkfSlamNode(Node):
         """Write the landmarks and covariances to ``map_file``."""
         data = self.map_dict()
         try:
-            path = Path(self.map_file)
+            path = output_path(self.map_file)
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(yaml.safe_dump(data, sort_keys=False))
         except OSError as err:
-            response.success, response.message = False, f'cannot write {self.map_file}: {err}'
+            response.success, response.message = False, f'cannot write {path}: {err}'
             return response
         response.success = True
-        response.message = f'saved {len(data["landmarks"])} landmarks to {self.map_file}'
+        response.message = f'saved {len(data["landmarks"])} landmarks to {path}'
         return response
 
     def on_reset(self, request, response):

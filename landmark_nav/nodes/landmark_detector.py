@@ -16,7 +16,8 @@ the image's stamp and frame (the camera optical frame):
 
 Bad input (unsupported encoding, undecodable data, size disagreeing with CameraInfo, no
 CameraInfo yet, an image without contrast) is dropped with a warning throttled per kind of
-problem; saturated images are processed with a warning.
+problem; saturated images are processed with a warning. Processed and dropped images and
+the latency are on ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
 from dataclasses import replace
@@ -28,7 +29,7 @@ from landmark_nav.conversions import (array_to_image, camera_info_to_model, Conv
 from landmark_nav.landmark_msgs import (compressed_to_gray, draw_detections, image_to_gray,
                                         make_landmark_markers, make_landmark_pose_array,
                                         make_pose_with_covariance_6d)
-from landmark_nav.nodes.common import (declare, declare_dataclass, ParameterError,
+from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats, ParameterError,
                                        ProblemWarner, run_node, SENSOR_QOS)
 from landmark_nav.vision.detector import detect_landmarks, DetectorParams, image_problem
 from landmark_nav.vision.landmark import LandmarkDesign
@@ -111,6 +112,7 @@ class LandmarkDetector(Node):
             except LandmarkMapError as err:
                 raise ParameterError(f'parameter landmark_map: {err}') from err
         self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner)
         self.camera = None
         self.info_frame = ''
         self.frames = 0
@@ -121,10 +123,10 @@ class LandmarkDetector(Node):
             if self.debug_image else None
         self.create_subscription(CameraInfo, 'camera/camera_info', self.on_info, SENSOR_QOS)
         if compressed:
-            self.create_subscription(CompressedImage, 'camera/image_raw/compressed',
-                                     self.on_compressed, SENSOR_QOS)
+            self.stats.subscribe(CompressedImage, 'camera/image_raw/compressed',
+                                 self.on_compressed, SENSOR_QOS)
         else:
-            self.create_subscription(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+            self.stats.subscribe(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
         self.get_logger().info(f'landmark_detector: {kind} landmarks of {width} m, '
                                f'{len(self.landmarks)} in the map')
 
@@ -141,7 +143,7 @@ class LandmarkDetector(Node):
         try:
             gray = image_to_gray(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping image: {err}')
+            self.stats.drop('malformed', f'Dropping image: {err}')
             return
         self.process(msg.header, gray)
 
@@ -150,7 +152,7 @@ class LandmarkDetector(Node):
         try:
             gray = compressed_to_gray(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping image: {err}')
+            self.stats.drop('malformed', f'Dropping image: {err}')
             return
         self.process(msg.header, gray)
 
@@ -158,17 +160,20 @@ class LandmarkDetector(Node):
         """Detect the landmarks of one grey image and publish them."""
         cam = self.camera
         if cam is None:
-            self.warner.warn('Dropping image: no CameraInfo received yet on camera/camera_info')
+            self.stats.drop('no_camera_info',
+                            'Dropping image: no CameraInfo received yet on camera/camera_info')
             return
         if gray.shape != (cam.height, cam.width):
-            self.warner.warn(f'Dropping image: size {gray.shape[1]}x{gray.shape[0]} disagrees '
-                             f'with CameraInfo {cam.width}x{cam.height}')
+            self.stats.drop('malformed', f'Dropping image: size {gray.shape[1]}x'
+                            f'{gray.shape[0]} disagrees with CameraInfo {cam.width}x'
+                            f'{cam.height}')
             return
         problem, usable = image_problem(gray, self.params.min_contrast)
         if problem:
-            self.warner.warn(('' if usable else 'Dropping image: ') + problem)
             if not usable:
+                self.stats.drop('unusable', 'Dropping image: ' + problem)
                 return
+            self.warner.warn(problem)
         stamp = stamp_to_ns(header.stamp)
         frame = header.frame_id or self.info_frame
         dets = detect_landmarks(gray, self.params, cam)
@@ -194,6 +199,7 @@ class LandmarkDetector(Node):
             self.pub_debug.publish(array_to_image(draw_detections(gray, dets), 'bgr8', stamp,
                                                   frame))
         self.frames += 1
+        self.stats.processed()
 
 
 def main(args=None) -> int:

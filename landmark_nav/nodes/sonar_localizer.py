@@ -33,8 +33,10 @@ row is no longer waited for (warned once). Until a usable map is set the filter 
 predicts (dead reckoning, growing covariance, a throttled warning); without sonar readings
 for ``sonar_timeout`` it publishes dead reckoning at every odometry sample. Odometry going
 back in time (a looped bag) resets the time bookkeeping. Bad messages (NaN or out-of-limit
-ranges, malformed odometry, joint states or maps) are dropped with a warning throttled per
-kind of problem; the node keeps running.
+ranges, a field of view that is not finite and >= 0, malformed odometry, joint states or
+maps) are dropped with a warning throttled per kind of problem; the node keeps running.
+Estimates published, inputs dropped and the latency are on ``/diagnostics``
+(:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
 from dataclasses import replace
@@ -50,8 +52,9 @@ from landmark_nav.localization.grid import GridMap, load_map_yaml
 from landmark_nav.localization.odometry import ProcessNoise
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.tracking import sonar_reading, SonarTracker
-from landmark_nav.nodes.common import (declare, declare_dataclass, declare_strings, ParameterError,
-                                       ProblemWarner, run_node, SENSOR_QOS)
+from landmark_nav.nodes.common import (declare, declare_dataclass, declare_strings,
+                                       InputStats, ParameterError, ProblemWarner, run_node,
+                                       SENSOR_QOS)
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 from rclpy.node import Node
@@ -151,11 +154,12 @@ class SonarLocalizer(Node):
         self._check(source, mounts, params)
         self.initial_cov = np.diag(np.square(std0))
         self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner)
         self.tracker = SonarTracker(
             filt, np.reshape(mounts, (-1, 3)), replace(params, noise=noise), pose0,
             self.initial_cov, radius, axle, k, sync, stale, sonar_timeout,
             sonar_names=self.topics,
-            warn=self.warner.warn, info=self.get_logger().info)
+            warn=self._tracker_problem, info=self.get_logger().info)
         if map_file:
             try:
                 self.tracker.set_map(load_map_yaml(map_file))
@@ -165,12 +169,12 @@ class SonarLocalizer(Node):
         else:
             self.create_subscription(OccupancyGrid, 'map', self.on_map, MAP_QOS)
         if source == 'odom':
-            self.create_subscription(Odometry, 'odom', self.on_odom, SENSOR_QOS)
+            self.stats.subscribe(Odometry, 'odom', self.on_odom, SENSOR_QOS)
         else:
-            self.create_subscription(JointState, 'joint_states', self.on_joints, SENSOR_QOS)
+            self.stats.subscribe(JointState, 'joint_states', self.on_joints, SENSOR_QOS)
         for i, topic in enumerate(self.topics):
-            self.create_subscription(Range, topic, lambda msg, i=i: self.on_range(i, msg),
-                                     SENSOR_QOS)
+            self.stats.subscribe(Range, topic, lambda msg, i=i: self.on_range(i, msg),
+                                 SENSOR_QOS)
         self.create_subscription(PoseWithCovarianceStamped, 'initialpose',
                                  self.on_initial_pose, 10)
         self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10)
@@ -192,12 +196,19 @@ class SonarLocalizer(Node):
             raise ParameterError('parameters min_range and max_range: need min_range < '
                                  'max_range')
 
+    def _tracker_problem(self, message: str) -> None:
+        """Warn about a tracker problem; count it as a drop when input was discarded."""
+        if any(word in message for word in ('dropped', 'ignored', 'arrived after')):
+            self.stats.drop('tracker', message)
+        else:
+            self.warner.warn(message)
+
     def on_odom(self, msg: Odometry) -> None:
         """Feed one odometry pose."""
         try:
             data = odometry_to_pose(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping odometry: {err}')
+            self.stats.drop('malformed', f'Dropping odometry: {err}')
             return
         self.publish(self.tracker.add_odometry_pose(data.stamp_ns, data.pose))
 
@@ -206,8 +217,9 @@ class SonarLocalizer(Node):
         names = list(msg.name)
         missing = [j for j in self.wheel_joints if j not in names]
         if missing or len(msg.position) != len(names):
-            self.warner.warn(f'Dropping joint states: no position for {missing or "every joint"}'
-                             f' ({len(msg.position)} positions, {len(names)} names)')
+            self.stats.drop('malformed', 'Dropping joint states: no position for '
+                            f'{missing or "every joint"} ({len(msg.position)} positions, '
+                            f'{len(names)} names)')
             return
         angles = [msg.position[names.index(j)] for j in self.wheel_joints]
         self.publish(self.tracker.add_wheel_angles(stamp_to_ns(msg.header.stamp), angles))
@@ -217,7 +229,8 @@ class SonarLocalizer(Node):
         try:
             reading = range_to_value(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping sonar reading on {self.topics[index]}: {err}')
+            self.stats.drop('malformed', f'Dropping sonar reading on {self.topics[index]}: '
+                            f'{err}')
             return
         value, problem = sonar_reading(reading.value, msg.min_range, msg.max_range)
         if problem is not None:
@@ -265,6 +278,7 @@ class SonarLocalizer(Node):
     def publish(self, estimates: list) -> None:
         """Publish the pose and the filtered odometry of each new estimate."""
         for e in estimates:
+            self.stats.processed()
             self.pub_pose.publish(make_pose_with_covariance_stamped(
                 e.stamp_ns, self.global_frame, e.pose, e.covariance))
             twist_cov = np.zeros((3, 3))

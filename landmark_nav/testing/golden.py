@@ -109,7 +109,7 @@ def load_expected(bag: Any) -> Dict[str, Any]:
     """Read and check ``<bag>/expected.yaml``.
 
     Raises:
-        ValueError: A figure names an unknown run or lacks value / tolerance.
+        ValueError: A figure names an unknown run or lacks value, readme_line or tolerance.
     """
     path = expected_path(bag)
     data = yaml.safe_load(path.read_text())
@@ -120,8 +120,8 @@ def load_expected(bag: Any) -> Dict[str, Any]:
         run = fig.get('source', [None])[0]
         if run not in data.get('runs', {}):
             raise ValueError(f'{path}: figure {fid} reads run {run!r}, not listed in runs')
-        if 'value' not in fig or not ({'rel', 'abs'} & set(fig)):
-            raise ValueError(f'{path}: figure {fid} needs value and rel or abs')
+        if 'value' not in fig or 'readme_line' not in fig or not ({'rel', 'abs'} & set(fig)):
+            raise ValueError(f'{path}: figure {fid} needs value, readme_line and rel or abs')
     return data
 
 

@@ -60,7 +60,8 @@ def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     from landmark_nav.tools.evaluate_features import run
     print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json,
               reference=args.reference, mount=args.mount, sensor_sigma_r=args.sensor_sigma_r,
-              scans=args.scans, seed=args.seed, truth_free=args.truth_free))
+              scans=args.scans, seed=args.seed, truth_free=args.truth_free,
+              progress=sys.stderr.isatty()))
     return 0
 
 
@@ -154,6 +155,15 @@ def _cmd_rasterize_map(args: argparse.Namespace) -> int:
 def _cmd_make_landmark(args: argparse.Namespace) -> int:
     from landmark_nav.tools.make_landmark import run
     print(run(args.code, args.out, kind=args.kind, frame_width=args.frame_width, dpi=args.dpi))
+    return 0
+
+
+def _cmd_config(args: argparse.Namespace) -> int:
+    from landmark_nav.tools.config_files import available, config_path
+    if args.node is None:
+        print('\n'.join(available()))
+        return 0
+    print(config_path(args.node))
     return 0
 
 
@@ -331,6 +341,14 @@ def build_parser() -> argparse.ArgumentParser:
                        help='write a printable visual landmark (PNG, SVG or PDF) at true scale')
     add_landmark_arguments(p)
     p.set_defaults(func=_cmd_make_landmark)
+
+    p = sub.add_parser('config', help="print the path of a node's shipped parameter file "
+                       '(for --params-file; no NODE: list the nodes)')
+    p.add_argument('node', nargs='?', default=None, help='node name, e.g. ekf_slam')
+    p.set_defaults(func=_cmd_config)
+
+    from landmark_nav.tools.pipeline import add_parser as add_pipeline_parser
+    add_pipeline_parser(sub, _Parser)
 
     from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
     add_emulate_parsers(sub, _Parser)

@@ -308,19 +308,19 @@ def evaluate_truth_free(bag, reference: Optional[str] = None,
 def run(bag, every: int = 1, sigma_r: Optional[float] = None, json_out=None,
         reference: Optional[str] = None, mount: Optional[Sequence[float]] = None,
         sensor_sigma_r: Optional[float] = None, scans: int = 20, seed: int = 0,
-        truth_free: bool = False) -> str:
-    """Evaluate, optionally write JSON, and return the tables.
+        truth_free: bool = False, progress: bool = False) -> str:
+    """Evaluate, optionally write JSON, and return the tables (``progress``: a tqdm bar).
 
     With ground-truth features (a simulator bag) and not ``truth_free``: the simulator
     tables; otherwise the truth-free tables, ``sigma_r`` then being the range noise the
     extractors assume (default: the node default) and ``sensor_sigma_r`` the sensor's.
     """
     if not truth_free and (Path(bag) / GROUND_TRUTH_FILE).is_file():
-        result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=True)
+        result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=progress)
         text = format_tables(result)
     else:
         result, notes = evaluate_truth_free(bag, reference, mount, sensor_sigma_r, sigma_r,
-                                            scans, seed, every, progress=True)
+                                            scans, seed, every, progress=progress)
         text = '\n'.join(notes + [format_scan_metrics(result)])
     if json_out:
         Path(json_out).write_text(json.dumps(result, indent=2))

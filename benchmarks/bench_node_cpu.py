@@ -1,0 +1,156 @@
+"""CPU per scan and memory of the live SLAM nodes while a bag is replayed through them.
+
+Run from the repository root::
+
+    python benchmarks/bench_node_cpu.py [bags/office] [--rate 1] [--threads N] [--seconds S]
+
+Starts ``corner_extractor`` and ``ekf_slam`` as processes (their console entry points, on a
+private DDS domain), replays the bag's ``/scan`` and ``/odom`` with ``bag_player`` (waiting
+for the subscribers) and reads each node's CPU time (user + system, ``/proc/<pid>/stat``)
+and resident memory before and after the replay. Printed per node: CPU per scan [ms]
+(CPU during the replay / scans replayed), RSS at start and end [MB], and the processed /
+dropped counts and latency percentiles of its last ``/diagnostics`` status.
+
+``--threads N`` exports ``LANDMARK_NAV_THREADS=N`` to the nodes (default: unset, i.e. the
+nodes' own default of one thread); ``--threads 0`` exports nothing and sets
+``OPENBLAS_NUM_THREADS`` / ``OMP_NUM_THREADS`` to the number of CPUs instead (how numpy
+behaves without a limit). ``--repo`` runs another checkout's code (e.g. an older commit
+exported with ``git archive``), for a before / after comparison. ``--seconds`` stops the
+replay after that much bag time. ``--soak S`` loops the bag for S wall seconds instead (a
+soak test: at ``--rate 4`` the office bag gives 40 Hz scans and odometry; each loop resets
+the filter, as odometry goes back in time) and also prints the RSS growth after the first
+minute; the scan count is then the corner extractor's processed + dropped.
+"""
+
+import argparse
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+REPO = Path(__file__).resolve().parents[1]
+NODES = ('corner_extractor', 'ekf_slam')
+
+
+def cpu_seconds(pid: int) -> float:
+    """Return the user + system CPU time of a process [s]."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def rss_mb(pid: int) -> float:
+    """Return the resident set size of a process [MB]."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024.0
+    return float('nan')
+
+
+def main() -> int:
+    """Run the nodes, replay the bag, print the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('bag', nargs='?', default=str(REPO / 'bags' / 'office'))
+    parser.add_argument('--rate', type=float, default=1.0)
+    parser.add_argument('--threads', type=int, default=None)
+    parser.add_argument('--seconds', type=float, default=None)
+    parser.add_argument('--soak', type=float, default=None, metavar='S')
+    parser.add_argument('--repo', default=str(REPO), help='checkout whose code is run')
+    parser.add_argument('--domain', type=int, default=90 + os.getpid() % 10)
+    args = parser.parse_args()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               PYTHONPATH=args.repo + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    for key in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'LANDMARK_NAV_THREADS'):
+        env.pop(key, None)
+    if args.threads == 0:
+        env['OPENBLAS_NUM_THREADS'] = env['OMP_NUM_THREADS'] = str(os.cpu_count())
+    elif args.threads is not None:
+        env['LANDMARK_NAV_THREADS'] = str(args.threads)
+    sys.path.insert(0, args.repo)
+    from landmark_nav.bag import BagReader
+    with BagReader(args.bag) as reader:
+        start, scans = reader.start_ns, 0
+        for item in reader.messages(('/scan',)):
+            if args.seconds is not None and item.log_time_ns - start > args.seconds * 1e9:
+                break
+            scans += 1
+    procs = {n: subprocess.Popen([sys.executable, '-m', f'landmark_nav.nodes.{n}'], env=env,
+                                 cwd=args.repo, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+             for n in NODES}
+    diag = subprocess.Popen([sys.executable, '-c', DIAG_LISTENER], env=env, cwd=args.repo,
+                            stdout=subprocess.PIPE, text=True)
+    time.sleep(5.0)
+    cpu0 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
+    rss0 = {n: rss_mb(p.pid) for n, p in procs.items()}
+    player = [sys.executable, '-m', 'landmark_nav.nodes.bag_player', args.bag, '--topics',
+              '/scan', '/odom', '--rate', str(args.rate), '--wait-for-subscribers', '20']
+    wall = time.monotonic()
+    try:
+        if args.soak is not None:
+            play = subprocess.Popen(player + ['--loop'], env=env, cwd=args.repo,
+                                    stdout=subprocess.DEVNULL)
+            time.sleep(min(60.0, args.soak))
+            rss0 = {n: rss_mb(p.pid) for n, p in procs.items()}
+            time.sleep(max(0.0, args.soak - 60.0))
+            play.send_signal(signal.SIGINT)
+            play.wait(30)
+        elif args.seconds is None:
+            subprocess.run(player, env=env, cwd=args.repo, check=True,
+                           stdout=subprocess.DEVNULL)
+        else:
+            play = subprocess.Popen(player, env=env, cwd=args.repo, stdout=subprocess.DEVNULL)
+            time.sleep(args.seconds / args.rate + 2.0)
+            play.send_signal(signal.SIGINT)
+            play.wait(30)
+        wall = time.monotonic() - wall
+        time.sleep(3.0)
+        cpu1 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
+        rss1 = {n: rss_mb(p.pid) for n, p in procs.items()}
+    finally:
+        for p in procs.values():
+            p.send_signal(signal.SIGINT)
+        diag.send_signal(signal.SIGINT)
+        last = {}
+        out, _ = diag.communicate(timeout=30)
+        for line in out.splitlines():
+            name, _, text = line.partition(' ')
+            last[name] = text
+        for p in procs.values():
+            p.wait(30)
+    if args.soak is not None:
+        values = dict(kv.split('=') for kv in last.get('corner_extractor', '').split())
+        scans = int(values.get('processed', 0)) + int(values.get('dropped', 0))
+    print(f'{args.bag}: {scans} scans at rate {args.rate} in {wall:.1f} s, code {args.repo}, '
+          f'threads {args.threads if args.threads is not None else "default"}')
+    for n in NODES:
+        print(f'{n:18s} CPU {1e3 * (cpu1[n] - cpu0[n]) / scans:7.2f} ms per scan, RSS '
+              f'{rss0[n]:.1f} -> {rss1[n]:.1f} MB; diagnostics: {last.get(n, "none")}')
+    return 0
+
+
+# A listener printing the last /diagnostics input status of each node.
+DIAG_LISTENER = """
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import ExternalShutdownException
+rclpy.init()
+node = rclpy.create_node('bench_diagnostics')
+last = {}
+def on(msg):
+    for s in msg.status:
+        if s.name.endswith(': input'):
+            last[s.name.split(':')[0]] = ' '.join(f'{v.key}={v.value}' for v in s.values)
+node.create_subscription(DiagnosticArray, '/diagnostics', on, 10)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+for k, v in last.items():
+    print(k, v, flush=True)
+"""
+
+if __name__ == '__main__':
+    raise SystemExit(main())

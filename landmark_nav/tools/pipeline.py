@@ -1,0 +1,114 @@
+"""``landmark_nav pipeline NAME``: start a whole pipeline of nodes with one command.
+
+Each node runs as its own process with its shipped parameter file
+(:func:`~landmark_nav.tools.config_files.config_path`) and the overrides given with
+``--set NODE.PARAMETER=VALUE``; honcho (a Python port of Foreman) starts them, prefixes
+every output line with the node's name and, on Ctrl-C or SIGTERM, stops them all with
+SIGTERM (every node shuts down cleanly on it). When one process ends, the others are
+stopped too (so a replay pipeline ends with its bag, unless ``--loop``).
+
+Pipelines:
+
+* ``slam``: live robot SLAM, laser_driver + base_driver + corner_extractor + ekf_slam;
+* ``sonar``: sonar localization, base_driver + sonar_localizer (give it a map:
+  ``--set sonar_localizer.map_file=/path/map.yaml``, or publish one on ``/map``);
+* ``landmarks``: landmark navigation, base_driver + landmark_detector (the camera driver is
+  the user's; ``--set landmark_detector.landmark_map=/path/landmarks.yaml`` for robot fixes);
+* ``replay``: a bag's ``/scan`` and ``/odom`` through the SLAM nodes, bag_player +
+  corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
+  subscribed, so no scan is lost to the nodes' start-up).
+"""
+
+import argparse
+import shlex
+import sys
+from typing import Dict, List, Optional, Sequence
+
+from landmark_nav.tools.config_files import config_path
+
+PIPELINES = {
+    'slam': ('laser_driver', 'base_driver', 'corner_extractor', 'ekf_slam'),
+    'sonar': ('base_driver', 'sonar_localizer'),
+    'landmarks': ('base_driver', 'landmark_detector'),
+    'replay': ('bag_player', 'corner_extractor', 'ekf_slam'),
+}
+
+
+def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
+    """Parse ``NODE.PARAMETER=VALUE`` settings into ``-p`` arguments per node.
+
+    Raises:
+        ValueError: A setting is malformed or names a node outside the pipeline.
+
+    """
+    out: Dict[str, List[str]] = {n: [] for n in nodes}
+    for text in settings:
+        key, sep, value = text.partition('=')
+        node, dot, name = key.partition('.')
+        if not (sep and dot and node and name):
+            raise ValueError(f'--set {text!r}: expected NODE.PARAMETER=VALUE')
+        if node not in out or node == 'bag_player':
+            raise ValueError(f'--set {text!r}: no node {node!r} with parameters in this '
+                             f'pipeline ({", ".join(n for n in nodes if n != "bag_player")})')
+        out[node] += ['-p', f'{name}:={value}']
+    return out
+
+
+def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str] = None,
+                      rate: float = 1.0, loop: bool = False) -> Dict[str, List[str]]:
+    """Return the command line of every process of a pipeline, by node name.
+
+    Raises:
+        ValueError: Unknown pipeline, a bad ``--set``, or a replay without a bag.
+        FileNotFoundError: A node's parameter file is missing.
+
+    """
+    if name not in PIPELINES:
+        raise ValueError(f'unknown pipeline {name!r}; one of {", ".join(PIPELINES)}')
+    nodes = PIPELINES[name]
+    extra = _overrides(settings, nodes)
+    commands = {}
+    for node in nodes:
+        cmd = [sys.executable, '-m', f'landmark_nav.nodes.{node}']
+        if node == 'bag_player':
+            if not bag:
+                raise ValueError(f'pipeline {name} needs --bag')
+            cmd += [bag, '--rate', repr(float(rate)), '--topics', '/scan', '/odom',
+                    '--wait-for-subscribers', '30'] + (['--loop'] if loop else [])
+        else:
+            cmd += ['--ros-args', '--params-file', str(config_path(node))] + extra[node]
+        commands[node] = cmd
+    return commands
+
+
+def add_parser(sub, parser_class) -> None:
+    """Add the ``pipeline`` subcommand to the ``landmark_nav`` command line."""
+    p = sub.add_parser('pipeline', help='start a pipeline of nodes (slam, sonar, landmarks, '
+                       'replay) with the shipped parameters; Ctrl-C stops it',
+                       description=__doc__.split('\n')[0])
+    p.add_argument('name', choices=sorted(PIPELINES), help='which pipeline')
+    p.add_argument('--bag', help='bag to replay (pipeline replay)')
+    p.add_argument('--rate', type=float, default=1.0, help='replay speed factor')
+    p.add_argument('--loop', action='store_true', help='replay the bag in a loop')
+    p.add_argument('--set', action='append', default=[], metavar='NODE.PARAMETER=VALUE',
+                   help='override a parameter, e.g. laser_driver.port=/dev/ttyUSB0 '
+                   '(repeatable)')
+    p.add_argument('--dry-run', action='store_true', help='print the commands, start nothing')
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Start the pipeline and wait until it stops; return honcho's exit status."""
+    commands = pipeline_commands(args.name, args.set, args.bag, args.rate, args.loop)
+    if args.dry_run:
+        for node, cmd in commands.items():
+            print(f'{node}: {shlex.join(cmd)}')
+        return 0
+    from honcho.manager import Manager
+    from honcho.printer import Printer
+    manager = Manager(Printer(sys.stdout, colour=sys.stdout.isatty(),
+                              width=max(len(n) for n in commands)))
+    for node, cmd in commands.items():
+        manager.add_process(node, 'exec ' + shlex.join(cmd))  # no shell between
+    manager.loop()
+    return manager.returncode or 0

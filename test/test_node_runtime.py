@@ -1,0 +1,168 @@
+"""Every node's main: thread limits, one-line parameter errors, clean shutdown on signals."""
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+NODES = ['corner_extractor', 'line_extractor', 'ekf_slam', 'sonar_localizer',
+         'landmark_detector']
+
+# Run a node's main with rclpy.spin replaced by a probe that prints the thread pools.
+PROBE = """
+import importlib, sys
+import rclpy
+from threadpoolctl import threadpool_info
+def spin(node):
+    pools = sorted((i['internal_api'], i['num_threads']) for i in threadpool_info())
+    import cv2
+    print('POOLS', pools, 'cv2', cv2.getNumThreads(), flush=True)
+    raise KeyboardInterrupt
+rclpy.spin = spin
+module = importlib.import_module('landmark_nav.nodes.' + sys.argv[1])
+sys.exit(module.main([sys.argv[0]]))
+"""
+
+
+def node_env(**extra) -> dict:
+    """Return the environment of a node subprocess (no thread variables unless given)."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
+                        'BLIS_NUM_THREADS', 'LANDMARK_NAV_THREADS')}
+    env['PYTHONPATH'] = str(REPO) + os.pathsep + env.get('PYTHONPATH', '')
+    env.update(extra)
+    return env
+
+
+def probe_pools(node: str, **extra) -> str:
+    """Return the POOLS line a node prints when it starts spinning."""
+    out = subprocess.run([sys.executable, '-c', PROBE, node], env=node_env(**extra),
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return [line for line in out.stdout.splitlines() if line.startswith('POOLS')][0]
+
+
+@pytest.mark.parametrize('node', NODES)
+def test_numerical_libraries_are_single_threaded_in_every_node(node):
+    line = probe_pools(node)
+    pools = eval(line.split(' ', 1)[1].rsplit(' cv2', 1)[0])
+    assert pools and all(n == 1 for _, n in pools), line
+    assert line.endswith('cv2 1'), line
+
+
+def test_thread_limit_can_be_configured():
+    line = probe_pools('ekf_slam', LANDMARK_NAV_THREADS='2')
+    pools = eval(line.split(' ', 1)[1].rsplit(' cv2', 1)[0])
+    assert all(n == 2 for _, n in pools) and line.endswith('cv2 2'), line
+    line = probe_pools('ekf_slam', OPENBLAS_NUM_THREADS='2')  # the user's own setting stays
+    assert ('openblas', 2) in eval(line.split(' ', 1)[1].rsplit(' cv2', 1)[0]), line
+
+
+def run_main(node: str, *ros_args: str, cwd=None) -> subprocess.CompletedProcess:
+    """Run a node's main with ROS arguments until it exits (it must exit by itself)."""
+    return subprocess.run([sys.executable, '-m', f'landmark_nav.nodes.{node}', '--ros-args',
+                           *ros_args], env=node_env(), capture_output=True, text=True,
+                          timeout=120, cwd=cwd or REPO)
+
+
+@pytest.mark.parametrize('node, name, value, expected', [
+    ('ekf_slam', 'confirm_hits', '2.5', 'expected an integer, got 2.5 (a double'),
+    ('ekf_slam', 'r_scale', '5', 'expected a double, got 5 (an integer); write 5.0 for a double'),
+    ('laser_driver', 'stale_warn', '5', 'expected a double, got 5 (an integer)'),
+    ('base_driver', 'cmd_vel_timeout', 'true', 'expected a double, got True (a bool)'),
+    ('sonar_localizer', 'filter', '3', 'expected a string, got 3 (an integer)'),
+    ('sonar_localizer', 'sonar_topics', '5', 'expected a list of strings, got 5'),
+    ('corner_extractor', 'refine', '1.0', 'expected a bool (true / false), got 1.0'),
+])
+def test_wrong_parameter_types_are_one_line_errors(node, name, value, expected):
+    """A wrong type used to print a 20-line traceback."""
+    out = run_main(node, '-p', f'{name}:={value}')
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1, out.stderr
+    assert lines[0].startswith('error: ') and f'parameter {name}: expected ' in lines[0]
+    assert expected in lines[0], lines[0]
+
+
+def test_parameters_say_they_are_read_only():
+    from landmark_nav.nodes.ekf_slam import EkfSlamNode
+    from landmark_nav.testing import RosHarness
+    from rclpy.parameter import Parameter
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context)
+        described = node.describe_parameter('r_scale')
+        result = node.set_parameters([Parameter('r_scale', value=2.0)])[0]
+        node.destroy_node()
+    assert described.read_only and 'read-only: set at start-up' in described.description
+    assert not result.successful and 'read-only' in result.reason and 'r_scale' in result.reason
+
+
+def test_config_paths_work_from_any_directory(tmp_path):
+    """README commands with config/... paths only worked from the repository root."""
+    out = subprocess.run([sys.executable, '-m', 'landmark_nav.tools.cli', 'config', 'ekf_slam'],
+                         env=node_env(), capture_output=True, text=True, timeout=60,
+                         cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    path = Path(out.stdout.strip())
+    assert path.is_absolute() and path.read_text() == (REPO / 'config/ekf_slam.yaml').read_text()
+    readme = (REPO / 'README.md').read_text()
+    assert '--params-file config/' not in readme and '$(landmark_nav config' in readme
+
+
+def _start(args, env):
+    return subprocess.Popen([sys.executable, '-m', *args], env=env, cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
+    """Ctrl-C or kill printed tracebacks (bag_player, ekf_slam while processing)."""
+    env = node_env()
+    nodes = {n: _start([f'landmark_nav.nodes.{n}'], env) for n in NODES}
+    time.sleep(8.0)  # start-up, generous on a loaded machine
+    player = _start(['landmark_nav.nodes.bag_player', str(REPO / 'bags' / 'office'),
+                     '--rate', '2'], env)
+    time.sleep(6.0)  # data flowing through every node
+    procs = dict(nodes, bag_player=player)
+    assert all(p.poll() is None for p in procs.values()), {
+        n: p.stderr.read() for n, p in procs.items() if p.poll() is not None}
+    for p in procs.values():
+        p.send_signal(sig)
+    for name, p in procs.items():
+        _, err = p.communicate(timeout=60)
+        assert 'Traceback' not in err and 'Error' not in err, f'{name}:\n{err}'
+        assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_drivers_stop_cleanly_on_signals(tmp_path, sig):
+    env = node_env()
+    urg, p2os = str(tmp_path / 'urg'), str(tmp_path / 'p2os')
+    emulators = [_start(['landmark_nav.tools.cli', 'emulate', 'urg', '--link', urg], env),
+                 _start(['landmark_nav.tools.cli', 'emulate', 'p2os', '--link', p2os], env)]
+    time.sleep(4.0)
+    drivers = {'laser_driver': _start(['landmark_nav.nodes.laser_driver', '--ros-args', '-p',
+                                       f'port:={urg}'], env),
+               'base_driver': _start(['landmark_nav.nodes.base_driver', '--ros-args', '-p',
+                                      f'port:={p2os}'], env)}
+    try:
+        time.sleep(8.0)  # connected and publishing
+        assert all(p.poll() is None for p in drivers.values()), {
+            n: p.stderr.read() for n, p in drivers.items() if p.poll() is not None}
+        for p in drivers.values():
+            p.send_signal(sig)
+        for name, p in drivers.items():
+            _, err = p.communicate(timeout=60)
+            assert 'Traceback' not in err, f'{name}:\n{err}'
+            assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
+            assert 'connected' in err or 'opened' in err.lower(), f'{name} never connected:\n{err}'
+    finally:
+        for p in emulators:
+            p.send_signal(signal.SIGINT)
+            p.communicate(timeout=30)

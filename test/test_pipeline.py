@@ -1,0 +1,58 @@
+"""``landmark_nav pipeline``: one command starts the nodes, prefixes output, Ctrl-C stops."""
+
+import importlib.util
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from landmark_nav.testing import RosHarness
+from landmark_nav.tools.pipeline import pipeline_commands, PIPELINES
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize('name', sorted(PIPELINES))
+def test_every_pipeline_names_existing_nodes_and_parameter_files(name):
+    commands = pipeline_commands(name, bag='bags/office')
+    assert list(commands) == list(PIPELINES[name])
+    for node, cmd in commands.items():
+        assert importlib.util.find_spec(cmd[2]) is not None, cmd
+        if node != 'bag_player':
+            params = Path(cmd[cmd.index('--params-file') + 1])
+            assert params.is_file() and params.name == f'{node}.yaml'
+
+
+def test_bad_settings_are_one_line_errors():
+    with pytest.raises(ValueError, match='expected NODE.PARAMETER=VALUE'):
+        pipeline_commands('slam', ['ekf_slam'])
+    with pytest.raises(ValueError, match="no node 'sonar_localizer'"):
+        pipeline_commands('slam', ['sonar_localizer.filter=ukf'])
+    with pytest.raises(ValueError, match='needs --bag'):
+        pipeline_commands('replay')
+    assert pipeline_commands('slam', ['laser_driver.port=/dev/ttyUSB1'])['laser_driver'][-2:] \
+        == ['-p', 'port:=/dev/ttyUSB1']
+
+
+@pytest.mark.dds
+def test_replay_pipeline_runs_prefixes_output_and_stops_on_ctrl_c():
+    with RosHarness() as ros:
+        poses = ros.collect('/pose', PoseWithCovarianceStamped)
+        proc = subprocess.Popen(
+            [sys.executable, '-m', 'landmark_nav.tools.cli', 'pipeline', 'replay', '--bag',
+             str(REPO / 'bags' / 'office'), '--rate', '2', '--set',
+             'ekf_slam.association=jcbb'], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            text=True)
+        try:
+            assert ros.wait_until(lambda: len(poses) >= 20, 60), 'no SLAM poses'
+        finally:
+            time.sleep(1.0)
+            proc.send_signal(signal.SIGINT)
+            out, _ = proc.communicate(timeout=60)
+    assert 'Traceback' not in out, out
+    assert 'ekf_slam         | ' in out and 'association jcbb' in out, out
+    for node in PIPELINES['replay']:
+        assert f'{node} stopped (rc=0)' in out, out
