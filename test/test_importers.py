@@ -13,6 +13,7 @@ from landmark_nav.importers import import_log, LineError, parse_drift_model, par
 from landmark_nav.importers.breezyslam import RoverGeometry, ticks_to_odometry
 from landmark_nav.importers.carmen import scan_geometry
 from landmark_nav.importers.drift import DriftModel
+from landmark_nav.importers.stamps import GLITCH_MAX
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
 import numpy as np
@@ -301,6 +302,22 @@ def test_clock_reset_shifts_the_rest():
     t, rep = repair_stamps([5.0, 5.1, 5.2, 0.1, 0.2])
     np.testing.assert_allclose(t, [5.0, 5.1, 5.2, 5.3, 5.4])
     assert rep.resets == 1 and rep.backward == 0
+
+
+def test_backward_glitch_of_several_samples_is_not_a_reset():
+    # a two-sample glitch: the later stamps 4, 5, 6 are correct and must not move
+    t, rep = repair_stamps([1.0, 2.0, 3.0, 1.5, 1.6, 4.0, 5.0, 6.0])
+    np.testing.assert_allclose(t, [1.0, 2.0, 3.0, 3 + 1 / 3, 3 + 2 / 3, 4.0, 5.0, 6.0])
+    assert (rep.backward, rep.resets) == (2, 0)
+
+
+def test_backward_run_longer_than_glitch_max_is_a_reset():
+    # the new clock passes the old one after GLITCH_MAX + 1 stamps: a reset, not a glitch
+    n = GLITCH_MAX + 1
+    stamps = [10.0, 11.0, 12.0] + [1.0 + k for k in range(n + 3)]
+    t, rep = repair_stamps(stamps)
+    np.testing.assert_allclose(t, 10.0 + np.arange(len(stamps)))
+    assert (rep.backward, rep.resets) == (0, 1)
 
 
 def test_all_equal_stamps_use_fallback_period():

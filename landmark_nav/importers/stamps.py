@@ -3,10 +3,12 @@
 Real logs carry three kinds of bad stamps, each repaired and counted:
 
 * **zero** stamps (the logger had no clock yet): treated as missing;
-* stamps going **backwards**: an isolated one (the next good stamp is again later than the
-  previous one) is treated as missing; a lasting one (every following stamp is earlier, as
-  when two runs were concatenated or the clock was reset) is a **clock reset**: the rest of
-  the stream is shifted to continue one nominal period after the last good stamp;
+* stamps going **backwards** (below the last good stamp ``t[last]``): the run of
+  consecutive good stamps that stay below ``t[last]`` is a **glitch** when a later good stamp
+  at or after ``t[last]`` ends it within :data:`GLITCH_MAX` stamps; its stamps are treated
+  as missing. A run that lasts longer, or to the end of the stream (two runs concatenated,
+  a clock reset), is a **clock reset**: the rest of the stream is shifted to continue one
+  nominal period after ``t[last]``;
 * **repeated** stamps (printed with too few digits, e.g. ``1.01893e+09``): a run of k equal
   stamps is spread evenly between its value and the next distinct stamp; a run with no later
   distinct stamp is spread at the nominal period.
@@ -22,7 +24,11 @@ from typing import Tuple
 
 import numpy as np
 
-__all__ = ['StampRepairs', 'repair_stamps']
+__all__ = ['GLITCH_MAX', 'StampRepairs', 'repair_stamps']
+
+#: Longest run of backward stamps [entries] still treated as a glitch when the stream
+#: comes back to (or past) the last good stamp after it; longer runs are clock resets.
+GLITCH_MAX = 10
 
 
 @dataclass(frozen=True)
@@ -90,15 +96,19 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
     if fallback:
         period = float(fallback_period)
 
-    # Backward stamps: isolated glitches become missing, lasting jumps shift the rest.
+    # Backward stamps: short runs (glitches) become missing, lasting jumps shift the rest.
     n_back = n_reset = 0
     last = None
     for pos, i in enumerate(good_idx):
+        if bad[i]:  # inside a glitch run found below
+            continue
         if last is not None and t[i] < t[last]:
-            later = good_idx[pos + 1:]
-            if len(later) and t[later[0]] >= t[last]:
-                bad[i] = True
-                n_back += 1
+            ahead = good_idx[pos:pos + GLITCH_MAX + 1]
+            back = np.flatnonzero(t[ahead] >= t[last])
+            if len(back):  # the stream comes back within GLITCH_MAX stamps: a glitch
+                run = ahead[:back[0]]
+                bad[run] = True
+                n_back += len(run)
                 continue
             shift = t[last] - t[i] + period
             t[good_idx[pos:]] += shift
