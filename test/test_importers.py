@@ -320,6 +320,13 @@ def test_backward_run_longer_than_glitch_max_is_a_reset():
     assert (rep.backward, rep.resets) == (0, 1)
 
 
+def test_non_finite_stamps_counted():
+    t, rep = repair_stamps([1.0, 2.0, 3.0, math.nan, 5.0, math.inf, 7.0])
+    np.testing.assert_allclose(t, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+    assert rep.nonfinite == 2 and rep.total == 2
+    assert rep.describe().endswith(', 2 non-finite')
+
+
 def test_all_equal_stamps_use_fallback_period():
     t, rep = repair_stamps([7.0] * 4, fallback_period=0.5)
     np.testing.assert_allclose(t, [7.0, 7.5, 8.0, 8.5])

@@ -2,7 +2,8 @@
 
 Real logs carry three kinds of bad stamps, each repaired and counted:
 
-* **zero** stamps (the logger had no clock yet): treated as missing;
+* **zero** stamps (the logger had no clock yet) and **non-finite** ones (``nan``, ``inf``:
+  the parsers accept what ``float`` reads): treated as missing;
 * stamps going **backwards** (below the last good stamp ``t[last]``): the run of
   consecutive good stamps that stay below ``t[last]`` is a **glitch** when a later good stamp
   at or after ``t[last]`` ends it within :data:`GLITCH_MAX` stamps; its stamps are treated
@@ -37,6 +38,7 @@ class StampRepairs:
 
     repeated: int = 0  # stamps moved off a run of equal stamps
     zero: int = 0
+    nonfinite: int = 0  # nan / inf stamps, interpolated
     backward: int = 0  # isolated backward stamps, interpolated
     resets: int = 0  # lasting backward jumps, later stamps shifted
     period: float = 0.0  # nominal period used [s]
@@ -45,12 +47,18 @@ class StampRepairs:
     @property
     def total(self) -> int:
         """Return the number of stamps changed (resets count once each)."""
-        return self.repeated + self.zero + self.backward + self.resets
+        return self.repeated + self.zero + self.nonfinite + self.backward + self.resets
 
     def describe(self) -> str:
-        """Return e.g. ``'12 repeated stamps spread, 0 zero, 1 backward, 0 clock resets'``."""
+        """Return e.g. ``'12 repeated stamps spread, 0 zero, 1 backward, 0 clock resets'``.
+
+        Non-finite stamps are named only when there are any (``', 2 non-finite'``).
+        """
         text = (f'{self.repeated} repeated stamps spread, {self.zero} zero, '
                 f'{self.backward} backward, {self.resets} clock resets')
+        if self.nonfinite:
+            text += f', {self.nonfinite} non-finite'
+
         if self.period_fallback:
             text += f' (no distinct stamps: {self.period:g} s period assumed)'
         return text
@@ -90,6 +98,7 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
     n = len(t)
     bad = ~np.isfinite(t) | (t == 0.0)
     n_zero = int(np.count_nonzero(t == 0.0))
+    n_nonfinite = int(np.count_nonzero(~np.isfinite(t)))
     good_idx = np.flatnonzero(~bad)
     period = _nominal_period(t[good_idx], good_idx)
     fallback = period <= 0.0
@@ -145,6 +154,6 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
             filled[:lo] = t[lo] - period * (lo - idx[:lo])
             filled[hi + 1:] = t[hi] + period * (idx[hi + 1:] - hi)
             t = filled
-    repairs = StampRepairs(repeated=n_rep, zero=n_zero, backward=n_back, resets=n_reset,
-                           period=period, period_fallback=bool(fallback and n > 1))
+    repairs = StampRepairs(repeated=n_rep, zero=n_zero, nonfinite=n_nonfinite, backward=n_back,
+                           resets=n_reset, period=period, period_fallback=bool(fallback and n > 1))
     return t, repairs
