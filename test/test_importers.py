@@ -353,6 +353,29 @@ def test_repairs_reported_in_bag(tmp_path):
     assert custom['landmark_nav.repairs'] in result.summary
 
 
+def test_clock_reset_shifts_all_streams_alike(tmp_path):
+    # odometry at 20 Hz, a scan 50 ms after every other O line; the clock restarts at 1 s
+    # after a last O line at 10.4 s. Stream by stream the odometry would be shifted by
+    # 10.4 - 1.0 + 0.05 = 9.45 s and the scans by 10.4 - 1.1 + 0.1 = 9.4 s.
+    text, raw, first = '', [], []
+    for run, (t0, n) in enumerate(((10.0, 9), (1.0, 8))):
+        first.append(len(first) and first[-1] + 9)
+        for k in range(n):
+            t = round(t0 + 0.05 * k, 2)
+            text += f'O {k} 0 0 {t}\n'
+            if k % 2:
+                text += _wean_l(k, 0, 0, np.full(180, 300), round(t + 0.05, 2))
+                raw.append((first[run] + k, round(t + 0.05, 2) - t))
+    result = import_log(_write(tmp_path / 'robotdata9.log', text), tmp_path / 'w')
+    assert result.repairs['scan'].resets == 1 and result.repairs['odom'].resets == 1
+    topics, _ = _read(tmp_path / 'w')
+    odom = [s for s, _ in topics['/odom']]
+    scans = [s for s, _ in topics['/scan']]
+    assert len(scans) == len(raw) == 8 and len(odom) == 17
+    for (j, delay), s in zip(raw, scans):
+        assert s - odom[j] == round(delay * 1e9)  # 50 ms after its O line, as logged
+
+
 # ---------------------------------------------------------------------- malformed lines
 
 @pytest.mark.parametrize('name, good, bad, rest', [

@@ -280,6 +280,7 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
             log.reference_poses = robot
         if odom and odom_lines:
             log.odom_stamps = log.scan_stamps
+            log.odom_lineno = np.array([s.lineno for s in lasers], dtype=int)
             log.odom_poses, anchors = rebuild_odometry(lasers, odom, path)
             log.notes.append(f'odometry rebuilt from the ODOM increments between scans '
                              f'({anchors} re-anchoring ODOM lines dropped)')
@@ -294,9 +295,11 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         if odom:
             kept = [o for o in odom if max_scans is None or o[0] <= last_line]
             log.odom_stamps = np.array([o[1] for o in kept], dtype=float)
+            log.odom_lineno = np.array([o[0] for o in kept], dtype=int)
             log.odom_poses = np.array([o[2] for o in kept], dtype=float).reshape(-1, 3)
         else:
             log.odom_stamps = log.scan_stamps
+            log.odom_lineno = np.array([s.lineno for s in lasers], dtype=int)
             log.odom_poses = robot
     if rear:
         rear = [s for s in rear if max_scans is None or s.lineno <= last_line]

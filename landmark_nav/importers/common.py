@@ -110,7 +110,8 @@ class ParsedLog:
 
     ``odom_*`` hold the robot's raw odometry (base_link in the odom frame) when the log has
     one; ``reference_*`` the corrected robot pose (base_link in the map frame) per scan when
-    the log has one (``reference_index[i]`` is the scan it belongs to).
+    the log has one (``reference_index[i]`` is the scan it belongs to). ``odom_lineno`` are
+    the log lines of the odometry records (the log order of all streams, for clock resets).
     """
 
     fmt: str
@@ -120,6 +121,7 @@ class ParsedLog:
     scans: List[ScanRecord] = field(default_factory=list)
     odom_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     odom_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    odom_lineno: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     reference_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     reference_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     rear_scans: List[ScanRecord] = field(default_factory=list)

@@ -45,7 +45,7 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
     path = Path(path)
     source = LineSource(path, lenient)
     scans, robot, laser = [], [], []
-    odom_t, odom_p = [], []
+    odom_t, odom_p, odom_n = [], [], []
     ignored = {}
     angle_min, inc = -math.pi / 2, math.pi / WEAN_BEAMS
     for lineno, tokens in source.lines():
@@ -65,6 +65,7 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
                 source.fail(lineno, 'malformed O line (non-finite value)')
                 continue
             odom_t.append(values[3])
+            odom_n.append(lineno)
             odom_p.append((values[0] * _CM, values[1] * _CM, values[2]))
         elif kind == 'L':
             if max_scans is not None and len(scans) >= max_scans:
@@ -101,6 +102,7 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
                     sigma_range=LMS_SIGMA_RANGE)
     log = ParsedLog('wean', path, sensor, mount, scans=scans)
     log.odom_stamps = np.array(odom_t, dtype=float)
+    log.odom_lineno = np.array(odom_n, dtype=int)
     log.odom_poses = np.array(odom_p, dtype=float).reshape(-1, 3)
     spread = float(np.max(np.hypot(rel[:, 0] - mount[0], rel[:, 1] - mount[1])))
     if spread > 0.005:

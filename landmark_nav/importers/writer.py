@@ -19,7 +19,7 @@ import numpy as np
 from .common import ParsedLog
 from .drift import DRIFT_MODELS, DriftModel, parse_drift_model, propagate_covariance, \
     synthetic_odometry
-from .stamps import repair_stamps, StampRepairs
+from .stamps import repair_streams, StampRepairs
 
 __all__ = ['CUSTOM_KEYS', 'FORMATS', 'ImportResult', 'guess_format', 'import_log',
            'parse_log']
@@ -211,15 +211,30 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                                max_range=max_range)
         pair_with_reference(log, ref_log)
 
-    repairs: Dict[str, StampRepairs] = {}
-    scan_t, repairs['scan'] = repair_stamps(log.scan_stamps, fallback_period)
+    # One clock for all streams: resets are found on the merged stream (log order) and
+    # shift every stream alike; repeated / zero / backward stamps are repaired per stream.
+    names = ['scan']
+    streams = [log.scan_stamps]
+    lines = [np.array([s.lineno for s in log.scans], dtype=int)]
     if log.has_odometry:
         if drift is not None:
             raise ValueError(f'{path.name} has raw odometry; --drift applies only to logs '
                              'without (Carmen corrected logs)')
+        names.append('odom')
+        streams.append(log.odom_stamps)
+        lines.append(log.odom_lineno)
+    if log.rear_scans:
+        names.append('rear scan')
+        streams.append([s.stamp for s in log.rear_scans])
+        lines.append(np.array([s.lineno for s in log.rear_scans], dtype=int))
+    fixed, reports = repair_streams(streams, lines, fallback_period)
+    repaired = dict(zip(names, fixed))
+    repairs: Dict[str, StampRepairs] = dict(zip(names, reports))
+    scan_t = repaired['scan']
+    if log.has_odometry:
         model = DRIFT_MODELS['pioneer']
         odometry, used_seed = 'raw', None
-        odom_t, repairs['odom'] = repair_stamps(log.odom_stamps, fallback_period)
+        odom_t = repaired['odom']
         odom_p = log.odom_poses
     elif log.has_reference:
         model = parse_drift_model(drift or 'pioneer')
@@ -232,10 +247,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError('--seed applies to synthetic odometry only')
     odom_cov = propagate_covariance(odom_p, model)
     odom_tw = _twist(odom_t, odom_p)
-    rear_t = None
-    if log.rear_scans:
-        rear_t, repairs['rear scan'] = repair_stamps(
-            [s.stamp for s in log.rear_scans], fallback_period)
+    rear_t = repaired.get('rear scan')
 
     def ns(t: float) -> int:
         return int(round(float(t) * 1e9))
