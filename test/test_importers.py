@@ -129,6 +129,23 @@ def test_flaser_beam_geometry(n, angle_max_deg):
     assert math.degrees(a0 + (n - 1) * inc) == pytest.approx(angle_max_deg)
 
 
+@pytest.mark.parametrize('n', [400, 401, 90, 182])
+def test_flaser_unknown_beam_count_needs_fov(tmp_path, n):
+    line = _flaser(np.ones(n), (0, 0, 0), 1.0)
+    log = _write(tmp_path / 'f-corrected.log',
+                 line + line.replace(' 1.0 host 1.0', ' 2.0 host 2.0'))
+    for lenient in (False, True):  # not a malformed line: --lenient does not skip it
+        with pytest.raises(LineError, match=rf'f-corrected.log:1: FLASER: {n} readings: '
+                                            r'beam geometry unknown.*--fov'):
+            parse_log(log, lenient=lenient)
+    scan = parse_log(log, fov=100.0).scans[0]
+    assert math.degrees(scan.angle_min) == pytest.approx(-50.0, abs=1e-12)
+    assert math.degrees(scan.angle_increment) * (n - 1) == pytest.approx(100.0, abs=1e-12)
+    with pytest.raises(ValueError, match='--fov applies to Carmen logs only'):
+        parse_log(_write(tmp_path / 'exp3.dat', _breezy_line(1, 0, 0, np.ones(682) * 900)),
+                  fov=100.0)
+
+
 def test_robotlaser1_geometry_mount_and_max_range(tmp_path):
     n, res = 241, math.radians(0.5)
     start, max_range = math.radians(-60.0), 30.0

@@ -78,7 +78,8 @@ def guess_format(path) -> str:
 
 def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
               lenient: bool = False, max_scans: Optional[int] = None,
-              max_range: Optional[float] = None, odom_lines: bool = False) -> ParsedLog:
+              max_range: Optional[float] = None, odom_lines: bool = False,
+              fov: Optional[float] = None) -> ParsedLog:
     """Parse a log of any supported format (``fmt`` guessed when None).
 
     Raises:
@@ -98,7 +99,9 @@ def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
     if fmt == 'carmen':
         from .carmen import parse_carmen
         return parse_carmen(path, poses=poses, lenient=lenient, max_scans=max_scans,
-                            max_range=max_range, odom_lines=odom_lines)
+                            max_range=max_range, odom_lines=odom_lines, fov=fov)
+    if fov is not None:
+        raise ValueError(f'--fov applies to Carmen logs only ({fmt} geometry is fixed)')
     if odom_lines:
         raise ValueError(f'--odom-lines applies to Carmen logs only, not {fmt}')
     if max_range is not None:
@@ -158,7 +161,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                reference=None, drift: Optional[str] = None, seed: Optional[int] = None,
                lenient: bool = False, force: bool = False, max_scans: Optional[int] = None,
                fallback_period: float = 1.0, progress: bool = False,
-               max_range: Optional[float] = None, odom_lines: bool = False) -> ImportResult:
+               max_range: Optional[float] = None, odom_lines: bool = False,
+               fov: Optional[float] = None) -> ImportResult:
     """Import a log into a bag directory ``out``; return what was written.
 
     Args:
@@ -179,6 +183,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         max_range: Carmen only: readings at or above it are "no return" [m].
         odom_lines: Carmen corrected logs only: rebuild the raw odometry from the
             re-anchored ``ODOM`` lines instead of synthetic drift.
+        fov: Carmen only: field of view of ``FLASER`` / ``RLASER`` lines [deg], for beam
+            counts other than 180, 181, 360, 361.
 
     Raises:
         LineError: A malformed line, unless ``lenient``.
@@ -199,7 +205,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError(f'seed must be in [0, 2**32), got {seed}')
     if out.exists() and not force:
         raise BagError(f'{out} exists already; use --force to replace it')
-    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines)
+    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines, fov)
     if reference is not None:
         if log.fmt != 'carmen':
             raise ValueError(f'--reference applies to Carmen logs only, not {log.fmt}')
@@ -208,7 +214,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                              'log (--poses raw) with its corrected log')
         from .carmen import pair_with_reference, parse_carmen
         ref_log = parse_carmen(reference, poses='corrected', lenient=lenient,
-                               max_range=max_range)
+                               max_range=max_range, fov=fov)
         pair_with_reference(log, ref_log)
 
     # One clock for all streams: resets are found on the merged stream (log order) and
