@@ -264,6 +264,22 @@ def test_wean_units_mount_and_codes(tmp_path):
     assert custom['landmark_nav.laser_mount'] == '0.25 0 0'
 
 
+def test_lms_zero_reading_is_too_close(tmp_path):
+    # the LMS "no distance" value 0 is -inf (REP 117 too close), as the live LMS driver
+    # publishes it; a negative reading cannot come from the sensor: NaN
+    ranges = _ranges(180, 3)
+    ranges[0], ranges[1] = 0.0, -1.0
+    result = import_log(_write(tmp_path / 'z-corrected.log', _flaser(ranges, (0, 0, 0), 1.0)
+                               + _flaser(ranges, (0.1, 0, 0), 2.0)), tmp_path / 'bag')
+    scan = scan_to_data(_read(tmp_path / 'bag')[0]['/scan'][0][1])
+    assert scan.ranges[0] == -math.inf and math.isnan(scan.ranges[1])
+    assert '2 error beams (NaN), 2 too-close beams (-inf)' in result.summary
+    cm = np.full(180, 300)
+    cm[5] = 0
+    wean = parse_log(_write(tmp_path / 'robotdata8.log', _wean_l(1, 2, 0.1, cm, 0.5)))
+    assert wean.scans[0].ranges[5] == -math.inf
+
+
 # -------------------------------------------------------------------------- breezyslam
 
 def _breezy_line(stamp_us, left, right, mm):

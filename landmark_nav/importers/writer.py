@@ -274,7 +274,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
             raise ValueError(f'{out} exists and is not a bag; refusing to replace it')
         shutil.rmtree(out)
     counts = {'/scan': 0, '/odom': 0, '/ground_truth/odom': 0, '/scan_rear': 0}
-    no_return = errors = 0
+    no_return = errors = too_close = 0
     items = events
     if progress:
         from tqdm import tqdm
@@ -297,6 +297,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                 if kind == 0:
                     no_return += int(np.count_nonzero(np.isposinf(scan.ranges)))
                     errors += int(np.count_nonzero(np.isnan(scan.ranges)))
+                    too_close += int(np.count_nonzero(np.isneginf(scan.ranges)))
             elif kind == 1:
                 topic = '/odom'
                 msg = make_odometry(stamp_ns, 'odom', 'base_link', odom_p[i], odom_cov[i],
@@ -338,7 +339,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
              f'{np.degrees(scan0.angle_min):.2f} deg in {np.degrees(scan0.angle_increment):.4f}'
              f' deg steps, range_max {sensor.range_max:g} m ({sensor.model}, sigma_range '
              f'{sensor.sigma_range:g} m); {no_return} no-return beams (+inf), {errors} error '
-             'beams (NaN)']
+             'beams (NaN)' + (f', {too_close} too-close beams (-inf)' if too_close else '')]
     if odometry == 'raw':
         lines.append(f'  /odom: {counts["/odom"]} raw odometry poses (covariance: '
                      f'{model.describe()})')
