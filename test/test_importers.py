@@ -499,6 +499,28 @@ def test_drift_along_track_spread():
     assert abs(np.mean(finals) - 9.0) < 3 * 0.15 / math.sqrt(2000)
 
 
+def test_heading_drift_depends_on_sampling_only_on_a_jittery_reference():
+    # sigma_th^2 = k_theta^2 D + k_dtheta^2 |dth| per step (drift.py): on a smooth arc the
+    # final heading variance is the same at 10 or 40 poses per metre; with a heading that
+    # wiggles by +-1 deg from pose to pose the summed |dth| grows with the sampling
+    model = DriftModel(0.0, 0.05, 0.1)
+
+    def var_theta(per_m, jitter):
+        s = np.linspace(0.0, 2.0, int(2 * per_m) + 1)
+        th = 0.5 * s + jitter * (-1.0) ** np.arange(len(s))
+        return propagate_covariance(np.column_stack((np.cos(s), np.sin(s), th)), model)[-1, 2, 2]
+
+    expected = 0.05 ** 2 * 2.0 + 0.1 ** 2 * 1.0  # D = 2 m (chord ~ arc), turned 1 rad
+    jitter = math.radians(1.0)
+    for per_m in (10, 40):
+        assert var_theta(per_m, 0.0) == pytest.approx(expected, rel=5e-4)
+    # 10 / m: steps of 0.05 +- 2 jitter rad never change sign: sum |dth| = 1 rad as smooth;
+    # 40 / m: 0.0125 +- 2 jitter do, and the 80 steps sum to 80 * 2 jitter = 2.79 rad
+    assert var_theta(10, jitter) == pytest.approx(expected, rel=5e-4)
+    assert var_theta(40, jitter) == pytest.approx(0.05 ** 2 * 2.0 + 0.1 ** 2 * 80 * 2 * jitter,
+                                                  rel=5e-4)
+
+
 def test_drift_reproducible_by_seed():
     ref = _straight(5.0, 20)
     model = parse_drift_model('pioneer')
