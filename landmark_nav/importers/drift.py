@@ -16,9 +16,9 @@ the path length and the total |dth| turned, so on a smooth reference the drift h
 depends on how finely the path is sampled. A jittery reference (a scan-matched corrected
 pose whose heading wiggles from scan to scan) is different: its sum of |dth| grows with the
 number of steps, and with it the k_dtheta part of the heading drift (the sum of D grows
-too, by less, with the position jitter). The covariance written into ``/odom`` is the first-order propagation
-of the same model, ``P_k+1 = F P_k F^T + G Q G^T`` with the Jacobians of the composition
-(eqs. 27-30), starting from zero at the first pose.
+too, by less, with the position jitter). The covariance written into ``/odom`` is the
+first-order propagation of the same model, ``P_k+1 = F P_k F^T + G Q G^T`` with the
+Jacobians of the composition (eqs. 27-30), starting from zero at the first pose.
 
 Default ``pioneer``: k_d = 0.05 m/sqrt(m), k_theta = 0.05 rad/sqrt(m),
 k_dtheta = 0.1 rad/sqrt(rad), the values of the simulator's Pioneer 2-DX model
