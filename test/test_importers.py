@@ -13,6 +13,7 @@ from landmark_nav.importers import import_log, LineError, parse_drift_model, par
 from landmark_nav.importers.breezyslam import RoverGeometry, ticks_to_odometry
 from landmark_nav.importers.carmen import scan_geometry
 from landmark_nav.importers.drift import DriftModel
+from landmark_nav.importers.stamps import GLITCH_MAX
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
 import numpy as np
@@ -126,6 +127,23 @@ def test_flaser_beam_geometry(n, angle_max_deg):
     a0, inc = scan_geometry(n)
     assert math.degrees(a0) == pytest.approx(-90.0)
     assert math.degrees(a0 + (n - 1) * inc) == pytest.approx(angle_max_deg)
+
+
+@pytest.mark.parametrize('n', [400, 401, 90, 182])
+def test_flaser_unknown_beam_count_needs_fov(tmp_path, n):
+    line = _flaser(np.ones(n), (0, 0, 0), 1.0)
+    log = _write(tmp_path / 'f-corrected.log',
+                 line + line.replace(' 1.0 host 1.0', ' 2.0 host 2.0'))
+    for lenient in (False, True):  # not a malformed line: --lenient does not skip it
+        with pytest.raises(LineError, match=rf'f-corrected.log:1: FLASER: {n} readings: '
+                                            r'beam geometry unknown.*--fov'):
+            parse_log(log, lenient=lenient)
+    scan = parse_log(log, fov=100.0).scans[0]
+    assert math.degrees(scan.angle_min) == pytest.approx(-50.0, abs=1e-12)
+    assert math.degrees(scan.angle_increment) * (n - 1) == pytest.approx(100.0, abs=1e-12)
+    with pytest.raises(ValueError, match='--fov applies to Carmen logs only'):
+        parse_log(_write(tmp_path / 'exp3.dat', _breezy_line(1, 0, 0, np.ones(682) * 900)),
+                  fov=100.0)
 
 
 def test_robotlaser1_geometry_mount_and_max_range(tmp_path):
@@ -246,6 +264,22 @@ def test_wean_units_mount_and_codes(tmp_path):
     assert custom['landmark_nav.laser_mount'] == '0.25 0 0'
 
 
+def test_lms_zero_reading_is_too_close(tmp_path):
+    # the LMS "no distance" value 0 is -inf (REP 117 too close), as the live LMS driver
+    # publishes it; a negative reading cannot come from the sensor: NaN
+    ranges = _ranges(180, 3)
+    ranges[0], ranges[1] = 0.0, -1.0
+    result = import_log(_write(tmp_path / 'z-corrected.log', _flaser(ranges, (0, 0, 0), 1.0)
+                               + _flaser(ranges, (0.1, 0, 0), 2.0)), tmp_path / 'bag')
+    scan = scan_to_data(_read(tmp_path / 'bag')[0]['/scan'][0][1])
+    assert scan.ranges[0] == -math.inf and math.isnan(scan.ranges[1])
+    assert '2 error beams (NaN), 2 too-close beams (-inf)' in result.summary
+    cm = np.full(180, 300)
+    cm[5] = 0
+    wean = parse_log(_write(tmp_path / 'robotdata8.log', _wean_l(1, 2, 0.1, cm, 0.5)))
+    assert wean.scans[0].ranges[5] == -math.inf
+
+
 # -------------------------------------------------------------------------- breezyslam
 
 def _breezy_line(stamp_us, left, right, mm):
@@ -303,6 +337,29 @@ def test_clock_reset_shifts_the_rest():
     assert rep.resets == 1 and rep.backward == 0
 
 
+def test_backward_glitch_of_several_samples_is_not_a_reset():
+    # a two-sample glitch: the later stamps 4, 5, 6 are correct and must not move
+    t, rep = repair_stamps([1.0, 2.0, 3.0, 1.5, 1.6, 4.0, 5.0, 6.0])
+    np.testing.assert_allclose(t, [1.0, 2.0, 3.0, 3 + 1 / 3, 3 + 2 / 3, 4.0, 5.0, 6.0])
+    assert (rep.backward, rep.resets) == (2, 0)
+
+
+def test_backward_run_longer_than_glitch_max_is_a_reset():
+    # the new clock passes the old one after GLITCH_MAX + 1 stamps: a reset, not a glitch
+    n = GLITCH_MAX + 1
+    stamps = [10.0, 11.0, 12.0] + [1.0 + k for k in range(n + 3)]
+    t, rep = repair_stamps(stamps)
+    np.testing.assert_allclose(t, 10.0 + np.arange(len(stamps)))
+    assert (rep.backward, rep.resets) == (0, 1)
+
+
+def test_non_finite_stamps_counted():
+    t, rep = repair_stamps([1.0, 2.0, 3.0, math.nan, 5.0, math.inf, 7.0])
+    np.testing.assert_allclose(t, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+    assert rep.nonfinite == 2 and rep.total == 2
+    assert rep.describe().endswith(', 2 non-finite')
+
+
 def test_all_equal_stamps_use_fallback_period():
     t, rep = repair_stamps([7.0] * 4, fallback_period=0.5)
     np.testing.assert_allclose(t, [7.0, 7.5, 8.0, 8.5])
@@ -327,6 +384,29 @@ def test_repairs_reported_in_bag(tmp_path):
     assert custom['landmark_nav.repairs'] == ('scan: 1 repeated stamps spread, 1 zero, '
                                               '0 backward, 0 clock resets')
     assert custom['landmark_nav.repairs'] in result.summary
+
+
+def test_clock_reset_shifts_all_streams_alike(tmp_path):
+    # odometry at 20 Hz, a scan 50 ms after every other O line; the clock restarts at 1 s
+    # after a last O line at 10.4 s. Stream by stream the odometry would be shifted by
+    # 10.4 - 1.0 + 0.05 = 9.45 s and the scans by 10.4 - 1.1 + 0.1 = 9.4 s.
+    text, raw, first = '', [], []
+    for run, (t0, n) in enumerate(((10.0, 9), (1.0, 8))):
+        first.append(len(first) and first[-1] + 9)
+        for k in range(n):
+            t = round(t0 + 0.05 * k, 2)
+            text += f'O {k} 0 0 {t}\n'
+            if k % 2:
+                text += _wean_l(k, 0, 0, np.full(180, 300), round(t + 0.05, 2))
+                raw.append((first[run] + k, round(t + 0.05, 2) - t))
+    result = import_log(_write(tmp_path / 'robotdata9.log', text), tmp_path / 'w')
+    assert result.repairs['scan'].resets == 1 and result.repairs['odom'].resets == 1
+    topics, _ = _read(tmp_path / 'w')
+    odom = [s for s, _ in topics['/odom']]
+    scans = [s for s, _ in topics['/scan']]
+    assert len(scans) == len(raw) == 8 and len(odom) == 17
+    for (j, delay), s in zip(raw, scans):
+        assert s - odom[j] == round(delay * 1e9)  # 50 ms after its O line, as logged
 
 
 # ---------------------------------------------------------------------- malformed lines
@@ -417,6 +497,28 @@ def test_drift_along_track_spread():
                        for s in range(2000)])
     assert np.std(finals) == pytest.approx(0.05 * 3.0, rel=3.0 / math.sqrt(2 * 1999))
     assert abs(np.mean(finals) - 9.0) < 3 * 0.15 / math.sqrt(2000)
+
+
+def test_heading_drift_depends_on_sampling_only_on_a_jittery_reference():
+    # sigma_th^2 = k_theta^2 D + k_dtheta^2 |dth| per step (drift.py): on a smooth arc the
+    # final heading variance is the same at 10 or 40 poses per metre; with a heading that
+    # wiggles by +-1 deg from pose to pose the summed |dth| grows with the sampling
+    model = DriftModel(0.0, 0.05, 0.1)
+
+    def var_theta(per_m, jitter):
+        s = np.linspace(0.0, 2.0, int(2 * per_m) + 1)
+        th = 0.5 * s + jitter * (-1.0) ** np.arange(len(s))
+        return propagate_covariance(np.column_stack((np.cos(s), np.sin(s), th)), model)[-1, 2, 2]
+
+    expected = 0.05 ** 2 * 2.0 + 0.1 ** 2 * 1.0  # D = 2 m (chord ~ arc), turned 1 rad
+    jitter = math.radians(1.0)
+    for per_m in (10, 40):
+        assert var_theta(per_m, 0.0) == pytest.approx(expected, rel=5e-4)
+    # 10 / m: steps of 0.05 +- 2 jitter rad never change sign: sum |dth| = 1 rad as smooth;
+    # 40 / m: 0.0125 +- 2 jitter do, and the 80 steps sum to 80 * 2 jitter = 2.79 rad
+    assert var_theta(10, jitter) == pytest.approx(expected, rel=5e-4)
+    assert var_theta(40, jitter) == pytest.approx(0.05 ** 2 * 2.0 + 0.1 ** 2 * 80 * 2 * jitter,
+                                                  rel=5e-4)
 
 
 def test_drift_reproducible_by_seed():

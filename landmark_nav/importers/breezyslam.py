@@ -115,6 +115,7 @@ def parse_breezyslam(path, lenient: bool = False,
     log = ParsedLog('breezyslam', path, sensor, (RoverGeometry.laser_x, 0.0, 0.0), scans=scans)
     ticks = np.array(ticks, dtype=float)
     log.odom_stamps = np.array(stamps)
+    log.odom_lineno = np.array([s.lineno for s in scans], dtype=int)
     log.odom_poses = ticks_to_odometry(ticks[:, 0], ticks[:, 1])
     log.skipped, log.first_skipped = source.skipped, source.first_skipped
     return log

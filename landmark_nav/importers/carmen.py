@@ -19,7 +19,8 @@ ignored.
 Beam geometry: ``ROBOTLASER1`` carries its own (``start_angle``, ``angular_resolution``)
 and ``maximum_range``; the laser mount is the median of ``robot_pose^-1 (+) laser_pose``.
 ``FLASER`` spans 180 deg from -90 deg: 180 readings are 1 deg steps to +89 deg, 360 are
-0.5 deg steps to +89.5 deg, 181 and 361 readings end at +90 deg (:func:`scan_geometry`);
+0.5 deg steps to +89.5 deg, 181 and 361 readings end at +90 deg (:func:`scan_geometry`,
+as Carmen's own reader); other counts are refused unless ``fov`` (``--fov DEG``) is given;
 its mount is ``(robot_frontlaser_offset, 0, 0)`` from the ``PARAM`` lines (0 when absent;
 ``RLASER``: ``(robot_rearlaser_offset, 0, pi)``). In a ``FLASER`` line ``x y theta`` is the
 laser's pose and ``odom_*`` the robot's odometry; ``ROBOTLASER1`` gives both poses.
@@ -58,7 +59,8 @@ import numpy as np
 from .common import LineError, LineSource, lms_cm_ranges, open_text, ParsedLog, \
     ScanRecord, Sensor
 
-__all__ = ['CARMEN_DEFAULT_MAX_RANGE', 'CarmenScan', 'LMS_SIGMA_RANGE', 'default_poses',
+__all__ = ['CARMEN_DEFAULT_MAX_RANGE', 'CarmenScan', 'GeometryError', 'KNOWN_BEAMS',
+           'LMS_SIGMA_RANGE', 'default_poses',
            'pair_with_reference', 'parse_carmen', 'read_carmen_scans', 'rebuild_odometry',
            'scan_geometry']
 
@@ -67,10 +69,41 @@ LMS_SIGMA_RANGE = 0.01  # [m] SICK LMS2xx, cm mode (see the module docstring)
 _LASER_TYPES = {'FLASER', 'RLASER'}
 
 
-def scan_geometry(n: int):
-    """Return (angle_min, angle_increment) of an n-beam Carmen front laser."""
+#: FLASER / RLASER beam counts whose geometry is known: Carmen's own reader
+#: (``carmen_laser_guess_angle_increment``) spaces 180 / 181 beams at 1 deg and 360 / 361 at
+#: 0.5 deg from -90 deg. For 400 / 401 it assumes 0.25 deg from -90 deg although such a
+#: laser spans 100 deg, and other counts pi / (n - 1): those need ``fov``.
+KNOWN_BEAMS = (180, 181, 360, 361)
+
+
+class GeometryError(ValueError):
+    """A FLASER / RLASER beam count whose geometry the log does not tell."""
+
+
+def scan_geometry(n: int, fov_deg: Optional[float] = None):
+    """Return (angle_min, angle_increment) of an n-beam Carmen ``FLASER`` / ``RLASER``.
+
+    Without ``fov_deg``: the counts of :data:`KNOWN_BEAMS` from -90 deg (180 readings: 1 deg
+    steps to +89 deg, 360: 0.5 deg to +89.5 deg, 181 / 361: to +90 deg). With ``fov_deg``
+    (``--fov``): n beams spread evenly over the field of view centred ahead, the first at
+    -fov/2 and the last at +fov/2.
+
+    Raises:
+        GeometryError: Another count without ``fov_deg``, or a bad ``fov_deg``.
+
+    """
     if n <= 0:
         raise ValueError(f'FLASER with {n} readings')
+    if fov_deg is not None:
+        if not 0 < fov_deg <= 360 or n < 2:
+            raise GeometryError(f'--fov {fov_deg:g} deg for {n} readings: need 0 < fov <= 360 '
+                                'and >= 2 readings')
+        fov = math.radians(fov_deg)
+        return -fov / 2, fov / (n - 1)
+    if n not in KNOWN_BEAMS:
+        raise GeometryError(f'{n} readings: beam geometry unknown (known: '
+                            f'{", ".join(map(str, KNOWN_BEAMS))}); give the field of view, '
+                            'e.g. --fov 100')
     if n % 2 == 0:  # 180 readings: 1 deg steps from -90 deg, the last at +89 deg
         return -math.pi / 2, math.pi / n
     return -math.pi / 2, math.pi / (n - 1)
@@ -105,7 +138,7 @@ class _Laser:
     laser: Optional[np.ndarray] = None  # laser pose fields (ROBOTLASER1)
 
 
-def _parse_flaser(tokens: List[str]) -> _Laser:
+def _parse_flaser(tokens: List[str], fov_deg: Optional[float] = None) -> _Laser:
     n = int(tokens[1])
     if n <= 0:
         raise ValueError(f'{n} readings')
@@ -114,7 +147,7 @@ def _parse_flaser(tokens: List[str]) -> _Laser:
     values = _floats(tokens[2:2 + n])
     poses = _floats(tokens[2 + n:8 + n])
     stamp = float(tokens[8 + n])
-    a0, inc = scan_geometry(n)
+    a0, inc = scan_geometry(n, fov_deg)
     return _Laser(0, stamp, values, a0, inc, None, poses[3:6], poses[0:3])
 
 
@@ -165,7 +198,7 @@ def _robot_from_laser(laser: np.ndarray, mount) -> np.ndarray:
 
 def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
                  max_scans: Optional[int] = None, max_range: Optional[float] = None,
-                 odom_lines: bool = False) -> ParsedLog:
+                 odom_lines: bool = False, fov: Optional[float] = None) -> ParsedLog:
     """Parse a Carmen log (``.log``, ``.clf``, optionally gzipped).
 
     Args:
@@ -178,9 +211,12 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
             states, e.g. 8.191 or 32.767 for logs of an LMS in a mm mode).
         odom_lines: Corrected logs: rebuild the raw odometry at the scans from the ``ODOM``
             lines (:func:`rebuild_odometry`) instead of leaving it to synthetic drift.
+        fov: Field of view of ``FLASER`` / ``RLASER`` lines [deg] (:func:`scan_geometry`);
+            needed for beam counts other than :data:`KNOWN_BEAMS`.
 
     Raises:
-        LineError: A malformed line (file and line number), unless ``lenient``.
+        LineError: A malformed line (file and line number), unless ``lenient``; a beam
+            count of unknown geometry without ``fov`` (also when ``lenient``).
         ValueError: The log has no laser scans, or ``poses`` is unknown.
 
     """
@@ -198,7 +234,7 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         kind = tokens[0]
         try:
             if kind in ('FLASER', 'RLASER'):
-                laser = _parse_flaser(tokens)
+                laser = _parse_flaser(tokens, fov)
             elif kind == 'ROBOTLASER1':
                 laser = _parse_robotlaser(tokens)
             elif kind == 'ODOM':
@@ -211,6 +247,8 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
                 else:
                     ignored[kind] = ignored.get(kind, 0) + 1
                 continue
+        except GeometryError as err:  # not a malformed line: --lenient does not skip it
+            raise LineError(path, lineno, f'{kind}: {err}') from None
         except (IndexError, ValueError) as err:
             source.fail(lineno, f'malformed {kind} line ({err})')
             continue
@@ -280,6 +318,7 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
             log.reference_poses = robot
         if odom and odom_lines:
             log.odom_stamps = log.scan_stamps
+            log.odom_lineno = np.array([s.lineno for s in lasers], dtype=int)
             log.odom_poses, anchors = rebuild_odometry(lasers, odom, path)
             log.notes.append(f'odometry rebuilt from the ODOM increments between scans '
                              f'({anchors} re-anchoring ODOM lines dropped)')
@@ -294,9 +333,11 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         if odom:
             kept = [o for o in odom if max_scans is None or o[0] <= last_line]
             log.odom_stamps = np.array([o[1] for o in kept], dtype=float)
+            log.odom_lineno = np.array([o[0] for o in kept], dtype=int)
             log.odom_poses = np.array([o[2] for o in kept], dtype=float).reshape(-1, 3)
         else:
             log.odom_stamps = log.scan_stamps
+            log.odom_lineno = np.array([s.lineno for s in lasers], dtype=int)
             log.odom_poses = robot
     if rear:
         rear = [s for s in rear if max_scans is None or s.lineno <= last_line]
@@ -435,10 +476,10 @@ def read_carmen_scans(path, max_range: float = 40.0) -> Iterator[CarmenScan]:
                 values = np.array(fields[2:2 + n], dtype=float)
                 rest = np.array(fields[2 + n:8 + n], dtype=float)
                 stamp = float(fields[8 + n])
+                angle_min, inc = scan_geometry(n)
             except (IndexError, ValueError) as err:
                 raise ValueError(f'{path}:{lineno}: malformed FLASER line ({err})') from err
             if len(values) != n or len(rest) != 6:
                 raise ValueError(f'{path}:{lineno}: FLASER line too short')
             ranges = np.where(values >= max_range, np.inf, values)
-            angle_min, inc = scan_geometry(n)
             yield CarmenScan(stamp, ranges, angle_min, inc, rest[:3], rest[3:])

@@ -100,7 +100,7 @@ class ScanRecord:
     lineno: int
     angle_min: float
     angle_increment: float
-    ranges: np.ndarray  # (n,) float64, +inf no return, NaN error
+    ranges: np.ndarray  # (n,) float64, REP 117: +inf no return, -inf too close, NaN error
     key: str = ''  # the range tokens as printed (pairs raw and corrected Carmen scans)
 
 
@@ -110,7 +110,8 @@ class ParsedLog:
 
     ``odom_*`` hold the robot's raw odometry (base_link in the odom frame) when the log has
     one; ``reference_*`` the corrected robot pose (base_link in the map frame) per scan when
-    the log has one (``reference_index[i]`` is the scan it belongs to).
+    the log has one (``reference_index[i]`` is the scan it belongs to). ``odom_lineno`` are
+    the log lines of the odometry records (the log order of all streams, for clock resets).
     """
 
     fmt: str
@@ -120,6 +121,7 @@ class ParsedLog:
     scans: List[ScanRecord] = field(default_factory=list)
     odom_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     odom_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    odom_lineno: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     reference_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     reference_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     rear_scans: List[ScanRecord] = field(default_factory=list)
@@ -150,6 +152,9 @@ class ParsedLog:
 # "measured value above the maximum" -> +inf; 8191 cm (all ones) is what the Carmen and
 # CMU loggers write for beams without an echo (e.g. the 81.91 m of the Radish logs), also
 # +inf; the others (dazzle, overflow, S/N too low, read error, ...) are errors -> NaN.
+# A reading of 0 is the LMS's "no distance" value (an object too close to measure,
+# docs/protocols/lms2xx.md): -inf, as the live driver publishes it (drivers/laser_session.py);
+# the loggers print it as 0 / 0.00. Negative readings cannot come from the sensor: NaN.
 LMS_CM_CODES = {8183: math.inf, 8191: math.inf}
 _LMS_CM_BAND = (8183, 8191)
 
@@ -159,7 +164,7 @@ def lms_cm_ranges(values_cm: np.ndarray, range_max: float) -> np.ndarray:
 
     Codes of the reserved band 8183..8191 cm map per :data:`LMS_CM_CODES` (+inf) or to NaN;
     any other reading at or above ``range_max`` [m] is the logger's "no return" (+inf);
-    readings <= 0 are errors (NaN).
+    0 is the LMS's "too close" (-inf, REP 117); negative readings are errors (NaN).
     """
     cm = np.asarray(values_cm, dtype=float)
     code = np.rint(cm)
@@ -168,4 +173,5 @@ def lms_cm_ranges(values_cm: np.ndarray, range_max: float) -> np.ndarray:
     out = np.where(out >= range_max, math.inf, out)
     no_return = band & np.isin(code, list(LMS_CM_CODES))
     out = np.where(band, np.where(no_return, math.inf, math.nan), out)
-    return np.where(cm <= 0.0, math.nan, out)
+    out = np.where(cm == 0.0, -math.inf, out)
+    return np.where(cm < 0.0, math.nan, out)

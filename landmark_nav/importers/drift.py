@@ -1,8 +1,7 @@
 """Odometry noise model: synthetic drift from a reference, and the odometry covariance.
 
 Model (per step between two consecutive poses; variances grow linearly with the distance
-travelled and the angle turned, so the drift does not depend on how finely the path is
-sampled)::
+travelled and the angle turned)::
 
     u_k   = relative(ref_k, ref_k+1) = (dx, dy, dth)    reference increment, robot frame
     D     = hypot(dx, dy),  a = atan2(dy, dx)           distance and its direction
@@ -11,10 +10,15 @@ sampled)::
     u'_k  = (dx + e_D cos a, dy + e_D sin a, dth + e_th)
     odom_k+1 = odom_k (+) u'_k,  odom_0 = ref_0         (composition, eq. 16 / eq. 13)
 
-so sigma_D = k_d sqrt(D) [m], and the heading error grows as k_theta sqrt(D) plus
-k_dtheta sqrt(|dth|). The covariance written into ``/odom`` is the first-order propagation
-of the same model, ``P_k+1 = F P_k F^T + G Q G^T`` with the Jacobians of the composition
-(eqs. 27-30), starting from zero at the first pose.
+so sigma_D = k_d sqrt(D) [m] and sigma_th = sqrt(k_theta^2 D + k_dtheta^2 |dth|) [rad] per
+step: the two heading terms add as variances. Summed over the steps, the variances follow
+the path length and the total |dth| turned, so on a smooth reference the drift hardly
+depends on how finely the path is sampled. A jittery reference (a scan-matched corrected
+pose whose heading wiggles from scan to scan) is different: its sum of |dth| grows with the
+number of steps, and with it the k_dtheta part of the heading drift (the sum of D grows
+too, by less, with the position jitter). The covariance written into ``/odom`` is the
+first-order propagation of the same model, ``P_k+1 = F P_k F^T + G Q G^T`` with the
+Jacobians of the composition (eqs. 27-30), starting from zero at the first pose.
 
 Default ``pioneer``: k_d = 0.05 m/sqrt(m), k_theta = 0.05 rad/sqrt(m),
 k_dtheta = 0.1 rad/sqrt(rad), the values of the simulator's Pioneer 2-DX model

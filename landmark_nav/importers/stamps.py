@@ -2,11 +2,14 @@
 
 Real logs carry three kinds of bad stamps, each repaired and counted:
 
-* **zero** stamps (the logger had no clock yet): treated as missing;
-* stamps going **backwards**: an isolated one (the next good stamp is again later than the
-  previous one) is treated as missing; a lasting one (every following stamp is earlier, as
-  when two runs were concatenated or the clock was reset) is a **clock reset**: the rest of
-  the stream is shifted to continue one nominal period after the last good stamp;
+* **zero** stamps (the logger had no clock yet) and **non-finite** ones (``nan``, ``inf``:
+  the parsers accept what ``float`` reads): treated as missing;
+* stamps going **backwards** (below the last good stamp ``t[last]``): the run of
+  consecutive good stamps that stay below ``t[last]`` is a **glitch** when a later good stamp
+  at or after ``t[last]`` ends it within :data:`GLITCH_MAX` stamps; its stamps are treated
+  as missing. A run that lasts longer, or to the end of the stream (two runs concatenated,
+  a clock reset), is a **clock reset**: the rest of the stream is shifted to continue one
+  nominal period after ``t[last]``;
 * **repeated** stamps (printed with too few digits, e.g. ``1.01893e+09``): a run of k equal
   stamps is spread evenly between its value and the next distinct stamp; a run with no later
   distinct stamp is spread at the nominal period.
@@ -17,12 +20,16 @@ positive steps between successive distinct good stamps, each divided by the numb
 entries it spans; ``fallback_period`` when the stream has no two distinct stamps.
 """
 
-from dataclasses import dataclass
-from typing import Tuple
+from dataclasses import dataclass, replace
+from typing import List, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ['StampRepairs', 'repair_stamps']
+__all__ = ['GLITCH_MAX', 'StampRepairs', 'repair_stamps', 'repair_streams']
+
+#: Longest run of backward stamps [entries] still treated as a glitch when the stream
+#: comes back to (or past) the last good stamp after it; longer runs are clock resets.
+GLITCH_MAX = 10
 
 
 @dataclass(frozen=True)
@@ -31,6 +38,7 @@ class StampRepairs:
 
     repeated: int = 0  # stamps moved off a run of equal stamps
     zero: int = 0
+    nonfinite: int = 0  # nan / inf stamps, interpolated
     backward: int = 0  # isolated backward stamps, interpolated
     resets: int = 0  # lasting backward jumps, later stamps shifted
     period: float = 0.0  # nominal period used [s]
@@ -39,12 +47,18 @@ class StampRepairs:
     @property
     def total(self) -> int:
         """Return the number of stamps changed (resets count once each)."""
-        return self.repeated + self.zero + self.backward + self.resets
+        return self.repeated + self.zero + self.nonfinite + self.backward + self.resets
 
     def describe(self) -> str:
-        """Return e.g. ``'12 repeated stamps spread, 0 zero, 1 backward, 0 clock resets'``."""
+        """Return e.g. ``'12 repeated stamps spread, 0 zero, 1 backward, 0 clock resets'``.
+
+        Non-finite stamps are named only when there are any (``', 2 non-finite'``).
+        """
         text = (f'{self.repeated} repeated stamps spread, {self.zero} zero, '
                 f'{self.backward} backward, {self.resets} clock resets')
+        if self.nonfinite:
+            text += f', {self.nonfinite} non-finite'
+
         if self.period_fallback:
             text += f' (no distinct stamps: {self.period:g} s period assumed)'
         return text
@@ -67,6 +81,32 @@ def _nominal_period(t: np.ndarray, idx: np.ndarray) -> float:
     return float(np.median(steps[ok] / gaps[ok]))
 
 
+def _backward(t: np.ndarray, bad: np.ndarray, good_idx: np.ndarray,
+              period: float) -> Tuple[int, List[Tuple[int, float]]]:
+    """Mark backward glitches in ``bad`` and shift ``t`` at clock resets (both in place).
+
+    Returns the number of glitch stamps and the resets as ``(position, shift [s])``.
+    """
+    n_back, resets = 0, []
+    last = None
+    for pos, i in enumerate(good_idx):
+        if bad[i]:  # inside a glitch run found below
+            continue
+        if last is not None and t[i] < t[last]:
+            ahead = good_idx[pos:pos + GLITCH_MAX + 1]
+            back = np.flatnonzero(t[ahead] >= t[last])
+            if len(back):  # the stream comes back within GLITCH_MAX stamps: a glitch
+                run = ahead[:back[0]]
+                bad[run] = True
+                n_back += len(run)
+                continue
+            shift = t[last] - t[i] + period
+            t[good_idx[pos:]] += shift
+            resets.append((int(i), float(shift)))
+        last = i
+    return n_back, resets
+
+
 def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, StampRepairs]:
     """Return (repaired stamps, what was repaired) for one stream of stamps [s].
 
@@ -84,26 +124,16 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
     n = len(t)
     bad = ~np.isfinite(t) | (t == 0.0)
     n_zero = int(np.count_nonzero(t == 0.0))
+    n_nonfinite = int(np.count_nonzero(~np.isfinite(t)))
     good_idx = np.flatnonzero(~bad)
     period = _nominal_period(t[good_idx], good_idx)
     fallback = period <= 0.0
     if fallback:
         period = float(fallback_period)
 
-    # Backward stamps: isolated glitches become missing, lasting jumps shift the rest.
-    n_back = n_reset = 0
-    last = None
-    for pos, i in enumerate(good_idx):
-        if last is not None and t[i] < t[last]:
-            later = good_idx[pos + 1:]
-            if len(later) and t[later[0]] >= t[last]:
-                bad[i] = True
-                n_back += 1
-                continue
-            shift = t[last] - t[i] + period
-            t[good_idx[pos:]] += shift
-            n_reset += 1
-        last = i
+    # Backward stamps: short runs (glitches) become missing, lasting jumps shift the rest.
+    n_back, resets = _backward(t, bad, good_idx, period)
+    n_reset = len(resets)
 
     # Runs of equal stamps: spread between the run's value and the next distinct stamp.
     good_idx = np.flatnonzero(~bad)
@@ -135,6 +165,55 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
             filled[:lo] = t[lo] - period * (lo - idx[:lo])
             filled[hi + 1:] = t[hi] + period * (idx[hi + 1:] - hi)
             t = filled
-    repairs = StampRepairs(repeated=n_rep, zero=n_zero, backward=n_back, resets=n_reset,
-                           period=period, period_fallback=bool(fallback and n > 1))
+    repairs = StampRepairs(repeated=n_rep, zero=n_zero, nonfinite=n_nonfinite, backward=n_back,
+                           resets=n_reset, period=period, period_fallback=bool(fallback and n > 1))
     return t, repairs
+
+
+def repair_streams(streams: Sequence, lines: Sequence,
+                   fallback_period: float = 1.0) -> Tuple[List[np.ndarray], List[StampRepairs]]:
+    """Repair several streams of one log with one clock: resets found on the merged stream.
+
+    ``lines[k]`` are the log line numbers of the entries of ``streams[k]`` (the log order).
+    The streams are merged in log order and clock resets are detected on the merged stream
+    (as in :func:`repair_stamps`), so one reset shifts every stream by the same amount
+    (stream by stream, each would get its own shift from its own last stamp and period).
+    Each shifted stream is then repaired on its own (repeated, zero, non-finite, backward
+    stamps); its ``resets`` count the merged resets that fall inside it.
+
+    Raises:
+        ValueError: A stream and its line numbers differ in length, or
+            ``fallback_period`` is not positive.
+
+    """
+    if not fallback_period > 0:
+        raise ValueError(f'fallback period must be > 0, got {fallback_period}')
+    streams = [np.array(t, dtype=float).ravel() for t in streams]
+    lines = [np.asarray(n, dtype=float).ravel() for n in lines]
+    for k, (t, n) in enumerate(zip(streams, lines)):
+        if len(t) != len(n):
+            raise ValueError(f'stream {k}: {len(t)} stamps but {len(n)} line numbers')
+    merged = np.concatenate(streams) if streams else np.zeros(0)
+    order = np.argsort(np.concatenate(lines), kind='stable') if streams else np.zeros(0, int)
+    t = merged[order]
+    bad = ~np.isfinite(t) | (t == 0.0)
+    good_idx = np.flatnonzero(~bad)
+    period = _nominal_period(t[good_idx], good_idx) or float(fallback_period)
+    _, resets = _backward(t, bad, good_idx, period)
+    step = np.zeros(len(t))
+    for pos, shift in resets:
+        step[pos] += shift
+    shift_sorted = np.cumsum(step)
+    shift = np.empty_like(shift_sorted)
+    shift[order] = shift_sorted
+    out, reports = [], []
+    start = 0
+    for s in streams:
+        sh = shift[start:start + len(s)]
+        changes = int(np.count_nonzero(np.diff(sh) != 0))
+        start += len(s)
+        ok = np.isfinite(s) & (s != 0.0)  # zero and non-finite stamps stay missing
+        fixed, rep = repair_stamps(np.where(ok, s + sh, s), fallback_period)
+        out.append(fixed)
+        reports.append(replace(rep, resets=rep.resets + changes))
+    return out, reports

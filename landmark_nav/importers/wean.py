@@ -32,6 +32,24 @@ __all__ = ['WEAN_BEAMS', 'WEAN_RANGE_MAX', 'parse_wean']
 WEAN_BEAMS = 180
 WEAN_RANGE_MAX = 81.82  # [m] largest LMS cm-mode distance (8182 cm); above it are codes
 _CM = 0.01
+_FIELDS = {'O': 5, 'L': 8 + WEAN_BEAMS}  # tokens per line, the type included
+
+
+def _values(source: LineSource, lineno: int, tokens) -> Optional[np.ndarray]:
+    """Return the numbers of an ``O`` / ``L`` line, or None after ``source.fail``."""
+    kind, need = tokens[0], _FIELDS[tokens[0]]
+    if len(tokens) != need:
+        source.fail(lineno, f'malformed {kind} line ({len(tokens)} fields, need {need})')
+        return None
+    try:
+        values = np.array(tokens[1:], dtype=float)
+    except ValueError as err:
+        source.fail(lineno, f'malformed {kind} line ({err})')
+        return None
+    if not np.all(np.isfinite(values)):
+        source.fail(lineno, f'malformed {kind} line (non-finite value)')
+        return None
+    return values
 
 
 def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> ParsedLog:
@@ -45,49 +63,29 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
     path = Path(path)
     source = LineSource(path, lenient)
     scans, robot, laser = [], [], []
-    odom_t, odom_p = [], []
+    odom_t, odom_p, odom_n = [], [], []
     ignored = {}
     angle_min, inc = -math.pi / 2, math.pi / WEAN_BEAMS
     for lineno, tokens in source.lines():
         kind = tokens[0]
+        if kind not in _FIELDS:
+            ignored[kind] = ignored.get(kind, 0) + 1
+            continue
+        if max_scans is not None and len(scans) >= max_scans:
+            break
+        values = _values(source, lineno, tokens)
+        if values is None:
+            continue
         if kind == 'O':
-            if max_scans is not None and len(scans) >= max_scans:
-                break
-            if len(tokens) != 5:
-                source.fail(lineno, f'malformed O line ({len(tokens)} fields, need 5)')
-                continue
-            try:
-                values = np.array(tokens[1:], dtype=float)
-            except ValueError as err:
-                source.fail(lineno, f'malformed O line ({err})')
-                continue
-            if not np.all(np.isfinite(values)):
-                source.fail(lineno, 'malformed O line (non-finite value)')
-                continue
             odom_t.append(values[3])
+            odom_n.append(lineno)
             odom_p.append((values[0] * _CM, values[1] * _CM, values[2]))
-        elif kind == 'L':
-            if max_scans is not None and len(scans) >= max_scans:
-                break
-            if len(tokens) != 8 + WEAN_BEAMS:
-                source.fail(lineno, f'malformed L line ({len(tokens)} fields, need '
-                                    f'{8 + WEAN_BEAMS})')
-                continue
-            try:
-                values = np.array(tokens[1:], dtype=float)
-            except ValueError as err:
-                source.fail(lineno, f'malformed L line ({err})')
-                continue
-            if not np.all(np.isfinite(values)):
-                source.fail(lineno, 'malformed L line (non-finite value)')
-                continue
+        else:
             cm = values[6:6 + WEAN_BEAMS]
             scans.append(ScanRecord(float(values[-1]), lineno, angle_min, inc,
                                     lms_cm_ranges(cm, WEAN_RANGE_MAX)))
             robot.append((values[0] * _CM, values[1] * _CM, values[2]))
             laser.append((values[3] * _CM, values[4] * _CM, values[5]))
-        else:
-            ignored[kind] = ignored.get(kind, 0) + 1
     if not scans:
         raise ValueError(f'{path}: no L lines (not a Wean Hall log?)')
     robot, laser = np.array(robot), np.array(laser)
@@ -101,6 +99,7 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
                     sigma_range=LMS_SIGMA_RANGE)
     log = ParsedLog('wean', path, sensor, mount, scans=scans)
     log.odom_stamps = np.array(odom_t, dtype=float)
+    log.odom_lineno = np.array(odom_n, dtype=int)
     log.odom_poses = np.array(odom_p, dtype=float).reshape(-1, 3)
     spread = float(np.max(np.hypot(rel[:, 0] - mount[0], rel[:, 1] - mount[1])))
     if spread > 0.005:

@@ -19,7 +19,7 @@ import numpy as np
 from .common import ParsedLog
 from .drift import DRIFT_MODELS, DriftModel, parse_drift_model, propagate_covariance, \
     synthetic_odometry
-from .stamps import repair_stamps, StampRepairs
+from .stamps import repair_streams, StampRepairs
 
 __all__ = ['CUSTOM_KEYS', 'FORMATS', 'ImportResult', 'guess_format', 'import_log',
            'parse_log']
@@ -78,7 +78,8 @@ def guess_format(path) -> str:
 
 def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
               lenient: bool = False, max_scans: Optional[int] = None,
-              max_range: Optional[float] = None, odom_lines: bool = False) -> ParsedLog:
+              max_range: Optional[float] = None, odom_lines: bool = False,
+              fov: Optional[float] = None) -> ParsedLog:
     """Parse a log of any supported format (``fmt`` guessed when None).
 
     Raises:
@@ -98,7 +99,9 @@ def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
     if fmt == 'carmen':
         from .carmen import parse_carmen
         return parse_carmen(path, poses=poses, lenient=lenient, max_scans=max_scans,
-                            max_range=max_range, odom_lines=odom_lines)
+                            max_range=max_range, odom_lines=odom_lines, fov=fov)
+    if fov is not None:
+        raise ValueError(f'--fov applies to Carmen logs only ({fmt} geometry is fixed)')
     if odom_lines:
         raise ValueError(f'--odom-lines applies to Carmen logs only, not {fmt}')
     if max_range is not None:
@@ -158,7 +161,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                reference=None, drift: Optional[str] = None, seed: Optional[int] = None,
                lenient: bool = False, force: bool = False, max_scans: Optional[int] = None,
                fallback_period: float = 1.0, progress: bool = False,
-               max_range: Optional[float] = None, odom_lines: bool = False) -> ImportResult:
+               max_range: Optional[float] = None, odom_lines: bool = False,
+               fov: Optional[float] = None) -> ImportResult:
     """Import a log into a bag directory ``out``; return what was written.
 
     Args:
@@ -179,6 +183,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         max_range: Carmen only: readings at or above it are "no return" [m].
         odom_lines: Carmen corrected logs only: rebuild the raw odometry from the
             re-anchored ``ODOM`` lines instead of synthetic drift.
+        fov: Carmen only: field of view of ``FLASER`` / ``RLASER`` lines [deg], for beam
+            counts other than 180, 181, 360, 361.
 
     Raises:
         LineError: A malformed line, unless ``lenient``.
@@ -199,7 +205,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError(f'seed must be in [0, 2**32), got {seed}')
     if out.exists() and not force:
         raise BagError(f'{out} exists already; use --force to replace it')
-    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines)
+    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines, fov)
     if reference is not None:
         if log.fmt != 'carmen':
             raise ValueError(f'--reference applies to Carmen logs only, not {log.fmt}')
@@ -208,18 +214,33 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                              'log (--poses raw) with its corrected log')
         from .carmen import pair_with_reference, parse_carmen
         ref_log = parse_carmen(reference, poses='corrected', lenient=lenient,
-                               max_range=max_range)
+                               max_range=max_range, fov=fov)
         pair_with_reference(log, ref_log)
 
-    repairs: Dict[str, StampRepairs] = {}
-    scan_t, repairs['scan'] = repair_stamps(log.scan_stamps, fallback_period)
+    # One clock for all streams: resets are found on the merged stream (log order) and
+    # shift every stream alike; repeated / zero / backward stamps are repaired per stream.
+    names = ['scan']
+    streams = [log.scan_stamps]
+    lines = [np.array([s.lineno for s in log.scans], dtype=int)]
     if log.has_odometry:
         if drift is not None:
             raise ValueError(f'{path.name} has raw odometry; --drift applies only to logs '
                              'without (Carmen corrected logs)')
+        names.append('odom')
+        streams.append(log.odom_stamps)
+        lines.append(log.odom_lineno)
+    if log.rear_scans:
+        names.append('rear scan')
+        streams.append([s.stamp for s in log.rear_scans])
+        lines.append(np.array([s.lineno for s in log.rear_scans], dtype=int))
+    fixed, reports = repair_streams(streams, lines, fallback_period)
+    repaired = dict(zip(names, fixed))
+    repairs: Dict[str, StampRepairs] = dict(zip(names, reports))
+    scan_t = repaired['scan']
+    if log.has_odometry:
         model = DRIFT_MODELS['pioneer']
         odometry, used_seed = 'raw', None
-        odom_t, repairs['odom'] = repair_stamps(log.odom_stamps, fallback_period)
+        odom_t = repaired['odom']
         odom_p = log.odom_poses
     elif log.has_reference:
         model = parse_drift_model(drift or 'pioneer')
@@ -232,10 +253,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError('--seed applies to synthetic odometry only')
     odom_cov = propagate_covariance(odom_p, model)
     odom_tw = _twist(odom_t, odom_p)
-    rear_t = None
-    if log.rear_scans:
-        rear_t, repairs['rear scan'] = repair_stamps(
-            [s.stamp for s in log.rear_scans], fallback_period)
+    rear_t = repaired.get('rear scan')
 
     def ns(t: float) -> int:
         return int(round(float(t) * 1e9))
@@ -256,7 +274,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
             raise ValueError(f'{out} exists and is not a bag; refusing to replace it')
         shutil.rmtree(out)
     counts = {'/scan': 0, '/odom': 0, '/ground_truth/odom': 0, '/scan_rear': 0}
-    no_return = errors = 0
+    no_return = errors = too_close = 0
     items = events
     if progress:
         from tqdm import tqdm
@@ -279,6 +297,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                 if kind == 0:
                     no_return += int(np.count_nonzero(np.isposinf(scan.ranges)))
                     errors += int(np.count_nonzero(np.isnan(scan.ranges)))
+                    too_close += int(np.count_nonzero(np.isneginf(scan.ranges)))
             elif kind == 1:
                 topic = '/odom'
                 msg = make_odometry(stamp_ns, 'odom', 'base_link', odom_p[i], odom_cov[i],
@@ -320,7 +339,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
              f'{np.degrees(scan0.angle_min):.2f} deg in {np.degrees(scan0.angle_increment):.4f}'
              f' deg steps, range_max {sensor.range_max:g} m ({sensor.model}, sigma_range '
              f'{sensor.sigma_range:g} m); {no_return} no-return beams (+inf), {errors} error '
-             'beams (NaN)']
+             'beams (NaN)' + (f', {too_close} too-close beams (-inf)' if too_close else '')]
     if odometry == 'raw':
         lines.append(f'  /odom: {counts["/odom"]} raw odometry poses (covariance: '
                      f'{model.describe()})')

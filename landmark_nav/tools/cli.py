@@ -71,7 +71,8 @@ def _cmd_import(args: argparse.Namespace) -> int:
                         reference=args.reference, drift=args.drift, seed=args.seed,
                         lenient=args.lenient, force=args.force, max_scans=args.max_scans,
                         fallback_period=args.period, progress=sys.stderr.isatty(),
-                        max_range=args.max_range, odom_lines=args.odom_lines)
+                        max_range=args.max_range, odom_lines=args.odom_lines,
+                        fov=args.fov)
     print(result.summary)
     return 0
 
@@ -224,6 +225,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help='Carmen: readings at or above this are "no return" (default: the '
                         "log's ROBOTLASER1 maximum_range or PARAM robot_front_laser_max, "
                         'else 50)')
+    p.add_argument('--fov', type=_positive_float, default=None, metavar='DEG',
+                   help='Carmen: field of view of FLASER / RLASER lines, beams spread evenly '
+                        'from -DEG/2 to +DEG/2 (needed for counts other than 180, 181, 360, '
+                        '361)')
     p.add_argument('--period', type=_positive_float, default=1.0, metavar='SECONDS',
                    help='scan period assumed when a log has no two distinct stamps '
                         '(default 1.0)')
