@@ -1,13 +1,14 @@
-"""No false surfaces: a line never covers a beam that saw through it (issue 15, item 1).
+"""No false surfaces: a line or corner arm never covers a beam seen through it (issue 15).
 
 A beam is seen through a segment when its ray crosses the segment inside its extent and
 its return lies more than ``max(3 sigma_r, 5 cm)`` beyond it. Hand-built scenes (a doorway,
 a gap with a far wall behind, a table leg in front of a wall) and every scan of the six
-Carmen logs, both line methods, node defaults.
+Carmen logs, both line methods and the refined corner detectors, node defaults.
 """
 
 import math
 
+from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.lines import extract_lines, LineParams, METHODS
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 from landmark_nav.testing import shared_data
@@ -133,17 +134,24 @@ CARMEN_LOGS = ['aces', 'seattle', 'belgioioso', 'fhw', 'freiburg-101', 'acapulco
 def test_no_false_surfaces_on_the_carmen_logs(name):
     from landmark_nav.tools.carmen import read_carmen_scans
     path = shared_data('carmen', f'{name}-corrected.log.gz')
-    counts = {m: [0, 0] for m in METHODS}  # lines, false beams
+    counts = {f'lines {m}': [0, 0] for m in METHODS}  # features, beams seen through them
     for scan in read_carmen_scans(path):
         valid = np.isfinite(scan.ranges) & (scan.ranges > 0.0)
         clusters = segment_scan(scan.ranges, scan.angles, valid, scan.angle_increment,
                                 sigma_r=SIGMA_R, min_points=5)
         for method in METHODS:
             lines = extract_lines(clusters, LineParams(method=method))
-            counts[method][0] += len(lines)
-            counts[method][1] += int(_false_beams(_segments(lines), scan.ranges, scan.angles,
-                                                  valid).sum())
+            seen = _false_beams(_segments(lines), scan.ranges, scan.angles, valid)
+            counts[f'lines {method}'][0] += len(lines)
+            counts[f'lines {method}'][1] += int(seen.sum())
+        for method in ('minus_cosine', 'split_merge'):  # the refined corner detectors
+            corners = detect_corners(clusters, CornerParams(method=method))
+            arms = np.array([c.arms for c in corners]).reshape(-1, 2, 2)
+            key = f'corners {method}'
+            counts.setdefault(key, [0, 0])
+            counts[key][0] += len(corners)
+            counts[key][1] += int(_false_beams(arms, scan.ranges, scan.angles, valid).sum())
     print(name, counts)
-    for method, (n_lines, n_false) in counts.items():
-        assert n_lines > 1000
-        assert n_false == 0, f'{name} {method}: {n_false} beams seen through lines'
+    for key, (n_found, n_false) in counts.items():
+        assert n_found > (1000 if key.startswith('lines') else 150)
+        assert n_false == 0, f'{name} {key}: {n_false} beams seen through them'

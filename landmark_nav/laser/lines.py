@@ -46,8 +46,9 @@ vectorised batch (fits from prefix sums of point moments):
    last supporting beam, also those of no cluster (dropped small clusters, read from the
    whole scan of :func:`~landmark_nav.laser.segmentation.segment_scan`); beams in front
    (occluders, e.g. a table leg) and missing returns may be bridged. A line hiding an
-   *opening* (a beam beyond it by more than 3 standard deviations of its distance along
-   the ray, eq. 7) is cut there and both sides are refitted, until no line hides one;
+   *opening* (a beam beyond it by more than ``see_through`` plus 3 standard deviations
+   of its distance along the ray, eq. 7) is cut there and both sides are refitted, until
+   no line hides one;
    thus merging across a cluster break and growth over neighbouring beams stand only
    over beams that are occluded or missing. A line hiding only its own noise (a wall seen
    at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) keeps
@@ -1004,9 +1005,9 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     hidden when its return lies more than ``see_through_tolerance`` beyond the line along
     its ray: the laser saw through where the line claims a surface. Beams in front of the
     line (occluders) and missing beams are allowed. ``opening`` marks the hidden beams
-    that are also beyond the line by more than 3 standard deviations of their distance
-    along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``); the
-    others are the wall's own noise at grazing incidence.
+    beyond the line by more than that tolerance plus 3 standard deviations of their
+    distance along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``);
+    the others are the wall's own noise (at grazing incidence, or a rare large error).
     """
     wr, wc, ws, wv = scan.beams()
     b0, b1 = scan.beam[first], scan.beam[last]
@@ -1026,7 +1027,7 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     line, idx, beyond, r, cos_in = line[bad], idx[bad], beyond[bad], r[bad], cos_in[bad]
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
-    return line, idx, beyond * beyond > 9.0 * var
+    return line, idx, beyond > params.see_through_tolerance + 3.0 * np.sqrt(var)
 
 
 def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
