@@ -52,8 +52,8 @@ vectorised batch (fits from prefix sums of point moments):
    thus merging across a cluster break and growth over neighbouring beams stand only
    over beams that are occluded or missing. A line hiding only its own noise (a wall seen
    at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) keeps
-   its fit on all its points, and its extent shrinks to its longest run of support
-   between those beams. See :func:`_cut_seen_through`.
+   its fit on all its points, and its extent shrinks to its run of support between those
+   beams with the most points. See :func:`_cut_seen_through`.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -1044,8 +1044,8 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
        opening leaves. Repeated on the new fits; support runs shorter than ``min_points``
        are dropped, and so is a line still hiding an opening after ``_MAX_CUTS`` rounds.
     2. A line that hides only beams within their noise (its own points at grazing
-       incidence) keeps its fit, all points included; its extent shrinks to the longest
-       run of its support between those beams.
+       incidence) keeps its fit, all points included; its extent shrinks to the run of
+       its support between those beams with the most points.
     """
     line, beam, opening = _seen_through(scan, f, first, last, params)
     if not line.size:
@@ -1085,10 +1085,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
-    if line.size:  # only noise: each line's extent becomes its longest run between them
+    if line.size:  # only noise: each line's extent becomes its largest run between them
         pos, run, starts, size = _support_runs(scan, owner, np.unique(beam))
         own = owner[pos[starts]]
-        best = np.lexsort((-size, own))  # per line, the longest run first
+        best = np.lexsort((-size, own))  # per line, the run of most points first
         head = np.ones(best.size, dtype=bool)
         head[1:] = own[best[1:]] != own[best[:-1]]
         best = best[head]
@@ -1178,6 +1178,9 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
             ``min_points`` points and can grow over the points of smaller ones, so pass
             small clusters too (``segment_scan(..., min_points=1)``) to let lines reach
             isolated points on their wall (e.g. a corridor wall seen at grazing angles).
+            Clusters of one ``segment_scan`` call carry the whole scan, so no line covers
+            a beam seen through it even where that beam's cluster was dropped; for
+            clusters built by hand only their own beams are known (step 5).
         params: Method and parameters (default ``LineParams()``).
 
     Returns:
