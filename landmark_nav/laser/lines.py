@@ -51,9 +51,10 @@ vectorised batch (fits from prefix sums of point moments):
    no line hides one;
    thus merging across a cluster break and growth over neighbouring beams stand only
    over beams that are occluded or missing. A line hiding only its own noise (a wall seen
-   at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) keeps
-   its fit on all its points, and its extent shrinks to its run of support between those
-   beams with the most points. See :func:`_cut_seen_through`.
+   at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) is cut
+   likewise when that leaves two or more lines of ``min_points`` and ``min_length``;
+   otherwise it keeps its fit on all its points, and its extent shrinks to its run of
+   support between those beams with the most points. See :func:`_cut_seen_through`.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -1044,8 +1045,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
        opening leaves. Repeated on the new fits; support runs shorter than ``min_points``
        are dropped, and so is a line still hiding an opening after ``_MAX_CUTS`` rounds.
     2. A line that hides only beams within their noise (its own points at grazing
-       incidence) keeps its fit, all points included; its extent shrinks to the run of
-       its support between those beams with the most points.
+       incidence) is cut there too when at least two of the pieces are lines of their own
+       (``min_points``, ``min_length``); otherwise it keeps its fit, all points included,
+       and its extent shrinks to the run of its support between those beams with the
+       most points.
     """
     line, beam, opening = _seen_through(scan, f, first, last, params)
     if not line.size:
@@ -1058,6 +1061,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         idx, _ = _gather(lo, hi)
         owner[idx] = np.repeat(np.arange(first.size), np.maximum(hi - lo + 1, 0))
     rounds = 0
+    opening |= _splits_in_two(scan, owner, line, beam, params)
     while opening.any():
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
             ok = np.ones(first.size, dtype=bool)
@@ -1085,6 +1089,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
+        opening |= _splits_in_two(scan, owner, line, beam, params)
     if line.size:  # only noise: each line's extent becomes its largest run between them
         pos, run, starts, size = _support_runs(scan, owner, np.unique(beam))
         own = owner[pos[starts]]
@@ -1096,6 +1101,23 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         first[own[best]] = pos[starts[best]]
         last[own[best]] = pos[starts[best] + size[best] - 1]
     return sums, first, last, f
+
+
+def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
+                   params: LineParams) -> np.ndarray:
+    """Mark the hidden beams (all of a line's) that cut it into two or more lines.
+
+    A piece between hidden beams counts as a line when it has ``min_points`` supporting
+    points and spans ``min_length``.
+    """
+    if not line.size:
+        return np.zeros(0, dtype=bool)
+    pos, _, starts, size = _support_runs(scan, owner, np.unique(beam))
+    a, b = pos[starts], pos[starts + size - 1]
+    span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
+    good = (size >= params.min_points) & (span >= params.min_length)
+    n_good = np.bincount(owner[a][good], minlength=int(owner.max()) + 1)
+    return n_good[line] >= 2
 
 
 def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
