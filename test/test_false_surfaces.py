@@ -155,3 +155,11 @@ def test_no_false_surfaces_on_the_carmen_logs(name):
     for key, (n_found, n_false) in counts.items():
         assert n_found > (1000 if key.startswith('lines') else 150)
         assert n_false == 0, f'{name} {key}: {n_false} beams seen through them'
+
+
+@pytest.mark.parametrize('value', [0.0, -0.05, float('nan'), float('inf')])
+def test_see_through_must_be_positive(value):
+    with pytest.raises(ValueError, match='see_through'):
+        LineParams(see_through=value)
+    assert LineParams().see_through_tolerance == 0.05
+    assert LineParams(sigma_r=0.02).see_through_tolerance == pytest.approx(0.06)

@@ -687,13 +687,14 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     r = np.hypot(x, y)
     for _ in range(2):
         c, s, rho = lines.c[..., None], lines.s[..., None], lines.rho[..., None]
-        d_own = np.abs(x * c + y * s - rho)
+        d = x * c + y * s - rho
+        d_own = np.abs(d)
         d_other = np.abs(x * c[:, ::-1] + y * s[:, ::-1] - rho[:, ::-1])
         far = d_own > 4.0 * sig + 0.01
         np.logical_and(far[..., :-1], far[..., 1:], out=two[..., :-1])
         cut = np.logical_or.accumulate(two, axis=-1)  # the arm ends at two consecutive misses
         # ... and before an opening seen through it (no false surface)
-        cut |= np.logical_or.accumulate(_behind(x, y, r, valid, lines, p)[1], axis=-1)
+        cut |= np.logical_or.accumulate(_behind(d, r, valid, rho, p)[1], axis=-1)
         ux, uy = _arm_directions(lines, cx, cy)
         along = (x - cx[:, None, None]) * ux[..., None] + (y - cy[:, None, None]) * uy[..., None]
         w = (valid & ~cut & ~far & (d_own <= d_other) & (along > near)).astype(float)
@@ -721,25 +722,33 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     return _make(cx, cy, bis, opening, cov, st.beam[g], fg, arms)
 
 
-def _behind(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray, ln: _Lines,
-            p: CornerParams) -> Tuple[np.ndarray, np.ndarray]:
+def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,
+            p: CornerParams, openings: bool = True):
     """Return the valid samples (K, 2, M) seen through their arm's line, and the openings.
 
-    A sample is seen through when it lies more than ``see_through_tolerance`` beyond the
-    line along its ray (``r - t``, ``t = rho / (u . n)`` the range at which the ray meets
-    the line); an opening when beyond by more than that plus 3 standard deviations of its
-    distance along the ray (eq. 7: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``), else
-    it is the surface's own noise (at grazing incidence, or a rare large error).
+    ``d`` are the samples' signed distances to their arm's line ``x cos a + y sin a = rho``
+    (``rho`` (K, 2, 1)), ``r`` their ranges. A sample is seen through when it lies more
+    than ``see_through_tolerance`` beyond the line along its ray: ``r - t > tol`` with
+    ``t = rho r / (d + rho)`` the range at which the ray meets the line; an opening when
+    beyond by more than that plus 3 standard deviations of its distance along the ray
+    (eq. 7: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``), else it is the surface's own
+    noise (at grazing incidence, or a rare large error). Without ``openings`` only the
+    first mask is returned.
     """
-    c, s, rho = ln.c[..., None], ln.s[..., None], ln.rho[..., None]
+    proj = d + rho  # r cos(incidence)
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        cos_in = (x * c + y * s) / r
-        t = rho / cos_in
-        beyond = r - t
+        t = rho * r / proj
+        beyond = r * d / proj  # r - t
         seen = valid & (t > 0.0) & (beyond > p.see_through_tolerance)
-        c2 = cos_in * cos_in
-        var = p.sigma_r ** 2 + (r * p.sigma_phi) ** 2 * (1.0 - c2) / c2
-        return seen, seen & (beyond > p.see_through_tolerance + 3.0 * np.sqrt(var))
+    if not openings:
+        return seen
+    opening = np.zeros_like(seen)
+    if seen.any():  # few samples: the noise test only where needed
+        idx = np.nonzero(seen)
+        c2 = (proj[idx] / r[idx]) ** 2
+        var = p.sigma_r ** 2 + (r[idx] * p.sigma_phi) ** 2 * (1.0 - c2) / c2
+        opening[idx] = beyond[idx] > p.see_through_tolerance + 3.0 * np.sqrt(var)
+    return seen, opening
 
 
 def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
@@ -760,42 +769,45 @@ def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
     size = x.shape[-1]
     used = w > 0.0
     n = used.sum(axis=-1)
+    pick = np.empty(x.shape[:-1] + (3,), dtype=np.int64)  # inner, outer, last used sample
     first = used.argmax(axis=-1)
     last = size - 1 - used[..., ::-1].argmax(axis=-1)
-    seen = _behind(x, y, r, valid, ln, p)[0]
-    run = np.cumsum(seen, axis=-1)  # samples seen through the line separate the runs
-    good = used & ~seen
-    # run sizes by (corner, arm, run number); the longest run wins
-    counts = np.zeros(x.shape[:-1] + (size + 1,), dtype=np.int64)
-    np.add.at(counts, (*np.nonzero(good)[:-1], run[good]), 1)
-    in_run = good & (run == counts.argmax(axis=-1)[..., None])
-    inner = in_run.argmax(axis=-1)
-    outer = size - 1 - in_run[..., ::-1].argmax(axis=-1)
-    c, s, rho = ln.c, ln.s, ln.rho
-    ends = np.empty(x.shape[:-1] + (3, 2))  # (K, arm, inner / outer / last used, xy)
-    for k, i in enumerate((inner, outer, last)):
-        xi = np.take_along_axis(x, i[..., None], axis=-1)[..., 0]
-        yi = np.take_along_axis(y, i[..., None], axis=-1)[..., 0]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            t = rho / (xi * c + yi * s)  # the ray through the sample meets the line
-        ends[..., k, 0] = t * xi
-        ends[..., k, 1] = t * yi
+    c, s, rho = ln.c[..., None], ln.s[..., None], ln.rho[..., None]
+    d = x * c + y * s - rho
+    seen = _behind(d, r, valid, rho, p, openings=False)
+    if seen.any():
+        run = np.cumsum(seen, axis=-1)  # samples seen through the line separate the runs
+        good = used & ~seen
+        # run sizes by (corner, arm, run number); the run of most samples wins
+        arm = np.arange(good.size // size).reshape(good.shape[:-1])[..., None]  # (K, 2, 1)
+        key = arm * (size + 1) + run
+        counts = np.bincount(key[good], minlength=arm.size * (size + 1))
+        best = counts.reshape(good.shape[:-1] + (size + 1,)).argmax(axis=-1)
+        in_run = good & (run == best[..., None])
+        pick[..., 0] = in_run.argmax(axis=-1)
+        pick[..., 1] = size - 1 - in_run[..., ::-1].argmax(axis=-1)
+    else:
+        pick[..., 0], pick[..., 1] = first, last
+    pick[..., 2] = last
+    xi = np.take_along_axis(x, pick, axis=-1)
+    yi = np.take_along_axis(y, pick, axis=-1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = rho / (xi * c + yi * s)  # the ray through the sample meets the line
+    ends = np.stack([t * xi, t * yi], axis=-1)  # (K, arm, inner / outer / last used, xy)
     cx, cy = _intersect(ln)
     reach = np.hypot(ends[..., 2, 0] - cx[:, None], ends[..., 2, 1] - cy[:, None])
-    d = x * c[..., None] + y * s[..., None] - rho[..., None]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        rmse = np.sqrt(np.where(used, d * d, 0.0).sum(axis=-1) / n)
-        inliers = n / (last - first + 1)
-    # An arm that ends inside its cluster (its samples leave the line: clutter, another
-    # surface) must reach arm_length; one cut by the cluster's end (an occlusion, a jump)
-    # half of it, as the window's own arms.
-    ends_inside = (valid & (np.arange(size) > last[..., None])).any(axis=-1)
-    need = np.where(ends_inside, p.arm_length, 0.5 * p.arm_length)
     real = n >= p.min_arm_points
     if p.real_arms:
+        with np.errstate(divide='ignore', invalid='ignore'):
+            rmse = np.sqrt(np.where(used, d * d, 0.0).sum(axis=-1) / n)
+            inliers = n / (last - first + 1)
+        # An arm that ends inside its cluster (its samples leave the line: clutter, another
+        # surface) must reach arm_length; one cut by the cluster's end (an occlusion, a
+        # jump) half of it, as the window's own arms.
+        ends_inside = (valid & (np.arange(size) > last[..., None])).any(axis=-1)
+        need = np.where(ends_inside, p.arm_length, 0.5 * p.arm_length)
         real &= (reach >= need) & (rmse <= p.arm_tolerance) & (inliers >= p.min_arm_inliers)
-    real = real.all(axis=-1)
-    return ends[..., :2, :], real
+    return ends[..., :2, :], real.all(axis=-1)
 
 
 def _dedup(x: np.ndarray, y: np.ndarray, score: np.ndarray, radius: float) -> np.ndarray:
