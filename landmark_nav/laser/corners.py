@@ -53,8 +53,9 @@ Design decisions where the chapter is silent (all documented on :class:`CornerPa
   point noise), else the "corner" is a bend of noise on a straight wall. (3) Each arm
   (starting ``corner_gap + 1`` samples from the vertex) is extended up to ``fit_length``
   metres and cut where two consecutive samples leave its line by more than
-  ``4 sigma + 1 cm`` or before a sample seen through it (an opening: beyond the line along
-  its ray by more than ``see_through`` plus 3 standard deviations); isolated samples off the
+  ``4 sigma + 1 cm`` or before a sample seen through it (an opening: a sample that far off
+  the line and beyond it along its ray by more than ``see_through`` plus 3 standard
+  deviations of its distance along the ray); isolated samples off the
   line are dropped (outliers), as are samples closer to the other arm's line or within
   ``max(sigma, spacing / 2)`` of the intersection. The lines are refitted (eqs. 8-10, two
   rounds) and intersected. (4) The corner is kept if both arms are real surfaces
@@ -169,8 +170,9 @@ class CornerParams:
         min_arm_inliers: smallest share of an arm's samples its fit uses (the rest are
             outliers farther than ``4 sigma + 1 cm``).
         see_through: an arm never covers a sample more than this beyond its line along
-            the sample's ray [m]: the fit stops before an opening (beyond by more than
-            this plus 3 standard deviations along the ray, eq. 7), the arm's extent
+            the sample's ray [m]: the fit stops before an opening (a sample off the line
+            and beyond by more than this plus 3 standard deviations along the ray, eq. 7),
+            the arm's extent
             (``Corner.arms``) before its own noisy samples at grazing incidence. None means
             ``max(3 sigma_r, 0.05)``.
     """
@@ -693,8 +695,9 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
         far = d_own > 4.0 * sig + 0.01
         np.logical_and(far[..., :-1], far[..., 1:], out=two[..., :-1])
         cut = np.logical_or.accumulate(two, axis=-1)  # the arm ends at two consecutive misses
-        # ... and before an opening seen through it (no false surface)
-        cut |= np.logical_or.accumulate(_behind(d, r, valid, rho, p)[1], axis=-1)
+        # ... and before an opening seen through it (no false surface): a sample off the
+        # line (far) and beyond it along its ray by more than its noise allows
+        cut |= np.logical_or.accumulate(far & _behind(d, r, valid, rho, p)[1], axis=-1)
         ux, uy = _arm_directions(lines, cx, cy)
         along = (x - cx[:, None, None]) * ux[..., None] + (y - cy[:, None, None]) * uy[..., None]
         w = (valid & ~cut & ~far & (d_own <= d_other) & (along > near)).astype(float)
@@ -756,8 +759,8 @@ def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
     """Return the arms' extents (K, 2, 2, 2) and whether both arms are real surfaces (K,).
 
     Samples run from the vertex outward; the arm fits use the samples ``w`` (cut before
-    any opening, see :func:`_behind`). Both arms are real surfaces when each fit uses at
-    least ``min_arm_points`` samples, reaches ``arm_length`` from the corner (half of it
+    any opening off the line, see :func:`_behind`). Both arms are real surfaces when each
+    fit uses at least ``min_arm_points`` samples, reaches ``arm_length`` from the corner (half of it
     when the arm ends at its cluster's end: an occlusion or a jump, as the window's own
     arms), fits them with an RMS distance of at most ``arm_tolerance``, and uses at least
     ``min_arm_inliers`` of the samples between its innermost and outermost used one (an
