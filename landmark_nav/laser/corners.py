@@ -760,14 +760,14 @@ def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
 
     Samples run from the vertex outward; the arm fits use the samples ``w`` (cut before
     any opening off the line, see :func:`_behind`). Both arms are real surfaces when each
-    fit uses at least ``min_arm_points`` samples, reaches ``arm_length`` from the corner (half of it
-    when the arm ends at its cluster's end: an occlusion or a jump, as the window's own
-    arms), fits them with an RMS distance of at most ``arm_tolerance``, and uses at least
-    ``min_arm_inliers`` of the samples between its innermost and outermost used one (an
-    arm of scattered points, e.g. furniture clutter, loses its outliers and fails). An
-    arm's extent is its longest run of used samples with no sample seen through the line
-    (its own noise at grazing incidence) between them, from the innermost to the
-    outermost, each end where that sample's ray meets the line.
+    fit uses at least ``min_arm_points`` samples, reaches ``arm_length`` from the corner
+    (half of it when the arm ends at its cluster's end: an occlusion or a jump, as the
+    window's own arms), fits them with an RMS distance of at most ``arm_tolerance``, and
+    uses at least ``min_arm_inliers`` of the samples between its innermost and outermost
+    used one (an arm of scattered points, e.g. furniture clutter, loses its outliers and
+    fails). An arm's extent is its run of used samples with the most samples and no sample
+    seen through the line (its own noise at grazing incidence) between them, from the
+    innermost to the outermost, each end where that sample's ray meets the line.
     """
     size = x.shape[-1]
     used = w > 0.0
