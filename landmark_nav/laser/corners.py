@@ -53,12 +53,19 @@ Design decisions where the chapter is silent (all documented on :class:`CornerPa
   point noise), else the "corner" is a bend of noise on a straight wall. (3) Each arm
   (starting ``corner_gap + 1`` samples from the vertex) is extended up to ``fit_length``
   metres and cut where two consecutive samples leave its line by more than
-  ``4 sigma + 1 cm``; isolated such samples are dropped (outliers), as are samples closer to
-  the other arm's line or within ``max(sigma, spacing / 2)`` of the intersection. The lines
-  are refitted (eqs. 8-10, two rounds) and intersected. (4) The corner is kept if both arms
-  keep ``min_arm_points`` samples, the angle between the fitted arms is inside the ``f``
-  bounds and the intersection lies within the window's reach of the vertex sample.
-  Refined corners closer than ``max(3 sigma_r, 5 cm)`` are merged (smaller ``f`` kept).
+  ``4 sigma + 1 cm`` or before a sample seen through it (an opening: a sample that far off
+  the line and beyond it along its ray by more than ``see_through`` plus 3 standard
+  deviations of its distance along the ray); isolated samples off the
+  line are dropped (outliers), as are samples closer to the other arm's line or within
+  ``max(sigma, spacing / 2)`` of the intersection. The lines are refitted (eqs. 8-10, two
+  rounds) and intersected. (4) The corner is kept if both arms are real surfaces
+  (``real_arms``: enough samples, reach, RMS distance and inlier share, see
+  :class:`CornerParams` and ``_arm_support``), the angle between the fitted arms is inside
+  the ``f`` bounds and the intersection lies within the window's reach of the vertex
+  sample. Refined corners closer than ``max(3 sigma_r, 5 cm)`` are merged (smaller ``f``
+  kept). ``Corner.arms`` gives each arm's extent: no beam inside it lies more than
+  ``see_through`` beyond it (no false surface); split-and-merge corners get the same
+  checks and extents.
 * Covariance. Point noise follows the line chapter's eq. 7,
   ``Q_i = sigma_phi^2 D_i^2 t t^T + sigma_r^2 n n^T`` (``n`` along the beam, ``t`` normal
   to it). It is propagated to first order through the TLS fit of each arm (analytic
@@ -104,6 +111,11 @@ class Corner:
             two-line split when refined, the window midpoint or the split point otherwise.
         f_theta: minus-cosine value of the detecting window (eq. 11); nan for the methods
             that do not compute it (sliding window, split and merge).
+        arms: (2, 2, 2) the two arms as segments [arm][inner end, outer end][x, y] [m]:
+            for refined and split-and-merge corners the extent of the samples supporting
+            each arm's line (ends where the first and last sample's ray meets the line; no
+            sample inside is seen through it), for unrefined corners the corner sample and
+            the window's terminal samples.
     """
 
     position: np.ndarray
@@ -112,6 +124,7 @@ class Corner:
     covariance: np.ndarray
     index: int
     f_theta: float
+    arms: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -146,6 +159,22 @@ class CornerParams:
         min_significance: the two arm lines must reduce the squared TLS residual of the
             detection window by at least this many ``sigma^2`` compared with one line
             (refinement only).
+        real_arms: refined and split-and-merge corners need two real surfaces: each arm
+            fit uses at least ``min_arm_points`` samples, reaches ``arm_length`` from the
+            corner (half of it when the arm ends at its cluster's end: an occlusion or a
+            jump), has an RMS distance of its samples of at most ``arm_rmse`` and uses at
+            least ``min_arm_inliers`` of the samples between its innermost and outermost
+            one. False keeps only the chapter's checks (``min_arm_points``).
+        arm_rmse: largest RMS distance of an arm's samples to its line [m]; None means
+            ``max(0.03, 3 sigma_r)`` (the line extractor's split tolerance).
+        min_arm_inliers: smallest share of an arm's samples its fit uses (the rest are
+            outliers farther than ``4 sigma + 1 cm``).
+        see_through: an arm never covers a sample more than this beyond its line along
+            the sample's ray [m]: the fit stops before an opening (a sample off the line
+            and beyond by more than this plus 3 standard deviations along the ray, eq. 7),
+            the arm's extent
+            (``Corner.arms``) before its own noisy samples at grazing incidence. None means
+            ``max(3 sigma_r, 0.05)``.
     """
 
     method: str = 'minus_cosine'
@@ -165,6 +194,10 @@ class CornerParams:
     sigma_phi: float = math.radians(0.1)
     refine: bool = True
     min_significance: float = 25.0
+    real_arms: bool = True
+    arm_rmse: Optional[float] = None
+    min_arm_inliers: float = 0.8
+    see_through: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -217,6 +250,14 @@ class CornerParams:
             raise bad('min_significance', '>= 0')
         if not isinstance(self.refine, (bool, np.bool_)):
             raise bad('refine', 'a bool')
+        if not isinstance(self.real_arms, (bool, np.bool_)):
+            raise bad('real_arms', 'a bool')
+        for name in ('arm_rmse', 'see_through'):
+            v = getattr(self, name)
+            if v is not None and (not is_num(v) or v <= 0.0):
+                raise bad(name, 'None or a number > 0')
+        if not (is_num(self.min_arm_inliers) and 0.0 <= self.min_arm_inliers <= 1.0):
+            raise bad('min_arm_inliers', 'a number in [0, 1]')
 
     @property
     def split_tolerance(self) -> float:
@@ -224,6 +265,20 @@ class CornerParams:
         if self.split_threshold is not None:
             return float(self.split_threshold)
         return max(0.05, 4.0 * self.sigma_r)
+
+    @property
+    def arm_tolerance(self) -> float:
+        """Return the largest RMS distance of an arm's samples to its line [m]."""
+        if self.arm_rmse is not None:
+            return float(self.arm_rmse)
+        return max(0.03, 3.0 * self.sigma_r)
+
+    @property
+    def see_through_tolerance(self) -> float:
+        """Return how far beyond an arm a sample may lie along its ray [m]."""
+        if self.see_through is not None:
+            return float(self.see_through)
+        return max(3.0 * self.sigma_r, 0.05)
 
     @property
     def arm_length(self) -> float:
@@ -518,7 +573,11 @@ def _raw_corners(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, f: n
     u2x, u2y = _unit(st.x[hi] - cx, st.y[hi] - cy)
     bis, opening, _ = _free_side(cx, cy, u1x, u1y, u2x, u2y)
     cov = point_covariance(st.r[g], st.phi[g], p.sigma_r, p.sigma_phi)
-    return _make(cx, cy, bis, opening, cov, st.beam[g], f)
+    arms = np.empty((g.size, 2, 2, 2))  # from the corner sample to the terminal samples
+    arms[:, :, 0, 0], arms[:, :, 0, 1] = cx[:, None], cy[:, None]
+    arms[:, 0, 1, 0], arms[:, 0, 1, 1], arms[:, 1, 1, 0], arms[:, 1, 1, 1] = (
+        st.x[lo], st.y[lo], st.x[hi], st.y[hi])
+    return _make(cx, cy, bis, opening, cov, st.beam[g], f, arms)
 
 
 def _minus_cosine(st: _Stack, p: CornerParams) -> List[Corner]:
@@ -627,13 +686,18 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     sig = sig[:, None, None]
     near = np.maximum(sig, 0.5 * spacing[:, None, None])
     two = np.zeros(x.shape, dtype=bool)
+    r = np.hypot(x, y)
     for _ in range(2):
         c, s, rho = lines.c[..., None], lines.s[..., None], lines.rho[..., None]
-        d_own = np.abs(x * c + y * s - rho)
+        d = x * c + y * s - rho
+        d_own = np.abs(d)
         d_other = np.abs(x * c[:, ::-1] + y * s[:, ::-1] - rho[:, ::-1])
         far = d_own > 4.0 * sig + 0.01
         np.logical_and(far[..., :-1], far[..., 1:], out=two[..., :-1])
         cut = np.logical_or.accumulate(two, axis=-1)  # the arm ends at two consecutive misses
+        # ... and before an opening seen through it (no false surface): a sample off the
+        # line (far) and beyond it along its ray by more than its noise allows
+        cut |= np.logical_or.accumulate(far & _behind(d, r, valid, rho, p)[1], axis=-1)
         ux, uy = _arm_directions(lines, cx, cy)
         along = (x - cx[:, None, None]) * ux[..., None] + (y - cy[:, None, None]) * uy[..., None]
         w = (valid & ~cut & ~far & (d_own <= d_other) & (along > near)).astype(float)
@@ -646,7 +710,8 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     reach2 = np.minimum((st.x[lo] - px) ** 2 + (st.y[lo] - py) ** 2,
                         (st.x[hi] - px) ** 2 + (st.y[hi] - py) ** 2)
     shift2 = (cx - px) ** 2 + (cy - py) ** 2
-    good = (found & (lines.n.min(axis=1) >= p.min_arm_points) & (f_fit >= p.f_min)
+    arms, real = _arm_support(x, y, r, valid, w, lines, p)
+    good = (found & real & (f_fit >= p.f_min)
             & (f_fit <= p.f_max) & (shift2 <= reach2))  # nan fails every comparison
     sel = np.flatnonzero(good)
     if sel.size == 0:
@@ -654,10 +719,98 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     if sel.size > 1:
         sel = sel[_dedup(cx[sel], cy[sel], fg[sel], max(3.0 * p.sigma_r, 0.05))]
     if sel.size < g.size:
-        x, y, w, lines = x[sel], y[sel], w[sel], lines.take(sel)
+        x, y, w, lines, arms = x[sel], y[sel], w[sel], lines.take(sel), arms[sel]
         cx, cy, g, bis, opening, fg = cx[sel], cy[sel], g[sel], bis[sel], opening[sel], fg[sel]
     cov = _corner_covariance(x, y, w, lines, cx, cy, p.sigma_r, p.sigma_phi)
-    return _make(cx, cy, bis, opening, cov, st.beam[g], fg)
+    return _make(cx, cy, bis, opening, cov, st.beam[g], fg, arms)
+
+
+def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,
+            p: CornerParams, openings: bool = True):
+    """Return the valid samples (K, 2, M) seen through their arm's line, and the openings.
+
+    ``d`` are the samples' signed distances to their arm's line ``x cos a + y sin a = rho``
+    (``rho`` (K, 2, 1)), ``r`` their ranges. A sample is seen through when it lies more
+    than ``see_through_tolerance`` beyond the line along its ray: ``r - t > tol`` with
+    ``t = rho r / (d + rho)`` the range at which the ray meets the line; an opening when
+    beyond by more than that plus 3 standard deviations of its distance along the ray
+    (eq. 7: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``), else it is the surface's own
+    noise (at grazing incidence, or a rare large error). Without ``openings`` only the
+    first mask is returned.
+    """
+    proj = d + rho  # r cos(incidence)
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        t = rho * r / proj
+        beyond = r * d / proj  # r - t
+        seen = valid & (t > 0.0) & (beyond > p.see_through_tolerance)
+    if not openings:
+        return seen
+    opening = np.zeros_like(seen)
+    if seen.any():  # few samples: the noise test only where needed
+        idx = np.nonzero(seen)
+        c2 = (proj[idx] / r[idx]) ** 2
+        var = p.sigma_r ** 2 + (r[idx] * p.sigma_phi) ** 2 * (1.0 - c2) / c2
+        opening[idx] = beyond[idx] > p.see_through_tolerance + 3.0 * np.sqrt(var)
+    return seen, opening
+
+
+def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
+                 w: np.ndarray, ln: _Lines, p: CornerParams) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the arms' extents (K, 2, 2, 2) and whether both arms are real surfaces (K,).
+
+    Samples run from the vertex outward; the arm fits use the samples ``w`` (cut before
+    any opening off the line, see :func:`_behind`). Both arms are real surfaces when each
+    fit uses at least ``min_arm_points`` samples, reaches ``arm_length`` from the corner
+    (half of it when the arm ends at its cluster's end: an occlusion or a jump, as the
+    window's own arms), fits them with an RMS distance of at most ``arm_tolerance``, and
+    uses at least ``min_arm_inliers`` of the samples between its innermost and outermost
+    used one (an arm of scattered points, e.g. furniture clutter, loses its outliers and
+    fails). An arm's extent is its run of used samples with the most samples and no sample
+    seen through the line (its own noise at grazing incidence) between them, from the
+    innermost to the outermost, each end where that sample's ray meets the line.
+    """
+    size = x.shape[-1]
+    used = w > 0.0
+    n = used.sum(axis=-1)
+    pick = np.empty(x.shape[:-1] + (3,), dtype=np.int64)  # inner, outer, last used sample
+    first = used.argmax(axis=-1)
+    last = size - 1 - used[..., ::-1].argmax(axis=-1)
+    c, s, rho = ln.c[..., None], ln.s[..., None], ln.rho[..., None]
+    d = x * c + y * s - rho
+    seen = _behind(d, r, valid, rho, p, openings=False)
+    if seen.any():
+        run = np.cumsum(seen, axis=-1)  # samples seen through the line separate the runs
+        good = used & ~seen
+        # run sizes by (corner, arm, run number); the run of most samples wins
+        arm = np.arange(good.size // size).reshape(good.shape[:-1])[..., None]  # (K, 2, 1)
+        key = arm * (size + 1) + run
+        counts = np.bincount(key[good], minlength=arm.size * (size + 1))
+        best = counts.reshape(good.shape[:-1] + (size + 1,)).argmax(axis=-1)
+        in_run = good & (run == best[..., None])
+        pick[..., 0] = in_run.argmax(axis=-1)
+        pick[..., 1] = size - 1 - in_run[..., ::-1].argmax(axis=-1)
+    else:
+        pick[..., 0], pick[..., 1] = first, last
+    pick[..., 2] = last
+    xi = np.take_along_axis(x, pick, axis=-1)
+    yi = np.take_along_axis(y, pick, axis=-1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = rho / (xi * c + yi * s)  # the ray through the sample meets the line
+    ends = np.stack([t * xi, t * yi], axis=-1)  # (K, arm, inner / outer / last used, xy)
+    cx, cy = _intersect(ln)
+    reach = np.hypot(ends[..., 2, 0] - cx[:, None], ends[..., 2, 1] - cy[:, None])
+    real = n >= p.min_arm_points
+    if p.real_arms:
+        with np.errstate(divide='ignore', invalid='ignore'):
+            rmse = np.sqrt(np.where(used, d * d, 0.0).sum(axis=-1) / n)
+            inliers = n / (last - first + 1)
+        # An arm that ends inside its cluster (its samples leave the line: clutter, another
+        # surface) must reach arm_length; one cut by the cluster's end (an occlusion, a
+        # jump) half of it, as the window's own arms.
+        ends_inside = (valid & (np.arange(size) > last[..., None])).any(axis=-1)
+        need = np.where(ends_inside, p.arm_length, 0.5 * p.arm_length)
+        real &= (reach >= need) & (rmse <= p.arm_tolerance) & (inliers >= p.min_arm_inliers)
+    return ends[..., :2, :], real.all(axis=-1)
 
 
 def _dedup(x: np.ndarray, y: np.ndarray, score: np.ndarray, radius: float) -> np.ndarray:
@@ -749,8 +902,9 @@ def _split_merge(clusters: Sequence[Cluster], st: _Stack, p: CornerParams) -> Li
     length = np.hypot(st.x[far] - st.x[near], st.y[far] - st.y[near])
     spacing = st.r[jt] * st.dphi[jt]
     off = np.hypot(cx - st.x[jt], cy - st.y[jt])
+    arms, real = _arm_support(x, y, np.hypot(x, y), valid, w, lines, p)
     good = ((count.min(axis=1) >= p.min_arm_points) & (length.min(axis=1) >= p.arm_length)
-            & (-cos_t >= p.f_min) & (-cos_t <= p.f_max)
+            & real & (-cos_t >= p.f_min) & (-cos_t <= p.f_max)
             & (off <= np.maximum(2.0 * tol, 3.0 * spacing)))  # nan fails every comparison
     sel = np.flatnonzero(good)
     if sel.size == 0:
@@ -758,20 +912,24 @@ def _split_merge(clusters: Sequence[Cluster], st: _Stack, p: CornerParams) -> Li
     cov = _corner_covariance(x[sel], y[sel], w[sel], lines.take(sel), cx[sel], cy[sel],
                              p.sigma_r, p.sigma_phi)
     return _make(cx[sel], cy[sel], bis[sel], opening[sel], cov, st.beam[jt[sel]],
-                 np.full(sel.size, math.nan))
+                 np.full(sel.size, math.nan), arms[sel])
 
 
 def _make(cx: np.ndarray, cy: np.ndarray, bis: np.ndarray, opening: np.ndarray,
-          cov: np.ndarray, index: np.ndarray, f: np.ndarray) -> List[Corner]:
-    """Build Corner objects (read-only arrays)."""
+          cov: np.ndarray, index: np.ndarray, f: np.ndarray, arms: np.ndarray
+          ) -> List[Corner]:
+    """Build Corner objects (read-only arrays); ``arms`` (K, 2, 2, 2) arm segments."""
     pos = np.empty((cx.size, 2))
     pos[:, 0], pos[:, 1] = cx, cy
     cov = np.array(cov, dtype=float)
+    arms = np.array(arms, dtype=float)
     pos.setflags(write=False)
     cov.setflags(write=False)
-    return [Corner(position=p_, bisector=b_, opening=o_, covariance=c_, index=i_, f_theta=f_)
-            for p_, b_, o_, c_, i_, f_ in zip(pos, bis.tolist(), opening.tolist(), cov,
-                                              index.tolist(), f.tolist())]
+    arms.setflags(write=False)
+    return [Corner(position=p_, bisector=b_, opening=o_, covariance=c_, index=i_, f_theta=f_,
+                   arms=a_)
+            for p_, b_, o_, c_, i_, f_, a_ in zip(pos, bis.tolist(), opening.tolist(), cov,
+                                                  index.tolist(), f.tolist(), arms)]
 
 
 # ---------------------------------------------------------------------------- public API

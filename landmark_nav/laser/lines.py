@@ -40,8 +40,25 @@ vectorised batch (fits from prefix sums of point moments):
 4. Growth: each line takes the free points beside its ends (also of small clusters) that
    lie within ``trim_sigma`` standard deviations and the split tolerance of it, e.g. a
    corridor wall seen at grazing angles, whose points the segmentation isolates.
-5. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
-   RMSE above the split tolerance are dropped.
+5. No false surfaces: a line never covers a valid beam whose return lies more than
+   ``see_through`` (default ``max(3 sigma_r, 5 cm)``) beyond it along the ray, i.e. a beam
+   the laser saw through it. The beams checked are all beams between a line's first and
+   last supporting beam, also those of no cluster (dropped small clusters, read from the
+   whole scan of :func:`~landmark_nav.laser.segmentation.segment_scan`); beams in front
+   (occluders, e.g. a table leg) and missing returns may be bridged. A line hiding an
+   *opening* (a beam beyond it by more than ``see_through`` plus 3 standard deviations
+   of its distance along the ray, eq. 7) is cut there and both sides are refitted, until
+   no line hides one;
+   thus merging across a cluster break and growth over neighbouring beams stand only
+   over beams that are occluded or missing. A line hiding only its own noise (a wall seen
+   at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) is cut
+   likewise when that leaves two or more lines of ``min_points`` and ``min_length``;
+   otherwise it keeps its fit on all its points, and its extent shrinks to its run of
+   support between those beams with the most points. See :func:`_cut_seen_through`.
+6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
+   RMSE above the split tolerance are dropped. End points are the projections of the
+   first and last supporting points, moved onto the ray of that beam when the projection
+   falls outside the supporting beams' bearings: a segment covers no beam outside them.
 
 Choices where the chapters are silent, or misprinted:
 
@@ -58,7 +75,7 @@ import math
 from typing import List, Optional, Sequence, Tuple
 
 from landmark_nav.laser.lowess import lowess, lowess_groups
-from landmark_nav.laser.segmentation import Cluster
+from landmark_nav.laser.segmentation import Cluster, ScanArrays
 import numpy as np
 
 __all__ = ['alfa_pieces', 'CHI2_2DOF_95', 'explained_points', 'extract_lines', 'fit_line',
@@ -82,13 +99,16 @@ class LineSegment:
     Attributes:
         rho: Distance of the line to the laser origin, >= 0 [m] (eq. 5).
         alpha: Angle of the line normal, wrapped to [-pi, pi) [rad].
-        start: (2,) projection of the first supporting point onto the line [m].
-        end: (2,) projection of the last supporting point [m].
-        num_points: Number of supporting points (the points of the fit).
+        start: (2,) projection of the first supporting point onto the line, or the
+            crossing of its beam's ray with the line when that is nearer the middle [m].
+        end: (2,) the same at the last supporting point [m].
+        num_points: Number of supporting points (the points of the fit; a line that hides
+            its own noisy returns at grazing incidence keeps them in the fit but not in
+            its extent, see step 5 above).
         rmse: Perpendicular RMSE of the supporting points [m] (eq. 21).
         covariance: (2, 2) covariance of (rho, alpha) [m^2, m rad; m rad, rad^2].
-        first_index: Beam index of the first supporting point.
-        last_index: Beam index of the last supporting point.
+        first_index: Beam index of the first supporting point of the extent.
+        last_index: Beam index of the last supporting point of the extent.
 
     """
 
@@ -145,6 +165,8 @@ class LineParams:
             distance to its line (eq. 7); ``inf`` disables both.
         merge_gap_angle: Lines of neighbouring clusters are also neighbours (for merging
             and growing) when their facing ends are at most this bearing apart [rad].
+        see_through: Largest distance a valid beam inside a line's extent may lie beyond
+            the line along its ray [m] (step 5); None means ``max(3 sigma_r, 0.05)``.
 
     """
 
@@ -163,6 +185,7 @@ class LineParams:
     max_gradient: float = 0.1
     trim_sigma: float = 3.0
     merge_gap_angle: float = math.radians(5.0)
+    see_through: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad parameter."""
@@ -214,6 +237,8 @@ class LineParams:
             raise bad('max_gradient', 'a number > 0')
         if not (number(self.merge_gap_angle) and 0 <= self.merge_gap_angle <= math.pi):
             raise bad('merge_gap_angle', 'an angle in [0, pi]')
+        if not positive(self.see_through, allow_none=True):
+            raise bad('see_through', 'None or a number > 0')
         if not (number(self.trim_sigma) and self.trim_sigma > 0):
             raise bad('trim_sigma', 'a number > 0 (inf disables the clean-up)')
 
@@ -223,6 +248,13 @@ class LineParams:
         if self.split_threshold is not None:
             return float(self.split_threshold)
         return max(0.03, 4.0 * self.sigma_r)
+
+    @property
+    def see_through_tolerance(self) -> float:
+        """Return the see-through tolerance [m] (``see_through`` or its default)."""
+        if self.see_through is not None:
+            return float(self.see_through)
+        return max(3.0 * self.sigma_r, 0.05)
 
     @property
     def rmse_bounds(self) -> Tuple[float, float]:
@@ -630,6 +662,24 @@ class _Scan:
     beam: np.ndarray
     cluster: np.ndarray  # (N,) cluster number of each point
     offsets: np.ndarray
+    whole: Optional[ScanArrays] = None  # the whole scan, when the clusters share it
+
+    def beams(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Return range, cos, sin and validity of every beam, by beam index.
+
+        From the whole scan when known (also the beams of no cluster: dropped small
+        clusters, returns the segmentation left out), else from the clusters' points alone
+        (beams of no cluster count as missing).
+        """
+        w = self.whole
+        if w is not None:
+            return w.ranges, w.cos, w.sin, w.valid
+        size = int(self.beam.max()) + 1
+        out = np.zeros((3, size))
+        out[:, self.beam] = self.cols[_RNG:_TOL]
+        valid = np.zeros(size, dtype=bool)
+        valid[self.beam] = np.isfinite(self.cols[_RNG]) & (self.cols[_RNG] > 0.0)
+        return out[0], out[1], out[2], valid
 
 
 # Rows of _Scan.cols: point coordinates relative to the origin, range, cos and sin of the
@@ -669,8 +719,10 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     np.subtract(xy[:, 1], oy, out=cols[_Y])
     np.multiply(cols[_RNG], 3.0 * params.sigma_phi, out=cols[_TOL])  # split tolerance
     cols[_TOL] += params.threshold
+    shared = (whole if whole is not None and whole.valid is not None
+              and all(c.scan is whole for c in cl) else None)
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.repeat(np.arange(sizes.size), sizes), offsets)
+                 np.repeat(np.arange(sizes.size), sizes), offsets, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -809,12 +861,13 @@ def _chi2(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarr
 
 
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
-           ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit]:
-    """Merge collinear neighbours (step 3); return sums (24, L), first, last and the fits.
+           ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit, np.ndarray]:
+    """Merge collinear neighbours (step 3); return sums (24, L), first, last, fits, labels.
 
     The pieces ``[s, e]`` must be sorted and disjoint. ``first``/``last`` are the outermost
-    point indices of each line (a merged line does not use the points between its pieces).
-    The fits have no covariance when lines were merged (they are refitted after growing).
+    point indices of each line (a merged line does not use the points between its pieces);
+    ``labels`` gives the line of each piece. The fits have no covariance when lines were
+    merged (they are refitted after growing).
     """
     bounds = np.empty(2 * s.size, dtype=np.int64)
     bounds[0::2] = s
@@ -822,7 +875,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     sums = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
     f = _solve(sums, scan.origin)
     if s.size == 1:
-        return sums, s, e, f
+        return sums, s, e, f, np.zeros(1, dtype=np.int64)
     gap = scan.cols[:, s[1:]] - scan.cols[:, e[:-1]]
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
             | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
@@ -831,7 +884,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
                          f.cov[1:]) <= gate)
     if not join.any():
-        return sums, s, e, f
+        return sums, s, e, f, np.arange(s.size)
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
@@ -858,14 +911,14 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         badness[~(g_end > g_start)[label]] = 0.0  # single pieces are not merged
         worst = np.maximum.reduceat(badness, g_start)
         if not (worst > 1.0).any():
-            return g_sums, s[g_start], e[g_end], g
+            return g_sums, s[g_start], e[g_end], g, label
         # The worst member of a failing chain leaves it; the rest are merged again (a
         # piece off its wall, e.g. a short noisy fit between two pieces of the wall, no
         # longer keeps the wall in pieces).
         out = np.flatnonzero((badness == worst[label]) & (worst > 1.0)[label])
         join[out[out < s.size - 1]] = False
         join[out[out > 0] - 1] = False
-    return sums, s, e, f
+    return sums, s, e, f, np.arange(s.size)
 
 
 def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
@@ -945,6 +998,155 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
 _NEXT = np.array([[0], [1]])
 
 
+def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
+                  params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (line, beam, opening) of the valid beams the lines hide (step 5).
+
+    A beam between the first and the last supporting beam of a line (in beam order) is
+    hidden when its return lies more than ``see_through_tolerance`` beyond the line along
+    its ray: the laser saw through where the line claims a surface. Beams in front of the
+    line (occluders) and missing beams are allowed. ``opening`` marks the hidden beams
+    beyond the line by more than that tolerance plus 3 standard deviations of their
+    distance along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``);
+    the others are the wall's own noise (at grazing incidence, or a rare large error).
+    """
+    wr, wc, ws, wv = scan.beams()
+    b0, b1 = scan.beam[first], scan.beam[last]
+    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
+    idx, _ = _gather(lo, hi)
+    line = np.repeat(np.arange(first.size), hi - lo + 1)
+    ok = wv[idx]
+    idx, line = idx[ok], line[ok]
+    rho, _, nx, ny = f.params[:, line]
+    r = wr[idx]
+    cos_in = wc[idx] * nx + ws[idx] * ny  # cosine of the incidence: ray . normal
+    with np.errstate(divide='ignore', invalid='ignore'):
+        beyond = r - rho / cos_in
+        bad = (cos_in > 1e-9) & (beyond > params.see_through_tolerance)
+    if not bad.any():
+        return line[:0], idx[:0], bad[:0]
+    line, idx, beyond, r, cos_in = line[bad], idx[bad], beyond[bad], r[bad], cos_in[bad]
+    c2 = cos_in * cos_in
+    var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
+    return line, idx, beyond > params.see_through_tolerance + 3.0 * np.sqrt(var)
+
+
+def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
+                      last: np.ndarray, f: _Fit, pieces: Tuple[np.ndarray, ...],
+                      params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit]:
+    """Keep the lines off the beams they hide (step 5).
+
+    ``pieces`` = (s, e, label, first0, last0): the merged pieces, their lines and the
+    lines' first / last points before growing (the support of line j is its pieces and
+    the grown runs ``[first[j], first0[j])`` and ``(last0[j], last[j]]``).
+
+    1. A line that hides an opening (see :func:`_seen_through`) is cut there: the support
+       on either side becomes a line of its own and is refitted, a supporting point at the
+       opening leaves. Repeated on the new fits; support runs shorter than ``min_points``
+       are dropped, and so is a line still hiding an opening after ``_MAX_CUTS`` rounds.
+    2. A line that hides only beams within their noise (its own points at grazing
+       incidence) is cut there too when at least two of the pieces are lines of their own
+       (``min_points``, ``min_length``); otherwise it keeps its fit, all points included,
+       and its extent shrinks to the run of its support between those beams with the
+       most points.
+    """
+    line, beam, opening = _seen_through(scan, f, first, last, params)
+    if not line.size:
+        return sums, first, last, f
+    s, e, label, first0, last0 = pieces
+    owner = np.full(scan.x.size, -1, dtype=np.int64)
+    idx, _ = _gather(s, e)
+    owner[idx] = np.repeat(label, e - s + 1)
+    for lo, hi in ((first, first0 - 1), (last0 + 1, last)):
+        idx, _ = _gather(lo, hi)
+        owner[idx] = np.repeat(np.arange(first.size), np.maximum(hi - lo + 1, 0))
+    rounds = 0
+    opening |= _splits_in_two(scan, owner, line, beam, params)
+    while opening.any():
+        if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
+            ok = np.ones(first.size, dtype=bool)
+            ok[line[opening]] = False
+            relabel = np.cumsum(ok) - 1
+            owner = np.where((owner >= 0) & ok[np.maximum(owner, 0)],
+                             relabel[np.maximum(owner, 0)], -1)
+            sums, first, last = sums[:, ok], first[ok], last[ok]
+            if not first.size:
+                return sums, first, last, f
+            f = _solve(sums, scan.origin)
+            sel = ok[line]
+            line, beam, opening = relabel[line[sel]], beam[sel], opening[sel]
+            break
+        rounds += 1
+        pos, run, starts, size = _support_runs(scan, owner, np.unique(beam[opening]))
+        big = size >= params.min_points
+        owner[:] = -1
+        kept = big[run]
+        owner[pos[kept]] = (np.cumsum(big) - 1)[run[kept]]
+        starts, size = starts[big], size[big]
+        if not starts.size:
+            return sums[:, :0], first[:0], last[:0], f
+        first, last = pos[starts], pos[starts + size - 1]
+        sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
+        f = _solve(sums, scan.origin)
+        line, beam, opening = _seen_through(scan, f, first, last, params)
+        opening |= _splits_in_two(scan, owner, line, beam, params)
+    if line.size:  # only noise: each line's extent becomes its largest run between them
+        pos, run, starts, size = _support_runs(scan, owner, np.unique(beam))
+        own = owner[pos[starts]]
+        best = np.lexsort((-size, own))  # per line, the run of most points first
+        head = np.ones(best.size, dtype=bool)
+        head[1:] = own[best[1:]] != own[best[:-1]]
+        best = best[head]
+        first, last = first.copy(), last.copy()
+        first[own[best]] = pos[starts[best]]
+        last[own[best]] = pos[starts[best] + size[best] - 1]
+    return sums, first, last, f
+
+
+def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
+                   params: LineParams) -> np.ndarray:
+    """Mark the hidden beams (all of a line's) that cut it into two or more lines.
+
+    A piece between hidden beams counts as a line when it has ``min_points`` supporting
+    points and spans ``min_length``.
+    """
+    if not line.size:
+        return np.zeros(0, dtype=bool)
+    pos, _, starts, size = _support_runs(scan, owner, np.unique(beam))
+    a, b = pos[starts], pos[starts + size - 1]
+    span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
+    good = (size >= params.min_points) & (span >= params.min_length)
+    n_good = np.bincount(owner[a][good], minlength=int(owner.max()) + 1)
+    return n_good[line] >= 2
+
+
+def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Split the lines' support at the hidden beams (sorted).
+
+    Returns the supporting points left (the hidden ones leave), the run of each, and the
+    runs' starts (into the points) and sizes. Runs are consecutive support of one line
+    with no hidden beam between; a hidden beam lies inside the extent of one line only.
+    """
+    pos = np.flatnonzero(owner >= 0)
+    bpos = scan.beam[pos]
+    keep = ~np.isin(bpos, hidden)
+    pos, bpos = pos[keep], bpos[keep]
+    cut = np.searchsorted(hidden, bpos)
+    own = owner[pos]
+    new = np.empty(pos.size, dtype=bool)
+    new[:1] = True
+    np.not_equal(own[1:], own[:-1], out=new[1:])
+    new[1:] |= cut[1:] != cut[:-1]
+    starts = np.flatnonzero(new)
+    size = np.diff(np.append(starts, pos.size))
+    return pos, np.cumsum(new) - 1, starts, size
+
+
+_MAX_CUTS = 8
+_INWARD = np.array([[1.0], [-1.0]])  # start moves forward along the line, end backward
+
+
 def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
            last: np.ndarray) -> List[LineSegment]:
     """Drop small or short fits and build the LineSegments (first/last: point indices)."""
@@ -960,6 +1162,21 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     proj = np.empty((2, first.size, 2))  # end point (first, last), line, (x, y)
     np.subtract(x, d * nx, out=proj[..., 0])
     np.subtract(y, d * ny, out=proj[..., 1])
+    # End points at the end beams: where a projection lies outside the bearings of the
+    # supporting beams, the end beam's ray meets the line (the segment then covers no beam
+    # outside its support). Inside, the projection stays (it does not depend on the range
+    # noise along a grazing ray).
+    cp, sp = scan.cols[_COS:_TOL, ends]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = rho / (cp * nx + sp * ny)
+    along = proj[..., 1] * nx - proj[..., 0] * ny  # position along the line (tangent)
+    along_ray = t * (sp * nx - cp * ny)
+    inward = np.where(along[1] >= along[0], 1.0, -1.0) * (along_ray - along) * _INWARD
+    # nan fails; a ray along the line (through the origin) meets it nowhere useful
+    inner = (t > 0.0) & (inward > 0.0) & (inward < np.abs(along[1] - along[0]))
+    if inner.any():
+        proj[..., 0] = np.where(inner, t * cp, proj[..., 0])
+        proj[..., 1] = np.where(inner, t * sp, proj[..., 1])
     length = np.hypot(proj[1, :, 0] - proj[0, :, 0], proj[1, :, 1] - proj[0, :, 1])
     cov = f.cov
     ok = np.flatnonzero((f.count >= params.min_points) & (length >= params.min_length)
@@ -983,6 +1200,9 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
             ``min_points`` points and can grow over the points of smaller ones, so pass
             small clusters too (``segment_scan(..., min_points=1)``) to let lines reach
             isolated points on their wall (e.g. a corridor wall seen at grazing angles).
+            Clusters of one ``segment_scan`` call carry the whole scan, so no line covers
+            a beam seen through it even where that beam's cluster was dropped; for
+            clusters built by hand only their own beams are known (step 5).
         params: Method and parameters (default ``LineParams()``).
 
     Returns:
@@ -1020,10 +1240,14 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
     s, e = _clean_pieces(scan, pre, s, e, params)
     if not s.size:
         return []
-    sums, first, last, fit = _merge(scan, feats, s, e, params)
-    sums, first, last, grown = _grow(scan, feats, sums, first, last, fit, params)
+    sums, first0, last0, fit, label = _merge(scan, feats, s, e, params)
+    sums, first, last, grown = _grow(scan, feats, sums, first0, last0, fit, params)
     if grown or fit.cov is None:
         fit = _solve(sums, scan.origin)
+    sums, first, last, fit = _cut_seen_through(scan, feats, sums, first, last, fit,
+                                               (s, e, label, first0, last0), params)
+    if not first.size:
+        return []
     return _build(scan, params, fit, first, last)
 
 

@@ -32,6 +32,8 @@ class ScanArrays:
         angles: (N,) beam angles [rad].
         cos: (N,) ``cos(angles)``.
         sin: (N,) ``sin(angles)``.
+        valid: (N,) bool, the beams that are real returns (None: unknown, e.g. built by
+            hand; extractors then know only the beams of the clusters).
 
     """
 
@@ -40,6 +42,7 @@ class ScanArrays:
     angles: np.ndarray
     cos: np.ndarray
     sin: np.ndarray
+    valid: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -114,7 +117,7 @@ def segment_scan(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
     # Cluster starts: valid beams not joined to their predecessor.
     starts = np.flatnonzero(valid & np.concatenate([[True], ~joined]))
     ends = np.flatnonzero(valid & np.concatenate([~joined, [True]])) + 1
-    scan = ScanArrays(xy, ranges, angles, cos, sin)
+    scan = ScanArrays(xy, ranges, angles, cos, sin, valid)
     clusters = []
     for s, e in zip(starts, ends):
         if e - s >= min_points:

@@ -51,6 +51,14 @@ CORNER_PARAMETERS = {
     'sigma_phi': ('laser bearing noise std [rad] (covariances)', (0.0, 0.1), None),
     'refine': ('refine minus_cosine corners as the intersection of lines fitted to the arms',
                None, None),
+    'real_arms': ('refined and split_merge corners need two real surfaces (arm reach, RMS, '
+                  'inlier share); false keeps only min_arm_points', None, None),
+    'arm_rmse': ("largest RMS distance of an arm's beams to its line [m]; 0 = automatic, "
+                 'max(0.03, 3 sigma_r)', (0.0, 1.0), None, 0.0),
+    'min_arm_inliers': ("smallest share of an arm's beams its line fit uses", (0.0, 1.0),
+                        None),
+    'see_through': ('an arm never covers a beam more than this beyond it along the ray [m]; '
+                    '0 = automatic, max(3 sigma_r, 0.05)', (0.0, 10.0), None, 0.0),
 }
 
 
