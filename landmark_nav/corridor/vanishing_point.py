@@ -60,6 +60,7 @@ from dataclasses import dataclass
 from typing import Optional, Tuple
 
 import numpy as np
+from scipy.ndimage import maximum_filter, uniform_filter
 
 _EPS = 1e-12
 
@@ -167,8 +168,48 @@ def segment_weights(segments: np.ndarray, weights: Optional[np.ndarray] = None) 
     return np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
 
 
+class _Geometry:
+    """Per-segment terms of the consistency test, precomputed for one K (private).
+
+    For directions ``D`` (M, 3) in the optical frame, ``v = K d`` and (module docstring)
+    ``r = l . v = d . (K^T l)``, ``v_xy . u = d . (K^T (u, 0))``, ``v_w = d_z``.
+    """
+
+    def __init__(self, seg: np.ndarray, K: np.ndarray, sigma_px: float) -> None:
+        p1, p2 = seg[:, :2], seg[:, 2:]
+        dl = p2 - p1
+        self.length = np.maximum(np.hypot(dl[:, 0], dl[:, 1]), _EPS)
+        u = dl / self.length[:, None]
+        nrm = np.column_stack([-u[:, 1], u[:, 0]])
+        c = -(nrm * p1).sum(1)                   # l = (nrm, c): l . (x, y, 1) = distance
+        self.kl = K.T @ np.vstack([nrm.T, c])    # (3, N) columns K^T l
+        self.ku = K.T @ np.vstack([u.T, np.zeros(len(seg))])
+        self.pu1 = (p1 * u).sum(1)
+        self.pu2 = (p2 * u).sum(1)
+        self.sigma = float(sigma_px)
+
+    def subset(self, idx: np.ndarray) -> '_Geometry':
+        g = object.__new__(_Geometry)
+        g.length, g.kl, g.ku = self.length[idx], self.kl[:, idx], self.ku[:, idx]
+        g.pu1, g.pu2, g.sigma = self.pu1[idx], self.pu2[idx], self.sigma
+        return g
+
+    def z(self, D: np.ndarray) -> np.ndarray:
+        """Return the (M, N) z-scores of the segments against directions D (M, 3)."""
+        D = np.atleast_2d(D)
+        r = D @ self.kl
+        vu = D @ self.ku
+        vw = D[:, 2:3]
+        a = (vw * self.pu2 - vu) / self.length
+        b = (vu - vw * self.pu1) / self.length
+        std = self.sigma * np.sqrt(a * a + b * b)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            z = np.where(std > 0, r / std, np.inf)
+        return np.where(np.isnan(z), np.inf, z)
+
+
 def consistency(segments: np.ndarray, v: np.ndarray, sigma_px: float = 1.0) -> np.ndarray:
-    """z-scores of segments against homogeneous VP pixels (see the module docstring).
+    """Return z-scores of segments against homogeneous VP pixels (see the module docstring).
 
     Args:
         segments: (N, 4) end points [px].
@@ -180,21 +221,7 @@ def consistency(segments: np.ndarray, v: np.ndarray, sigma_px: float = 1.0) -> n
     """
     seg = np.asarray(segments, dtype=float).reshape(-1, 4)
     v = np.asarray(v, dtype=float)
-    vv = v.reshape(-1, 3)
-    p1, p2 = seg[:, :2], seg[:, 2:]
-    dl = p2 - p1
-    L = np.maximum(np.hypot(dl[:, 0], dl[:, 1]), _EPS)
-    u = dl / L[:, None]
-    nrm = np.column_stack([-u[:, 1], u[:, 0]])
-    c = -(nrm * p1).sum(1)                      # l = (nrm, c): l . (x, y, 1) = distance
-    r = vv[:, :2] @ nrm.T + vv[:, 2:3] * c       # (M, N)
-    vu = vv[:, :2] @ u.T                         # v_xy . u
-    a = (vv[:, 2:3] * (p2 * u).sum(1) - vu) / L
-    b = (vu - vv[:, 2:3] * (p1 * u).sum(1)) / L
-    std = sigma_px * np.sqrt(a * a + b * b)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        z = np.where(std > _EPS * (np.abs(vv).max(1, keepdims=True) + _EPS), r / std, np.inf)
-    z = np.where(np.isnan(z), np.inf, z)
+    z = _Geometry(seg, np.eye(3), sigma_px).z(v.reshape(-1, 3))
     return z[0] if v.ndim == 1 else z
 
 
@@ -226,16 +253,19 @@ def cluster_directions(d: np.ndarray, w: np.ndarray, params: VPParams = VPParams
     if d.shape[0] == 0:
         raise ValueError('no vanishing-point candidates (fewer than two non-parallel lines)')
     keep = np.arange(d.shape[0])
-    c = _axial_mean(d, w)
+    dw = d * w[:, None]
+    scatter = dw.T @ d
+    c = np.linalg.eigh(scatter)[1][:, -1]
     while keep.size > params.final_candidates:
         cosang = np.abs(d[keep] @ c)
         n_rm = max(1, int(params.removal_fraction * keep.size))
         n_rm = min(n_rm, keep.size - params.final_candidates)
         order = np.argpartition(cosang, n_rm)       # smallest |cos| = farthest
-        keep = keep[order[n_rm:]]
+        gone, keep = keep[order[:n_rm]], keep[order[n_rm:]]
+        scatter = scatter - dw[gone].T @ d[gone]    # downdate: same as recomputing
         if np.sum(w[keep]) <= 0:
             break
-        c = _axial_mean(d[keep], w[keep])
+        c = np.linalg.eigh(scatter)[1][:, -1]
     return c
 
 
@@ -243,7 +273,7 @@ def refine_direction(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
                      weights: Optional[np.ndarray] = None,
                      params: VPParams = VPParams(),
                      allowed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    """IRLS refinement of a direction on its consistent segments.
+    """Refine a direction by IRLS on its consistent segments.
 
     Each iteration minimises ``sum z_i^2`` over the consistent segments (``|z| <= gate``,
     and ``allowed`` when given) with the variances of the previous direction, then
@@ -255,31 +285,33 @@ def refine_direction(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
         two segments are consistent with it.
     """
     seg, K = _check(segments, K)
-    p1 = np.column_stack([seg[:, :2], np.ones(len(seg))])
-    p2 = np.column_stack([seg[:, 2:], np.ones(len(seg))])
-    lines = np.cross(p1, p2)
-    lines /= np.maximum(np.hypot(lines[:, 0], lines[:, 1]), _EPS)[:, None]
-    m = lines @ K                                       # rows: K^T l
-    d = d / np.linalg.norm(d)
-    ok = np.ones(seg.shape[0], dtype=bool) if allowed is None else np.asarray(allowed, bool)
-    inl = ok & (np.abs(consistency(seg, K @ d, params.sigma_px)) <= params.gate)
+    del weights
+    return _refine(_Geometry(seg, K, params.sigma_px), d, params, allowed)
+
+
+def _refine(geo: _Geometry, d: np.ndarray, params: VPParams,
+            allowed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    d = np.asarray(d, dtype=float) / np.linalg.norm(d)
+    n = geo.kl.shape[1]
+    ok = np.ones(n, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+    z = geo.z(d)[0]
+    inl = ok & (np.abs(z) <= params.gate)
     for _ in range(params.refine_iterations):
         if np.count_nonzero(inl) < 2:
             break
-        r = m[inl] @ d
-        z = consistency(seg[inl], K @ d, params.sigma_px)
+        r = d @ geo.kl[:, inl]
+        zi = z[inl]
         with np.errstate(divide='ignore', invalid='ignore'):
-            std2 = np.where(np.isfinite(z) & (np.abs(z) > 0), (r / z) ** 2, np.nan)
+            std2 = np.where(np.isfinite(zi) & (zi != 0), (r / zi) ** 2, np.nan)
         good = np.isfinite(std2) & (std2 > 0)
         if np.count_nonzero(good) < 2:
             break
-        mm = m[inl][good] / np.sqrt(std2[good])[:, None]
-        _, vec = np.linalg.eigh(mm.T @ mm)
+        mm = geo.kl[:, inl][:, good] / np.sqrt(std2[good])
+        _, vec = np.linalg.eigh(mm @ mm.T)
         d_new = vec[:, 0]
-        if d_new @ d < 0:
-            d_new = -d_new
-        d = d_new
-        new_inl = ok & (np.abs(consistency(seg, K @ d, params.sigma_px)) <= params.gate)
+        d = d_new if d_new @ d >= 0 else -d_new
+        z = geo.z(d)[0]
+        new_inl = ok & (np.abs(z) <= params.gate)
         if np.array_equal(new_inl, inl):
             break
         inl = new_inl
@@ -374,7 +406,7 @@ def vanishing_point(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
     return _make_vp(seg, K, d_ref, inl_all, w)
 
 
-def _orthogonal_pair(seg: np.ndarray, K: np.ndarray, d1: np.ndarray, free: np.ndarray,
+def _orthogonal_pair(geo: _Geometry, normals: np.ndarray, d1: np.ndarray, free: np.ndarray,
                      w: np.ndarray, params: VPParams) -> Tuple[np.ndarray, np.ndarray, float]:
     """Best (d2, d3) on the great circle orthogonal to d1; returns (d2, d3, support)."""
     idx = np.nonzero(free)[0]
@@ -383,8 +415,7 @@ def _orthogonal_pair(seg: np.ndarray, K: np.ndarray, d1: np.ndarray, free: np.nd
     if idx.size == 0:
         e = np.linalg.svd(d1[None, :])[2]
         return e[1], e[2], 0.0
-    n = plane_normals(seg[idx], K)
-    prop = np.cross(d1, n)
+    prop = np.cross(d1, normals[idx])
     s = np.linalg.norm(prop, axis=1)
     ok = s > 1e-9
     prop = prop[ok] / s[ok, None]
@@ -392,8 +423,9 @@ def _orthogonal_pair(seg: np.ndarray, K: np.ndarray, d1: np.ndarray, free: np.nd
         e = np.linalg.svd(d1[None, :])[2]
         return e[1], e[2], 0.0
     prop3 = np.cross(d1, prop)
-    z2 = np.abs(consistency(seg[idx], prop @ K.T, params.sigma_px))
-    z3 = np.abs(consistency(seg[idx], prop3 @ K.T, params.sigma_px))
+    sub = geo.subset(idx)
+    z2 = np.abs(sub.z(prop))
+    z3 = np.abs(sub.z(prop3))
     score = (_msac(np.minimum(z2, z3), params.gate) * w[idx]).sum(1)
     k = int(np.argmax(score))
     return prop[k], prop3[k], float(score[k])
@@ -411,7 +443,6 @@ def sphere_peaks(d: np.ndarray, w: np.ndarray, count: int,
         (k, 3) unit directions (bin-weighted means of the candidates in each peak bin),
         k <= count, strongest first.
     """
-    from scipy.ndimage import maximum_filter, uniform_filter
     d = _canonical(d)
     n_p = int(np.ceil(90.0 / bin_deg)) + 1
     n_a = int(np.ceil(360.0 / bin_deg))
@@ -446,26 +477,24 @@ def _msac(z: np.ndarray, gate: float) -> np.ndarray:
     return np.maximum(0.0, 1.0 - (z / gate) ** 2)
 
 
-def _labels(seg: np.ndarray, K: np.ndarray, D: np.ndarray, params: VPParams,
-            exclusive: bool) -> np.ndarray:
+def _labels(geo: _Geometry, D: np.ndarray, params: VPParams, exclusive: bool) -> np.ndarray:
     """Direction index of each segment (the smallest |z| within the gate), -1 for none.
 
     With ``exclusive`` a segment consistent with two or more directions gets -1 too (it
     cannot tell them apart: e.g. a segment pointing at both VPs).
     """
-    z = np.abs(consistency(seg, D.T @ K.T, params.sigma_px))
+    z = np.abs(geo.z(D.T))
     lab = np.argmin(z, axis=0)
     within = z <= params.gate
-    ok = within[lab, np.arange(seg.shape[0])]
+    ok = within[lab, np.arange(z.shape[1])]
     if exclusive:
         ok &= within.sum(0) == 1
     return np.where(ok, lab, -1)
 
 
-def _triad_support(seg: np.ndarray, K: np.ndarray, D: np.ndarray, w: np.ndarray,
-                   params: VPParams) -> float:
+def _triad_support(geo: _Geometry, D: np.ndarray, w: np.ndarray, params: VPParams) -> float:
     """Return the MSAC-scored weight of the segments consistent with a column of D."""
-    z = np.abs(consistency(seg, D.T @ K.T, params.sigma_px)).min(0)
+    z = np.abs(geo.z(D.T)).min(0)
     return float(np.sum(w * _msac(z, params.gate)))
 
 
@@ -479,32 +508,37 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
     seg, K = _check(segments, K)
     w = segment_weights(seg, weights)
     idx = _usable(seg, w, params)
-    n = plane_normals(seg[idx], K)
-    cand, cw = _pair_candidates(n, w[idx])
+    geo = _Geometry(seg, K, params.sigma_px)
+    normals = plane_normals(seg, K)
+    cand, cw = _pair_candidates(normals[idx], w[idx])
     if cand.shape[0] == 0:
         raise ValueError('no vanishing-point candidates (fewer than two non-parallel lines)')
-    hyps = [refine_direction(seg[idx], K, cluster_directions(cand, cw, params), w[idx],
-                             params)[0]]
-    for h in sphere_peaks(cand, cw, params.hypotheses):
-        hyps.append(refine_direction(seg[idx], K, h, w[idx], params)[0])
+    sub = geo.subset(idx)
+    starts = [cluster_directions(cand, cw, params)]
+    starts += list(sphere_peaks(cand, cw, params.hypotheses))
+    hyps = []
+    for h in starts:
+        d1 = _refine(sub, h, params)[0]
+        if not any(abs(d1 @ e) > 1.0 - 1e-12 for e in hyps):   # same start, same triad
+            hyps.append(d1)
     best = None
     for d1 in hyps:
-        in1 = np.abs(consistency(seg, K @ d1, params.sigma_px)) <= params.gate
-        d2, d3, _ = _orthogonal_pair(seg, K, d1, ~in1, w, params)
-        D = np.column_stack([refine_direction(seg, K, d, w, params)[0] for d in (d1, d2, d3)])
-        score = _triad_support(seg, K, D, w, params)
+        in1 = np.abs(geo.z(d1)[0]) <= params.gate
+        d2, d3, _ = _orthogonal_pair(geo, normals, d1, ~in1, w, params)
+        D = np.column_stack([_refine(geo, d, params)[0] for d in (d1, d2, d3)])
+        score = _triad_support(geo, D, w, params)
         if best is None or score > best[0]:
             best = (score, D)
     D = best[1]
     for _ in range(params.refine_iterations):      # exclusive labels, then refine each
-        lab = _labels(seg, K, D, params, exclusive=True)
-        D_new = np.column_stack([refine_direction(seg, K, D[:, k], w, params, lab == k)[0]
+        lab = _labels(geo, D, params, exclusive=True)
+        D_new = np.column_stack([_refine(geo, D[:, k], params, lab == k)[0]
                                  for k in range(3)])
         if np.allclose(np.abs(np.sum(D_new * D, axis=0)), 1.0, atol=1e-12):
             D = D_new
             break
         D = D_new
-    lab = _labels(seg, K, D, params, exclusive=False)
+    lab = _labels(geo, D, params, exclusive=False)
     order = np.argsort(-np.abs(D[2]), kind='stable')
     D = D[:, order]
     new_lab = np.full_like(lab, -1)
