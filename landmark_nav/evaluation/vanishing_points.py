@@ -128,7 +128,7 @@ class FrameResult:
     name: str
     axis: float
     axis_selected: float
-    all: Tuple[float, float, float]
+    all_three: Tuple[float, float, float]
     n_lines: int
     t_lines: float
     t_vp: float
@@ -200,7 +200,7 @@ def summarize(results: List[FrameResult]) -> Dict[str, float]:
     """Return the summary figures of a run (medians in deg, fractions in [0, 1], times in s)."""
     axis = np.array([r.axis for r in results])
     sel = np.array([r.axis_selected for r in results])
-    all3 = np.array([r.all for r in results]).reshape(-1)
+    all3 = np.array([r.all_three for r in results]).reshape(-1)
     t = np.array([r.t_lines + r.t_vp for r in results])
     return {
         'images': float(len(results)),

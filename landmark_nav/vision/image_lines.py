@@ -122,6 +122,8 @@ class SegmentedHoughParams:
         max_gap_px: maximum gap [px] between the facing end points of two joined pieces;
             None: half the shorter sub-image side.
         min_length_px: output segments shorter than this [px] are dropped.
+        trace_gap_px: tracing follows a line across gaps of at most this many pixels
+            without edge pixels (Canny breaks edges for 1-2 px at junctions).
         gradient_window_deg: with image gradients, a pixel votes only for line normals
             within this angle [deg] of its gradient direction: about the std of the Sobel
             3 x 3 direction at the Canny low threshold (grey-level noise std 2 gives a
@@ -136,6 +138,7 @@ class SegmentedHoughParams:
     merge_rms_px: float = 0.8
     max_gap_px: Optional[float] = None
     min_length_px: float = 10.0
+    trace_gap_px: float = 3.0
     gradient_window_deg: float = 12.0
 
 
@@ -411,6 +414,10 @@ def segmented_hough(edges: np.ndarray,
         gx, gy = gradient
         normal = np.arctan2(gy[ys, xs], gx[ys, xs]) % math.pi
     xs, ys = xs.astype(float), ys.astype(float)
+    normal_img = None
+    if gradient is not None:
+        normal_img = np.full(edges.shape, np.nan)
+        normal_img[ys.astype(np.int64), xs.astype(np.int64)] = normal
     mom, segs, cells = _cell_hough(xs, ys, normal, (h, w), params)
     n = mom.shape[0]
     if n == 0:
@@ -422,9 +429,29 @@ def segmented_hough(edges: np.ndarray,
     near = ((np.abs(cells[:, None, 0] - cells[None, :, 0]) <= 1)
             & (np.abs(cells[:, None, 1] - cells[None, :, 1]) <= 1))
     i, j = np.nonzero(np.triu(near, 1))
+    mom, segs = _join(mom, segs, i, j, max_gap, params.merge_rms_px)
+    # tracing: each line followed along the edge image beyond its ends, then lines that
+    # now meet are joined (e.g. an edge running along a sub-image border, whose pieces on
+    # either side were too short to be found)
+    ext, traced = _follow(segs, edges, normal_img, params)
+    mom = mom + traced
+    c, u, _ = _moments_fit(mom)           # refit with the traced pixels, ends on the line
+    t = ((ext.reshape(-1, 2, 2) - c[:, None, :]) * u[:, None, :]).sum(-1)
+    segs = np.column_stack([c + t[:, :1] * u, c + t[:, 1:] * u])
+    i, j = np.triu_indices(segs.shape[0], 1)
+    mom, segs = _join(mom, segs, i, j, params.trace_gap_px, params.merge_rms_px)
+    d = segs[:, 2:] - segs[:, :2]
+    keep = np.hypot(d[:, 0], d[:, 1]) >= params.min_length_px
+    return ImageLines(segs[keep], mom[keep, 0])
+
+
+def _join(mom: np.ndarray, segs: np.ndarray, i: np.ndarray, j: np.ndarray, max_gap: float,
+          max_rms: float) -> tuple:
+    """Join pairs (i, j) that pass the gap and straightness tests; chains are refitted."""
+    n = mom.shape[0]
     mm = mom[i] + mom[j]
     _, u, rms = _moments_fit(mm)
-    ok = (rms <= params.merge_rms_px) & (_gap(segs[i], segs[j], u) <= max_gap)
+    ok = (rms <= max_rms) & (_gap(segs[i], segs[j], u) <= max_gap)
     i, j = i[ok], j[ok]
     graph = coo_matrix((np.ones(i.size), (i, j)), shape=(n, n))
     n_comp, label = connected_components(graph, directed=False)
@@ -437,19 +464,92 @@ def segmented_hough(edges: np.ndarray,
     np.minimum.at(tmin, label, pts_t.min(1))
     np.maximum.at(tmax, label, pts_t.max(1))
     out_seg = np.column_stack([c + tmin[:, None] * u, c + tmax[:, None] * u])
-    out_w = cm[:, 0].copy()
-    straight = rms <= params.merge_rms_px
-    seg_list, w_list = [out_seg[straight]], [out_w[straight]]
+    straight = rms <= max_rms
+    seg_list, mom_list = [out_seg[straight]], [cm[straight]]
     for k in np.nonzero(~straight)[0]:      # bent chains: trace greedily instead
         members = np.nonzero(label == k)[0]
-        for m, s in _trace(mom[members], segs[members], max_gap, params.merge_rms_px):
-            seg_list.append(s[None, :])
-            w_list.append(np.array([m[0]]))
-    seg_all = np.concatenate(seg_list)
-    w_all = np.concatenate(w_list)
-    d = seg_all[:, 2:] - seg_all[:, :2]
-    keep = np.hypot(d[:, 0], d[:, 1]) >= params.min_length_px
-    return ImageLines(seg_all[keep], w_all[keep])
+        for m, sg in _trace(mom[members], segs[members], max_gap, max_rms):
+            seg_list.append(sg[None, :])
+            mom_list.append(m[None, :])
+    return np.concatenate(mom_list), np.concatenate(seg_list)
+
+
+def _follow(segs: np.ndarray, edges: np.ndarray, normal_img: Optional[np.ndarray],
+            params: SegmentedHoughParams) -> tuple:
+    """Extend each segment along its line while edge pixels continue it.
+
+    From each end, points at 1 px steps along the line (up to the image border) are hits
+    when an edge pixel lies within ``band_px`` across the line (and, with gradients, has a
+    normal within ``gradient_window_deg`` of the line's); the end moves to the last hit
+    before the first run of more than ``trace_gap_px`` misses.
+
+    Returns:
+        (extended segments (S, 4), pixel moments of the traced edge pixels (S, 6)).
+    """
+    h, w = edges.shape
+    s_n = segs.shape[0]
+    if s_n == 0:
+        return segs, np.zeros(0)
+    reach = int(math.ceil(math.hypot(w, h)))
+    gap = int(math.floor(params.trace_gap_px))
+    block = 32
+    d = segs[:, 2:] - segs[:, :2]
+    L = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    u = d / L[:, None]
+    nrm = np.column_stack([-u[:, 1], u[:, 0]])
+    line_normal = np.arctan2(nrm[:, 1], nrm[:, 0]) % math.pi
+    offs = np.arange(-int(params.band_px), int(params.band_px) + 1, dtype=float)
+    win = math.radians(params.gradient_window_deg)
+    new = segs.copy()
+    extra = np.zeros((s_n, 6))
+
+    def hits(idx: np.ndarray, origin: np.ndarray, sign: float, steps: np.ndarray):
+        base = origin[idx, None, :] + sign * steps[None, :, None] * u[idx, None, :]
+        pts = base[:, :, None, :] + offs[None, None, :, None] * nrm[idx, None, None, :]
+        xi = np.rint(pts[..., 0]).astype(np.int64)
+        yi = np.rint(pts[..., 1]).astype(np.int64)
+        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        xi, yi = np.clip(xi, 0, w - 1), np.clip(yi, 0, h - 1)
+        hit = inside & (edges[yi, xi] > 0)
+        if normal_img is not None:
+            da = np.abs(normal_img[yi, xi] - line_normal[idx, None, None])
+            hit &= np.minimum(da, math.pi - da) <= win
+        return hit, inside.any(axis=2), xi, yi
+
+    for end, sign in ((1, 1.0), (0, -1.0)):
+        origin = segs[:, 2:] if end == 1 else segs[:, :2]
+        last = np.zeros(s_n)                 # steps [px] of the last hit so far
+        active = np.arange(s_n)
+        start = 1
+        while active.size and start <= reach:
+            # the block plus the gap steps before it, so that runs across blocks count
+            steps = np.arange(max(1, start - gap), start + block, dtype=float)
+            hit3, inside, xi, yi = hits(active, origin, sign, steps)
+            hit = hit3.any(axis=2)
+            miss = ~hit
+            cs = np.concatenate([np.zeros((active.size, 1)), np.cumsum(miss, axis=1)], 1)
+            run = (cs[:, gap + 1:] - cs[:, :-(gap + 1)]) >= gap + 1
+            stop = run.any(axis=1) | ~inside[:, -1]
+            first = np.where(run.any(axis=1), np.argmax(run, axis=1), steps.size)
+            ok = hit & (np.arange(steps.size)[None, :] < first[:, None])
+            ok &= steps[None, :] >= start            # the gap steps were counted before
+            # moments of the traced edge pixels (each pixel once per step)
+            take = hit3 & ok[:, :, None]
+            take &= np.cumsum(take, axis=2) == 1
+            row = np.broadcast_to(np.arange(active.size)[:, None, None], take.shape)[take]
+            px, py = xi[take].astype(float), yi[take].astype(float)
+            extra[active] += _moments(px, py, row, active.size)
+            has = ok.any(axis=1)
+            k = steps.size - 1 - np.argmax(ok[:, ::-1], axis=1)
+            last[active[has]] = steps[k[has]]
+            active = active[~stop]
+            start += block
+        pos = origin + sign * last[:, None] * u
+        if end == 1:
+            new[:, 2:] = pos
+        else:
+            new[:, :2] = pos
+    return new, extra
 
 
 def hough_p(edges: np.ndarray, params: HoughPParams = HoughPParams()) -> ImageLines:
