@@ -4,7 +4,7 @@ import math
 
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.image_lines import (canny_edges, detect_lines, ImageLines, METHODS,
-                                             SegmentedHoughParams, segmented_hough, to_gray,
+                                             segmented_hough, SegmentedHoughParams, to_gray,
                                              undistort_segments)
 import numpy as np
 import pytest
@@ -13,7 +13,7 @@ W, H = 640, 480
 
 
 def polygon_image(corners, inside=200, outside=40):
-    """A dark image with one bright filled polygon (sub-pixel corners, anti-aliased)."""
+    """Return a dark image with one bright filled polygon (sub-pixel corners, anti-aliased)."""
     import cv2
     img = np.full((H, W), outside, np.uint8)
     pts = np.round(np.asarray(corners) * 16).astype(np.int32)
@@ -22,7 +22,7 @@ def polygon_image(corners, inside=200, outside=40):
 
 
 def edge_distance(seg, a, b):
-    """Largest distance [px] of the segment's end points from the infinite line a-b."""
+    """Return the largest distance [px] of the segment's end points from the infinite line a-b."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
     return max(abs((seg[:2] - a) @ n), abs((seg[2:] - a) @ n))
