@@ -87,7 +87,7 @@ class VPParams:
     final_candidates: int = 10
     max_lines: int = 150
     min_length_px: float = 10.0
-    refine_iterations: int = 5
+    refine_iterations: int = 10
     hypotheses: int = 12
 
 
@@ -309,10 +309,12 @@ def _refine(geo: _Geometry, d: np.ndarray, params: VPParams,
         mm = geo.kl[:, inl][:, good] / np.sqrt(std2[good])
         _, vec = np.linalg.eigh(mm @ mm.T)
         d_new = vec[:, 0]
-        d = d_new if d_new @ d >= 0 else -d_new
+        d_new = d_new if d_new @ d >= 0 else -d_new
+        moved = np.linalg.norm(d_new - d)
+        d = d_new
         z = geo.z(d)[0]
         new_inl = ok & (np.abs(z) <= params.gate)
-        if np.array_equal(new_inl, inl):
+        if np.array_equal(new_inl, inl) and moved < 1e-9:
             break
         inl = new_inl
     return _canonical(d), inl
@@ -381,6 +383,12 @@ def vanishing_point(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
                     exclude: Optional[np.ndarray] = None) -> VanishingPoint:
     """Find the dominant vanishing direction: weighted projective clustering + IRLS.
 
+    Starts: the chapter's farthest-removal cluster (on the sphere, weighted) and the
+    ``hypotheses`` strongest peaks of the candidate histogram (the removal alone follows
+    the centre of gravity of all candidates, so it loses a VP far from it, e.g. at
+    infinity among clutter near the image centre). Each start is refined (IRLS) and the
+    one with the largest MSAC-scored segment support is returned.
+
     Args:
         segments: (N, 4) ideal pixels.
         K: (3, 3) intrinsics.
@@ -399,11 +407,18 @@ def vanishing_point(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
     idx = _usable(seg, w_use, params)
     n = plane_normals(seg[idx], K)
     d, cw = _pair_candidates(n, w[idx])
-    c = cluster_directions(d, cw, params)
-    d_ref, inl = refine_direction(seg[idx], K, c, w[idx], params)
-    inl_all = np.abs(consistency(seg, K @ d_ref, params.sigma_px)) <= params.gate
-    del inl
-    return _make_vp(seg, K, d_ref, inl_all, w)
+    if d.shape[0] == 0:
+        raise ValueError('no vanishing-point candidates (fewer than two non-parallel lines)')
+    geo = _Geometry(seg, K, params.sigma_px)
+    sub = geo.subset(idx)
+    best = None
+    for start in [cluster_directions(d, cw, params), *sphere_peaks(d, cw, params.hypotheses)]:
+        d_ref = _refine(sub, start, params)[0]
+        score = float(np.sum(w_use * _msac(np.abs(geo.z(d_ref)[0]), params.gate)))
+        if best is None or score > best[0]:
+            best = (score, d_ref)
+    inl_all = np.abs(geo.z(best[1])[0]) <= params.gate
+    return _make_vp(seg, K, best[1], inl_all, w)
 
 
 def _orthogonal_pair(geo: _Geometry, normals: np.ndarray, d1: np.ndarray, free: np.ndarray,
