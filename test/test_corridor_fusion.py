@@ -73,7 +73,7 @@ def simulate(rng, ekf, steps, sigma_th, sigma_y, every, reverse=False):
             y_v = -truth[2] if rev else truth[2]
             res = ekf.update(th_v + rng.normal(0, sigma_th), y_v + rng.normal(0, sigma_y),
                              np.diag([sigma_th ** 2, sigma_y ** 2]))
-            assert res.reversed == reverse
+            assert res.facing_back == reverse
             rejected += not res.accepted
         e = ekf.s - truth
         e[0] = wrap_angle(e[0])

@@ -68,12 +68,12 @@ class UpdateResult:
     Attributes:
         accepted: False when the gate rejected the measurement (state unchanged).
         nis: normalised innovation squared.
-        reversed: True when the robot faced the other way (theta_v = theta - pi, y_v = -y).
+        facing_back: True when the robot faced the other way (theta_v = theta - pi, y_v = -y).
     """
 
     accepted: bool
     nis: float
-    reversed: bool
+    facing_back: bool
 
 
 class CorridorEKF:
