@@ -194,15 +194,19 @@ class _Geometry:
         g.pu1, g.pu2, g.sigma = self.pu1[idx], self.pu2[idx], self.sigma
         return g
 
-    def z(self, D: np.ndarray) -> np.ndarray:
-        """Return the (M, N) z-scores of the segments against directions D (M, 3)."""
+    def terms(self, D: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Return the (M, N) residuals ``r = l . K d`` and their standard deviations."""
         D = np.atleast_2d(D)
         r = D @ self.kl
         vu = D @ self.ku
         vw = D[:, 2:3]
         a = (vw * self.pu2 - vu) / self.length
         b = (vu - vw * self.pu1) / self.length
-        std = self.sigma * np.sqrt(a * a + b * b)
+        return r, self.sigma * np.sqrt(a * a + b * b)
+
+    def z(self, D: np.ndarray) -> np.ndarray:
+        """Return the (M, N) z-scores of the segments against directions D (M, 3)."""
+        r, std = self.terms(D)
         with np.errstate(divide='ignore', invalid='ignore'):
             z = np.where(std > 0, r / std, np.inf)
         return np.where(np.isnan(z), np.inf, z)
@@ -299,10 +303,7 @@ def _refine(geo: _Geometry, d: np.ndarray, params: VPParams,
     for _ in range(params.refine_iterations):
         if np.count_nonzero(inl) < 2:
             break
-        r = d @ geo.kl[:, inl]
-        zi = z[inl]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            std2 = np.where(np.isfinite(zi) & (zi != 0), (r / zi) ** 2, np.nan)
+        std2 = geo.subset(np.nonzero(inl)[0]).terms(d)[1][0] ** 2
         good = np.isfinite(std2) & (std2 > 0)
         if np.count_nonzero(good) < 2:
             break
@@ -318,6 +319,29 @@ def _refine(geo: _Geometry, d: np.ndarray, params: VPParams,
             break
         inl = new_inl
     return _canonical(d), inl
+
+
+def direction_covariance(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
+                         inliers: np.ndarray, sigma_px: float = 0.6) -> np.ndarray:
+    """Return the (3, 3) covariance of a VP direction refined on its inlier segments.
+
+    First order: the direction minimises ``sum z_i^2`` over the inliers (IRLS), whose
+    information matrix on the sphere is ``J = sum (K^T l_i)(K^T l_i)^T / std_i^2``; the
+    covariance is its pseudo-inverse on the plane tangent at ``d`` (rank 2).
+    """
+    seg, K = _check(segments, K)
+    d = np.asarray(d, dtype=float) / np.linalg.norm(d)
+    inl = np.asarray(inliers, dtype=bool)
+    geo = _Geometry(seg[inl], K, sigma_px)
+    std = geo.terms(d)[1][0]
+    ok = np.isfinite(std) & (std > 0)
+    m = geo.kl[:, ok] / std[ok]
+    J = m @ m.T
+    T = np.linalg.svd(d[None, :])[2][1:]          # (2, 3) tangent basis
+    Jt = T @ J @ T.T
+    if np.count_nonzero(ok) < 2 or np.linalg.cond(Jt) > 1e12:
+        return np.full((3, 3), np.inf)
+    return T.T @ np.linalg.inv(Jt) @ T
 
 
 def _make_vp(seg: np.ndarray, K: np.ndarray, d: np.ndarray, inl: np.ndarray,
