@@ -46,7 +46,8 @@ class FrameParams:
         vp: vanishing-point parameters.
         max_axis_angle_deg: the corridor VP must lie within this angle of the camera's
             forward direction [deg] (a forward-looking camera in a corridor).
-        min_corridor_lines: fewer corridor lines -> lost.
+        min_corridor_lines: fewer corridor lines -> lost (3: two lines always meet
+            somewhere, a third one confirms the VP).
         heading_std_floor: added in quadrature to the heading std [rad].
         lateral_std_floor: added in quadrature to the lateral std [m].
     """
@@ -55,7 +56,7 @@ class FrameParams:
     lines: LineParams = field(default_factory=LineParams)
     vp: VPParams = field(default_factory=VPParams)
     max_axis_angle_deg: float = 45.0
-    min_corridor_lines: int = 2
+    min_corridor_lines: int = 3
     heading_std_floor: float = math.radians(0.3)
     lateral_std_floor: float = 0.02
 
