@@ -1,0 +1,143 @@
+"""corridor_follower node: rendered frames and odometry through DDS, enable, lost, bad input."""
+
+import math
+from pathlib import Path
+
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
+from landmark_nav.conversions import (array_to_image, make_camera_info, make_odometry,
+                                      quaternion_to_yaw)
+from landmark_nav.nodes.common import ParameterError
+from landmark_nav.nodes.corridor_follower import CorridorFollower
+from landmark_nav.sim.camera import CameraSimulator
+from landmark_nav.sim.corridor import (corridor_scene, corridor_view, CorridorConfig,
+                                       default_corridor_camera)
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
+from nav_msgs.msg import Odometry
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import SetBool
+
+REPO = Path(__file__).resolve().parents[1]
+MOUNT = [0.1, 0.0, 1.1, 0.0, math.radians(5.0), 0.0]
+CAM = default_corridor_camera()
+
+
+def node_params(**extra):
+    """Return the node's parameter overrides for the rendered corridor."""
+    values = {'camera_mount': MOUNT, 'corridor_width': 2.0, 'corridor_height': 2.6}
+    values.update(extra)
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def test_config_file_matches_declared_parameters():
+    values = parameter_file(REPO, 'corridor_follower')
+    with RosHarness() as ros:
+        node = CorridorFollower(context=ros.context)
+        assert declared_parameters(node) == values
+
+
+def test_bad_parameters():
+    with RosHarness() as ros:
+        high = [0.0, 0.0, 3.0, 0.0, 0.0, 0.0]
+        with pytest.raises(ParameterError, match='between floor and ceiling'):
+            CorridorFollower(context=ros.context,
+                             parameter_overrides=node_params(camera_mount=high))
+        with pytest.raises(ParameterError, match='lateral_offset'):
+            CorridorFollower(context=ros.context,
+                             parameter_overrides=node_params(lateral_offset=1.5))
+
+
+def drive(ros, node, images, seconds=3.0, y0=0.25, th0=math.radians(-5.0), speed=0.3,
+          before_image=None):
+    """Publish odometry (20 Hz) and rendered frames (5 Hz) of a straight drive; return truth."""
+    planes = corridor_scene(CorridorConfig(), 1)
+    sim = CameraSimulator(CAM)
+    pub_info = ros._helper.create_publisher(CameraInfo, 'camera/camera_info', 10)
+    pub_img = ros._helper.create_publisher(Image, 'camera/image_raw', 10)
+    pub_odom = ros._helper.create_publisher(Odometry, 'odom', 100)
+    assert ros.wait_for_subscribers([pub_info, pub_img, pub_odom])
+    truth = np.array([2.0, y0, th0])
+    odom_origin = np.array([5.0, -3.0, 1.0])         # the odometry frame is elsewhere
+    for k in range(int(seconds * 20)):
+        stamp = 1_000_000_000 + k * 50_000_000
+        if k:
+            truth = truth + [speed * 0.05 * math.cos(truth[2]),
+                             speed * 0.05 * math.sin(truth[2]), 0.0]
+        c, s = math.cos(odom_origin[2]), math.sin(odom_origin[2])
+        op = [odom_origin[0] + c * truth[0] - s * truth[1],
+              odom_origin[1] + s * truth[0] + c * truth[1], odom_origin[2] + truth[2]]
+        pub_odom.publish(make_odometry(stamp, 'odom', 'base_link', op))
+        # one at a time: sensor-data QoS drops what a busy node cannot take
+        assert ros.wait_until(lambda: node.last_odom is not None
+                              and node.last_odom[0] == stamp, 10)
+        if k % 4 == 0:
+            n_before = node.frames + node.warner.count
+            pub_info.publish(make_camera_info(CAM, stamp, 'camera'))
+            img = corridor_view(sim, planes, truth, MOUNT).image if images else \
+                np.zeros((CAM.height, CAM.width), np.uint8)
+            if before_image is not None:
+                before_image(k)
+            pub_img.publish(array_to_image(img, 'mono8', stamp, 'camera'))
+            assert ros.wait_until(lambda: node.frames + node.warner.count > n_before, 20)
+    return truth
+
+
+def call_enable(ros, on):
+    """Call ~/enable and return the response."""
+    cli = ros._helper.create_client(SetBool, '/corridor_follower/enable')
+    assert cli.wait_for_service(timeout_sec=10)
+    fut = cli.call_async(SetBool.Request(data=on))
+    assert ros.wait_until(fut.done, 10)
+    return fut.result()
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_estimate_and_cmd_vel_from_rendered_frames():
+    with RosHarness() as ros:
+        node = ros.add_node(CorridorFollower(context=ros.context,
+                                             parameter_overrides=node_params()))
+        poses = ros.collect('corridor/pose', PoseWithCovarianceStamped)
+        cmds = ros.collect('cmd_vel', Twist)
+        assert call_enable(ros, True).success
+        truth = drive(ros, node, images=True)
+        # a pose after every odometry message once the filter has started, and per frame
+        assert ros.wait_until(lambda: len(poses) >= 59 + 15, 10)
+        last = poses[-1]
+        q = last.pose.pose.orientation
+        yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
+        assert abs(last.pose.pose.position.y - truth[1]) < 0.02
+        assert abs(math.degrees(yaw - truth[2])) < 0.3
+        assert last.header.frame_id == 'corridor'
+        assert node.frames == 15
+        # drives forward at the set speed, steering by the control law on the estimate:
+        # omega = -0.6 theta - 1.0 v y, here about 0.052 - 0.051 rad/s
+        assert ros.wait_until(lambda: len(cmds) == 60, 10)
+        assert cmds[-1].linear.x == pytest.approx(0.3)
+        assert cmds[-1].angular.z == pytest.approx(-0.6 * truth[2] - 0.3 * truth[1], abs=0.006)
+        speeds = [c.linear.x for c in cmds if c.linear.x > 0]
+        assert speeds[0] == pytest.approx(0.3 * 0.05)   # max_accel x the odometry period
+        assert np.all(np.diff(speeds) >= 0) and np.max(np.diff(speeds)) <= 0.015 + 1e-9
+        assert call_enable(ros, False).success
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_lost_estimate_stops_the_robot_and_bad_camera_info_is_survived():
+    with RosHarness() as ros:
+        node = ros.add_node(CorridorFollower(
+            context=ros.context, parameter_overrides=node_params(enabled=True)))
+        cmds = ros.collect('cmd_vel', Twist)
+        drive(ros, node, images=False, seconds=1.0)
+        assert ros.wait_until(lambda: len(cmds) >= 20, 10)
+        assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in cmds)
+        assert node.ekf is None and node.warner.count > 0
+        bad = make_camera_info(CAM)
+        bad.k = [0.0] * 9
+        pub = ros._helper.create_publisher(CameraInfo, 'camera/camera_info', 10)
+        assert ros.wait_for_subscribers([pub])
+        before = node.warner.count
+        pub.publish(bad)
+        assert ros.wait_until(lambda: node.warner.count > before, 10)
