@@ -125,3 +125,24 @@ def test_bad_input():
         ekf.update(0.0, math.nan, np.eye(2))
     with pytest.raises(ValueError, match='wheel_separation'):
         DeadReckoningNoise(wheel_separation=0.0)
+
+
+# ------------------------------------------------------------------ controller
+def test_controller_ramps_steers_and_stops():
+    from landmark_nav.corridor.controller import ControllerParams, CorridorController
+    p = ControllerParams(speed=0.4, lateral_offset=0.1, gain_lateral=2.0, gain_heading=0.5,
+                         max_accel=0.2, max_angular_speed=0.3)
+    c = CorridorController(p)
+    v, w = c.step(0.0, 0.1, 0.5, True)               # on the set-point: straight
+    assert v == pytest.approx(0.1) and w == pytest.approx(0.0)
+    for _ in range(10):
+        v, w = c.step(math.radians(5.0), 0.1, 0.5, True)
+    assert v == pytest.approx(0.4)
+    assert w == pytest.approx(-0.5 * math.radians(5.0))
+    v, w = c.step(0.0, 0.3, 0.1, True)               # 20 cm left of the set-point
+    assert w == pytest.approx(-2.0 * 0.4 * 0.2)
+    assert c.step(0.0, 5.0, 0.1, True)[1] == pytest.approx(-0.3)   # clipped
+    assert c.step(0.0, 0.0, 0.1, False) == (0.0, 0.0)
+    assert c.step(0.0, 0.0, 0.1, True)[0] == pytest.approx(0.02)   # ramps again from 0
+    with pytest.raises(ValueError, match='speed'):
+        ControllerParams(speed=0.0)
