@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import cv2  # noqa: E402
 from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame  # noqa: E402
 from landmark_nav.corridor.lateral import CorridorModel  # noqa: E402
-from landmark_nav.evaluation.corridor_run import run_corridor, RunConfig  # noqa: E402
+from landmark_nav.evaluation.corridor_run import (hard_cases, run_corridor,  # noqa: E402
+                                                  RunConfig)
 from landmark_nav.sim.camera import CameraSimulator, Photometry  # noqa: E402
 from landmark_nav.sim.corridor import (corridor_scene, corridor_view,  # noqa: E402
                                        CorridorConfig, default_corridor_camera)
@@ -95,6 +96,12 @@ def main() -> None:
             print(f'  {m:<16s}{1e3 * t:7.1f}{1 / t:7.1f}{t / ref:7.2f}{hm:11.3f} deg'
                   f'{100 * ym:10.2f} cm{lost:6d}')
         print()
+    print('hard cases (20 frames each; medians / worst):')
+    for case, r in hard_cases().items():
+        print(f'  {case:<10s} lost {r["lost"]:.0f}, heading {r["heading_median_deg"]:.3f} / '
+              f'{r["heading_max_deg"]:.3f} deg, lateral {100 * r["lateral_median"]:.2f} / '
+              f'{100 * r["lateral_max"]:.2f} cm')
+    print()
     s = run_corridor(RunConfig(), args.seed).summary()
     print('fused 27 m run (5 frames/s, 20 Hz odometry, 1 % right-wheel scale error):')
     print('  ' + ', '.join(f'{k} {v:.4g}' for k, v in s.items()))

@@ -88,3 +88,18 @@ def test_fused_run_along_the_rendered_corridor():
     assert s['fused_heading_rms_deg'] < 0.1
     assert s['single_lateral_median'] < 0.003
     assert s['single_heading_median_deg'] < 0.05
+
+
+@pytest.mark.slow
+def test_hard_cases():
+    from landmark_nav.evaluation.corridor_run import hard_cases
+    res = hard_cases(frames=20, seed=3)
+    assert set(res) == {'occluded', 'near_wall', 'one_wall', 'lighting'}
+    for case, r in res.items():
+        # measured: nothing lost; heading medians 0.018-0.082 deg (worst frame 0.18),
+        # lateral medians 1.0-4.2 mm (worst frame 1.5 cm); the issue: within 2x of 0.5 deg
+        # and 3 cm
+        assert r['lost'] <= 1, case
+        assert r['heading_median_deg'] < 0.15, case
+        assert r['lateral_median'] < 0.008, case
+        assert r['lateral_max'] < 0.03, case

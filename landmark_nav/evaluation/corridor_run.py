@@ -138,3 +138,64 @@ def run_corridor(config: RunConfig = RunConfig(), seed: int = 0) -> RunResult:
         rec_v.append(visual)
         rec_a.append(accepted)
     return RunResult(np.array(rec_t), np.array(rec_f), np.array(rec_v), np.array(rec_a), lost)
+
+
+#: The chapter's hard cases (its Fig. 8) and one of ours, as (scene, pose sampler).
+HARD_CASES = ('occluded', 'near_wall', 'one_wall', 'lighting')
+
+
+def _hard_pose(case: str, rng: np.random.Generator) -> Tuple[float, float, float]:
+    if case == 'occluded':            # people and open doors between the robot and the VP
+        return rng.uniform(1, 3), rng.uniform(-0.4, 0.4), math.radians(rng.uniform(-10, 10))
+    if case == 'near_wall':
+        return (rng.uniform(2, 20), rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 0.7),
+                math.radians(rng.uniform(-10, 10)))
+    if case == 'one_wall':            # turned 36-42 deg: one wall only, the end not in view
+        return (rng.uniform(2, 20), rng.uniform(-0.3, 0.3),
+                math.radians(rng.choice([-1.0, 1.0]) * rng.uniform(36, 42)))
+    return rng.uniform(2, 20), rng.uniform(-0.5, 0.5), math.radians(rng.uniform(-15, 15))
+
+
+def hard_cases(frames: int = 20, seed: int = 3,
+               params: FrameParams = FrameParams()) -> Dict[str, Dict[str, float]]:
+    """Return single-frame error medians / maxima [deg, m] and losses per hard case.
+
+    ``occluded``: 6 people and 4 open doors in the corridor beyond 4 m, robot 1-3 m from
+    the start (at least 1 m before the first occluder);
+    ``near_wall``: 0.5-0.7 m off the centre line; ``one_wall``: turned 36-42 deg, so that
+    one wall fills the view and the corridor's end is outside it (the chapter's Fig. 8 b,
+    c); ``lighting``: exposure 0.4-1.4, illumination gradients, vignetting, gamma 2.2, shot
+    noise.
+    """
+    cam = default_corridor_camera()
+    sim = CameraSimulator(cam)
+    mount = RunConfig().mount
+    out = {}
+    for case in HARD_CASES:
+        cfg = CorridorConfig(people=6, open_doors=4) if case == 'occluded' else CorridorConfig()
+        planes = corridor_scene(cfg, seed)
+        model = CorridorModel(cfg.width, cfg.height)
+        rng = np.random.default_rng(seed)
+        eh, ey, lost = [], [], 0
+        for _ in range(frames):
+            robot = _hard_pose(case, rng)
+            ph = Photometry(noise_sigma=2.0, defocus_sigma=0.5)
+            if case == 'lighting':
+                ph = Photometry(exposure=rng.uniform(0.4, 1.4),
+                                gradient=(rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)),
+                                vignetting=0.3, gamma=2.2, noise_sigma=3.0, shot_noise=0.3,
+                                defocus_sigma=0.7)
+            view = corridor_view(sim, planes, robot, mount, ph, rng)
+            try:
+                m = measure_frame(view.image, cam, model, mount, params=params)
+            except CorridorLost:
+                lost += 1
+                continue
+            eh.append(abs(math.degrees(wrap_angle(m.heading - robot[2]))))
+            ey.append(abs(m.y - robot[1]))
+        out[case] = {'frames': float(frames), 'lost': float(lost),
+                     'heading_median_deg': float(np.median(eh)) if eh else math.nan,
+                     'heading_max_deg': float(np.max(eh)) if eh else math.nan,
+                     'lateral_median': float(np.median(ey)) if ey else math.nan,
+                     'lateral_max': float(np.max(ey)) if ey else math.nan}
+    return out

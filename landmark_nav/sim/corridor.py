@@ -40,6 +40,9 @@ class CorridorConfig:
         doors_per_side: door leaves per wall (0.9 m x 2.0 m, set 1 cm into the wall).
         centre_line: a dark 5 cm floor line along the centre.
         texel: texture resolution [m per texel].
+        people: people standing in the corridor (0.5 m x 1.7 m two-sided boards with
+            blotchy clothing texture, at random places; occluders).
+        open_doors: door leaves opened 90 deg into the corridor (0.8 m deep; occluders).
     """
 
     length: float = 30.0
@@ -49,6 +52,8 @@ class CorridorConfig:
     doors_per_side: int = 4
     centre_line: bool = False
     texel: float = 0.01
+    people: int = 0
+    open_doors: int = 0
 
 
 def corridor_scene(config: CorridorConfig, seed: int) -> List[Plane]:
@@ -85,6 +90,18 @@ def corridor_scene(config: CorridorConfig, seed: int) -> List[Plane]:
             tex[:, -int(round(0.05 / m)):] = 60
             tex[:int(round(0.05 / m)), :] = 60
             planes.append(Plane(tex, m, R, [x, y, 1.0 + c.skirting / 2], 'door'))
+    across = np.column_stack([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+    for _ in range(c.people):
+        x, y = rng.uniform(4.0, c.length - 2.0), rng.uniform(-c.width / 3, c.width / 3)
+        tex = wall(rng, (int(round(1.7 / m)), int(round(0.5 / m))), mean=70.0, contrast=40.0)
+        planes.append(Plane(tex, m, across, [x, y, 0.86], 'person', two_sided=True))
+    for k in range(c.open_doors):
+        side = 1.0 if k % 2 == 0 else -1.0
+        x = rng.uniform(4.0, c.length - 2.0)
+        tex = np.full((int(round(2.0 / m)), int(round(0.8 / m))), 110, np.uint8)
+        tex[:, :int(round(0.04 / m))] = 50
+        y = side * (c.width / 2 - 0.4 - inset)
+        planes.append(Plane(tex, m, across, [x, y, 1.01], 'open_door', two_sided=True))
     if c.centre_line:
         planes.append(Plane(np.full((nl, max(1, int(round(0.05 / m)))), 20, np.uint8), m,
                             _FLOOR, [mid, 0.0, 0.001], 'centre_line'))
