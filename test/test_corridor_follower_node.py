@@ -141,3 +141,59 @@ def test_lost_estimate_stops_the_robot_and_bad_camera_info_is_survived():
         before = node.warner.count
         pub.publish(bad)
         assert ros.wait_until(lambda: node.warner.count > before, 10)
+
+
+@pytest.fixture(scope='module')
+def drive_bag(tmp_path_factory):
+    """Return a 6 m rendered corridor drive (60 frames, drifting odometry), made once."""
+    from landmark_nav.sim.corridor_record import record_corridor_drive
+    out = tmp_path_factory.mktemp('bags') / 'corridor_drive'
+    record_corridor_drive(out, seed=0)
+    return out
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_bag_replay_against_ground_truth(drive_bag):
+    from landmark_nav.bag import BagReader
+    from landmark_nav.conversions import odometry_to_pose, stamp_to_ns
+    truth = {}
+    with BagReader(drive_bag) as reader:
+        for _, _, msg in reader.decoded(['/ground_truth/odom']):
+            p = odometry_to_pose(msg)
+            truth[p.stamp_ns] = p.pose
+    with RosHarness() as ros:
+        node = ros.add_node(CorridorFollower(context=ros.context,
+                                             parameter_overrides=node_params()))
+        poses = ros.collect('corridor/pose', PoseWithCovarianceStamped)
+        done = {'n': 0}
+
+        def wait_for_node(topic, log_time_ns):
+            if topic == '/camera/camera_info':
+                assert ros.wait_until(lambda: node.camera is not None, 10)
+            elif topic == '/camera/image_raw':
+                done['n'] += 1
+                assert ros.wait_until(lambda: node.frames + node.warner.count >= done['n'], 20)
+            elif topic == '/odom':
+                assert ros.wait_until(lambda: node.last_odom is not None
+                                      and node.last_odom[0] == log_time_ns, 10)
+
+        counts = ros.play(drive_bag, topics=['/camera/camera_info', '/odom',
+                                             '/camera/image_raw'], on_message=wait_for_node)
+        assert counts['/camera/image_raw'] == 60
+        assert ros.wait_until(lambda: len(poses) >= 60 + 239, 10)
+        assert node.frames == 60
+        err_y, err_th = [], []
+        for msg in poses:
+            t = stamp_to_ns(msg.header.stamp)
+            q = msg.pose.pose.orientation
+            err_y.append(msg.pose.pose.position.y - truth[t][1])
+            err_th.append(math.degrees(quaternion_to_yaw(q.x, q.y, q.z, q.w) - truth[t][2]))
+        err_y, err_th = np.array(err_y[20:]), np.array(err_th[20:])   # after the first second
+        # measured over every pose (after images and after each odometry step): lateral
+        # 1.2 mm RMS (worst 2.6 mm), heading 0.27 deg RMS (worst 0.86 deg: the 1 % wheel
+        # scale error turns the odometry heading by 0.17 deg between two frames)
+        assert np.sqrt(np.mean(err_y ** 2)) < 0.003
+        assert np.abs(err_y).max() < 0.006
+        assert np.sqrt(np.mean(err_th ** 2)) < 0.4
+        assert np.abs(err_th).max() < 1.2
