@@ -113,10 +113,11 @@ def test_estimate_and_cmd_vel_from_rendered_frames():
         assert last.header.frame_id == 'corridor'
         assert node.frames == 15
         # drives forward at the set speed, steering by the control law on the estimate:
-        # omega = -0.6 theta - 1.0 v y, here about 0.052 - 0.051 rad/s
+        # omega = -v (4 theta + 4 y), here about 0.3 (0.35 - 0.68) rad/s
         assert ros.wait_until(lambda: len(cmds) == 60, 10)
         assert cmds[-1].linear.x == pytest.approx(0.3)
-        assert cmds[-1].angular.z == pytest.approx(-0.6 * truth[2] - 0.3 * truth[1], abs=0.006)
+        assert cmds[-1].angular.z == pytest.approx(-0.3 * (4 * truth[2] + 4 * truth[1]),
+                                                   abs=0.01)
         speeds = [c.linear.x for c in cmds if c.linear.x > 0]
         assert speeds[0] == pytest.approx(0.3 * 0.05)   # max_accel x the odometry period
         assert np.all(np.diff(speeds) >= 0) and np.max(np.diff(speeds)) <= 0.015 + 1e-9

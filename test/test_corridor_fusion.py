@@ -138,9 +138,9 @@ def test_controller_ramps_steers_and_stops():
     for _ in range(10):
         v, w = c.step(math.radians(5.0), 0.1, 0.5, True)
     assert v == pytest.approx(0.4)
-    assert w == pytest.approx(-0.5 * math.radians(5.0))
+    assert w == pytest.approx(-0.4 * 0.5 * math.radians(5.0))
     v, w = c.step(0.0, 0.3, 0.1, True)               # 20 cm left of the set-point
-    assert w == pytest.approx(-2.0 * 0.4 * 0.2)
+    assert w == pytest.approx(-0.4 * 2.0 * 0.2)
     assert c.step(0.0, 5.0, 0.1, True)[1] == pytest.approx(-0.3)   # clipped
     assert c.step(0.0, 0.0, 0.1, False) == (0.0, 0.0)
     assert c.step(0.0, 0.0, 0.1, True)[0] == pytest.approx(0.02)   # ramps again from 0

@@ -161,6 +161,16 @@ class CorridorEKF:
         return UpdateResult(True, nis, rev)
 
     @property
+    def facing_back(self) -> bool:
+        """Return whether the robot faces against the corridor's x axis (|theta| > pi/2)."""
+        return abs(wrap_angle(self.s[0])) > math.pi / 2
+
+    def visual_prior(self) -> Tuple[float, float]:
+        """Return the predicted ``y_v`` (mean, std) in the frame of the VP ahead (eq. 24)."""
+        sign = -1.0 if self.facing_back else 1.0
+        return sign * float(self.s[2]), math.sqrt(max(float(self.p[2, 2]), 0.0))
+
+    @property
     def state(self) -> Tuple[float, float, float]:
         """Return ``(theta, x, y)``."""
         return float(self.s[0]), float(self.s[1]), float(self.s[2])

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import math
 from typing import Dict, List, Tuple
 
+from landmark_nav.corridor.controller import ControllerParams, CorridorController
 from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame
 from landmark_nav.corridor.fusion import CorridorEKF, DeadReckoningNoise
 from landmark_nav.corridor.lateral import CorridorModel
@@ -43,6 +44,7 @@ class RunConfig:
         model_noise: the error model the EKF assumes.
         photometry: image noise and blur.
         frame: per-frame pipeline parameters.
+        lengths: corridor lengths driven, turning on the spot at the ends in between.
     """
 
     corridor: CorridorConfig = field(default_factory=CorridorConfig)
@@ -60,6 +62,7 @@ class RunConfig:
     photometry: Photometry = field(default_factory=lambda: Photometry(noise_sigma=2.0,
                                                                       defocus_sigma=0.5))
     frame: FrameParams = field(default_factory=FrameParams)
+    lengths: int = 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,12 +74,14 @@ class RunResult:
     visual: np.ndarray         # (F, 2) theta_v, y_v (NaN when lost)
     accepted: np.ndarray       # (F,) bool
     lost: List[str]
+    turning: np.ndarray        # (F,) bool: frames while turning at an end
 
     def summary(self) -> Dict[str, float]:
-        """Return RMS / median figures [m, deg] and counts."""
-        e_y = self.fused[:, 1] - self.truth[:, 1]
-        e_th = np.degrees(wrap_angle(self.fused[:, 2] - self.truth[:, 2]))
-        ok = np.isfinite(self.visual[:, 0])
+        """Return RMS / median figures [m, deg] and counts (frames while turning left out)."""
+        drive = ~self.turning
+        e_y = self.fused[drive, 1] - self.truth[drive, 1]
+        e_th = np.degrees(wrap_angle(self.fused[drive, 2] - self.truth[drive, 2]))
+        ok = np.isfinite(self.visual[:, 0]) & drive
         v_y = np.abs(self.visual[ok, 1] - self.truth[ok, 1])
         v_th = np.abs(np.degrees(wrap_angle(self.visual[ok, 0] - self.truth[ok, 2])))
         return {'frames': float(len(self.truth)), 'lost': float(len(self.lost)),
@@ -85,7 +90,15 @@ class RunResult:
                 'fused_heading_rms_deg': float(np.sqrt(np.mean(e_th ** 2))),
                 'single_lateral_median': float(np.median(v_y)) if v_y.size else math.nan,
                 'single_heading_median_deg': float(np.median(v_th)) if v_th.size else math.nan,
-                'max_abs_lateral': float(np.max(np.abs(self.truth[:, 1])))}
+                'max_abs_lateral': float(np.max(np.abs(self.truth[drive, 1]))),
+                'max_abs_lateral_after_2m': float(np.max(np.abs(
+                    self.truth[drive & (np.arange(len(drive)) >= self._frames_2m), 1])))}
+
+    @property
+    def _frames_2m(self) -> int:
+        """Index of the first frame after the first 2 m (the start transient)."""
+        d = np.abs(self.truth[:, 0] - self.truth[0, 0])
+        return int(np.argmax(d >= 2.0)) if np.any(d >= 2.0) else len(d)
 
 
 def _move(s: np.ndarray, d_l: float, d_r: float, b: float) -> np.ndarray:
@@ -95,7 +108,14 @@ def _move(s: np.ndarray, d_l: float, d_r: float, b: float) -> np.ndarray:
 
 
 def run_corridor(config: RunConfig = RunConfig(), seed: int = 0) -> RunResult:
-    """Simulate one run (deterministic for a seed)."""
+    """Simulate one run (deterministic for a seed).
+
+    The robot follows :class:`~landmark_nav.corridor.controller.CorridorController`'s
+    command on the fused estimate (closed loop). With ``config.lengths > 1`` it turns on
+    the spot (0.5 rad/s, odometry only) when the estimate passes ``turn_margin`` before
+    either end and drives back, ``lengths`` times in all; frames during the turns are kept
+    out of the figures (``RunResult.turning``).
+    """
     rng = np.random.default_rng(seed)
     c = config
     planes = corridor_scene(c.corridor, seed)
@@ -106,38 +126,60 @@ def run_corridor(config: RunConfig = RunConfig(), seed: int = 0) -> RunResult:
     # the filter starts from a rough guess: 10 cm and 3 deg off, with that uncertainty
     ekf = CorridorEKF([truth[2] + math.radians(3.0), truth[0], truth[1] - 0.1],
                       np.diag([math.radians(3.0) ** 2, 0.05 ** 2, 0.1 ** 2]), c.model_noise)
+    ctrl = CorridorController(ControllerParams(speed=c.speed, max_accel=1e3))
     b = c.true_noise.wheel_separation
-    step = c.speed / c.odom_rate
+    dt = 1.0 / c.odom_rate
     per_frame = int(round(c.odom_rate / c.camera_rate))
-    rec_t, rec_f, rec_v, rec_a, lost = [], [], [], [], []
-    n_steps = int(c.distance / step)
-    for k in range(n_steps):
-        th, _, y = ekf.state
-        omega = -1.0 * y - 1.5 * wrap_angle(th)                   # [rad/m] towards centre
-        omega = max(-0.5, min(0.5, omega))
-        d_l, d_r = step * (1 - 0.5 * b * omega), step * (1 + 0.5 * b * omega)
+    rec_t, rec_f, rec_v, rec_a, rec_turn, lost = [], [], [], [], [], []
+    ends = (c.start[0] + c.distance, c.start[0])
+    leg, travelled, turning, target = 0, 0.0, False, 0.0
+    k = 0
+    while leg < c.lengths:
+        k += 1
+        if turning:
+            err = wrap_angle(target - ekf.s[0])
+            if abs(err) < 0.02:
+                turning = False
+                continue
+            v, w = 0.0, math.copysign(min(0.5, abs(err) * c.odom_rate), err)
+        else:
+            th, y = ekf.s[0], ekf.visual_prior()[0]
+            if ekf.facing_back:
+                th = wrap_angle(th - math.pi)
+            v, w = ctrl.step(th, y, dt, True)
+        d_l, d_r = (v - 0.5 * b * w) * dt, (v + 0.5 * b * w) * dt
         n = c.true_noise
         t_l = d_l + rng.normal(0.0, math.sqrt(n.k_left * abs(d_l)))
         t_r = (d_r + rng.normal(0.0, math.sqrt(n.k_right * abs(d_r)))) / (1 + c.right_scale_error)
         truth = _move(truth, t_l, t_r, b)
         ekf.predict_wheels(d_l, d_r)                              # measured = commanded
-        if k % per_frame != per_frame - 1:
+        travelled += v * dt
+        if not turning and travelled >= c.distance:
+            leg += 1
+            travelled = 0.0
+            if leg < c.lengths:
+                turning, target = True, wrap_angle(ekf.s[0] + math.pi)
+                target = math.pi if abs(target) > math.pi / 2 else 0.0
+        if k % per_frame != 0:
             continue
         view = corridor_view(sim, planes, truth, c.mount, c.photometry, rng)
         visual = (math.nan, math.nan)
         accepted = False
         try:
-            prior = (ekf.s[2], math.sqrt(ekf.p[2, 2]))
-            m = measure_frame(view.image, cam, model, c.mount, prior, c.frame)
+            m = measure_frame(view.image, cam, model, c.mount, ekf.visual_prior(), c.frame)
             visual = (m.heading, m.y)
             accepted = ekf.update(m.heading, m.y, m.covariance).accepted
         except CorridorLost as err:
             lost.append(str(err))
+        back = abs(wrap_angle(truth[2])) > math.pi / 2      # visual values in the truth frame
         rec_t.append(truth.copy())
         rec_f.append([ekf.s[1], ekf.s[2], ekf.s[0]])
-        rec_v.append(visual)
+        rec_v.append((wrap_angle(visual[0] + math.pi), -visual[1]) if back else visual)
         rec_a.append(accepted)
-    return RunResult(np.array(rec_t), np.array(rec_f), np.array(rec_v), np.array(rec_a), lost)
+        rec_turn.append(turning)
+    del ends
+    return RunResult(np.array(rec_t), np.array(rec_f), np.array(rec_v), np.array(rec_a), lost,
+                     np.array(rec_turn))
 
 
 #: The chapter's hard cases (its Fig. 8) and one of ours, as (scene, pose sampler).

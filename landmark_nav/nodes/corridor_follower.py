@@ -32,7 +32,7 @@ from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame
 from landmark_nav.corridor.fusion import CorridorEKF, DeadReckoningNoise
 from landmark_nav.corridor.lateral import CorridorModel
 from landmark_nav.corridor.vanishing_point import VPParams
-from landmark_nav.geometry import relative
+from landmark_nav.geometry import relative, wrap_angle
 from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
 from landmark_nav.nodes.common import declare, ParameterError, ProblemWarner, run_node, \
     SENSOR_QOS
@@ -84,10 +84,12 @@ class CorridorFollower(Node):
         enabled = d('enabled', False, 'drive at start-up (else wait for ~/enable)')
         ctrl = {k: d(k, v, doc, lim) for k, v, doc, lim in (
             ('speed', 0.3, 'forward speed set-point [m/s]', (0.01, 3.0)),
-            ('lateral_offset', 0.0, 'lateral set-point [m], left positive', (-10.0, 10.0)),
-            ('gain_lateral', 1.0, 'heading correction per m of lateral error per m driven '
-             '[rad/m^2]', (0.01, 100.0)),
-            ('gain_heading', 0.6, 'heading gain [1/s]', (0.01, 100.0)),
+            ('lateral_offset', 0.0, 'lateral set-point [m], left of the direction of travel '
+             'positive', (-10.0, 10.0)),
+            ('gain_lateral', 4.0, 'turn per m driven per m of lateral error [1/m^2]',
+             (0.01, 100.0)),
+            ('gain_heading', 4.0, 'turn per m driven per rad of heading error [1/m] '
+             '(critically damped: 2 sqrt(gain_lateral))', (0.01, 100.0)),
             ('max_accel', 0.3, 'forward acceleration limit [m/s^2]', (0.01, 10.0)),
             ('max_angular_speed', 0.5, 'angular speed limit [rad/s]', (0.01, 10.0)))}
         if len(mount) != 6 or not all(math.isfinite(v) for v in mount):
@@ -170,9 +172,7 @@ class CorridorFollower(Node):
                              f'with CameraInfo {cam.width}x{cam.height}')
             return
         stamp = stamp_to_ns(header.stamp)
-        prior = None
-        if self.ekf is not None:
-            prior = (float(self.ekf.s[2]), math.sqrt(self.ekf.p[2, 2]))
+        prior = None if self.ekf is None else self.ekf.visual_prior()
         try:
             m = measure_frame(gray, cam, self.model, self.mount, prior, self.params)
         except CorridorLost as err:
@@ -224,7 +224,11 @@ class CorridorFollower(Node):
                   and (stamp - self.last_fix_ns) * 1e-9 <= self.stale)
         if not usable:
             self.warner.warn('Stopping: corridor estimate lost or stale')
-        th, y = (float(self.ekf.s[0]), float(self.ekf.s[2])) if self.ekf else (0.0, 0.0)
+        th, y = 0.0, 0.0
+        if self.ekf is not None:               # relative to the direction of travel
+            th, y = float(self.ekf.s[0]), self.ekf.visual_prior()[0]
+            if self.ekf.facing_back:
+                th = wrap_angle(th - math.pi)
         v, w = self.controller.step(th, y, dt, usable)
         self._publish_cmd(v, w, msg.header.stamp)
 
