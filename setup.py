@@ -14,6 +14,7 @@ EXECUTABLES = {
     'bag_player': 'landmark_nav.nodes.bag_player:main',
     'base_driver': 'landmark_nav.nodes.base_driver:main',
     'corner_extractor': 'landmark_nav.nodes.corner_extractor:main',
+    'corridor_follower': 'landmark_nav.nodes.corridor_follower:main',
     'ekf_slam': 'landmark_nav.nodes.ekf_slam:main',
     'landmark_detector': 'landmark_nav.nodes.landmark_detector:main',
     'laser_driver': 'landmark_nav.nodes.laser_driver:main',

@@ -13,6 +13,9 @@ Pure Python/numpy/OpenCV; no rclpy and no message types (see
   and the ``cv2.solvePnP`` reference.
 * :mod:`.localize` -- landmark map, camera mount, robot pose from a detection and the
   odometry correction by landmark fixes (§2.3.3).
+* :mod:`.image_lines` -- straight line segments: Canny + the segmented Hough transform of
+  the visual navigation chapter §3.1.1, OpenCV HoughLinesP and LSD behind one interface
+  (shared by the corridor follower and the monocular localizer).
 * :mod:`landmark_nav.evaluation.vision` (not in this package) -- Table 1 / Table 2 style
   statistics on rendered frames
   (``python -m landmark_nav.evaluation.vision``).

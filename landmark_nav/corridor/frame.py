@@ -1,0 +1,156 @@
+"""One camera frame -> corridor heading and lateral position (the per-frame pipeline, §3.1).
+
+Image lines (:mod:`landmark_nav.vision.image_lines`, undistorted with the camera model),
+the corridor vanishing point (:func:`~.vanishing_point.corridor_vanishing_point`: the
+Manhattan direction closest to the optical axis), heading and tilt (eq. 21,
+:mod:`.orientation`) and the lateral position from the corridor lines (eqs. 22-23,
+:mod:`.lateral`). The node and the offline evaluation call :func:`measure_frame`.
+
+Standard deviations: the heading's from the VP direction covariance
+(:func:`~.vanishing_point.direction_covariance`, end-point noise), the lateral position's
+from :mod:`.lateral`; both are floored by :attr:`FrameParams.heading_std_floor` and
+:attr:`FrameParams.lateral_std_floor` for what the line noise model leaves out (the
+chapter: single frames off by 10-15 cm now and then, "a higher standard deviation for the
+assumed measured error").
+
+Failures raise :class:`CorridorLost` with the reason (no lines, no VP, VP too far off the
+optical axis, no lateral estimate).
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Optional, Sequence, Tuple
+
+from landmark_nav.corridor.lateral import CorridorModel, lateral_position, LateralEstimate
+from landmark_nav.corridor.orientation import corridor_orientation, CorridorOrientation
+from landmark_nav.corridor.vanishing_point import (corridor_vanishing_point,
+                                                   direction_covariance, VanishingPoint,
+                                                   VPParams)
+from landmark_nav.vision.camera import CameraModel
+from landmark_nav.vision.image_lines import (detect_lines, ImageLines, LineParams,
+                                             undistort_segments)
+import numpy as np
+
+
+class CorridorLost(ValueError):
+    """No corridor estimate from this frame (the message says why)."""
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """Parameters of the per-frame pipeline.
+
+    Attributes:
+        line_method: ``'segmented_hough'`` (the chapter), ``'hough_p'`` or ``'lsd'``.
+        lines: line detector parameters.
+        vp: vanishing-point parameters.
+        max_axis_angle_deg: the corridor VP must lie within this angle of the camera's
+            forward direction [deg] (a forward-looking camera in a corridor).
+        min_corridor_lines: fewer corridor lines -> lost (3: two lines always meet
+            somewhere, a third one confirms the VP).
+        heading_std_floor: added in quadrature to the heading std [rad].
+        lateral_std_floor: added in quadrature to the lateral std [m].
+    """
+
+    line_method: str = 'segmented_hough'
+    lines: LineParams = field(default_factory=LineParams)
+    vp: VPParams = field(default_factory=VPParams)
+    max_axis_angle_deg: float = 45.0
+    min_corridor_lines: int = 3
+    heading_std_floor: float = math.radians(0.3)
+    lateral_std_floor: float = 0.02
+
+
+@dataclass(frozen=True, eq=False)
+class CorridorMeasurement:
+    """The visual measurement of one frame (eq. 24's ``z``) with its parts.
+
+    Attributes:
+        heading: robot heading relative to the corridor [rad] (``theta_v``).
+        heading_std: its standard deviation [rad].
+        y: lateral position of base_link [m] (``y_v``).
+        y_std: its standard deviation [m].
+        vp: the corridor vanishing point (ideal pixels).
+        orientation: heading, tilt and elevation (eq. 21, mount).
+        lateral: the line matching and lateral estimate.
+        lines: the undistorted image lines.
+    """
+
+    heading: float
+    heading_std: float
+    y: float
+    y_std: float
+    vp: VanishingPoint
+    orientation: CorridorOrientation
+    lateral: LateralEstimate
+    lines: ImageLines
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Return the (2, 2) covariance of ``(heading, y)`` (taken as uncorrelated)."""
+        return np.diag([self.heading_std ** 2, self.y_std ** 2])
+
+
+def _heading_std(vp: VanishingPoint, lines: ImageLines, K: np.ndarray,
+                 mount: Sequence[float], sigma_px: float) -> float:
+    cov = direction_covariance(lines.segments, K, vp.direction, vp.inliers, sigma_px)
+    if not np.all(np.isfinite(cov)):
+        return math.inf
+    h0 = corridor_orientation(vp.direction, mount).heading
+    grad = np.zeros(3)
+    eps = 1e-7
+    for k in range(3):
+        d = vp.direction.copy()
+        d[k] += eps
+        grad[k] = (corridor_orientation(d, mount).heading - h0) / eps
+    return float(math.sqrt(max(grad @ cov @ grad, 0.0)))
+
+
+def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
+                  mount: Sequence[float],
+                  prior: Optional[Tuple[float, float]] = None,
+                  params: FrameParams = FrameParams()) -> CorridorMeasurement:
+    """Return heading and lateral position from one image.
+
+    Args:
+        image: (H, W) grey or BGR image of ``camera`` (same size).
+        camera: the calibrated camera (lines are undistorted with it).
+        model: corridor width, height, centre line.
+        mount: camera_link pose in base_link ``[x, y, z, roll, pitch, yaw]``.
+        prior: optional ``(mean, std)`` of the lateral position (the filter's prediction).
+        params: see :class:`FrameParams`.
+
+    Raises:
+        CorridorLost: no estimate from this frame (the reason in the message).
+        ValueError: an image whose size differs from the camera's.
+    """
+    img = np.asarray(image)
+    if img.ndim < 2 or img.shape[:2] != (camera.height, camera.width):
+        raise ValueError(f'image size {img.shape[:2][::-1]} differs from the camera '
+                         f'({camera.width} x {camera.height})')
+    lines = undistort_segments(detect_lines(img, params.line_method, params.lines), camera)
+    if len(lines) < 2:
+        raise CorridorLost(f'{len(lines)} image lines')
+    K = camera.K
+    try:
+        vp = corridor_vanishing_point(lines.segments, K, lines.weights, params.vp)
+    except ValueError as err:
+        raise CorridorLost(f'no vanishing point: {err}') from None
+    axis = math.degrees(math.acos(min(1.0, abs(float(vp.direction[2])))))
+    if axis > params.max_axis_angle_deg:
+        raise CorridorLost(f'vanishing point {axis:.0f} deg off the optical axis '
+                           f'(> {params.max_axis_angle_deg:.0f})')
+    n_in = int(np.count_nonzero(vp.inliers))
+    if n_in < params.min_corridor_lines:
+        raise CorridorLost(f'{n_in} corridor lines (< {params.min_corridor_lines})')
+    orient = corridor_orientation(vp.direction, mount)
+    try:
+        lat = lateral_position(lines.segments[vp.inliers], K, vp.direction, model, mount,
+                               prior, params.vp.sigma_px)
+    except ValueError as err:
+        raise CorridorLost(f'no lateral position: {err}') from None
+    h_std = _heading_std(vp, lines, K, mount, params.vp.sigma_px)
+    return CorridorMeasurement(
+        heading=orient.heading, heading_std=math.hypot(h_std, params.heading_std_floor),
+        y=lat.y, y_std=math.hypot(lat.std, params.lateral_std_floor), vp=vp,
+        orientation=orient, lateral=lat, lines=lines)

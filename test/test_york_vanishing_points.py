@@ -1,0 +1,102 @@
+"""Vanishing points on real photographs: the York Urban training images (51).
+
+Acceptance (issue: corridor follower, "Real images"): for the ground-truth direction closest
+to the optical axis, the detected VP within 2 deg on >= 90 % of the images and a median
+<= 1 deg; the Manhattan extension's median over all three directions <= 1.3 deg.
+
+No constant was fitted to these figures. ``VPParams.sigma_px = 0.6`` is the end-point noise
+measured once on every third training image (a Gaussian + uniform mixture fitted to the
+z-scores of detected segments against the true directions: 0.55 px for the segmented Hough
+and LSD inputs, 0.64 px for HoughLinesP); every other constant is stated in the modules.
+Measured with the defaults (``python benchmarks/bench_vanishing_points.py``), 640 x 480:
+
+=================  ======  ==========  ===============
+input              median  <= 2 deg    all-three median
+=================  ======  ==========  ===============
+segmented Hough    0.41    46/51       0.70
+LSD                0.32    46/51       0.49
+HoughLinesP        0.69    35/51       1.32
+=================  ======  ==========  ===============
+
+The bounds below are these figures with a margin of one image for the fractions and about
+a third for the medians (the errors of neighbouring ranks, so one changed image cannot
+cross them).
+"""
+
+from landmark_nav.corridor.vanishing_point import consistency
+from landmark_nav.evaluation.vanishing_points import (angular_error_deg, evaluate_york,
+                                                      load_york_urban, matched_errors,
+                                                      summarize, YORK_FLIP, YORK_K)
+from landmark_nav.testing import shared_data
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def york():
+    """Return the York Urban training folder (skips when the data is not there)."""
+    return shared_data('york_urban_train')
+
+
+def test_ground_truth_convention(york):
+    items = load_york_urban(york)
+    assert len(items) == 51
+    z_ok, z_flip = [], []
+    for it in items:
+        for k in range(3):
+            seg = it.lines[it.association == k]
+            if len(seg):
+                z_ok.append(np.abs(consistency(seg, YORK_K @ it.directions[:, k])))
+                flipped = YORK_FLIP @ it.directions[:, k]
+                z_flip.append(np.abs(consistency(seg, YORK_K @ flipped)))
+    # hand-labelled segments pass through their VP (1 px end-point noise: measured median
+    # |z| 0.22); without the README's y flip they do not (measured 2.83)
+    assert np.median(np.concatenate(z_ok)) < 0.3
+    assert np.median(np.concatenate(z_flip)) > 2.0
+
+
+def test_matched_errors():
+    truth = np.eye(3)
+    det = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+    np.testing.assert_allclose(matched_errors(det, truth), [0.0, 0.0, 90.0])
+    assert angular_error_deg(np.array([1.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0])) == 0.0
+    assert angular_error_deg(np.array([1.0, 0.0, 0.0]),
+                             np.array([1.0, 1.0, 0.0])) == pytest.approx(45.0)
+
+
+def test_bad_folder(tmp_path):
+    with pytest.raises(FileNotFoundError, match='no \\*_gt.npz'):
+        load_york_urban(tmp_path)
+    np.savez(tmp_path / 'A_gt.npz', vp=np.eye(3), lines=np.zeros((0, 4)),
+             vp_association=np.zeros(0))
+    with pytest.raises(FileNotFoundError, match='A.jpg is missing'):
+        load_york_urban(tmp_path)
+    (tmp_path / 'A.jpg').write_bytes(b'')
+    np.savez(tmp_path / 'A_gt.npz', vp=np.eye(3), lines=np.zeros((0, 4)))
+    with pytest.raises(ValueError, match="A_gt.npz: missing key 'vp_association'"):
+        load_york_urban(tmp_path)
+
+
+@pytest.mark.slow
+def test_segmented_hough_meets_the_acceptance(york):
+    s = summarize(evaluate_york(york, 'segmented_hough', 'manhattan'))
+    assert s['images'] == 51
+    assert s['axis_within_2deg'] >= 45 / 51          # measured 46/51 (the acceptance: 90 %)
+    assert s['axis_median'] <= 0.55                  # measured 0.41 (acceptance: 1 deg)
+    assert s['all_median'] <= 0.9                    # measured 0.70 (acceptance: 1.3 deg)
+
+
+@pytest.mark.slow
+def test_lsd_input(york):
+    s = summarize(evaluate_york(york, 'lsd', 'manhattan'))
+    assert s['axis_within_2deg'] >= 45 / 51          # measured 46/51
+    assert s['axis_median'] <= 0.45                  # measured 0.32
+    assert s['all_median'] <= 0.65                   # measured 0.49
+
+
+@pytest.mark.slow
+def test_the_chapter_method_alone_is_far_worse_on_outdoor_images(york):
+    # the chapter's image-plane clustering assumes a corridor VP near the image centre;
+    # in York Urban the axis direction is often 30-60 deg off axis (measured median 17.9)
+    s = summarize(evaluate_york(york, 'segmented_hough', 'chapter'))
+    assert s['axis_median'] > 5.0
