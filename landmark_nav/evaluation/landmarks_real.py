@@ -62,7 +62,7 @@ from landmark_nav.vision.camera import CameraModel, OPTICAL_FROM_BODY
 from landmark_nav.vision.detector import detect_landmarks, DetectorParams
 from landmark_nav.vision.landmark import LandmarkDesign
 from landmark_nav.vision.pose import (angles_from_rotation, estimate_pose, PoseError,
-                                      project_points, rotation_matrix)
+                                      PoseParams, project_points, rotation_matrix)
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -310,7 +310,8 @@ class Detectors:
 
     def __init__(self, names: Sequence[str] = DETECTORS, camera: CameraModel = CAMERA,
                  module: float = MODULE,
-                 landmark_params: DetectorParams = DetectorParams()) -> None:
+                 landmark_params: DetectorParams = DetectorParams(),
+                 pose_params: PoseParams = PoseParams()) -> None:
         """Create the detectors (``pupil_apriltags`` is imported only if asked for).
 
         Raises:
@@ -321,6 +322,7 @@ class Detectors:
         self.camera = camera
         self.module = module
         self.landmark_params = landmark_params
+        self.pose_params = pose_params
         self.design = LandmarkDesign(frame_width=7 * module)
         self._april = {}
         for name in self.names:
@@ -343,7 +345,7 @@ class Detectors:
                 rot = tr = None
                 if pose:
                     try:
-                        p = estimate_pose(d.corners, cam, self.design,
+                        p = estimate_pose(d.corners, cam, self.design, self.pose_params,
                                           edge_corners_px=d.edge_corners)
                         rot, tr = p.rotation_optical, p.translation_optical
                     except PoseError:
@@ -634,10 +636,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--detectors', nargs='+', default=list(DETECTORS), choices=DETECTORS)
     ap.add_argument('--backgrounds', type=Path, default=None,
                     help='folder of photographs (default ../shared/data/york_urban_train)')
+    ap.add_argument('--no-planar-start', action='store_true',
+                    help='landmark pose from the quadrant guesses only (before issue 20)')
     ap.add_argument('--json', type=Path, default=None, help='write every outcome here')
     args = ap.parse_args(argv)
     bgs = load_backgrounds(args.backgrounds) if args.backgrounds else default_backgrounds()
-    dets = Detectors(args.detectors)
+    dets = Detectors(args.detectors,
+                     pose_params=PoseParams(planar_start=not args.no_planar_start))
     everything: List[Outcome] = []
     if args.what in ('detection', 'all'):
         trials = detection_trials(args.sizes, args.per_size, tuple(args.tilt), args.seed,
