@@ -354,10 +354,10 @@ def test_planar_start_removes_the_gross_pose_errors_of_tilted_landmarks():
     rng = np.random.default_rng(7)
     errs = {True: [], False: []}
     for v, c, e, cam in _tilted_views(rng, 300, 0.05):
-        for planar in errs:
-            p = estimate_pose(c, cam, DESIGN, PoseParams(planar_start=planar),
+        for start in errs:
+            p = estimate_pose(c, cam, DESIGN, PoseParams(planar_start=start),
                               edge_corners_px=e)
-            errs[planar].append(_angle_error_deg(p.v, v))
+            errs[start].append(_angle_error_deg(p.v, v))
     with_ippe, without = np.array(errs[True]), np.array(errs[False])
     assert np.sum(without > 5.0) >= 3                 # the failure this guards against
     assert np.sum(with_ippe > 5.0) == 0 and with_ippe.max() < 3.5     # measured 3.0 deg
