@@ -281,7 +281,12 @@ def composite(background: np.ndarray, texture: np.ndarray, v: np.ndarray, module
     img = background.astype(np.float32)
     patch = photo.black * cover + (photo.white - photo.black) * refl
     img[y0:y1, x0:x1] = img[y0:y1, x0:x1] * (1.0 - cover) + patch
-    img = cv2.GaussianBlur(img, (0, 0), photo.blur)
+    return degrade(img, photo, noise_seed)
+
+
+def degrade(img: np.ndarray, photo: Photometrics, noise_seed: int) -> np.ndarray:
+    """Blur, gain/gamma, noise, 8 bits and JPEG of a float frame (module docstring)."""
+    img = cv2.GaussianBlur(np.asarray(img, np.float32), (0, 0), photo.blur)
     img = 255.0 * np.power(np.clip(photo.gain * img / 255.0, 0.0, None), photo.gamma)
     rng = np.random.default_rng(noise_seed)
     img = img + rng.normal(0.0, photo.noise, img.shape).astype(np.float32)
@@ -527,6 +532,169 @@ def pose_trials(distances: Sequence[float] = (1.0, 2.2), per_distance: int = 150
     return out
 
 
+# ---------------------------------------------------------------------- frames without markers
+
+
+def checkerboard_texture(squares: int, px_per_square: int = TEXTURE_PX) -> np.ndarray:
+    """Return a ``squares x squares`` checkerboard with a one-square white margin (uint8)."""
+    j, i = np.mgrid[0:squares, 0:squares]
+    board = np.where((i + j) % 2 == 0, np.uint8(0), np.uint8(255))
+    board = np.pad(board, 1, constant_values=255)
+    return np.repeat(np.repeat(board, px_per_square, axis=0), px_per_square, axis=1)
+
+
+def transformed_photo(photo: np.ndarray, rng: np.random.Generator,
+                      width: int = 640, height: int = 480) -> np.ndarray:
+    """Return a random view of a photograph: scale 0.6-2, rotation +-30 deg, flips, crop."""
+    img = photo
+    if rng.random() < 0.5:
+        img = img[:, ::-1]
+    if rng.random() < 0.25:
+        img = img[::-1]
+    s = float(rng.uniform(0.6, 2.0))
+    ang = float(rng.uniform(-30.0, 30.0))
+    h, w = img.shape
+    a = cv2.getRotationMatrix2D((w / 2.0, h / 2.0), ang, s)
+    a[:, 2] += [width / 2.0 - w / 2.0 + rng.uniform(-0.25, 0.25) * w * s,
+                height / 2.0 - h / 2.0 + rng.uniform(-0.25, 0.25) * h * s]
+    return cv2.warpAffine(np.ascontiguousarray(img), a, (width, height),
+                          flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+
+
+@dataclass
+class FalseResult:
+    """Detections in real frames without landmarks (every detection is false)."""
+
+    frames: Dict[str, int]
+    detections: Dict[str, int]
+    ms_per_frame: float
+
+
+def false_frames(photos: Sequence[np.ndarray], count: int = 1020, seed: int = 3,
+                 extra: Sequence[np.ndarray] = (), checkerboards: float = 0.3,
+                 params: DetectorParams = DetectorParams()) -> FalseResult:
+    """Run the landmark detector on ``count`` real frames without a landmark.
+
+    Each frame is a random view (:func:`transformed_photo`) of one of ``photos`` or (40 %
+    of the frames) of ``extra`` (other real photographs, e.g. the CamVid road frames),
+    degraded like the
+    composites; a fraction ``checkerboards`` of them also shows a rendered checkerboard of
+    4-10 squares (the printed pattern closest to a landmark frame) at 4-12 px per square and
+    0-60 deg tilt, composited like the markers.
+    """
+    rng = np.random.default_rng(seed)
+    pool = list(photos) + list(extra)
+    frames: Dict[str, int] = {}
+    dets: Dict[str, int] = {}
+    spent = 0.0
+    cv2.setNumThreads(1)
+    for _ in range(count):
+        use_extra = len(extra) and rng.random() < 0.4
+        k = len(photos) + int(rng.integers(len(extra))) if use_extra else \
+            int(rng.integers(len(photos)))
+        kind = 'extra' if use_extra else 'york'
+        img = transformed_photo(pool[k], rng).astype(np.float32)
+        photo = draw_photometrics(rng)
+        if rng.random() < checkerboards:
+            kind += '+checkerboard'
+            squares = int(rng.integers(4, 11))
+            v = draw_pose(rng, float(rng.uniform(4.0, 12.0)), float(rng.uniform(0.0, 60.0)),
+                          squares + 2)
+            gray = composite(img.astype(np.uint8), checkerboard_texture(squares), v,
+                             squares + 2, MODULE, photo, int(rng.integers(2 ** 31)))
+        else:
+            gray = degrade(img, photo, int(rng.integers(2 ** 31)))
+        t0 = time.process_time()
+        found = detect_landmarks(gray, params)
+        spent += time.process_time() - t0
+        frames[kind] = frames.get(kind, 0) + 1
+        dets[kind] = dets.get(kind, 0) + len(found)
+    return FalseResult(frames, dets, 1000.0 * spent / max(count, 1))
+
+
+def default_extra_photos() -> List[np.ndarray]:
+    """Load the CamVid road frames of ``../shared/data/camvid_road/images`` (480 x 360), grey."""
+    from landmark_nav.testing import shared_data
+    out = []
+    for p in sorted(shared_data('camvid_road', 'images').glob('*.png')):
+        img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise ValueError(f'{p}: not an image OpenCV can read')
+        out.append(img)
+    return out
+
+
+# ---------------------------------------------------------------------- detector stages
+
+#: Stages of the landmark detector, in order (:func:`landmark_stage`).
+STAGES = ('corners', 'edges', 'frame', 'grid', 'code', 'detected')
+
+
+def landmark_stage(gray: np.ndarray, trial: Trial, params: DetectorParams = DetectorParams(),
+                   camera: CameraModel = CAMERA, module: float = MODULE,
+                   tolerance: float = 0.35) -> Tuple[str, str]:
+    """Return the first detector stage that loses the trial's landmark, and why.
+
+    The truth's 20 frame X-corners are matched to the nearest corner group (within
+    ``tolerance`` of the block pixels, at least 1 px). Stages: ``corners`` (an X-corner
+    has no corner group), ``edges`` (an edge of the matched corners is not among the eq. 3
+    chains), ``frame`` (eq. 4 does not join them), ``grid`` (the code grid leaves the
+    image), ``code`` (:func:`read_code` rejects it; the reason is returned), ``detected``.
+    """
+    design = params.design
+    debug: dict = {}
+    dets = detect_landmarks(gray, params, debug=debug)
+    code = trial.codes['landmark']
+    truth_c = marker_corners(trial.v, CORNER_MODULES['landmark'] * module, camera).mean(0)
+    ppm = camera.fx * module / np.linalg.norm(trial.v[:3])
+    for d in dets:
+        if d.code == code and np.linalg.norm(d.corners.mean(0) - truth_c) <= ppm:
+            return 'detected', ''
+    grid_pts = design.edge_corners()                          # (4, n, 3), landmark frame
+    d7 = LandmarkDesign(frame_width=7 * module)
+    truth = project_points(trial.v, d7.edge_corners().reshape(-1, 3), camera).reshape(
+        grid_pts.shape[:2] + (2,))
+    pts = debug['points']
+    if not len(pts):
+        return 'corners', 'no corner groups'
+    dist = np.linalg.norm(truth[:, :, None, :] - pts[None, None], axis=3)
+    ids = dist.argmin(axis=2)
+    tol = max(1.0, tolerance * ppm)
+    missing = int(np.sum(dist[:, :-1].min(axis=2) > tol))   # 20 distinct X-corners
+    if missing:
+        return 'corners', f'{missing} of 20 X-corners without a group'
+    edges = {tuple(e) for e in debug['edges'].tolist()}
+    lost = sum(tuple(ids[e]) not in edges for e in range(4))
+    if lost:
+        return 'edges', f'{lost} of 4 edges not chained'
+    want = frozenset(ids.ravel().tolist())
+    for k, frame in enumerate(debug['frames']):
+        if frozenset(frame.ravel().tolist()) == want:
+            break
+    else:
+        return 'frame', 'edges not joined into a frame'
+    # the readings follow the frames whose grid is inside the image, in order
+    grids = debug['grids']
+    for g, r in zip(grids, debug['readings']):
+        if np.linalg.norm(g.corners.mean(0) - truth_c) <= ppm:
+            if r.code is None:
+                return 'code', r.reason
+            return 'code', f'read as {r.code}' if r.code != code else 'duplicate'
+    return 'grid', 'grid outside the image'
+
+
+def stage_counts(trials: Sequence[Trial], backgrounds: Sequence[np.ndarray],
+                 params: DetectorParams = DetectorParams()) -> Dict[str, Dict[str, int]]:
+    """Count per px per module the stage at which each landmark is lost (and the reasons)."""
+    out: Dict[str, Dict[str, int]] = {}
+    for t in trials:
+        stage, why = landmark_stage(render_trial(t, 'landmark', backgrounds), t, params)
+        row = out.setdefault(f'{t.px_per_module:g} px', {})
+        key = stage if not why else f'{stage}: {why}'
+        row[key] = row.get(key, 0) + 1
+    return out
+
+
 # ---------------------------------------------------------------------- summaries
 
 
@@ -624,7 +792,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(
         prog='python -m landmark_nav.evaluation.landmarks_real', description=__doc__.split(
             '\n')[0])
-    ap.add_argument('what', nargs='?', default='all', choices=('detection', 'pose', 'all'))
+    ap.add_argument('what', nargs='?', default='all',
+                    choices=('detection', 'pose', 'false', 'stages', 'all'))
     ap.add_argument('--per-size', type=int, default=100, help='trials per px per module')
     ap.add_argument('--sizes', type=float, nargs='+', default=[3, 4, 5, 6, 8, 12],
                     help='px per module')
@@ -632,6 +801,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='tilt range of the detection trials [deg]')
     ap.add_argument('--per-distance', type=int, default=150, help='pose trials per distance')
     ap.add_argument('--distances', type=float, nargs='+', default=[1.0, 2.2])
+    ap.add_argument('--false-frames', type=int, default=1020,
+                    help='real frames without landmarks (false)')
     ap.add_argument('--seed', type=int, default=1)
     ap.add_argument('--detectors', nargs='+', default=list(DETECTORS), choices=DETECTORS)
     ap.add_argument('--backgrounds', type=Path, default=None,
@@ -666,6 +837,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                                     ' m'),
                            'Pose (tilt 0-60 deg): p_detect; median position / angle error, '
                            'worst angle', pose=True))
+        print()
+    if args.what in ('false', 'all'):
+        res = false_frames(bgs, args.false_frames, args.seed + 2000,
+                           default_extra_photos() if args.backgrounds is None else ())
+        print(f'Landmark-free real frames: {sum(res.frames.values())} '
+              f'({", ".join(f"{k} {v}" for k, v in sorted(res.frames.items()))}); '
+              f'detections (all false): {sum(res.detections.values())} '
+              f'({", ".join(f"{k} {v}" for k, v in sorted(res.detections.items()))}); '
+              f'{res.ms_per_frame:.1f} ms per frame')
+        print()
+    if args.what == 'stages':
+        trials = detection_trials(args.sizes, args.per_size, tuple(args.tilt), args.seed,
+                                  len(bgs))
+        print('Where the landmark detector loses the landmark (first failing stage):')
+        for size, row in stage_counts(trials, bgs).items():
+            items = sorted(row.items(), key=lambda kv: -kv[1])
+            print(f'  {size}: ' + '; '.join(f'{k} {v}' for k, v in items))
         print()
     if args.json:
         args.json.write_text(json.dumps([asdict(o) for o in everything], indent=0))

@@ -67,9 +67,17 @@ Readings of the chapter that needed a decision (documented here, tested in
   and every cell by at least ``min_margin`` of half the black-white contrast (more,
   ``small_block_margin``, when the corner spacing is under ``small_block_px``); otherwise the
   candidate is rejected (no detection rather than a wrong code).
+* Extension (``deblur_margin``): at 4-5 px per block, blur, JPEG and tilt mix each half-block
+  code cell with its neighbours, and on composites in real photographs three quarters of the
+  lost landmarks at 4 px had a complete frame whose code was rejected as ambiguous. Since the
+  frame around the code is known, such a grid is read a second time with the mixing
+  unmixed (:func:`unmix_cells`: a 3 x 3 cell-blur model fitted on the same grid, then the
+  code whiteness by least squares); its bits are used only when every code cell is clearly
+  on one side (``deblur_margin``) and the model fits (``deblur_residual``).
 """
 
 from dataclasses import dataclass, field
+import functools
 import math
 from typing import List, Optional, Sequence, Tuple
 
@@ -121,6 +129,14 @@ class DetectorParams:
         refine_edges: fit each edge line (eq. 5) to sub-pixel points of the ring boundary
             along the edge rather than to its corners only, and move the interior corners
             of each edge to the crossings of the block boundaries with its line.
+        deblur_margin: a grid whose cells are too close to the threshold is read again
+            with the cell blur unmixed (:func:`unmix_cells`); its bits are accepted when
+            every unmixed code cell is at least this far from the black/white midpoint
+            (fraction of half the contrast; 0 turns the second reading off). Composites in
+            real photographs at 3-5 px per block: wrong reads had unmixed margins of at
+            most 0.01, correct ones 0.31 or more in 95 % of the cases.
+        deblur_residual: largest RMS misfit of the blur model to the cells, fraction of
+            the contrast (correct reads: at most 0.085).
     """
 
     kind: str = '3x3'
@@ -145,6 +161,8 @@ class DetectorParams:
     refine_corners: bool = True
     refine_window: float = 0.45
     refine_edges: bool = True
+    deblur_margin: float = 0.35
+    deblur_residual: float = 0.12
 
     def __post_init__(self) -> None:
         """Validate the values (ValueError naming the field)."""
@@ -161,7 +179,8 @@ class DetectorParams:
             'cell_samples': (1, 16), 'cell_margin': (0.0, 0.45), 'min_contrast': (0.0, 255.0),
             'min_margin': (0.0, 1.0), 'max_corners': (10, 10 ** 6),
             'small_block_px': (0.0, 100.0), 'small_block_margin': (0.0, 1.0),
-            'refine_window': (0.1, 0.5)}
+            'refine_window': (0.1, 0.5), 'deblur_margin': (0.0, 1.0),
+            'deblur_residual': (0.0, 1.0)}
         for name, (lo, hi) in checks.items():
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) \
@@ -983,6 +1002,86 @@ def sample_cells(g: np.ndarray, grid: np.ndarray, samples: int = 4,
     return vals.reshape(r, c, samples * samples).mean(axis=2)
 
 
+@functools.lru_cache(maxsize=8)
+def _blur_operators(kind: str, parity: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Linear maps of the cell blur model of :func:`unmix_cells` for one design and parity.
+
+    Returns ``(known, unknown, code_index)``: ``known`` (3, I) the centre, 4-neighbour and
+    diagonal-neighbour sums of the known whiteness (code cells 0) at the I grid cells,
+    ``unknown`` (3, I, C) the same sums per unit whiteness of each of the C code cells.
+    """
+    design = LandmarkDesign(kind)
+    colour = np.repeat(np.repeat(design.block_colours(), 2, axis=0), 2, axis=1)
+    if parity:
+        colour = np.where(colour >= 0, 1 - colour, colour)
+    band = colour[1:-1, 1:-1]                      # grid cells and one cell around them
+    b = band.shape[0]
+    known = (band == 0).astype(float).ravel()      # whiteness: 1 white, 0 black or code
+    code_index = np.flatnonzero(band.ravel() < 0)
+    idx = np.arange(b * b).reshape(b, b)
+    inner = idx[1:-1, 1:-1]
+    ops = np.zeros((3, inner.size, b * b))
+    rows = np.arange(inner.size)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            k = 0 if dy == dx == 0 else (1 if dy == 0 or dx == 0 else 2)
+            ops[k, rows, idx[1 + dy:b - 1 + dy, 1 + dx:b - 1 + dx].ravel()] += 1.0
+    return ops @ known, ops[:, :, code_index], code_index
+
+
+def unmix_cells(cells: np.ndarray, design: LandmarkDesign, parity: int = 0,
+                iterations: int = 3) -> Optional[Tuple[np.ndarray, float]]:
+    """Read the code cells with the blur between neighbouring cells unmixed (extension).
+
+    At 2-3 px per half-block cell, blur and JPEG mix every cell with its neighbours, and
+    an isolated cell is pulled towards the threshold (the per-cell test of §2.2.3 then has
+    to give up). The frame around the code is known, so the mixing can be measured on the
+    same grid: each cell mean is modelled as ``y = p0 + p1 x + p2 sum(x of the 4 edge
+    neighbours) + p3 sum(x of the 4 diagonal ones)`` with ``x`` the whiteness (1 white,
+    0 black) of the printed cells -- known for the frame (the inner ring in the grid, the
+    outer ring beside it), unknown for the code. Alternately the four ``p`` are fitted by
+    least squares over all grid cells and the code whiteness solved by least squares
+    given them (a linear deconvolution), starting from the per-cell threshold reading.
+
+    Args:
+        cells: the (2(n - 1), 2(n - 1)) cell means of :func:`read_code`.
+        design: the landmark design.
+        parity: 1 if the frame colouring is inverted (a quarter turn of the 2x2 design).
+        iterations: fit/solve rounds.
+
+    Returns:
+        ``(whiteness, residual)``: the (2m, 2m) unmixed code-cell whiteness and the RMS
+        misfit of the model over the contrast ``p1 + 4 p2 + 4 p3``; None if the fitted
+        mixing is not centre-weighted (``p1`` the largest weight) or the solve fails.
+    """
+    known, unknown, _ = _blur_operators(design.kind, int(parity))
+    y = np.asarray(cells, dtype=float).ravel()
+    m2 = 2 * design.code_squares
+    ones = np.ones_like(y)
+    frame_white = known[0] > 0
+    frame_black = (known[0] == 0) & (unknown[0].sum(axis=1) == 0)
+    lo, hi = float(y[frame_black].mean()), float(y[frame_white].mean())
+    if not hi > lo:
+        return None
+    x = np.clip((y[unknown[0].argmax(axis=0)] - lo) / (hi - lo), 0.0, 1.0)
+    try:
+        for _ in range(iterations):
+            feats = np.column_stack([ones, *(known + unknown @ x)])
+            p = np.linalg.lstsq(feats, y, rcond=None)[0]
+            if not (p[1] > 0 and p[1] > abs(p[2]) and p[1] > abs(p[3])):
+                return None
+            mix = np.tensordot(p[1:], unknown, axes=1)             # (I, C)
+            base = p[0] + p[1:] @ known
+            x = np.linalg.lstsq(mix, y - base, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return None
+    contrast = float(p[1] + 4.0 * p[2] + 4.0 * p[3])
+    if not contrast > 0:
+        return None
+    res = y - base - mix @ x
+    return x.reshape(m2, m2), float(np.sqrt(np.mean(res * res))) / contrast
+
+
 @dataclass(frozen=True, eq=False)
 class CodeReading:
     """Result of :func:`read_code` for one frame grid."""
@@ -996,7 +1095,8 @@ class CodeReading:
 
 
 def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 20.0,
-              min_margin: float = 0.2) -> CodeReading:
+              min_margin: float = 0.2, deblur_margin: float = 0.0,
+              deblur_residual: float = 0.12) -> CodeReading:
     """Classify the cells of a frame grid and decode them (§2.2.3).
 
     ``cells`` covers the inner ring and the code area in half-block cells. Half of the frame
@@ -1013,6 +1113,12 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
         design: the landmark design.
         min_contrast: smallest white-black difference of the frame cells.
         min_margin: smallest distance from the threshold, fraction of half the contrast.
+        deblur_margin: if > 0, code cells closer to the threshold than ``min_margin`` are
+            read again by :func:`unmix_cells`; the unmixed bits are used when every code
+            cell is at least ``deblur_margin`` from the midpoint and the blur model fits
+            within ``deblur_residual`` of the contrast (the frame cells must still pass
+            ``min_margin``).
+        deblur_residual: see ``deblur_margin``.
 
     Returns:
         :class:`CodeReading`; ``code`` is None with a ``reason`` when the grid is
@@ -1047,7 +1153,14 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
         return CodeReading(None, 0, empty, contrast, margin, 'frame cells inconsistent')
     bits = code_cells < thr
     if code_margin < min_margin:
-        return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
+        unmixed = unmix_cells(cells, design, parity) if deblur_margin > 0 else None
+        if unmixed is None or unmixed[1] > deblur_residual:
+            return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
+        white = unmixed[0]
+        margin = min(ring_margin, float(np.abs(white - 0.5).min()) * 2.0)
+        if margin < deblur_margin:
+            return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
+        bits = white < 0.5
     got = design.decode_with_rotation(bits)
     if got is None:
         return CodeReading(None, 0, bits, contrast, margin, 'no valid code')
@@ -1198,7 +1311,8 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
         smallest = float(np.min(np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2)))
         margin = params.min_margin if smallest >= params.small_block_px else \
             max(params.min_margin, params.small_block_margin)
-        reading = read_code(cells, design, params.min_contrast, margin)
+        reading = read_code(cells, design, params.min_contrast, margin, params.deblur_margin,
+                            params.deblur_residual)
         if debug is not None:
             debug['grids'].append(fg)
             debug['readings'].append(reading)
@@ -1231,4 +1345,4 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
 __all__ = ['CodeReading', 'Corners', 'Detection', 'DetectorParams', 'FrameGrid',
            'corner_groups', 'corner_neighbours', 'corner_pixels', 'detect_landmarks',
            'edge_points', 'find_frames', 'fit_frame', 'frame_edges', 'image_problem',
-           'read_code', 'refine_corners', 'sample_cells', 'smooth']
+           'read_code', 'refine_corners', 'sample_cells', 'smooth', 'unmix_cells']
