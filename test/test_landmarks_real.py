@@ -8,8 +8,9 @@ import math
 
 from landmark_nav.evaluation.landmarks_real import (CAMERA, composite, default_backgrounds,
                                                     detection_trials, Detectors, draw_pose,
-                                                    Found, marker_corners, marker_texture,
-                                                    MODULE, Photometrics, pose_trials,
+                                                    false_frames, Found, landmark_stage,
+                                                    marker_corners, marker_texture, MODULE,
+                                                    Photometrics, pose_trials,
                                                     render_trial, run_trials, score,
                                                     summarise)
 from landmark_nav.vision.detector import detect_landmarks
@@ -74,3 +75,18 @@ def test_scoring_counts_wrong_codes_and_false_detections(backgrounds):
     img = render_trial(trial, 'landmark', backgrounds)
     assert img.shape == (480, 640) and img.dtype == np.uint8
     assert math.isclose(CAMERA.fx * MODULE / np.linalg.norm(trial.v[:3]), 8.0)
+
+
+def test_stage_counter_names_the_lost_stage(backgrounds):
+    trial = detection_trials((8,), 1, tilt_range=(10.0, 20.0), seed=6,
+                             n_backgrounds=len(backgrounds))[0]
+    assert landmark_stage(render_trial(trial, 'landmark', backgrounds), trial) == \
+        ('detected', '')
+    bare = backgrounds[trial.background]                    # the photograph alone
+    assert landmark_stage(bare, trial) == ('corners', '10-20 of 20 X-corners without a group')
+
+
+def test_landmark_free_real_frames_give_no_detection(backgrounds):
+    res = false_frames(backgrounds, count=40, seed=9)
+    assert sum(res.frames.values()) == 40 and res.frames.get('york+checkerboard', 0) >= 5
+    assert sum(res.detections.values()) == 0

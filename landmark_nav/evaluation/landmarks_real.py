@@ -662,7 +662,8 @@ def landmark_stage(gray: np.ndarray, trial: Trial, params: DetectorParams = Dete
     tol = max(1.0, tolerance * ppm)
     missing = int(np.sum(dist[:, :-1].min(axis=2) > tol))   # 20 distinct X-corners
     if missing:
-        return 'corners', f'{missing} of 20 X-corners without a group'
+        return 'corners', ('1-2' if missing <= 2 else '3-9' if missing < 10 else '10-20') + \
+            ' of 20 X-corners without a group'
     edges = {tuple(e) for e in debug['edges'].tolist()}
     lost = sum(tuple(ids[e]) not in edges for e in range(4))
     if lost:
