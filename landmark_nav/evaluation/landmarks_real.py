@@ -808,12 +808,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--detectors', nargs='+', default=list(DETECTORS), choices=DETECTORS)
     ap.add_argument('--backgrounds', type=Path, default=None,
                     help='folder of photographs (default ../shared/data/york_urban_train)')
+    ap.add_argument('--deblur-margin', type=float, default=DetectorParams().deblur_margin,
+                    help='landmark detector deblur_margin (0: the code read before issue 20)')
     ap.add_argument('--no-planar-start', action='store_true',
                     help='landmark pose from the quadrant guesses only (before issue 20)')
     ap.add_argument('--json', type=Path, default=None, help='write every outcome here')
     args = ap.parse_args(argv)
     bgs = load_backgrounds(args.backgrounds) if args.backgrounds else default_backgrounds()
-    dets = Detectors(args.detectors,
+    lm_params = DetectorParams(deblur_margin=args.deblur_margin)
+    dets = Detectors(args.detectors, landmark_params=lm_params,
                      pose_params=PoseParams(planar_start=not args.no_planar_start))
     everything: List[Outcome] = []
     if args.what in ('detection', 'all'):
@@ -841,7 +844,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print()
     if args.what in ('false', 'all'):
         res = false_frames(bgs, args.false_frames, args.seed + 2000,
-                           default_extra_photos() if args.backgrounds is None else ())
+                           default_extra_photos() if args.backgrounds is None else (),
+                           params=lm_params)
         print(f'Landmark-free real frames: {sum(res.frames.values())} '
               f'({", ".join(f"{k} {v}" for k, v in sorted(res.frames.items()))}); '
               f'detections (all false): {sum(res.detections.values())} '
@@ -852,7 +856,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         trials = detection_trials(args.sizes, args.per_size, tuple(args.tilt), args.seed,
                                   len(bgs))
         print('Where the landmark detector loses the landmark (first failing stage):')
-        for size, row in stage_counts(trials, bgs).items():
+        for size, row in stage_counts(trials, bgs, lm_params).items():
             items = sorted(row.items(), key=lambda kv: -kv[1])
             print(f'  {size}: ' + '; '.join(f'{k} {v}' for k, v in items))
         print()

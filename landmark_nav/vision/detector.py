@@ -85,6 +85,8 @@ import cv2
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 
@@ -355,21 +357,17 @@ def _components(n: int, src: np.ndarray, dst: np.ndarray) -> Tuple[int, np.ndarr
     """Label the connected components of an undirected graph (n nodes, edges src-dst).
 
     Returns:
-        (count, labels) with labels 0..count-1.
+        (count, labels) with labels 0..count-1, numbered in the order of each component's
+        smallest node.
     """
-    lab = np.arange(n)
-    if len(src):
-        while True:
-            m = np.minimum(lab[src], lab[dst])
-            new = lab.copy()
-            np.minimum.at(new, src, m)
-            np.minimum.at(new, dst, m)
-            new = new[new]                     # pointer jumping
-            if np.array_equal(new, lab):
-                break
-            lab = new
-    uniq, inv = np.unique(lab, return_inverse=True)
-    return len(uniq), inv
+    if not len(src):
+        return n, np.arange(n)
+    graph = coo_matrix((np.ones(len(src), np.int8), (src, dst)), shape=(n, n))
+    count, lab = connected_components(graph, directed=False)
+    _, first = np.unique(lab, return_index=True)      # smallest node of each component
+    rank = np.empty(count, np.int64)
+    rank[np.argsort(first)] = np.arange(count)
+    return count, rank[lab]
 
 
 def corner_groups(pixels: Sequence[np.ndarray], merge_distance: float = 1.5) -> Corners:
@@ -556,38 +554,55 @@ def find_frames(points: np.ndarray, edges: np.ndarray, k_p: float = 0.5) -> List
     if len(edges) < 4:
         return []
     first, last = edges[:, 0], edges[:, -1]
-    vec = points[last] - points[first]
-    by_start = {}
-    for e, s in enumerate(first):
-        by_start.setdefault(int(s), []).append(e)
-    by_pair = {}
-    for e, (s, t) in enumerate(zip(first, last)):
-        by_pair.setdefault((int(s), int(t)), []).append(e)
-    frames, seen = [], set()
-    for e1 in range(len(edges)):
-        a, b = int(first[e1]), int(last[e1])
-        v1 = vec[e1]
-        n1 = math.hypot(v1[0], v1[1])
-        for e2 in by_start.get(a, ()):
-            v2 = vec[e2]
-            if v1[0] * v2[1] - v1[1] * v2[0] <= 0.0:   # f_2 clockwise of f_1 (image y down)
-                continue
-            d = int(last[e2])
-            n2 = math.hypot(v2[0], v2[1])
-            for e3 in by_start.get(d, ()):
-                c = int(last[e3])
-                if c in (a, b) or math.hypot(*(v1 - vec[e3])) > k_p * n1:   # eq. 4
-                    continue
-                for e4 in by_pair.get((b, c), ()):
-                    if math.hypot(*(v2 - vec[e4])) > k_p * n2:              # eq. 4
-                        continue
-                    ids = edges[[e1, e2, e3, e4]]
-                    key = frozenset(ids.ravel().tolist())
-                    if len(key) != 4 * (edges.shape[1] - 1) or key in seen:
-                        continue
-                    seen.add(key)
-                    frames.append(ids)
-    return frames
+    vec = (points[last] - points[first]).astype(float)
+    norm = np.hypot(vec[:, 0], vec[:, 1])
+    # every (e1, e2, e3, e4) in lexicographic order, as nested loops over the edges would
+    # give them (the first of equal frames is kept); ranges of edges by start corner and
+    # by (start, end) corner pair come from stable sorts
+    by_first = np.argsort(first, kind='stable')
+    sorted_first = first[by_first]
+    n_pts = int(max(first.max(), last.max())) + 1
+    pair_key = first.astype(np.int64) * n_pts + last
+    by_pair = np.argsort(pair_key, kind='stable')
+    sorted_pair = pair_key[by_pair]
+
+    def expand(keys: np.ndarray, sorted_keys: np.ndarray, order: np.ndarray
+               ) -> Tuple[np.ndarray, np.ndarray]:
+        """Return (row, edge): every edge whose key equals ``keys[row]``, rows in order."""
+        lo = np.searchsorted(sorted_keys, keys, 'left')
+        hi = np.searchsorted(sorted_keys, keys, 'right')
+        cnt = hi - lo
+        row = np.repeat(np.arange(len(keys)), cnt)
+        start = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt)
+        return row, order[start + np.arange(len(row))]
+
+    r, e2 = expand(first, sorted_first, by_first)
+    e1 = r
+    v1, v2 = vec[e1], vec[e2]
+    keep = v1[:, 0] * v2[:, 1] - v1[:, 1] * v2[:, 0] > 0.0     # f_2 clockwise of f_1 (y down)
+    e1, e2 = e1[keep], e2[keep]
+    r, e3 = expand(last[e2], sorted_first, by_first)
+    e1, e2 = e1[r], e2[r]
+    c = last[e3]
+    keep = (c != first[e1]) & (c != last[e1]) & \
+        (np.hypot(*(vec[e1] - vec[e3]).T) <= k_p * norm[e1])             # eq. 4
+    e1, e2, e3 = e1[keep], e2[keep], e3[keep]
+    r, e4 = expand(last[e1].astype(np.int64) * n_pts + last[e3], sorted_pair, by_pair)
+    e1, e2, e3 = e1[r], e2[r], e3[r]
+    keep = np.hypot(*(vec[e2] - vec[e4]).T) <= k_p * norm[e2]             # eq. 4
+    e1, e2, e3, e4 = e1[keep], e2[keep], e3[keep], e4[keep]
+    if not len(e1):
+        return []
+    ids = np.stack([edges[e1], edges[e2], edges[e3], edges[e4]], axis=1)   # (F, 4, n)
+    flat = np.sort(ids.reshape(len(ids), -1), axis=1)
+    distinct = 1 + np.count_nonzero(np.diff(flat, axis=1), axis=1)
+    good = np.flatnonzero(distinct == 4 * (edges.shape[1] - 1))
+    if not len(good):
+        return []
+    # frames with the same corner set are one frame: keep the first (the shared corners
+    # appear twice in every frame, so equal sets have equal sorted id lists)
+    _, first_of = np.unique(flat[good], axis=0, return_index=True)
+    return [ids[i] for i in good[np.sort(first_of)]]
 
 
 # ---------------------------------------------------------------------- 2.2.3 code
