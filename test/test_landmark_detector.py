@@ -298,3 +298,20 @@ def test_unmixing_reads_a_blurred_code_that_the_cell_threshold_cannot():
         assert np.array_equal(whiteness > 0.5, white[4:10, 4:10] > 0.5)
         read += read_code(seen, design, deblur_margin=0.35).code == code
     assert ambiguous >= 10 and read == 20          # 14 of 20 ambiguous per cell
+
+
+def test_second_neighbour_of_a_sector_finds_an_edge_at_an_acute_frame_corner():
+    # two frame edges 25 deg apart in the image (strong tilt) share a 45-degree sector:
+    # the nearer, foreshortened edge hides the other unless the second neighbour is kept
+    corner = np.zeros((1, 2))
+    along = np.arange(1, 6)[:, None] * np.array([[10.0, 0.0]])
+    short = np.arange(1, 6)[:, None] * 6.0 * np.array([[math.cos(math.radians(25.0)),
+                                                        math.sin(math.radians(25.0))]])
+    pts = np.vstack([corner, along, short])
+    filters = np.array([0, 1, 0, 1, 0, 1, 1, 0, 1, 0, 1])
+    for angle, found in ((0.0, False), (math.radians(20.0), True)):
+        nb = corner_neighbours(pts, 100.0, 8, mode='sectors', second_angle=angle)
+        assert (1 in nb[0]) == found and 6 in nb[0]
+        nb[1:] = len(pts)                     # chains may start at the frame corner only
+        edges = frame_edges(pts, nb, 6, filters=filters)
+        assert any(list(e) == [0, 1, 2, 3, 4, 5] for e in edges.tolist()) == found
