@@ -16,7 +16,9 @@ frames except for the printed pattern:
 * ``apriltag`` -- tag36h11 (8 x 8 cells including its black border, one white cell around:
   10 x 10), drawn by OpenCV's ``aruco.generateImageMarker`` with ``DICT_APRILTAG_36h11``
   (the same bit patterns as AprilTag's tag images) and detected by AprilTag 3
-  (``pupil_apriltags``, decimate 1 and 2, one thread);
+  (``pupil_apriltags``, decimate 1 and 2, one thread); its pose is ``cv2.solvePnP``
+  (``SOLVEPNP_IPPE_SQUARE``) on its four corners, as for ArUco (AprilTag's own
+  ``estimate_tag_pose`` corrupted the heap in a test run, see :class:`Detectors`);
 * ``aruco`` -- ``DICT_6X6_250`` (8 x 8 with its border, one white cell around), drawn and
   detected by OpenCV ArUco with sub-pixel corner refinement.
 
@@ -358,29 +360,30 @@ class Detectors:
                 out.append(Found(d.code, d.corners, rot, tr))
             return out
         if name in self._april:
-            res = self._april[name].detect(
-                gray, estimate_tag_pose=pose,
-                camera_params=(cam.fx, cam.fy, cam.cx, cam.cy) if pose else None,
-                tag_size=8 * self.module if pose else None)
-            return [Found(int(r.tag_id), np.asarray(r.corners, float),
-                          np.asarray(r.pose_R) if pose else None,
-                          np.asarray(r.pose_t).ravel() if pose else None) for r in res]
+            # AprilTag's own estimate_tag_pose corrupted the heap here (an abort in a later
+            # allocation; AprilRobotics/apriltag issues 22 and 59): its corners go through
+            # the same IPPE_SQUARE solve as ArUco's (AprilTag lists its corners the other
+            # way round; IPPE_SQUARE needs them clockwise in the image)
+            res = self._april[name].detect(gray)
+            return [self._square_pose(int(r.tag_id), np.asarray(r.corners, float)[::-1], pose)
+                    for r in res]
         if name == 'aruco':
             corners, ids, _ = self._aruco.detectMarkers(gray)
-            out = []
-            b = 4 * self.module
-            obj = np.array([[-b, b, 0], [b, b, 0], [b, -b, 0], [-b, -b, 0]], float)
-            for c, i in zip(corners, [] if ids is None else ids.ravel()):
-                c = np.asarray(c, float).reshape(4, 2)
-                rot = tr = None
-                if pose:
-                    ok, rvec, tvec = cv2.solvePnP(obj, c, cam.K, cam.D,
-                                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
-                    if ok:
-                        rot, tr = cv2.Rodrigues(rvec)[0], tvec.ravel()
-                out.append(Found(int(i), c, rot, tr))
-            return out
+            return [self._square_pose(int(i), np.asarray(c, float).reshape(4, 2), pose)
+                    for c, i in zip(corners, [] if ids is None else ids.ravel())]
         raise ValueError(f'unknown detector {name!r}; use one of {DETECTORS}')
+
+    def _square_pose(self, code: int, corners: np.ndarray, pose: bool) -> Found:
+        """Return a tag detection, with ``cv2.solvePnP`` (IPPE_SQUARE) pose if asked."""
+        if not pose:
+            return Found(code, corners)
+        b = 4 * self.module
+        obj = np.array([[-b, b, 0], [b, b, 0], [b, -b, 0], [-b, -b, 0]], float)
+        ok, rvec, tvec = cv2.solvePnP(obj, corners, self.camera.K, self.camera.D,
+                                      flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        if not ok:
+            return Found(code, corners)
+        return Found(code, corners, cv2.Rodrigues(rvec)[0], tvec.ravel())
 
 
 # ---------------------------------------------------------------------- trials
@@ -436,9 +439,7 @@ def _rotation_error_deg(r_est: np.ndarray, r_true: np.ndarray, quarter_turns: bo
     return best
 
 
-#: landmark frame (x out, y right, z up) -> tag frames (x right, y down, z into the tag)
-_TAG_FROM_LANDMARK = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])
-#: landmark frame -> ArUco frame (x right, y up, z out of the marker)
+#: landmark frame (x out, y right, z up) -> square-tag frame (x right, y up, z out)
 _ARUCO_FROM_LANDMARK = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
@@ -478,8 +479,8 @@ def score(name: str, trial: Trial, found: List[Found], seconds: float,
                 if fam == 'landmark':
                     out.angle_error_deg = _rotation_error_deg(f.rotation, r_opt, False)
                 else:
-                    conv = _TAG_FROM_LANDMARK if fam == 'apriltag' else _ARUCO_FROM_LANDMARK
-                    out.angle_error_deg = _rotation_error_deg(f.rotation, r_opt @ conv.T, True)
+                    out.angle_error_deg = _rotation_error_deg(
+                        f.rotation, r_opt @ _ARUCO_FROM_LANDMARK.T, True)
         elif dist <= radius:
             out.wrong_codes += 1
         else:
