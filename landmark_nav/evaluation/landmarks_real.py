@@ -811,12 +811,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='folder of photographs (default ../shared/data/york_urban_train)')
     ap.add_argument('--deblur-margin', type=float, default=DetectorParams().deblur_margin,
                     help='landmark detector deblur_margin (0: the code read before issue 20)')
+    ap.add_argument('--second-neighbour-angle', type=float,
+                    default=DetectorParams().second_neighbour_angle,
+                    help='landmark detector second_neighbour_angle [deg] (0: before issue 20)')
     ap.add_argument('--no-planar-start', action='store_true',
                     help='landmark pose from the quadrant guesses only (before issue 20)')
     ap.add_argument('--json', type=Path, default=None, help='write every outcome here')
     args = ap.parse_args(argv)
     bgs = load_backgrounds(args.backgrounds) if args.backgrounds else default_backgrounds()
-    lm_params = DetectorParams(deblur_margin=args.deblur_margin)
+    lm_params = DetectorParams(deblur_margin=args.deblur_margin,
+                               second_neighbour_angle=args.second_neighbour_angle)
     dets = Detectors(args.detectors, landmark_params=lm_params,
                      pose_params=PoseParams(planar_start=not args.no_planar_start))
     everything: List[Outcome] = []
