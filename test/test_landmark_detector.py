@@ -12,7 +12,8 @@ from landmark_nav.sim.camera_scenarios import default_camera, landmark_view, Vie
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.detector import (corner_groups, corner_neighbours, corner_pixels,
                                           detect_landmarks, DetectorParams, find_frames,
-                                          frame_edges, image_problem, read_code, smooth)
+                                          frame_edges, image_problem, read_code, smooth,
+                                          unmix_cells)
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 import pytest
@@ -276,3 +277,41 @@ def test_image_problems_and_bad_arrays():
 def test_detector_params_are_validated(field, value):
     with pytest.raises(ValueError, match=field):
         DetectorParams(**{field: value})
+
+
+def test_unmixing_reads_a_blurred_code_that_the_cell_threshold_cannot():
+    # a cell keeps half of its own whiteness and takes the rest from its 8 neighbours:
+    # isolated cells sit on the threshold, the known frame tells the mixing
+    design = LandmarkDesign()
+    rng = np.random.default_rng(5)
+    kernel = np.array([[0.025, 0.1, 0.025], [0.1, 0.5, 0.1], [0.025, 0.1, 0.025]])
+    codes = [int(c) for c in rng.integers(0, design.code_limit, 40) if design.is_valid_code(c)]
+    ambiguous = read = 0
+    for code in codes[:20]:
+        white = 1.0 - design.half_block_image(code, 0).astype(float)      # 14 x 14 cells
+        seen = 30.0 + 170.0 * cv2.filter2D(white, -1, kernel,
+                                           borderType=cv2.BORDER_REPLICATE)[2:12, 2:12]
+        seen += rng.normal(0.0, 2.0, seen.shape)
+        ambiguous += read_code(seen, design).reason == 'ambiguous code cell'
+        whiteness, residual = unmix_cells(seen, design)
+        assert residual < 0.02                      # noise 2 / contrast 170 = 0.012
+        assert np.array_equal(whiteness > 0.5, white[4:10, 4:10] > 0.5)
+        read += read_code(seen, design, deblur_margin=0.35).code == code
+    assert ambiguous >= 10 and read == 20          # 14 of 20 ambiguous per cell
+
+
+def test_second_neighbour_of_a_sector_finds_an_edge_at_an_acute_frame_corner():
+    # two frame edges 25 deg apart in the image (strong tilt) share a 45-degree sector:
+    # the nearer, foreshortened edge hides the other unless the second neighbour is kept
+    corner = np.zeros((1, 2))
+    along = np.arange(1, 6)[:, None] * np.array([[10.0, 0.0]])
+    short = np.arange(1, 6)[:, None] * 6.0 * np.array([[math.cos(math.radians(25.0)),
+                                                        math.sin(math.radians(25.0))]])
+    pts = np.vstack([corner, along, short])
+    filters = np.array([0, 1, 0, 1, 0, 1, 1, 0, 1, 0, 1])
+    for angle, found in ((0.0, False), (math.radians(20.0), True)):
+        nb = corner_neighbours(pts, 100.0, 8, mode='sectors', second_angle=angle)
+        assert (1 in nb[0]) == found and 6 in nb[0]
+        nb[1:] = len(pts)                     # chains may start at the frame corner only
+        edges = frame_edges(pts, nb, 6, filters=filters)
+        assert any(list(e) == [0, 1, 2, 3, 4, 5] for e in edges.tolist()) == found

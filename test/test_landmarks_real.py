@@ -1,0 +1,92 @@
+"""Composites of printed markers in real photographs (landmark_nav.evaluation.landmarks_real).
+
+The full tables come from ``benchmarks/bench_landmarks_real.py``; these tests check the
+geometry of the composites against the detectors and the scoring on a few trials.
+"""
+
+import math
+
+from landmark_nav.evaluation.landmarks_real import (CAMERA, composite, default_backgrounds,
+                                                    detection_trials, Detectors, draw_pose,
+                                                    false_frames, Found, landmark_stage,
+                                                    marker_corners, marker_texture, MODULE,
+                                                    Photometrics, pose_trials,
+                                                    render_trial, run_trials, score,
+                                                    summarise)
+from landmark_nav.vision.detector import detect_landmarks
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def backgrounds():
+    return default_backgrounds()
+
+
+def test_backgrounds_are_the_51_grey_vga_photographs(backgrounds):
+    assert len(backgrounds) == 51
+    assert all(b.shape == (480, 640) and b.dtype == np.uint8 for b in backgrounds)
+
+
+def test_textures_have_the_printed_module_counts():
+    assert marker_texture('landmark', 156, 8).shape == (72, 72)      # 9 modules
+    tag = marker_texture('apriltag', 3, 8)
+    assert tag.shape == (80, 80) and tag[:8].min() == 255 and tag[8:16, 8:72].max() == 0
+    assert marker_texture('aruco', 3, 8).shape == (80, 80)
+
+
+def test_clean_composite_puts_the_frame_corners_where_the_truth_says(backgrounds):
+    # no blur, no noise, high JPEG quality: the detector's corners are the truth's
+    rng = np.random.default_rng(4)
+    photo = Photometrics(white=220.0, black=20.0, blur=0.3, gain=1.0, gamma=1.0, noise=0.0,
+                         jpeg_quality=100)
+    errs = []
+    for _ in range(5):
+        v = draw_pose(rng, 12.0, float(rng.uniform(0, 40)))
+        img = composite(backgrounds[0], marker_texture('landmark', 156), v, 9, MODULE, photo,
+                        0)
+        det = [d for d in detect_landmarks(img) if d.code == 156]
+        assert len(det) == 1
+        truth = marker_corners(v, 5 * MODULE, CAMERA)
+        errs.append(np.abs(det[0].corners - truth).max())
+    assert max(errs) < 0.02, errs      # measured 0.003-0.006 px; a half-pixel slip is 0.5
+
+
+def test_tags_are_found_by_their_own_detectors_with_poses(backgrounds):
+    pytest.importorskip('pupil_apriltags')
+    trials = pose_trials((1.0,), per_distance=4, seed=5, n_backgrounds=len(backgrounds))
+    res = run_trials(trials, backgrounds, Detectors(), pose=True)
+    assert len(res) == 16
+    for o in res:
+        assert o.detected and o.wrong_codes == 0 and o.false_detections == 0, o
+        assert o.angle_error_deg < 3.0 and o.position_error < 0.02, o
+    rows = summarise(res, lambda o: 'all')
+    assert {r.detector for r in rows} == {'landmark', 'apriltag1', 'apriltag2', 'aruco'}
+
+
+def test_scoring_counts_wrong_codes_and_false_detections(backgrounds):
+    trial = detection_trials((8,), 1, seed=3, n_backgrounds=len(backgrounds))[0]
+    truth = marker_corners(trial.v, 5 * MODULE, CAMERA)
+    code = trial.codes['landmark']
+    far = truth + np.array([200.0, 0.0]) * (1 if truth[:, 0].mean() < 320 else -1)
+    found = [Found(code + 1, truth), Found(code, truth + 0.5), Found(code, far)]
+    o = score('landmark', trial, found, 0.0)
+    assert o.detected and o.wrong_codes == 1 and o.false_detections == 1
+    img = render_trial(trial, 'landmark', backgrounds)
+    assert img.shape == (480, 640) and img.dtype == np.uint8
+    assert math.isclose(CAMERA.fx * MODULE / np.linalg.norm(trial.v[:3]), 8.0)
+
+
+def test_stage_counter_names_the_lost_stage(backgrounds):
+    trial = detection_trials((8,), 1, tilt_range=(10.0, 20.0), seed=6,
+                             n_backgrounds=len(backgrounds))[0]
+    assert landmark_stage(render_trial(trial, 'landmark', backgrounds), trial) == \
+        ('detected', '')
+    bare = backgrounds[trial.background]                    # the photograph alone
+    assert landmark_stage(bare, trial) == ('corners', '10-20 of 20 X-corners without a group')
+
+
+def test_landmark_free_real_frames_give_no_detection(backgrounds):
+    res = false_frames(backgrounds, count=40, seed=9)
+    assert sum(res.frames.values()) == 40 and res.frames.get('york+checkerboard', 0) >= 5
+    assert sum(res.detections.values()) == 0
