@@ -52,16 +52,50 @@ def test_clean_composite_puts_the_frame_corners_where_the_truth_says(backgrounds
     assert max(errs) < 0.02, errs      # measured 0.003-0.006 px; a half-pixel slip is 0.5
 
 
-def test_tags_are_found_by_their_own_detectors_with_poses(backgrounds):
-    pytest.importorskip('pupil_apriltags')
-    trials = pose_trials((1.0,), per_distance=4, seed=5, n_backgrounds=len(backgrounds))
-    res = run_trials(trials, backgrounds, Detectors(), pose=True)
-    assert len(res) == 16
+def _check_pose_outcomes(res, names):
+    assert len(res) == 4 * len(names)
     for o in res:
         assert o.detected and o.wrong_codes == 0 and o.false_detections == 0, o
         assert o.angle_error_deg < 3.0 and o.position_error < 0.02, o
+    assert {o.detector for o in res} == set(names)
+
+
+def test_markers_are_found_by_their_own_detectors_with_poses(backgrounds):
+    names = ('landmark', 'aruco')
+    trials = pose_trials((1.0,), per_distance=4, seed=5, n_backgrounds=len(backgrounds))
+    res = run_trials(trials, backgrounds, Detectors(names), pose=True)
+    _check_pose_outcomes(res, names)
     rows = summarise(res, lambda o: 'all')
-    assert {r.detector for r in rows} == {'landmark', 'apriltag1', 'apriltag2', 'aruco'}
+    assert {r.detector for r in rows} == set(names)
+
+
+_APRILTAG_CHILD = """
+import json, dataclasses
+from landmark_nav.evaluation.landmarks_real import (default_backgrounds, Detectors,
+                                                    pose_trials, run_trials)
+bg = default_backgrounds()
+trials = pose_trials((1.0,), per_distance=4, seed=5, n_backgrounds=len(bg))
+res = run_trials(trials, bg, Detectors(('apriltag1', 'apriltag2')), pose=True)
+print(json.dumps([dataclasses.asdict(o) for o in res]))
+"""
+
+
+def test_apriltags_are_found_by_their_own_detector_with_poses(backgrounds):
+    """The AprilTag detector runs in a child process: its C library can corrupt the heap.
+
+    (An abort in a later numpy allocation of the test run was seen once in a full suite,
+    never in isolation; AprilRobotics/apriltag reports heap corruption in quad fitting.)
+    """
+    pytest.importorskip('pupil_apriltags')
+    import json
+    import subprocess
+    import sys
+    from landmark_nav.evaluation.landmarks_real import Outcome
+    child = subprocess.run([sys.executable, '-c', _APRILTAG_CHILD], capture_output=True,
+                           text=True, timeout=300)
+    assert child.returncode == 0, child.stderr[-2000:]
+    res = [Outcome(**o) for o in json.loads(child.stdout.strip().splitlines()[-1])]
+    _check_pose_outcomes(res, ('apriltag1', 'apriltag2'))
 
 
 def test_scoring_counts_wrong_codes_and_false_detections(backgrounds):
