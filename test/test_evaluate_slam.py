@@ -5,6 +5,7 @@ from pathlib import Path
 
 from landmark_nav.bag import BagError, BagReader, BagWriter
 from landmark_nav.conversions import make_odometry, odometry_to_pose
+from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import evaluate_bag, format_summary
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
@@ -124,7 +125,7 @@ def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_
     write_tum(tum, Trajectory.from_planar(np.array([p.stamp_ns for p in gt]),
                                           np.array([p.pose for p in gt])))
     with pytest.raises(ValueError, match='--reference'):
-        evaluate_bag(bag, progress=False)
+        load_bag(bag)
     r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, reference=tum)
     assert r['simulator_truth'] is False and r['reference'] == str(tum)
     assert any('re-expressed' in n for n in r['notes'])
@@ -141,6 +142,72 @@ def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_
     assert np.abs(a.positions - b.positions).max() < 1e-8
     assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
     assert 'no true corners' in format_summary(r)
+
+
+def _path_length(positions: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(positions[:, :2], axis=0), axis=1).sum())
+
+
+def test_bag_without_reference(tmp_path, office_result):
+    """No /ground_truth/odom, no TUM file: SLAM runs, the error figures are null, not guessed.
+
+    The odometry frame is a rigid change of the office bag's, so the filter path and the map
+    are the reference run's moved: same counts, same path lengths, same SLAM-odometry gap.
+    """
+    ref, ref_out = office_result
+    bag = tmp_path / 'noref'
+    reencode(BAG, bag, reference_topic=False,
+             custom={'landmark_nav.laser_mount': '0 0 0',
+                     'landmark_nav.laser_sigma_range': '0.01'})
+    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False)
+    assert r['reference'] is None and r['simulator_truth'] is False
+    assert not any('re-expressed' in n for n in r['notes'])
+    for k in ('scans', 'mapped', 'associations', 'resets'):
+        assert r[k] == ref[k], k
+    for k in ('ate_rmse', 'ate_max', 'odom_ate_rmse', 'ate_se2_rmse', 'odom_ate_se2_max',
+              'rpe_trans_rmse', 'odom_rpe_rot_rmse_deg', 'rpe_pairs', 'nees_share_band',
+              'mean_nees', 'wrong_associations', 'ate_improvement'):
+        assert k in r and r[k] is None, k
+    slam = read_tum(ref_out / 'trajectory_slam.tum').positions
+    odom = read_tum(ref_out / 'trajectory_odom.tum').positions
+    assert r['path_length_m'] == pytest.approx(_path_length(slam), abs=1e-6)
+    assert r['odom_path_length_m'] == pytest.approx(_path_length(odom), abs=1e-6)
+    gap = np.linalg.norm(slam[:, :2] - odom[:, :2], axis=1).max()
+    assert r['max_slam_odom_difference_m'] == pytest.approx(gap, abs=1e-6)
+    assert np.allclose(read_tum(tmp_path / 'out' / 'trajectory_odom.tum').positions[0, :2],
+                       ODOM_START[:2])
+    cov = np.array(r['final_pose_covariance'])
+    assert cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+    saved = json.loads((tmp_path / 'out' / 'slam.json').read_text())
+    assert saved['ate_rmse'] is None and saved['rpe_trans_rmse'] is None
+    assert saved['path_length_m'] == r['path_length_m']
+    written = sorted(p.name for p in (tmp_path / 'out').iterdir())
+    assert written == ['slam.json', 'slam_map.png', 'trajectory_odom.tum',
+                       'trajectory_slam.tum']
+    assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
+    text = format_summary(r)
+    assert 'ATE, RPE and NEES need one (--reference FILE.tum or /ground_truth/odom' in text
+    assert 'reference none' in text and 'ATE RMSE' not in text
+
+
+def test_evaluate_imported_wean_log_without_reference(tmp_path, capsys):
+    """A Wean log (no reference) through ``landmark_nav import`` and ``landmark_nav evaluate``."""
+    log = shared_data('wean', 'robotdata1.log.gz')
+    imported = import_log(log, tmp_path / 'bag')
+    assert cli_main(['evaluate', str(tmp_path / 'bag'), '--no-progress', '--out',
+                     str(tmp_path / 'out')]) == 0
+    text = capsys.readouterr().out
+    assert 'ATE, RPE and NEES need one' in text and 'path length: EKF-SLAM' in text
+    r = json.loads((tmp_path / 'out' / 'slam.json').read_text())
+    assert r['reference'] is None and r['ate_rmse'] is None and r['rpe_trans_rmse'] is None
+    assert 0 < r['scans'] <= imported.counts['/scan']
+    assert sum(r['reset_reasons'].values()) == r['resets']
+    assert r['mapped'] > 0 and r['associations'] > 0
+    # measured: 41.48 m filter vs 41.20 m odometry, largest gap 0.37 m
+    assert r['path_length_m'] == pytest.approx(r['odom_path_length_m'], rel=0.02)
+    assert 0.0 < r['max_slam_odom_difference_m'] < 0.5
+    assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
+    assert not (tmp_path / 'out' / 'trajectory_gt.tum').exists()
 
 
 def test_evaluate_imported_carmen_log(tmp_path):

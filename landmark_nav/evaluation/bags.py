@@ -62,15 +62,16 @@ class BagScenario:
         laser: laser configuration (mount, noise; the rest defaults for real bags).
         robot: None (not needed for SLAM).
         events: odometry and scan samples in time order.
-        reference: where the reference comes from (topic or file).
+        reference: where the reference comes from (topic or file); None without one.
         notes: facts the user should read (defaults taken, frames changed).
         scan_period: median time between scans [s].
     """
 
     def __init__(self, name: str, world: Optional[World], laser: LaserConfig, events: List,
-                 truth_stamps: np.ndarray, truth_poses: np.ndarray, reference: str = '',
+                 truth_stamps: np.ndarray, truth_poses: Optional[np.ndarray],
+                 reference: Optional[str] = '',
                  notes: Sequence[str] = (), scan_period: float = 0.1) -> None:
-        """Wrap the decoded bag content."""
+        """Wrap the decoded bag content (``truth_poses`` None: no reference)."""
         self.name = name
         self.world = world
         self.laser = laser
@@ -81,16 +82,21 @@ class BagScenario:
         self.scan_period = float(scan_period)
         self._t = np.asarray(truth_stamps, dtype=np.int64)
         self._rel = (self._t - self._t[0]).astype(float)
-        self._poses = np.asarray(truth_poses, dtype=float)
+        self._poses = None if truth_poses is None else np.asarray(truth_poses, dtype=float)
+
+    @property
+    def has_reference(self) -> bool:
+        """Whether the bag (or a TUM file) gave a reference trajectory."""
+        return self._poses is not None
 
     @property
     def start_ns(self) -> int:
-        """Stamp of the first reference pose."""
+        """Stamp of the first reference pose (without a reference: of the odometry)."""
         return int(self._t[0])
 
     @property
     def end_ns(self) -> int:
-        """Stamp of the last reference pose."""
+        """Stamp of the last reference pose (without a reference: of the odometry)."""
         return int(self._t[-1])
 
     @property
@@ -104,8 +110,10 @@ class BagScenario:
         return self._poses
 
     def truth_at(self, stamp_ns) -> np.ndarray:
-        """Return the reference pose(s) interpolated at stamp(s) [ns]."""
+        """Return the reference pose(s) interpolated at stamp(s) [ns] (NaN without one)."""
         s = np.asarray(stamp_ns, dtype=np.int64)
+        if self._poses is None:
+            return np.full(s.shape + (3,), np.nan)
         out = interpolate_pose(np.atleast_1d(s - self._t[0]).astype(float), self._rel,
                                self._poses)
         return out[0] if s.ndim == 0 else out
@@ -206,7 +214,8 @@ def laser_config(custom: Dict[str, str], meta: Optional[dict],
 
 def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
              laser_pose: Optional[Sequence[float]] = None,
-             sigma_r: Optional[float] = None) -> BagScenario:
+             sigma_r: Optional[float] = None,
+             require_reference: bool = True) -> BagScenario:
     """Read a bag with ``/odom``, ``/scan`` and a reference into a :class:`BagScenario`.
 
     Args:
@@ -215,6 +224,9 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
         reference: TUM file of the reference trajectory (None: ``/ground_truth/odom``).
         laser_pose: Laser mount when the bag does not state it (module docstring).
         sigma_r: Range noise when the bag does not state it [m].
+        require_reference: False: a bag without ``/ground_truth/odom`` (and no ``reference``)
+            is read without a reference (``has_reference`` False, ``truth_at`` NaN, the odometry
+            as it is); True: that is an error.
 
     Returns:
         The scenario; scans outside the odometry and reference time span are dropped.
@@ -241,11 +253,14 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
         for t in TOPICS:
             if t not in topics or topics[t].count == 0:
                 raise ValueError(f'{bag} has no {t} messages')
+        has_ref = reference is not None
         if reference is None:
-            if REFERENCE_TOPIC not in topics or topics[REFERENCE_TOPIC].count == 0:
+            if REFERENCE_TOPIC in topics and topics[REFERENCE_TOPIC].count > 0:
+                wanted.append(REFERENCE_TOPIC)
+                has_ref = True
+            elif require_reference:
                 raise ValueError(f'{bag} has no {REFERENCE_TOPIC} messages: give a reference '
                                  f'trajectory with --reference FILE.tum')
-            wanted.append(REFERENCE_TOPIC)
         for topic, _, msg in reader.decoded(wanted):
             if topic == '/scan':
                 d = scan_to_data(msg)
@@ -263,9 +278,15 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
         tum = read_tum(reference)
         truth = [_Stamped(int(t), p) for t, p in zip(tum.stamps_ns, tum.planar())]
         ref_name = str(reference)
-    else:
+    elif has_ref:
         ref_name = REFERENCE_TOPIC
+    else:
+        ref_name = None
     odo.sort(key=lambda e: e.stamp_ns)
+    if not has_ref:  # the odometry span stands for the reference span below
+        truth = [_Stamped(odo[0].stamp_ns, np.zeros(3)), _Stamped(odo[-1].stamp_ns, np.zeros(3))]
+        if truth[1].stamp_ns == truth[0].stamp_ns:
+            truth = truth[:1]
     truth.sort(key=lambda e: e.stamp_ns)
     ts = np.array([e.stamp_ns for e in truth], dtype=np.int64)
     if np.any(np.diff(ts) <= 0) or np.any(np.diff([e.stamp_ns for e in odo]) <= 0):
@@ -278,15 +299,17 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
     sweep = [int(round(len(s.ranges) * s.time_increment * 1e9)) for s in scans]
     kept = [s for s, w in zip(scans, sweep) if t_start <= s.stamp_ns and s.stamp_ns + w <= t_end]
     if not kept:
-        raise ValueError(f'{bag}: no /scan message inside the odometry / reference span')
+        raise ValueError(f'{bag}: no /scan message inside the odometry / reference span'
+                         if has_ref else f'{bag}: no /scan message inside the odometry span')
     if len(kept) < len(scans):
         why = '' if max_seconds is None else f' or after the first {max_seconds:g} s'
+        span = 'odometry / reference' if has_ref else 'odometry'
         notes.append(f'{len(scans) - len(kept)} of {len(scans)} scans are not used (outside '
-                     f'the odometry / reference time span{why})')
+                     f'the {span} time span{why})')
     op = np.array([e.pose for e in odo], dtype=float)
     truth_poses = np.array([e.pose for e in truth])
     t_a = max(odo[0].stamp_ns, int(ts[0]))  # first stamp with odometry and reference
-    if t_a <= min(odo[-1].stamp_ns, int(ts[-1])):
+    if has_ref and t_a <= min(odo[-1].stamp_ns, int(ts[-1])):
         o_t = np.array([e.stamp_ns for e in odo], dtype=np.int64)
         odo_a = interpolate_pose(float(t_a - o_t[0]), (o_t - o_t[0]).astype(float), op)
         ref_a = interpolate_pose(float(t_a - ts[0]), (ts - ts[0]).astype(float), truth_poses)
@@ -306,8 +329,8 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
     period = float(np.median(np.diff(st))) * 1e-9 if st.size > 1 else 1.0 / laser.rate_hz
     if meta is not None and meta.get('laser'):
         period = 1.0 / float(laser.rate_hz)
-    return BagScenario(str(bag), world, laser, events, ts, truth_poses, ref_name, notes,
-                       period)
+    return BagScenario(str(bag), world, laser, events, ts, truth_poses if has_ref else None,
+                       ref_name, notes, period)
 
 
 __all__ = ['BagScenario', 'laser_config', 'load_bag', 'REFERENCE_TOPIC']

@@ -52,7 +52,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.features import corner_truth
 from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
-                                                Trajectory, write_tum)
+                                                STATISTICS, Trajectory, write_tum)
 from landmark_nav.geometry import (covariance_ellipse, interpolate_pose, relative,
                                    transform_points)
 from landmark_nav.laser.corners import CornerParams, extract_corners
@@ -99,7 +99,7 @@ class SlamRun:
 class SlamScore:
     """Scores of one run (see the module docstring)."""
 
-    ate_rmse: float
+    ate_rmse: float                    # NaN without a reference (so are odom_ate_*, NEES)
     ate_max: float
     odom_ate_rmse: float
     odom_ate_max: float
@@ -274,6 +274,8 @@ def score_run(result: ScenarioResult, run: SlamRun, params: Optional[SlamParams]
         The scores.
     """
     params = params or SlamParams()
+    if not getattr(result, 'has_reference', True):
+        return _score_without_reference(run)
     err = position_errors(run.poses, run.truth)
     oerr = position_errors(run.odometry, run.truth)
     assoc = np.isin(run.obs_status, ('matched', 'confirmed'))
@@ -310,6 +312,24 @@ def score_run(result: ScenarioResult, run: SlamRun, params: Optional[SlamParams]
         mean_nis_per_dof=float(run.nis[dof > 0].sum() / max(dof.sum(), 1)),
         psd_repairs=int(run.stats['psd_repairs']),
         ms_per_scan=1e3 * run.seconds / max(len(run.stamps), 1), **landmarks)
+
+
+def _score_without_reference(run: SlamRun) -> SlamScore:
+    """Scores of a bag without a reference: every error figure NaN / None, never guessed.
+
+    The landmark scores need the true path too (the visible corners, the map frame), so they
+    are None / NaN even with the simulator's world.
+    """
+    assoc = np.isin(run.obs_status, ('matched', 'confirmed'))
+    dof = run.nis_dof
+    return SlamScore(
+        ate_rmse=math.nan, ate_max=math.nan, odom_ate_rmse=math.nan, odom_ate_max=math.nan,
+        landmark_rmse=math.nan, mapped=int(run.landmarks.shape[0]), true_visible=None,
+        ghost_landmarks=None, duplicates=None, associations=int(assoc.sum()),
+        wrong_associations=None, nees_share_band=math.nan, nees_share_gate=math.nan,
+        mean_nees=math.nan, mean_nis_per_dof=float(run.nis[dof > 0].sum() / max(dof.sum(), 1)),
+        psd_repairs=int(run.stats['psd_repairs']),
+        ms_per_scan=1e3 * run.seconds / max(len(run.stamps), 1))
 
 
 def evaluate(name: str, seeds: List[int], params: Optional[SlamParams] = None,
@@ -361,6 +381,8 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
       ``align`` alignment (each aligned on its own, as the ATE is computed).
     * ``slam_errors.png``: x, y, heading error against the reference with the filter's
       +-2 sigma (unaligned, in the map frame).
+
+    Without a reference (a bag's ``has_reference`` False) only ``slam_map.png``.
     """
     import matplotlib
     matplotlib.use('Agg')
@@ -390,6 +412,8 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
     fig.tight_layout()
     fig.savefig(out_dir / 'slam_map.png', dpi=120)
     plt.close(fig)
+    if not getattr(scenario, 'has_reference', True):
+        return ['slam_map.png']  # the other figures are against the reference
 
     ref = Trajectory.from_planar(run.stamps, run.truth)
     fig, ax = plt.subplots(figsize=(9, 7.5))
@@ -433,6 +457,35 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
 
 def _clean(v):
     return None if isinstance(v, float) and math.isnan(v) else v
+
+
+def _path_length(poses: np.ndarray) -> float:
+    return float(np.hypot(*np.diff(poses[:, :2], axis=0).T).sum()) if len(poses) > 1 else 0.0
+
+
+def _add_figures_without_reference(result: dict, run: SlamRun, align: str,
+                                   rpe_delta: float) -> None:
+    """Fill ``result`` for a bag without a reference: error figures None, path figures."""
+    for key in ('', 'odom_'):
+        for k in STATISTICS + ('pairs', 'scale'):
+            result[f'{key}ate_{align}_{k}'] = None
+    result['rpe_distance_m'] = float(rpe_delta)
+    for key in ('', 'odom_'):
+        for k in STATISTICS:
+            result[f'{key}rpe_trans_{k}'] = None
+            result[f'{key}rpe_rot_{k}_deg'] = None
+        result[f'{key}rpe_pairs'] = None
+    result['ate_improvement'] = None
+    d = run.poses - run.odometry
+    dist = np.hypot(d[:, 0], d[:, 1])
+    k = int(np.argmax(dist))
+    result['path_length_m'] = _path_length(run.poses)
+    result['odom_path_length_m'] = _path_length(run.odometry)
+    result['max_slam_odom_difference_m'] = float(dist[k])
+    result['max_slam_odom_difference_t_s'] = float((run.stamps[k] - run.stamps[0]) * 1e-9)
+    result['max_slam_odom_heading_difference_deg'] = float(
+        np.degrees(np.abs(np.angle(np.exp(1j * d[:, 2]))).max()))
+    result['final_pose_covariance'] = run.covariances[-1].tolist()
 
 
 def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = True,
@@ -479,7 +532,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
                          f'got {association!r}')
     if align not in ALIGNMENTS:
         raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
-    scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r)
+    scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
+                        require_reference=False)
     prm = params or SlamParams()
     prm = SlamParams(**{**{f.name: getattr(prm, f.name) for f in fields(SlamParams)},
                         'association': association})
@@ -507,21 +561,24 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
               'laser_mount': [float(v) for v in scenario.laser.mount],
               'laser_sigma_range': float(scenario.laser.sigma_range)}
     result.update({k: _clean(v) for k, v in asdict(score).items()})
-    ref = Trajectory.from_planar(run.stamps, run.truth)
     est = {'': Trajectory.from_planar(run.stamps, run.poses),
            'odom_': Trajectory.from_planar(run.stamps, run.odometry)}
     result['align'] = align
-    for key, traj in est.items():
-        for k, v in ate(traj, ref, align).items():
-            result[f'{key}ate_{align}_{k}'] = v
-    result['rpe_distance_m'] = float(rpe_delta)
-    for key, traj in est.items():
-        r = rpe(traj, ref, rpe_delta)
-        for k, v in r.items():
-            name = k if k.startswith('rot_') or k == 'pairs' else f'trans_{k}'
-            result[f'{key}rpe_{name}'] = _clean(v)
-    result['ate_improvement'] = (score.odom_ate_rmse / score.ate_rmse
-                                 if score.ate_rmse > 0 else None)
+    if scenario.has_reference:
+        ref = Trajectory.from_planar(run.stamps, run.truth)
+        for key, traj in est.items():
+            for k, v in ate(traj, ref, align).items():
+                result[f'{key}ate_{align}_{k}'] = v
+        result['rpe_distance_m'] = float(rpe_delta)
+        for key, traj in est.items():
+            r = rpe(traj, ref, rpe_delta)
+            for k, v in r.items():
+                name = k if k.startswith('rot_') or k == 'pairs' else f'trans_{k}'
+                result[f'{key}rpe_{name}'] = _clean(v)
+        result['ate_improvement'] = (score.odom_ate_rmse / score.ate_rmse
+                                     if score.ate_rmse > 0 else None)
+    else:
+        _add_figures_without_reference(result, run, align, rpe_delta)
     result['seconds_total'] = float(wall)
     result['ms_per_step_total'] = 1e3 * wall / max(len(run.stamps), 1)
     result['real_time_factor'] = float(duration / wall) if wall > 0 else None
@@ -534,14 +591,36 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         out.mkdir(parents=True, exist_ok=True)
         write_tum(out / 'trajectory_slam.tum', est[''])
         write_tum(out / 'trajectory_odom.tum', est['odom_'])
-        write_tum(out / 'trajectory_gt.tum', ref)
+        if scenario.has_reference:
+            write_tum(out / 'trajectory_gt.tum', ref)
         (out / 'slam.json').write_text(json.dumps(result, indent=2))
-        if plots:
+        if plots and not scenario.has_reference:
+            plot_run(scenario, run, out, f'EKF-SLAM ({association}) on {Path(bag).name}\n'
+                     f'{score.mapped} landmarks, {run.resets} resets (no reference)', align)
+        elif plots:
             plot_run(scenario, run, out, f'EKF-SLAM ({association}) on {Path(bag).name}\nATE '
                      f'{100 * score.ate_rmse:.1f} cm ({align} aligned '
                      f'{100 * result[f"ate_{align}_rmse"]:.1f} cm), odometry '
                      f'{100 * score.odom_ate_rmse:.1f} cm, {run.resets} resets', align)
     return result
+
+
+def _lines_without_reference(r: dict) -> List[str]:
+    """Render the summary lines of a run without a reference (what needs none)."""
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(r['final_pose_covariance'])), 0.0))
+    rtf = r['real_time_factor']
+    return [
+        'note: no reference trajectory: ATE, RPE and NEES need one (--reference FILE.tum or '
+        '/ground_truth/odom in the bag); judge the map in slam_map.png',
+        f'landmarks: {r["mapped"]} mapped; associations {r["associations"]}',
+        f'path length: EKF-SLAM {r["path_length_m"]:.2f} m, odometry '
+        f'{r["odom_path_length_m"]:.2f} m; largest EKF-SLAM vs odometry difference '
+        f'{r["max_slam_odom_difference_m"]:.3f} m (at {r["max_slam_odom_difference_t_s"]:.1f} '
+        f's), heading {r["max_slam_odom_heading_difference_deg"]:.2f} deg',
+        f'final pose 1 sigma: x {100 * sd[0]:.2f} cm, y {100 * sd[1]:.2f} cm, psi '
+        f'{np.degrees(sd[2]):.3f} deg (covariance in slam.json)',
+        f'filter {r["ms_per_scan"]:.2f} ms/step, total {r["ms_per_step_total"]:.2f} ms/step, '
+        f'real-time factor {"n/a" if rtf is None else f"{rtf:.0f}"}x']
 
 
 def format_summary(r: dict) -> str:
@@ -554,9 +633,11 @@ def format_summary(r: dict) -> str:
     a = r['align']
     why = ', '.join(f'{k}: {v}' for k, v in sorted(r.get('reset_reasons', {}).items()))
     lines = [f'{r["bag"]} ({r["association"]}): {r["scans"]} scans, {r["duration_s"]:.1f} s, '
-             f'reference {r["reference"]}, {r["resets"]} filter resets'
+             f'reference {r["reference"] or "none"}, {r["resets"]} filter resets'
              + (f' ({why})' if why else '')]
     lines += [f'note: {n}' for n in r.get('notes', [])]
+    if r['reference'] is None:
+        return '\n'.join(lines + _lines_without_reference(r))
     lines += [
         f'ATE RMSE {cm(r["ate_rmse"])} (max {cm(r["ate_max"])}); odometry '
         f'{cm(r["odom_ate_rmse"])} (max {cm(r["odom_ate_max"])})',

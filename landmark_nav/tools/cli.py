@@ -114,7 +114,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           align=args.align, laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta)
     print(format_summary(result))
-    if args.out is not None:
+    if args.out is not None and result['reference'] is None:
+        print(f'written: {args.out}/slam.json, trajectory_{{slam,odom}}.tum, slam_map.png')
+    elif args.out is not None:
         print(f'written: {args.out}/slam.json, trajectory_{{slam,odom,gt}}.tum, slam_map.png, '
               f'slam_trajectory.png, slam_errors.png')
     return 0
@@ -276,8 +278,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='Algorithm 1 iterations (default 2, as in the chapter)')
     p.set_defaults(func=_cmd_calibrate_odometry)
 
-    p = sub.add_parser('evaluate', help='run EKF-SLAM on a bag and score it against a reference')
-    p.add_argument('bag', help='rosbag2 directory with /scan, /odom and a reference '
+    p = sub.add_parser('evaluate', help='run EKF-SLAM on a bag and score it against a reference '
+                       '(without one: map, path and filter figures only)')
+    p.add_argument('bag', help='rosbag2 directory with /scan, /odom and optionally a reference '
                    '(/ground_truth/odom or --reference)')
     p.add_argument('--association', choices=['icnn', 'jcbb'], default='icnn',
                    help='data association (default icnn)')
