@@ -109,7 +109,8 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
-    result = evaluate_bag(args.bag, args.association, args.out, progress=not args.no_progress,
+    progress = not args.no_progress and sys.stderr.isatty()
+    result = evaluate_bag(args.bag, args.association, args.out, progress=progress,
                           max_seconds=args.max_seconds, reference=args.reference,
                           align=args.align, laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta)

@@ -9,6 +9,7 @@ summaries.
 
 import json
 from pathlib import Path
+import sys
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose
@@ -130,5 +131,5 @@ def run_demo(bag, out) -> str:
     (out / 'drift.json').write_text(json.dumps(
         {k: v for k, v in drift.items() if k != 'position_error_m'}, indent=2) + '\n')
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
-    slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=True))
+    slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=sys.stderr.isatty()))
     return summary + '\n\nEKF-SLAM (ICNN):\n' + slam
