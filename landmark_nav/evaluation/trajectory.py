@@ -184,19 +184,9 @@ def _stats(metric: metrics.PE, pairs: int, **extra) -> Dict[str, float]:
     return out
 
 
-def ate(est: Trajectory, ref: Trajectory, align: str = 'none',
-        max_diff: float = MAX_DIFF_S) -> Dict[str, float]:
-    """Absolute trajectory error of ``est`` against ``ref`` (module docstring).
-
-    Args:
-        est: Estimate.
-        ref: Reference.
-        align: One of :data:`ALIGNMENTS`.
-        max_diff: Largest stamp difference of a pair [s].
-
-    Returns:
-        ``{'rmse', 'mean', 'median', 'std', 'min', 'max'}`` [m], ``'pairs'`` (associated
-        poses) and ``'scale'`` (the sim3 scale, 1 otherwise).
+def _associate_aligned(est: Trajectory, ref: Trajectory, align: str, max_diff: float
+                       ) -> Tuple[PoseTrajectory3D, PoseTrajectory3D, float]:
+    """Associate ``est`` with ``ref`` and align it (evo); return (ref, est, sim3 scale).
 
     Raises:
         ValueError: Unknown alignment, no pairs, or too few / degenerate poses to align.
@@ -215,9 +205,30 @@ def ate(est: Trajectory, ref: Trajectory, align: str = 'none',
             _, _, scale = e.align(r, correct_scale=(align == 'sim3'))
         except GeometryException as exc:
             raise ValueError(f'{align} alignment failed: {exc}') from None
+    return r, e, float(scale)
+
+
+def ate(est: Trajectory, ref: Trajectory, align: str = 'none',
+        max_diff: float = MAX_DIFF_S) -> Dict[str, float]:
+    """Absolute trajectory error of ``est`` against ``ref`` (module docstring).
+
+    Args:
+        est: Estimate.
+        ref: Reference.
+        align: One of :data:`ALIGNMENTS`.
+        max_diff: Largest stamp difference of a pair [s].
+
+    Returns:
+        ``{'rmse', 'mean', 'median', 'std', 'min', 'max'}`` [m], ``'pairs'`` (associated
+        poses) and ``'scale'`` (the sim3 scale, 1 otherwise).
+
+    Raises:
+        ValueError: Unknown alignment, no pairs, or too few / degenerate poses to align.
+    """
+    r, e, scale = _associate_aligned(est, ref, align, max_diff)
     m = metrics.APE(metrics.PoseRelation.translation_part)
     m.process_data((r, e))
-    return _stats(m, r.num_poses, scale=float(scale))
+    return _stats(m, r.num_poses, scale=scale)
 
 
 def aligned(est: Trajectory, ref: Trajectory, align: str,
@@ -232,15 +243,11 @@ def aligned(est: Trajectory, ref: Trajectory, align: str,
 
     Returns:
         ``(ref_poses, est_poses)`` ``[x, y, yaw]`` of the pairs, the estimate aligned.
+
+    Raises:
+        ValueError: As :func:`ate` (the plot then leaves that path out).
     """
-    if align not in ALIGNMENTS:
-        raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
-    r, e = associate(est, ref, max_diff)
-    if align == 'se2':
-        r.project(Plane.XY)
-        e.project(Plane.XY)
-    if align != 'none' and r.num_poses >= 3:
-        e.align(r, correct_scale=(align == 'sim3'))
+    r, e, _ = _associate_aligned(est, ref, align, max_diff)
 
     def planar(t: PoseTrajectory3D) -> np.ndarray:
         q = np.roll(t.orientations_quat_wxyz, -1, axis=1)
