@@ -100,15 +100,21 @@ def _bad_scans(good: LaserScan):
     ]
 
 
+def _corner_extractor(ros):
+    """Start a corner extractor; return it, its corners, /rosout and a ready scan publisher."""
+    node = ros.add_node(CornerExtractor(context=ros.context))
+    poses = ros.collect('corners', PoseArray)
+    logs = ros.collect('/rosout', Log)
+    pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+    assert ros.wait_for_subscribers([pub])
+    return node, poses, logs, pub
+
+
 @pytest.mark.dds
 def test_corner_extractor_survives_bad_input():
     good = first_scans(2)
     with RosHarness() as ros:
-        node = ros.add_node(CornerExtractor(context=ros.context))
-        poses = ros.collect('corners', PoseArray)
-        logs = ros.collect('/rosout', Log)
-        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
-        assert ros.wait_for_subscribers([pub])
+        node, poses, logs, pub = _corner_extractor(ros)
         expected_outputs = 0
         for needle, msg in _bad_scans(good[0]):
             before, dropped = len(logs), node.warner.count
@@ -136,11 +142,7 @@ def test_scan_problems_are_warned_with_their_values():
     negative = np.array(d.ranges)
     negative[3] = -0.5
     with RosHarness() as ros:
-        node = ros.add_node(CornerExtractor(context=ros.context))
-        poses = ros.collect('corners', PoseArray)
-        logs = ros.collect('/rosout', Log)
-        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
-        assert ros.wait_for_subscribers([pub])
+        node, poses, logs, pub = _corner_extractor(ros)
         pub.publish(make_scan(d.stamp_ns, d.frame_id, d.angle_min, d.angle_increment,
                               negative, d.range_min, d.range_max))
         assert ros.wait_until(lambda: len(poses) == 1, 10)
@@ -159,12 +161,8 @@ def test_scans_lost_in_a_burst_are_counted_warned_and_on_diagnostics():
     """A node slower than its input lost scans in the full queue without a word."""
     scans = first_scans(100)
     with RosHarness() as ros:
-        node = ros.add_node(CornerExtractor(context=ros.context))
-        poses = ros.collect('corners', PoseArray)
-        logs = ros.collect('/rosout', Log)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
-        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
-        assert ros.wait_for_subscribers([pub])
+        node, poses, logs, pub = _corner_extractor(ros)
         pub.publish(scans[0])  # the first message of a publisher starts its sequence
         assert ros.wait_until(lambda: len(poses) == 1, 10)
         for msg in scans[1:-1]:

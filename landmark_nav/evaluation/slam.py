@@ -370,6 +370,19 @@ def _scan_points(scenario, run: SlamRun, max_points: int = 200_000) -> np.ndarra
     return np.concatenate(out) if out else np.zeros((0, 2))
 
 
+def _save_plan(fig, ax, title: str, path: Path) -> None:
+    """Finish a top view in metres (equal axes, labels, legend), write it and close it."""
+    import matplotlib.pyplot as plt
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    ax.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALIGN_DEFAULT
              ) -> List[str]:
     """Write the figures of a run; return their file names.
@@ -404,14 +417,7 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
         for m, c in zip(run.landmarks, run.landmark_covariances):
             e = covariance_ellipse(m, c)
             ax.plot(e[:, 0], e[:, 1], 'r-', lw=0.8)
-    ax.set_aspect('equal')
-    ax.set_xlabel('x [m]')
-    ax.set_ylabel('y [m]')
-    ax.set_title(title)
-    ax.legend(loc='best', fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_dir / 'slam_map.png', dpi=120)
-    plt.close(fig)
+    _save_plan(fig, ax, title, out_dir / 'slam_map.png')
     if not getattr(scenario, 'has_reference', True):
         return ['slam_map.png']  # the other figures are against the reference
 
@@ -424,14 +430,7 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
         except ValueError:
             continue
         ax.plot(est[:, 0], est[:, 1], style, lw=1, label=f'{name} ({align} aligned)')
-    ax.set_aspect('equal')
-    ax.set_xlabel('x [m]')
-    ax.set_ylabel('y [m]')
-    ax.set_title(title)
-    ax.legend(loc='best', fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_dir / 'slam_trajectory.png', dpi=120)
-    plt.close(fig)
+    _save_plan(fig, ax, title, out_dir / 'slam_trajectory.png')
 
     t = (run.stamps - run.stamps[0]) * 1e-9
     err = run.poses - run.truth
