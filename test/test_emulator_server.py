@@ -126,3 +126,40 @@ def test_parse_fault_rejects_bad_text(text):
 def test_server_needs_an_endpoint():
     with pytest.raises(ValueError):
         DeviceServer(_Echo())
+
+
+class _Delayed(Device):
+    """Answer every write ``delay`` seconds later (a device model with its own timing)."""
+
+    def __init__(self, delay: float) -> None:
+        self.delay = delay
+        self.pending = []
+
+    def receive(self, data, now):
+        self.pending.append((now + self.delay, b'<' + data + b'>\n'))
+        return []
+
+    def poll(self, now):
+        due = [frame for t, frame in self.pending if t <= now]
+        self.pending = [(t, frame) for t, frame in self.pending if t > now]
+        return due
+
+    def next_due(self, now):
+        return min((t for t, _ in self.pending), default=None)
+
+
+def test_frames_leave_when_the_device_says_not_on_the_loop_tick(tmp_path):
+    # Loop period 100 ms, replies due 5 ms after each request: the server sleeps until the
+    # device's next deadline, so the reply arrives in about 5 ms, not at the next tick.
+    link = str(tmp_path / 'dev')
+    delays = []
+    with DeviceServer(_Delayed(0.005), link=link, period=0.1):
+        with serial.serial_for_url(link, timeout=0.002) as port:
+            for k in range(5):
+                sent = time.monotonic()
+                port.write(b'q%d' % k)
+                assert b'>' in _read_until(port, b'>')
+                delays.append(time.monotonic() - sent)
+    print('reply delays [ms]', [round(d * 1e3, 2) for d in delays])
+    assert min(delays) >= 0.005
+    assert sorted(delays)[2] < 0.02  # median: the model's 5 ms plus scheduling, not 100 ms

@@ -193,6 +193,10 @@ class LineQueue:
         self.items.append((due, frame))
         return due
 
+    def next_due(self) -> Optional[float]:
+        """Return the delivery time of the oldest queued frame (None: empty)."""
+        return self.items[0][0] if self.items else None
+
     def take(self, now: float) -> List[bytes]:
         """Remove and return the frames delivered by ``now``."""
         out = []

@@ -43,6 +43,14 @@ class Device:
         """Return frames the device sends on its own at time ``now`` (default: none)."""
         return []
 
+    def next_due(self, now: float) -> Optional[float]:
+        """Return when :meth:`poll` next has something to send (None: no deadline known).
+
+        The server sleeps until then (at most its loop period), so frames leave at the
+        times the device model gives them rather than on the loop's tick.
+        """
+        return None
+
     def disconnected(self) -> None:
         """Forget per-connection state (the link went down or the client left)."""
 
@@ -293,8 +301,10 @@ class DeviceServer:
                     self._open_endpoints()
                     down = False
                 fds = self._readable()
+                due = self.device.next_due(now)
+            wait = self.period if due is None else min(self.period, max(0.0, due - now))
             try:
-                ready, _, _ = select.select(fds, [], [], self.period)
+                ready, _, _ = select.select(fds, [], [], wait)
             except (OSError, ValueError):
                 ready = []
             with self._lock:

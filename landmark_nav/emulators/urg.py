@@ -238,6 +238,14 @@ class UrgDevice(Device):
             self._buf = b''
         return self._queue.take(now)
 
+    def next_due(self, now: float) -> Optional[float]:
+        """Return the earlier of the next queued frame's delivery and the next scan's end."""
+        if self._t0 is None:
+            return None
+        due = self._queue.next_due()
+        ready = self._scan_ready(self._k_next)
+        return ready if due is None else min(due, ready)
+
     def poll(self, now: float) -> List[bytes]:
         """Produce the scans that completed by ``now``; release frames that are due."""
         self._start(now)
