@@ -515,7 +515,13 @@ def split_pieces(xy: np.ndarray, offsets: np.ndarray, tolerance) -> np.ndarray:
 
 def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
            tol: np.ndarray) -> np.ndarray:
-    """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points."""
+    """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points.
+
+    All pieces of one recursion level in one batch. The farthest point from a chord is
+    found on the unnormalised cross product ``|(q - p0) x (p1 - p0)|`` (the distance of
+    eq. 4 times the chord length, constant within a piece), compared with the tolerance
+    times the chord length: no chord equation is formed.
+    """
     pxy = np.stack([px, py])
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
@@ -528,25 +534,22 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             if not s.size:
                 break
         cnt = e - s - 1  # interior points of every piece
-        offs = np.cumsum(cnt) - cnt
-        pos = np.arange(offs[-1] + cnt[-1])
-        idx = np.repeat(s + 1 - offs, cnt) + pos
-        # eq. 4: the chord A x + B y + C = 0 through the first and last point, normalised
-        p0, p1 = pxy[:, s], pxy[:, e]
-        chord = np.empty((3, s.size))
-        np.subtract(p1[1], p0[1], out=chord[0])
-        np.subtract(p0[0], p1[0], out=chord[1])
-        norm = np.hypot(chord[0], chord[1])
-        norm[norm == 0.0] = 1.0
-        chord[:2] /= norm
-        np.negative(chord[0] * p0[0] + chord[1] * p0[1], out=chord[2])
-        a_c, b_c, c_c = np.repeat(chord, cnt, axis=1)
-        q = pxy[:, idx]
-        dist = np.abs(a_c * q[0] + b_c * q[1] + c_c)
-        dmax = np.maximum.reduceat(dist, offs)
-        hit = np.where(dist == np.repeat(dmax, cnt), pos, pos.size)
-        k = idx[np.minimum.reduceat(hit, offs)]  # the first farthest point
-        split = dmax > tol[k]
+        offs = np.cumsum(cnt)
+        total = int(offs[-1])
+        offs -= cnt
+        idx = np.repeat(s + 1 - offs, cnt)
+        idx += np.arange(total)
+        p0 = pxy[:, s]
+        chord = pxy[:, e] - p0
+        rel = pxy[:, idx] - np.repeat(p0, cnt, axis=1)
+        chord_p = np.repeat(chord, cnt, axis=1)
+        cross = rel[0] * chord_p[1]
+        cross -= rel[1] * chord_p[0]
+        np.abs(cross, out=cross)  # eq. 4 distance times the chord length
+        cmax = np.maximum.reduceat(cross, offs)
+        at = np.flatnonzero(cross == np.repeat(cmax, cnt))
+        k = idx[at[np.searchsorted(at, offs)]]  # the first farthest point
+        split = cmax > tol[k] * np.hypot(chord[0], chord[1])
         if not split.all():
             done_s.append(s[~split])
             done_e.append(e[~split])
@@ -1061,7 +1064,8 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         idx, _ = _gather(lo, hi)
         owner[idx] = np.repeat(np.arange(first.size), np.maximum(hi - lo + 1, 0))
     rounds = 0
-    opening |= _splits_in_two(scan, owner, line, beam, params)
+    two, runs = _splits_in_two(scan, owner, line, beam, params)
+    opening |= two
     while opening.any():
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
             ok = np.ones(first.size, dtype=bool)
@@ -1075,6 +1079,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
             f = _solve(sums, scan.origin)
             sel = ok[line]
             line, beam, opening = relabel[line[sel]], beam[sel], opening[sel]
+            runs = None
             break
         rounds += 1
         pos, run, starts, size = _support_runs(scan, owner, np.unique(beam[opening]))
@@ -1089,9 +1094,11 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
-        opening |= _splits_in_two(scan, owner, line, beam, params)
+        two, runs = _splits_in_two(scan, owner, line, beam, params)
+        opening |= two
     if line.size:  # only noise: each line's extent becomes its largest run between them
-        pos, run, starts, size = _support_runs(scan, owner, np.unique(beam))
+        pos, run, starts, size = (runs if runs is not None
+                                  else _support_runs(scan, owner, np.unique(beam)))
         own = owner[pos[starts]]
         best = np.lexsort((-size, own))  # per line, the run of most points first
         head = np.ones(best.size, dtype=bool)
@@ -1104,20 +1111,22 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
-                   params: LineParams) -> np.ndarray:
+                   params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
     """Mark the hidden beams (all of a line's) that cut it into two or more lines.
 
     A piece between hidden beams counts as a line when it has ``min_points`` supporting
-    points and spans ``min_length``.
+    points and spans ``min_length``. Also returns the :func:`_support_runs` at all the
+    hidden beams (None without hidden beams), which the noise-only case reuses.
     """
     if not line.size:
-        return np.zeros(0, dtype=bool)
-    pos, _, starts, size = _support_runs(scan, owner, np.unique(beam))
+        return np.zeros(0, dtype=bool), None
+    runs = _support_runs(scan, owner, np.unique(beam))
+    pos, _, starts, size = runs
     a, b = pos[starts], pos[starts + size - 1]
     span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
     good = (size >= params.min_points) & (span >= params.min_length)
     n_good = np.bincount(owner[a][good], minlength=int(owner.max()) + 1)
-    return n_good[line] >= 2
+    return n_good[line] >= 2, runs
 
 
 def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
