@@ -484,7 +484,7 @@ def _gather(starts: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarra
     cnt = ends - starts + 1
     offs = np.zeros(cnt.size + 1, dtype=np.int64)
     np.cumsum(cnt, out=offs[1:])
-    idx = np.arange(offs[-1], dtype=np.int64) - np.repeat(offs[:-1] - starts, cnt)
+    idx = np.arange(offs[-1], dtype=np.int64) - (offs[:-1] - starts).repeat(cnt)
     return idx, offs
 
 
@@ -522,7 +522,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     eq. 4 times the chord length, constant within a piece), compared with the tolerance
     times the chord length: no chord equation is formed.
     """
-    pxy = np.stack([px, py])
+    pxy = np.vstack((px, py))
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
     while s.size:
@@ -534,20 +534,20 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             if not s.size:
                 break
         cnt = e - s - 1  # interior points of every piece
-        offs = np.cumsum(cnt)
+        offs = cnt.cumsum()
         total = int(offs[-1])
         offs -= cnt
-        idx = np.repeat(s + 1 - offs, cnt)
+        idx = (s + 1 - offs).repeat(cnt)
         idx += np.arange(total)
         p0 = pxy[:, s]
         chord = pxy[:, e] - p0
-        rel = pxy[:, idx] - np.repeat(p0, cnt, axis=1)
-        chord_p = np.repeat(chord, cnt, axis=1)
+        rel = pxy[:, idx] - p0.repeat(cnt, axis=1)
+        chord_p = chord.repeat(cnt, axis=1)
         cross = rel[0] * chord_p[1]
         cross -= rel[1] * chord_p[0]
         np.abs(cross, out=cross)  # eq. 4 distance times the chord length
         cmax = np.maximum.reduceat(cross, offs)
-        at = np.flatnonzero(cross == np.repeat(cmax, cnt))
+        at = (cross == cmax.repeat(cnt)).nonzero()[0]
         k = idx[at[np.searchsorted(at, offs)]]  # the first farthest point
         split = cmax > tol[k] * np.hypot(chord[0], chord[1])
         if not split.all():
@@ -725,7 +725,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     shared = (whole if whole is not None and whole.valid is not None
               and all(c.scan is whole for c in cl) else None)
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.repeat(np.arange(sizes.size), sizes), offsets, shared)
+                 np.arange(sizes.size).repeat(sizes), offsets, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -752,7 +752,7 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     if s.size < 2:
         return s, e
     o = s[1:] - e[:-1]
-    adj = np.flatnonzero((o >= 0) & (o <= 1) & (scan.cluster[s[1:]] == scan.cluster[e[:-1]]))
+    adj = ((o >= 0) & (o <= 1) & (scan.cluster[s[1:]] == scan.cluster[e[:-1]])).nonzero()[0]
     if not adj.size:
         return s, e
     s, e = s.copy(), e.copy()
@@ -808,7 +808,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     lead, trail = np.cumprod((z > gate).reshape(s.size, 2, reach), axis=2).sum(axis=2).T
     ns, ne = s + lead, e - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
-    shared = np.flatnonzero((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:]))
+    shared = ((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:])).nonzero()[0]
     if shared.size:
         to_prev = z[shared, reach] <= z[shared + 1, 0]
         ns[shared + 1] = np.where(to_prev, ne[shared] + 1, ns[shared + 1])
@@ -897,11 +897,11 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         new = np.empty(s.size, dtype=bool)
         new[0] = True
         np.logical_not(join, out=new[1:])
-        g_start = np.flatnonzero(new)
+        g_start = new.nonzero()[0]
         g_end = np.empty_like(g_start)
         np.subtract(g_start[1:], 1, out=g_end[:-1])
         g_end[-1] = s.size - 1
-        label = np.cumsum(new) - 1
+        label = new.cumsum() - 1
         g_sums = np.add.reduceat(sums, g_start, axis=1)
         g = _solve(g_sums[:6], scan.origin, rmse=False)
         # Every member must agree with its merged line: chi-square (the merged line taken
@@ -918,7 +918,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         # The worst member of a failing chain leaves it; the rest are merged again (a
         # piece off its wall, e.g. a short noisy fit between two pieces of the wall, no
         # longer keeps the wall in pieces).
-        out = np.flatnonzero((badness == worst[label]) & (worst > 1.0)[label])
+        out = ((badness == worst[label]) & (worst > 1.0)[label]).nonzero()[0]
         join[out[out < s.size - 1]] = False
         join[out[out > 0] - 1] = False
     return sums, s, e, f, np.arange(s.size)
@@ -945,27 +945,27 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     hi[:-1] = first
     hi[-1] = n_pts
     size = hi - lo
-    gaps = np.flatnonzero(size > 0)
+    gaps = (size > 0).nonzero()[0]
     if not gaps.size or not math.isfinite(gate):
         return sums, first, last, False
     size_g = size[gaps]
-    starts = np.cumsum(size_g) - size_g
+    starts = size_g.cumsum() - size_g
     pos = np.arange(starts[-1] + size_g[-1])
-    within = pos - np.repeat(starts, size_g)  # position in the gap
-    idx = within + np.repeat(lo[gaps], size_g)
+    within = pos - starts.repeat(size_g)  # position in the gap
+    idx = within + lo[gaps].repeat(size_g)
     # row 0: the line before the gap growing forward, row 1: the line after it, backward
     owner = np.empty((2, gaps.size), dtype=np.int64)
     np.subtract(gaps, 1, out=owner[0])
     owner[1] = gaps
     has = (owner >= 0) & (owner < n_lines)
-    rho, _, nx, ny = f.params[:, np.repeat(np.clip(owner, 0, n_lines - 1), size_g, axis=1)]
+    rho, _, nx, ny = f.params[:, np.clip(owner, 0, n_lines - 1).repeat(size_g, axis=1)]
     x, y, rng, cp, sp, tol = scan.cols[:_PHI, idx]
     ox, oy = scan.origin
     d = (x + ox) * nx + (y + oy) * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
     var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
-    ok = np.repeat(has, size_g, axis=1) & (d * d <= gate * gate * var) & (np.abs(d) <= tol)
+    ok = has.repeat(size_g, axis=1) & (d * d <= gate * gate * var) & (np.abs(d) <= tol)
     # Bearing steps: step[i] is the step from point i - 1 to i (True at both scan ends);
     # row 0 steps onto each point, row 1 off it.
     phi = scan.cols[_PHI]
@@ -1017,7 +1017,7 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     b0, b1 = scan.beam[first], scan.beam[last]
     lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
     idx, _ = _gather(lo, hi)
-    line = np.repeat(np.arange(first.size), hi - lo + 1)
+    line = np.arange(first.size).repeat(hi - lo + 1)
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
     rho, _, nx, ny = f.params[:, line]
@@ -1059,10 +1059,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
     s, e, label, first0, last0 = pieces
     owner = np.full(scan.x.size, -1, dtype=np.int64)
     idx, _ = _gather(s, e)
-    owner[idx] = np.repeat(label, e - s + 1)
+    owner[idx] = label.repeat(e - s + 1)
     for lo, hi in ((first, first0 - 1), (last0 + 1, last)):
         idx, _ = _gather(lo, hi)
-        owner[idx] = np.repeat(np.arange(first.size), np.maximum(hi - lo + 1, 0))
+        owner[idx] = np.arange(first.size).repeat(np.maximum(hi - lo + 1, 0))
     rounds = 0
     two, runs = _splits_in_two(scan, owner, line, beam, params)
     opening |= two
@@ -1082,7 +1082,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
             runs = None
             break
         rounds += 1
-        pos, run, starts, size = _support_runs(scan, owner, np.unique(beam[opening]))
+        pos, run, starts, size = _support_runs(scan, owner, beam[opening])
         big = size >= params.min_points
         owner[:] = -1
         kept = big[run]
@@ -1098,7 +1098,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         opening |= two
     if line.size:  # only noise: each line's extent becomes its largest run between them
         pos, run, starts, size = (runs if runs is not None
-                                  else _support_runs(scan, owner, np.unique(beam)))
+                                  else _support_runs(scan, owner, beam))
         own = owner[pos[starts]]
         best = np.lexsort((-size, own))  # per line, the run of most points first
         head = np.ones(best.size, dtype=bool)
@@ -1120,7 +1120,7 @@ def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.nd
     """
     if not line.size:
         return np.zeros(0, dtype=bool), None
-    runs = _support_runs(scan, owner, np.unique(beam))
+    runs = _support_runs(scan, owner, beam)
     pos, _, starts, size = runs
     a, b = pos[starts], pos[starts + size - 1]
     span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
@@ -1131,25 +1131,28 @@ def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.nd
 
 def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Split the lines' support at the hidden beams (sorted).
+    """Split the lines' support at the hidden beams (beam indices, repeats allowed).
 
     Returns the supporting points left (the hidden ones leave), the run of each, and the
     runs' starts (into the points) and sizes. Runs are consecutive support of one line
     with no hidden beam between; a hidden beam lies inside the extent of one line only.
     """
-    pos = np.flatnonzero(owner >= 0)
+    pos = (owner >= 0).nonzero()[0]
     bpos = scan.beam[pos]
-    keep = ~np.isin(bpos, hidden)
+    mark = np.zeros(max(int(bpos.max(initial=0)), int(hidden.max(initial=0))) + 1,
+                    dtype=np.int8)
+    mark[hidden] = 1
+    keep = mark[bpos] == 0
     pos, bpos = pos[keep], bpos[keep]
-    cut = np.searchsorted(hidden, bpos)
+    cut = mark.cumsum()[bpos]  # hidden beams before each point
     own = owner[pos]
     new = np.empty(pos.size, dtype=bool)
     new[:1] = True
     np.not_equal(own[1:], own[:-1], out=new[1:])
     new[1:] |= cut[1:] != cut[:-1]
-    starts = np.flatnonzero(new)
+    starts = new.nonzero()[0]
     size = np.diff(np.append(starts, pos.size))
-    return pos, np.cumsum(new) - 1, starts, size
+    return pos, new.cumsum() - 1, starts, size
 
 
 _MAX_CUTS = 8
@@ -1188,9 +1191,9 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
         proj[..., 1] = np.where(inner, t * sp, proj[..., 1])
     length = np.hypot(proj[1, :, 0] - proj[0, :, 0], proj[1, :, 1] - proj[0, :, 1])
     cov = f.cov
-    ok = np.flatnonzero((f.count >= params.min_points) & (length >= params.min_length)
-                        & (f.rmse <= params.threshold)
-                        & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1]))
+    ok = ((f.count >= params.min_points) & (length >= params.min_length)
+          & (f.rmse <= params.threshold)
+          & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1])).nonzero()[0]
     rho, alpha, rmse = rho[ok].tolist(), alpha[ok].tolist(), f.rmse[ok].tolist()
     count = f.count[ok].astype(np.int64).tolist()
     b0, b1 = scan.beam[ends[:, ok]].tolist()
@@ -1223,7 +1226,7 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
     if scan is None:
         return []
     offsets = scan.offsets
-    big = np.flatnonzero(offsets[1:] - offsets[:-1] >= params.min_points)
+    big = (offsets[1:] - offsets[:-1] >= params.min_points).nonzero()[0]
     if not big.size:
         return []
     cols = scan.cols
