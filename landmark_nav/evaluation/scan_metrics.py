@@ -276,7 +276,7 @@ def in_view(view: MetricScan, points_map: np.ndarray, margin: float = 0.1) -> np
         ValueError: ``view`` has no pose.
     """
     if view.pose is None:
-        raise ValueError('in_view needs the scan\'s pose (MetricScan.pose is None)')
+        raise ValueError("in_view needs the scan's pose (MetricScan.pose is None)")
     pts = inverse_transform_points(view.pose, np.asarray(points_map, dtype=float)
                                    ).reshape(-1, 2)
     n = len(view.angles)

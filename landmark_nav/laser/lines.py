@@ -31,9 +31,12 @@ vectorised batch (fits from prefix sums of point moments):
    for a linearised merge test, and their points become free for step 4.
 3. Merge: two consecutive pieces are merged when they are neighbours (same cluster, or
    clusters whose facing ends are at most ``merge_gap`` or ``merge_gap_angle`` apart, e.g.
-   a wall cut by a dropout, a spurious return or a table leg in front) and their (rho,
-   alpha) agree in a chi-square test, ``d^2 = dp^T (C1 + C2)^-1 dp <= merge_chi2`` with
-   the covariances of the two independent fits. Chains of passing pairs are refitted on
+   a wall cut by a dropout or a spurious return) and their (rho, alpha) agree in a
+   chi-square test, ``d^2 = dp^T (C1 + C2)^-1 dp <= merge_chi2`` with the covariances of
+   the two independent fits, each scaled by its a-posteriori variance factor where its
+   residuals reject the stated noise (:func:`_variance_factor`: a SICK in cm mode or a
+   rough wall scatters more than ``sigma_r``, and pieces of one wall would otherwise stay
+   apart). Chains of passing pairs are refitted on
    the union of their points (points between them are not used) and kept only if every
    member also passes the test against the merged line and its end points are within
    the split tolerance of it.
@@ -44,17 +47,23 @@ vectorised batch (fits from prefix sums of point moments):
    ``see_through`` (default ``max(3 sigma_r, 5 cm)``) beyond it along the ray, i.e. a beam
    the laser saw through it. The beams checked are all beams between a line's first and
    last supporting beam, also those of no cluster (dropped small clusters, read from the
-   whole scan of :func:`~landmark_nav.laser.segmentation.segment_scan`); beams in front
-   (occluders, e.g. a table leg) and missing returns may be bridged. A line hiding an
+   whole scan of :func:`~landmark_nav.laser.segmentation.segment_scan`). A line hiding an
    *opening* (a beam beyond it by more than ``see_through`` plus 3 standard deviations
    of its distance along the ray, eq. 7) is cut there and both sides are refitted, until
-   no line hides one;
-   thus merging across a cluster break and growth over neighbouring beams stand only
-   over beams that are occluded or missing. A line hiding only its own noise (a wall seen
-   at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) is cut
-   likewise when that leaves two or more lines of ``min_points`` and ``min_length``;
-   otherwise it keeps its fit on all its points, and its extent shrinks to its run of
-   support between those beams with the most points. See :func:`_cut_seen_through`.
+   no line hides one; thus merging across a cluster break and growth over neighbouring
+   beams stand only over beams that are occluded from the front or missing. A line
+   hiding only its own noise (a wall seen at grazing incidence, where bearing noise puts
+   returns 5 cm or more beyond it) is cut likewise when that leaves two or more lines of
+   ``min_points`` and ``min_length``; otherwise it keeps its fit on all its points, and
+   its extent shrinks to its run of support between those beams with the most points.
+   See :func:`_cut_seen_through`. A line keeps its fit across an *occluder* (two or more
+   neighbouring beams in front of it by more than the opening margin: a table leg, a
+   person), but not its extent: it is reported as one segment per side of at least
+   ``min_points`` points, each with the line's (rho, alpha), covariance and point count,
+   since a segment along the occluder's rays would claim a surface where the laser saw
+   something else (the PLE ray metric scores such beams with their full distance to the
+   line). A lone beam in front (one return cannot tell an object from a spurious return)
+   stays inside. See :func:`_occluded_extents`.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -863,6 +872,30 @@ def _chi2(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarr
     return np.where((det > 0.0) & (d2 > -np.inf) & ~np.isnan(d2), d2, np.inf)
 
 
+_Z95 = 1.6448536269514722  # standard normal 95 % quantile
+
+
+def _variance_factor(sums: np.ndarray, f: _Fit) -> np.ndarray:
+    """Return (G,) a-posteriori variance factors of fits whose residuals reject eq. 7.
+
+    The residual sum of squares of a fit of n points, divided by the mean variance of
+    the points' distances to the line (eq. 7 on the normal), is chi-square with n - 2
+    degrees of freedom when the stated noise holds. Where it exceeds the 95 % quantile
+    (Wilson-Hilferty approximation) the points are noisier than stated (e.g. a SICK in cm
+    mode, a rough or dark wall) and the factor is the ratio of the residual variance to
+    the stated one; elsewhere 1.
+    """
+    n = f.count
+    nx, ny = f.nx, f.ny
+    var = (nx * nx * sums[6] + ny * ny * sums[12] + 2.0 * nx * ny * sums[18]) / n
+    dof = np.maximum(n - 2.0, 1.0)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        stat = n * f.rmse * f.rmse / var  # RSS / sigma^2
+        h = 2.0 / (9.0 * dof)
+        q95 = dof * (1.0 - h + _Z95 * np.sqrt(h)) ** 3
+        return np.where(stat > q95, stat / dof, 1.0)
+
+
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit, np.ndarray]:
     """Merge collinear neighbours (step 3); return sums (24, L), first, last, fits, labels.
@@ -879,6 +912,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     f = _solve(sums, scan.origin)
     if s.size == 1:
         return sums, s, e, f, np.zeros(1, dtype=np.int64)
+    f = _Fit(f.params, f.rmse, f.count, f.cov * _variance_factor(sums, f)[:, None, None])
     gap = scan.cols[:, s[1:]] - scan.cols[:, e[:-1]]
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
             | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
@@ -1007,11 +1041,12 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
 
     A beam between the first and the last supporting beam of a line (in beam order) is
     hidden when its return lies more than ``see_through_tolerance`` beyond the line along
-    its ray: the laser saw through where the line claims a surface. Beams in front of the
-    line (occluders) and missing beams are allowed. ``opening`` marks the hidden beams
-    beyond the line by more than that tolerance plus 3 standard deviations of their
-    distance along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``);
-    the others are the wall's own noise (at grazing incidence, or a rare large error).
+    its ray: the laser saw through where the line claims a surface. ``opening`` marks the
+    hidden beams beyond the line by more than that tolerance plus 3 standard deviations of
+    their distance along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi
+    tan(incidence))^2``); the others are the wall's own noise (at grazing incidence, or a
+    rare large error). Beams in front of the line (occluders) and missing beams are
+    allowed here (occluders are left out of the extents by :func:`_occluded_extents`).
     """
     wr, wc, ws, wv = scan.beams()
     b0, b1 = scan.beam[first], scan.beam[last]
@@ -1155,6 +1190,61 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     return pos, new.cumsum() - 1, starts, size
 
 
+def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
+                      params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut the lines' extents at occluders (step 5); return (line, first, last) per piece.
+
+    An occluder of a line is a run of two or more neighbouring valid beams inside its
+    extent whose returns lie in front of it by more than the opening margin of
+    :func:`_seen_through` (``see_through_tolerance`` plus 3 standard deviations of the
+    distance along the ray, eq. 7). The extent's points are split at the occluders'
+    beams (which leave); pieces of at least ``min_points`` points are kept, each
+    pointing to its line's fit. Without occluders every line is one piece.
+    """
+    same = np.arange(first.size), first, last
+    wr, wc, ws, wv = scan.beams()
+    b0, b1 = scan.beam[first], scan.beam[last]
+    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
+    idx, _ = _gather(lo, hi)
+    line = np.arange(first.size).repeat(hi - lo + 1)
+    ok = wv[idx]
+    idx, line = idx[ok], line[ok]
+    rho, _, nx, ny = f.params[:, line]
+    r = wr[idx]
+    cos_in = wc[idx] * nx + ws[idx] * ny
+    with np.errstate(divide='ignore', invalid='ignore'):
+        front = rho / cos_in - r  # how far the return lies in front of the line
+        c2 = cos_in * cos_in
+        var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
+        hit = ((cos_in > 1e-9)
+               & (front > params.see_through_tolerance + 3.0 * np.sqrt(var))).nonzero()[0]
+    if hit.size < 2:
+        return same
+    fl, fb = line[hit], idx[hit]
+    pair = (fl[1:] == fl[:-1]) & (fb[1:] - fb[:-1] == 1)
+    if not pair.any():
+        return same
+    occ = np.zeros(hit.size, dtype=bool)
+    occ[1:] |= pair
+    occ[:-1] |= pair
+    size = int(max(b1.max(), scan.beam.max())) + 1
+    key_occ = fl[occ] * size + fb[occ]  # sorted (line-major, beams increasing)
+    pts, offs = _gather(first, last)
+    own = np.arange(first.size).repeat(offs[1:] - offs[:-1])
+    key = own * size + scan.beam[pts]
+    cut = np.searchsorted(key_occ, key)  # occluder beams of the line before each point
+    keep = (cut >= key_occ.size) | (key_occ[np.minimum(cut, key_occ.size - 1)] != key)
+    pts, own, cut = pts[keep], own[keep], cut[keep]
+    new = np.empty(pts.size, dtype=bool)
+    new[:1] = True
+    new[1:] = (own[1:] != own[:-1]) | (cut[1:] != cut[:-1])
+    starts = new.nonzero()[0]
+    count = np.diff(np.append(starts, pts.size))
+    big = count >= params.min_points
+    starts, count = starts[big], count[big]
+    return own[starts], pts[starts], pts[starts + count - 1]
+
+
 _MAX_CUTS = 8
 _INWARD = np.array([[1.0], [-1.0]])  # start moves forward along the line, end backward
 
@@ -1260,6 +1350,9 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
                                                (s, e, label, first0, last0), params)
     if not first.size:
         return []
+    col, first, last = _occluded_extents(scan, fit, first, last, params)
+    if col.size != fit.count.size or (col != np.arange(col.size)).any():
+        fit = _Fit(fit.params[:, col], fit.rmse[col], fit.count[col], fit.cov[col])
     return _build(scan, params, fit, first, last)
 
 
