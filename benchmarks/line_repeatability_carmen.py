@@ -22,9 +22,11 @@ return, as ``feature_metrics_carmen.py --direct``):
 * ``ICP + midpoint``: both: what is left is the extractor's own.
 
 It also prints the ICP corrections (median and 90th percentile of |dx|, |dy| in cm and
-|dtheta| in deg): the reference poses' error between consecutive scans, and the failures
-of the metric as defined in classes: no overlapping segment at all, or one off only in
-rho (> 5 cm), or off in alpha (> 2 deg).
+|dtheta| in deg): the reference poses' error between consecutive scans; the failures of
+the line metric as defined in classes: no overlapping segment at all, or one off only in
+rho (> 5 cm), or off in alpha (> 2 deg); and for the corners the share of opportunities
+whose nearest corner in the next scan is 10-50 cm away (moved) or farther / absent (not
+detected again).
 """
 
 import argparse
@@ -115,6 +117,19 @@ def line_matches(seg_k, pose_k, seg_n, scan_n, midpoint):
                      (~ok & ~none & ~rho_only).sum()])
 
 
+def corner_distances(c_k, pose_k, c_n, scan_n) -> np.ndarray:
+    """Return the distance of each corner of scan k in view of scan n to n's nearest [m]."""
+    if not len(c_k):
+        return np.zeros(0)
+    world = transform_points(pose_k, c_k)
+    world = world[in_view(scan_n, world, 0.1)]
+    if not len(c_n):
+        return np.full(len(world), np.inf)
+    other = transform_points(scan_n.pose, c_n)
+    dist = np.hypot(*(world[:, None] - other[None]).transpose(2, 0, 1))
+    return dist.min(axis=1, initial=np.inf)
+
+
 def main() -> None:
     """Print one table per log."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -158,8 +173,13 @@ def main() -> None:
                 corner_repeatability(score, corners[k], refined[k] if use_icp else scans[k].pose,
                                      corners[k + 1], scans[k + 1])
             tally[key] = score
+        near = [corner_distances(corners[k], scans[k].pose, corners[k + 1], scans[k + 1])
+                for k in range(len(scans) - 1)]
+        near = np.concatenate(near) if near else np.zeros(0)
         print(f'| {name} | minus_cosine corners ({tally["reference"].opportunities}) | '
-              f'{tally["reference"].fraction:.3f} | | {tally["ICP"].fraction:.3f} | | |')
+              f'{tally["reference"].fraction:.3f} | | {tally["ICP"].fraction:.3f} | | '
+              f'next corner 10-50 cm away: {np.mean((near > 0.1) & (near <= 0.5)):.3f}, '
+              f'none within 50 cm: {np.mean(near > 0.5):.3f} |')
         a = np.abs(corr)
         print(f'| {name} | ICP corrections of the reference, median (90 %) | '
               f'dx {100 * np.median(a[:, 0]):.1f} ({100 * np.percentile(a[:, 0], 90):.1f}) cm, '
