@@ -1,5 +1,6 @@
 """``landmark_nav evaluate-features`` on bags without ground-truth features (truth-free)."""
 
+import json
 import math
 from pathlib import Path
 
@@ -94,6 +95,13 @@ def test_tum_reference_and_bag_without_reference(tmp_path):
     res, notes = evaluate_truth_free(tmp_path / 'b', scans=4)
     assert res['repeat_pairs'] == 0 and any('no /ground_truth/odom' in n for n in notes)
     assert res['lines']['split_merge']['line_opportunities'] == 0
+    # No repeatability without poses: None (JSON null, 'n/a' in the tables), not NaN.
+    assert all(f['line_repeatability'] is None for f in res['lines'].values())
+    assert all(f['corner_repeatability'] is None for f in res['corners'].values())
+    text = run(tmp_path / 'b', json_out=tmp_path / 'out.json', scans=4)
+    assert text.count('n/a (no reference poses)') == len(res['lines']) + len(res['corners'])
+    assert json.loads((tmp_path / 'out.json').read_text())['lines']['alfa'][
+        'line_repeatability'] is None
     write_tum(tmp_path / 'ref.tum', poses)
     res, _ = evaluate_truth_free(tmp_path / 'b', reference=str(tmp_path / 'ref.tum'), scans=4)
     assert res['repeat_pairs'] == 5

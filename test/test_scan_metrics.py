@@ -3,8 +3,8 @@
 import math
 
 from landmark_nav.evaluation.scan_metrics import (approx_poly_segments, corner_repeatability,
-                                                  in_view, line_repeatability, ray_metrics,
-                                                  ray_ranges, Repeatability, ScanView)
+                                                  in_view, line_repeatability, MetricScan,
+                                                  ray_metrics, ray_ranges, Repeatability)
 from landmark_nav.geometry import inverse_transform_points
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 import numpy as np
@@ -162,11 +162,12 @@ ROOM_CORNERS = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], dtype=float)
 FOV = np.radians(np.arange(-120.0, 120.01, 1.0))
 
 
-def view_of(pose, segments_map) -> ScanView:
+def view_of(pose, segments_map) -> MetricScan:
     """Ray-cast the map segments from ``pose``: a noise-free scan over FOV."""
     segs = inverse_transform_points(pose, segments_map.reshape(-1, 2)).reshape(-1, 2, 2)
     r = ray_ranges(FOV, segs).min(axis=1)
-    return ScanView(np.asarray(pose, float), r, FOV, np.isfinite(r), np.isinf(r), 0.1, 30.0)
+    return MetricScan(r, FOV, np.isfinite(r), np.isinf(r), 0.1, 30.0,
+                      np.asarray(pose, float))
 
 
 def to_laser(pose, pts):
@@ -233,5 +234,5 @@ def test_short_lines_are_no_opportunity_and_occluded_places_are_not_in_view():
     np.testing.assert_array_equal(in_view(hidden, ROOM_CORNERS), [False, True, False, False])
     np.testing.assert_array_equal(in_view(view_b, ROOM_CORNERS), [False, True, True, False])
     # Out of range.
-    near = ScanView(B, view_b.ranges, FOV, view_b.valid, view_b.no_return, 0.1, 3.0)
+    near = MetricScan(view_b.ranges, FOV, view_b.valid, view_b.no_return, 0.1, 3.0, B)
     assert not in_view(near, ROOM_CORNERS).any()

@@ -234,30 +234,36 @@ def approx_poly_segments(clusters: Sequence, epsilon: float = 0.05,
 
 # ---------------------------------------------------------------------------- repeatability
 @dataclass(frozen=True)
-class ScanView:
-    """What one scan saw, for deciding whether a place is in its view.
+class MetricScan:
+    """One scan for the truth-free metrics, and what it saw for :func:`in_view`.
 
     Attributes:
-        pose: (3,) laser pose in the map frame (reference pose composed with the mount).
         ranges: (N,) ranges [m].
         angles: (N,) beam angles [rad], evenly spaced.
         valid: (N,) beams with a return in [range_min, range_max].
-        no_return: (N,) beams without a return.
+        no_return: (N,) beams without a return (REP 117 +inf).
         range_min: Closest valid range [m].
         range_max: Farthest valid range [m].
+        pose: (3,) laser pose in the map frame (reference pose composed with the mount),
+            or None without a reference (no repeatability).
 
     """
 
-    pose: np.ndarray
     ranges: np.ndarray
     angles: np.ndarray
     valid: np.ndarray
     no_return: np.ndarray
     range_min: float
     range_max: float
+    pose: Optional[np.ndarray] = None
+
+    @property
+    def angle_increment(self) -> float:
+        """Beam spacing [rad]."""
+        return float(self.angles[1] - self.angles[0]) if len(self.angles) > 1 else 0.0
 
 
-def in_view(view: ScanView, points_map: np.ndarray, margin: float = 0.1) -> np.ndarray:
+def in_view(view: MetricScan, points_map: np.ndarray, margin: float = 0.1) -> np.ndarray:
     """Return (M,) True for map points that the scan ``view`` could see.
 
     A point is in view when its bearing lies inside the scan's field of view (half a beam
@@ -265,7 +271,12 @@ def in_view(view: ScanView, points_map: np.ndarray, margin: float = 0.1) -> np.n
     beam nearest to its bearing is not occluded in front of it: that beam returned at least
     ``distance - margin`` away, or returned nothing (no return: nothing in the way). Beams
     with an error reading decide nothing (not in view).
+
+    Raises:
+        ValueError: ``view`` has no pose.
     """
+    if view.pose is None:
+        raise ValueError("in_view needs the scan's pose (MetricScan.pose is None)")
     pts = inverse_transform_points(view.pose, np.asarray(points_map, dtype=float)
                                    ).reshape(-1, 2)
     n = len(view.angles)
@@ -297,7 +308,7 @@ class Repeatability:
 
 
 def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.ndarray,
-                       segments_next: np.ndarray, view_next: ScanView,
+                       segments_next: np.ndarray, view_next: MetricScan,
                        min_length: float = 1.0, max_drho: float = 0.05,
                        max_dalpha: float = math.radians(2.0), margin: float = 0.1) -> None:
     """Add the line re-detections from scan k to scan k+1 to ``score``.
@@ -339,7 +350,7 @@ def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.
 
 
 def corner_repeatability(score: Repeatability, corners_k: np.ndarray, pose_k: np.ndarray,
-                         corners_next: np.ndarray, view_next: ScanView,
+                         corners_next: np.ndarray, view_next: MetricScan,
                          max_distance: float = 0.1, margin: float = 0.1) -> None:
     """Add the corner re-detections from scan k to scan k+1 to ``score``.
 
@@ -364,40 +375,6 @@ def corner_repeatability(score: Repeatability, corners_k: np.ndarray, pose_k: np
 # ---------------------------------------------------------------------------- runner
 BASELINE = 'approxPolyDP'
 BASELINE_MIN = 'approxPolyDP_min_size'
-
-
-@dataclass(frozen=True)
-class MetricScan:
-    """One scan for the truth-free metrics.
-
-    Attributes:
-        ranges: (N,) ranges [m].
-        angles: (N,) beam angles [rad], evenly spaced.
-        valid: (N,) beams with a return in [range_min, range_max].
-        no_return: (N,) beams without a return (REP 117 +inf).
-        range_min: Closest valid range [m].
-        range_max: Farthest valid range [m].
-        pose: (3,) laser pose in the map frame from the reference, or None.
-
-    """
-
-    ranges: np.ndarray
-    angles: np.ndarray
-    valid: np.ndarray
-    no_return: np.ndarray
-    range_min: float
-    range_max: float
-    pose: Optional[np.ndarray] = None
-
-    @property
-    def angle_increment(self) -> float:
-        """Beam spacing [rad]."""
-        return float(self.angles[1] - self.angles[0]) if len(self.angles) > 1 else 0.0
-
-    def view(self) -> ScanView:
-        """Return the scan as a :class:`ScanView` (needs ``pose``)."""
-        return ScanView(np.asarray(self.pose, dtype=float), self.ranges, self.angles,
-                        self.valid, self.no_return, self.range_min, self.range_max)
 
 
 def sample_scans(n: int, count: int, seed: int) -> np.ndarray:
@@ -501,7 +478,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
 
     Returns:
         {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r', 'repeat_pairs',
-        'lines': {method: figures}, 'corners': {method: figures}}.
+        'lines': {method: figures}, 'corners': {method: figures}}; without a pair of
+        consecutive scans with poses (no reference) the repeatability figures are None.
 
     """
     from landmark_nav.laser.corners import CornerParams, detect_corners
@@ -555,26 +533,38 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                                      scan.no_return), k in sample)
         if prev is not None and prev[0].pose is not None and scan.pose is not None:
             pairs += 1
-            view = scan.view()
             for m, tally in tallies.items():
-                line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], view)
+                line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], scan)
             for m in corner_methods:
-                corner_repeatability(c_repeat[m], prev[2][m], prev[0].pose, corners[m], view)
+                corner_repeatability(c_repeat[m], prev[2][m], prev[0].pose, corners[m], scan)
         prev = (scan, segs, corners)
     n = len(scans)
+    lines = {m: t.figures(n) for m, t in tallies.items()}
+    if not pairs:  # no reference poses: no repeatability (None, not NaN: JSON null)
+        for f in lines.values():
+            f['line_repeatability'] = None
     return {
         'scans': n, 'ple_scans': len(sample), 'sample': sorted(sample), 'seed': seed,
         'sigma_r': sigma_r, 'extractor_sigma_r': ext_sigma, 'repeat_pairs': pairs,
         'false_surface_margin_m': max(3.0 * sigma_r, FALSE_SURFACE_MIN),
-        'lines': {m: t.figures(n) for m, t in tallies.items()},
+        'lines': lines,
         'corners': {m: {
             'corner_opportunities': c_repeat[m].opportunities,
             'corner_redetected': c_repeat[m].redetected,
-            'corner_repeatability': c_repeat[m].fraction,
+            'corner_repeatability': c_repeat[m].fraction if pairs else None,
             'corners_per_scan': c_count[m] / n if n else float('nan'),
             'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None,
             'mean_ms_per_scan': 1e3 * float(np.mean(c_times[m])) if c_times[m] else None}
             for m in corner_methods}}
+
+
+def _repeat_text(figures: dict, kind: str) -> str:
+    """Render the ``kind`` ('line' or 'corner') repeatability of one method's figures."""
+    fraction = figures[f'{kind}_repeatability']
+    if fraction is None:
+        return 'n/a (no reference poses)'
+    return (f'{fraction:.3f} ({figures[f"{kind}_redetected"]}/'
+            f'{figures[f"{kind}_opportunities"]})')
 
 
 def format_scan_metrics(result: dict, title: str = '') -> str:
@@ -597,13 +587,11 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
             f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]} '
             f'({f["false_surface_scans_over_30cm"]})}} | '
             f'{100 * f["fit_rms_m"]:.2f} cm '
-            f'({f["fit_beams"]}) | {f["line_repeatability"]:.3f} '
-            f'({f["line_redetected"]}/{f["line_opportunities"]}) | '
+            f'({f["fit_beams"]}) | {_repeat_text(f, "line")} | '
             f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
     out += ['', '| corner method | corners re-detected within 10 cm | corners/scan | '
             'ms/scan median |', '| --- | --- | --- | --- |']
     for m, f in result['corners'].items():
-        out.append(f'| {m} | {f["corner_repeatability"]:.3f} ({f["corner_redetected"]}/'
-                   f'{f["corner_opportunities"]}) | {f["corners_per_scan"]:.2f} | '
+        out.append(f'| {m} | {_repeat_text(f, "corner")} | {f["corners_per_scan"]:.2f} | '
                    f'{f["median_ms_per_scan"]:.2f} |')
     return '\n'.join(out)

@@ -31,9 +31,12 @@ vectorised batch (fits from prefix sums of point moments):
    for a linearised merge test, and their points become free for step 4.
 3. Merge: two consecutive pieces are merged when they are neighbours (same cluster, or
    clusters whose facing ends are at most ``merge_gap`` or ``merge_gap_angle`` apart, e.g.
-   a wall cut by a dropout, a spurious return or a table leg in front) and their (rho,
-   alpha) agree in a chi-square test, ``d^2 = dp^T (C1 + C2)^-1 dp <= merge_chi2`` with
-   the covariances of the two independent fits. Chains of passing pairs are refitted on
+   a wall cut by a dropout or a spurious return) and their (rho, alpha) agree in a
+   chi-square test, ``d^2 = dp^T (C1 + C2)^-1 dp <= merge_chi2`` with the covariances of
+   the two independent fits, each scaled by its a-posteriori variance factor where its
+   residuals reject the stated noise (:func:`_variance_factor`: a SICK in cm mode or a
+   rough wall scatters more than ``sigma_r``, and pieces of one wall would otherwise stay
+   apart). Chains of passing pairs are refitted on
    the union of their points (points between them are not used) and kept only if every
    member also passes the test against the merged line and its end points are within
    the split tolerance of it.
@@ -44,17 +47,23 @@ vectorised batch (fits from prefix sums of point moments):
    ``see_through`` (default ``max(3 sigma_r, 5 cm)``) beyond it along the ray, i.e. a beam
    the laser saw through it. The beams checked are all beams between a line's first and
    last supporting beam, also those of no cluster (dropped small clusters, read from the
-   whole scan of :func:`~landmark_nav.laser.segmentation.segment_scan`); beams in front
-   (occluders, e.g. a table leg) and missing returns may be bridged. A line hiding an
+   whole scan of :func:`~landmark_nav.laser.segmentation.segment_scan`). A line hiding an
    *opening* (a beam beyond it by more than ``see_through`` plus 3 standard deviations
    of its distance along the ray, eq. 7) is cut there and both sides are refitted, until
-   no line hides one;
-   thus merging across a cluster break and growth over neighbouring beams stand only
-   over beams that are occluded or missing. A line hiding only its own noise (a wall seen
-   at grazing incidence, where bearing noise puts returns 5 cm or more beyond it) is cut
-   likewise when that leaves two or more lines of ``min_points`` and ``min_length``;
-   otherwise it keeps its fit on all its points, and its extent shrinks to its run of
-   support between those beams with the most points. See :func:`_cut_seen_through`.
+   no line hides one; thus merging across a cluster break and growth over neighbouring
+   beams stand only over beams that are occluded from the front or missing. A line
+   hiding only its own noise (a wall seen at grazing incidence, where bearing noise puts
+   returns 5 cm or more beyond it) is cut likewise when that leaves two or more lines of
+   ``min_points`` and ``min_length``; otherwise it keeps its fit on all its points, and
+   its extent shrinks to its run of support between those beams with the most points.
+   See :func:`_cut_seen_through`. A line keeps its fit across an *occluder* (two or more
+   neighbouring beams in front of it by more than the opening margin: a table leg, a
+   person), but not its extent: it is reported as one segment per side of at least
+   ``min_points`` points, each with the line's (rho, alpha), covariance and point count,
+   since a segment along the occluder's rays would claim a surface where the laser saw
+   something else (the PLE ray metric scores such beams with their full distance to the
+   line). A lone beam in front (one return cannot tell an object from a spurious return)
+   stays inside. See :func:`_occluded_extents`.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -484,7 +493,7 @@ def _gather(starts: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarra
     cnt = ends - starts + 1
     offs = np.zeros(cnt.size + 1, dtype=np.int64)
     np.cumsum(cnt, out=offs[1:])
-    idx = np.arange(offs[-1], dtype=np.int64) - np.repeat(offs[:-1] - starts, cnt)
+    idx = np.arange(offs[-1], dtype=np.int64) - (offs[:-1] - starts).repeat(cnt)
     return idx, offs
 
 
@@ -515,8 +524,14 @@ def split_pieces(xy: np.ndarray, offsets: np.ndarray, tolerance) -> np.ndarray:
 
 def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
            tol: np.ndarray) -> np.ndarray:
-    """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points."""
-    pxy = np.stack([px, py])
+    """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points.
+
+    All pieces of one recursion level in one batch. The farthest point from a chord is
+    found on the unnormalised cross product ``|(q - p0) x (p1 - p0)|`` (the distance of
+    eq. 4 times the chord length, constant within a piece), compared with the tolerance
+    times the chord length: no chord equation is formed.
+    """
+    pxy = np.vstack((px, py))
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
     while s.size:
@@ -528,25 +543,22 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             if not s.size:
                 break
         cnt = e - s - 1  # interior points of every piece
-        offs = np.cumsum(cnt) - cnt
-        pos = np.arange(offs[-1] + cnt[-1])
-        idx = np.repeat(s + 1 - offs, cnt) + pos
-        # eq. 4: the chord A x + B y + C = 0 through the first and last point, normalised
-        p0, p1 = pxy[:, s], pxy[:, e]
-        chord = np.empty((3, s.size))
-        np.subtract(p1[1], p0[1], out=chord[0])
-        np.subtract(p0[0], p1[0], out=chord[1])
-        norm = np.hypot(chord[0], chord[1])
-        norm[norm == 0.0] = 1.0
-        chord[:2] /= norm
-        np.negative(chord[0] * p0[0] + chord[1] * p0[1], out=chord[2])
-        a_c, b_c, c_c = np.repeat(chord, cnt, axis=1)
-        q = pxy[:, idx]
-        dist = np.abs(a_c * q[0] + b_c * q[1] + c_c)
-        dmax = np.maximum.reduceat(dist, offs)
-        hit = np.where(dist == np.repeat(dmax, cnt), pos, pos.size)
-        k = idx[np.minimum.reduceat(hit, offs)]  # the first farthest point
-        split = dmax > tol[k]
+        offs = cnt.cumsum()
+        total = int(offs[-1])
+        offs -= cnt
+        idx = (s + 1 - offs).repeat(cnt)
+        idx += np.arange(total)
+        p0 = pxy[:, s]
+        chord = pxy[:, e] - p0
+        rel = pxy[:, idx] - p0.repeat(cnt, axis=1)
+        chord_p = chord.repeat(cnt, axis=1)
+        cross = rel[0] * chord_p[1]
+        cross -= rel[1] * chord_p[0]
+        np.abs(cross, out=cross)  # eq. 4 distance times the chord length
+        cmax = np.maximum.reduceat(cross, offs)
+        at = (cross == cmax.repeat(cnt)).nonzero()[0]
+        k = idx[at[np.searchsorted(at, offs)]]  # the first farthest point
+        split = cmax > tol[k] * np.hypot(chord[0], chord[1])
         if not split.all():
             done_s.append(s[~split])
             done_e.append(e[~split])
@@ -722,7 +734,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     shared = (whole if whole is not None and whole.valid is not None
               and all(c.scan is whole for c in cl) else None)
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.repeat(np.arange(sizes.size), sizes), offsets, shared)
+                 np.arange(sizes.size).repeat(sizes), offsets, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -749,7 +761,7 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     if s.size < 2:
         return s, e
     o = s[1:] - e[:-1]
-    adj = np.flatnonzero((o >= 0) & (o <= 1) & (scan.cluster[s[1:]] == scan.cluster[e[:-1]]))
+    adj = ((o >= 0) & (o <= 1) & (scan.cluster[s[1:]] == scan.cluster[e[:-1]])).nonzero()[0]
     if not adj.size:
         return s, e
     s, e = s.copy(), e.copy()
@@ -805,7 +817,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     lead, trail = np.cumprod((z > gate).reshape(s.size, 2, reach), axis=2).sum(axis=2).T
     ns, ne = s + lead, e - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
-    shared = np.flatnonzero((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:]))
+    shared = ((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:])).nonzero()[0]
     if shared.size:
         to_prev = z[shared, reach] <= z[shared + 1, 0]
         ns[shared + 1] = np.where(to_prev, ne[shared] + 1, ns[shared + 1])
@@ -860,6 +872,30 @@ def _chi2(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarr
     return np.where((det > 0.0) & (d2 > -np.inf) & ~np.isnan(d2), d2, np.inf)
 
 
+_Z95 = 1.6448536269514722  # standard normal 95 % quantile
+
+
+def _variance_factor(sums: np.ndarray, f: _Fit) -> np.ndarray:
+    """Return (G,) a-posteriori variance factors of fits whose residuals reject eq. 7.
+
+    The residual sum of squares of a fit of n points, divided by the mean variance of
+    the points' distances to the line (eq. 7 on the normal), is chi-square with n - 2
+    degrees of freedom when the stated noise holds. Where it exceeds the 95 % quantile
+    (Wilson-Hilferty approximation) the points are noisier than stated (e.g. a SICK in cm
+    mode, a rough or dark wall) and the factor is the ratio of the residual variance to
+    the stated one; elsewhere 1.
+    """
+    n = f.count
+    nx, ny = f.nx, f.ny
+    var = (nx * nx * sums[6] + ny * ny * sums[12] + 2.0 * nx * ny * sums[18]) / n
+    dof = np.maximum(n - 2.0, 1.0)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        stat = n * f.rmse * f.rmse / var  # RSS / sigma^2
+        h = 2.0 / (9.0 * dof)
+        q95 = dof * (1.0 - h + _Z95 * np.sqrt(h)) ** 3
+        return np.where(stat > q95, stat / dof, 1.0)
+
+
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit, np.ndarray]:
     """Merge collinear neighbours (step 3); return sums (24, L), first, last, fits, labels.
@@ -876,6 +912,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     f = _solve(sums, scan.origin)
     if s.size == 1:
         return sums, s, e, f, np.zeros(1, dtype=np.int64)
+    f = _Fit(f.params, f.rmse, f.count, f.cov * _variance_factor(sums, f)[:, None, None])
     gap = scan.cols[:, s[1:]] - scan.cols[:, e[:-1]]
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
             | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
@@ -894,11 +931,11 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         new = np.empty(s.size, dtype=bool)
         new[0] = True
         np.logical_not(join, out=new[1:])
-        g_start = np.flatnonzero(new)
+        g_start = new.nonzero()[0]
         g_end = np.empty_like(g_start)
         np.subtract(g_start[1:], 1, out=g_end[:-1])
         g_end[-1] = s.size - 1
-        label = np.cumsum(new) - 1
+        label = new.cumsum() - 1
         g_sums = np.add.reduceat(sums, g_start, axis=1)
         g = _solve(g_sums[:6], scan.origin, rmse=False)
         # Every member must agree with its merged line: chi-square (the merged line taken
@@ -915,7 +952,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         # The worst member of a failing chain leaves it; the rest are merged again (a
         # piece off its wall, e.g. a short noisy fit between two pieces of the wall, no
         # longer keeps the wall in pieces).
-        out = np.flatnonzero((badness == worst[label]) & (worst > 1.0)[label])
+        out = ((badness == worst[label]) & (worst > 1.0)[label]).nonzero()[0]
         join[out[out < s.size - 1]] = False
         join[out[out > 0] - 1] = False
     return sums, s, e, f, np.arange(s.size)
@@ -942,27 +979,27 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     hi[:-1] = first
     hi[-1] = n_pts
     size = hi - lo
-    gaps = np.flatnonzero(size > 0)
+    gaps = (size > 0).nonzero()[0]
     if not gaps.size or not math.isfinite(gate):
         return sums, first, last, False
     size_g = size[gaps]
-    starts = np.cumsum(size_g) - size_g
+    starts = size_g.cumsum() - size_g
     pos = np.arange(starts[-1] + size_g[-1])
-    within = pos - np.repeat(starts, size_g)  # position in the gap
-    idx = within + np.repeat(lo[gaps], size_g)
+    within = pos - starts.repeat(size_g)  # position in the gap
+    idx = within + lo[gaps].repeat(size_g)
     # row 0: the line before the gap growing forward, row 1: the line after it, backward
     owner = np.empty((2, gaps.size), dtype=np.int64)
     np.subtract(gaps, 1, out=owner[0])
     owner[1] = gaps
     has = (owner >= 0) & (owner < n_lines)
-    rho, _, nx, ny = f.params[:, np.repeat(np.clip(owner, 0, n_lines - 1), size_g, axis=1)]
+    rho, _, nx, ny = f.params[:, np.clip(owner, 0, n_lines - 1).repeat(size_g, axis=1)]
     x, y, rng, cp, sp, tol = scan.cols[:_PHI, idx]
     ox, oy = scan.origin
     d = (x + ox) * nx + (y + oy) * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
     var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
-    ok = np.repeat(has, size_g, axis=1) & (d * d <= gate * gate * var) & (np.abs(d) <= tol)
+    ok = has.repeat(size_g, axis=1) & (d * d <= gate * gate * var) & (np.abs(d) <= tol)
     # Bearing steps: step[i] is the step from point i - 1 to i (True at both scan ends);
     # row 0 steps onto each point, row 1 off it.
     phi = scan.cols[_PHI]
@@ -1004,17 +1041,18 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
 
     A beam between the first and the last supporting beam of a line (in beam order) is
     hidden when its return lies more than ``see_through_tolerance`` beyond the line along
-    its ray: the laser saw through where the line claims a surface. Beams in front of the
-    line (occluders) and missing beams are allowed. ``opening`` marks the hidden beams
-    beyond the line by more than that tolerance plus 3 standard deviations of their
-    distance along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``);
-    the others are the wall's own noise (at grazing incidence, or a rare large error).
+    its ray: the laser saw through where the line claims a surface. ``opening`` marks the
+    hidden beams beyond the line by more than that tolerance plus 3 standard deviations of
+    their distance along the ray (eq. 7 on the ray: ``sigma_r^2 + (r sigma_phi
+    tan(incidence))^2``); the others are the wall's own noise (at grazing incidence, or a
+    rare large error). Beams in front of the line (occluders) and missing beams are
+    allowed here (occluders are left out of the extents by :func:`_occluded_extents`).
     """
     wr, wc, ws, wv = scan.beams()
     b0, b1 = scan.beam[first], scan.beam[last]
     lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
     idx, _ = _gather(lo, hi)
-    line = np.repeat(np.arange(first.size), hi - lo + 1)
+    line = np.arange(first.size).repeat(hi - lo + 1)
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
     rho, _, nx, ny = f.params[:, line]
@@ -1056,12 +1094,13 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
     s, e, label, first0, last0 = pieces
     owner = np.full(scan.x.size, -1, dtype=np.int64)
     idx, _ = _gather(s, e)
-    owner[idx] = np.repeat(label, e - s + 1)
+    owner[idx] = label.repeat(e - s + 1)
     for lo, hi in ((first, first0 - 1), (last0 + 1, last)):
         idx, _ = _gather(lo, hi)
-        owner[idx] = np.repeat(np.arange(first.size), np.maximum(hi - lo + 1, 0))
+        owner[idx] = np.arange(first.size).repeat(np.maximum(hi - lo + 1, 0))
     rounds = 0
-    opening |= _splits_in_two(scan, owner, line, beam, params)
+    two, runs = _splits_in_two(scan, owner, line, beam, params)
+    opening |= two
     while opening.any():
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
             ok = np.ones(first.size, dtype=bool)
@@ -1075,9 +1114,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
             f = _solve(sums, scan.origin)
             sel = ok[line]
             line, beam, opening = relabel[line[sel]], beam[sel], opening[sel]
+            runs = None
             break
         rounds += 1
-        pos, run, starts, size = _support_runs(scan, owner, np.unique(beam[opening]))
+        pos, run, starts, size = _support_runs(scan, owner, beam[opening])
         big = size >= params.min_points
         owner[:] = -1
         kept = big[run]
@@ -1089,9 +1129,11 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
-        opening |= _splits_in_two(scan, owner, line, beam, params)
+        two, runs = _splits_in_two(scan, owner, line, beam, params)
+        opening |= two
     if line.size:  # only noise: each line's extent becomes its largest run between them
-        pos, run, starts, size = _support_runs(scan, owner, np.unique(beam))
+        pos, run, starts, size = (runs if runs is not None
+                                  else _support_runs(scan, owner, beam))
         own = owner[pos[starts]]
         best = np.lexsort((-size, own))  # per line, the run of most points first
         head = np.ones(best.size, dtype=bool)
@@ -1104,43 +1146,103 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
-                   params: LineParams) -> np.ndarray:
+                   params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
     """Mark the hidden beams (all of a line's) that cut it into two or more lines.
 
     A piece between hidden beams counts as a line when it has ``min_points`` supporting
-    points and spans ``min_length``.
+    points and spans ``min_length``. Also returns the :func:`_support_runs` at all the
+    hidden beams (None without hidden beams), which the noise-only case reuses.
     """
     if not line.size:
-        return np.zeros(0, dtype=bool)
-    pos, _, starts, size = _support_runs(scan, owner, np.unique(beam))
+        return np.zeros(0, dtype=bool), None
+    runs = _support_runs(scan, owner, beam)
+    pos, _, starts, size = runs
     a, b = pos[starts], pos[starts + size - 1]
     span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
     good = (size >= params.min_points) & (span >= params.min_length)
     n_good = np.bincount(owner[a][good], minlength=int(owner.max()) + 1)
-    return n_good[line] >= 2
+    return n_good[line] >= 2, runs
 
 
 def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Split the lines' support at the hidden beams (sorted).
+    """Split the lines' support at the hidden beams (beam indices, repeats allowed).
 
     Returns the supporting points left (the hidden ones leave), the run of each, and the
     runs' starts (into the points) and sizes. Runs are consecutive support of one line
     with no hidden beam between; a hidden beam lies inside the extent of one line only.
     """
-    pos = np.flatnonzero(owner >= 0)
+    pos = (owner >= 0).nonzero()[0]
     bpos = scan.beam[pos]
-    keep = ~np.isin(bpos, hidden)
+    mark = np.zeros(max(int(bpos.max(initial=0)), int(hidden.max(initial=0))) + 1,
+                    dtype=np.int8)
+    mark[hidden] = 1
+    keep = mark[bpos] == 0
     pos, bpos = pos[keep], bpos[keep]
-    cut = np.searchsorted(hidden, bpos)
+    cut = mark.cumsum()[bpos]  # hidden beams before each point
     own = owner[pos]
     new = np.empty(pos.size, dtype=bool)
     new[:1] = True
     np.not_equal(own[1:], own[:-1], out=new[1:])
     new[1:] |= cut[1:] != cut[:-1]
-    starts = np.flatnonzero(new)
+    starts = new.nonzero()[0]
     size = np.diff(np.append(starts, pos.size))
-    return pos, np.cumsum(new) - 1, starts, size
+    return pos, new.cumsum() - 1, starts, size
+
+
+def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
+                      params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut the lines' extents at occluders (step 5); return (line, first, last) per piece.
+
+    An occluder of a line is a run of two or more neighbouring valid beams inside its
+    extent whose returns lie in front of it by more than the opening margin of
+    :func:`_seen_through` (``see_through_tolerance`` plus 3 standard deviations of the
+    distance along the ray, eq. 7). The extent's points are split at the occluders'
+    beams (which leave); pieces of at least ``min_points`` points are kept, each
+    pointing to its line's fit. Without occluders every line is one piece.
+    """
+    same = np.arange(first.size), first, last
+    wr, wc, ws, wv = scan.beams()
+    b0, b1 = scan.beam[first], scan.beam[last]
+    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
+    idx, _ = _gather(lo, hi)
+    line = np.arange(first.size).repeat(hi - lo + 1)
+    ok = wv[idx]
+    idx, line = idx[ok], line[ok]
+    rho, _, nx, ny = f.params[:, line]
+    r = wr[idx]
+    cos_in = wc[idx] * nx + ws[idx] * ny
+    with np.errstate(divide='ignore', invalid='ignore'):
+        front = rho / cos_in - r  # how far the return lies in front of the line
+        c2 = cos_in * cos_in
+        var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
+        hit = ((cos_in > 1e-9)
+               & (front > params.see_through_tolerance + 3.0 * np.sqrt(var))).nonzero()[0]
+    if hit.size < 2:
+        return same
+    fl, fb = line[hit], idx[hit]
+    pair = (fl[1:] == fl[:-1]) & (fb[1:] - fb[:-1] == 1)
+    if not pair.any():
+        return same
+    occ = np.zeros(hit.size, dtype=bool)
+    occ[1:] |= pair
+    occ[:-1] |= pair
+    size = int(max(b1.max(), scan.beam.max())) + 1
+    key_occ = fl[occ] * size + fb[occ]  # sorted (line-major, beams increasing)
+    pts, offs = _gather(first, last)
+    own = np.arange(first.size).repeat(offs[1:] - offs[:-1])
+    key = own * size + scan.beam[pts]
+    cut = np.searchsorted(key_occ, key)  # occluder beams of the line before each point
+    keep = (cut >= key_occ.size) | (key_occ[np.minimum(cut, key_occ.size - 1)] != key)
+    pts, own, cut = pts[keep], own[keep], cut[keep]
+    new = np.empty(pts.size, dtype=bool)
+    new[:1] = True
+    new[1:] = (own[1:] != own[:-1]) | (cut[1:] != cut[:-1])
+    starts = new.nonzero()[0]
+    count = np.diff(np.append(starts, pts.size))
+    big = count >= params.min_points
+    starts, count = starts[big], count[big]
+    return own[starts], pts[starts], pts[starts + count - 1]
 
 
 _MAX_CUTS = 8
@@ -1179,9 +1281,9 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
         proj[..., 1] = np.where(inner, t * sp, proj[..., 1])
     length = np.hypot(proj[1, :, 0] - proj[0, :, 0], proj[1, :, 1] - proj[0, :, 1])
     cov = f.cov
-    ok = np.flatnonzero((f.count >= params.min_points) & (length >= params.min_length)
-                        & (f.rmse <= params.threshold)
-                        & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1]))
+    ok = ((f.count >= params.min_points) & (length >= params.min_length)
+          & (f.rmse <= params.threshold)
+          & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1])).nonzero()[0]
     rho, alpha, rmse = rho[ok].tolist(), alpha[ok].tolist(), f.rmse[ok].tolist()
     count = f.count[ok].astype(np.int64).tolist()
     b0, b1 = scan.beam[ends[:, ok]].tolist()
@@ -1214,7 +1316,7 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
     if scan is None:
         return []
     offsets = scan.offsets
-    big = np.flatnonzero(offsets[1:] - offsets[:-1] >= params.min_points)
+    big = (offsets[1:] - offsets[:-1] >= params.min_points).nonzero()[0]
     if not big.size:
         return []
     cols = scan.cols
@@ -1248,6 +1350,9 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
                                                (s, e, label, first0, last0), params)
     if not first.size:
         return []
+    col, first, last = _occluded_extents(scan, fit, first, last, params)
+    if col.size != fit.count.size or (col != np.arange(col.size)).any():
+        fit = _Fit(fit.params[:, col], fit.rmse[col], fit.count[col], fit.cov[col])
     return _build(scan, params, fit, first, last)
 
 

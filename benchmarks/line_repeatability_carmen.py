@@ -1,0 +1,192 @@
+"""Why lines and corners are not re-detected between consecutive Carmen scans.
+
+Run from the repository root (needs ``../shared/data/carmen``)::
+
+    python benchmarks/line_repeatability_carmen.py [LOG ...]
+
+Repeatability as ``landmark_nav evaluate-features`` scores it (lines >= 1 m re-detected
+within 5 cm in rho and 2 deg in alpha, rho in the next scan's laser frame, overlapping
+extents; corners within 10 cm; the places in view of the next scan) mixes three things:
+the extractor, the reference poses (the Radish "corrected" poses) and, for lines, the lever
+arm of rho (a line far from its foot point, e.g. a wall at grazing incidence, moves rho by
+its angle difference times metres). This script separates them on every pair of
+consecutive scans (node defaults; the FLASER pose as laser pose, readings >= 40 m no
+return, as ``feature_metrics_carmen.py --direct``):
+
+* ``reference``: the metric as defined;
+* ``midpoint``: the line's distance compared at the midpoint of the scan-k segment (the
+  midpoint's distance to the partner's line) instead of rho: no lever arm;
+* ``ICP``: the relative pose of the pair refined by point-to-line ICP of the two scans
+  (returns within 15 m, five-neighbour normals, pairs within 15 cm, 15 Gauss-Newton steps;
+  pairs with fewer than 20 matches keep the reference) instead of the reference;
+* ``ICP + midpoint``: both: what is left is the extractor's own.
+
+It also prints the ICP corrections (median and 90th percentile of |dx|, |dy| in cm and
+|dtheta| in deg): the reference poses' error between consecutive scans; the failures of
+the line metric as defined in classes: no overlapping segment at all, or one off only in
+rho (> 5 cm), or off in alpha (> 2 deg); and for the corners the share of opportunities
+whose nearest corner in the next scan is 10-50 cm away (moved) or farther / absent (not
+detected again).
+"""
+
+import argparse
+import math
+from pathlib import Path
+import sys
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from feature_metrics_carmen import CARMEN, carmen_metric_scans, LOGS  # noqa: E402
+from landmark_nav.evaluation.features import normal_form  # noqa: E402
+from landmark_nav.evaluation.scan_metrics import (corner_repeatability, in_view,  # noqa: E402
+                                                  Repeatability, segments_of)
+from landmark_nav.geometry import (compose, inverse_transform_points, relative,  # noqa: E402
+                                   transform_points, wrap_angle)
+from landmark_nav.laser.corners import CornerParams, detect_corners  # noqa: E402
+from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
+from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
+
+MAX_DRHO, MAX_DALPHA = 0.05, math.radians(2.0)
+
+
+def icp_correction(scan_k, scan_n) -> np.ndarray:
+    """Return the pose (3,) that moves scan k's points, placed by the reference, onto scan n's."""
+    def points(s):
+        m = s.valid & (s.ranges < 15.0)
+        return np.column_stack([s.ranges[m] * np.cos(s.angles[m]),
+                                s.ranges[m] * np.sin(s.angles[m])])
+    p = inverse_transform_points(scan_n.pose, transform_points(scan_k.pose, points(scan_k)))
+    q = points(scan_n)
+    if len(p) < 20 or len(q) < 20:
+        return np.zeros(3)
+    tree = cKDTree(q)
+    _, nb = tree.query(q, k=5)
+    nbh = q[nb] - q[nb].mean(axis=1, keepdims=True)
+    normals = np.linalg.eigh(np.einsum('kni,knj->kij', nbh, nbh))[1][:, :, 0]
+    t = np.zeros(3)
+    for _ in range(15):
+        c, s = math.cos(t[2]), math.sin(t[2])
+        pt = p @ np.array([[c, s], [-s, c]]) + t[:2]
+        dist, j = tree.query(pt)
+        m = dist < 0.15
+        if m.sum() < 20:
+            return np.zeros(3)
+        n = normals[j[m]]
+        r = np.einsum('ij,ij->i', pt[m] - q[j[m]], n)
+        jac = np.column_stack([n, -pt[m, 1] * n[:, 0] + pt[m, 0] * n[:, 1]])
+        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+        t += step
+        if np.abs(step).max() < 1e-5:
+            break
+    return t
+
+
+def line_matches(seg_k, pose_k, seg_n, scan_n, midpoint):
+    """Return (opportunities, re-detected, none, rho only, alpha) of one pair."""
+    seg_k = seg_k[np.hypot(*(seg_k[:, 1] - seg_k[:, 0]).T) >= 1.0]
+    if not len(seg_k):
+        return np.zeros(5, dtype=int)
+    world = transform_points(pose_k, seg_k.reshape(-1, 2)).reshape(-1, 2, 2)
+    look = in_view(scan_n, world.mean(axis=1), 0.1)
+    if not look.any():
+        return np.zeros(5, dtype=int)
+    mine = inverse_transform_points(scan_n.pose, world[look].reshape(-1, 2)).reshape(-1, 2, 2)
+    if not len(seg_n):
+        return np.array([look.sum(), 0, look.sum(), 0, 0])
+    f_k, f_n = normal_form(mine[:, 0], mine[:, 1]), normal_form(seg_n[:, 0], seg_n[:, 1])
+    da = np.abs(wrap_angle(f_k[:, None, 1] - f_n[None, :, 1]))
+    if midpoint:
+        mid = mine.mean(axis=1)
+        dr = np.abs(mid[:, None, 0] * np.cos(f_n[None, :, 1])
+                    + mid[:, None, 1] * np.sin(f_n[None, :, 1]) - f_n[None, :, 0])
+    else:
+        dr = np.abs(f_k[:, None, 0] - f_n[None, :, 0])
+    d = mine[:, 1] - mine[:, 0]
+    length2 = np.einsum('ij,ij->i', d, d)[:, None]
+    base = np.einsum('aj,aj->a', mine[:, 0], d)[:, None]
+    t0 = (np.einsum('bj,aj->ab', seg_n[:, 0], d) - base) / length2
+    t1 = (np.einsum('bj,aj->ab', seg_n[:, 1], d) - base) / length2
+    overlap = (np.maximum(t0, t1) > 0.0) & (np.minimum(t0, t1) < 1.0)
+    ok = (overlap & (dr <= MAX_DRHO) & (da <= MAX_DALPHA)).any(axis=1)
+    none = ~overlap.any(axis=1)
+    rho_only = ~ok & ~none & (overlap & (da <= MAX_DALPHA)).any(axis=1)
+    return np.array([look.sum(), ok.sum(), none.sum(), rho_only.sum(),
+                     (~ok & ~none & ~rho_only).sum()])
+
+
+def corner_distances(c_k, pose_k, c_n, scan_n) -> np.ndarray:
+    """Return the distance of each corner of scan k in view of scan n to n's nearest [m]."""
+    if not len(c_k):
+        return np.zeros(0)
+    world = transform_points(pose_k, c_k)
+    world = world[in_view(scan_n, world, 0.1)]
+    if not len(c_n):
+        return np.full(len(world), np.inf)
+    other = transform_points(scan_n.pose, c_n)
+    dist = np.hypot(*(world[:, None] - other[None]).transpose(2, 0, 1))
+    return dist.min(axis=1, initial=np.inf)
+
+
+def main() -> None:
+    """Print one table per log."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('logs', nargs='*', default=list(LOGS), help='log names (default: all six)')
+    args = ap.parse_args()
+    print('| log | method | reference | midpoint | ICP | ICP + midpoint | failures (reference):'
+          ' none / rho only / alpha |')
+    print('| --- | --- | --- | --- | --- | --- | --- |')
+    for name in args.logs:
+        path = CARMEN / f'{name}-corrected.log.gz'
+        if not path.exists():
+            print(f'{path}: not present')
+            continue
+        scans = carmen_metric_scans(path)
+        corr = np.array([icp_correction(a, b) for a, b in zip(scans[:-1], scans[1:])])
+        refined = [compose(b.pose, compose(c, relative(b.pose, a.pose)))
+                   for a, b, c in zip(scans[:-1], scans[1:], corr)]
+        clusters = [segment_scan(s.ranges, s.angles, s.valid, s.angle_increment)
+                    for s in scans]
+        for method in ('split_merge', 'alfa'):
+            params = LineParams(method=method)
+            segs = [segments_of(extract_lines(c, params)) for c in clusters]
+            tally = {}
+            for key, use_icp, mid in (('reference', False, False), ('midpoint', False, True),
+                                      ('ICP', True, False), ('ICP + midpoint', True, True)):
+                tally[key] = sum(
+                    line_matches(segs[k], refined[k] if use_icp else scans[k].pose,
+                                 segs[k + 1], scans[k + 1], mid)
+                    for k in range(len(scans) - 1))
+            cells = ' | '.join(f'{v[1] / max(v[0], 1):.3f}' for v in tally.values())
+            ref = tally['reference']
+            print(f'| {name} | {method} lines >= 1 m ({ref[0]}) | {cells} | '
+                  f'{ref[2]} / {ref[3]} / {ref[4]} |', flush=True)
+        params = CornerParams()
+        corners = [np.array([c.position for c in detect_corners(cl, params)]).reshape(-1, 2)
+                   for cl in clusters]
+        tally = {}
+        for key, use_icp in (('reference', False), ('ICP', True)):
+            score = Repeatability()
+            for k in range(len(scans) - 1):
+                corner_repeatability(score, corners[k], refined[k] if use_icp else scans[k].pose,
+                                     corners[k + 1], scans[k + 1])
+            tally[key] = score
+        near = [corner_distances(corners[k], scans[k].pose, corners[k + 1], scans[k + 1])
+                for k in range(len(scans) - 1)]
+        near = np.concatenate(near) if near else np.zeros(0)
+        print(f'| {name} | minus_cosine corners ({tally["reference"].opportunities}) | '
+              f'{tally["reference"].fraction:.3f} | | {tally["ICP"].fraction:.3f} | | '
+              f'next corner 10-50 cm away: {np.mean((near > 0.1) & (near <= 0.5)):.3f}, '
+              f'none within 50 cm: {np.mean(near > 0.5):.3f} |')
+        a = np.abs(corr)
+        print(f'| {name} | ICP corrections of the reference, median (90 %) | '
+              f'dx {100 * np.median(a[:, 0]):.1f} ({100 * np.percentile(a[:, 0], 90):.1f}) cm, '
+              f'dy {100 * np.median(a[:, 1]):.1f} ({100 * np.percentile(a[:, 1], 90):.1f}) cm, '
+              f'dtheta {math.degrees(np.median(a[:, 2])):.2f} '
+              f'({math.degrees(np.percentile(a[:, 2], 90)):.2f}) deg | | | | |', flush=True)
+
+
+if __name__ == '__main__':
+    main()
