@@ -163,6 +163,10 @@ class DetectorParams:
             the contrast of JPEG ringing and neighbour blur on composites in real
             photographs, and most frames lost at 5 px with all their corners found were
             rejected as inconsistent there.
+        decimate: fast mode (like AprilTag's ``quad_decimate``): with 2 the corner
+            filters and groups (eq. 1-2) run on the image averaged over 2 x 2 pixels, the
+            chains, frames, code and sub-pixel steps on the full image; a landmark then
+            needs twice the pixels per block (1: off).
     """
 
     kind: str = '3x3'
@@ -193,6 +197,7 @@ class DetectorParams:
     max_gaps: int = 1
     refine_grid: bool = True
     block_ring: bool = True
+    decimate: int = 1
 
     def __post_init__(self) -> None:
         """Validate the values (ValueError naming the field)."""
@@ -211,7 +216,7 @@ class DetectorParams:
             'small_block_px': (0.0, 100.0), 'small_block_margin': (0.0, 1.0),
             'refine_window': (0.1, 0.5), 'deblur_margin': (0.0, 1.0),
             'deblur_residual': (0.0, 1.0), 'second_neighbour_angle': (0.0, 45.0),
-            'max_gaps': (0, 2)}
+            'max_gaps': (0, 2), 'decimate': (1, 4)}
         for name, (lo, hi) in checks.items():
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) \
@@ -562,8 +567,10 @@ def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
     As :func:`frame_edges`; in addition (extension), when no corner lies within ``k_lim
     |v|`` of a prediction ``h^_{i+1}`` of an interior corner, the chain may go on from the
     prediction itself (a *virtual* corner, the spacing not updated), at most ``max_gaps``
-    times per chain and never twice in a row; the first two and the last corner are
-    always detected corners, so that frames are still joined at shared corners (eq. 4).
+    times per chain and never twice in a row; the first three and the last corner are
+    always detected corners, so that frames are still joined at shared corners (eq. 4)
+    and clutter does not start bridged chains (a missed interior corner is the fourth or
+    fifth corner of the edge followed from one of its two ends).
     Seen at 40-60 degrees tilt with 4-5 px per block, the corner filters (eq. 1) miss one
     or two of the 20 frame X-corners in a third of the lost landmarks; the virtual corner
     is refined like every frame corner once the frame reads as a valid code.
@@ -602,7 +609,7 @@ def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
         dist, best = tree.query(pred, k=1)
         good = dist < k_lim * np.linalg.norm(v, axis=1)           # |h_i - h^_i| < k_lim |v_i|
         virt = np.zeros_like(good)
-        if max_gaps > 0 and step < n_corners - 3:
+        if max_gaps > 0 and 1 <= step < n_corners - 3:
             virt = ~good & (gaps < max_gaps) & ~was_virtual
         keep = good | virt
         chain = [c[keep] for c in chain]
@@ -1428,9 +1435,21 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
     n = design.corners_per_edge
     if img.dtype != np.uint8:
         img = np.clip(np.nan_to_num(img.astype(np.float64)), 0, 255).astype(np.uint8)
-    g8 = smooth(img, params.sigma)
+    if params.decimate > 1:
+        # fast mode: corners (eq. 1-2) on the image averaged over f x f pixel blocks, their
+        # centres mapped to full-resolution pixels (block of f pixels -> centre f i + (f-1)/2);
+        # everything after the corners runs on the full-resolution image
+        f = params.decimate
+        small = cv2.resize(img, (img.shape[1] // f, img.shape[0] // f),
+                           interpolation=cv2.INTER_AREA)
+        g8 = smooth(small, params.sigma)
+    else:
+        g8 = smooth(img, params.sigma)
     pixels = corner_pixels(g8, params.k_min, params.axial_offset, params.diagonal_offset)
     corners = corner_groups(pixels, params.merge_distance)
+    if params.decimate > 1:
+        corners = Corners(corners.points * f + 0.5 * (f - 1), corners.weights,
+                          corners.filters)
     pts, filt = corners.points, corners.filters
     if len(pts) > params.max_corners:
         keep = np.argsort(corners.weights)[::-1][:params.max_corners]
@@ -1506,5 +1525,5 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
 
 __all__ = ['CodeReading', 'Corners', 'Detection', 'DetectorParams', 'FrameGrid',
            'chain_edges', 'corner_groups', 'corner_neighbours', 'corner_pixels',
-           'detect_landmarks', 'edge_points', 'find_frames', 'fit_frame', 'frame_edges', 'image_problem',
-           'read_code', 'refine_corners', 'sample_cells', 'smooth', 'unmix_cells']
+           'detect_landmarks', 'edge_points', 'find_frames', 'fit_frame', 'frame_edges',
+           'image_problem', 'read_code', 'refine_corners', 'sample_cells', 'smooth', 'unmix_cells']
