@@ -86,7 +86,7 @@ Readings of the chapter that needed a decision (documented here, tested in
 from dataclasses import dataclass, field
 import functools
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import cv2
 from landmark_nav.vision.camera import CameraModel
@@ -198,6 +198,8 @@ class DetectorParams:
     refine_grid: bool = True
     block_ring: bool = True
     decimate: int = 1
+    unblur_margin: float = 0.3
+    unblur_residual: float = 0.08
 
     def __post_init__(self) -> None:
         """Validate the values (ValueError naming the field)."""
@@ -216,7 +218,8 @@ class DetectorParams:
             'small_block_px': (0.0, 100.0), 'small_block_margin': (0.0, 1.0),
             'refine_window': (0.1, 0.5), 'deblur_margin': (0.0, 1.0),
             'deblur_residual': (0.0, 1.0), 'second_neighbour_angle': (0.0, 45.0),
-            'max_gaps': (0, 2), 'decimate': (1, 4)}
+            'max_gaps': (0, 2), 'decimate': (1, 4), 'unblur_margin': (0.0, 1.0),
+            'unblur_residual': (0.0, 1.0)}
         for name, (lo, hi) in checks.items():
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) \
@@ -1220,6 +1223,121 @@ def unmix_cells(cells: np.ndarray, design: LandmarkDesign, parity: int = 0,
     return x.reshape(m2, m2), float(np.sqrt(np.mean(res * res))) / contrast
 
 
+def _known_pattern(kind: str, parity: int, quiet: int = 2) -> np.ndarray:
+    """Half-block cells of a design around its grid: 1 black, 0 white, -1 code (uint8 view).
+
+    The frame (both rings, colours inverted with ``parity``) with ``quiet`` white cells
+    around it; cell ``(r, c)`` of the code grid of :class:`FrameGrid` is entry
+    ``(r + 2 + quiet, c + 2 + quiet)``.
+    """
+    colour = np.repeat(np.repeat(LandmarkDesign(kind).block_colours(), 2, axis=0), 2, axis=1)
+    if parity:
+        colour = np.where(colour >= 0, 1 - colour, colour)
+    return np.pad(colour, quiet, constant_values=0)
+
+
+def unblur_code(image: np.ndarray, grid: np.ndarray, design: LandmarkDesign,
+                parity: int = 0, sigmas: Sequence[float] = (0.7, 1.0, 1.3, 1.6),
+                supersample: int = 4) -> Optional[Tuple[np.ndarray, float, float]]:
+    """Read the code cells from the pixels with a model of the printed pattern and the blur.
+
+    Extension for 4-5 px per block, where a half-block code cell covers 2 x 2 pixels or
+    less and blur, JPEG and tilt mix it with its neighbours. The frame is known, so every
+    pixel around and inside the code area is modelled as the pattern mapped into the
+    image by the homography of the fitted grid, averaged over the pixel (``supersample``
+    x ``supersample`` points) and blurred by a Gaussian point-spread function::
+
+        I(p) = b + d K_s(p) + sum_c y_c A_{c,s}(p)
+
+    with ``K_s`` the blurred coverage of p by the known white cells, ``A_{c,s}`` that by
+    code cell c, ``b`` the black level, ``d`` the black-white contrast and ``y_c / d`` the
+    whiteness of code cell c. For each blur ``s`` of ``sigmas`` the model is linear in
+    ``(b, d, y)`` and solved by least squares; the blur with the smallest residual is
+    kept.
+
+    Args:
+        image: (H, W) float32 unsmoothed image.
+        grid: (2n - 1, 2n - 1, 2) code grid of :class:`FrameGrid` (sub-pixel fit).
+        design: the landmark design.
+        parity: 1 if the frame colouring is inverted (a quarter turn of the 2x2 design).
+        sigmas: point-spread standard deviations tried [px].
+        supersample: sample points per pixel and axis.
+
+    Returns:
+        ``(whiteness, residual, sigma)``: the (2m, 2m) code-cell whiteness (1 white, 0
+        black), the RMS misfit over the contrast and the blur chosen; None if the patch
+        leaves the image, the contrast is not positive or the solve fails.
+    """
+    k = grid.shape[0] - 1                               # code grid cells per side
+    quiet = 2
+    pattern = _known_pattern(design.kind, parity, quiet)
+    off = 2 + quiet                                     # pattern index of grid cell 0
+    gi, gj = np.mgrid[0:k + 1, 0:k + 1]
+    src = np.column_stack([gj.ravel(), gi.ravel()]).astype(np.float64)
+    hom, _ = cv2.findHomography(src, grid.reshape(-1, 2).astype(np.float64), 0)
+    if hom is None:
+        return None
+    # pixels of the code area and one cell of frame around it, plus the blur's reach
+    pad = 3.0 * max(sigmas) + 1.0
+    lo, hi = grid[1:-1, 1:-1].reshape(-1, 2).min(axis=0), grid[1:-1, 1:-1].reshape(-1, 2).max(
+        axis=0)
+    x0, y0 = (int(math.floor(v - pad)) for v in lo)
+    x1, y1 = (int(math.ceil(v + pad)) + 1 for v in hi)
+    h, w = image.shape
+    if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+        return None
+    pw, ph = x1 - x0, y1 - y0
+    s = supersample
+    sub = (np.arange(s) + 0.5) / s - 0.5
+    ys, xs = np.meshgrid(y0 + np.repeat(np.arange(ph), s) + np.tile(sub, ph),
+                         x0 + np.repeat(np.arange(pw), s) + np.tile(sub, pw), indexing='ij')
+    pts = cv2.perspectiveTransform(np.column_stack([xs.ravel(), ys.ravel()])[None],
+                                   np.linalg.inv(hom))[0]
+    cj = np.floor(pts[:, 0]).astype(np.int64) + off
+    ci = np.floor(pts[:, 1]).astype(np.int64) + off
+    n = pattern.shape[0]
+    inside = (ci >= 0) & (ci < n) & (cj >= 0) & (cj < n)
+    label = np.zeros(len(pts), np.int64)                 # 0 white (quiet zone beyond)
+    col = pattern[np.clip(ci, 0, n - 1), np.clip(cj, 0, n - 1)]
+    m2 = 2 * design.code_squares
+    code = inside & (col < 0)
+    label[inside & (col == 1)] = 1                       # 1 black
+    label[code] = 2 + (ci[code] - off - 2) * m2 + (cj[code] - off - 2)
+    # pixel of every sample point: (row // s) * pw + col // s
+    pix = (np.arange(ph * s)[:, None] // s * pw + np.arange(pw * s)[None, :] // s).ravel()
+    cover = np.bincount(pix * (2 + m2 * m2) + label, minlength=ph * pw * (2 + m2 * m2))
+    cover = cover.reshape(ph, pw, 2 + m2 * m2).astype(np.float32) / (s * s)
+    y = image[y0:y1, x0:x1].astype(np.float64).ravel()
+    # fit where the pixels see the code area and the ring around it (the frame's inner
+    # cells), where the model matters; the far background is not modelled
+    ring = cv2.perspectiveTransform(np.array([[[1.0, 1.0], [k - 1.0, 1.0], [k - 1.0, k - 1.0],
+                                               [1.0, k - 1.0]]]), hom)[0]
+    mask = np.zeros((ph, pw), np.uint8)
+    cv2.fillConvexPoly(mask, np.round((ring - [x0, y0]) * 16).astype(np.int32), 1,
+                       lineType=cv2.LINE_8, shift=4)
+    use = mask.ravel() > 0
+    if use.sum() < 2 + m2 * m2 + 8:
+        return None
+    best = None
+    for sig in sigmas:
+        blurred = cv2.GaussianBlur(cover, (0, 0), sig, borderType=cv2.BORDER_REPLICATE)
+        a = blurred.reshape(-1, 2 + m2 * m2)[use].astype(np.float64)
+        feats = np.column_stack([np.ones(len(a)), a[:, 0], a[:, 2:]])   # b, d, y_c
+        try:        # normal equations: 38 unknowns, a few hundred pixels
+            coef = np.linalg.solve(feats.T @ feats, feats.T @ y[use])
+        except np.linalg.LinAlgError:
+            return None
+        res = y[use] - feats @ coef
+        rms = float(np.sqrt(np.mean(res * res)))
+        if best is None or rms < best[0]:
+            best = (rms, coef, sig)
+    rms, coef, sig = best
+    d = float(coef[1])
+    if not d > 0:
+        return None
+    return (coef[2:] / d).reshape(m2, m2), rms / d, float(sig)
+
+
 @dataclass(frozen=True, eq=False)
 class CodeReading:
     """Result of :func:`read_code` for one frame grid."""
@@ -1234,7 +1352,9 @@ class CodeReading:
 
 def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 20.0,
               min_margin: float = 0.2, deblur_margin: float = 0.0,
-              deblur_residual: float = 0.12, block_ring: bool = False) -> CodeReading:
+              deblur_residual: float = 0.12, block_ring: bool = False,
+              unblur: Optional[Callable[[int], Optional[Tuple[np.ndarray, float, float]]]] = None,
+              unblur_margin: float = 0.3, unblur_residual: float = 0.08) -> CodeReading:
     """Classify the cells of a frame grid and decode them (§2.2.3).
 
     ``cells`` covers the inner ring and the code area in half-block cells. Half of the frame
@@ -1259,6 +1379,12 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
         deblur_residual: see ``deblur_margin``.
         block_ring: test the frame's consistency on its blocks (the mean of each frame
             block's 2 x 2 cells) rather than on every cell.
+        unblur: if given, a code still ambiguous after ``deblur_margin`` is read by
+            ``unblur(parity)`` (:func:`unblur_code` on the frame's pixels); its whiteness
+            is used when every code cell is at least ``unblur_margin`` from the midpoint
+            and the model misfit is at most ``unblur_residual`` of the contrast.
+        unblur_margin: see ``unblur``.
+        unblur_residual: see ``unblur``.
 
     Returns:
         :class:`CodeReading`; ``code`` is None with a ``reason`` when the grid is
@@ -1301,11 +1427,18 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
     bits = code_cells < thr
     if code_margin < min_margin:
         unmixed = unmix_cells(cells, design, parity) if deblur_margin > 0 else None
-        if unmixed is None or unmixed[1] > deblur_residual:
-            return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
-        white = unmixed[0]
-        margin = min(ring_margin, float(np.abs(white - 0.5).min()) * 2.0)
-        if margin < deblur_margin:
+        white = None
+        if unmixed is not None and unmixed[1] <= deblur_residual:
+            m = min(ring_margin, float(np.abs(unmixed[0] - 0.5).min()) * 2.0)
+            if m >= deblur_margin:
+                white, margin = unmixed[0], m
+        if white is None and unblur is not None:
+            pixel = unblur(parity)
+            if pixel is not None and pixel[1] <= unblur_residual:
+                m = min(ring_margin, float(np.abs(pixel[0] - 0.5).min()) * 2.0)
+                if m >= unblur_margin:
+                    white, margin = pixel[0], m
+        if white is None:
             return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
         bits = white < 0.5
     got = design.decode_with_rotation(bits)
@@ -1350,6 +1483,15 @@ def image_problem(gray: np.ndarray, min_contrast: float = 20.0,
     if black > saturated_fraction:
         return f'image is underexposed: {100 * black:.0f} % of the pixels black', True
     return '', True
+
+
+def _unblur(raw: np.ndarray, grid: np.ndarray, design: LandmarkDesign,
+            params: DetectorParams
+            ) -> Optional[Callable[[int], Optional[Tuple[np.ndarray, float, float]]]]:
+    """Return the :func:`unblur_code` reader of a grid for :func:`read_code` (or None)."""
+    if params.unblur_margin >= 1.0:
+        return None
+    return functools.partial(unblur_code, raw, grid, design)
 
 
 #: read failures worth a second reading on the refined grid (``refine_grid``)
@@ -1493,7 +1635,8 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
                 cells = sample_cells(raw, fg.grid, params.cell_samples, params.cell_margin)
                 reading = read_code(cells, design, params.min_contrast, margin,
                                     params.deblur_margin, params.deblur_residual,
-                                    params.block_ring)
+                                    params.block_ring, _unblur(raw, fg.grid, design, params),
+                                    params.unblur_margin, params.unblur_residual)
         if debug is not None:
             debug['grids'].append(fg)
             debug['readings'].append(reading)
