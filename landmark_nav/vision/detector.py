@@ -504,30 +504,33 @@ def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
     valid = idx < n
     ext = np.vstack([points, [[0.0, 0.0]]])
     d = ext[np.where(valid, idx, n)] - points[:, None, :]
-    sector = np.floor((np.arctan2(d[..., 1], d[..., 0]) + math.pi) / (2 * math.pi) * k)
-    sector = np.clip(sector.astype(np.int64), 0, k - 1)
-    rows = np.broadcast_to(np.arange(n)[:, None], idx.shape)
-    key = (rows * k + sector)[valid]        # row-major: within a row nearest first
-    first = np.unique(key, return_index=True)[1]
-    out = np.full(n * k, n, dtype=np.int64)
-    out[key[first]] = idx[valid][first]
-    out = out.reshape(n, k)
-    if second_angle > 0:
+    ang = np.arctan2(d[..., 1], d[..., 0])
+    sector = np.floor((ang + math.pi) / (2 * math.pi) * k)
+    sector = np.where(valid, np.clip(sector.astype(np.int64), 0, k - 1), k)   # k: none
+    rows = np.arange(n)
+    cols = idx.shape[1]
+    out = np.full((n, k), n, dtype=np.int64)
+    extra = np.full((n, k), n, dtype=np.int64) if second_angle > 0 else None
+    # the columns of a row are in order of distance: the first column of a sector is its
+    # nearest corner, the next one of the same sector its second nearest
+    for s in range(k):
+        in_s = sector == s
+        first = np.argmax(in_s, axis=1)
+        has = in_s[rows, first]
+        out[has, s] = idx[rows[has], first[has]]
+        if extra is None:
+            continue
         # extension: also the second nearest corner of a sector when its direction differs
         # from the nearest one's by more than second_angle (two frame edges seen at an
         # acute angle share a sector)
-        ang = np.arctan2(d[..., 1], d[..., 0])[valid]
-        order = np.argsort(key, kind='stable')
-        ks = key[order]
-        is_second = np.zeros(len(ks), bool)
-        is_second[1:] = ks[1:] == ks[:-1]
-        is_second[2:] &= ks[2:] != ks[:-2]
-        pos = np.flatnonzero(is_second)
-        da = np.abs((ang[order[pos]] - ang[order[pos - 1]] + math.pi) % (2 * math.pi) - math.pi)
-        pos = pos[da > second_angle]
-        extra = np.full(n * k, n, dtype=np.int64)
-        extra[ks[pos]] = idx[valid][order[pos]]
-        out = np.hstack([out, extra.reshape(n, k)])
+        later = in_s & (np.arange(cols)[None, :] > first[:, None])
+        second = np.argmax(later, axis=1)
+        has2 = later[rows, second]
+        da = np.abs((ang[rows, second] - ang[rows, first] + math.pi) % (2 * math.pi) - math.pi)
+        has2 &= da > second_angle
+        extra[has2, s] = idx[rows[has2], second[has2]]
+    if extra is not None:
+        out = np.hstack([out, extra])
     return out.astype(np.int64)
 
 
