@@ -409,3 +409,15 @@ def test_unblur_reads_small_blurred_codes_that_the_cells_cannot():
         assert got.code in (None, code)
         lost += got.code is None
     assert lost >= 3
+
+
+def test_fast_mode_finds_the_same_landmarks_with_full_resolution_corners():
+    # corners on the 2 x 2-averaged image, everything after them at full resolution: the
+    # sub-pixel frame corners agree with those of the full-resolution run
+    for roll, distance in ((0.0, 1.0), (30.0, 1.2), (200.0, 0.8)):
+        frame = view(123456789, roll=roll, distance=distance, tilt=20.0)
+        full = detect_landmarks(frame.image, camera=CAMERA)
+        fast = detect_landmarks(frame.image, DetectorParams(decimate=2), camera=CAMERA)
+        assert [d.code for d in fast] == [d.code for d in full] == [123456789]
+        assert np.abs(fast[0].corners - full[0].corners).max() < 1e-3    # 4e-5 measured
+        assert fast[0].rotation == full[0].rotation
