@@ -554,9 +554,9 @@ def frame_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
         k_g: spacing gain (eq. 3).
         tree: a ``cKDTree`` of ``points`` if one exists already.
         filters: (N,) filter (0..3 for C1..C4) of each corner; if given, two corners of the
-            same filter do not start an edge: neighbouring X-corners of a frame edge have
-            opposite polarity (C1 next to C2, C3 next to C4, or one of each pair at
-            in-between rotations).
+            same filter do not start an edge, nor follow each other in it: neighbouring
+            X-corners of a frame edge have opposite polarity (C1 next to C2, C3 next to
+            C4, or one of each pair at in-between rotations).
 
     Returns:
         (E, n_corners) int64 corner indices, ordered along each edge.
@@ -614,6 +614,10 @@ def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
         pred = pos + v                                            # eq. 3 prediction
         dist, best = tree.query(pred, k=1)
         good = dist < k_lim * np.linalg.norm(v, axis=1)           # |h_i - h^_i| < k_lim |v_i|
+        if filters is not None:
+            # neighbouring corners of an edge alternate in polarity, as h_1 and h_2 (a
+            # bridged corner, index -1, has no filter: f[-1] = -1)
+            good &= f[np.minimum(best, n)] != f[chain[-1]]
         virt = np.zeros_like(good)
         if max_gaps > 0 and 1 <= step < n_corners - 3:
             virt = ~good & (gaps < max_gaps) & ~was_virtual
