@@ -796,6 +796,24 @@ def tilt_bin(o: Outcome) -> str:
     return 'tilt 55-60'
 
 
+def parse_detector_params(items: Sequence[str]) -> Dict[str, object]:
+    """Parse ``NAME=VALUE`` items (YAML scalars) into DetectorParams keyword arguments.
+
+    Raises:
+        ValueError: an item without ``=`` or a name that is not a DetectorParams field.
+    """
+    import yaml
+    fields = set(DetectorParams.__dataclass_fields__)
+    out = {}
+    for item in items:
+        name, sep, value = item.partition('=')
+        if not sep or name not in fields:
+            raise ValueError(f'--set {item!r}: expected NAME=VALUE with NAME one of '
+                             f'{", ".join(sorted(fields))}')
+        out[name] = yaml.safe_load(value)
+    return out
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Command line: detection, pose and speed tables on composites of real photographs."""
     ap = argparse.ArgumentParser(
@@ -821,6 +839,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--second-neighbour-angle', type=float,
                     default=DetectorParams().second_neighbour_angle,
                     help='landmark detector second_neighbour_angle [deg] (0: before issue 20)')
+    ap.add_argument('--set', nargs='+', default=[], metavar='NAME=VALUE',
+                    help='landmark detector parameters (DetectorParams fields), e.g. '
+                    'max_gaps=0 refine_grid=false block_ring=false unblur_margin=1 (the '
+                    'detector before the small-landmark extensions)')
     ap.add_argument('--no-planar-start', action='store_true',
                     help='landmark pose from the quadrant guesses only (before issue 20)')
     ap.add_argument('--json', type=Path, default=None, help='write every outcome here')
@@ -830,6 +852,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     bgs = load_backgrounds(args.backgrounds) if args.backgrounds else default_backgrounds()
     lm_params = DetectorParams(deblur_margin=args.deblur_margin,
                                second_neighbour_angle=args.second_neighbour_angle)
+    try:
+        lm_params = replace(lm_params, **parse_detector_params(args.set))
+    except (TypeError, ValueError) as err:
+        ap.error(str(err))
     dets = Detectors(args.detectors, landmark_params=lm_params,
                      pose_params=PoseParams(planar_start=not args.no_planar_start))
     everything: List[Outcome] = []
