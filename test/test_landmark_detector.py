@@ -10,10 +10,10 @@ import cv2
 from landmark_nav.sim.camera import Photometry
 from landmark_nav.sim.camera_scenarios import default_camera, landmark_view, ViewOptions
 from landmark_nav.vision.camera import CameraModel
-from landmark_nav.vision.detector import (corner_groups, corner_neighbours, corner_pixels,
-                                          detect_landmarks, DetectorParams, find_frames,
-                                          frame_edges, image_problem, read_code, smooth,
-                                          unmix_cells)
+from landmark_nav.vision.detector import (chain_edges, corner_groups, corner_neighbours,
+                                          corner_pixels, detect_landmarks, DetectorParams,
+                                          find_frames, frame_edges, image_problem, read_code,
+                                          sample_cells, smooth, unblur_code, unmix_cells)
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 import pytest
@@ -315,3 +315,109 @@ def test_second_neighbour_of_a_sector_finds_an_edge_at_an_acute_frame_corner():
         nb[1:] = len(pts)                     # chains may start at the frame corner only
         edges = frame_edges(pts, nb, 6, filters=filters)
         assert any(list(e) == [0, 1, 2, 3, 4, 5] for e in edges.tolist()) == found
+
+
+def test_chain_edges_bridge_one_missed_interior_corner():
+    h = np.array([[1.0, 0.1, 0.0], [0.05, 1.0, 0.0], [0.005, 0.0004, 1.0]])
+    line = _grid_points(h)[:6]
+    spacing = float(np.linalg.norm(np.diff(line, axis=0), axis=1).mean())
+    rng = np.random.default_rng(1)
+    clutter = rng.uniform(0, 200, (40, 2))
+    clutter = clutter[np.min(np.linalg.norm(clutter[:, None] - line[None], axis=2), 1) > 5]
+    for missing in (1, 2, 3, 4):
+        pts = np.vstack([np.delete(line, missing, axis=0), clutter])
+        nb = corner_neighbours(pts, 100.0, 8)
+        assert len(frame_edges(pts, nb, 6)) == 0 or not any(
+            e[0] == 0 and e[-1] == 4 for e in frame_edges(pts, nb, 6).tolist())
+        edges, virtual = chain_edges(pts, nb, 6, max_gaps=1)
+        n = len(pts)
+        want = [0, 1, 2, 3, 4]
+        want.insert(missing, n)
+        hits = [e for e in edges.tolist() if e == want or e == want[::-1]]
+        assert len(hits) == 2                                   # once in each direction
+        # the bridged corner is the eq. 3 prediction: within the k_lim tolerance a detected
+        # corner would have (0.10-0.2 of the spacing here, perspective shrinks it by 15 %)
+        assert np.linalg.norm(virtual[0] - line[missing]) < 0.37 * spacing
+        assert len(virtual) == 1
+    # two neighbouring corners missed, or an end corner: no edge
+    for gone in ([2, 3], [5]):
+        pts = np.vstack([np.delete(line, gone, axis=0), clutter])
+        edges, _ = chain_edges(pts, corner_neighbours(pts, 100.0, 8), 6, max_gaps=1)
+        ends = {(e[0], e[-1]) for e in edges.tolist()}
+        assert (0, 6 - len(gone) - 1) not in ends or gone == [5]
+        assert not any(e[0] == 0 and len(set(e) & set(range(6 - len(gone)))) >= 4
+                       and e[-1] < 6 - len(gone) for e in edges.tolist() if gone == [5])
+
+
+def test_block_ring_tolerates_a_noisy_half_cell_but_not_a_wrong_block():
+    design = LandmarkDesign()
+    cells = _ideal_cells(design, 156)             # black 40, white 200, threshold 120
+    noisy = cells.copy()
+    noisy[0, 1] = 130.0                           # one half cell of a black block near grey
+    assert read_code(noisy, design).reason == 'frame cells inconsistent'
+    assert read_code(noisy, design, block_ring=True).code == 156
+    wrong = cells.copy()
+    wrong[0:2, 0:2] = 200.0                       # a whole black frame block reads white
+    assert read_code(wrong, design, block_ring=True).reason == 'frame cells inconsistent'
+
+
+def _small_view(code, design, blur, rng, noise=3.0):
+    """Return a landmark at 4 px per block, blurred and noisy, and its true code grid.
+
+    Rendered at 8 px per block and 2 x 2 area-averaged; the grid is FrameGrid's (half-block
+    steps between the frame corners).
+    """
+    img = cv2.resize(design.render(code, 8, 1).astype(np.float32), None, fx=0.5, fy=0.5,
+                     interpolation=cv2.INTER_AREA)
+    img = cv2.copyMakeBorder(img, 10, 10, 10, 10, cv2.BORDER_CONSTANT, value=255)
+    img = 30.0 + 170.0 / 255.0 * img
+    img = cv2.GaussianBlur(img, (0, 0), blur) + rng.normal(0.0, noise, img.shape)
+    k = 2 * (design.n_blocks - 2)
+    i, j = np.mgrid[0:k + 1, 0:k + 1]
+    # grid point (u, v) blocks -> rendered pixel (u + 1) 8 - 0.5 -> (x + 0.5) / 2 - 0.5 + 10
+    u, v = 1.0 + 0.5 * j, 1.0 + 0.5 * i
+    grid = np.stack([(u + 1) * 4.0 - 0.5 + 10.0, (v + 1) * 4.0 - 0.5 + 10.0], axis=-1)
+    return img.astype(np.float32), grid
+
+
+def test_unblur_reads_small_blurred_codes_that_the_cells_cannot():
+    design = LandmarkDesign()
+    rng = np.random.default_rng(7)
+    codes = [int(c) for c in rng.integers(0, design.code_limit, 30) if design.is_valid_code(c)]
+    ambiguous = 0
+    for code in codes[:12]:
+        img, grid = _small_view(code, design, 1.3, rng)
+        cells = sample_cells(img, grid)
+        plain = read_code(cells, design, min_margin=0.4, deblur_margin=0.35)
+        ambiguous += plain.code is None
+        white, residual, sigma = unblur_code(img, grid, design)
+        assert residual < 0.025                     # noise 3 / contrast 170 = 0.018
+        assert sigma == 1.3                         # the tried blur nearest the true 1.3
+        assert np.array_equal(white < 0.5, design.encode(code))
+        assert np.abs(white - 0.5).min() > 0.25     # every cell clear (0.3 measured)
+        got = read_code(cells, design, min_margin=0.4, deblur_margin=0.35, block_ring=True,
+                        unblur=lambda parity: unblur_code(img, grid, design, parity))
+        assert got.code == code and got.rotation == 0
+    assert ambiguous >= 6                           # 6 of 12 lost by the cell reading
+    # blurred beyond reach (sigma 1.7 at 2 px per cell): no reading, never a wrong one
+    lost = 0
+    for code in codes[12:24]:
+        img, grid = _small_view(code, design, 1.7, rng)
+        got = read_code(sample_cells(img, grid), design, min_margin=0.4, deblur_margin=0.35,
+                        block_ring=True,
+                        unblur=lambda parity: unblur_code(img, grid, design, parity))
+        assert got.code in (None, code)
+        lost += got.code is None
+    assert lost >= 3
+
+
+def test_fast_mode_finds_the_same_landmarks_with_full_resolution_corners():
+    # corners on the 2 x 2-averaged image, everything after them at full resolution: the
+    # sub-pixel frame corners agree with those of the full-resolution run
+    for roll, distance in ((0.0, 1.0), (30.0, 1.2), (200.0, 0.8)):
+        frame = view(123456789, roll=roll, distance=distance, tilt=20.0)
+        full = detect_landmarks(frame.image, camera=CAMERA)
+        fast = detect_landmarks(frame.image, DetectorParams(decimate=2), camera=CAMERA)
+        assert [d.code for d in fast] == [d.code for d in full] == [123456789]
+        assert np.abs(fast[0].corners - full[0].corners).max() < 1e-3    # 4e-5 measured
+        assert fast[0].rotation == full[0].rotation

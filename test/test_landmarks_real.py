@@ -61,7 +61,7 @@ def _check_pose_outcomes(res, names):
 
 
 def test_markers_are_found_by_their_own_detectors_with_poses(backgrounds):
-    names = ('landmark', 'aruco')
+    names = ('landmark', 'landmark_fast', 'aruco')
     trials = pose_trials((1.0,), per_distance=4, seed=5, n_backgrounds=len(backgrounds))
     res = run_trials(trials, backgrounds, Detectors(names), pose=True)
     _check_pose_outcomes(res, names)

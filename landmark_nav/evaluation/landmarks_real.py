@@ -12,7 +12,8 @@ frames except for the printed pattern:
 
 * ``landmark`` -- the package's landmark (3x3 design), printed by
   :meth:`LandmarkDesign.render` (the code path of ``landmark_nav make-landmark``'s PNG),
-  one-block quiet zone: 9 x 9 modules of which 7 x 7 are the frame;
+  one-block quiet zone: 9 x 9 modules of which 7 x 7 are the frame; ``landmark_fast`` is
+  the same detector in its fast mode (``DetectorParams.decimate = 2``);
 * ``apriltag`` -- tag36h11 (8 x 8 cells including its black border, one white cell around:
   10 x 10), drawn by OpenCV's ``aruco.generateImageMarker`` with ``DICT_APRILTAG_36h11``
   (the same bit patterns as AprilTag's tag images) and detected by AprilTag 3
@@ -47,11 +48,12 @@ estimated and true marker orientation; for the tags the orientation is compared 
 quarter turns about the normal (their frame conventions differ from the truth's; the code
 fixes the quarter turn). Times are CPU times of the process per call
 (``time.process_time``, less sensitive than the wall clock to other load on the machine),
-single-threaded (``cv2.setNumThreads(1)``, AprilTag ``nthreads=1``).
+single-threaded (``cv2.setNumThreads(1)``, AprilTag ``nthreads=1``, BLAS limited to one
+thread by threadpoolctl in :func:`main`).
 """
 
 import argparse
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import json
 import math
 from pathlib import Path
@@ -73,8 +75,9 @@ _M = np.asarray(OPTICAL_FROM_BODY, dtype=float)
 #: The camera of the composites: f = 600 px, 640 x 480, no distortion.
 CAMERA = CameraModel(640, 480, np.array([[600.0, 0.0, 319.5], [0.0, 600.0, 239.5],
                                          [0.0, 0.0, 1.0]]), np.zeros(5))
-#: Marker types, in table order; ``apriltag2`` is AprilTag with ``quad_decimate = 2``.
-DETECTORS = ('landmark', 'apriltag1', 'apriltag2', 'aruco')
+#: Detectors, in table order; ``landmark_fast`` is the landmark detector's fast mode
+#: (``DetectorParams.decimate = 2``), ``apriltag2`` AprilTag with ``quad_decimate = 2``.
+DETECTORS = ('landmark', 'landmark_fast', 'apriltag1', 'apriltag2', 'aruco')
 #: Printed module (landmark block, tag cell) of the pose runs [m]: the default 0.175 m frame.
 MODULE = LandmarkDesign().block_size
 #: Texture resolution of the printed patterns [px per module].
@@ -91,6 +94,8 @@ TAG_IDS = {'apriltag': 587, 'aruco': 250}
 
 def marker_family(detector: str) -> str:
     """Return the printed marker type of a detector name (``apriltag1`` -> ``apriltag``)."""
+    if detector.startswith('landmark'):
+        return 'landmark'
     return 'apriltag' if detector.startswith('apriltag') else detector
 
 
@@ -346,9 +351,11 @@ class Detectors:
     def detect(self, name: str, gray: np.ndarray, pose: bool = False) -> List[Found]:
         """Run one detector on a frame; with ``pose`` each detection carries its pose."""
         cam = self.camera
-        if name == 'landmark':
+        if name in ('landmark', 'landmark_fast'):
+            params = self.landmark_params if name == 'landmark' else \
+                replace(self.landmark_params, decimate=2)
             out = []
-            for d in detect_landmarks(gray, self.landmark_params):
+            for d in detect_landmarks(gray, params):
                 rot = tr = None
                 if pose:
                     try:
@@ -789,6 +796,24 @@ def tilt_bin(o: Outcome) -> str:
     return 'tilt 55-60'
 
 
+def parse_detector_params(items: Sequence[str]) -> Dict[str, object]:
+    """Parse ``NAME=VALUE`` items (YAML scalars) into DetectorParams keyword arguments.
+
+    Raises:
+        ValueError: an item without ``=`` or a name that is not a DetectorParams field.
+    """
+    import yaml
+    fields = set(DetectorParams.__dataclass_fields__)
+    out = {}
+    for item in items:
+        name, sep, value = item.partition('=')
+        if not sep or name not in fields:
+            raise ValueError(f'--set {item!r}: expected NAME=VALUE with NAME one of '
+                             f'{", ".join(sorted(fields))}')
+        out[name] = yaml.safe_load(value)
+    return out
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Command line: detection, pose and speed tables on composites of real photographs."""
     ap = argparse.ArgumentParser(
@@ -814,13 +839,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--second-neighbour-angle', type=float,
                     default=DetectorParams().second_neighbour_angle,
                     help='landmark detector second_neighbour_angle [deg] (0: before issue 20)')
+    ap.add_argument('--set', nargs='+', default=[], metavar='NAME=VALUE',
+                    help='landmark detector parameters (DetectorParams fields), e.g. '
+                    'max_gaps=0 refine_grid=false block_ring=false unblur_margin=1 (the '
+                    'detector before the small-landmark extensions)')
     ap.add_argument('--no-planar-start', action='store_true',
                     help='landmark pose from the quadrant guesses only (before issue 20)')
     ap.add_argument('--json', type=Path, default=None, help='write every outcome here')
     args = ap.parse_args(argv)
+    from threadpoolctl import threadpool_limits
+    threadpool_limits(limits=1)             # BLAS single-threaded too (numpy least squares)
     bgs = load_backgrounds(args.backgrounds) if args.backgrounds else default_backgrounds()
     lm_params = DetectorParams(deblur_margin=args.deblur_margin,
                                second_neighbour_angle=args.second_neighbour_angle)
+    try:
+        lm_params = replace(lm_params, **parse_detector_params(args.set))
+    except (TypeError, ValueError) as err:
+        ap.error(str(err))
     dets = Detectors(args.detectors, landmark_params=lm_params,
                      pose_params=PoseParams(planar_start=not args.no_planar_start))
     everything: List[Outcome] = []

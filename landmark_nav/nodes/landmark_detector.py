@@ -64,6 +64,26 @@ DETECTOR_PARAMETERS = {
     'small_block_margin': ('min_margin for such small frames', (0.0, 1.0), None),
     'refine_corners': ('refine the frame corners to sub-pixel saddle points', None, None),
     'refine_edges': ('fit the frame edge lines to sub-pixel edge points', None, None),
+    'second_neighbour_angle': ('sectors mode: also keep the second nearest corner of a sector '
+                               'whose direction differs by more than this [deg] (acute '
+                               'frame corners at strong tilt; 0: off)', (0.0, 45.0), None),
+    'max_gaps': ('missed interior corners an edge chain may bridge at its eq. 3 prediction '
+                 '(0: the chapter)', (0, 2), None),
+    'decimate': ('fast mode: corner filters on the image averaged over decimate x decimate '
+                 'pixels, the rest at full resolution (1: off; 2 needs twice the pixels per '
+                 'block)', (1, 4), None),
+    'refine_grid': ('read a grid that fails again on the sub-pixel frame fit', None, None),
+    'block_ring': ('judge the frame consistency on its blocks rather than half-block cells',
+                   None, None),
+    'deblur_margin': ('ambiguous code: read again with the cell blur unmixed, accept if every '
+                      'code cell is this far from the midpoint (0: off)', (0.0, 1.0), None),
+    'deblur_residual': ('largest misfit of the cell blur model, fraction of the contrast',
+                        (0.0, 1.0), None),
+    'unblur_margin': ('still ambiguous: read the code from the pixels (pattern, homography, '
+                      'blur model), accept if every code cell is this far from the midpoint '
+                      '(1: off)', (0.0, 1.0), None),
+    'unblur_residual': ('largest misfit of the pixel blur model, fraction of the contrast',
+                        (0.0, 1.0), None),
 }
 POSE_PARAMETERS = {
     'pixel_sigma': ('frame corner noise for the pose covariance [px]', (1e-4, 10.0), None),
@@ -75,6 +95,8 @@ POSE_PARAMETERS = {
                   ['edges', 'frame']),
     'edge_corner_weight': ('weight of an interior X-corner relative to a frame corner (ratio '
                            'of their pixel precisions)', (0.01, 10.0), None),
+    'planar_start': ('also start Gauss-Newton from the closed-form planar (IPPE) solutions '
+                     'and keep the best by pixel error', None, None),
 }
 
 
