@@ -361,6 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
     add_emulate_parsers(sub, _Parser)
+
+    from landmark_nav.tools.drive import add_parser as add_drive_parser
+    add_drive_parser(sub, _Parser)
     return parser
 
 
