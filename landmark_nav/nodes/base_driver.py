@@ -158,6 +158,7 @@ class BaseDriver(Node):
         self._lock = threading.Lock()
         self._status = None
         self._last_battery = -math.inf
+        self._last_stamp = 0  # ns, of the last status packet (I/O thread)
         self._robot_origin = self._robot_base = (0.0, 0.0, 0.0)
         self.warner = ProblemWarner(self)
 
@@ -226,7 +227,13 @@ class BaseDriver(Node):
 
     def _stamp_ns(self, arrival: float) -> int:
         age = time.monotonic() - arrival
-        return self.get_clock().now().nanoseconds - int((age + self.time_offset) * 1e9)
+        stamp = self.get_clock().now().nanoseconds - int((age + self.time_offset) * 1e9)
+        # Packets read in one chunk share an arrival time, and the two clocks are read apart:
+        # keep the stamps strictly increasing (1 us apart at least), as ekf_slam restarts on
+        # odometry that goes back in time (seen under load: 20 us back).
+        stamp = max(stamp, self._last_stamp + 1000)
+        self._last_stamp = stamp
+        return stamp
 
     def publish_status(self, update: SipUpdate, arrival: float) -> None:
         """Publish odometry, joint states, sonar ranges and battery of one status packet."""
