@@ -94,8 +94,10 @@ def test_demo_writes_plot_and_summary(office, tmp_path):
     drift = (tmp_path / 'out' / 'summary.txt').read_text().strip()
     assert summary.startswith(drift) and 'odometry final position error' in drift
     assert 'EKF-SLAM' in summary and 'ATE RMSE' in summary
-    for name in ('slam_map.png', 'slam_errors.png', 'slam.json', 'trajectory_slam.tum'):
+    for name in ('slam_map.png', 'slam_errors.png', 'slam.json', 'trajectory_slam.tum',
+                 'view/view.mcap'):
         assert (tmp_path / 'out' / name).is_file(), name
+    assert 'viewer file: ' in summary  # its content: test_viewer_mcap.py
 
 
 @pytest.mark.parametrize('scenario', sorted(COMMITTED))
