@@ -60,7 +60,7 @@ def main() -> int:
                         help='laser_driver.skip for the UTM-30LX (default 3: 10 scans/s, '
                              'as the office bags; 0: all 40)')
     parser.add_argument('--domain', type=int, default=101,
-                        help='DDS domain (default 101, outside the tests\' 20..99: another '
+                        help="DDS domain (default 101, outside the tests' 20..99: another "
                              "process's odometry on the domain resets the filter)")
     parser.add_argument('--out', default=None, help='keep the files here')
     args = parser.parse_args()
@@ -119,11 +119,12 @@ def main() -> int:
     keep = (to >= t_slam[0]) & (to <= t_slam[-1])
     t_odom, e_odom, _ = position_errors(out / 'truth.tum', to[keep], po[keep])
     dist = float(np.sum(np.hypot(*np.diff(ref[:, :2], axis=0).T)))
-    print(f'files in {out}; {len(t_slam)} SLAM poses over {(t_slam[-1] - t_slam[0]) * 1e-9:.1f} s, '
-          f'{dist:.2f} m driven')
+    span = (t_slam[-1] - t_slam[0]) * 1e-9
+    print(f'files in {out}; {len(t_slam)} SLAM poses over {span:.1f} s, {dist:.2f} m driven')
     for name, err in (('ekf_slam', e_slam), ('odometry', e_odom)):
-        print(f'{name:9s} ATE (start frame, unaligned): RMSE {100 * np.sqrt(np.mean(err ** 2)):.2f}'
-              f' cm, max {100 * err.max():.2f} cm')
+        rmse = 100 * np.sqrt(np.mean(err ** 2))
+        print(f'{name:9s} ATE (start frame, unaligned): RMSE {rmse:.2f} cm, '
+              f'max {100 * err.max():.2f} cm')
     se2 = ate(Trajectory.from_planar(t_slam, ps[np.isin(ts, t_slam)]),
               Trajectory.from_planar(t_slam, ref), 'se2')
     print(f'ekf_slam ATE SE(2)-aligned (evo): RMSE {100 * se2["rmse"]:.2f} cm, '

@@ -33,7 +33,8 @@ def _open(base: RobotBase, now: float) -> None:
     base.receive(cmd('ENABLE', 1), now)
 
 
-def _drive(laser_model, laser_first: bool, commands, seconds: float, step: float = 0.002):
+def _drive(laser_model, laser_first: bool, commands, seconds: float, step: float = 0.002,
+           base_every: int = 1):
     base, laser = make_robot('urg', laser_model, MOUNT, QUIET, {'baud': 0},
                              start_pose=(1.2, 1.2, 0.0), sonar_noise=False)
     truth = io.StringIO()
@@ -49,7 +50,8 @@ def _drive(laser_model, laser_first: bool, commands, seconds: float, step: float
             _, name, value = pending.pop(0)
             base.receive(cmd(name, value), now)
         for device in ((laser, base) if laser_first else (base, laser)):
-            device.poll(now)
+            if device is laser or i % base_every == 0:
+                device.poll(now)
     return base, laser, truth
 
 
@@ -57,10 +59,11 @@ COMMANDS = [(0.3, 'VEL', 250), (0.3, 'RVEL', 0), (1.0, 'RVEL', 25), (1.45, 'RVEL
             (1.9, 'VEL', 100), (2.2, 'RVEL', 0), (2.5, 'PULSE', None), (2.8, 'STOP', None)]
 
 
-@pytest.mark.parametrize('model,laser_first', [('utm-30lx', True), ('utm-30lx', False),
-                                               ('urg-04lx', True)])
-def test_every_scan_is_cast_from_the_bases_true_path(model, laser_first):
-    base, laser, _ = _drive(model, laser_first, COMMANDS, 3.4)
+@pytest.mark.parametrize('model,laser_first,base_every', [
+    ('utm-30lx', True, 1), ('utm-30lx', False, 1), ('urg-04lx', True, 1),
+    ('utm-30lx', True, 150)])  # the base's thread polled every 0.3 s only (a loaded host)
+def test_every_scan_is_cast_from_the_bases_true_path(model, laser_first, base_every):
+    base, laser, _ = _drive(model, laser_first, COMMANDS, 3.4, base_every=base_every)
     sent = list(laser.sent)
     assert len(sent) >= (120 if model == 'utm-30lx' else 30)
     assert base.predicted_queries > 0  # some beams lay past the base's last cycle
@@ -90,6 +93,22 @@ def test_pose_inside_a_cycle_follows_eqs_1_to_5_and_ends_on_the_reported_pose():
     nxt = base._path[-4]
     assert base.pose_at(t_end) == pytest.approx(nxt[1], abs=1e-12)
     assert abs(v) > 0.1 and abs(w) > 0.1
+
+
+def test_cycles_run_for_the_laser_are_sent_by_the_base():
+    base, laser = make_robot('urg', 'utm-30lx', MOUNT, QUIET, {'baud': 0})
+    _open(base, 0.0)
+    base.poll(0.0)
+    base.receive(cmd('VEL', 200), 0.05)
+    laser.receive(b'MD0000108001000\n', 0.05)
+    for i in range(1, 400):  # 0.8 s of laser polls, none of the base
+        laser.poll(0.05 + 0.002 * i)
+    assert len(base._path) >= 7  # the laser ran the base's cycles
+    frames = base.poll(0.9)
+    decoder = p2os.P2osDecoder()
+    sips = [f for frame in frames for f in decoder.feed(frame)]
+    assert len(sips) == len(base.sent) >= 8  # every cycle's packet goes out, once
+    assert base.poll(0.9) == []
 
 
 def test_truth_file_is_the_true_path_in_the_start_frame():

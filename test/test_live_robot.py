@@ -40,8 +40,8 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path):
         stderr=subprocess.STDOUT, text=True)
     pipeline = subprocess.Popen(
         cli + ['pipeline', 'slam', '--set', f'laser_driver.port={laser}', '--set',
-               'laser_driver.skip=3', '--set', f'base_driver.port={base}'], env=env, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
+               'laser_driver.skip=3', '--set', f'base_driver.port={base}'], env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         with RosHarness() as ros:
             result = drive(ROUTES['short'][:2], (1.2, 1.2, 0.0), duration=9.0, wait=60.0,

@@ -10,9 +10,10 @@ and ``ekf_slam`` run on a live robot that ``cmd_vel`` drives (README, "One emula
   command takes effect one cycle later). Inside a cycle the pose is the one of eqs. 1-5
   with that twist (:func:`landmark_nav.sim.robot.step_pose` over the part of the cycle
   elapsed), so :meth:`RobotBase.pose_at` gives the pose at any host time, exactly the one
-  the status packets report at the cycles. After the last cycle (the laser's last beams
-  may lie up to one cycle ahead of the base's bookkeeping) it uses the twist planned for
-  that interval; only a stall at a wall (or an E_STOP) can still change it.
+  the status packets report at the cycles. It first runs the cycles due by then (the
+  base's server thread may be late under load); within the interval after the last cycle
+  it uses the twist planned for it, which only a stall at a wall (or an E_STOP) can still
+  change.
 * :class:`MountedLaser` is the laser's path for :class:`~landmark_nav.emulators.laser_scene.
   LaserScene`: the base pose at the beam's time composed with the mount ``base_link ->
   laser``; the laser emulator ray-casts the same world the base moves and its sonars
@@ -65,6 +66,7 @@ class RobotBase(P2osDevice):
         self._path: deque = deque(maxlen=int(history))
         self.listeners: List[Callable[[float, np.ndarray, float, float], None]] = []
         self._plan: Tuple[float, float, Tuple[int, int]] = (0.0, 0.0, (0, 0))
+        self._early: List[bytes] = []  # status packets of cycles run by pose_at
         self.predicted_queries = 0
 
     def _true_twist(self, wheels: Optional[Tuple[int, int]] = None) -> Tuple[float, float]:
@@ -110,13 +112,23 @@ class RobotBase(P2osDevice):
         """Twist of the interval after the last cycle (planned then; a stall stops it)."""
         return self._true_twist(self._plan[2])
 
+    def poll(self, now: float) -> List[bytes]:
+        """Send the status packets of cycles run early for the laser, then the due ones."""
+        with self._lock:
+            early, self._early = self._early, []
+            return early + super().poll(now)
+
     def pose_at(self, t) -> np.ndarray:
         """Return the true pose(s) ``(..., 3)`` at host time(s) ``t`` [s] (module docstring).
 
-        Times before the kept history get the pose at its start.
+        Cycles due by the latest ``t`` are run first (the base's own thread may be late under
+        load; their packets go out with its next poll), so only the interval after the last
+        cycle is predicted. Times before the kept history get the pose at its start.
         """
         t = np.asarray(t, dtype=float)
         with self._lock:
+            if t.size and self._next_tick is not None and float(t.max()) >= self._next_tick:
+                self._early += P2osDevice.poll(self, float(t.max()))
             path = list(self._path)
             current = self.true_pose.copy()
             predicted = self._predicted_twist()

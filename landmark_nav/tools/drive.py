@@ -57,7 +57,7 @@ def add_parser(sub, parser_class) -> None:
                    help='a waypoint in the world [m] instead of --route (repeatable)')
     p.add_argument('--start-pose', type=float, nargs=3, default=(1.2, 1.2, 0.0),
                    metavar=('X', 'Y', 'YAW_DEG'),
-                   help='the robot\'s start pose in the world [m, m, deg] (default 1.2 1.2 0)')
+                   help="the robot's start pose in the world [m, m, deg] (default 1.2 1.2 0)")
     p.add_argument('--pose-topic', default='/odometry',
                    help='nav_msgs/Odometry pose feedback (default /odometry of ekf_slam)')
     p.add_argument('--cmd-vel', default='/cmd_vel', help='Twist topic (default /cmd_vel)')
