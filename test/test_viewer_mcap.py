@@ -115,3 +115,12 @@ def test_existing_output_is_not_overwritten(tmp_path):
     (tmp_path / 'v').mkdir()
     with pytest.raises(ValueError, match='exists already'):
         write_slam_view(REPO / 'bags' / 'office', tmp_path / 'v', max_seconds=1.0)
+
+
+def test_rviz_config_shows_the_slam_topics_in_map():
+    import yaml
+    config = yaml.safe_load((REPO / 'rviz' / 'slam.rviz').read_text())
+    manager = config['Visualization Manager']
+    topics = {d['Topic']['Value'] for d in manager['Displays'] if 'Topic' in d}
+    assert manager['Global Options']['Fixed Frame'] == 'map'
+    assert {'/scan', '/landmarks', '/path', '/pose'} <= topics <= set(VIEW_TOPICS)
