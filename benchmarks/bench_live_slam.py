@@ -15,7 +15,9 @@ also records ``/odom``. Printed: the ATE (position error after interpolating the
 each estimate's stamp; no alignment: the truth is written in the start frame, which is the
 odom and map frame) of ekf_slam and of the odometry, RMSE and max, over the driven time;
 the SE(2)-aligned ATE (evo's metric); the distance driven; and ekf_slam's and the corner
-extractor's last ``/diagnostics`` input status (processed, dropped, latency percentiles).
+extractor's last ``/diagnostics`` input status (processed, dropped, latency percentiles)
+and every node's RSS after one minute and at the end. ``--loop --seconds 600 --skip 0``
+is a soak through the live drivers (40 scans/s, 10 Hz odometry).
 """
 
 import argparse
@@ -50,6 +52,20 @@ def position_errors(truth_file, stamps, poses):
     return stamps[keep], err, ref
 
 
+def node_rss(log: Path) -> dict:
+    """Return {node: RSS [MB]} of the pipeline's processes (pids from honcho's log)."""
+    import re
+    out = {}
+    for node, pid in re.findall(r'\| (\w+) started \(pid=(\d+)\)', log.read_text()):
+        try:
+            for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+                if line.startswith('VmRSS:'):
+                    out[node] = int(line.split()[1]) / 1024.0
+        except OSError:
+            pass
+    return out
+
+
 def main() -> int:
     """Run the emulator, the pipeline and the driver; print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -59,6 +75,8 @@ def main() -> int:
     parser.add_argument('--skip', type=int, default=3,
                         help='laser_driver.skip for the UTM-30LX (default 3: 10 scans/s, '
                              'as the office bags; 0: all 40)')
+    parser.add_argument('--loop', action='store_true',
+                        help='drive the route again and again (a soak: --seconds 600)')
     parser.add_argument('--domain', type=int, default=101,
                         help="DDS domain (default 101, outside the tests' 20..99: another "
                              "process's odometry on the domain resets the filter)")
@@ -93,15 +111,24 @@ def main() -> int:
         procs.append(subprocess.Popen(
             cli + ['pipeline', 'slam', '--set', f'base_driver.port={base_link}'] + laser_set,
             env=env, stdout=log, stderr=subprocess.STDOUT))
+        started = time.monotonic()
         try:
             with RosHarness() as ros:
                 odom = ros.collect('/odom', Odometry)
                 diags = ros.collect('/diagnostics', DiagnosticArray)
-                drive = subprocess.run(
+                drive = subprocess.Popen(
                     cli + ['drive', '--route', args.route, '--duration', str(args.seconds),
-                           '--record', str(out / 'slam.tum')], env=env, capture_output=True,
-                    text=True, timeout=args.seconds + 180)
-                print(drive.stdout.strip().splitlines()[-1] if drive.stdout else drive.stderr)
+                           '--record', str(out / 'slam.tum')] + (['--loop'] if args.loop
+                                                                 else []),
+                    env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                rss = {}
+                while drive.poll() is None:
+                    time.sleep(1.0)
+                    if not rss and time.monotonic() - started > 60.0:
+                        rss = node_rss(out / 'pipeline.log')
+                text, _ = drive.communicate()
+                print(text.strip().splitlines()[-1] if text.strip() else 'drive: no output')
+                rss_end = node_rss(out / 'pipeline.log')
                 time.sleep(1.0)
                 odom_msgs, diag_msgs = list(odom), list(diags)
         finally:
@@ -137,6 +164,10 @@ def main() -> int:
     resets = [line for line in (out / 'pipeline.log').read_text().splitlines()
               if 'Resetting EKF-SLAM' in line]
     print(f'ekf_slam resets: {len(resets)}' + ''.join(f'\n  {line}' for line in resets[:3]))
+    for node in sorted(rss_end):
+        if node in rss:
+            print(f'{node}: RSS {rss[node]:.1f} MB at 1 min, {rss_end[node]:.1f} MB at the end '
+                  f'({rss_end[node] - rss[node]:+.1f} MB)')
     for name, values in sorted(last.items()):
         keys = ('processed', 'dropped', 'latency_p50_ms', 'latency_p95_ms', 'latency_max_ms')
         print(f'{name}: ' + ', '.join(f'{k} {values.get(k)}' for k in keys))

@@ -69,6 +69,8 @@ def add_parser(sub, parser_class) -> None:
                    help='wait this long for the first pose [s] (default 60)')
     p.add_argument('--record', default=None, metavar='FILE.tum',
                    help='write every pose received (TUM)')
+    p.add_argument('--loop', action='store_true',
+                   help='start the route again when it is done (until --duration)')
     p.set_defaults(func=run)
 
 
@@ -76,7 +78,7 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
           max_speed: float = 0.3, max_turn_rate: float = 0.6,
           duration: Optional[float] = None, wait: float = 60.0, record=None,
           stop: Optional[threading.Event] = None, context=None,
-          log=print) -> dict:
+          log=print, loop: bool = False) -> dict:
     """Drive the route; return a summary (waypoints reached, poses received, seconds).
 
     Raises:
@@ -126,6 +128,7 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
         pub.publish(msg)
 
     started = None
+    laps = 0
     try:
         deadline = time.monotonic() + wait
         while 'pose' not in latest and not stop.is_set():
@@ -135,7 +138,7 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
         started = time.monotonic()
         log(f'drive: first pose on {pose_topic}; driving {len(follower.points)} waypoints')
         next_cmd = started
-        reached = 0
+        reached = laps = 0
         while not stop.is_set() and not follower.done:
             if duration is not None and time.monotonic() - started > duration:
                 break
@@ -148,6 +151,9 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
                     reached = follower.index
                     log(f'drive: waypoint {reached}/{len(follower.points)} reached '
                         f'after {time.monotonic() - started:.1f} s')
+                if follower.done and loop:
+                    follower.index, reached = 0, 0
+                    laps += 1
     finally:
         for _ in range(3):
             send(0.0, 0.0)
@@ -158,7 +164,7 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
         node.destroy_node()
         if own:
             rclpy.shutdown(context=context)
-    return {'reached': follower.index, 'waypoints': len(follower.points),
+    return {'reached': follower.index, 'waypoints': len(follower.points), 'laps': laps,
             'poses': received[0],
             'seconds': 0.0 if started is None else time.monotonic() - started}
 
@@ -174,7 +180,8 @@ def run(args: argparse.Namespace) -> int:
     points = args.waypoint or ROUTES[args.route]
     result = drive(points, (x, y, math.radians(yaw_deg)), args.pose_topic, args.cmd_vel,
                    args.max_speed, args.max_turn_rate, args.duration, args.wait, args.record,
-                   stop, log=lambda text: print(text, flush=True))
-    print(f'drive: {result["reached"]}/{result["waypoints"]} waypoints in '
+                   stop, log=lambda text: print(text, flush=True), loop=args.loop)
+    print(f'drive: {result["laps"]} laps and {result["reached"]}/{result["waypoints"]} '
+          f'waypoints in '
           f'{result["seconds"]:.1f} s, {result["poses"]} poses received', flush=True)
     return 0
