@@ -127,8 +127,13 @@ class RobotBase(P2osDevice):
         """
         t = np.asarray(t, dtype=float)
         with self._lock:
-            if t.size and self._next_tick is not None and float(t.max()) >= self._next_tick:
-                self._early += P2osDevice.poll(self, float(t.max()))
+            latest = float(t.max()) if t.size else -math.inf
+            while self._next_tick is not None and latest >= self._next_tick:
+                tick = self._next_tick
+                self._next_tick += self.cycle_s
+                frame = self._cycle(tick)  # its packet goes out late, not never
+                if frame is not None:
+                    self._early.append(frame)
             path = list(self._path)
             current = self.true_pose.copy()
             predicted = self._predicted_twist()
