@@ -101,14 +101,16 @@ def test_cycles_run_for_the_laser_are_sent_by_the_base():
     base.poll(0.0)
     base.receive(cmd('VEL', 200), 0.05)
     laser.receive(b'MD0000108001000\n', 0.05)
-    for i in range(1, 5):  # the laser's thread too is late: 0.8 s in four polls
+    for i in range(1, 5):  # 0.8 s of laser polls, none of the base
         laser.poll(0.05 + 0.2 * i)
     assert len(base._path) >= 7  # the laser ran the base's cycles
-    frames = base.poll(0.9)
+    base.pose_at(np.array([1.4]))  # a laser thread 0.5 s late asks at once
+    assert len(base._path) >= 13
+    frames = base.poll(1.45)
     decoder = p2os.P2osDecoder()
     sips = [f for frame in frames for f in decoder.feed(frame)]
-    assert len(sips) == len(base.sent) >= 8  # every cycle's packet goes out, once
-    assert base.poll(0.9) == []
+    assert len(sips) == len(base.sent) >= 14  # every cycle's packet goes out, once
+    assert base.poll(1.45) == []
 
 
 def test_truth_file_is_the_true_path_in_the_start_frame():
