@@ -4,10 +4,12 @@ from pathlib import Path
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, range_to_value, scan_to_data
+from landmark_nav.evaluation.viewer import VIEW_TOPICS
 from landmark_nav.sim.record import load_ground_truth, record_scenario, sonar_topic
 from landmark_nav.sim.world import World
 from landmark_nav.tools.bag_info import bag_size_bytes
 from landmark_nav.tools.demo import run_demo
+from mcap.reader import make_reader
 import numpy as np
 import pytest
 
@@ -94,8 +96,18 @@ def test_demo_writes_plot_and_summary(office, tmp_path):
     drift = (tmp_path / 'out' / 'summary.txt').read_text().strip()
     assert summary.startswith(drift) and 'odometry final position error' in drift
     assert 'EKF-SLAM' in summary and 'ATE RMSE' in summary
-    for name in ('slam_map.png', 'slam_errors.png', 'slam.json', 'trajectory_slam.tum'):
+    for name in ('slam_map.png', 'slam_errors.png', 'slam.json', 'trajectory_slam.tum',
+                 'view/view.mcap'):
         assert (tmp_path / 'out' / name).is_file(), name
+    assert 'viewer file: ' in summary  # its content in detail: test_viewer_mcap.py
+    with open(tmp_path / 'out' / 'view' / 'view.mcap', 'rb') as f:
+        view = make_reader(f).get_summary()
+    channels = {c.topic: c for c in view.channels.values()}
+    assert set(channels) == set(VIEW_TOPICS)  # every topic typed: a ros2msg schema
+    assert all(view.schemas[c.schema_id].encoding == 'ros2msg' and
+               view.schemas[c.schema_id].name == VIEW_TOPICS[t] for t, c in channels.items())
+    counts = view.statistics.channel_message_counts
+    assert counts[channels['/scan'].id] == counts[channels['/pose'].id] == 1200
 
 
 @pytest.mark.parametrize('scenario', sorted(COMMITTED))

@@ -76,9 +76,13 @@ class BagWriter:
         """Close the bag (written metadata makes it readable)."""
         self._writer.close()
 
-    def add_topic(self, topic: str, msg_class: type, latched: bool = False) -> None:
-        """Register a topic with its message class; latched topics replay as transient local."""
-        name = type_name(msg_class)
+    def add_topic(self, topic: str, msg_class, latched: bool = False) -> None:
+        """Register a topic with its message class; latched topics replay as transient local.
+
+        ``msg_class`` may also be a type name (``'tf2_msgs/msg/TFMessage'``) of a message
+        package that is not installed: write its CDR bytes with :meth:`write_serialized`.
+        """
+        name = msg_class if isinstance(msg_class, str) else type_name(msg_class)
         try:
             self._connections[topic] = self._writer.add_connection(
                 topic, name, typestore=self._typestore, offered_qos_profiles=[_qos(latched)])
@@ -91,6 +95,13 @@ class BagWriter:
         if connection is None:
             raise BagError(f'Topic {topic} was not added to {self.path}')
         self._writer.write(connection, int(stamp_ns), serialize(msg))
+
+    def write_serialized(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        """Write one message already serialized (CDR) with its log time [ns]."""
+        connection: Optional[object] = self._connections.get(topic)
+        if connection is None:
+            raise BagError(f'Topic {topic} was not added to {self.path}')
+        self._writer.write(connection, int(stamp_ns), bytes(data))
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Store a string in the bag's ``metadata.yaml`` ``custom_data`` (rosbag2 >= 6).

@@ -110,15 +110,28 @@ class Measurement:
 
 
 class LaserScene:
-    """Simulate sweeps of an emulated laser in a world (default: the office world)."""
+    """Simulate sweeps of an emulated laser in a world (default: the office world).
+
+    The laser's path is ``config.motion`` unless a ``motion`` is given: any object with
+    ``start_ns = 0`` and ``pose_at_seconds(t)`` returning the laser pose(s) ``(..., 3)`` in
+    the world at ``t`` seconds after the scene started (e.g. the base it is mounted on,
+    :mod:`landmark_nav.emulators.robot`). The device calls :meth:`start` with the host time
+    at which its scene time 0 lies (:attr:`origin`).
+    """
 
     def __init__(self, config: Optional[SceneConfig] = None,
-                 world: Optional[World] = None) -> None:
-        """Bind the configuration and the world; the noise generator is seeded."""
+                 world: Optional[World] = None, motion=None) -> None:
+        """Bind the configuration, the world and the path; the noise generator is seeded."""
         self.config = config or SceneConfig()
         self.world = world or office_world()
-        self.motion = _Motion(self.config)
+        self.motion = motion if motion is not None else _Motion(self.config)
         self.rng = np.random.default_rng(self.config.seed)
+        self.origin: Optional[float] = None
+
+    def start(self, now: float) -> None:
+        """Anchor scene time 0 at host time ``now`` [s] (the first call wins)."""
+        if self.origin is None:
+            self.origin = float(now)
 
     def pose_at(self, t: float) -> np.ndarray:
         """Return the laser pose ``(x, y, yaw)`` at ``t`` seconds."""

@@ -158,6 +158,7 @@ class LmsDevice(Device):
         if self._t0 is None:
             self._t0 = now
             self._k_next = 0
+            self.scene.start(now)
 
     def _scan_start(self, k: int) -> float:
         return self._t0 + k * REVOLUTION

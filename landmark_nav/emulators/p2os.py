@@ -545,19 +545,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "without CLOSE), to try the driver's CLOSE-and-retry path")
 
 
-def make_device(args: argparse.Namespace) -> P2osDevice:
-    """Build the device from the parsed options."""
+def device_kwargs(args: argparse.Namespace) -> dict:
+    """Return the :class:`P2osDevice` arguments of the parsed options."""
     robot = RobotParams()
     if args.k is not None:
         robot = replace(robot, k1=args.k[0], k2=args.k[1], k3=args.k[2])
     x, y, yaw_deg = args.start_pose
-    return P2osDevice(robot=robot, model=args.model, start_pose=(x, y, math.radians(yaw_deg)),
-                      name=args.name, sonar_noise=not args.no_sonar_noise,
-                      wheel_noise=args.wheel_noise, sonars_per_cycle=args.sonars_per_cycle,
-                      battery_v=args.battery, battery_drain_v_per_h=args.battery_drain,
-                      watchdog_s=args.watchdog, position_bits=args.position_bits,
-                      start_open=args.start_open, seed=args.seed)
+    return {'robot': robot, 'model': args.model,
+            'start_pose': (x, y, math.radians(yaw_deg)), 'name': args.name,
+            'sonar_noise': not args.no_sonar_noise, 'wheel_noise': args.wheel_noise,
+            'sonars_per_cycle': args.sonars_per_cycle, 'battery_v': args.battery,
+            'battery_drain_v_per_h': args.battery_drain, 'watchdog_s': args.watchdog,
+            'position_bits': args.position_bits, 'start_open': args.start_open,
+            'seed': args.seed}
 
 
-__all__ = ['add_arguments', 'CONNECTED', 'make_device', 'OPEN', 'P2osDevice',
+def make_device(args: argparse.Namespace) -> P2osDevice:
+    """Build the device from the parsed options."""
+    return P2osDevice(**device_kwargs(args))
+
+
+__all__ = ['add_arguments', 'CONNECTED', 'device_kwargs', 'make_device', 'OPEN', 'P2osDevice',
            'ReceivedCommand', 'SentStatus', 'WAIT_SYNC0', 'WAIT_SYNC1', 'WAIT_SYNC2']

@@ -191,6 +191,7 @@ class UrgDevice(Device):
     def _start(self, now: float) -> None:
         if self._t0 is None:
             self._t0 = self._clock_h0 = now
+            self.scene.start(now)
             # scans pass step 0 at a fixed phase within the millisecond (0.37 ms)
             self._base_time, self._base_k = now + 0.37e-3 / (1.0 + self.skew), 0
             self._k_next = 0

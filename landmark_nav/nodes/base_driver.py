@@ -5,7 +5,12 @@ velocity commands, watchdog) is :class:`landmark_nav.drivers.p2os_client.P2osCli
 odometry is :class:`landmark_nav.localization.wheel_odometry.WheelOdometry`; the port and
 its reconnects are :class:`landmark_nav.nodes.driver_common.DeviceLink`. This node converts.
 
-Publishes (stamped with the arrival time of the status packet minus ``time_offset``):
+Publishes (stamped with the host time of the robot's cycle: the status packets leave every
+``cycle_time`` on the robot's clock, so the count of cycles (from the robot's own odometry,
+:class:`~landmark_nav.drivers.p2os_client.SipUpdate` ``cycles``) is a sensor clock that
+:class:`~landmark_nav.drivers.clock_filter.ClockFilter` maps to host time from the lowest
+arrival delays, as the laser driver does with the sensor's counter; arrival times minus
+``time_offset`` jitter by the OS scheduling, tens of ms under load, the stamps do not):
 
 * ``odom`` (nav_msgs/Odometry, ``odom_frame`` -> ``base_frame``) every status packet
   (10 Hz): integrated from the wheel velocities with k1, k2, k3 (eqs. 4-7, 17-18, 1-3) or,
@@ -30,11 +35,12 @@ in :func:`~landmark_nav.nodes.common.run_node`'s shutdown path and needs no ROS 
 import math
 import threading
 import time
-from typing import List, Tuple
+from typing import List, Optional, Tuple
 
 from geometry_msgs.msg import TransformStamped, Twist
 from landmark_nav.conversions import (make_joint_state, make_odometry, make_range,
                                       ns_to_stamp, quaternion_msg_from_yaw)
+from landmark_nav.drivers.clock_filter import ClockFilter
 from landmark_nav.drivers.p2os import P2osDecoder
 from landmark_nav.drivers.p2os_client import ClientConfig, P2osClient, SipUpdate
 from landmark_nav.hardware import SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE
@@ -158,6 +164,9 @@ class BaseDriver(Node):
         self._lock = threading.Lock()
         self._status = None
         self._last_battery = -math.inf
+        self._last_stamp = 0  # ns, of the last status packet (I/O thread)
+        self._cycle_clock = ClockFilter()  # robot cycles -> host time
+        self._cycles = 0
         self._robot_origin = self._robot_base = (0.0, 0.0, 0.0)
         self.warner = ProblemWarner(self)
 
@@ -224,15 +233,29 @@ class BaseDriver(Node):
 
     # --- conversions ------------------------------------------------------------------------
 
-    def _stamp_ns(self, arrival: float) -> int:
-        age = time.monotonic() - arrival
-        return self.get_clock().now().nanoseconds - int((age + self.time_offset) * 1e9)
+    def _stamp_ns(self, arrival: float, update: Optional[SipUpdate] = None) -> int:
+        host = arrival - self.time_offset
+        if update is not None:  # the robot's cycle on the host clock (module docstring)
+            if update.first:
+                self._cycle_clock.reset()
+                self._cycles = 0
+            else:
+                self._cycles += max(1, int(update.cycles))
+            host = self._cycle_clock.update(self._cycles * self.cycle_s, host)
+        age = time.monotonic() - host
+        stamp = self.get_clock().now().nanoseconds - int(age * 1e9)
+        # Packets read in one chunk share an arrival time, and the two clocks are read apart:
+        # keep the stamps strictly increasing (1 us apart at least), as ekf_slam restarts on
+        # odometry that goes back in time (seen under load: 20 us back).
+        stamp = max(stamp, self._last_stamp + 1000)
+        self._last_stamp = stamp
+        return stamp
 
     def publish_status(self, update: SipUpdate, arrival: float) -> None:
         """Publish odometry, joint states, sonar ranges and battery of one status packet."""
         status = update.status
         params = self.client.params
-        stamp = self._stamp_ns(arrival)
+        stamp = self._stamp_ns(arrival, update)
         if update.lost:
             self.health.on_problem(f'{update.lost} status packet(s) late or lost')
         dt = update.cycles * self.cycle_s

@@ -115,6 +115,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           align=args.align, laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta)
     print(format_summary(result))
+    if args.view is not None:
+        from landmark_nav.evaluation.viewer import write_slam_view
+        view = write_slam_view(args.bag, args.view, args.association,
+                               max_seconds=args.max_seconds, reference=args.reference,
+                               laser_pose=args.laser_pose, sigma_r=args.sigma_r)
+        print(f'viewer file: {view["mcap"]} (Foxglove / Lichtblick; layout '
+              'viewer/slam_layout.json)')
     if args.out is not None and result['reference'] is None:
         print(f'written: {args.out}/slam.json, trajectory_{{slam,odom}}.tum, slam_map.png')
     elif args.out is not None:
@@ -302,6 +309,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='RPE distance along the reference [m] (default 1)')
     p.add_argument('--max-seconds', type=float, default=None,
                    help='use only the first seconds of the bag')
+    p.add_argument('--view', default=None, metavar='DIR',
+                   help='also write the inputs and outputs as one MCAP for Foxglove / '
+                        'Lichtblick into the new bag directory DIR')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.set_defaults(func=_cmd_evaluate)
 
@@ -361,6 +371,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
     add_emulate_parsers(sub, _Parser)
+
+    from landmark_nav.tools.drive import add_parser as add_drive_parser
+    add_drive_parser(sub, _Parser)
     return parser
 
 

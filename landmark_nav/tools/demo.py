@@ -3,8 +3,9 @@
 Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png``,
 ``summary.txt`` and ``drift.json`` (odometry drift against ``/ground_truth/odom``) and the
 EKF-SLAM evaluation of :func:`landmark_nav.evaluation.slam.evaluate_bag`
-(``slam_map.png``, ``slam_errors.png``, ``slam.json``, TUM trajectories); returns both
-summaries.
+(``slam_map.png``, ``slam_errors.png``, ``slam.json``, TUM trajectories) and the viewer file
+``view/view.mcap`` (:func:`landmark_nav.evaluation.viewer.write_slam_view`: inputs and
+outputs in standard message types for Foxglove / Lichtblick); returns both summaries.
 """
 
 import json
@@ -132,4 +133,7 @@ def run_demo(bag, out) -> str:
         {k: v for k, v in drift.items() if k != 'position_error_m'}, indent=2) + '\n')
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
     slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=sys.stderr.isatty()))
-    return summary + '\n\nEKF-SLAM (ICNN):\n' + slam
+    from landmark_nav.evaluation.viewer import write_slam_view
+    view = write_slam_view(bag, out / 'view', 'icnn', force=True)
+    return (summary + '\n\nEKF-SLAM (ICNN):\n' + slam + f'\nviewer file: {view["mcap"]} '
+            '(open in Foxglove or Lichtblick; layout viewer/slam_layout.json)')

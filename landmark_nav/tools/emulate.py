@@ -1,8 +1,10 @@
-"""``landmark_nav emulate urg|lms200|p2os``: serve an emulated device on a pty and a TCP port.
+"""``landmark_nav emulate urg|lms200|p2os|robot``: serve emulated devices on a pty and TCP.
 
 Each emulator module (``landmark_nav.emulators.<name>``) provides ``add_arguments(parser)``
 for its own options and ``make_device(args) -> Device``; this module adds the common
 options (endpoints, faults) and runs :func:`~landmark_nav.emulators.server.serve_forever`.
+A module serving several devices (``robot``: the base and its laser) provides
+``serve(args, announce)`` instead.
 """
 
 import argparse
@@ -17,6 +19,8 @@ EMULATORS = {
     'urg': ('landmark_nav.emulators.urg', 'Hokuyo URG/UTM laser speaking SCIP 2.0'),
     'lms200': ('landmark_nav.emulators.lms200', 'SICK LMS200/291 laser (LMS2xx telegrams)'),
     'p2os': ('landmark_nav.emulators.p2os', 'Pioneer base speaking P2OS (odometry, sonars)'),
+    'robot': ('landmark_nav.emulators.robot', 'one robot: the P2OS base and a laser (urg or '
+              'lms200) on it, the laser scanning from wherever cmd_vel drove the base'),
 }
 
 
@@ -41,8 +45,9 @@ def add_parsers(sub: argparse._SubParsersAction, parser_class: type) -> None:
                                parser_class=parser_class)
     for name, (module, help_text) in EMULATORS.items():
         d = devices.add_parser(name, help=help_text)
-        d.add_argument('--link', default=f'/tmp/landmark_nav_{name}',
-                       help=f'symlink to the pseudo-terminal (default /tmp/landmark_nav_{name}; '
+        link = 'p2os' if name == 'robot' else name  # the robot's --link is its base's
+        d.add_argument('--link', default=f'/tmp/landmark_nav_{link}',
+                       help=f'symlink to the pseudo-terminal (default /tmp/landmark_nav_{link}; '
                             '"" for no pty)')
         d.add_argument('--tcp', type=int, default=None, metavar='PORT',
                        help='also listen on this TCP port (0: any free port)')
@@ -71,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     """Build the device and serve it until Ctrl-C."""
     from landmark_nav.emulators.server import serve_forever
     module = importlib.import_module(EMULATORS[args.device][0])
+    if hasattr(module, 'serve'):  # several devices (robot): the module serves them
+        return module.serve(args, announce=lambda text: print(text, flush=True))
     device = module.make_device(args)
     server = DeviceServer(device, link=args.link or None, tcp_port=args.tcp,
                           tcp_host=args.tcp_host,

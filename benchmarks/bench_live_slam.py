@@ -1,0 +1,178 @@
+"""Live SLAM on the emulated robot: ATE of ekf_slam and of the odometry against the truth.
+
+Run from the repository root::
+
+    python benchmarks/bench_live_slam.py [--seconds 120] [--route office] [--laser urg]
+        [--skip 3]
+
+Starts, each as its own process on a private DDS domain, exactly what the README shows:
+``landmark_nav emulate robot --truth truth.tum`` (the P2OS base and the laser on one
+world), ``landmark_nav pipeline slam`` (laser_driver + base_driver + corner_extractor +
+ekf_slam with the shipped parameters; the UTM-30LX's 40 scans/s thinned to 10 with
+``laser_driver.skip=3`` unless ``--skip 0``) and ``landmark_nav drive --route office --record
+slam.tum`` (cmd_vel closed on ekf_slam's ``/odometry``) for ``--seconds``; this process
+also records ``/odom``. Printed: the ATE (position error after interpolating the truth to
+each estimate's stamp; no alignment: the truth is written in the start frame, which is the
+odom and map frame) of ekf_slam and of the odometry, RMSE and max, over the driven time;
+the SE(2)-aligned ATE (evo's metric); the distance driven; and ekf_slam's and the corner
+extractor's last ``/diagnostics`` input status (processed, dropped, latency percentiles)
+and every node's RSS after one minute and at the end. ``--loop --seconds 600 --skip 0``
+is a soak through the live drivers (40 scans/s, 10 Hz odometry).
+"""
+
+import argparse
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def planar(traj):
+    """Return (stamps_ns, (N, 3) x, y, yaw) of a TUM trajectory."""
+    import numpy as np
+    q = traj.quaternions
+    return traj.stamps_ns, np.column_stack([traj.positions[:, :2],
+                                            2.0 * np.arctan2(q[:, 2], q[:, 3])])
+
+
+def position_errors(truth_file, stamps, poses):
+    """Return (stamps kept, errors [m], truth at them) of poses against the truth file."""
+    import numpy as np
+    from landmark_nav.evaluation.trajectory import read_tum
+    from landmark_nav.geometry import interpolate_pose
+    tt, tp = planar(read_tum(truth_file))
+    keep = (stamps >= tt[0]) & (stamps <= tt[-1])
+    ref = interpolate_pose((stamps[keep] - tt[0]) * 1e-9, (tt - tt[0]) * 1e-9, tp)
+    err = np.hypot(*(poses[keep, :2] - ref[:, :2]).T)
+    return stamps[keep], err, ref
+
+
+def node_rss(log: Path) -> dict:
+    """Return {node: RSS [MB]} of the pipeline's processes (pids from honcho's log)."""
+    import re
+    out = {}
+    for node, pid in re.findall(r'\| (\w+) started \(pid=(\d+)\)', log.read_text()):
+        try:
+            for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+                if line.startswith('VmRSS:'):
+                    out[node] = int(line.split()[1]) / 1024.0
+        except OSError:
+            pass
+    return out
+
+
+def main() -> int:
+    """Run the emulator, the pipeline and the driver; print the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--seconds', type=float, default=120.0)
+    parser.add_argument('--route', default='office')
+    parser.add_argument('--laser', default='urg', choices=('urg', 'lms200'))
+    parser.add_argument('--skip', type=int, default=3,
+                        help='laser_driver.skip for the UTM-30LX (default 3: 10 scans/s, '
+                             'as the office bags; 0: all 40)')
+    parser.add_argument('--loop', action='store_true',
+                        help='drive the route again and again (a soak: --seconds 600)')
+    parser.add_argument('--domain', type=int, default=101,
+                        help="DDS domain (default 101, outside the tests' 20..99: another "
+                             "process's odometry on the domain resets the filter)")
+    parser.add_argument('--out', default=None, help='keep the files here')
+    args = parser.parse_args()
+
+    import numpy as np
+    from landmark_nav.conversions import odometry_to_pose
+    from landmark_nav.evaluation.trajectory import ate, read_tum, Trajectory
+    from landmark_nav.testing import isolate_dds, RosHarness
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+
+    isolate_dds(args.domain)
+    out = Path(args.out or tempfile.mkdtemp(prefix='live_slam_'))
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    cli = [sys.executable, '-m', 'landmark_nav.tools.cli']
+    base_link, laser_link = out / 'p2os', out / 'laser'
+    laser_set = ['--set', f'laser_driver.port={laser_link}']
+    if args.laser == 'urg' and args.skip:
+        laser_set += ['--set', f'laser_driver.skip={args.skip}']
+    if args.laser == 'lms200':
+        laser_set += ['--set', 'laser_driver.protocol=lms2xx', '--set', 'laser_driver.baud=38400']
+    procs = []
+    with open(out / 'emulator.log', 'w') as emu_log, open(out / 'pipeline.log', 'w') as log:
+        procs.append(subprocess.Popen(
+            cli + ['emulate', 'robot', '--link', str(base_link), '--tcp', '0', '--laser',
+                   args.laser, '--laser-link', str(laser_link), '--truth',
+                   str(out / 'truth.tum')], env=env, stdout=emu_log, stderr=subprocess.STDOUT))
+        time.sleep(2.0)
+        procs.append(subprocess.Popen(
+            cli + ['pipeline', 'slam', '--set', f'base_driver.port={base_link}'] + laser_set,
+            env=env, stdout=log, stderr=subprocess.STDOUT))
+        started = time.monotonic()
+        try:
+            with RosHarness() as ros:
+                odom = ros.collect('/odom', Odometry)
+                diags = ros.collect('/diagnostics', DiagnosticArray)
+                drive = subprocess.Popen(
+                    cli + ['drive', '--route', args.route, '--duration', str(args.seconds),
+                           '--record', str(out / 'slam.tum')] + (['--loop'] if args.loop
+                                                                 else []),
+                    env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                rss = {}
+                while drive.poll() is None:
+                    time.sleep(1.0)
+                    if not rss and time.monotonic() - started > 60.0:
+                        rss = node_rss(out / 'pipeline.log')
+                text, _ = drive.communicate()
+                print(text.strip().splitlines()[-1] if text.strip() else 'drive: no output')
+                rss_end = node_rss(out / 'pipeline.log')
+                time.sleep(1.0)
+                odom_msgs, diag_msgs = list(odom), list(diags)
+        finally:
+            procs[1].send_signal(signal.SIGINT)
+            procs[1].wait(timeout=60)
+            procs[0].send_signal(signal.SIGTERM)
+            procs[0].wait(timeout=30)
+
+    est = read_tum(out / 'slam.tum')
+    ts, ps = planar(est)
+    t_slam, e_slam, ref = position_errors(out / 'truth.tum', ts, ps)
+    od = [odometry_to_pose(m) for m in odom_msgs]
+    to = np.array([d.stamp_ns for d in od], dtype=np.int64)
+    po = np.array([d.pose for d in od])
+    keep = (to >= t_slam[0]) & (to <= t_slam[-1])
+    t_odom, e_odom, _ = position_errors(out / 'truth.tum', to[keep], po[keep])
+    dist = float(np.sum(np.hypot(*np.diff(ref[:, :2], axis=0).T)))
+    span = (t_slam[-1] - t_slam[0]) * 1e-9
+    print(f'files in {out}; {len(t_slam)} SLAM poses over {span:.1f} s, {dist:.2f} m driven')
+    for name, err in (('ekf_slam', e_slam), ('odometry', e_odom)):
+        rmse = 100 * np.sqrt(np.mean(err ** 2))
+        print(f'{name:9s} ATE (start frame, unaligned): RMSE {rmse:.2f} cm, '
+              f'max {100 * err.max():.2f} cm')
+    se2 = ate(Trajectory.from_planar(t_slam, ps[np.isin(ts, t_slam)]),
+              Trajectory.from_planar(t_slam, ref), 'se2')
+    print(f'ekf_slam ATE SE(2)-aligned (evo): RMSE {100 * se2["rmse"]:.2f} cm, '
+          f'max {100 * se2["max"]:.2f} cm')
+    last = {}
+    for array in diag_msgs:
+        for status in array.status:
+            if status.name.endswith(': input'):
+                last[status.name] = {v.key: v.value for v in status.values}
+    resets = [line for line in (out / 'pipeline.log').read_text().splitlines()
+              if 'Resetting EKF-SLAM' in line]
+    print(f'ekf_slam resets: {len(resets)}' + ''.join(f'\n  {line}' for line in resets[:3]))
+    for node in sorted(rss_end):
+        if node in rss:
+            print(f'{node}: RSS {rss[node]:.1f} MB at 1 min, {rss_end[node]:.1f} MB at the end '
+                  f'({rss_end[node] - rss[node]:+.1f} MB)')
+    for name, values in sorted(last.items()):
+        keys = ('processed', 'dropped', 'latency_p50_ms', 'latency_p95_ms', 'latency_max_ms')
+        print(f'{name}: ' + ', '.join(f'{k} {values.get(k)}' for k in keys))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
