@@ -59,6 +59,17 @@ def test_bad_seed(tmp_path, seed):
                           'seed')
 
 
+@pytest.mark.parametrize('args,words', [
+    (['office', '--distance', '3'], ('--distance', 'corridor scenario only')),
+    (['corridor', '--image-size', '100x100'], ('--image-size', '320x240')),
+    (['corridor', '--distance', '40'], ('40', 'does not fit')),
+    (['corridor', '--distance', '-1'], ('--distance', 'must be > 0')),
+])
+def test_bad_corridor_options(tmp_path, args, words):
+    assert_one_line_error(run_cli('simulate', *args, '--out', tmp_path / 'b'), *words)
+    assert not (tmp_path / 'b').exists()
+
+
 def test_existing_output_is_not_overwritten(tmp_path):
     (tmp_path / 'b').mkdir()
     assert_one_line_error(run_cli('simulate', 'calibration', '--out', tmp_path / 'b'), 'exists')

@@ -102,6 +102,9 @@ def record_scenario(name: str, seed: int, out, force: bool = False, **overrides)
     if name in ('landmark_views', 'landmark_shuttle'):  # camera scenarios: own recorder
         from landmark_nav.sim.camera_record import record_camera_scenario
         return record_camera_scenario(name, seed, out, force=force, **overrides)
+    if name == 'corridor':                               # rendered corridor: own recorder
+        from landmark_nav.sim.corridor_record import record_corridor_scenario
+        return record_corridor_scenario(seed, out, force=force, **overrides)
     result = run_scenario(name, seed, **overrides)
     out = Path(out)
     if force and out.exists():

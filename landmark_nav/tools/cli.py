@@ -38,6 +38,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     overrides = {}
     if args.laser_sigma_range is not None:
         overrides['laser'] = {'sigma_range': args.laser_sigma_range}
+    corridor = {'distance': args.distance, 'downscale': args.image_size, 'raw': args.raw_images}
+    given = [k for k, v in corridor.items() if v not in (None, False)]
+    if given and args.scenario != 'corridor':
+        raise ValueError(f'--{given[0].replace("_", "-")} applies to the corridor scenario '
+                         f'only')
+    if args.scenario == 'corridor':
+        overrides.update(distance=args.distance, downscale=args.image_size)
+        if args.raw_images:
+            overrides['jpeg_quality'] = None
     summary = record_scenario(args.scenario, args.seed, args.out, force=args.force,
                               **overrides)
     print(summary)
@@ -97,6 +106,14 @@ def _positive_float(text: str) -> float:
     if not 0 < value < float('inf'):
         raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
     return value
+
+
+def _image_size(text: str) -> int:
+    """Parse a corridor camera size ``WxH``; return the downscale of 640 x 480 (1, 2, 4)."""
+    sizes = {'640x480': 1, '320x240': 2, '160x120': 4}
+    if text not in sizes:
+        raise argparse.ArgumentTypeError(f'expected one of {", ".join(sizes)}, got {text!r}')
+    return sizes[text]
 
 
 def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
@@ -182,12 +199,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('simulate', help='simulate a named scenario into a rosbag2 (MCAP) bag')
     p.add_argument('scenario',
                    help='scenario name: office, hallway, calibration, ambiguous, '
-                        'landmark_views or landmark_shuttle')
+                        'landmark_views, landmark_shuttle or corridor')
     p.add_argument('--seed', type=_seed, default=1, help='random seed (default 1)')
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--force', action='store_true', help='replace an existing bag directory')
     p.add_argument('--laser-sigma-range', type=float, default=None, metavar='METRES',
                    help='laser range noise std (default 0.01 m)')
+    p.add_argument('--distance', type=_positive_float, default=None, metavar='METRES',
+                   help='corridor: distance driven (default 3; at most 28)')
+    p.add_argument('--image-size', type=_image_size, default=None, metavar='WxH',
+                   help='corridor: 640x480, 320x240 (default) or 160x120')
+    p.add_argument('--raw-images', action='store_true',
+                   help='corridor: raw mono8 frames on /camera/image_raw instead of JPEG on '
+                        '/camera/image_raw/compressed')
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser('replay', help='publish a bag into the ROS graph (like ros2 bag play)')
