@@ -6,6 +6,7 @@ from pathlib import Path
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
 from landmark_nav.conversions import (array_to_image, make_camera_info, make_odometry,
                                       quaternion_to_yaw)
+from landmark_nav.geometry import wrap_angle
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corridor_follower import CorridorFollower
 from landmark_nav.sim.camera import CameraSimulator
@@ -231,3 +232,32 @@ def test_committed_bag_replay_compressed():
     assert np.abs(err_y).max() < 0.004
     assert np.sqrt(np.mean(err_th ** 2)) < 0.3
     assert np.abs(err_th).max() < 1.0
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_closed_loop_through_cmd_vel():
+    """The simulated robot obeys the node's cmd_vel: 2 x 4 m back and forth, one turn.
+
+    Starts 15 cm off the centre line, 10 m into the 30 m corridor; the full 3 x 26 m run
+    is ``benchmarks/bench_corridor_loop.py``.
+    """
+    from landmark_nav.sim.corridor_loop import follower_parameters, LoopConfig, run_loop
+    cfg = LoopConfig(start=(10.0, 0.15, math.radians(4.0)), distance=4.0, lengths=2)
+    with RosHarness() as ros:
+        node = ros.add_node(CorridorFollower(context=ros.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in follower_parameters(cfg).items()]))
+        result = run_loop(ros.context, cfg, seed=2, executor=ros._executor)
+    s = result.summary()
+    assert result.turning.any() and not result.turning[-1]
+    # facing back at the end (measured 4.3 deg off the axis, still converging after 4 m)
+    assert abs(math.degrees(wrap_angle(result.truth[-1, 2] - math.pi))) < 6.0
+    # both legs driven to their full odometry length (none ended by a stall)
+    assert len(result.legs) == 2 and min(result.legs) >= 4.0
+    assert abs(result.truth[-1, 0] - 10.0) < 0.1 and s['path_m'] > 7.9
+    # measured: within 1.32 cm of the centre line after the first 2 m (lateral RMS
+    # 0.76 cm); the issue asks for 5 cm on the full run
+    assert s['max_abs_lateral_after_2m'] < 0.02
+    assert s['rms_lateral_after_2m'] < 0.01
+    assert s['min_wall_clearance'] > 0.55
+    assert node.frames > 90
