@@ -49,7 +49,7 @@ def test_not_a_bag(tmp_path):
 
 def test_unknown_scenario(tmp_path):
     assert_one_line_error(run_cli('simulate', 'moon', '--out', tmp_path / 'b'), 'moon',
-                          'office')
+                          'office', 'corridor', 'landmark_views')
     assert not (tmp_path / 'b').exists()
 
 
