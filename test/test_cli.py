@@ -70,6 +70,15 @@ def test_bad_corridor_options(tmp_path, args, words):
     assert not (tmp_path / 'b').exists()
 
 
+@pytest.mark.parametrize('args,words', [
+    (['--offset', '0.9'], ('0.9', 'into a wall')),
+    (['--distance', '29'], ('29', 'does not fit')),
+    (['--lengths', '0'], ('--lengths', 'must be >= 1')),
+])
+def test_bad_corridor_loop_options(args, words):
+    assert_one_line_error(run_cli('corridor-loop', *args), *words)
+
+
 def test_existing_output_is_not_overwritten(tmp_path):
     (tmp_path / 'b').mkdir()
     assert_one_line_error(run_cli('simulate', 'calibration', '--out', tmp_path / 'b'), 'exists')

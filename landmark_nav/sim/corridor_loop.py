@@ -156,9 +156,12 @@ class CorridorLoop:
     def __init__(self, context, config: LoopConfig = LoopConfig(), seed: int = 0) -> None:
         """Build the scene and the node (name ``corridor_sim``)."""
         c = config
-        if c.distance + c.start[0] > c.corridor.length - 1.0:
+        if not (0.0 < c.start[0] and c.distance + c.start[0] <= c.corridor.length - 1.0):
             raise ValueError(f'a {c.distance} m leg from x = {c.start[0]} does not fit the '
-                             f'{c.corridor.length} m corridor')
+                             f'{c.corridor.length} m corridor (1 m clear of its far end)')
+        if abs(c.start[1]) + c.robot_radius >= c.corridor.width / 2:
+            raise ValueError(f'a start {c.start[1]} m off the centre line puts the robot '
+                             f'(radius {c.robot_radius} m) into a wall')
         self.config = c
         self.seed = seed
         self.rng = np.random.default_rng(seed)
