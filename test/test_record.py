@@ -118,3 +118,11 @@ def test_committed_bag_is_small_and_reproducible(scenario, tmp_path):
     for topic in topics:
         np.testing.assert_array_equal(a[topic], b[topic], err_msg=topic)
     assert load_ground_truth(fresh) == meta
+
+
+def test_corridor_bag_stays_small():
+    """bags/corridor holds images: 320 x 240 JPEG frames keep it under 0.5 MB (440 KB)."""
+    bag = REPO / 'bags' / 'corridor'
+    assert bag_size_bytes(bag) < 512 * 1024
+    meta = load_ground_truth(bag)
+    assert meta['image_size'] == [320, 240] and meta['frames'] == 30

@@ -2,28 +2,28 @@
 
 Topics (stamps are simulation time, starting at 1 s):
 
-========================  ===============================  ==================================
-topic                     type                             content
-========================  ===============================  ==================================
-/camera/image_raw         sensor_msgs/Image                mono8, frame ``camera_optical``,
+============================  ===========================  ===============================
+topic                         type                         content
+============================  ===========================  ===============================
+/camera/image_raw             sensor_msgs/Image            mono8, frame ``camera_optical``,
                                                            ``camera_rate`` (without
                                                            ``jpeg_quality``)
-/camera/image_raw/        sensor_msgs/CompressedImage      the same frames JPEG-compressed
-compressed                                                 (format ``jpeg``; with
-                                                           ``jpeg_quality``)
-/camera/camera_info       sensor_msgs/CameraInfo           plumb_bob, same stamp (written
+/camera/image_raw/compressed  sensor_msgs/CompressedImage  the same frames as JPEG (format
+                                                           ``jpeg``; with ``jpeg_quality``)
+/camera/camera_info           sensor_msgs/CameraInfo       plumb_bob, same stamp (written
                                                            just before the image)
-/odom                     nav_msgs/Odometry                measured (drifting) odometry,
+/odom                         nav_msgs/Odometry            measured (drifting) odometry,
                                                            ``odom`` -> ``base_link``
-/ground_truth/odom        nav_msgs/Odometry                true pose in the corridor frame
+/ground_truth/odom            nav_msgs/Odometry            true pose in the corridor frame
                                                            (``corridor`` -> ``base_link``)
-========================  ===============================  ==================================
+============================  ===========================  ===============================
 
 The robot weaves about the centre line (a lateral set-point ``0.3 sin(2 pi x / 8)`` m)
 under a controller on its *true* pose, so that the bag does not depend on the follower
 under test. The measured odometry integrates wheel distances with Kleeman noise and the
 right wheel's scale error of :class:`~landmark_nav.evaluation.corridor_run.RunConfig`.
-``ground_truth.yaml`` beside the MCAP holds the seed, corridor geometry and camera mount.
+``ground_truth.yaml`` beside the MCAP holds the seed, corridor geometry, camera mount,
+image size and topic, and the odometry error model.
 
 The ``corridor`` scenario of ``landmark_nav simulate`` (:func:`record_corridor_scenario`)
 is a short drive at 320 x 240 with JPEG frames, small enough to commit (``bags/corridor``).
