@@ -36,6 +36,7 @@ bags: $(STAMP)
 	$(BIN)/landmark_nav simulate office --seed 1 --out bags/office --force
 	$(BIN)/landmark_nav simulate hallway --seed 1 --out bags/hallway --force
 	$(BIN)/landmark_nav simulate calibration --seed 1 --out bags/calibration --force
+	$(BIN)/landmark_nav simulate corridor --seed 1 --out bags/corridor --force
 
 clean:
 	rm -rf $(VENV) out build install log

@@ -6,10 +6,16 @@ Run from the repository root::
 
 Per-frame time of :func:`landmark_nav.corridor.frame.measure_frame` (lines, corridor VP,
 heading, lateral position) for each line input, at 640 x 480 and 320 x 240 on the same
-rendered corridor frames (``landmark_nav.sim.corridor``), with the ratio to the LSD-input
-pipeline in the same run (machines differ), and the single-frame errors; the hard cases;
-then a fused 27 m run and a closed loop of three lengths back and forth
-(:func:`landmark_nav.evaluation.corridor_run.run_corridor`).
+rendered corridor frames (``landmark_nav.sim.corridor``), with the ratios to the
+HoughLinesP- and LSD-input pipelines in the same run (machines differ), and the
+single-frame errors; the hard cases; then a fused 27 m run and a closed loop of three
+lengths back and forth (:func:`landmark_nav.evaluation.corridor_run.run_corridor`).
+
+Times: the numerical libraries single-threaded, as in the node
+(:func:`landmark_nav.nodes.common.limit_threads`); per frame the best of ``--repeat`` runs
+of the process CPU time (``time.process_time``: what the frame costs, hardly changed by
+other jobs on a shared machine) and of the wall time; the medians over the frames.
+``--speed-only`` stops after the timing tables.
 Targets (issue): >= 30 frames/s at 320 x 240 and >= 10 at 640 x 480; single frames
 heading <= 0.5 deg and lateral <= 3 cm median; fused lateral <= 1.5 cm and heading
 <= 0.5 deg RMS.
@@ -29,18 +35,30 @@ from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame
 from landmark_nav.corridor.lateral import CorridorModel  # noqa: E402
 from landmark_nav.evaluation.corridor_run import (hard_cases, run_corridor,  # noqa: E402
                                                   RunConfig)
+from landmark_nav.nodes.common import limit_threads  # noqa: E402
 from landmark_nav.sim.camera import CameraSimulator, Photometry  # noqa: E402
 from landmark_nav.sim.corridor import (corridor_scene, corridor_view,  # noqa: E402
                                        CorridorConfig, default_corridor_camera)
-from landmark_nav.vision.camera import CameraModel  # noqa: E402
-from landmark_nav.vision.image_lines import METHODS  # noqa: E402
+from landmark_nav.vision.image_lines import detect_lines, METHODS  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def half(cam: CameraModel) -> CameraModel:
-    """Return the camera at half resolution (pixel centres at integer coordinates)."""
-    S = np.array([[0.5, 0.0, -0.25], [0.0, 0.5, -0.25], [0.0, 0.0, 1.0]])
-    return CameraModel(cam.width // 2, cam.height // 2, S @ cam.K, cam.D)
+def best_time(fn, repeat: int):
+    """Return (best process CPU time, best wall time) [s] of ``repeat`` calls, last result."""
+    cpu, wall, out = math.inf, math.inf, None
+    for _ in range(repeat):
+        c0, w0 = time.process_time(), time.perf_counter()
+        out = fn()
+        cpu, wall = min(cpu, time.process_time() - c0), min(wall, time.perf_counter() - w0)
+    return cpu, wall, out
+
+
+def measure(img, c, model, mount, p):
+    """Return the frame's measurement or None when the corridor is lost."""
+    try:
+        return measure_frame(img, c, model, mount, params=p)
+    except CorridorLost:
+        return None
 
 
 def main() -> None:
@@ -48,7 +66,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--frames', type=int, default=40)
     ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
+    ap.add_argument('--speed-only', action='store_true', help='only the timing tables')
     args = ap.parse_args()
+    threads = limit_threads()
     cfg = CorridorConfig()
     cam = default_corridor_camera()
     sim = CameraSimulator(cam)
@@ -62,41 +83,44 @@ def main() -> None:
                  math.radians(rng.uniform(-15, 15)))
         views.append(corridor_view(sim, planes, robot, mount,
                                    Photometry(noise_sigma=2.0, defocus_sigma=0.5), rng))
-    for scale, c in ((1, cam), (2, half(cam))):
+    print(f'library threads: {threads}; times per frame: best of {args.repeat}, median over '
+          'the frames')
+    for scale, c in ((1, cam), (2, default_corridor_camera(2))):
         rows = {}
         for m in METHODS:
             p = FrameParams(line_method=m)
-            times, eh, ey, lost = [], [], [], 0
+            cpu, wall, line_cpu, eh, ey, lost = [], [], [], [], [], 0
             for v in views:
                 img = v.image
                 if scale != 1:
                     img = cv2.resize(img, (c.width, c.height), interpolation=cv2.INTER_AREA)
-                best = math.inf
-                for _ in range(3):
-                    t0 = time.perf_counter()
-                    try:
-                        meas = measure_frame(img, c, model, mount, params=p)
-                    except CorridorLost:
-                        meas = None
-                    best = min(best, time.perf_counter() - t0)
-                times.append(best)
+                line_cpu.append(best_time(lambda: detect_lines(img, m, p.lines),
+                                          args.repeat)[0])
+                t_cpu, t_wall, meas = best_time(lambda: measure(img, c, model, mount, p),
+                                                args.repeat)
+                cpu.append(t_cpu)
+                wall.append(t_wall)
                 if meas is None:
                     lost += 1
                     continue
                 eh.append(abs(math.degrees(meas.heading - v.robot[2])))
                 ey.append(abs(meas.y - v.robot[1]))
-            rows[m] = (statistics.median(times), eh, ey, lost)
-        ref = rows['lsd'][0]
-        print(f'rendered corridor, {len(views)} frames at {c.width} x {c.height} '
-              f'(median per frame; ratio to the LSD-input pipeline = {1e3 * ref:.1f} ms)')
-        print(f'  {"lines":<16s}{"ms":>7s}{"fps":>7s}{"x LSD":>7s}{"heading med":>13s}'
-              f'{"lateral med":>13s}{"lost":>6s}')
-        for m, (t, eh, ey, lost) in rows.items():
+            rows[m] = (statistics.median(cpu), statistics.median(wall),
+                       statistics.median(line_cpu), eh, ey, lost)
+        ref_h, ref_l = rows['hough_p'][0], rows['lsd'][0]
+        print(f'rendered corridor, {len(views)} frames at {c.width} x {c.height}: per-frame '
+              f'pipeline, CPU ms (frames/s) and wall ms; ratios of the CPU times to the '
+              f'HoughLinesP- and LSD-input pipelines of this run')
+        print(f'  {"lines":<16s}{"lines ms":>9s}{"CPU ms":>8s}{"fps":>7s}{"wall ms":>9s}'
+              f'{"x HLP":>7s}{"x LSD":>7s}{"heading med":>13s}{"lateral med":>13s}{"lost":>6s}')
+        for m, (t, tw, tl, eh, ey, lost) in rows.items():
             hm = statistics.median(eh) if eh else math.nan
             ym = statistics.median(ey) if ey else math.nan
-            print(f'  {m:<16s}{1e3 * t:7.1f}{1 / t:7.1f}{t / ref:7.2f}{hm:11.3f} deg'
-                  f'{100 * ym:10.2f} cm{lost:6d}')
+            print(f'  {m:<16s}{1e3 * tl:9.1f}{1e3 * t:8.1f}{1 / t:7.1f}{1e3 * tw:9.1f}'
+                  f'{t / ref_h:7.2f}{t / ref_l:7.2f}{hm:11.3f} deg{100 * ym:10.2f} cm{lost:6d}')
         print()
+    if args.speed_only:
+        return
     print('hard cases (20 frames each; medians / worst):')
     for case, r in hard_cases().items():
         print(f'  {case:<10s} lost {r["lost"]:.0f}, heading {r["heading_median_deg"]:.3f} / '

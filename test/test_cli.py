@@ -49,7 +49,7 @@ def test_not_a_bag(tmp_path):
 
 def test_unknown_scenario(tmp_path):
     assert_one_line_error(run_cli('simulate', 'moon', '--out', tmp_path / 'b'), 'moon',
-                          'office')
+                          'office', 'corridor', 'landmark_views')
     assert not (tmp_path / 'b').exists()
 
 
@@ -57,6 +57,26 @@ def test_unknown_scenario(tmp_path):
 def test_bad_seed(tmp_path, seed):
     assert_one_line_error(run_cli('simulate', 'office', '--seed', seed, '--out', tmp_path / 'b'),
                           'seed')
+
+
+@pytest.mark.parametrize('args,words', [
+    (['office', '--distance', '3'], ('--distance', 'corridor scenario only')),
+    (['corridor', '--image-size', '100x100'], ('--image-size', '320x240')),
+    (['corridor', '--distance', '40'], ('40', 'does not fit')),
+    (['corridor', '--distance', '-1'], ('--distance', 'must be > 0')),
+])
+def test_bad_corridor_options(tmp_path, args, words):
+    assert_one_line_error(run_cli('simulate', *args, '--out', tmp_path / 'b'), *words)
+    assert not (tmp_path / 'b').exists()
+
+
+@pytest.mark.parametrize('args,words', [
+    (['--offset', '0.9'], ('0.9', 'into a wall')),
+    (['--distance', '29'], ('29', 'does not fit')),
+    (['--lengths', '0'], ('--lengths', 'must be >= 1')),
+])
+def test_bad_corridor_loop_options(args, words):
+    assert_one_line_error(run_cli('corridor-loop', *args), *words)
 
 
 def test_existing_output_is_not_overwritten(tmp_path):

@@ -6,6 +6,7 @@ from pathlib import Path
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
 from landmark_nav.conversions import (array_to_image, make_camera_info, make_odometry,
                                       quaternion_to_yaw)
+from landmark_nav.geometry import wrap_angle
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corridor_follower import CorridorFollower
 from landmark_nav.sim.camera import CameraSimulator
@@ -153,48 +154,110 @@ def drive_bag(tmp_path_factory):
     return out
 
 
-@pytest.mark.dds
-@pytest.mark.slow
-def test_bag_replay_against_ground_truth(drive_bag):
+def replay(bag, **params):
+    """Replay a corridor bag into the node in lock step; return it, lateral and heading errors.
+
+    Errors of every published pose (after images and after each odometry step) against
+    ``/ground_truth/odom`` at its stamp, from the second second on; images are those of
+    ``ground_truth.yaml``'s ``image_topic`` (raw by default).
+    """
     from landmark_nav.bag import BagReader
     from landmark_nav.conversions import odometry_to_pose, stamp_to_ns
+    from landmark_nav.sim.record import load_ground_truth
+    meta = load_ground_truth(bag)
+    image_topic = meta.get('image_topic', '/camera/image_raw')
     truth = {}
-    with BagReader(drive_bag) as reader:
+    with BagReader(bag) as reader:
         for _, _, msg in reader.decoded(['/ground_truth/odom']):
             p = odometry_to_pose(msg)
             truth[p.stamp_ns] = p.pose
     with RosHarness() as ros:
-        node = ros.add_node(CorridorFollower(context=ros.context,
-                                             parameter_overrides=node_params()))
+        node = ros.add_node(CorridorFollower(context=ros.context, parameter_overrides=node_params(
+            camera_mount=meta['camera_mount'], **params)))
         poses = ros.collect('corridor/pose', PoseWithCovarianceStamped)
         done = {'n': 0}
 
         def wait_for_node(topic, log_time_ns):
             if topic == '/camera/camera_info':
                 assert ros.wait_until(lambda: node.camera is not None, 10)
-            elif topic == '/camera/image_raw':
+            elif topic == image_topic:
                 done['n'] += 1
                 assert ros.wait_until(lambda: node.frames + node.warner.count >= done['n'], 20)
             elif topic == '/odom':
                 assert ros.wait_until(lambda: node.last_odom is not None
                                       and node.last_odom[0] == log_time_ns, 10)
 
-        counts = ros.play(drive_bag, topics=['/camera/camera_info', '/odom',
-                                             '/camera/image_raw'], on_message=wait_for_node)
-        assert counts['/camera/image_raw'] == 60
-        assert ros.wait_until(lambda: len(poses) >= 60 + 239, 10)
-        assert node.frames == 60
+        counts = ros.play(bag, topics=['/camera/camera_info', '/odom', image_topic],
+                          on_message=wait_for_node)
+        assert counts[image_topic] == meta['frames']
+        n_odom = counts['/odom']
+        # one pose per frame and per odometry message after the first frame (the filter
+        # starts on the first frame, the first odometry message only sets the origin)
+        assert ros.wait_until(lambda: len(poses) >= meta['frames'] + n_odom - 1, 10)
         err_y, err_th = [], []
         for msg in poses:
             t = stamp_to_ns(msg.header.stamp)
             q = msg.pose.pose.orientation
             err_y.append(msg.pose.pose.position.y - truth[t][1])
             err_th.append(math.degrees(quaternion_to_yaw(q.x, q.y, q.z, q.w) - truth[t][2]))
-        err_y, err_th = np.array(err_y[20:]), np.array(err_th[20:])   # after the first second
-        # measured over every pose (after images and after each odometry step): lateral
-        # 1.2 mm RMS (worst 2.6 mm), heading 0.27 deg RMS (worst 0.86 deg: the 1 % wheel
-        # scale error turns the odometry heading by 0.17 deg between two frames)
-        assert np.sqrt(np.mean(err_y ** 2)) < 0.003
-        assert np.abs(err_y).max() < 0.006
-        assert np.sqrt(np.mean(err_th ** 2)) < 0.4
-        assert np.abs(err_th).max() < 1.2
+    return node, np.array(err_y[20:]), np.array(err_th[20:])    # after the first second
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_bag_replay_against_ground_truth(drive_bag):
+    node, err_y, err_th = replay(drive_bag)
+    assert node.frames == 60
+    # measured over every pose (after images and after each odometry step): lateral
+    # 1.2 mm RMS (worst 2.6 mm), heading 0.27 deg RMS (worst 0.86 deg: the 1 % wheel
+    # scale error turns the odometry heading by 0.17 deg between two frames)
+    assert np.sqrt(np.mean(err_y ** 2)) < 0.003
+    assert np.abs(err_y).max() < 0.006
+    assert np.sqrt(np.mean(err_th ** 2)) < 0.4
+    assert np.abs(err_th).max() < 1.2
+
+
+COMMITTED = REPO / 'bags' / 'corridor'
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_committed_bag_replay_compressed():
+    """bags/corridor: 320 x 240 JPEG frames on camera/image_raw/compressed."""
+    node, err_y, err_th = replay(COMMITTED, compressed=True)
+    assert node.frames == 30 and node.warner.count == 0
+    # measured (deterministic in lock step): lateral 2.06 mm RMS (worst 3.34 mm), heading
+    # 0.254 deg RMS (worst 0.886 deg, the odometry heading drift between two frames)
+    assert np.sqrt(np.mean(err_y ** 2)) < 0.0025
+    assert np.abs(err_y).max() < 0.004
+    assert np.sqrt(np.mean(err_th ** 2)) < 0.3
+    assert np.abs(err_th).max() < 1.0
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_closed_loop_through_cmd_vel():
+    """The simulated robot obeys the node's cmd_vel: 2 x 4 m back and forth, one turn.
+
+    Starts 15 cm off the centre line, 10 m into the 30 m corridor; the full 3 x 26 m run
+    is ``benchmarks/bench_corridor_loop.py``.
+    """
+    from landmark_nav.sim.corridor_loop import follower_parameters, LoopConfig, run_loop
+    cfg = LoopConfig(start=(10.0, 0.15, math.radians(4.0)), distance=4.0, lengths=2)
+    with RosHarness() as ros:
+        node = ros.add_node(CorridorFollower(context=ros.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in follower_parameters(cfg).items()]))
+        result = run_loop(ros.context, cfg, seed=2, executor=ros._executor)
+    s = result.summary()
+    assert result.turning.any() and not result.turning[-1]
+    # facing back at the end (measured 4.3 deg off the axis, still converging after 4 m)
+    assert abs(math.degrees(wrap_angle(result.truth[-1, 2] - math.pi))) < 6.0
+    # both legs driven to their full odometry length (none ended by a stall)
+    assert len(result.legs) == 2 and min(result.legs) >= 4.0
+    assert abs(result.truth[-1, 0] - 10.0) < 0.1 and s['path_m'] > 7.9
+    # measured: within 1.32 cm of the centre line after the first 2 m (lateral RMS
+    # 0.76 cm); the issue asks for 5 cm on the full run
+    assert s['max_abs_lateral_after_2m'] < 0.02
+    assert s['rms_lateral_after_2m'] < 0.01
+    assert s['min_wall_clearance'] > 0.55
+    assert node.frames > 90

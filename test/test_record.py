@@ -3,8 +3,9 @@
 from pathlib import Path
 
 from landmark_nav.bag import BagReader
-from landmark_nav.conversions import odometry_to_pose, range_to_value, scan_to_data
+from landmark_nav.conversions import odometry_to_pose, range_to_value, scan_to_data, stamp_to_ns
 from landmark_nav.evaluation.viewer import VIEW_TOPICS
+from landmark_nav.landmark_msgs import compressed_to_gray
 from landmark_nav.sim.record import load_ground_truth, record_scenario, sonar_topic
 from landmark_nav.sim.world import World
 from landmark_nav.tools.bag_info import bag_size_bytes
@@ -14,7 +15,8 @@ import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-COMMITTED = {'office': 1, 'hallway': 1, 'calibration': 1}  # scenario -> seed (Makefile)
+COMMITTED = {'office': 1, 'hallway': 1, 'calibration': 1, 'corridor': 1}  # scenario -> seed
+IMAGES = '/camera/image_raw/compressed'                                   # (Makefile)
 
 
 def content(bag, topics):
@@ -25,6 +27,9 @@ def content(bag, topics):
             if topic == '/scan':
                 d = scan_to_data(msg)
                 row = np.concatenate([[d.stamp_ns, log_ns], d.ranges])
+            elif topic == IMAGES:
+                gray = compressed_to_gray(msg).ravel()
+                row = np.concatenate([[stamp_to_ns(msg.header.stamp), log_ns], gray])
             elif topic.startswith('/sonar'):
                 r = range_to_value(msg)
                 row = np.array([r.stamp_ns, log_ns, r.value])
@@ -120,8 +125,16 @@ def test_committed_bag_is_small_and_reproducible(scenario, tmp_path):
     fresh = tmp_path / scenario
     record_scenario(scenario, COMMITTED[scenario], fresh)
     with BagReader(bag) as reader:
-        topics = [t for t in ('/odom', '/scan', sonar_topic(0)) if t in reader.topics()]
+        topics = [t for t in ('/odom', '/scan', sonar_topic(0), IMAGES) if t in reader.topics()]
     a, b = content(bag, topics), content(fresh, topics)
     for topic in topics:
         np.testing.assert_array_equal(a[topic], b[topic], err_msg=topic)
     assert load_ground_truth(fresh) == meta
+
+
+def test_corridor_bag_stays_small():
+    """bags/corridor holds images: 320 x 240 JPEG frames keep it under 0.5 MB (440 KB)."""
+    bag = REPO / 'bags' / 'corridor'
+    assert bag_size_bytes(bag) < 512 * 1024
+    meta = load_ground_truth(bag)
+    assert meta['image_size'] == [320, 240] and meta['frames'] == 30

@@ -34,7 +34,6 @@ from typing import Sequence, Tuple, Union
 
 from landmark_nav.vision.camera import CameraModel, OPTICAL_FROM_BODY
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,7 +131,12 @@ def mount_rotation(mount: Sequence[float]) -> np.ndarray:
     if m.size != 6 or not np.all(np.isfinite(m)):
         raise ValueError(f'camera mount must be 6 finite numbers [x, y, z, roll, pitch, yaw];'
                          f' got {m}')
-    r = Rotation.from_euler('xyz', m[3:]).as_matrix()
+    cr, sr = math.cos(m[3]), math.sin(m[3])
+    cp, sp = math.cos(m[4]), math.sin(m[4])
+    cy, sy = math.cos(m[5]), math.sin(m[5])
+    r = np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],     # Rz Ry Rx
+                  [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                  [-sp, cp * sr, cp * cr]])
     return r @ np.asarray(OPTICAL_FROM_BODY).T
 
 

@@ -290,35 +290,50 @@ def refine_direction(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
     """
     seg, K = _check(segments, K)
     del weights
-    return _refine(_Geometry(seg, K, params.sigma_px), d, params, allowed)
+    D, inl = _refine_many(_Geometry(seg, K, params.sigma_px), np.asarray(d, dtype=float)[None],
+                          params, None if allowed is None else np.asarray(allowed)[None])
+    return D[0], inl[0]
 
 
-def _refine(geo: _Geometry, d: np.ndarray, params: VPParams,
-            allowed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    d = np.asarray(d, dtype=float) / np.linalg.norm(d)
-    n = geo.kl.shape[1]
-    ok = np.ones(n, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
-    z = geo.z(d)[0]
-    inl = ok & (np.abs(z) <= params.gate)
+def _refine_many(geo: _Geometry, D0: np.ndarray, params: VPParams,
+                 allowed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """:func:`refine_direction` of M starts at once: (M, 3) directions, (M, N) inliers.
+
+    Each row iterates on its own (it stops when it has fewer than two usable inliers or
+    its labels and direction no longer change); the normal matrices of all rows are
+    formed in one product and their eigenvectors in one call.
+    """
+    D = np.asarray(D0, dtype=float).reshape(-1, 3)
+    D = D / np.linalg.norm(D, axis=1, keepdims=True)
+    m, n = D.shape[0], geo.kl.shape[1]
+    ok = np.ones((m, n), dtype=bool) if allowed is None else \
+        np.broadcast_to(np.asarray(allowed, dtype=bool), (m, n))
+    inl = ok & (np.abs(geo.z(D)) <= params.gate)
+    active = np.ones(m, dtype=bool)
     for _ in range(params.refine_iterations):
-        if np.count_nonzero(inl) < 2:
+        active &= np.count_nonzero(inl, axis=1) >= 2
+        idx = np.nonzero(active)[0]
+        if idx.size == 0:
             break
-        std2 = geo.subset(np.nonzero(inl)[0]).terms(d)[1][0] ** 2
-        good = np.isfinite(std2) & (std2 > 0)
-        if np.count_nonzero(good) < 2:
+        std2 = geo.terms(D[idx])[1] ** 2
+        good = inl[idx] & np.isfinite(std2) & (std2 > 0)
+        enough = np.count_nonzero(good, axis=1) >= 2
+        active[idx[~enough]] = False
+        idx, good, std2 = idx[enough], good[enough], std2[enough]
+        if idx.size == 0:
             break
-        mm = geo.kl[:, inl][:, good] / np.sqrt(std2[good])
-        _, vec = np.linalg.eigh(mm @ mm.T)
-        d_new = vec[:, 0]
-        d_new = d_new if d_new @ d >= 0 else -d_new
-        moved = np.linalg.norm(d_new - d)
-        d = d_new
-        z = geo.z(d)[0]
-        new_inl = ok & (np.abs(z) <= params.gate)
-        if np.array_equal(new_inl, inl) and moved < 1e-9:
-            break
-        inl = new_inl
-    return _canonical(d), inl
+        w = np.where(good, 1.0 / np.where(good, std2, 1.0), 0.0)
+        normal = (w[:, None, :] * geo.kl[None]) @ geo.kl.T          # (A, 3, 3)
+        d_new = np.linalg.eigh(normal)[1][:, :, 0]
+        d_old = D[idx]
+        d_new = np.where((np.sum(d_new * d_old, axis=1) >= 0)[:, None], d_new, -d_new)
+        moved = np.linalg.norm(d_new - d_old, axis=1)
+        D[idx] = d_new
+        new_inl = ok[idx] & (np.abs(geo.z(d_new)) <= params.gate)
+        done = np.all(new_inl == inl[idx], axis=1) & (moved < 1e-9)
+        inl[idx] = new_inl
+        active[idx[done]] = False
+    return _canonical(D), inl
 
 
 def direction_covariance(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
@@ -435,14 +450,13 @@ def vanishing_point(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
         raise ValueError('no vanishing-point candidates (fewer than two non-parallel lines)')
     geo = _Geometry(seg, K, params.sigma_px)
     sub = geo.subset(idx)
-    best = None
-    for start in [cluster_directions(d, cw, params), *sphere_peaks(d, cw, params.hypotheses)]:
-        d_ref = _refine(sub, start, params)[0]
-        score = float(np.sum(w_use * _msac(np.abs(geo.z(d_ref)[0]), params.gate)))
-        if best is None or score > best[0]:
-            best = (score, d_ref)
-    inl_all = np.abs(geo.z(best[1])[0]) <= params.gate
-    return _make_vp(seg, K, best[1], inl_all, w)
+    starts = np.vstack([cluster_directions(d, cw, params)[None],
+                        sphere_peaks(d, cw, params.hypotheses)])
+    refined = _refine_many(sub, starts, params)[0]
+    scores = np.sum(w_use * _msac(np.abs(geo.z(refined)), params.gate), axis=1)
+    best = refined[int(np.argmax(scores))]              # the first of equal scores
+    inl_all = np.abs(geo.z(best)[0]) <= params.gate
+    return _make_vp(seg, K, best, inl_all, w)
 
 
 def _orthogonal_pair(geo: _Geometry, normals: np.ndarray, d1: np.ndarray, free: np.ndarray,
@@ -553,26 +567,28 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
     if cand.shape[0] == 0:
         raise ValueError('no vanishing-point candidates (fewer than two non-parallel lines)')
     sub = geo.subset(idx)
-    starts = [cluster_directions(cand, cw, params)]
-    starts += list(sphere_peaks(cand, cw, params.hypotheses))
+    starts = np.vstack([cluster_directions(cand, cw, params)[None],
+                        sphere_peaks(cand, cw, params.hypotheses)])
     hyps = []
-    for h in starts:
-        d1 = _refine(sub, h, params)[0]
+    for d1 in _refine_many(sub, starts, params)[0]:
         if not any(abs(d1 @ e) > 1.0 - 1e-12 for e in hyps):   # same start, same triad
             hyps.append(d1)
+    in1 = np.abs(geo.z(np.array(hyps))) <= params.gate
+    triads = []
+    for d1, used in zip(hyps, in1):
+        d2, d3, _ = _orthogonal_pair(geo, normals, d1, ~used, w, params)
+        triads += [d1, d2, d3]
+    refined = _refine_many(geo, np.array(triads), params)[0]
     best = None
-    for d1 in hyps:
-        in1 = np.abs(geo.z(d1)[0]) <= params.gate
-        d2, d3, _ = _orthogonal_pair(geo, normals, d1, ~in1, w, params)
-        D = np.column_stack([_refine(geo, d, params)[0] for d in (d1, d2, d3)])
+    for h in range(len(hyps)):
+        D = refined[3 * h:3 * h + 3].T
         score = _triad_support(geo, D, w, params)
         if best is None or score > best[0]:
             best = (score, D)
     D = best[1]
     for _ in range(params.refine_iterations):      # exclusive labels, then refine each
         lab = _labels(geo, D, params, exclusive=True)
-        D_new = np.column_stack([_refine(geo, D[:, k], params, lab == k)[0]
-                                 for k in range(3)])
+        D_new = _refine_many(geo, D.T, params, lab[None, :] == np.arange(3)[:, None])[0].T
         if np.allclose(np.abs(np.sum(D_new * D, axis=0)), 1.0, atol=1e-12):
             D = D_new
             break

@@ -7,8 +7,8 @@ along the wall/floor edges, door niches (darker door leaves set into the walls) 
 optional floor centre line. A robot pose ``(x, y, theta)`` and the camera mount give the
 camera pose; :func:`corridor_view` renders one frame with its ground truth.
 
-Not yet here (issue: corridor follower, item 7): people and open doors as occluders,
-lighting changes along a run, trajectories on drifting odometry, bags, closed loop.
+Drives on drifting odometry into bags: :mod:`.corridor_record`; the closed loop through the
+``corridor_follower`` node: :mod:`.corridor_loop`.
 """
 
 from dataclasses import dataclass
@@ -134,8 +134,18 @@ def corridor_view(sim: CameraSimulator, planes: Sequence[Plane], robot: Sequence
     return CorridorView(img, tuple(float(v) for v in robot))
 
 
-def default_corridor_camera() -> CameraModel:
-    """Return a 640 x 480 camera with a 70 deg horizontal field of view, mild distortion."""
+def default_corridor_camera(downscale: int = 1) -> CameraModel:
+    """Return a 640 x 480 camera with a 70 deg horizontal field of view, mild distortion.
+
+    Args:
+        downscale: 1, 2 or 4: the same camera at 640 x 480 / ``downscale`` (binned pixels:
+            the intrinsics scaled about the pixel centres, the distortion unchanged).
+    """
+    if downscale not in (1, 2, 4):
+        raise ValueError(f'downscale must be 1, 2 or 4; got {downscale!r}')
     f = 320.0 / math.tan(math.radians(35.0))
     K = np.array([[f, 0.0, 319.5], [0.0, f, 239.5], [0.0, 0.0, 1.0]])
-    return CameraModel(640, 480, K, np.array([-0.08, 0.03, 0.0, 0.0, 0.0]))
+    s = 1.0 / downscale
+    S = np.array([[s, 0.0, 0.5 * s - 0.5], [0.0, s, 0.5 * s - 0.5], [0.0, 0.0, 1.0]])
+    return CameraModel(640 // downscale, 480 // downscale, S @ K,
+                       np.array([-0.08, 0.03, 0.0, 0.0, 0.0]))

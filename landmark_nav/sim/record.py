@@ -32,7 +32,7 @@ from landmark_nav.bag import BagWriter
 from landmark_nav.conversions import (make_joint_state, make_odometry, make_range, make_scan,
                                       ns_to_stamp, quaternion_msg_from_yaw)
 from landmark_nav.sim.laser import ScanSample
-from landmark_nav.sim.scenarios import OdometrySample, run_scenario, TruthSample
+from landmark_nav.sim.scenarios import OdometrySample, run_scenario, scenario_names, TruthSample
 from landmark_nav.sim.sonar import SonarSample
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -102,6 +102,12 @@ def record_scenario(name: str, seed: int, out, force: bool = False, **overrides)
     if name in ('landmark_views', 'landmark_shuttle'):  # camera scenarios: own recorder
         from landmark_nav.sim.camera_record import record_camera_scenario
         return record_camera_scenario(name, seed, out, force=force, **overrides)
+    if name == 'corridor':                               # rendered corridor: own recorder
+        from landmark_nav.sim.corridor_record import record_corridor_scenario
+        return record_corridor_scenario(seed, out, force=force, **overrides)
+    if name not in scenario_names():
+        valid = scenario_names() + ['corridor', 'landmark_shuttle', 'landmark_views']
+        raise ValueError(f'unknown scenario {name!r}; valid names: {", ".join(sorted(valid))}')
     result = run_scenario(name, seed, **overrides)
     out = Path(out)
     if force and out.exists():

@@ -38,9 +38,42 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     overrides = {}
     if args.laser_sigma_range is not None:
         overrides['laser'] = {'sigma_range': args.laser_sigma_range}
+    corridor = {'distance': args.distance, 'downscale': args.image_size, 'raw': args.raw_images}
+    given = [k for k, v in corridor.items() if v not in (None, False)]
+    if given and args.scenario != 'corridor':
+        raise ValueError(f'--{given[0].replace("_", "-")} applies to the corridor scenario '
+                         f'only')
+    if args.scenario == 'corridor':
+        overrides.update(distance=args.distance, downscale=args.image_size)
+        if args.raw_images:
+            overrides['jpeg_quality'] = None
     summary = record_scenario(args.scenario, args.seed, args.out, force=args.force,
                               **overrides)
     print(summary)
+    return 0
+
+
+def _cmd_corridor_loop(args: argparse.Namespace) -> int:
+    import math
+    import rclpy
+    from landmark_nav.sim.corridor_loop import LoopConfig, run_loop
+    cfg = LoopConfig(start=(args.start, args.offset, math.radians(args.heading)),
+                     distance=args.distance, lengths=args.lengths, follower=args.follower,
+                     downscale=args.image_size or 2)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        result = run_loop(context, cfg, seed=args.seed)
+    except TimeoutError as err:
+        raise ValueError(str(err)) from None
+    finally:
+        rclpy.try_shutdown(context=context)
+    s = result.summary()
+    print(f'{len(result.legs)} legs ({", ".join(f"{v:.1f}" for v in result.legs)} m), path '
+          f'{s["path_m"]:.1f} m, {s["frames"]:.0f} frames; lateral after the first 2 m: max '
+          f'{100 * s["max_abs_lateral_after_2m"]:.2f} cm, RMS '
+          f'{100 * s["rms_lateral_after_2m"]:.2f} cm; smallest wall clearance '
+          f'{100 * s["min_wall_clearance"]:.1f} cm; {s["wall_seconds"]:.0f} s')
     return 0
 
 
@@ -97,6 +130,14 @@ def _positive_float(text: str) -> float:
     if not 0 < value < float('inf'):
         raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
     return value
+
+
+def _image_size(text: str) -> int:
+    """Parse a corridor camera size ``WxH``; return the downscale of 640 x 480 (1, 2, 4)."""
+    sizes = {'640x480': 1, '320x240': 2, '160x120': 4}
+    if text not in sizes:
+        raise argparse.ArgumentTypeError(f'expected one of {", ".join(sizes)}, got {text!r}')
+    return sizes[text]
 
 
 def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
@@ -189,13 +230,40 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('simulate', help='simulate a named scenario into a rosbag2 (MCAP) bag')
     p.add_argument('scenario',
                    help='scenario name: office, hallway, calibration, ambiguous, '
-                        'landmark_views or landmark_shuttle')
+                        'landmark_views, landmark_shuttle or corridor')
     p.add_argument('--seed', type=_seed, default=1, help='random seed (default 1)')
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--force', action='store_true', help='replace an existing bag directory')
     p.add_argument('--laser-sigma-range', type=float, default=None, metavar='METRES',
                    help='laser range noise std (default 0.01 m)')
+    p.add_argument('--distance', type=_positive_float, default=None, metavar='METRES',
+                   help='corridor: distance driven (default 3; at most 28)')
+    p.add_argument('--image-size', type=_image_size, default=None, metavar='WxH',
+                   help='corridor: 640x480, 320x240 (default) or 160x120')
+    p.add_argument('--raw-images', action='store_true',
+                   help='corridor: raw mono8 frames on /camera/image_raw instead of JPEG on '
+                        '/camera/image_raw/compressed')
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser('corridor-loop',
+                       help='simulated robot and camera in the rendered corridor, driven by a '
+                            'running corridor_follower (stamped_cmd_vel: true) through cmd_vel')
+    p.add_argument('--seed', type=_seed, default=1, help='scene and noise seed (default 1)')
+    p.add_argument('--distance', type=_positive_float, default=26.0, metavar='METRES',
+                   help='length of a leg (default 26)')
+    p.add_argument('--lengths', type=_positive_int, default=3,
+                   help='legs back and forth (default 3)')
+    p.add_argument('--start', type=float, default=2.0, metavar='METRES',
+                   help='start along the 30 m corridor (default 2)')
+    p.add_argument('--offset', type=float, default=0.15, metavar='METRES',
+                   help='start left of the centre line (default 0.15)')
+    p.add_argument('--heading', type=float, default=4.0, metavar='DEG',
+                   help='start heading off the corridor axis (default 4)')
+    p.add_argument('--image-size', type=_image_size, default=None, metavar='WxH',
+                   help='640x480, 320x240 (default) or 160x120')
+    p.add_argument('--follower', default='corridor_follower',
+                   help='name of the follower node (its service <name>/enable)')
+    p.set_defaults(func=_cmd_corridor_loop)
 
     p = sub.add_parser('replay', help='publish a bag into the ROS graph (like ros2 bag play)')
     add_replay_arguments(p)
