@@ -1,0 +1,170 @@
+"""Park road terrain (height field) and a tilted 2-D laser ray-cast on it, with exact truth.
+
+A straight road along the world x axis, centred on ``y = 0``: a crowned (convex) surface
+``z = crown (1 - (2 y / W)^2)`` of true width ``W`` (asphalt or gravel), flat shoulders
+of ``shoulder`` metres each side (as rough as gravel), then grass (rough). Optional: a
+kerb (a step up of ``kerb`` metres at the road edges instead of shoulders), a flat horse
+track crossing the road at ``x`` in ``crossing``, and upright cylinders (pedestrians,
+posts). Surface roughness is a fixed pseudo-random height field (bilinear between grid
+nodes ``cell`` metres apart) with a per-surface amplitude, so the truth is exact and
+repeatable for a seed.
+
+Truth classes of a laser reading: road, shoulder and horse track are traversable; grass,
+kerb faces and cylinders are not (``landmark_nav.road.terrain`` class numbers).
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Optional, Sequence
+
+import numpy as np
+
+from landmark_nav.road.terrain import LaserMount, NOT_TRAVERSABLE, TRAVERSABLE
+
+#: Surface codes of :meth:`ParkRoad.surface`.
+ROAD, SHOULDER, GRASS, TRACK, KERB, OBJECT = range(6)
+
+#: Road kinds of Table 3: (true width [m], crown [m], roughness amplitude [m]).
+ROAD_KINDS = {'asphalt': (4.9, 0.08, 0.002), 'gravel': (4.0, 0.15, 0.006)}
+
+
+@dataclass(frozen=True)
+class ParkRoad:
+    """A straight park road with shoulders, grass and optional features (metres)."""
+
+    width: float = 4.9
+    crown: float = 0.08
+    road_rough: float = 0.002
+    shoulder: float = 0.6
+    shoulder_rough: float = 0.006
+    grass_rough: float = 0.06
+    kerb: float = 0.0
+    crossing: Optional[tuple] = None        # (x_min, x_max) of a flat horse track
+    cylinders: tuple = ()                   # ((x, y, radius, height), ...)
+    cell: float = 0.05
+    seed: int = 0
+
+    @classmethod
+    def of_kind(cls, kind: str, **kwargs) -> 'ParkRoad':
+        """Return the road of a Table 3 kind ('asphalt' or 'gravel')."""
+        if kind not in ROAD_KINDS:
+            raise ValueError(f'unknown road kind {kind!r}; one of {sorted(ROAD_KINDS)}')
+        w, c, rough = ROAD_KINDS[kind]
+        return cls(width=w, crown=c, road_rough=rough, **kwargs)
+
+    def _noise(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Fixed unit-amplitude random height field, bilinear between grid nodes."""
+        gx, gy = x / self.cell, y / self.cell
+        ix, iy = np.floor(gx).astype(np.int64), np.floor(gy).astype(np.int64)
+        fx, fy = gx - ix, gy - iy
+
+        def node(i, j):
+            h = (i * 73856093) ^ (j * 19349663) ^ (self.seed * 83492791)
+            h = (h ^ (h >> 13)) * 1274126177
+            return ((h & 0xFFFF) / 32767.5) - 1.0
+        return ((1 - fx) * (1 - fy) * node(ix, iy) + fx * (1 - fy) * node(ix + 1, iy)
+                + (1 - fx) * fy * node(ix, iy + 1) + fx * fy * node(ix + 1, iy + 1))
+
+    def surface(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Surface code at ground points (x, y) (cylinders excluded)."""
+        ay = np.abs(y)
+        half = 0.5 * self.width
+        out = np.full(np.shape(x), GRASS, dtype=np.int8)
+        if self.kerb <= 0.0:
+            out[ay <= half + self.shoulder] = SHOULDER
+        if self.crossing is not None:
+            out[(x >= self.crossing[0]) & (x <= self.crossing[1])] = TRACK
+        out[ay <= half] = ROAD
+        return out
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Ground height at (x, y) [m] (cylinders excluded)."""
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        half = 0.5 * self.width
+        surf = self.surface(x, y)
+        amp = np.choose(np.minimum(surf, 3), [self.road_rough, self.shoulder_rough,
+                                              self.grass_rough, self.shoulder_rough])
+        z = amp * self._noise(x, y)
+        road = surf == ROAD
+        z = np.where(road, z + self.crown * (1.0 - (y / half) ** 2), z)
+        if self.kerb > 0.0:
+            z = np.where(road, z, z + self.kerb)
+        return z
+
+    def edges(self) -> tuple[float, float]:
+        """True road edges (y_right, y_left) [m]."""
+        return -0.5 * self.width, 0.5 * self.width
+
+
+@dataclass(frozen=True, eq=False)
+class TiltedScan:
+    """One simulated scan with its truth (arrays read-only)."""
+
+    angles: np.ndarray       # (N,) [rad]
+    ranges: np.ndarray       # (N,) [m]; +inf = no return
+    hits: np.ndarray         # (N, 3) true hit points in the world (NaN: none)
+    truth: np.ndarray        # (N,) TRAVERSABLE / NOT_TRAVERSABLE / 0 (no hit)
+    surface: np.ndarray      # (N,) surface code (-1: none)
+
+
+def _rotation_z(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def cast_scan(road: ParkRoad, pose: Sequence[float], mount: LaserMount,
+              angles: np.ndarray, range_max: float = 8.0, sigma_range: float = 0.005,
+              rng: Optional[np.random.Generator] = None, step: float = 0.01) -> TiltedScan:
+    """Ray-cast a tilted 2-D laser at robot pose (x, y, yaw) on the terrain.
+
+    Each beam is marched in ``step`` metres to ``range_max``; the first crossing of the
+    height field is refined by linear interpolation; upright cylinders are intersected
+    exactly. Range noise is Gaussian with ``sigma_range``.
+    """
+    a = np.asarray(angles, dtype=float)
+    rot = _rotation_z(pose[2]) @ mount.rotation()
+    origin = _rotation_z(pose[2]) @ mount.translation() + np.array([pose[0], pose[1], 0.0])
+    dirs = (rot @ np.vstack([np.cos(a), np.sin(a), np.zeros_like(a)])).T       # (N, 3)
+    t = np.arange(step, range_max + step, step)
+    p = origin + dirs[:, None, :] * t[None, :, None]                         # (N, T, 3)
+    below = p[..., 2] <= road.height(p[..., 0], p[..., 1])
+    first = np.where(below.any(axis=1), below.argmax(axis=1), -1)
+    ranges = np.full(a.size, np.inf)
+    has = first > 0
+    k = first[has]
+    rows = np.flatnonzero(has)
+    g0 = p[rows, k - 1, 2] - road.height(p[rows, k - 1, 0], p[rows, k - 1, 1])
+    g1 = p[rows, k, 2] - road.height(p[rows, k, 0], p[rows, k, 1])
+    frac = g0 / np.maximum(g0 - g1, 1e-12)
+    ranges[rows] = t[k - 1] + frac * step
+    surf = np.full(a.size, -1, dtype=np.int8)
+    for cx, cy, radius, height in road.cylinders:
+        d = dirs[:, :2]
+        o = origin[:2] - np.array([cx, cy])
+        qa = np.sum(d * d, axis=1)
+        qb = 2.0 * d @ o
+        qc = o @ o - radius ** 2
+        disc = qb * qb - 4.0 * qa * qc
+        ok = disc >= 0
+        tc = np.where(ok, (-qb - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * np.maximum(qa, 1e-12)),
+                      np.inf)
+        zc = origin[2] + dirs[:, 2] * tc
+        hit = ok & (tc > 0) & (tc < ranges) & (zc <= height)
+        ranges[hit] = tc[hit]
+        surf[hit] = OBJECT
+    hits = np.where(np.isfinite(ranges)[:, None], origin + dirs * ranges[:, None], np.nan)
+    ground = np.isfinite(ranges) & (surf != OBJECT)
+    surf[ground] = road.surface(hits[ground, 0], hits[ground, 1])
+    if road.kerb > 0.0:   # readings on the kerb face (within 3 cm of the road edge)
+        near = ground & (np.abs(np.abs(hits[:, 1]) - 0.5 * road.width) < 0.03)
+        surf[near] = KERB
+    truth = np.zeros(a.size, dtype=np.int8)
+    truth[np.isin(surf, (ROAD, SHOULDER, TRACK))] = TRAVERSABLE
+    truth[np.isin(surf, (GRASS, KERB, OBJECT))] = NOT_TRAVERSABLE
+    if rng is not None and sigma_range > 0.0:
+        fin = np.isfinite(ranges)
+        ranges[fin] += rng.normal(0.0, sigma_range, int(fin.sum()))
+    for arr in (a, ranges, hits, truth, surf):
+        arr.setflags(write=False)
+    return TiltedScan(a.copy(), ranges, hits, truth, surf)
