@@ -24,12 +24,15 @@ Beyond the chapter, on its stated weaknesses:
   region is closed morphologically by ``close_px`` and its holes that are brighter than
   the seed by ``marking_contrast`` grey levels (paint) or tiny are filled, so markings
   inside the road count as road, while darker holes (a cyclist, a car) stay obstacles;
-* *shadows*: with ``chroma='invariant'`` the chromaticity is Finlayson's 1-D illuminant
-  invariant: the log chromaticities ``(log(r / g), log(b / g))`` projected on the direction
-  orthogonal to the illuminant-colour direction ``invariant_angle`` (a camera constant;
-  the shadow edges of daylight move pixels along it), paired with the eq. 25 ``g``
-  component; and the gradient of eq. 28 is taken on the log intensity, which turns a
-  shadow border into a step of constant height whatever the brightness.
+* *shadows*: the Mahalanobis distance of eq. 27 uses ``Q`` plus each pixel's own
+  chromaticity noise, ``(chroma_noise / I)^2`` on the diagonal (the chromaticity of a dark,
+  shadowed pixel is a ratio of small, noisy numbers), and the gradient of eq. 28 is taken
+  on the log intensity (``log_gradient``: a shadow border is a step of one height whatever
+  the brightness, a dark shadow interior is as smooth as a lit one). Optionally
+  (``chroma='invariant'``) the chromaticity is Finlayson's 1-D illuminant invariant -- the
+  log chromaticities ``(log(r / g), log(b / g))`` projected orthogonal to the
+  illuminant-colour direction ``invariant_angle`` (a camera constant), paired with the
+  eq. 25 ``g`` -- which did not improve the real street frames (see the README).
 """
 
 from dataclasses import dataclass
@@ -51,23 +54,25 @@ class SeedError(ValueError):
 class OutlineParams:
     """Weights and limits of eqs. 26-28 and of the marking / shadow handling."""
 
-    w_c_top: float = 0.1
-    w_c_bottom: float = 0.1
-    w_e: float = 0.02
-    k_limit: float = 1.2
+    w_c_top: float = 0.3
+    w_c_bottom: float = 0.3
+    w_e: float = 0.01
+    k_limit: float = 1.35
     chroma: str = 'rg'
     invariant_angle: float = math.radians(150.0)
-    log_gradient: bool = False
+    log_gradient: bool = True
     close_px: int = 5
     fill_holes: bool = True
     marking_contrast: float = 25.0
     small_hole: int = 12
     regularization: float = 1e-5
+    chroma_noise: float = 1.0
     min_seed_pixels: int = 20
 
     def __post_init__(self) -> None:
         """Check the ranges."""
-        for name in ('w_c_top', 'w_c_bottom', 'w_e', 'k_limit', 'regularization'):
+        for name in ('w_c_top', 'w_c_bottom', 'w_e', 'k_limit', 'regularization',
+                     'chroma_noise'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'outline {name} must be >= 0; got {value!r}')
@@ -181,13 +186,16 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
     cs = c[seed_s].astype(np.float64)
     mean = cs.mean(axis=0)
     q = np.cov(cs.T) + params.regularization * np.eye(2)
-    qi = np.linalg.inv(q).astype(np.float32)
     d = c - mean.astype(np.float32)
-    m2 = (d[..., 0] * (qi[0, 0] * d[..., 0] + qi[0, 1] * d[..., 1])
-          + d[..., 1] * (qi[1, 0] * d[..., 0] + qi[1, 1] * d[..., 1]))
+    intensity = small.astype(np.float32).mean(axis=2)
+    # Q plus the pixel's own chromaticity noise: grey-level noise divided by the intensity
+    # (dark, e.g. shadowed, pixels have noisier chromaticity), isotropic.
+    extra = (params.chroma_noise / (intensity + 1.0)) ** 2
+    a, b, cc = q[0, 0] + extra, q[0, 1], q[1, 1] + extra
+    det = a * cc - b * b
+    m2 = (cc * d[..., 0] ** 2 - 2.0 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
     rows = np.linspace(params.w_c_top, params.w_c_bottom, WORK_SIZE[1], dtype=np.float32)
     p_c = 1.0 / (1.0 + rows[:, None] * m2)                                  # eq. 27
-    intensity = small.astype(np.float32).mean(axis=2)
     if params.log_gradient:
         intensity = 64.0 * np.log1p(intensity)
     p_e = 1.0 / (1.0 + params.w_e * _gradient_squared(intensity))           # eq. 28

@@ -361,6 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from landmark_nav.tools.emulate import add_parsers as add_emulate_parsers
     add_emulate_parsers(sub, _Parser)
+
+    from landmark_nav.tools.road_tools import add_parsers as add_road_parsers
+    add_road_parsers(sub, _Parser)
     return parser
 
 
