@@ -101,10 +101,15 @@ class TerrainParams:
     """Thresholds of the feature functions (lengths in metres)."""
 
     window: float = 0.45
-    roughness_max: float = 0.02
+    roughness_max: float = 0.013
     step_max: float = 0.04
     height_max: float = 0.3
     split_ratio: float = 40.0
+    split_rms: float = 0.008
+    rough_ratio: float = 1.5
+    grow_sigmas: float = 2.0
+    rough_lag: int = 3
+    rough_gain: float = 20.0
     slope_max: float = 0.25
     curvature_max: float = 0.6
     min_width: float = 0.5
@@ -114,13 +119,15 @@ class TerrainParams:
 
     def __post_init__(self) -> None:
         """Check the ranges."""
-        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio',
+        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio', 'split_rms', 'rough_gain',
                      'slope_max', 'curvature_max', 'min_width', 'obstacle_height'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'terrain {name} must be > 0; got {value!r}')
         if not (math.isfinite(self.gap_max) and self.gap_max >= 0.0):
             raise ValueError(f'terrain gap_max must be >= 0; got {self.gap_max!r}')
+        if not self.rough_ratio >= 1.0:
+            raise ValueError(f'terrain rough_ratio must be >= 1; got {self.rough_ratio!r}')
         if self.min_points < 3:
             raise ValueError(f'terrain min_points must be >= 3; got {self.min_points!r}')
 
@@ -273,8 +280,9 @@ def _split_profile(first: int, last: int, s: np.ndarray, z: np.ndarray,
 
     The best split point minimises the summed SSE of the two pieces (each at least
     ``min_width / 2`` long); it is kept when the SSE drop, in units of the two-piece residual
-    variance, exceeds ``split_ratio`` (an F-test of 3 extra parameters), e.g. the slope
-    break between a crowned road and its flat shoulder.
+    variance, exceeds ``split_ratio`` (an F-test of 2 extra parameters) and the fit improves
+    by more than ``split_rms`` metres rms (a physical size, not only a significant one):
+    e.g. the slope break between a crowned road and its flat shoulder.
     """
     n = last - first + 1
     if n < 2 * params.min_points + 6 or s[last] - s[first] < params.min_width:
@@ -301,11 +309,46 @@ def _split_profile(first: int, last: int, s: np.ndarray, z: np.ndarray,
     best = int(np.argmin(total))
     var = total[best] / max(n - 5, 1)
     gain = (left[n] - total[best]) / (2.0 * max(var, 1e-12))
-    if gain <= params.split_ratio:
-        out.append((first, last))
-        return
+    rms_gain = math.sqrt(max(left[n] - total[best], 0.0) / n)
+    if gain <= params.split_ratio or rms_gain <= params.split_rms:
+        best = _roughness_change(zz, allowed, params)
+        if best is None:
+            out.append((first, last))
+            return
     _split_profile(first, first + best - 1, s, z, params, out)
     _split_profile(first + best, last, s, z, params, out)
+
+
+def _roughness_change(z: np.ndarray, allowed: np.ndarray,
+                      params: TerrainParams) -> Optional[int]:
+    """Split point where the small-scale roughness changes level (F_sigma groups), or None.
+
+    The second differences of the heights along the scan, over ``rough_lag`` readings
+    either side (a few centimetres: longer than the range noise's one reading), measure the
+    roughness of each reading; the change point maximises the Gaussian log-likelihood gain of two variances
+    over one and is kept when the gain exceeds ``rough_gain`` and the rougher piece's
+    roughness exceeds the smoother one's ``rough_ratio`` times (e.g. asphalt next to a
+    gravel or grass verge at the same height).
+    """
+    n = z.size
+    lag = min(params.rough_lag, (n - 1) // 2)
+    e2 = np.zeros(n)
+    e2[lag:n - lag] = (z[lag:n - lag] - 0.5 * (z[:n - 2 * lag] + z[2 * lag:])) ** 2
+    e2[:lag], e2[n - lag:] = e2[lag], e2[n - lag - 1]
+    c = np.concatenate([[0.0], np.cumsum(e2)])
+    k = np.arange(n + 1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        v_l = c / k
+        v_r = (c[-1] - c) / (n - k)
+        floor = 1e-12
+        gain = 0.5 * (n * np.log(max(c[-1] / n, floor)) - k * np.log(np.maximum(v_l, floor))
+                      - (n - k) * np.log(np.maximum(v_r, floor)))
+    gain[~allowed] = -np.inf
+    best = int(np.argmax(gain))
+    if not np.isfinite(gain[best]) or gain[best] <= params.rough_gain:
+        return None
+    ratio = math.sqrt(max(v_l[best], v_r[best]) / max(min(v_l[best], v_r[best]), 1e-12))
+    return best if ratio >= params.rough_ratio else None
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -381,14 +424,20 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
                 start = k
         groups.append((start, last))
     groups = _combine(groups, s, z, cut, params)
+    # Height profiles across the scan are functions of the lateral position (base_link y,
+    # increasing along the scan), which a crowned road's profile is a quadratic of.
+    lateral = p[:, 1]
     pieces = []
     for first, last in groups:
-        _split_profile(first, last, s, z, params, pieces)
+        _split_profile(first, last, lateral, z, params, pieces)
     groups = pieces
     segments = []
     for g, (first, last) in enumerate(groups):
         groups_all[idx[first:last + 1]] = g
-        seg = _segment(first, last, p, s, rough, idx, params)
+        lo = groups[g - 1][1] + 1 if g > 0 else 0
+        hi = groups[g + 1][0] - 1 if g + 1 < len(groups) else idx.size - 1
+        first, last = _grow(first, last, lateral, z, params, lo, hi)
+        seg = _segment(first, last, p, lateral, rough, idx, params)
         if seg is not None:
             segments.append(seg)
             classes[idx[first:last + 1]] = TRAVERSABLE
@@ -414,6 +463,33 @@ def _combine(groups: list, s: np.ndarray, z: np.ndarray, cut: np.ndarray,
                 continue
         out.append((first, last))
     return out
+
+
+def _grow(first: int, last: int, s: np.ndarray, z: np.ndarray, params: TerrainParams,
+          lo_index: int, hi_index: int) -> tuple[int, int]:
+    """Extend a group over the neighbouring readings that continue its height profile.
+
+    The windowed roughness of the readings within half a window of a rougher neighbour is
+    raised by that neighbour, which trims every group by up to ``window / 2`` at each end;
+    a reading next to the group is taken in while its height lies within
+    ``grow_sigmas`` residual standard deviations of the group's quadratic profile (and no
+    step lies between), one reading at a time outwards, at most ``window / 2`` far and not
+    into the neighbouring groups (readings ``lo_index`` .. ``hi_index`` are free).
+    """
+    if last - first + 1 < params.min_points:
+        return first, last
+    t = s[first:last + 1]
+    coef = np.polyfit(t - t.mean(), z[first:last + 1], 2)
+    sigma = max(float(np.std(z[first:last + 1] - np.polyval(coef, t - t.mean()))), 0.003)
+    limit = params.grow_sigmas * sigma
+    lo, hi = s[first] - 0.5 * params.window, s[last] + 0.5 * params.window
+    while first > lo_index and s[first - 1] >= lo and abs(z[first - 1] - np.polyval(coef, s[first - 1] - t.mean())) <= limit \
+            and abs(z[first - 1] - z[first]) <= params.step_max:
+        first -= 1
+    while last < hi_index and s[last + 1] <= hi and abs(z[last + 1] - np.polyval(coef, s[last + 1] - t.mean())) <= limit \
+            and abs(z[last + 1] - z[last]) <= params.step_max:
+        last += 1
+    return first, last
 
 
 def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndarray,

@@ -9,8 +9,9 @@ posts). Surface roughness is a fixed pseudo-random height field (bilinear betwee
 nodes ``cell`` metres apart) with a per-surface amplitude, so the truth is exact and
 repeatable for a seed.
 
-Truth classes of a laser reading: road, shoulder and horse track are traversable; grass,
-kerb faces and cylinders are not (``landmark_nav.road.terrain`` class numbers).
+Truth classes of a laser reading: road and horse track are traversable; shoulders (a rough
+verge), grass, kerb faces and cylinders are not (``landmark_nav.road.terrain`` class
+numbers). The road width of Table 3 is the width of the road proper, shoulders excluded.
 """
 
 from dataclasses import dataclass
@@ -36,7 +37,7 @@ class ParkRoad:
     crown: float = 0.08
     road_rough: float = 0.002
     shoulder: float = 0.6
-    shoulder_rough: float = 0.006
+    shoulder_rough: float = 0.015
     grass_rough: float = 0.06
     kerb: float = 0.0
     crossing: Optional[tuple] = None        # (x_min, x_max) of a flat horse track
@@ -126,18 +127,28 @@ def cast_scan(road: ParkRoad, pose: Sequence[float], mount: LaserMount,
     rot = _rotation_z(pose[2]) @ mount.rotation()
     origin = _rotation_z(pose[2]) @ mount.translation() + np.array([pose[0], pose[1], 0.0])
     dirs = (rot @ np.vstack([np.cos(a), np.sin(a), np.zeros_like(a)])).T       # (N, 3)
-    t = np.arange(step, range_max + step, step)
-    p = origin + dirs[:, None, :] * t[None, :, None]                         # (N, T, 3)
-    below = p[..., 2] <= road.height(p[..., 0], p[..., 1])
-    first = np.where(below.any(axis=1), below.argmax(axis=1), -1)
+    # March each beam only through the slab of heights the terrain can have, in at most
+    # ``max_steps`` steps of at least ``step`` metres.
+    amp = max(road.road_rough, road.shoulder_rough, road.grass_rough)
+    z_hi, z_lo = road.crown + road.kerb + amp, -amp
     ranges = np.full(a.size, np.inf)
+    down = dirs[:, 2] < -1e-6
+    rate = np.where(down, -dirs[:, 2], 1.0)
+    t0 = np.clip((origin[2] - z_hi) / rate - step, 0.0, range_max)
+    t1 = np.clip((origin[2] - z_lo) / rate + step, 0.0, range_max)
+    max_steps = 300
+    h = np.maximum((t1 - t0) / max_steps, step)
+    t = t0[:, None] + h[:, None] * np.arange(max_steps + 1)[None, :]      # (N, T)
+    p = origin + dirs[:, None, :] * t[..., None]                          # (N, T, 3)
+    below = (p[..., 2] <= road.height(p[..., 0], p[..., 1])) & (t <= range_max)
+    first = np.where(below.any(axis=1) & down, below.argmax(axis=1), -1)
     has = first > 0
     k = first[has]
     rows = np.flatnonzero(has)
     g0 = p[rows, k - 1, 2] - road.height(p[rows, k - 1, 0], p[rows, k - 1, 1])
     g1 = p[rows, k, 2] - road.height(p[rows, k, 0], p[rows, k, 1])
     frac = g0 / np.maximum(g0 - g1, 1e-12)
-    ranges[rows] = t[k - 1] + frac * step
+    ranges[rows] = t[rows, k - 1] + frac * h[rows]
     surf = np.full(a.size, -1, dtype=np.int8)
     for cx, cy, radius, height in road.cylinders:
         d = dirs[:, :2]
@@ -160,8 +171,8 @@ def cast_scan(road: ParkRoad, pose: Sequence[float], mount: LaserMount,
         near = ground & (np.abs(np.abs(hits[:, 1]) - 0.5 * road.width) < 0.03)
         surf[near] = KERB
     truth = np.zeros(a.size, dtype=np.int8)
-    truth[np.isin(surf, (ROAD, SHOULDER, TRACK))] = TRAVERSABLE
-    truth[np.isin(surf, (GRASS, KERB, OBJECT))] = NOT_TRAVERSABLE
+    truth[np.isin(surf, (ROAD, TRACK))] = TRAVERSABLE
+    truth[np.isin(surf, (SHOULDER, GRASS, KERB, OBJECT))] = NOT_TRAVERSABLE
     if rng is not None and sigma_range > 0.0:
         fin = np.isfinite(ranges)
         ranges[fin] += rng.normal(0.0, sigma_range, int(fin.sum()))
