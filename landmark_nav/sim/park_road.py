@@ -179,3 +179,103 @@ def cast_scan(road: ParkRoad, pose: Sequence[float], mount: LaserMount,
     for arr in (a, ranges, hits, truth, surf):
         arr.setflags(write=False)
     return TiltedScan(a.copy(), ranges, hits, truth, surf)
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Light of a rendered view: overcast, or sun with soft or hard shadow bands.
+
+    ``shadows`` are (x_min, x_max) bands across the road in the world (tree shadows), dimmed
+    to ``shadow_level`` of the lit intensity and tinted blue by ``shadow_tint`` (skylight);
+    ``soft`` metres of linear transition at their borders (0: hard).
+    """
+
+    shadows: tuple = ()
+    shadow_level: float = 0.45
+    shadow_tint: float = 0.08
+    soft: float = 0.0
+
+
+#: Surface colours (RGB, 0-255) and texture amplitudes.
+_COLOURS = {ROAD: ((105, 105, 110), 10.0), SHOULDER: ((120, 112, 90), 18.0),
+            GRASS: ((70, 120, 50), 22.0), TRACK: ((140, 120, 90), 14.0)}
+_GRAVEL = ((150, 138, 115), 14.0)
+
+
+def render_view(road: ParkRoad, pose: Sequence[float], camera, mount: Sequence[float],
+                lighting: Lighting = Lighting(), markings: bool = False,
+                rng: Optional[np.random.Generator] = None, gravel: bool = False) -> np.ndarray:
+    """Render the terrain seen by a camera at robot pose (x, y, yaw): (H, W, 3) uint8 RGB.
+
+    Flat-ground ray casting (the crown's few centimetres are ignored for the image):
+    each pixel's ray meets the ground plane; its colour is the surface's colour with a
+    fixed texture (the terrain's noise field), lit by ``lighting``; rays above the horizon
+    see the sky; upright cylinders (pedestrians) in front of the ground are dark grey.
+    ``markings`` paints a dashed white centre line.
+    """
+    from landmark_nav.road.fusion import pixels_to_ground
+    h, w = camera.height, camera.width
+    vv, uu = np.mgrid[0:h, 0:w]
+    px = np.column_stack([uu.ravel(), vv.ravel()]).astype(float)
+    g = pixels_to_ground(camera, mount, px, max_distance=200.0)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    wx = pose[0] + c * g[:, 0] - s * g[:, 1]
+    wy = pose[1] + s * g[:, 0] + c * g[:, 1]
+    sky = ~np.isfinite(wx)
+    wx = np.where(sky, 0.0, wx)
+    wy = np.where(sky, 0.0, wy)
+    surf = road.surface(wx, wy)
+    img = np.zeros((px.shape[0], 3))
+    for code, (rgb, amp) in _COLOURS.items():
+        if code == ROAD and gravel:
+            rgb, amp = _GRAVEL
+        m = surf == code
+        tex = amp * road._noise(wx[m] * 7.0, wy[m] * 7.0)
+        img[m] = np.array(rgb, dtype=float) + tex[:, None]
+    if markings:
+        dash = (np.abs(wy) < 0.06) & (np.mod(wx, 3.0) < 1.5) & (surf == ROAD)
+        img[dash] = (235, 235, 230)
+    light = np.ones(px.shape[0])
+    tint = np.zeros(px.shape[0])
+    for x0, x1 in lighting.shadows:
+        if lighting.soft > 0.0:
+            inside = np.clip(np.minimum(wx - x0, x1 - wx) / lighting.soft + 0.5, 0.0, 1.0)
+        else:
+            inside = ((wx >= x0) & (wx <= x1)).astype(float)
+        light = np.minimum(light, 1.0 - (1.0 - lighting.shadow_level) * inside)
+        tint = np.maximum(tint, lighting.shadow_tint * inside)
+    img = img * light[:, None]
+    img[:, 2] *= 1.0 + tint
+    img[sky] = (170, 200, 235)
+    if road.cylinders:
+        rays_hit = _cylinder_pixels(road, pose, camera, mount, px, g)
+        img[rays_hit] = (45, 40, 50)
+    if rng is not None:
+        img += rng.normal(0.0, 2.0, img.shape)
+    return np.clip(img, 0, 255).reshape(h, w, 3).astype(np.uint8)
+
+
+def _cylinder_pixels(road: ParkRoad, pose, camera, mount, px: np.ndarray,
+                     ground: np.ndarray) -> np.ndarray:
+    """Pixels whose ray meets an upright cylinder before the ground."""
+    from landmark_nav.corridor.orientation import mount_rotation
+    rays = camera.back_project(px) @ mount_rotation(mount).T          # base_link
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    d = rays @ rot.T
+    o = rot @ np.asarray(mount[:3], dtype=float) + np.array([pose[0], pose[1], 0.0])
+    t_ground = np.where(np.isfinite(ground[:, 0]),
+                        np.linalg.norm(ground - np.asarray(mount[:2]), axis=1)
+                        / np.maximum(np.linalg.norm(rays[:, :2], axis=1), 1e-12), np.inf)
+    hit = np.zeros(px.shape[0], dtype=bool)
+    for cx, cy, radius, height in road.cylinders:
+        oc = o[:2] - np.array([cx, cy])
+        qa = np.sum(d[:, :2] ** 2, axis=1)
+        qb = 2.0 * d[:, :2] @ oc
+        qc = oc @ oc - radius ** 2
+        disc = qb * qb - 4.0 * qa * qc
+        t = np.where(disc >= 0, (-qb - np.sqrt(np.maximum(disc, 0.0)))
+                     / (2.0 * np.maximum(qa, 1e-12)), np.inf)
+        z = o[2] + d[:, 2] * t
+        hit |= (t > 0) & (t < t_ground) & (z >= 0.0) & (z <= height)
+    return hit
