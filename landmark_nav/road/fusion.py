@@ -247,7 +247,7 @@ def plan_routes(corridors: Sequence[Corridor], obstacles: Optional[np.ndarray] =
 
 
 def choose_route(routes: Sequence[Route]) -> Optional[Route]:
-    """The best route: farthest reach, then least lateral excursion, then widest clearance."""
+    """Return the best route: farthest reach, least lateral excursion, widest clearance."""
     if not routes:
         return None
     return max(routes, key=lambda r: (round(float(r.points[-1, 0]), 3), -round(r.excursion, 2),

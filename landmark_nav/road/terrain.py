@@ -119,7 +119,8 @@ class TerrainParams:
 
     def __post_init__(self) -> None:
         """Check the ranges."""
-        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio', 'split_rms', 'rough_gain',
+        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio',
+                     'split_rms', 'rough_gain',
                      'slope_max', 'curvature_max', 'min_width', 'obstacle_height'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -219,7 +220,7 @@ def _window_bounds(s: np.ndarray, lo_off: float, hi_off: float) -> tuple[np.ndar
 
 
 def _window_sums(cs: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Sums over [lo, hi) from a cumulative sum with a leading zero."""
+    """Return the sums over [lo, hi) from a cumulative sum with a leading zero."""
     return cs[hi] - cs[lo]
 
 
@@ -325,7 +326,8 @@ def _roughness_change(z: np.ndarray, allowed: np.ndarray,
 
     The second differences of the heights along the scan, over ``rough_lag`` readings
     either side (a few centimetres: longer than the range noise's one reading), measure the
-    roughness of each reading; the change point maximises the Gaussian log-likelihood gain of two variances
+    roughness of each reading; the change point maximises the Gaussian log-likelihood gain
+    of two variances
     over one and is kept when the gain exceeds ``rough_gain`` and the rougher piece's
     roughness exceeds the smoother one's ``rough_ratio`` times (e.g. asphalt next to a
     gravel or grass verge at the same height).
@@ -483,11 +485,14 @@ def _grow(first: int, last: int, s: np.ndarray, z: np.ndarray, params: TerrainPa
     sigma = max(float(np.std(z[first:last + 1] - np.polyval(coef, t - t.mean()))), 0.003)
     limit = params.grow_sigmas * sigma
     lo, hi = s[first] - 0.5 * params.window, s[last] + 0.5 * params.window
-    while first > lo_index and s[first - 1] >= lo and abs(z[first - 1] - np.polyval(coef, s[first - 1] - t.mean())) <= limit \
-            and abs(z[first - 1] - z[first]) <= params.step_max:
+
+    def fits(k: int, inner: int) -> bool:
+        off = abs(z[k] - np.polyval(coef, s[k] - t.mean()))
+        return off <= limit and abs(z[k] - z[inner]) <= params.step_max
+
+    while first > lo_index and s[first - 1] >= lo and fits(first - 1, first):
         first -= 1
-    while last < hi_index and s[last + 1] <= hi and abs(z[last + 1] - np.polyval(coef, s[last + 1] - t.mean())) <= limit \
-            and abs(z[last + 1] - z[last]) <= params.step_max:
+    while last < hi_index and s[last + 1] <= hi and fits(last + 1, last):
         last += 1
     return first, last
 

@@ -18,9 +18,8 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence
 
-import numpy as np
-
 from landmark_nav.road.terrain import LaserMount, NOT_TRAVERSABLE, TRAVERSABLE
+import numpy as np
 
 #: Surface codes of :meth:`ParkRoad.surface`.
 ROAD, SHOULDER, GRASS, TRACK, KERB, OBJECT = range(6)
@@ -54,7 +53,7 @@ class ParkRoad:
         return cls(width=w, crown=c, road_rough=rough, **kwargs)
 
     def _noise(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Fixed unit-amplitude random height field, bilinear between grid nodes."""
+        """Return a fixed unit-amplitude random height field, bilinear between grid nodes."""
         gx, gy = x / self.cell, y / self.cell
         ix, iy = np.floor(gx).astype(np.int64), np.floor(gy).astype(np.int64)
         fx, fy = gx - ix, gy - iy
@@ -94,7 +93,7 @@ class ParkRoad:
         return z
 
     def edges(self) -> tuple[float, float]:
-        """True road edges (y_right, y_left) [m]."""
+        """Return the true road edges, right and left of the centre line [m]."""
         return -0.5 * self.width, 0.5 * self.width
 
 

@@ -28,7 +28,8 @@ def _cmd_evaluate_road_outline(args: argparse.Namespace) -> int:
         ranked = sorted(scores, key=lambda s: s.iou)
         k = len(ranked) - 1
         picks = [ranked[round(k * q)].name for q in (0.0, 0.25, 0.5, 0.75, 1.0)]
-        print(f'overlays (min, quartiles, max IoU): {write_overlays(folder, picks, args.overlays)}')
+        path = write_overlays(folder, picks, args.overlays)
+        print(f'overlays (min, quartiles, max IoU): {path}')
     return 0
 
 
