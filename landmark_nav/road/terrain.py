@@ -25,7 +25,9 @@ F_w width}``:
    (the robot's width): the groups that pass are the *traversable segments*, their readings
    ``C_t``; the other valid readings are ``C_n``;
 6. *obstacles*: runs of valid readings higher than ``obstacle_height`` above the ground
-   plane (e.g. a pedestrian's legs, a kerb face, a post).
+   plane (a kerb face, a post), or not traversable, between traversable readings and more
+   than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
+   pedestrian's legs just before the ground).
 
 Pure numpy; the node is :mod:`landmark_nav.nodes.road_classifier`.
 """
@@ -115,13 +117,15 @@ class TerrainParams:
     min_width: float = 0.5
     gap_max: float = 0.15
     obstacle_height: float = 0.12
+    obstacle_depth: float = 0.06
     min_points: int = 5
 
     def __post_init__(self) -> None:
         """Check the ranges."""
         for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio',
                      'split_rms', 'rough_gain',
-                     'slope_max', 'curvature_max', 'min_width', 'obstacle_height'):
+                     'slope_max', 'curvature_max', 'min_width', 'obstacle_height',
+                     'obstacle_depth'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'terrain {name} must be > 0; got {value!r}')
@@ -434,17 +438,29 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
         _split_profile(first, last, lateral, z, params, pieces)
     groups = pieces
     segments = []
+    grown_last = -1
     for g, (first, last) in enumerate(groups):
         groups_all[idx[first:last + 1]] = g
-        lo = groups[g - 1][1] + 1 if g > 0 else 0
+        lo = max(groups[g - 1][1] if g > 0 else -1, grown_last) + 1
         hi = groups[g + 1][0] - 1 if g + 1 < len(groups) else idx.size - 1
         first, last = _grow(first, last, lateral, z, params, lo, hi)
+        grown_last = last
         seg = _segment(first, last, p, lateral, rough, idx, params)
         if seg is not None:
             segments.append(seg)
             classes[idx[first:last + 1]] = TRAVERSABLE
+    # Obstacles: readings high above the ground plane, or (a tilted laser meets an object
+    # before the ground) well short of the ground line the traversable readings trace.
+    high = z > params.obstacle_height
+    trav = np.flatnonzero(classes[idx] == TRAVERSABLE)
+    if trav.size >= 2:
+        k = np.arange(idx.size)
+        ground_x = np.interp(k, trav, p[trav, 0])
+        between = (k > trav[0]) & (k < trav[-1])
+        high |= (between & (classes[idx] != TRAVERSABLE)
+                 & (ground_x - p[:, 0] > params.obstacle_depth))
     obstacles = []
-    for first, last in _runs(z > params.obstacle_height):
+    for first, last in _runs(high):
         obstacles.append(Obstacle(int(idx[first]), int(idx[last]), p[first:last + 1].copy(),
                                   float(z[first:last + 1].max())))
     return TerrainScan(pts, classes, rough_all, step_all, groups_all, tuple(segments),

@@ -38,6 +38,7 @@ class ParkRoad:
     shoulder: float = 0.6
     shoulder_rough: float = 0.015
     grass_rough: float = 0.06
+    track_rough: float = 0.005
     kerb: float = 0.0
     crossing: Optional[tuple] = None        # (x_min, x_max) of a flat horse track
     cylinders: tuple = ()                   # ((x, y, radius, height), ...)
@@ -84,7 +85,7 @@ class ParkRoad:
         half = 0.5 * self.width
         surf = self.surface(x, y)
         amp = np.choose(np.minimum(surf, 3), [self.road_rough, self.shoulder_rough,
-                                              self.grass_rough, self.shoulder_rough])
+                                              self.grass_rough, self.track_rough])
         z = amp * self._noise(x, y)
         road = surf == ROAD
         z = np.where(road, z + self.crown * (1.0 - (y / half) ** 2), z)
