@@ -12,7 +12,8 @@
   width, line after line, until none does;
 * :func:`plan_routes` / :func:`choose_route`: one route per corridor through the middle of
   its free interval at each line, kept ``robot_width / 2`` clear of the obstacles and the
-  corridor's borders; the best is the longest-reaching one, then the one with the least
+  corridor's borders, its lateral moves started early (``max_lateral_slope``: a
+  pedestrian far ahead already bends the route near the robot); the best is the longest-reaching one, then the one with the least
   lateral excursion and the widest clearance (corridor statistics). Without a usable
   outline the laser corridors are used alone;
 * the road width from the laser (the newest segment of the chosen corridor) and from vision
@@ -39,6 +40,8 @@ class FusionParams:
     line_step: float = 0.5        # spacing of the intersection lines [m]
     max_distance: float = 12.0    # farthest intersection line ahead of base_link [m]
     history: int = 10             # scans kept for eq. 29
+    max_lateral_slope: float = 0.5  # route's largest |dy/dx| where the corridor allows
+    obstacle_margin: float = 0.25   # kept between the robot's side and an obstacle point
 
     def __post_init__(self) -> None:
         """Check the ranges."""
@@ -191,7 +194,7 @@ def extend_with_outline(corridor: Corridor, ground_polygon: Optional[np.ndarray]
 
 
 def _free_interval(iv: Interval, obstacles: np.ndarray, half: float, prev_y: float,
-                   band: float) -> Optional[tuple]:
+                   band: float, margin: float) -> Optional[tuple]:
     """Free sub-interval (lo, hi) of ``iv`` for the robot centre, nearest ``prev_y``."""
     lo, hi = iv.lo + half, iv.hi - half
     if hi < lo:
@@ -199,7 +202,8 @@ def _free_interval(iv: Interval, obstacles: np.ndarray, half: float, prev_y: flo
     blocks = []
     if len(obstacles):
         near = obstacles[np.abs(obstacles[:, 0] - iv.x) <= band]
-        blocks = sorted((float(y) - half, float(y) + half) for y in near[:, 1])
+        blocks = sorted((float(y) - half - margin, float(y) + half + margin)
+                        for y in near[:, 1])
     free, start = [], lo
     for b0, b1 in blocks:
         if b1 < start or b0 > hi:
@@ -219,6 +223,8 @@ def plan_routes(corridors: Sequence[Corridor], obstacles: Optional[np.ndarray] =
                 params: FusionParams = FusionParams()) -> list:
     """One route per corridor, ``robot_width / 2`` clear of its borders and the obstacles.
 
+    Obstacle points block ``robot_width / 2 + obstacle_margin`` either side.
+
     Args:
         corridors: Corridors (intervals nearest first).
         obstacles: (M, 2) obstacle points in base_link (laser obstacles; may be empty).
@@ -232,18 +238,37 @@ def plan_routes(corridors: Sequence[Corridor], obstacles: Optional[np.ndarray] =
     half = 0.5 * params.robot_width
     routes = []
     for c in corridors:
-        pts, clear, y = [(0.0, 0.0)], math.inf, 0.0
+        pts, frees, clear, y = [(0.0, 0.0)], [(0.0, 0.0)], math.inf, 0.0
         for iv in sorted(c.intervals, key=lambda i: i.x):
-            free = _free_interval(iv, obs, half, y, 0.5 * params.line_step)
+            free = _free_interval(iv, obs, half, y, 0.5 * params.line_step,
+                                  params.obstacle_margin)
             if free is None:
                 break
-            y = min(max(0.5 * (free[0] + free[1]), free[0]), free[1])
+            y = 0.5 * (free[0] + free[1])
             pts.append((iv.x, y))
+            frees.append(free)
             clear = min(clear, half + 0.5 * (free[1] - free[0]))
         if len(pts) > 1:
-            p = np.array(pts)
+            p = _limit_lateral_slope(np.array(pts), frees, params.max_lateral_slope)
             routes.append(Route(c, p, float(clear), float(np.max(np.abs(p[:, 1])))))
     return routes
+
+
+def _limit_lateral_slope(p: np.ndarray, frees: list, slope: float) -> np.ndarray:
+    """Start lateral moves early: |dy/dx| <= slope between route points, inside the free
+    intervals where possible (a backward pass from the far end, then a forward one from
+    the robot)."""
+    p = p.copy()
+    n = len(p)
+    for i in range(n - 2, 0, -1):
+        step = slope * (p[i + 1, 0] - p[i, 0])
+        y = min(max(p[i, 1], p[i + 1, 1] - step), p[i + 1, 1] + step)
+        p[i, 1] = min(max(y, frees[i][0]), frees[i][1])
+    for i in range(1, n):
+        step = slope * (p[i, 0] - p[i - 1, 0])
+        y = min(max(p[i, 1], p[i - 1, 1] - step), p[i - 1, 1] + step)
+        p[i, 1] = min(max(y, frees[i][0]), frees[i][1])
+    return p
 
 
 def choose_route(routes: Sequence[Route]) -> Optional[Route]:

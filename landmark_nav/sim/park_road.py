@@ -196,8 +196,8 @@ class Lighting:
     soft: float = 0.0
 
 
-#: Surface colours (RGB, 0-255) and texture amplitudes.
-_COLOURS = {ROAD: ((105, 105, 110), 10.0), SHOULDER: ((120, 112, 90), 18.0),
+#: Surface colours (RGB, 0-255) and texture amplitudes (the shoulder: a grassy verge).
+_COLOURS = {ROAD: ((105, 105, 110), 10.0), SHOULDER: ((105, 118, 72), 18.0),
             GRASS: ((70, 120, 50), 22.0), TRACK: ((140, 120, 90), 14.0)}
 _GRAVEL = ((150, 138, 115), 14.0)
 

@@ -4,6 +4,8 @@
   frames (IoU, precision, recall per frame set; overlays).
 * ``landmark_nav evaluate-road-laser``: tilted-laser terrain classification on the park-road
   simulator (per-reading accuracy, road width as in Table 3).
+* ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
+  frames (road width in the robot's ground plane, failures per lighting).
 """
 
 import argparse
@@ -53,6 +55,18 @@ def add_parsers(sub, parser_class) -> None:
     p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     p.set_defaults(func=_cmd_evaluate_road_laser)
 
+    p = sub.add_parser('evaluate-road-vision', help='score the vision road width on simulated '
+                       'park roads (laser-seeded outline, rendered frames)')
+    p.add_argument('--kinds', nargs='+', default=['asphalt', 'gravel'],
+                   choices=['asphalt', 'gravel'], help='road kinds (Table 3)')
+    p.add_argument('--lighting', nargs='+', default=['overcast', 'soft_shadows',
+                                                     'hard_shadows'],
+                   choices=['overcast', 'soft_shadows', 'hard_shadows'], help='lighting')
+    p.add_argument('--frames', type=int, default=250, help='frames per case (default 250)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    p.add_argument('--markings', action='store_true', help='paint a dashed centre line')
+    p.set_defaults(func=_cmd_evaluate_road_vision)
+
 
 def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.road_laser import evaluate_laser_road
@@ -63,4 +77,17 @@ def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
         print(f'{kind:8s} {s.true_width:6.2f} {s.scans:5d} {100 * s.accuracy:6.2f} '
               f'{100 * s.accuracy_min:6.2f} {s.width_mean:6.3f} {s.width_std:6.3f} '
               f'{s.widths:5d} {s.failures:4d}')
+    return 0
+
+
+def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.road_fusion import evaluate_vision_road
+    print(f'{"road":8s} {"lighting":13s} {"true m":>6s} {"frames":>6s} {"width":>6s} '
+          f'{"sigma":>6s} {"N":>5s} {"fail %":>6s}')
+    for kind in args.kinds:
+        for light in args.lighting:
+            s = evaluate_vision_road(kind, light, args.frames, args.seed, args.markings)
+            print(f'{kind:8s} {light:13s} {s.true_width:6.2f} {s.frames:6d} '
+                  f'{s.width_mean:6.3f} {s.width_std:6.3f} {s.widths:5d} '
+                  f'{100 * s.failures / s.frames:6.1f}')
     return 0
