@@ -27,10 +27,11 @@ CAMERA = CameraModel.from_fov(320, 240, math.radians(70.0))
 CAMERA_MOUNT = (0.2, 0.0, 1.0, 0.0, math.radians(12.0), 0.0)
 MIN_LINES = 4
 FAIL_WIDTH = 1.0
-#: Lighting conditions of the evaluation: overcast, soft and hard tree shadows across the road.
+#: Lighting of the evaluation: overcast; soft and hard shadows of a row of trees across the
+#: road (bands of 1.5 m and 1 m every 8 m).
 LIGHTING = {'overcast': Lighting(),
-            'soft_shadows': Lighting(shadows=((5.0, 6.5), (9.0, 10.0)), soft=0.8),
-            'hard_shadows': Lighting(shadows=((5.0, 6.5), (9.0, 10.0)), soft=0.0)}
+            'soft_shadows': Lighting(shadows=((1.0, 2.5), (5.0, 6.0)), soft=0.8, period=8.0),
+            'hard_shadows': Lighting(shadows=((1.0, 2.5), (5.0, 6.0)), soft=0.0, period=8.0)}
 
 
 @dataclass(frozen=True, eq=False)

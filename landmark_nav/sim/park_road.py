@@ -187,10 +187,12 @@ class Lighting:
 
     ``shadows`` are (x_min, x_max) bands across the road in the world (tree shadows), dimmed
     to ``shadow_level`` of the lit intensity and tinted blue by ``shadow_tint`` (skylight);
-    ``soft`` metres of linear transition at their borders (0: hard).
+    ``soft`` metres of linear transition at their borders (0: hard); with ``period`` > 0 the
+    bands repeat every ``period`` metres along x (a row of trees).
     """
 
     shadows: tuple = ()
+    period: float = 0.0
     shadow_level: float = 0.45
     shadow_tint: float = 0.08
     soft: float = 0.0
@@ -237,11 +239,12 @@ def render_view(road: ParkRoad, pose: Sequence[float], camera, mount: Sequence[f
         img[dash] = (235, 235, 230)
     light = np.ones(px.shape[0])
     tint = np.zeros(px.shape[0])
+    sx = np.mod(wx, lighting.period) if lighting.period > 0.0 else wx
     for x0, x1 in lighting.shadows:
         if lighting.soft > 0.0:
-            inside = np.clip(np.minimum(wx - x0, x1 - wx) / lighting.soft + 0.5, 0.0, 1.0)
+            inside = np.clip(np.minimum(sx - x0, x1 - sx) / lighting.soft + 0.5, 0.0, 1.0)
         else:
-            inside = ((wx >= x0) & (wx <= x1)).astype(float)
+            inside = ((sx >= x0) & (sx <= x1)).astype(float)
         light = np.minimum(light, 1.0 - (1.0 - lighting.shadow_level) * inside)
         tint = np.maximum(tint, lighting.shadow_tint * inside)
     img = img * light[:, None]
