@@ -9,7 +9,7 @@ import pytest
 
 
 def _scene(rng, marking=False, obstacle=False):
-    """A grey road (columns 100-219) between green verges, 240 x 320, with texture."""
+    """Return a grey road (columns 100-219) between green verges, 240 x 320, with texture."""
     img = np.empty((240, 320, 3))
     img[:] = (70, 120, 50)
     img[:, 100:220] = (105, 105, 110)

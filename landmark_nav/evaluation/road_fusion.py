@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence
 
-from landmark_nav.road.fusion import (choose_route, extend_with_outline, FusionParams,
-                                      ground_to_pixels, pixels_to_ground, plan_routes,
-                                      road_widths, Route, segment_interval, Corridor)
+from landmark_nav.road.fusion import (choose_route, Corridor, extend_with_outline,
+                                      FusionParams, ground_to_pixels, pixels_to_ground,
+                                      plan_routes, road_widths, Route, segment_interval)
 from landmark_nav.road.outline import OutlineParams, polyline_seed, road_outline, SeedError
 from landmark_nav.road.terrain import classify_scan, LaserMount
 from landmark_nav.sim.park_road import cast_scan, Lighting, ParkRoad, render_view

@@ -13,8 +13,9 @@
 * :func:`plan_routes` / :func:`choose_route`: one route per corridor through the middle of
   its free interval at each line, kept ``robot_width / 2`` clear of the obstacles and the
   corridor's borders, its lateral moves started early (``max_lateral_slope``: a
-  pedestrian far ahead already bends the route near the robot); the best is the longest-reaching one, then the one with the least
-  lateral excursion and the widest clearance (corridor statistics). Without a usable
+  pedestrian far ahead already bends the route near the robot); the best is the
+  longest-reaching one, then the one with the least lateral excursion and the widest
+  clearance (corridor statistics). Without a usable
   outline the laser corridors are used alone;
 * the road width from the laser (the newest segment of the chosen corridor) and from vision
   (median width of its outline intervals, in the robot's ground plane).
@@ -255,9 +256,11 @@ def plan_routes(corridors: Sequence[Corridor], obstacles: Optional[np.ndarray] =
 
 
 def _limit_lateral_slope(p: np.ndarray, frees: list, slope: float) -> np.ndarray:
-    """Start lateral moves early: |dy/dx| <= slope between route points, inside the free
-    intervals where possible (a backward pass from the far end, then a forward one from
-    the robot)."""
+    """Start lateral moves early: |dy/dx| <= slope between route points.
+
+    Inside the free intervals where possible: a backward pass from the far end, then a
+    forward one from the robot.
+    """
     p = p.copy()
     n = len(p)
     for i in range(n - 2, 0, -1):
