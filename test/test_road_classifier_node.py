@@ -98,11 +98,12 @@ def test_scans_and_frames_give_grid_route_width_and_outline():
             _settle(ros, node, n)
         assert ros.wait_until(lambda: len(rig.widths) == 6 and len(rig.outlines) == 6, 10)
         assert node.stats.dropped_count == 0
-        # The laser width of the asphalt road (4.9 m) measured within 0.3 m on these scans;
-        # vision (ground plane, flat-ground rendering) within 0.3 m.
+        # The asphalt road is 4.9 m wide: measured here laser 5.13 m (the laser's bias, see
+        # the README), vision 4.82 m (ground plane, flat-ground rendering).
         w = rig.widths[-1].vector
         assert abs(w.x - 4.9) < 0.3
-        assert abs(w.y - 4.9) < 0.3
+        assert abs(w.y - 4.9) < 0.15
+        assert w.z == 1.0                       # one corridor
         grid = rig.grids[-1]
         data = np.array(grid.data, dtype=int).reshape(grid.info.height, grid.info.width)
         assert grid.header.frame_id == 'base_link'
