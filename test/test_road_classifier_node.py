@@ -10,12 +10,14 @@ from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.road_classifier import RoadClassifier
 from landmark_nav.road.terrain import LaserMount
 from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view
+from landmark_nav.sim.park_road_record import record_park_road
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from landmark_nav.vision.camera import CameraModel
 from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+import yaml
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
 
 REPO = Path(__file__).resolve().parents[1]
@@ -160,3 +162,43 @@ def test_bad_input_warns_and_publishes_nothing_new():
         assert node.stats.dropped['no_valid'] == 2
         assert rig.outputs() == (1, 1, 1, 0)
         assert node.warner.count == 5
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_bag_replay_of_the_park_road_drive(tmp_path):
+    """``landmark_nav simulate park_road`` replayed into the node: every scan and frame."""
+    bag = tmp_path / 'park_road'
+    record_park_road(1, bag)
+    truth = yaml.safe_load((bag / 'ground_truth.yaml').read_text())
+    with RosHarness() as ros:
+        node = ros.add_node(RoadClassifier(context=ros.context))
+        widths = ros.collect('road/width', Vector3Stamped)
+        routes = ros.collect('road/route', PathMsg)
+        outlines = ros.collect('road/outline', PolygonStamped)
+
+        def caught_up(topic, _stamp, before=[0]):
+            if topic == '/camera/camera_info':
+                assert ros.wait_until(lambda: node.camera is not None, 10)
+            elif topic in ('/tilted_scan', '/camera/image_raw'):
+                before[0] += 1
+                assert ros.wait_until(lambda: node.stats.processed_count
+                                      + node.stats.dropped_count >= before[0], 20)
+            elif topic == '/odom':
+                assert ros.wait_until(lambda: node.pose is not None, 10)
+        counts = ros.play(bag, on_message=caught_up)
+        assert counts['/tilted_scan'] == 61 and counts['/camera/image_raw'] == 13
+        assert ros.wait_until(lambda: len(widths) == 61 and len(outlines) == 13, 10)
+        assert node.stats.dropped_count == 0
+        laser = np.array([w.vector.x for w in widths])
+        vision = np.array([w.vector.y for w in widths])
+        vision = vision[np.isfinite(vision)]
+        # measured on this bag: laser median 5.06 m, vision 4.79 m (60 of 61; truth 4.9 m)
+        assert abs(np.median(laser) - truth['width']) < 0.25
+        assert abs(np.median(vision) - truth['width']) < 0.15 and len(vision) >= 58
+        # the pedestrian (x = 10 m, beyond the 2.7 m laser line all along) bends the route:\n        # measured 1.37 m beside it
+        p = np.array([[q.pose.position.x, q.pose.position.y] for q in routes[-1].poses])
+        ped_x = truth['pedestrian'][0] - 3.0                 # the robot ends at x = 3 m
+        ped_y = -truth['lateral_offset']
+        near = p[np.abs(p[:, 0] - ped_x) <= 0.3]
+        assert len(near) and np.all(np.abs(near[:, 1] - ped_y) >= 0.7)

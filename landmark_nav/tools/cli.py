@@ -182,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('simulate', help='simulate a named scenario into a rosbag2 (MCAP) bag')
     p.add_argument('scenario',
                    help='scenario name: office, hallway, calibration, ambiguous, '
-                        'landmark_views or landmark_shuttle')
+                        'landmark_views, landmark_shuttle or park_road')
     p.add_argument('--seed', type=_seed, default=1, help='random seed (default 1)')
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--force', action='store_true', help='replace an existing bag directory')
