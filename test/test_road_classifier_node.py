@@ -17,8 +17,8 @@ from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
-import yaml
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 CAM = CameraModel.from_fov(320, 240, math.radians(70.0))
@@ -196,7 +196,8 @@ def test_bag_replay_of_the_park_road_drive(tmp_path):
         # measured on this bag: laser median 5.06 m, vision 4.79 m (60 of 61; truth 4.9 m)
         assert abs(np.median(laser) - truth['width']) < 0.25
         assert abs(np.median(vision) - truth['width']) < 0.15 and len(vision) >= 58
-        # the pedestrian (x = 10 m, beyond the 2.7 m laser line all along) bends the route:\n        # measured 1.37 m beside it
+        # the pedestrian (x = 10 m, beyond the 2.7 m laser line all along) bends the route:
+        # measured 1.37 m beside it
         p = np.array([[q.pose.position.x, q.pose.position.y] for q in routes[-1].poses])
         ped_x = truth['pedestrian'][0] - 3.0                 # the robot ends at x = 3 m
         ped_y = -truth['lateral_offset']

@@ -76,11 +76,10 @@ def record_park_road(seed: int, out, force: bool = False, kind: str = 'asphalt',
                 bag.write(INFO_TOPIC, t, make_camera_info(camera, t, 'camera'))
                 bag.write(IMAGE_TOPIC, t, array_to_image(img, 'rgb8', t, 'camera'))
                 counts['images'] += 1
+    laser = [mount.x, mount.y, mount.z, mount.roll, mount.pitch, mount.yaw]
     truth = {'scenario': 'park_road', 'seed': seed, 'kind': kind, 'width': road.width,
              'edges': list(road.edges()), 'crown': road.crown, 'lateral_offset': y0,
-             'pedestrian': list(pedestrian), 'laser_mount': [mount.x, mount.y, mount.z,
-                                                              mount.roll, mount.pitch,
-                                                              mount.yaw],
+             'pedestrian': list(pedestrian), 'laser_mount': laser,
              'camera_mount': list(CAMERA_MOUNT)}
     with open(out / GROUND_TRUTH_FILE, 'w') as f:
         yaml.safe_dump(truth, f, sort_keys=False)
