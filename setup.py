@@ -15,6 +15,7 @@ EXECUTABLES = {
     'base_driver': 'landmark_nav.nodes.base_driver:main',
     'corner_extractor': 'landmark_nav.nodes.corner_extractor:main',
     'corridor_follower': 'landmark_nav.nodes.corridor_follower:main',
+    'road_classifier': 'landmark_nav.nodes.road_classifier:main',
     'ekf_slam': 'landmark_nav.nodes.ekf_slam:main',
     'landmark_detector': 'landmark_nav.nodes.landmark_detector:main',
     'laser_driver': 'landmark_nav.nodes.laser_driver:main',

@@ -19,8 +19,8 @@ from typing import Iterator, List, Tuple
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1] / 'landmark_nav'
-CORES = ('geometry', 'hardware', 'laser', 'slam', 'localization', 'vision', 'corridor', 'drivers',
-         'bag')
+CORES = ('geometry', 'hardware', 'laser', 'slam', 'localization', 'vision', 'corridor', 'road',
+         'drivers', 'bag')
 ABOVE_CORES = ('landmark_nav.sim', 'landmark_nav.evaluation', 'landmark_nav.tools',
                'landmark_nav.nodes')
 RCLPY_ALLOWED = ('bag',)

@@ -99,6 +99,9 @@ def record_scenario(name: str, seed: int, out, force: bool = False, **overrides)
         BagError: The output exists (without ``force``) or cannot be written.
 
     """
+    if name == 'park_road':  # tilted laser + camera on a 3-D terrain: own recorder
+        from landmark_nav.sim.park_road_record import record_park_road
+        return record_park_road(seed, out, force=force, **overrides)
     if name in ('landmark_views', 'landmark_shuttle'):  # camera scenarios: own recorder
         from landmark_nav.sim.camera_record import record_camera_scenario
         return record_camera_scenario(name, seed, out, force=force, **overrides)

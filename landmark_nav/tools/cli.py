@@ -230,7 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('simulate', help='simulate a named scenario into a rosbag2 (MCAP) bag')
     p.add_argument('scenario',
                    help='scenario name: office, hallway, calibration, ambiguous, '
-                        'landmark_views, landmark_shuttle or corridor')
+                        'landmark_views, landmark_shuttle, corridor or park_road')
     p.add_argument('--seed', type=_seed, default=1, help='random seed (default 1)')
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--force', action='store_true', help='replace an existing bag directory')
@@ -442,6 +442,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from landmark_nav.tools.drive import add_parser as add_drive_parser
     add_drive_parser(sub, _Parser)
+
+    from landmark_nav.tools.road_tools import add_parsers as add_road_parsers
+    add_road_parsers(sub, _Parser)
     return parser
 
 

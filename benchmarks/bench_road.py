@@ -1,0 +1,105 @@
+"""Speed of the road follower's cores: laser classification per scan, vision outline per frame.
+
+Run from the repository root::
+
+    python benchmarks/bench_road.py [--scans N] [--frames N] [--seed S]
+
+* :func:`landmark_nav.road.terrain.classify_scan` on simulated 361-beam tilted scans of the
+  asphalt and gravel park roads; reference in the same run: one ``np.polyfit`` of degree 2
+  over the scan's valid points (a floor any per-scan fit pays). Target (issue): <= 2 ms.
+* :func:`landmark_nav.road.outline.road_outline` on 320 x 240 rendered park-road frames and
+  on the real CamVid frames (480 x 360, resampled to 320 x 240 inside) when present;
+  reference in the same run: a full-frame OpenCV Sobel 3 x 3 + 5 x 5 and a Mahalanobis pass
+  on the eq. 25 chromaticity at 320 x 240. Target (issue): <= 20 ms.
+Times are medians of single-threaded calls.
+"""
+
+import argparse
+from pathlib import Path
+import statistics
+import sys
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import cv2  # noqa: E402
+from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT  # noqa: E402
+from landmark_nav.evaluation.road_laser import ANGLES  # noqa: E402
+from landmark_nav.evaluation.road_outline import (frame_names, load_frame,  # noqa: E402
+                                                  SEED_COLS, SEED_ROWS)
+from landmark_nav.road.outline import band_seed, chromaticity, road_outline  # noqa: E402
+from landmark_nav.road.terrain import classify_scan, LaserMount  # noqa: E402
+from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view  # noqa: E402
+from landmark_nav.testing import shared_data  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def median_ms(fn, items, repeat: int = 3) -> float:
+    """Median time of fn(item) over the items (best of ``repeat`` per item) [ms]."""
+    times = []
+    for it in items:
+        best = float('inf')
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            fn(it)
+            best = min(best, time.perf_counter() - t0)
+        times.append(best)
+    return 1e3 * statistics.median(times)
+
+
+def reference_pass(rgb: np.ndarray) -> None:
+    """Full-frame Sobel 3x3 + 5x5 and a Mahalanobis pass on the chromaticity (320 x 240)."""
+    small = cv2.resize(rgb, (320, 240), interpolation=cv2.INTER_AREA)
+    grey = small.astype(np.float32).mean(axis=2)
+    for k in (3, 5):
+        cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=k)
+        cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=k)
+    c = chromaticity(small)
+    d = c - c.reshape(-1, 2).mean(axis=0)
+    q = np.linalg.inv(np.cov(d.reshape(-1, 2).T)).astype(np.float32)
+    np.einsum('...i,ij,...j->...', d, q, d)
+
+
+def main() -> None:
+    """Run the benchmark and print the table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--scans', type=int, default=100)
+    ap.add_argument('--frames', type=int, default=30)
+    ap.add_argument('--seed', type=int, default=0)
+    args = ap.parse_args()
+    cv2.setNumThreads(1)
+    rng = np.random.default_rng(args.seed)
+    mount = LaserMount()
+    print(f'{"case":34s} {"ms":>7s} {"ref ms":>7s} {"ratio":>6s}')
+    for kind in ('asphalt', 'gravel'):
+        road = ParkRoad.of_kind(kind, seed=args.seed)
+        scans = [cast_scan(road, (0.1 * i, rng.normal(0, 0.3), rng.normal(0, 0.05)), mount,
+                           ANGLES, rng=rng) for i in range(args.scans)]
+        t = median_ms(lambda s: classify_scan(s.ranges, s.angles, mount), scans)
+
+        def ref(s):
+            ok = np.isfinite(s.ranges)
+            np.polyfit(s.angles[ok], s.ranges[ok], 2)
+        r = median_ms(ref, scans)
+        print(f'{"laser " + kind + " (361 beams)":34s} {t:7.2f} {r:7.3f} {t / r:6.1f}')
+    road = ParkRoad.of_kind('asphalt', seed=args.seed)
+    frames = [render_view(road, (0.2 * i, rng.normal(0, 0.3), rng.normal(0, 0.05)), CAMERA,
+                          CAMERA_MOUNT, rng=rng) for i in range(args.frames)]
+    seed = band_seed(frames[0].shape, (0.8, 0.84), (0.3, 0.7))
+    t = median_ms(lambda f: road_outline(f, seed), frames)
+    r = median_ms(reference_pass, frames)
+    print(f'{"vision rendered 320x240":34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+    try:
+        folder = shared_data('camvid_road')
+    except FileNotFoundError as err:
+        print(f'(skipped CamVid: {err})')
+        return
+    real = [load_frame(folder, n)[0] for n in frame_names(folder)[:args.frames]]
+    seed = band_seed(real[0].shape, SEED_ROWS, SEED_COLS)
+    t = median_ms(lambda f: road_outline(f, seed), real)
+    r = median_ms(reference_pass, real)
+    print(f'{"vision CamVid 480x360 -> 320x240":34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+
+
+if __name__ == '__main__':
+    main()

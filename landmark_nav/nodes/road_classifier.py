@@ -1,0 +1,328 @@
+"""Executable ``road_classifier``: tilted-laser terrain classes, vision road outline, route.
+
+Visual navigation chapter §4. Subscribes (sensor-data QoS) the tilted scan
+(sensor_msgs/LaserScan on ``scan_topic``, default ``tilted_scan``; its pose in base_link is
+``laser_mount``), ``camera/image_raw`` (sensor_msgs/Image rgb8 or bgr8) with
+``camera/camera_info`` (pose ``camera_mount``) and ``odom`` (nav_msgs/Odometry). Publishes,
+in ``base_frame`` with the scan's stamp after every scan with valid readings:
+
+* ``road/grid`` (nav_msgs/OccupancyGrid, a local grid ahead of the robot: 0 = traversable
+  (laser segments, corridor intervals, inside the vision outline), 100 = not traversable
+  (laser readings classed so, obstacles), -1 = unknown): usable as a Nav2 costmap source;
+* ``road/segments`` (visualization_msgs/MarkerArray: traversable segments green, obstacle
+  readings red, the non-traversable readings grey);
+* ``road/route`` (nav_msgs/Path): the chosen route along the best corridor;
+* ``road/width`` (geometry_msgs/Vector3Stamped): x = road width from the laser, y = from
+  vision (in the robot's ground plane), z = number of corridors; NaN where not measured;
+
+and after every camera frame with a usable seed: ``road/outline`` (geometry_msgs/
+PolygonStamped, the outline on the ground plane, z = 0) and, with
+``publish_debug_image``, ``road/debug_image`` (sensor_msgs/Image bgr8).
+
+The seed area of the vision outline is the newest laser's traversable segment under the
+robot projected through the camera model (a band ``seed_thickness_px`` thick). Bad input
+(no valid readings, a laser tilt that never reaches the ground, a frame without
+CameraInfo, a seed area outside the image, undecodable messages) gives a warning throttled
+per kind of problem; nothing is republished for it.
+"""
+
+import math
+
+import cv2
+from geometry_msgs.msg import Point, Point32, PolygonStamped, PoseStamped, Vector3Stamped
+from landmark_nav.conversions import (array_to_image, camera_info_to_model, ConversionError,
+                                      image_to_array, make_occupancy_grid, ns_to_stamp,
+                                      odometry_to_pose, scan_to_data, stamp_to_ns)
+from landmark_nav.geometry import transform_points
+from landmark_nav.nodes.common import (declare, InputStats, ParameterError, ProblemWarner,
+                                       run_node, SENSOR_QOS)
+from landmark_nav.road.fusion import (choose_route, extend_with_outline, FusionParams,
+                                      ground_to_pixels, laser_corridors, pixels_to_ground,
+                                      plan_routes, road_widths)
+from landmark_nav.road.outline import OutlineParams, polyline_seed, road_outline, SeedError
+from landmark_nav.road.terrain import (classify_scan, LaserMount, NOT_TRAVERSABLE,
+                                       TerrainParams)
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image, LaserScan
+from visualization_msgs.msg import Marker, MarkerArray
+
+_TERRAIN_DOCS = {
+    'window': ('roughness window along the scan (about a wheel base) [m]', (0.05, 5.0)),
+    'roughness_max': ('largest roughness of a traversable reading [m]', (1e-4, 1.0)),
+    'step_max': ('largest height step inside a segment [m]', (1e-3, 1.0)),
+    'height_max': ('largest |height| of a ground reading [m]', (1e-3, 5.0)),
+    'min_width': ('narrowest traversable segment (the robot width) [m]', (0.05, 10.0)),
+    'obstacle_height': ('readings higher than this above the ground are obstacles [m]',
+                        (1e-3, 5.0)),
+}
+
+
+class RoadClassifier(Node):
+    """Thin node: scan -> classify_scan -> corridors/route; image -> road_outline."""
+
+    def __init__(self, **kwargs) -> None:
+        """Declare and validate parameters and create the interfaces."""
+        super().__init__('road_classifier', **kwargs)
+
+        def d(*args, **kw):
+            return declare(self, *args, **kw)
+
+        scan_topic = d('scan_topic', 'tilted_scan', 'topic of the tilted laser scan')
+        laser = d('laser_mount', [0.3, 0.0, 0.6, 0.0, math.radians(14.0), 0.0],
+                  'laser pose in base_link: x, y, z [m] (z above the ground), roll, pitch '
+                  '(> 0 tilts down), yaw [rad]')
+        camera = d('camera_mount', [0.2, 0.0, 1.0, 0.0, math.radians(12.0), 0.0],
+                   'camera_link pose in base_link: x, y, z [m], roll, pitch, yaw [rad]')
+        defaults = TerrainParams()
+        terrain = {k: d(k, getattr(defaults, k), doc, lim)
+                   for k, (doc, lim) in _TERRAIN_DOCS.items()}
+        width = d('robot_width', 0.5, 'robot width: corridors overlap by more [m]',
+                  (0.05, 10.0))
+        self.max_distance = d('max_distance', 12.0, 'farthest intersection line and grid '
+                              'extent ahead [m]', (1.0, 100.0))
+        history = d('history', 10, 'scans kept for the corridors (eq. 29)', (1, 1000))
+        self.k_limit = d('k_limit', OutlineParams().k_limit, 'road where P_c + P_e exceeds '
+                         'this (eq. 26)', (0.0, 2.0))
+        self.seed_px = d('seed_thickness_px', 9, 'thickness of the seed band [px]', (1, 200))
+        self.outline_timeout = d('outline_timeout', 0.5, 'an outline older than this (scan '
+                                 'time) is not fused [s]', (0.0, 60.0))
+        self.resolution = d('grid_resolution', 0.1, 'cell size of road/grid [m]',
+                            (0.01, 2.0))
+        self.half_width = d('grid_half_width', 6.0, 'road/grid extends this far left and '
+                            'right [m]', (0.5, 100.0))
+        self.base_frame = d('base_frame', 'base_link', 'frame of the outputs')
+        self.debug = d('publish_debug_image', False, 'publish road/debug_image')
+        try:
+            self.laser = LaserMount.from_sequence(laser)
+            self.terrain = TerrainParams(min_width=terrain.pop('min_width'), **terrain)
+            self.fusion = FusionParams(robot_width=width, max_distance=self.max_distance,
+                                       history=history)
+            self.outline_params = OutlineParams(k_limit=self.k_limit)
+        except ValueError as err:
+            raise ParameterError(f'road_classifier: {err}') from err
+        if len(camera) != 6 or not all(math.isfinite(v) for v in camera) or camera[2] <= 0:
+            raise ParameterError(f'parameter camera_mount must be 6 finite numbers with z > 0;'
+                                 f' got {camera}')
+        self.camera_mount = camera
+        self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner)
+        self.camera = None
+        self.pose = None                 # latest odometry pose (x, y, yaw)
+        self.history = []                # per scan, newest first: segment ends in odom
+        self.last_terrain = None         # (stamp_ns, TerrainScan)
+        self.outline = None              # (stamp_ns, ground polygon (K, 2))
+        self.scans = 0
+        self.frames = 0
+        self.pub_grid = self.create_publisher(OccupancyGrid, 'road/grid', 2)
+        self.pub_markers = self.create_publisher(MarkerArray, 'road/segments', 2)
+        self.pub_route = self.create_publisher(Path, 'road/route', 2)
+        self.pub_width = self.create_publisher(Vector3Stamped, 'road/width', 10)
+        self.pub_outline = self.create_publisher(PolygonStamped, 'road/outline', 2)
+        self.pub_debug = self.create_publisher(Image, 'road/debug_image', 2) \
+            if self.debug else None
+        self.stats.subscribe(LaserScan, scan_topic, self.on_scan, SENSOR_QOS)
+        self.stats.subscribe(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+        self.create_subscription(CameraInfo, 'camera/camera_info', self.on_info, SENSOR_QOS)
+        self.create_subscription(Odometry, 'odom', self.on_odom, SENSOR_QOS)
+
+    # ------------------------------------------------------------------ inputs
+    def on_info(self, msg: CameraInfo) -> None:
+        """Keep the latest valid camera model."""
+        try:
+            self.camera = camera_info_to_model(msg)
+        except ConversionError as err:
+            self.warner.warn(f'Ignoring camera_info: {err}')
+
+    def on_odom(self, msg: Odometry) -> None:
+        """Keep the latest odometry pose."""
+        try:
+            self.pose = np.asarray(odometry_to_pose(msg).pose, dtype=float)
+        except ConversionError as err:
+            self.warner.warn(f'Dropping odometry: {err}')
+
+    def on_scan(self, msg: LaserScan) -> None:
+        """Classify one scan, fuse, publish grid, markers, route and widths."""
+        try:
+            scan = scan_to_data(msg)
+        except ConversionError as err:
+            self.stats.drop('bad_scan', f'Dropping scan: {err}')
+            return
+        ts = classify_scan(scan.ranges, scan.angles, self.laser, self.terrain,
+                           scan.range_min, scan.range_max)
+        if not np.any(ts.classes):
+            self.stats.drop('no_valid', f'Dropping scan: no valid readings '
+                            f'({scan.ranges.size} beams)')
+            return
+        if ts.ground_hits == 0:
+            self.stats.drop('no_ground', 'Dropping scan: no reading reaches the ground; check '
+                            'laser_mount (tilt) against the laser height')
+            return
+        stamp = scan.stamp_ns
+        pose = np.zeros(3) if self.pose is None else self.pose
+        ends = [(tuple(transform_points(pose, np.array([s.start]))[0]),
+                 tuple(transform_points(pose, np.array([s.end]))[0])) for s in ts.segments]
+        self.history.insert(0, ends)
+        del self.history[self.fusion.history:]
+        self.last_terrain = (stamp, ts)
+        corridors = laser_corridors(self.history, pose, self.fusion)
+        ground = None
+        if self.outline is not None and abs(stamp - self.outline[0]) * 1e-9 <= \
+                self.outline_timeout:
+            ground = self.outline[1]
+        corridors = [extend_with_outline(c, ground, self.fusion) for c in corridors]
+        obstacles = np.vstack([o.points[:, :2] for o in ts.obstacles]) if ts.obstacles \
+            else np.zeros((0, 2))
+        route = choose_route(plan_routes(corridors, obstacles, self.fusion))
+        self.scans += 1
+        self._publish(stamp, ts, corridors, route, ground, obstacles)
+        self.stats.processed()
+
+    def on_image(self, msg: Image) -> None:
+        """Find the road outline seeded by the newest laser segment."""
+        cam = self.camera
+        if cam is None:
+            self.stats.drop('no_camera_info', 'Dropping image: no valid CameraInfo received')
+            return
+        try:
+            img = image_to_array(msg)
+        except ConversionError as err:
+            self.stats.drop('bad_image', f'Dropping image: {err}')
+            return
+        if msg.encoding not in ('rgb8', 'bgr8'):
+            self.stats.drop('bad_image', f'Dropping image: encoding {msg.encoding} has no '
+                            'colour (rgb8 or bgr8 needed for the chromaticity)')
+            return
+        if img.shape[:2] != (cam.height, cam.width):
+            self.stats.drop('bad_image', f'Dropping image: size {img.shape[1]}x{img.shape[0]}'
+                            f' disagrees with CameraInfo {cam.width}x{cam.height}')
+            return
+        rgb = img if msg.encoding == 'rgb8' else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        if self.last_terrain is None:
+            self.stats.drop('no_seed', 'Dropping image: no laser scan with a traversable '
+                            'segment yet (the seed area)')
+            return
+        ts = self.last_terrain[1]
+        seg = ts.best_segment()
+        if seg is None:
+            self.stats.drop('no_seed', 'Dropping image: the newest scan has no traversable '
+                            'segment (the seed area)')
+            return
+        pts = ts.points[seg.first:seg.last + 1]
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        px = ground_to_pixels(cam, self.camera_mount, pts)
+        px = px[np.isfinite(px).all(axis=1)]
+        seed = polyline_seed(rgb.shape, px, self.seed_px) if len(px) else None
+        if seed is None:
+            self.stats.drop('seed_outside', 'Dropping image: the seed area (laser segment '
+                            'through the camera model) lies outside the image; check '
+                            'camera_mount and laser_mount')
+            return
+        try:
+            out = road_outline(rgb, seed, self.outline_params)
+        except SeedError as err:
+            self.stats.drop('seed_outside', f'Dropping image: {err}')
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        ground = pixels_to_ground(cam, self.camera_mount, out.polygon, self.max_distance)
+        ground = ground[np.isfinite(ground).all(axis=1)]
+        self.outline = (stamp, ground)
+        self.frames += 1
+        poly = PolygonStamped()
+        poly.header.stamp = msg.header.stamp
+        poly.header.frame_id = self.base_frame
+        poly.polygon.points = [Point32(x=float(x), y=float(y), z=0.0) for x, y in ground]
+        self.pub_outline.publish(poly)
+        if self.pub_debug is not None:
+            vis = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+            vis[out.mask] = (0.6 * vis[out.mask] + np.array([0, 100, 0])).astype(np.uint8)
+            vis[seed] = (255, 60, 0)
+            if len(out.polygon):
+                cv2.polylines(vis, [out.polygon.astype(np.int32).reshape(-1, 1, 2)], True,
+                              (0, 255, 255), 1)
+            self.pub_debug.publish(array_to_image(vis, 'bgr8', stamp, msg.header.frame_id))
+        self.stats.processed()
+
+    # ------------------------------------------------------------------ outputs
+    def _publish(self, stamp: int, ts, corridors, route, ground, obstacles) -> None:
+        self.pub_grid.publish(self._grid(stamp, ts, corridors, ground, obstacles))
+        self.pub_markers.publish(self._markers(stamp, ts))
+        path = Path()
+        path.header.frame_id = self.base_frame
+        path.header.stamp = ns_to_stamp(stamp)
+        if route is not None:
+            for x, y in route.points:
+                ps = PoseStamped()
+                ps.header = path.header
+                ps.pose.position.x, ps.pose.position.y = float(x), float(y)
+                ps.pose.orientation.w = 1.0
+                path.poses.append(ps)
+        self.pub_route.publish(path)
+        width = Vector3Stamped()
+        width.header = path.header
+        lw, vw = road_widths(route.corridor) if route is not None else (None, None)
+        width.vector.x = math.nan if lw is None else float(lw)
+        width.vector.y = math.nan if vw is None else float(vw)
+        width.vector.z = float(len(corridors))
+        self.pub_width.publish(width)
+
+    def _grid(self, stamp: int, ts, corridors, ground, obstacles):
+        res = self.resolution
+        w = int(round(2 * self.half_width / res))
+        h = int(round(self.max_distance / res))
+        grid = np.full((w, h), -1, dtype=np.int8)         # rows = y, columns = x
+
+        def cell(xy):
+            xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+            return np.column_stack([(xy[:, 0] / res), (xy[:, 1] + self.half_width) / res])
+        if ground is not None and len(ground) >= 3:
+            cv2.fillPoly(grid, [np.round(cell(ground)).astype(np.int32).reshape(-1, 1, 2)], 0)
+        for c in corridors:
+            for iv in c.intervals:
+                x0, x1 = iv.x - 0.5 * self.fusion.line_step, iv.x + 0.5 * self.fusion.line_step
+                a, b = cell([(x0, iv.lo), (x1, iv.hi)])
+                cv2.rectangle(grid, tuple(np.round(a).astype(int)),
+                              tuple(np.round(b).astype(int)), 0, -1)
+        bad = ts.points[ts.classes == NOT_TRAVERSABLE][:, :2]
+        for pts in (bad, obstacles):
+            if len(pts):
+                ij = np.floor(cell(pts)).astype(int)
+                ok = (ij[:, 0] >= 0) & (ij[:, 0] < h) & (ij[:, 1] >= 0) & (ij[:, 1] < w)
+                grid[ij[ok, 1], ij[ok, 0]] = 100
+        return make_occupancy_grid(grid, res, [0.0, -self.half_width, 0.0], self.base_frame,
+                                   stamp)
+
+    def _markers(self, stamp: int, ts) -> MarkerArray:
+        out = MarkerArray()
+        clear = Marker()
+        clear.action = Marker.DELETEALL
+        out.markers.append(clear)
+        groups = [('traversable', (0.1, 0.8, 0.1), np.concatenate(
+            [np.arange(s.first, s.last + 1) for s in ts.segments]) if ts.segments else []),
+            ('not_traversable', (0.5, 0.5, 0.5), np.flatnonzero(ts.classes == NOT_TRAVERSABLE)),
+            ('obstacles', (0.9, 0.1, 0.1), np.concatenate(
+                [np.arange(o.first, o.last + 1) for o in ts.obstacles]) if ts.obstacles
+             else [])]
+        for k, (ns, rgb, idx) in enumerate(groups):
+            m = Marker()
+            m.header.frame_id = self.base_frame
+            m.header.stamp = ns_to_stamp(stamp)
+            m.ns, m.id, m.type, m.action = ns, k, Marker.POINTS, Marker.ADD
+            m.scale.x = m.scale.y = 0.04
+            m.color.r, m.color.g, m.color.b, m.color.a = (*rgb, 1.0)
+            m.pose.orientation.w = 1.0
+            for p in ts.points[np.asarray(idx, dtype=int)]:
+                if np.all(np.isfinite(p)):
+                    m.points.append(Point(x=float(p[0]), y=float(p[1]), z=float(p[2])))
+            out.markers.append(m)
+        return out
+
+
+def main(args=None) -> int:
+    """Run ``ros2 run landmark_nav road_classifier``."""
+    return run_node(RoadClassifier, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,532 @@
+"""Terrain classification from single scans of a tilted 2-D laser (visual navigation ch. §4.2).
+
+A laser scanner pitched slightly down sweeps a line across the ground in front of the
+robot. Each reading is classified into ``C = {C_t traversable, C_n not traversable,
+C_0 invalid}`` from features of the single scan,
+``F = {H_h raw height, F_sigma roughness, F_z step size, F_c curvature, F_t slope,
+F_w width}``:
+
+1. the readings are placed in ``base_link`` (x forward, y left, z up, z = 0 on the ground
+   plane under the robot) through the laser mount (x, y, z, roll, pitch, yaw);
+2. *roughness* ``F_sigma``: the root of the local variance about a line fitted (total least
+   squares, in the scan plane) over the readings within ``window`` (about one wheel base,
+   0.45 m) of path length along the scan;
+3. *roughness groups*: runs of consecutive valid readings with a roughness below
+   ``roughness_max``, a raw height ``|H_h|`` below ``height_max`` and no *step* ``F_z``
+   (height jump between neighbours) above ``step_max``;
+4. groups separated by at most ``gap_max`` metres of rough readings at a compatible height
+   are combined (a stone or a tuft of grass does not cut a road in two); a group is then
+   split where a bent and a straight height profile (slope ``F_t`` and curvature ``F_c``
+   changing) fit far better than one quadratic: e.g. the kink between a crowned road and its
+   flat shoulder, which roughness alone does not separate on gravel (the chapter's +0.7 m);
+5. each group is filtered by its quadratic height profile ``z = a + b s + c s^2`` across
+   the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|`` below
+   ``curvature_max``, width ``F_w`` (end-to-end distance) at least ``min_width``
+   (the robot's width): the groups that pass are the *traversable segments*, their readings
+   ``C_t``; the other valid readings are ``C_n``;
+6. *obstacles*: runs of valid readings higher than ``obstacle_height`` above the ground
+   plane (a kerb face, a post), or not traversable, between traversable readings and more
+   than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
+   pedestrian's legs just before the ground).
+
+Pure numpy; the node is :mod:`landmark_nav.nodes.road_classifier`.
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Optional, Sequence
+
+import numpy as np
+
+#: Reading classes (the chapter's C_0, C_t, C_n).
+INVALID = 0
+TRAVERSABLE = 1
+NOT_TRAVERSABLE = 2
+
+
+@dataclass(frozen=True)
+class LaserMount:
+    """Pose of the laser frame in ``base_link`` (REP 103; pitch > 0 tilts the scan down).
+
+    ``z`` is the height of the laser above the ground plane under the robot.
+    """
+
+    x: float = 0.3
+    y: float = 0.0
+    z: float = 0.6
+    roll: float = 0.0
+    pitch: float = math.radians(14.0)
+    yaw: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Check that every field is finite and the laser is above the ground."""
+        for name in ('x', 'y', 'z', 'roll', 'pitch', 'yaw'):
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ValueError(f'laser mount {name} must be finite; got {value!r}')
+        if not self.z > 0.0:
+            raise ValueError(f'laser mount z (height above the ground) must be > 0; '
+                             f'got {self.z!r}')
+
+    @classmethod
+    def from_sequence(cls, values: Sequence[float]) -> 'LaserMount':
+        """Build from ``[x, y, z, roll, pitch, yaw]``."""
+        if len(values) != 6:
+            raise ValueError(f'laser mount needs 6 values (x, y, z, roll, pitch, yaw); '
+                             f'got {len(values)}')
+        return cls(*(float(v) for v in values))
+
+    def rotation(self) -> np.ndarray:
+        """Return R = Rz(yaw) Ry(pitch) Rx(roll), laser frame -> base_link."""
+        cr, sr = math.cos(self.roll), math.sin(self.roll)
+        cp, sp = math.cos(self.pitch), math.sin(self.pitch)
+        cy, sy = math.cos(self.yaw), math.sin(self.yaw)
+        rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+        ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+        rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+        return rz @ ry @ rx
+
+    def translation(self) -> np.ndarray:
+        """Return the laser origin in ``base_link``."""
+        return np.array([self.x, self.y, self.z])
+
+    def ground_range(self, angles: np.ndarray) -> np.ndarray:
+        """Range at which each beam meets a flat ground plane z = 0 (inf if it never does)."""
+        d = self.rotation() @ np.vstack([np.cos(angles), np.sin(angles), np.zeros_like(angles)])
+        with np.errstate(divide='ignore'):
+            r = np.where(d[2] < -1e-9, -self.z / np.minimum(d[2], -1e-12), np.inf)
+        return r
+
+
+@dataclass(frozen=True)
+class TerrainParams:
+    """Thresholds of the feature functions (lengths in metres)."""
+
+    window: float = 0.45
+    roughness_max: float = 0.013
+    step_max: float = 0.04
+    height_max: float = 0.3
+    split_ratio: float = 40.0
+    split_rms: float = 0.008
+    rough_ratio: float = 1.5
+    grow_sigmas: float = 2.0
+    rough_lag: int = 3
+    rough_gain: float = 20.0
+    slope_max: float = 0.25
+    curvature_max: float = 0.6
+    min_width: float = 0.5
+    gap_max: float = 0.15
+    obstacle_height: float = 0.12
+    obstacle_depth: float = 0.06
+    min_points: int = 5
+
+    def __post_init__(self) -> None:
+        """Check the ranges."""
+        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio',
+                     'split_rms', 'rough_gain',
+                     'slope_max', 'curvature_max', 'min_width', 'obstacle_height',
+                     'obstacle_depth'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'terrain {name} must be > 0; got {value!r}')
+        if not (math.isfinite(self.gap_max) and self.gap_max >= 0.0):
+            raise ValueError(f'terrain gap_max must be >= 0; got {self.gap_max!r}')
+        if not self.rough_ratio >= 1.0:
+            raise ValueError(f'terrain rough_ratio must be >= 1; got {self.rough_ratio!r}')
+        if self.min_points < 3:
+            raise ValueError(f'terrain min_points must be >= 3; got {self.min_points!r}')
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One traversable segment of a scan (readings ``first`` .. ``last`` inclusive).
+
+    Attributes:
+        first: Index of the first reading (in the scan's order).
+        last: Index of the last reading.
+        start: (x, y) of the first reading in base_link [m].
+        end: (x, y) of the last reading in base_link [m].
+        width: End-to-end distance ``F_w`` [m].
+        height: Mean raw height ``H_h`` [m].
+        roughness: Mean roughness ``F_sigma`` [m].
+        slope: Height slope ``F_t`` across the segment at its centre [m/m].
+        curvature: Height curvature ``F_c`` [1/m] (negative: convex, e.g. a crowned road).
+    """
+
+    first: int
+    last: int
+    start: tuple
+    end: tuple
+    width: float
+    height: float
+    roughness: float
+    slope: float
+    curvature: float
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Midpoint of the end points (x, y) [m]."""
+        return 0.5 * (np.asarray(self.start) + np.asarray(self.end))
+
+    def lateral_extent(self) -> tuple[float, float]:
+        """Return (y_min, y_max) of the end points [m] (across the robot heading)."""
+        ys = (self.start[1], self.end[1])
+        return float(min(ys)), float(max(ys))
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A run of readings standing above the ground (``first`` .. ``last`` inclusive)."""
+
+    first: int
+    last: int
+    points: np.ndarray = field(repr=False)   # (M, 3) base_link [m]
+    height: float = 0.0                      # highest reading above the ground [m]
+
+
+@dataclass(frozen=True, eq=False)
+class TerrainScan:
+    """Classification of one scan; arrays have one row per reading (NaN where invalid)."""
+
+    points: np.ndarray        # (N, 3) base_link
+    classes: np.ndarray       # (N,) INVALID / TRAVERSABLE / NOT_TRAVERSABLE
+    roughness: np.ndarray     # (N,) F_sigma [m]
+    step: np.ndarray          # (N,) F_z [m]: largest height jump to a valid neighbour
+    groups: np.ndarray        # (N,) roughness group id, -1 outside every group
+    segments: tuple           # Segment, ordered by first reading
+    obstacles: tuple          # Obstacle
+    ground_hits: int          # valid readings on the ground (|z| <= height_max)
+
+    def best_segment(self, y: float = 0.0) -> Optional[Segment]:
+        """Return the segment spanning the lateral offset ``y`` (else the nearest, or None)."""
+        if not self.segments:
+            return None
+
+        def distance(s: Segment) -> float:
+            lo, hi = s.lateral_extent()
+            return 0.0 if lo <= y <= hi else min(abs(lo - y), abs(hi - y))
+        return min(self.segments, key=lambda s: (distance(s), -s.width))
+
+
+def scan_points(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount) -> np.ndarray:
+    """Place the readings in base_link: (N, 3) [m]; non-finite ranges give NaN rows."""
+    r = np.asarray(ranges, dtype=float)
+    a = np.asarray(angles, dtype=float)
+    local = np.vstack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)])
+    return (mount.rotation() @ local).T + mount.translation()
+
+
+def _window_bounds(s: np.ndarray, lo_off: float, hi_off: float) -> tuple[np.ndarray, ...]:
+    """Index ranges [lo, hi) of the readings with s in [s_i + lo_off, s_i + hi_off]."""
+    lo = np.searchsorted(s, s + lo_off, side='left')
+    hi = np.searchsorted(s, s + hi_off, side='right')
+    return lo, hi
+
+
+def _window_sums(cs: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Return the sums over [lo, hi) from a cumulative sum with a leading zero."""
+    return cs[hi] - cs[lo]
+
+
+def _moments(u: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Windowed count, means and central second moments of (u, v)."""
+    z = np.zeros(1)
+    n = (hi - lo).astype(float)
+    su = _window_sums(np.concatenate([z, np.cumsum(u)]), lo, hi)
+    sv = _window_sums(np.concatenate([z, np.cumsum(v)]), lo, hi)
+    suu = _window_sums(np.concatenate([z, np.cumsum(u * u)]), lo, hi)
+    svv = _window_sums(np.concatenate([z, np.cumsum(v * v)]), lo, hi)
+    suv = _window_sums(np.concatenate([z, np.cumsum(u * v)]), lo, hi)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        mu, mv = su / n, sv / n
+        cuu = suu / n - mu * mu
+        cvv = svv / n - mv * mv
+        cuv = suv / n - mu * mv
+    return n, cuu, cvv, cuv
+
+
+def _roughness(plane: np.ndarray, s: np.ndarray, window: float, min_points: int) -> np.ndarray:
+    """F_sigma: rms distance to the total-least-squares line over ``window`` of path length."""
+    lo, hi = _window_bounds(s, -0.5 * window, 0.5 * window)
+    # Centre the coordinates for numerical accuracy of the running sums.
+    u = plane[:, 0] - plane[:, 0].mean()
+    v = plane[:, 1] - plane[:, 1].mean()
+    n, cuu, cvv, cuv = _moments(u, v, lo, hi)
+    tr = cuu + cvv
+    det = cuu * cvv - cuv * cuv
+    smallest = 0.5 * tr - np.sqrt(np.maximum(0.25 * tr * tr - det, 0.0))
+    out = np.sqrt(np.maximum(smallest, 0.0))
+    out[n < min_points] = np.inf
+    return out
+
+
+def _prefix_sse(t: np.ndarray, z: np.ndarray, degree: int) -> np.ndarray:
+    """SSE of the least-squares polynomial z(t) of ``degree`` over every prefix ``[0, k)``."""
+    n, d = t.size, degree + 1
+    powers = np.vstack([t ** k for k in range(2 * d - 1)])
+    m = np.concatenate([np.zeros((2 * d - 1, 1)), np.cumsum(powers, axis=1)], axis=1)
+    tz = np.vstack([z * t ** k for k in range(d)])
+    b = np.concatenate([np.zeros((d, 1)), np.cumsum(tz, axis=1)], axis=1)
+    zz = np.concatenate([[0.0], np.cumsum(z * z)])
+    a = np.empty((n + 1, d, d))
+    for i in range(d):
+        for j in range(d):
+            a[:, i, j] = m[i + j]
+    sse = np.zeros(n + 1)
+    ok = np.arange(n + 1) > d
+    coef = np.linalg.solve(a[ok] + 1e-12 * np.eye(d), b.T[ok][..., None])[..., 0]
+    sse[ok] = np.maximum(zz[ok] - np.sum(coef * b.T[ok], axis=1), 0.0)
+    return sse
+
+
+def _split_profile(first: int, last: int, s: np.ndarray, z: np.ndarray,
+                   params: TerrainParams, out: list) -> None:
+    """Split a group where two quadratic height profiles fit far better than one (F_t, F_c).
+
+    The best split point minimises the summed SSE of the two pieces (each at least
+    ``min_width / 2`` long); it is kept when the SSE drop, in units of the two-piece residual
+    variance, exceeds ``split_ratio`` (an F-test of 2 extra parameters) and the fit improves
+    by more than ``split_rms`` metres rms (a physical size, not only a significant one):
+    e.g. the slope break between a crowned road and its flat shoulder.
+    """
+    n = last - first + 1
+    if n < 2 * params.min_points + 6 or s[last] - s[first] < params.min_width:
+        out.append((first, last))
+        return
+    t = s[first:last + 1] - 0.5 * (s[first] + s[last])
+    zz = z[first:last + 1]
+    # One piece bends (quadratic: a crowned road), the other is straight (a shoulder, a
+    # verge): the kink between them is located far more sharply than by two quadratics.
+    quad_l, line_l = _prefix_sse(t, zz, 2), _prefix_sse(t, zz, 1)                # [0, k)
+    quad_r = _prefix_sse(t[::-1], zz[::-1], 2)[::-1]                           # [k, n)
+    line_r = _prefix_sse(t[::-1], zz[::-1], 1)[::-1]
+    k = np.arange(n + 1)
+    total = np.minimum(quad_l + line_r, line_l + quad_r)
+    left = quad_l
+    span = 0.25 * params.min_width
+    allowed = ((k >= params.min_points) & (k <= n - params.min_points)
+               & (s[first + np.minimum(k, n - 1)] - s[first] >= span)
+               & (s[last] - s[first + np.minimum(k, n - 1)] >= span))
+    if not allowed.any():
+        out.append((first, last))
+        return
+    total[~allowed] = np.inf
+    best = int(np.argmin(total))
+    var = total[best] / max(n - 5, 1)
+    gain = (left[n] - total[best]) / (2.0 * max(var, 1e-12))
+    rms_gain = math.sqrt(max(left[n] - total[best], 0.0) / n)
+    if gain <= params.split_ratio or rms_gain <= params.split_rms:
+        best = _roughness_change(zz, allowed, params)
+        if best is None:
+            out.append((first, last))
+            return
+    _split_profile(first, first + best - 1, s, z, params, out)
+    _split_profile(first + best, last, s, z, params, out)
+
+
+def _roughness_change(z: np.ndarray, allowed: np.ndarray,
+                      params: TerrainParams) -> Optional[int]:
+    """Split point where the small-scale roughness changes level (F_sigma groups), or None.
+
+    The second differences of the heights along the scan, over ``rough_lag`` readings
+    either side (a few centimetres: longer than the range noise's one reading), measure the
+    roughness of each reading; the change point maximises the Gaussian log-likelihood gain
+    of two variances
+    over one and is kept when the gain exceeds ``rough_gain`` and the rougher piece's
+    roughness exceeds the smoother one's ``rough_ratio`` times (e.g. asphalt next to a
+    gravel or grass verge at the same height).
+    """
+    n = z.size
+    lag = min(params.rough_lag, (n - 1) // 2)
+    e2 = np.zeros(n)
+    e2[lag:n - lag] = (z[lag:n - lag] - 0.5 * (z[:n - 2 * lag] + z[2 * lag:])) ** 2
+    e2[:lag], e2[n - lag:] = e2[lag], e2[n - lag - 1]
+    c = np.concatenate([[0.0], np.cumsum(e2)])
+    k = np.arange(n + 1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        v_l = c / k
+        v_r = (c[-1] - c) / (n - k)
+        floor = 1e-12
+        gain = 0.5 * (n * np.log(max(c[-1] / n, floor)) - k * np.log(np.maximum(v_l, floor))
+                      - (n - k) * np.log(np.maximum(v_r, floor)))
+    gain[~allowed] = -np.inf
+    best = int(np.argmax(gain))
+    if not np.isfinite(gain[best]) or gain[best] <= params.rough_gain:
+        return None
+    ratio = math.sqrt(max(v_l[best], v_r[best]) / max(min(v_l[best], v_r[best]), 1e-12))
+    return best if ratio >= params.rough_ratio else None
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Inclusive (first, last) index pairs of the runs of True in a 1-D mask."""
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
+def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
+                  params: TerrainParams = TerrainParams(), range_min: float = 0.0,
+                  range_max: float = math.inf) -> TerrainScan:
+    """Classify the readings of one tilted-laser scan (§4.2).
+
+    Args:
+        ranges: (N,) ranges [m] in scan order; non-finite or outside
+            [range_min, range_max] are invalid (REP 117).
+        angles: (N,) beam angles in the laser frame [rad], increasing.
+        mount: The laser's pose in base_link.
+        params: Feature-function thresholds.
+        range_min: Smallest valid range [m].
+        range_max: Largest valid range [m].
+
+    Returns:
+        The per-reading classes, features, traversable segments and obstacles.
+
+    Raises:
+        ValueError: ``ranges`` and ``angles`` differ in shape or are not 1-D.
+    """
+    r = np.asarray(ranges, dtype=float)
+    a = np.asarray(angles, dtype=float)
+    if r.ndim != 1 or r.shape != a.shape:
+        raise ValueError(f'ranges and angles must be 1-D of one length; got {r.shape} and '
+                         f'{a.shape}')
+    n_all = r.size
+    with np.errstate(invalid='ignore'):
+        valid = np.isfinite(r) & (r >= range_min) & (r <= range_max) & np.isfinite(a)
+    pts = np.full((n_all, 3), np.nan)
+    classes = np.full(n_all, INVALID, dtype=np.int8)
+    rough_all = np.full(n_all, np.nan)
+    step_all = np.full(n_all, np.nan)
+    groups_all = np.full(n_all, -1, dtype=int)
+    idx = np.flatnonzero(valid)
+    if idx.size == 0:
+        return TerrainScan(pts, classes, rough_all, step_all, groups_all, (), (), 0)
+    p = scan_points(r[idx], a[idx], mount)
+    pts[idx] = p
+    classes[idx] = NOT_TRAVERSABLE
+    plane = np.column_stack([r[idx] * np.cos(a[idx]), r[idx] * np.sin(a[idx])])
+    gaps = np.linalg.norm(np.diff(plane, axis=0), axis=1)
+    # Path length along the scan; a jump longer than the window is capped at it so that
+    # no window spans both sides of a range discontinuity.
+    s = np.concatenate([[0.0], np.cumsum(np.minimum(gaps, params.window))])
+    z = p[:, 2]
+    rough = _roughness(plane, s, params.window, params.min_points)   # F_sigma
+    dz = np.abs(np.diff(z))
+    step = np.maximum(np.concatenate([[0.0], dz]), np.concatenate([dz, [0.0]]))   # F_z
+    rough_all[idx] = rough
+    step_all[idx] = step
+    ground = np.abs(z) <= params.height_max                          # H_h
+    smooth = (rough <= params.roughness_max) & ground
+    # Runs of smooth readings, cut at steps and at gaps.
+    cut = np.zeros(idx.size, dtype=bool)
+    cut[1:] = (dz > params.step_max) | (gaps > params.gap_max)
+    groups = []
+    for first, last in _runs(smooth):
+        start = first
+        for k in range(first + 1, last + 1):
+            if cut[k]:
+                groups.append((start, k - 1))
+                start = k
+        groups.append((start, last))
+    groups = _combine(groups, s, z, cut, params)
+    # Height profiles across the scan are functions of the lateral position (base_link y,
+    # increasing along the scan), which a crowned road's profile is a quadratic of.
+    lateral = p[:, 1]
+    pieces = []
+    for first, last in groups:
+        _split_profile(first, last, lateral, z, params, pieces)
+    groups = pieces
+    segments = []
+    grown_last = -1
+    for g, (first, last) in enumerate(groups):
+        groups_all[idx[first:last + 1]] = g
+        lo = max(groups[g - 1][1] if g > 0 else -1, grown_last) + 1
+        hi = groups[g + 1][0] - 1 if g + 1 < len(groups) else idx.size - 1
+        first, last = _grow(first, last, lateral, z, params, lo, hi)
+        grown_last = last
+        seg = _segment(first, last, p, lateral, rough, idx, params)
+        if seg is not None:
+            segments.append(seg)
+            classes[idx[first:last + 1]] = TRAVERSABLE
+    # Obstacles: readings high above the ground plane, or (a tilted laser meets an object
+    # before the ground) well short of the ground line the traversable readings trace.
+    high = z > params.obstacle_height
+    trav = np.flatnonzero(classes[idx] == TRAVERSABLE)
+    if trav.size >= 2:
+        k = np.arange(idx.size)
+        ground_x = np.interp(k, trav, p[trav, 0])
+        between = (k > trav[0]) & (k < trav[-1])
+        high |= (between & (classes[idx] != TRAVERSABLE)
+                 & (ground_x - p[:, 0] > params.obstacle_depth))
+    obstacles = []
+    for first, last in _runs(high):
+        obstacles.append(Obstacle(int(idx[first]), int(idx[last]), p[first:last + 1].copy(),
+                                  float(z[first:last + 1].max())))
+    return TerrainScan(pts, classes, rough_all, step_all, groups_all, tuple(segments),
+                       tuple(obstacles), int(ground.sum()))
+
+
+def _combine(groups: list, s: np.ndarray, z: np.ndarray, cut: np.ndarray,
+             params: TerrainParams) -> list:
+    """Join neighbouring groups separated by a short rough gap at a compatible height."""
+    out = []
+    for first, last in groups:
+        if out:
+            pf, pl = out[-1]
+            short = s[first] - s[pl] <= params.gap_max
+            level = abs(z[first] - z[pl]) <= params.step_max
+            if short and level and not cut[pl + 1:first + 1].any():
+                out[-1] = (pf, last)
+                continue
+        out.append((first, last))
+    return out
+
+
+def _grow(first: int, last: int, s: np.ndarray, z: np.ndarray, params: TerrainParams,
+          lo_index: int, hi_index: int) -> tuple[int, int]:
+    """Extend a group over the neighbouring readings that continue its height profile.
+
+    The windowed roughness of the readings within half a window of a rougher neighbour is
+    raised by that neighbour, which trims every group by up to ``window / 2`` at each end;
+    a reading next to the group is taken in while its height lies within
+    ``grow_sigmas`` residual standard deviations of the group's quadratic profile (and no
+    step lies between), one reading at a time outwards, at most ``window / 2`` far and not
+    into the neighbouring groups (readings ``lo_index`` .. ``hi_index`` are free).
+    """
+    if last - first + 1 < params.min_points:
+        return first, last
+    t = s[first:last + 1]
+    coef = np.polyfit(t - t.mean(), z[first:last + 1], 2)
+    sigma = max(float(np.std(z[first:last + 1] - np.polyval(coef, t - t.mean()))), 0.003)
+    limit = params.grow_sigmas * sigma
+    lo, hi = s[first] - 0.5 * params.window, s[last] + 0.5 * params.window
+
+    def fits(k: int, inner: int) -> bool:
+        off = abs(z[k] - np.polyval(coef, s[k] - t.mean()))
+        return off <= limit and abs(z[k] - z[inner]) <= params.step_max
+
+    while first > lo_index and s[first - 1] >= lo and fits(first - 1, first):
+        first -= 1
+    while last < hi_index and s[last + 1] <= hi and fits(last + 1, last):
+        last += 1
+    return first, last
+
+
+def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndarray,
+             idx: np.ndarray, params: TerrainParams) -> Optional[Segment]:
+    """Filter one roughness group by width, slope and curvature; return its segment."""
+    if last - first + 1 < params.min_points:
+        return None
+    width = float(np.linalg.norm(p[last, :2] - p[first, :2]))          # F_w
+    if width < params.min_width:
+        return None
+    t = s[first:last + 1] - 0.5 * (s[first] + s[last])
+    zz = p[first:last + 1, 2]
+    c2, c1, _ = np.polyfit(t, zz, 2)
+    slope, curvature = float(c1), float(2.0 * c2)                     # F_t, F_c
+    if abs(slope) > params.slope_max or abs(curvature) > params.curvature_max:
+        return None
+    return Segment(int(idx[first]), int(idx[last]), tuple(map(float, p[first, :2])),
+                   tuple(map(float, p[last, :2])), width, float(zz.mean()),
+                   float(np.mean(rough[first:last + 1])), slope, curvature)

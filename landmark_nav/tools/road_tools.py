@@ -1,0 +1,93 @@
+"""Road following evaluations on the command line.
+
+* ``landmark_nav evaluate-road-outline FOLDER``: the vision road outline on labelled street
+  frames (IoU, precision, recall per frame set; overlays).
+* ``landmark_nav evaluate-road-laser``: tilted-laser terrain classification on the park-road
+  simulator (per-reading accuracy, road width as in Table 3).
+* ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
+  frames (road width in the robot's ground plane, failures per lighting).
+"""
+
+import argparse
+import json
+from pathlib import Path
+
+
+def _cmd_evaluate_road_outline(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.road_outline import (evaluate_folder, format_summary,
+                                                      frame_names, summarize, write_overlays)
+    folder = Path(args.folder)
+    names = frame_names(folder)
+    if args.every > 1:
+        names = names[args.offset::args.every]
+    scores = evaluate_folder(folder, names=names)
+    summary = summarize(scores)
+    print(format_summary(summary))
+    if args.json:
+        Path(args.json).write_text(json.dumps(
+            {'summary': summary, 'frames': [s.__dict__ for s in scores]}, indent=1))
+    if args.overlays:
+        ranked = sorted(scores, key=lambda s: s.iou)
+        k = len(ranked) - 1
+        picks = [ranked[round(k * q)].name for q in (0.0, 0.25, 0.5, 0.75, 1.0)]
+        path = write_overlays(folder, picks, args.overlays)
+        print(f'overlays (min, quartiles, max IoU): {path}')
+    return 0
+
+
+def add_parsers(sub, parser_class) -> None:
+    """Add the road subcommands to the ``landmark_nav`` command line."""
+    p = sub.add_parser('evaluate-road-outline', help='score the vision road outline on a '
+                       'folder of labelled street frames (images/, labels_camvid11/)')
+    p.add_argument('folder', help='e.g. ../shared/data/camvid_road')
+    p.add_argument('--every', type=int, default=1, help='use every N-th frame (default 1)')
+    p.add_argument('--offset', type=int, default=0, help='first frame index with --every')
+    p.add_argument('--json', help='write the per-frame scores and the summary here')
+    p.add_argument('--overlays', help='write a montage of five overlays (min, quartiles, '
+                   'max IoU) to this image file')
+    p.set_defaults(func=_cmd_evaluate_road_outline)
+
+    p = sub.add_parser('evaluate-road-laser', help='score the tilted-laser terrain '
+                       'classification on simulated park roads (accuracy, road width)')
+    p.add_argument('--kinds', nargs='+', default=['asphalt', 'gravel'],
+                   choices=['asphalt', 'gravel'], help='road kinds (Table 3)')
+    p.add_argument('--scans', type=int, default=1000, help='scans per road (default 1000)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    p.set_defaults(func=_cmd_evaluate_road_laser)
+
+    p = sub.add_parser('evaluate-road-vision', help='score the vision road width on simulated '
+                       'park roads (laser-seeded outline, rendered frames)')
+    p.add_argument('--kinds', nargs='+', default=['asphalt', 'gravel'],
+                   choices=['asphalt', 'gravel'], help='road kinds (Table 3)')
+    p.add_argument('--lighting', nargs='+', default=['overcast', 'soft_shadows',
+                                                     'hard_shadows'],
+                   choices=['overcast', 'soft_shadows', 'hard_shadows'], help='lighting')
+    p.add_argument('--frames', type=int, default=250, help='frames per case (default 250)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    p.add_argument('--markings', action='store_true', help='paint a dashed centre line')
+    p.set_defaults(func=_cmd_evaluate_road_vision)
+
+
+def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.road_laser import evaluate_laser_road
+    print(f'{"road":8s} {"true m":>6s} {"scans":>5s} {"acc %":>6s} {"min %":>6s} '
+          f'{"width":>6s} {"sigma":>6s} {"N":>5s} {"fail":>4s}')
+    for kind in args.kinds:
+        s = evaluate_laser_road(kind, args.scans, args.seed)
+        print(f'{kind:8s} {s.true_width:6.2f} {s.scans:5d} {100 * s.accuracy:6.2f} '
+              f'{100 * s.accuracy_min:6.2f} {s.width_mean:6.3f} {s.width_std:6.3f} '
+              f'{s.widths:5d} {s.failures:4d}')
+    return 0
+
+
+def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.road_fusion import evaluate_vision_road
+    print(f'{"road":8s} {"lighting":13s} {"true m":>6s} {"frames":>6s} {"width":>6s} '
+          f'{"sigma":>6s} {"N":>5s} {"fail %":>6s}')
+    for kind in args.kinds:
+        for light in args.lighting:
+            s = evaluate_vision_road(kind, light, args.frames, args.seed, args.markings)
+            print(f'{kind:8s} {light:13s} {s.true_width:6.2f} {s.frames:6d} '
+                  f'{s.width_mean:6.3f} {s.width_std:6.3f} {s.widths:5d} '
+                  f'{100 * s.failures / s.frames:6.1f}')
+    return 0

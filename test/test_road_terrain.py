@@ -1,0 +1,104 @@
+"""Tilted-laser terrain classification (road.terrain) on scans of known geometry."""
+
+import math
+
+from landmark_nav.evaluation.road_laser import ANGLES, evaluate_laser_road
+from landmark_nav.road.terrain import (classify_scan, INVALID, LaserMount, NOT_TRAVERSABLE,
+                                       TerrainParams, TRAVERSABLE)
+from landmark_nav.sim.park_road import cast_scan, OBJECT, ParkRoad, ROAD, TRACK
+import numpy as np
+import pytest
+
+MOUNT = LaserMount()
+
+
+def test_mount_places_flat_ground_readings_on_the_ground():
+    r = MOUNT.ground_range(ANGLES)
+    assert r[ANGLES.size // 2] == pytest.approx(MOUNT.z / math.sin(MOUNT.pitch), rel=1e-12)
+    assert np.isinf(r[0]) and np.isinf(r[-1])         # +-90 deg beams stay level
+    ranges = np.where(r < 8.0, r, np.inf)
+    ts = classify_scan(ranges, ANGLES, MOUNT, range_max=8.0)
+    ok = np.isfinite(ranges)
+    np.testing.assert_allclose(ts.points[ok, 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(ts.points[ok, 0], MOUNT.x + MOUNT.z / math.tan(MOUNT.pitch),
+                               atol=1e-12)               # the scan line x = const
+    assert np.all(ts.classes[~ok] == INVALID)
+    # Readings closer than gap_max (0.15 m) to their neighbours along the ground line, i.e.
+    # beams within about 64 deg of the axis, form one traversable segment; sparser ones do not.
+    dense = np.abs(ANGLES) <= math.radians(64.0)
+    assert np.all(ts.classes[dense] == TRAVERSABLE)
+    assert np.all(ts.classes[ok & (np.abs(ANGLES) >= math.radians(70.0))] == NOT_TRAVERSABLE)
+    assert len(ts.segments) == 1
+    seg = ts.segments[0]
+    first, last = seg.first, seg.last
+    assert np.all(dense[first:last + 1] | (ts.classes[first:last + 1] == TRAVERSABLE))
+    assert seg.width == pytest.approx(abs(ts.points[last, 1] - ts.points[first, 1]))
+    assert abs(seg.slope) < 1e-9 and abs(seg.curvature) < 1e-9
+    assert ts.obstacles == ()
+
+
+def test_no_valid_readings_and_bad_shapes():
+    ts = classify_scan(np.full(ANGLES.size, np.nan), ANGLES, MOUNT)
+    assert np.all(ts.classes == INVALID) and ts.segments == () and ts.ground_hits == 0
+    with pytest.raises(ValueError, match='1-D of one length'):
+        classify_scan(np.ones(3), np.ones(4), MOUNT)
+    with pytest.raises(ValueError, match='laser mount z'):
+        LaserMount(z=0.0)
+    with pytest.raises(ValueError, match='roughness_max'):
+        TerrainParams(roughness_max=0.0)
+
+
+def test_readings_above_the_ground_are_not_ground_hits():
+    ts = classify_scan(np.full(ANGLES.size, 0.8), ANGLES, MOUNT)   # a wall 0.8 m ahead
+    assert ts.ground_hits == 0 and ts.segments == ()
+    assert np.all(ts.classes == NOT_TRAVERSABLE)
+    assert len(ts.obstacles) == 1 and ts.obstacles[0].height > 0.5
+
+
+def test_horse_track_crossing_gives_three_segments():
+    """Fig. 11: a crowned gravel road crossed by a flat horse track."""
+    road = ParkRoad.of_kind('gravel', crossing=(-5.0, 5.0))
+    sc = cast_scan(road, (0.0, 0.0, 0.0), MOUNT, ANGLES, rng=np.random.default_rng(0))
+    ts = classify_scan(sc.ranges, sc.angles, MOUNT)
+    assert len(ts.segments) == 3
+    middle = ts.segments[1]
+    on_road = np.flatnonzero(sc.surface == ROAD)
+    assert abs(middle.first - on_road[0]) <= 2 and abs(middle.last - on_road[-1]) <= 2
+    assert middle.curvature < -0.05                    # convex (crowned) profile
+    for side in (ts.segments[0], ts.segments[2]):
+        # all on the track but at most the one reading next to the road
+        assert np.sum(sc.surface[side.first:side.last + 1] != TRACK) <= 1
+        assert side.width > 2.0
+
+
+def test_pedestrian_on_the_road_is_an_obstacle_and_cuts_the_segment():
+    road = ParkRoad.of_kind('asphalt', cylinders=((2.55, 0.8, 0.25, 1.75),))
+    sc = cast_scan(road, (0.0, 0.0, 0.0), MOUNT, ANGLES, rng=np.random.default_rng(0))
+    ts = classify_scan(sc.ranges, sc.angles, MOUNT)
+    legs = np.flatnonzero(sc.surface == OBJECT)
+    assert len(ts.obstacles) == 1
+    ob = ts.obstacles[0]
+    assert legs[0] <= ob.first and ob.last <= legs[-1]
+    centre = ob.points[:, :2].mean(axis=0)
+    assert np.hypot(centre[0] - 2.55, centre[1] - 0.8) < 0.3
+    assert len(ts.segments) == 2
+    # the legs' grazing outermost hits lie at foot level: within 2 readings of the cut
+    assert ts.segments[0].last <= legs[0] + 2 and ts.segments[1].first >= legs[-1] - 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('kind', ['asphalt', 'gravel'])
+def test_per_reading_accuracy_and_road_width_against_the_simulator(kind):
+    """Acceptance: >= 95 % of the readings right on both road types.
+
+    The widths (Table 3 style) guard the figures measured on these 200 scans (asphalt
+    5.08 m sigma 0.21, gravel 3.71 m sigma 0.60; on 1000 scans 5.08 / 0.21 and 3.81 / 0.50):
+    the issue's 0.1 m / 0.15 m is not met yet (see the README).
+    """
+    s = evaluate_laser_road(kind, 200, seed=1)
+    assert s.accuracy >= 0.95
+    assert s.failures == 0 and s.widths == 200
+    if kind == 'asphalt':
+        assert abs(s.width_mean - 4.9) < 0.22 and s.width_std < 0.25
+    else:
+        assert abs(s.width_mean - 4.0) < 0.35 and s.width_std < 0.7
