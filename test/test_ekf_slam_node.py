@@ -11,8 +11,10 @@ from landmark_nav.evaluation.slam import run_slam
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_feature_cloud
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.nodes.corner_extractor import CornerExtractor
+from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
-from landmark_nav.testing import RosHarness
+from landmark_nav.slam.frontend import ODOMETRY_NOISE_MODELS
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 import pytest
@@ -142,12 +144,13 @@ def test_bad_input():
             """Publish an odometry pose."""
             pub_odom.publish(make_odometry(t, 'odom', 'base_link', [x, 0.0, 0.0]))
 
-        pub_c.publish(corner_cloud(t0, [good]))  # before any odometry: skipped
+        pub_c.publish(corner_cloud(t0 - 10_000_000, [good]))  # waits for the first odometry
         assert ros.wait_until(lambda: slam.corner_count == 1, 5)
-        assert slam.warner.count == 1 and not slam.pending
-        odom(t0, 0.0)
+        assert slam.warner.count == 0 and len(slam.pending) == 1
+        odom(t0, 0.0)  # ... which comes later: the set is older, skipped
         odom(t0 + 100_000_000, 0.01)
         assert ros.wait_until(lambda: slam.odom_count == 2, 5)
+        assert slam.warner.count == 1 and not slam.pending
         pub_c.publish(corner_cloud(t0 + 50_000_000, [good, [np.nan] * 8]))  # NaN row dropped
         assert ros.wait_until(lambda: len(poses) == 1, 5)
         assert slam.warner.count == 2
@@ -254,3 +257,33 @@ def test_negative_corner_covariance_is_warned_with_its_value():
         assert updates == [1]  # the good corner only
         assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings
         slam.destroy_node()
+
+
+def test_config_file_matches_declared_parameters():
+    """config/ekf_slam.yaml lists every declared parameter with its default."""
+    values = parameter_file(OFFICE.parents[1], 'ekf_slam')
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context)
+        declared = declared_parameters(node)
+        noise = node.params.odometry
+        node.destroy_node()
+    assert set(values) == set(declared)
+    for name, value in values.items():
+        if isinstance(value, float):
+            assert declared[name] == pytest.approx(value)
+        else:
+            assert declared[name] == value
+    assert noise == ODOMETRY_NOISE_MODELS['pioneer']
+
+
+def test_odometry_model_parameter_sets_the_noise_and_rejects_bad_gains():
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('odometry.model', value='k_d=0.02 k_theta=0.03 k_dtheta=0.04')])
+        noise = node.params.odometry
+        node.destroy_node()
+        with pytest.raises(ParameterError, match='odometry.model'):
+            EkfSlamNode(context=ros.context, parameter_overrides=[
+                Parameter('odometry.model', value='k_d=fast')])
+    assert (noise.sigma_xy_per_sqrt_m, noise.sigma_yaw_per_sqrt_m,
+            noise.sigma_yaw_per_sqrt_rad) == (0.02, 0.03, 0.04)

@@ -98,6 +98,9 @@ class SlamRun:
     #: Odometry / feature-set events of the front end other than used as they came
     #: (:data:`~landmark_nav.slam.frontend.ODOMETRY_EVENTS`, ``FEATURE_EVENTS``).
     events: Dict[str, int] = field(default_factory=dict)
+    #: (S,) index of each step's scan among the scenario's scans (a scan the front end
+    #: skipped, e.g. before any odometry, has no step).
+    scan_index: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -172,7 +175,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     seconds = 0.0
     scan_k = 0
     o_scan, o_world, o_status, o_lm = [], [], [], []
-    poses, covs, nis_v, nis_d, odo_at, stamps = [], [], [], [], [], []
+    poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
 
     def record(new_steps: List[Step]) -> None:
         for st in new_steps:
@@ -180,6 +183,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             if callback is not None:
                 callback(k, st.slam, st.result)
             stamps.append(st.stamp_ns)
+            index.append(k)
             poses.append(st.slam.pose)
             covs.append(st.slam.pose_covariance)
             odo_at.append(st.odometry)
@@ -232,7 +236,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    landmarks=slam.landmarks, landmark_covariances=slam.landmark_covariances,
                    stats=dict(slam.stats), resets=fe.restarts, seconds=seconds,
                    reset_reasons={'odometry restart': fe.restarts} if fe.restarts else {},
-                   events=events)
+                   events=events, scan_index=np.array(index, dtype=np.int64))
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
@@ -380,7 +384,9 @@ def _scan_points(scenario, run: SlamRun, max_points: int = 200_000) -> np.ndarra
     step = max(1, int(math.ceil(n / max_points)))
     mount = tuple(float(v) for v in scenario.laser.mount)
     out = []
-    for k, scan in enumerate(scans):
+    index = run.scan_index if run.scan_index is not None else np.arange(len(run.poses))
+    for k, i in enumerate(index):
+        scan = scans[i]
         ok = np.isfinite(scan.ranges)
         if not np.any(ok):
             continue

@@ -35,7 +35,8 @@ Each sample ``(stamp, pose, covariance)`` is judged against the previous accepte
 Feature sets (:meth:`SlamFrontend.add_features`)
 ------------------------------------------------
 A set of corners (laser frame, each with its covariance, bisector, opening and beam time
-after the set's stamp) waits until the odometry covers its last beam (``stamp +
+after the set's stamp; a set that comes before any odometry waits for the first sample and
+is dropped if it is older, ``'before_odometry'``) waits until the odometry covers its last beam (``stamp +
 max(beam_time)``; with de-skew off, the stamp), then is processed in stamp order; a set
 older than the last processed step is dropped (``'out_of_order'``). :meth:`flush` processes
 the sets still waiting whose stamp the odometry covers, holding the last odometry pose for
@@ -345,6 +346,10 @@ class SlamFrontend:
                 self.slam = EkfSlam(self.params, initial_pose=pose)
                 self.t0 = stamp_ns
                 self.last_step = (stamp_ns, pose.copy())
+                while self._pending and self._pending[0].stamp_ns < stamp_ns:
+                    old = self._pending.pop(0)
+                    self._event('before_odometry', f'corners at {old.stamp_ns} ns are older '
+                                f'than the first odometry ({stamp_ns} ns): skipped')
             return self._event('accepted'), self.process()
         last = b.t[-1]
         if stamp_ns == last:
@@ -426,10 +431,7 @@ class SlamFrontend:
             The steps made (possibly none, possibly older sets too).
         """
         t = int(corners.stamp_ns)
-        if self.slam is None or self.t0 is None:
-            self._event('before_odometry', f'corners at {t} ns before any odometry: skipped')
-            return []
-        if self.last_step is not None and t < self.last_step[0] or (
+        if self.slam is not None and self.last_step is not None and t < self.last_step[0] or (
                 self._buf.t and t < self._buf.t[0]):
             self._event('out_of_order', f'corners at {t} ns are older than the last step '
                         f'({self.last_step[0]} ns) or the buffered odometry: skipped')
