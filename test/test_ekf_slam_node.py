@@ -10,8 +10,8 @@ from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import run_slam
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_feature_cloud
 from landmark_nav.laser.corners import CornerParams
-from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.common import ParameterError
+from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
 from landmark_nav.slam.frontend import ODOMETRY_NOISE_MODELS
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness

@@ -81,8 +81,8 @@ class CornerExtractor(ScanFeatureNode):
         corners = detect_corners(clusters, self.params)
         stamp, frame = scan.stamp_ns, scan.frame_id
         self.pub_corners.publish(make_corner_pose_array(stamp, frame, corners))
-        self.pub_features.publish(make_corner_cloud(stamp, frame, corners,
-                                                     scan.time_increment))
+        self.pub_features.publish(
+            make_corner_cloud(stamp, frame, corners, scan.time_increment))
         self.pub_markers.publish(make_corner_markers(stamp, frame, corners))
 
 

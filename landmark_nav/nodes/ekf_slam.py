@@ -53,8 +53,8 @@ from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_mar
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
                                        output_path, ParameterError, ProblemWarner, run_node)
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
-from landmark_nav.slam.frontend import (Corners, FrontendParams, ODOMETRY_NOISE_MODELS,
-                                        odometry_noise_model, SlamFrontend, Step)
+from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
+                                        ODOMETRY_NOISE_MODELS, SlamFrontend, Step)
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 from rclpy.node import Node

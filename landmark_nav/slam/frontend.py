@@ -35,12 +35,13 @@ Each sample ``(stamp, pose, covariance)`` is judged against the previous accepte
 Feature sets (:meth:`SlamFrontend.add_features`)
 ------------------------------------------------
 A set of corners (laser frame, each with its covariance, bisector, opening and beam time
-after the set's stamp; a set that comes before any odometry waits for the first sample and
-is dropped if it is older, ``'before_odometry'``) waits until the odometry covers its last beam (``stamp +
+after the set's stamp) waits until the odometry covers its last beam (``stamp +
 max(beam_time)``; with de-skew off, the stamp), then is processed in stamp order; a set
-older than the last processed step is dropped (``'out_of_order'``). :meth:`flush` processes
-the sets still waiting whose stamp the odometry covers, holding the last odometry pose for
-beams after it (end of a recording; the node calls it when odometry stops coming).
+older than the last processed step is dropped (``'out_of_order'``), and so is a set that
+came before any odometry and turns out older than the first sample (``'before_odometry'``).
+:meth:`flush` processes the sets still waiting whose stamp the odometry covers, holding
+the last odometry pose for beams after it (end of a recording; the node calls it when
+odometry stops coming).
 
 Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
 (:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
@@ -204,7 +205,7 @@ class Corners:
                                                     dtype=float).reshape(m))
 
     def __len__(self) -> int:
-        """Number of corners."""
+        """Return the number of corners."""
         return self.positions.shape[0]
 
     def items(self) -> List['_Corner']:
@@ -288,7 +289,7 @@ class SlamFrontend:
         if not np.all(np.isfinite(self.mount)):
             raise ValueError(f'laser_mount must be 3 finite numbers, got {laser_mount!r}')
         self.on_event = on_event
-        self.events: Dict[str, int] = {k: 0 for k in ODOMETRY_EVENTS + FEATURE_EVENTS}
+        self.events: Dict[str, int] = dict.fromkeys(ODOMETRY_EVENTS + FEATURE_EVENTS, 0)
         self.restarts = 0
         self._seq = 0
         self.clear()
@@ -407,8 +408,8 @@ class SlamFrontend:
         prev = self._buf.cov_last
         if cov is not None and prev is not None:
             grow = cov - prev
-            var_xy = max(var_xy, float(np.linalg.eigvalsh(0.5 * (grow[:2, :2]
-                                                                  + grow[:2, :2].T))[-1]))
+            sym = 0.5 * (grow[:2, :2] + grow[:2, :2].T)
+            var_xy = max(var_xy, float(np.linalg.eigvalsh(sym)[-1]))
             var_psi = max(var_psi, float(grow[2, 2]))
         span = max(dt, f.min_step_s)
         lim_xy = f.max_speed * span + f.jump_sigmas * math.sqrt(var_xy)
