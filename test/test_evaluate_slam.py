@@ -10,6 +10,7 @@ from landmark_nav.evaluation.slam import evaluate_bag, format_summary
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
 from landmark_nav.importers import import_log
+from landmark_nav.slam.ekf_slam import SlamParams
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
 from nav_msgs.msg import Odometry
@@ -126,7 +127,10 @@ def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_
                                           np.array([p.pose for p in gt])))
     with pytest.raises(ValueError, match='--reference'):
         load_bag(bag)
-    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, reference=tum)
+    # The re-encoded bag states no odometry noise (it would get the pioneer model): give it
+    # the simulator's, the reference run's.
+    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, reference=tum,
+                     params=SlamParams())
     assert r['simulator_truth'] is False and r['reference'] == str(tum)
     assert any('re-expressed' in n for n in r['notes'])
     assert any('custom_data landmark_nav.laser_mount' in n for n in r['notes'])
@@ -159,7 +163,8 @@ def test_bag_without_reference(tmp_path, office_result):
     reencode(BAG, bag, reference_topic=False,
              custom={'landmark_nav.laser_mount': '0 0 0',
                      'landmark_nav.laser_sigma_range': '0.01'})
-    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False)
+    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False,
+                     params=SlamParams())  # the reference run's (simulator) odometry noise
     assert r['reference'] is None and r['simulator_truth'] is False
     assert not any('re-expressed' in n for n in r['notes'])
     for k in ('scans', 'mapped', 'associations', 'resets'):
@@ -221,6 +226,13 @@ def test_evaluate_imported_carmen_log(tmp_path):
     assert r['true_visible'] is None and r['wrong_associations'] is None
     assert f'{r["resets"]} filter resets' in format_summary(r)
     assert sum(r['reset_reasons'].values()) == r['resets']
+    # 1 m steps 3 s apart are motion (before the front end: 205 resets on 292 scans).
+    assert r['resets'] == 0 and r['frontend_events'] == {}
+    # The odometry noise is the importer's stated drift model (default pioneer gains).
+    noise = r['odometry_noise']
+    assert noise['source'] == 'custom_data landmark_nav.drift_model'
+    assert (noise['sigma_xy_per_sqrt_m'], noise['sigma_yaw_per_sqrt_m'],
+            noise['sigma_yaw_per_sqrt_rad']) == (0.05, 0.05, 0.1)
     for name in FILES:
         assert (tmp_path / 'out' / name).stat().st_size > 0, name
 

@@ -288,19 +288,18 @@ class EkfSlamNode(Node):
         pose, cov = self.slam.pose, self.slam.pose_covariance
         self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
         self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
-        self.path_poses.append((t, pose.copy()))
+        ps = PoseStamped()  # built once per step: the path message only lists them
+        ps.header.stamp = ns_to_stamp(t)
+        ps.header.frame_id = self.map_frame
+        ps.pose = pose_msg_from_2d(pose)
+        self.path_poses.append(ps)
         self.display_stamp = t
 
     def path_message(self) -> PathMsg:
         """Return the path of the last ``path_max_poses`` steps."""
         path = PathMsg()
         path.header.frame_id = self.map_frame
-        for t, pose in self.path_poses:
-            ps = PoseStamped()
-            ps.header.stamp = ns_to_stamp(t)
-            ps.header.frame_id = self.map_frame
-            ps.pose = pose_msg_from_2d(pose)
-            path.poses.append(ps)
+        path.poses = list(self.path_poses)
         if path.poses:
             path.header.stamp = path.poses[-1].header.stamp
         return path
