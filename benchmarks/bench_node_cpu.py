@@ -148,7 +148,7 @@ def main() -> int:
     for n in NODES:
         print(f'{n:18s} CPU {1e3 * (cpu1[n] - cpu0[n]) / scans:7.2f} ms per scan, RSS '
               f'{rss0[n]:.1f} -> {rss1[n]:.1f} MB; diagnostics: {last.get(n, "none")}')
-    if args.soak is None:
+    if args.soak is None and noise is not None:  # (an older --repo has no front end)
         core_ms = core_step_ms(scenario, noise)
         node_ms = 1e3 * (cpu1['ekf_slam'] - cpu0['ekf_slam']) / scans
         print(f'core (SlamFrontend + EkfSlam, offline, same bag) {core_ms:.2f} ms per step; '
