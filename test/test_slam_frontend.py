@@ -169,3 +169,16 @@ def test_frontend_params_are_validated():
         FrontendParams(deskew=1)
     with pytest.raises(ValueError, match='laser_mount'):
         SlamFrontend(laser_mount=[0, 0, np.nan])
+
+
+def test_steps_made_at_once_carry_their_own_pose():
+    """Sets released together (after an /odom gap) each report the pose of their step."""
+    seen = []
+    fe = SlamFrontend(on_step=lambda st: seen.append(st.slam.pose))
+    fe.add_odometry(T0, [0, 0, 0])
+    for k in (1, 2, 3):
+        assert fe.add_features(corners(T0 + k * 100 * MS)) == []
+    _, steps = fe.add_odometry(T0 + 400 * MS, [0.4, 0, 0])
+    assert [s.stamp_ns for s in steps] == [T0 + k * 100 * MS for k in (1, 2, 3)]
+    np.testing.assert_allclose([s.pose[0] for s in steps], [0.1, 0.2, 0.3], atol=1e-12)
+    np.testing.assert_array_equal(np.array([s.pose for s in steps]), np.array(seen))

@@ -171,57 +171,56 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     """
     fp = replace(frontend or FrontendParams(), deskew=deskew, descriptors=descriptors)
     mount = np.asarray(result.laser.mount, dtype=float)
-    fe = SlamFrontend(params, mount, fp)
-    seconds = 0.0
+    fe = SlamFrontend(params, mount, fp, on_step=lambda st: record(st))
+    seconds = record_s = 0.0
     scan_k = 0
     o_scan, o_world, o_status, o_lm = [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
 
-    def record(new_steps: List[Step]) -> None:
-        for st in new_steps:
-            k = st.tag
-            if callback is not None:
-                callback(k, st.slam, st.result)
-            stamps.append(st.stamp_ns)
-            index.append(k)
-            poses.append(st.slam.pose)
-            covs.append(st.slam.pose_covariance)
-            odo_at.append(st.odometry)
-            nis_v.append(st.result.nis)
-            nis_d.append(st.result.nis_dof)
-            scan, corners = pending.pop(k)
-            if len(corners):
-                lp = np.array([c.position for c in corners]).reshape(-1, 2)
-                beam_ns = scan.stamp_ns + np.rint(np.array([c.index for c in corners])
-                                                  * scan.time_increment * 1e9).astype(np.int64)
-                beam_ns = np.minimum(beam_ns, result.end_ns)
-                o_world.append(transform_points(
-                    sensor_pose(result.truth_at(beam_ns), tuple(mount)), lp))
-                o_scan.append(np.full(len(corners), len(stamps) - 1))
-                o_status.append(st.result.status)
-                o_lm.append(st.result.landmark_id)
+    def record(st: Step) -> None:  # right after the step (several may come at once)
+        nonlocal record_s
+        tic = time.perf_counter()
+        k = st.tag
+        if callback is not None:
+            callback(k, st.slam, st.result)
+        stamps.append(st.stamp_ns)
+        index.append(k)
+        poses.append(st.pose)
+        covs.append(st.covariance)
+        odo_at.append(st.odometry)
+        nis_v.append(st.result.nis)
+        nis_d.append(st.result.nis_dof)
+        scan, corners = pending.pop(k)
+        if len(corners):
+            lp = np.array([c.position for c in corners]).reshape(-1, 2)
+            beam_ns = scan.stamp_ns + np.rint(np.array([c.index for c in corners])
+                                              * scan.time_increment * 1e9).astype(np.int64)
+            beam_ns = np.minimum(beam_ns, result.end_ns)
+            o_world.append(transform_points(
+                sensor_pose(result.truth_at(beam_ns), tuple(mount)), lp))
+            o_scan.append(np.full(len(corners), len(stamps) - 1))
+            o_status.append(st.result.status)
+            o_lm.append(st.result.landmark_id)
+        record_s += time.perf_counter() - tic
 
     pending: Dict[int, Tuple[ScanSample, list]] = {}  # scan index -> scan, corners
     for ev in result.events:
         if isinstance(ev, OdometrySample):
             tic = time.perf_counter()
-            _, new = fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
+            fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
             seconds += time.perf_counter() - tic
         elif isinstance(ev, ScanSample):
             corners = scan_corners(ev, corner_params)
             pending[scan_k] = (ev, corners)
             tic = time.perf_counter()
-            new = fe.add_features(Corners.from_corners(ev.stamp_ns, corners,
-                                                       ev.time_increment), scan_k)
+            fe.add_features(Corners.from_corners(ev.stamp_ns, corners, ev.time_increment),
+                            scan_k)
             scan_k += 1
             seconds += time.perf_counter() - tic
-        else:
-            continue
-        record(new)
     tic = time.perf_counter()
-    new = fe.flush()
+    fe.flush()
     seconds += time.perf_counter() - tic
-    record(new)
+    seconds -= record_s  # the filter's time only
     slam = fe.slam
     truth = result.truth_at(np.array(stamps, dtype=np.int64))
     events = {k: v for k, v in fe.events.items() if v and k not in ('accepted', 'processed')}
@@ -688,9 +687,11 @@ def format_summary(r: dict) -> str:
         return 'n/a' if v is None else fmt.format(v)
     a = r['align']
     why = ', '.join(f'{k}: {v}' for k, v in sorted(r.get('reset_reasons', {}).items()))
+    events = ', '.join(f'{v} {k}' for k, v in sorted(r.get('frontend_events', {}).items()))
     lines = [f'{r["bag"]} ({r["association"]}): {r["scans"]} scans, {r["duration_s"]:.1f} s, '
              f'reference {r["reference"] or "none"}, {r["resets"]} filter resets'
-             + (f' ({why})' if why else '')]
+             + (f' ({why})' if why else '')
+             + (f'; inputs not used as they came: {events}' if events else '')]
     lines += [f'note: {n}' for n in r.get('notes', [])]
     if r['reference'] is None:
         return '\n'.join(lines + _lines_without_reference(r))

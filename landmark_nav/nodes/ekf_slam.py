@@ -280,12 +280,11 @@ class EkfSlamNode(Node):
         """Publish each step's pose and count it."""
         for st in steps:
             st: Step
-            self._publish(st.stamp_ns)
+            self._publish(st.stamp_ns, st.pose, st.covariance)
             self.stats.processed(max(int(st.tag or 0), odometry_received_ns))
 
-    def _publish(self, t: int) -> None:
+    def _publish(self, t: int, pose: np.ndarray, cov: np.ndarray) -> None:
         """Publish the pose of one step and remember it for the path."""
-        pose, cov = self.slam.pose, self.slam.pose_covariance
         self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
         self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
         ps = PoseStamped()  # built once per step: the path message only lists them

@@ -232,7 +232,11 @@ class Step:
         increment: (3,) the increment predicted with (eq. 13).
         bridged_variance: (3,) variance added for bridged odometry jumps in the step.
         result: The filter's association result.
-        slam: The filter after the step (the live object; copy what you keep).
+        pose: (3,) the filter's robot pose after the step (a copy).
+        covariance: (3, 3) its covariance (a copy).
+        slam: The filter (the live object: when several steps come back at once it is
+            already past the earlier ones; use ``pose`` / ``covariance``, or the
+            ``on_step`` callback of :class:`SlamFrontend` for the full state).
         tag: The ``tag`` given to :meth:`SlamFrontend.add_features`.
     """
 
@@ -241,6 +245,8 @@ class Step:
     increment: np.ndarray
     bridged_variance: np.ndarray
     result: UpdateResult
+    pose: np.ndarray
+    covariance: np.ndarray
     slam: EkfSlam
     tag: object = None
 
@@ -276,12 +282,14 @@ class SlamFrontend:
         on_event: Called as ``on_event(kind, message)`` for every odometry or feature set
             that is not used as it came (kinds of :data:`ODOMETRY_EVENTS` /
             :data:`FEATURE_EVENTS` other than 'accepted' and 'processed').
+        on_step: Called as ``on_step(step)`` right after each step, before the next one.
     """
 
     def __init__(self, params: Optional[SlamParams] = None,
                  laser_mount: Sequence[float] = (0.0, 0.0, 0.0),
                  frontend: Optional[FrontendParams] = None,
-                 on_event: Optional[Callable[[str, str], None]] = None) -> None:
+                 on_event: Optional[Callable[[str, str], None]] = None,
+                 on_step: Optional[Callable[['Step'], None]] = None) -> None:
         """Start empty: the filter starts at the first accepted odometry sample."""
         self.params = params or SlamParams()
         self.frontend = frontend or FrontendParams()
@@ -289,6 +297,7 @@ class SlamFrontend:
         if not np.all(np.isfinite(self.mount)):
             raise ValueError(f'laser_mount must be 3 finite numbers, got {laser_mount!r}')
         self.on_event = on_event
+        self.on_step = on_step
         self.events: Dict[str, int] = dict.fromkeys(ODOMETRY_EVENTS + FEATURE_EVENTS, 0)
         self.restarts = 0
         self._seq = 0
@@ -501,8 +510,12 @@ class SlamFrontend:
         res = self.slam.update(z, r, desc)
         self.last_step = (t, odo)
         self._event('processed')
-        return Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
-                    slam=self.slam, tag=p.tag)
+        step = Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
+                    pose=self.slam.pose, covariance=self.slam.pose_covariance, slam=self.slam,
+                    tag=p.tag)
+        if self.on_step is not None:
+            self.on_step(step)
+        return step
 
 
 __all__ = ['Corners', 'FEATURE_EVENTS', 'FrontendParams', 'ODOMETRY_EVENTS',
