@@ -178,7 +178,7 @@ def test_out_of_order_corner_sets_are_processed_in_stamp_order():
     with RosHarness() as ros:
         slam = EkfSlamNode(context=ros.context)
         stamps = []
-        slam._publish = lambda t: stamps.append(t)
+        slam._publish = lambda t, pose, cov: stamps.append(t)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
         slam.on_corners(corner_cloud(t0 + 200_000_000, [good]))  # waits for odometry
