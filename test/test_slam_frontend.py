@@ -182,3 +182,15 @@ def test_steps_made_at_once_carry_their_own_pose():
     assert [s.stamp_ns for s in steps] == [T0 + k * 100 * MS for k in (1, 2, 3)]
     np.testing.assert_allclose([s.pose[0] for s in steps], [0.1, 0.2, 0.3], atol=1e-12)
     np.testing.assert_array_equal(np.array([s.pose for s in steps]), np.array(seen))
+
+
+def test_the_odometry_buffer_is_bounded_without_feature_sets():
+    fe = SlamFrontend(frontend=FrontendParams(buffer_s=1.0))
+    for k in range(500):  # 50 s at 10 Hz, no scan
+        fe.add_odometry(T0 + k * 100 * MS, [0.01 * k, 0, 0])
+    first, last = fe.odometry_span
+    assert last == T0 + 499 * 100 * MS and last - first <= 1100 * MS
+    assert fe.add_features(corners(T0 + 10_000 * MS)) == []  # older than the buffer
+    assert fe.events['out_of_order'] == 1
+    (step,) = fe.add_features(corners(T0 + 49_850 * MS))
+    np.testing.assert_allclose(step.odometry, [4.985, 0, 0], atol=1e-9)

@@ -111,7 +111,7 @@ FRONTEND_PARAMETERS = {
     'min_step_s': ('smallest elapsed time the odometry check uses [s]', (1e-6, 10.0), None),
     'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
                        (1e-3, 1e6), None),
-    'buffer_s': ('odometry kept behind the last step [s]', (0.1, 3600.0), None),
+    'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,

@@ -145,7 +145,8 @@ class FrontendParams:
         jump_sigmas: Odometry noise standard deviations allowed on top of the speed limits.
         min_step_s: Smallest elapsed time the check uses (stamp jitter) [s].
         max_backward_s: A stamp further back than this restarts the front end [s].
-        buffer_s: Odometry kept behind the last processed step [s].
+        buffer_s: Odometry kept behind the newest sample [s] (bounded memory when no
+            feature sets come; a set older than the buffer is dropped as out of order).
     """
 
     deskew: bool = True
@@ -401,8 +402,7 @@ class SlamFrontend:
         b.pose.append(bridged)
         b.extra.append(extra)
         b.raw_last, b.cov_last = raw, cov
-        keep_from = (self.last_step[0] if self.last_step else t) - int(
-            self.frontend.buffer_s * 1e9)
+        keep_from = t - int(self.frontend.buffer_s * 1e9)
         drop = bisect.bisect_left(b.t, keep_from) - 1  # keep one sample before keep_from
         if drop > 0:
             del b.t[:drop], b.pose[:drop], b.extra[:drop]
