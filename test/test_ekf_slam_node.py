@@ -287,3 +287,25 @@ def test_odometry_model_parameter_sets_the_noise_and_rejects_bad_gains():
                 Parameter('odometry.model', value='k_d=fast')])
     assert (noise.sigma_xy_per_sqrt_m, noise.sigma_yaw_per_sqrt_m,
             noise.sigma_yaw_per_sqrt_rad) == (0.02, 0.03, 0.04)
+
+
+def test_waiting_sets_are_processed_when_odometry_stops():
+    """A set whose last beam the odometry never reaches is processed after odometry_timeout."""
+    t0 = 1_700_000_000_000_000_000
+    names = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy', 'time')
+    row = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4, 0.05]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t, pose, cov: stamps.append((t, pose[0]))
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.1, 0.0, 0.0]))
+        slam.on_corners(make_feature_cloud(t0 + 80_000_000, 'laser', names,
+                                           dict(zip(names, np.array([row]).T)), True))
+        slam.check_odometry_timeout()
+        assert stamps == [] and len(slam.pending) == 1  # its last beam is at 130 ms
+        slam.last_odom_wall -= slam.odometry_timeout + 0.1  # no odometry for that long
+        slam.check_odometry_timeout()
+        assert stamps == [(t0 + 80_000_000, pytest.approx(0.08, abs=1e-12))]
+        assert slam.frontend.events['held'] == 1 and not slam.pending
+        slam.destroy_node()

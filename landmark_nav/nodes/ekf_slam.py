@@ -174,7 +174,7 @@ class EkfSlamNode(Node):
         self.stats.subscribe(Odometry, 'odom', self.on_odom, ODOM_QOS)
         self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10)
         self.create_timer(display_period, self.publish_display)
-        self.create_timer(min(0.1, self.odometry_timeout), self.check_odometry_timeout)
+        self.create_timer(0.5 * self.odometry_timeout, self.check_odometry_timeout)
         self.create_service(Trigger, 'save_map', self.on_save_map)
         self.create_service(Trigger, 'reset', self.on_reset)
         self.odom_count = 0
