@@ -77,7 +77,9 @@ def test_node_equals_offline_with_deskew_and_services(tmp_path):
         ros.add_node(CornerExtractor(context=ros.context))
         slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
             Parameter('map_file', value=str(tmp_path / 'map.yaml')),
-            Parameter('odometry.model', value='simulator')]))
+            Parameter('odometry.model', value='simulator'),
+            # The test paces the messages; a stall of the machine is no odometry outage.
+            Parameter('odometry_timeout', value=3600.0)]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
         clouds = ros.collect('corners/features', PointCloud2)
         n_scan = replay(ros, msgs, slam)
