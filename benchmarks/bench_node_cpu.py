@@ -20,6 +20,13 @@ replay after that much bag time. ``--soak S`` loops the bag for S wall seconds i
 soak test: at ``--rate 4`` the office bag gives 40 Hz scans and odometry; each loop resets
 the filter, as odometry goes back in time) and also prints the RSS growth after the first
 minute; the scan count is then the corner extractor's processed + dropped.
+
+Ratio in the same run: after the replay the same bag (same ``--seconds``) goes through the
+offline pipeline in this process (:func:`landmark_nav.evaluation.slam.run_slam`, the same
+:class:`~landmark_nav.slam.frontend.SlamFrontend` the node runs, with the bag's odometry
+noise model and laser mount, which the node also gets as parameters); printed: the core's
+time per step (front end + filter, without corner extraction) and ``ekf_slam``'s CPU per
+step over it (the issue's target: at most 2).
 """
 
 import argparse
@@ -70,13 +77,26 @@ def main() -> int:
         env['LANDMARK_NAV_THREADS'] = str(args.threads)
     sys.path.insert(0, args.repo)
     from landmark_nav.bag import BagReader
+    from landmark_nav.evaluation.bags import load_bag
+    scenario = load_bag(args.bag, max_seconds=args.seconds, require_reference=False)
+    node_args = {'ekf_slam': ['--ros-args', '-p', 'laser_pose:=[' + ','.join(
+        f'{v!r}' for v in map(float, scenario.laser.mount)) + ']']}
+    try:
+        from landmark_nav.evaluation.slam import bag_odometry_noise, DRIFT_KEY
+        model = scenario.custom_data.get(DRIFT_KEY) or (
+            'simulator' if scenario.simulator else 'pioneer')
+        noise = bag_odometry_noise(scenario)[0]
+        node_args['ekf_slam'] += ['-p', f'odometry.model:={model}']
+    except ImportError:  # an older checkout (--repo): its defaults
+        noise = None
     with BagReader(args.bag) as reader:
         start, scans = reader.start_ns, 0
         for item in reader.messages(('/scan',)):
             if args.seconds is not None and item.log_time_ns - start > args.seconds * 1e9:
                 break
             scans += 1
-    procs = {n: subprocess.Popen([sys.executable, '-m', f'landmark_nav.nodes.{n}'], env=env,
+    procs = {n: subprocess.Popen([sys.executable, '-m', f'landmark_nav.nodes.{n}']
+                                 + node_args.get(n, []), env=env,
                                  cwd=args.repo, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)
              for n in NODES}
@@ -128,7 +148,45 @@ def main() -> int:
     for n in NODES:
         print(f'{n:18s} CPU {1e3 * (cpu1[n] - cpu0[n]) / scans:7.2f} ms per scan, RSS '
               f'{rss0[n]:.1f} -> {rss1[n]:.1f} MB; diagnostics: {last.get(n, "none")}')
+    if args.soak is None and noise is not None:  # (an older --repo has no front end)
+        core_ms = core_step_ms(scenario, noise)
+        node_ms = 1e3 * (cpu1['ekf_slam'] - cpu0['ekf_slam']) / scans
+        print(f'core (SlamFrontend + EkfSlam, offline, same bag) {core_ms:.2f} ms per step; '
+              f'ekf_slam node CPU / core = {node_ms / core_ms:.2f}')
     return 0
+
+
+def core_step_ms(scenario, noise) -> float:
+    """CPU time per step of the offline pipeline on the scenario (corners extracted first).
+
+    The front end gets the bag's odometry and each scan's corners in the bag's order, as
+    :func:`landmark_nav.evaluation.slam.run_slam` gives them; only its calls are timed
+    (process CPU time, as the node's figure).
+    """
+    from dataclasses import replace
+    from landmark_nav.evaluation.slam import scan_corners
+    from landmark_nav.laser.corners import CornerParams
+    from landmark_nav.sim import OdometrySample, ScanSample
+    from landmark_nav.slam.ekf_slam import SlamParams
+    from landmark_nav.slam.frontend import Corners, SlamFrontend
+    from threadpoolctl import threadpool_limits
+    params = SlamParams() if noise is None else replace(SlamParams(), odometry=noise)
+    cp = CornerParams(sigma_r=scenario.laser.sigma_range, sigma_phi=scenario.laser.sigma_angle)
+    inputs = [(True, e) if isinstance(e, OdometrySample) else
+              (False, Corners.from_corners(e.stamp_ns, scan_corners(e, cp), e.time_increment))
+              for e in scenario.events if isinstance(e, (OdometrySample, ScanSample))]
+    fe = SlamFrontend(params, scenario.laser.mount)
+    steps = 0
+    with threadpool_limits(1):  # as the nodes (one thread by default)
+        cpu = time.process_time()
+        for is_odom, item in inputs:
+            if is_odom:
+                steps += len(fe.add_odometry(item.stamp_ns, item.pose, item.covariance)[1])
+            else:
+                steps += len(fe.add_features(item))
+        steps += len(fe.flush())
+        cpu = time.process_time() - cpu
+    return 1e3 * cpu / max(steps, 1)
 
 
 # A listener printing the last /diagnostics input status of each node.

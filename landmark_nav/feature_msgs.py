@@ -4,8 +4,11 @@ Encodings (documented in the README topic table):
 
 * Corners: ``geometry_msgs/PoseArray`` (position = corner, orientation = yaw of the
   free-space bisector) plus ``sensor_msgs/PointCloud2`` with one point per corner and the
-  float32 fields ``x y z bisector opening cov_xx cov_xy cov_yy`` (z = 0; covariance of
-  the position in m^2) -- the PointCloud2 carries what a PoseArray cannot.
+  float64 fields ``x y z bisector opening cov_xx cov_xy cov_yy time`` (z = 0; covariance
+  of the position in m^2; ``time`` = the corner beam's time after the header stamp [s],
+  beam index times the scan's ``time_increment``, 0 when the scan has none) -- the
+  PointCloud2 carries what a PoseArray cannot. Float64, so that the SLAM node sees the
+  same numbers as the offline evaluation (float32 would move a corner by up to 0.1 um).
 * Lines: ``sensor_msgs/PointCloud2`` with one point per line and the float32 fields
   ``x y z rho alpha x1 y1 x2 y2 cov_rr cov_ra cov_aa num_points rmse``: (x, y) is the
   segment midpoint (so RViz shows it), (rho, alpha) the Hessian normal form
@@ -24,26 +27,30 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 from visualization_msgs.msg import Marker, MarkerArray
 
-CORNER_FIELDS = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
+CORNER_FIELDS = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy', 'time')
 LINE_FIELDS = ('x', 'y', 'z', 'rho', 'alpha', 'x1', 'y1', 'x2', 'y2', 'cov_rr', 'cov_ra',
                'cov_aa', 'num_points', 'rmse')
 
 
 def make_feature_cloud(stamp_ns: int, frame_id: str, names: Sequence[str],
-                       columns: Dict[str, np.ndarray]) -> PointCloud2:
-    """Pack equal-length float columns into an unordered PointCloud2 (float32 fields)."""
+                       columns: Dict[str, np.ndarray], float64: bool = False) -> PointCloud2:
+    """Pack equal-length float columns into an unordered PointCloud2.
+
+    The fields are float32, or float64 with ``float64``.
+    """
     n = len(columns[names[0]]) if names else 0
-    table = np.zeros((n, len(names)), dtype='<f4')
+    size, kind = (8, PointField.FLOAT64) if float64 else (4, PointField.FLOAT32)
+    table = np.zeros((n, len(names)), dtype=f'<f{size}')
     for j, name in enumerate(names):
         table[:, j] = np.asarray(columns[name], dtype=float)
     msg = PointCloud2()
     msg.header.stamp = ns_to_stamp(stamp_ns)
     msg.header.frame_id = frame_id
     msg.height, msg.width = 1, n
-    msg.fields = [PointField(name=name, offset=4 * j, datatype=PointField.FLOAT32, count=1)
+    msg.fields = [PointField(name=name, offset=size * j, datatype=kind, count=1)
                   for j, name in enumerate(names)]
     msg.is_bigendian = False
-    msg.point_step = 4 * len(names)
+    msg.point_step = size * len(names)
     msg.row_step = msg.point_step * n
     msg.is_dense = True
     msg.data = table.tobytes()
@@ -51,10 +58,11 @@ def make_feature_cloud(stamp_ns: int, frame_id: str, names: Sequence[str],
 
 
 def feature_cloud_to_arrays(msg: PointCloud2) -> Dict[str, np.ndarray]:
-    """Unpack a float32 PointCloud2 into {field name: (N,) float64 array}.
+    """Unpack a float32 / float64 PointCloud2 into {field name: (N,) float64 array}.
 
     Raises:
-        ConversionError: Non-float32 fields, big-endian data or inconsistent sizes.
+        ConversionError: Fields neither float32 nor float64 scalars, a field beyond the
+            point, big-endian data or inconsistent sizes.
 
     """
     n = msg.width * msg.height
@@ -66,12 +74,18 @@ def feature_cloud_to_arrays(msg: PointCloud2) -> Dict[str, np.ndarray]:
     out = {}
     raw = np.frombuffer(bytes(msg.data), dtype=np.uint8)
     rows = raw[: msg.point_step * n].reshape(n, msg.point_step) if n else raw[:0].reshape(0, 0)
+    sizes = {PointField.FLOAT32: 4, PointField.FLOAT64: 8}
     for field in msg.fields:
-        if field.datatype != PointField.FLOAT32 or field.count != 1:
-            raise ConversionError(f'PointCloud2: field {field.name} is not a float32 scalar')
+        size = sizes.get(field.datatype)
+        if size is None or field.count != 1:
+            raise ConversionError(f'PointCloud2: field {field.name} is not a float32 or '
+                                  f'float64 scalar')
+        if field.offset + size > msg.point_step:
+            raise ConversionError(f'PointCloud2: field {field.name} at offset {field.offset} '
+                                  f'does not fit in a point of {msg.point_step} bytes')
         if n:
-            out[field.name] = rows[:, field.offset:field.offset + 4].copy().view('<f4')[:, 0] \
-                .astype(float)
+            out[field.name] = rows[:, field.offset:field.offset + size].copy().view(
+                f'<f{size}')[:, 0].astype(float)
         else:
             out[field.name] = np.zeros(0)
     return out
@@ -90,16 +104,21 @@ def make_corner_pose_array(stamp_ns: int, frame_id: str, corners) -> PoseArray:
     return msg
 
 
-def make_corner_cloud(stamp_ns: int, frame_id: str, corners) -> PointCloud2:
-    """Corners with bisector, opening and position covariance as a PointCloud2."""
+def make_corner_cloud(stamp_ns: int, frame_id: str, corners,
+                      time_increment: float = 0.0) -> PointCloud2:
+    """Corners with bisector, opening, position covariance and beam time as a PointCloud2.
+
+    ``time`` = the corner's beam index times ``time_increment`` (the scan's) [s].
+    """
     cols = {
         'x': [c.position[0] for c in corners], 'y': [c.position[1] for c in corners],
         'z': [0.0] * len(corners), 'bisector': [c.bisector for c in corners],
         'opening': [c.opening for c in corners],
         'cov_xx': [c.covariance[0, 0] for c in corners],
         'cov_xy': [c.covariance[0, 1] for c in corners],
-        'cov_yy': [c.covariance[1, 1] for c in corners]}
-    return make_feature_cloud(stamp_ns, frame_id, CORNER_FIELDS, cols)
+        'cov_yy': [c.covariance[1, 1] for c in corners],
+        'time': [float(time_increment) * c.index for c in corners]}
+    return make_feature_cloud(stamp_ns, frame_id, CORNER_FIELDS, cols, float64=True)
 
 
 def make_line_cloud(stamp_ns: int, frame_id: str, lines) -> PointCloud2:

@@ -1,4 +1,4 @@
-"""ekf_slam node: office bag through DDS equals the offline filter; bad input; services."""
+"""ekf_slam node: office bag through DDS equals the offline run (de-skew on); bad input; QoS."""
 
 from pathlib import Path
 from types import SimpleNamespace
@@ -8,15 +8,18 @@ from landmark_nav.bag import BagReader
 from landmark_nav.conversions import make_odometry, stamp_to_ns
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import run_slam
-from landmark_nav.feature_msgs import make_feature_cloud
+from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_feature_cloud
 from landmark_nav.laser.corners import CornerParams
+from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
-from landmark_nav.testing import RosHarness
+from landmark_nav.slam.frontend import ODOMETRY_NOISE_MODELS
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan, PointCloud2
 from std_srvs.srv import Trigger
 import yaml
@@ -47,50 +50,78 @@ def call(ros, node_name, srv):
     return future.result()
 
 
+def replay(ros, msgs, slam, odom_qos=10):
+    """Publish the bag's messages one by one, each after the previous one was received."""
+    pub_odom = ros._helper.create_publisher(Odometry, 'odom', odom_qos)
+    pub_scan = ros._helper.create_publisher(LaserScan, 'scan', 10)
+    assert ros.wait_for_subscribers([pub_odom, pub_scan])
+    assert ros.wait_until(lambda: slam.count_publishers('corners/features') > 0, 5)
+    n_odom = n_scan = 0
+    for topic, msg in msgs:
+        if topic == '/odom':
+            n_odom += 1
+            pub_odom.publish(msg)
+            assert ros.wait_until(lambda: slam.odom_count >= n_odom, 5)
+        else:
+            n_scan += 1
+            pub_scan.publish(msg)
+            assert ros.wait_until(lambda: slam.corner_count >= n_scan, 5)
+    return n_scan
+
+
 @pytest.mark.dds
-def test_node_equals_offline_and_services(tmp_path):
+def test_node_equals_offline_with_deskew_and_services(tmp_path):
+    """Node and offline run are one pipeline (SlamFrontend): equal to 1e-9 m, de-skew on."""
     msgs = bag_messages()
     with RosHarness() as ros:
         ros.add_node(CornerExtractor(context=ros.context))
         slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
-            Parameter('map_file', value=str(tmp_path / 'map.yaml'))]))
+            Parameter('map_file', value=str(tmp_path / 'map.yaml')),
+            Parameter('odometry.model', value='simulator'),
+            # The test paces the messages; a stall of the machine is no odometry outage.
+            Parameter('odometry_timeout', value=3600.0)]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
         clouds = ros.collect('corners/features', PointCloud2)
-        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
-        pub_scan = ros._helper.create_publisher(LaserScan, 'scan', 10)
-        assert ros.wait_for_subscribers([pub_odom, pub_scan])
-        assert ros.wait_until(lambda: slam.count_publishers('corners/features') > 0, 5)
-        n_odom = n_scan = 0
-        for topic, msg in msgs:
-            if topic == '/odom':
-                n_odom += 1
-                pub_odom.publish(msg)
-                assert ros.wait_until(lambda: slam.odom_count >= n_odom, 5)
-            else:
-                n_scan += 1
-                pub_scan.publish(msg)
-                assert ros.wait_until(lambda: slam.corner_count >= n_scan, 5)
+        n_scan = replay(ros, msgs, slam)
+        # Every scan but the last (its sweep ends after the last odometry) is a step.
         assert ros.wait_until(lambda: len(poses) >= n_scan - 1, 5)
         res = call(ros, 'save_map', Trigger)
         assert res.success, res.message
         saved = yaml.safe_load((tmp_path / 'map.yaml').read_text())
         n_landmarks = slam.slam.num_landmarks
+        events = dict(slam.frontend.events)
         assert call(ros, 'reset', Trigger).success
         assert slam.slam is None
     assert len(clouds) == n_scan
+    assert max(np.max(feature_cloud_to_arrays(c)['time'], initial=0.0) for c in clouds) > 0.0
     scenario = load_bag(OFFICE, max_seconds=SECONDS)
     laser = scenario.laser
     ref = run_slam(scenario, None, CornerParams(sigma_r=laser.sigma_range,
-                                                sigma_phi=laser.sigma_angle), deskew=False)
+                                                sigma_phi=laser.sigma_angle), deskew=True)
     stamps = np.array([stamp_to_ns(p.header.stamp) for p in poses])
     xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
-    k = np.searchsorted(ref.stamps, stamps)
-    assert len(poses) >= len(ref.stamps) - 1 and np.all(ref.stamps[k] == stamps)
-    err = np.hypot(*(xy - ref.poses[k, :2]).T)
-    print('max node-offline difference', err.max(), 'm over', len(k), 'poses')
-    assert err.max() < 1e-7  # README; measured 6.6e-8 m (float32 fields of the corner cloud)
+    assert len(stamps) == len(ref.stamps) and np.array_equal(stamps, ref.stamps)
+    err = np.hypot(*(xy - ref.poses[:, :2]).T)
+    print('max node-offline difference', err.max(), 'm over', len(err), 'poses')
+    assert err.max() < 1e-9  # measured 0 (the same arithmetic on the same float64 numbers)
+    assert events['processed'] == len(ref.stamps) and events['jump'] == 0
     assert len(saved['landmarks']) == n_landmarks == ref.landmarks.shape[0] > 5
     assert len(saved['landmarks'][0]['covariance']) == 4
+
+
+@pytest.mark.dds
+def test_odom_from_a_best_effort_publisher():
+    """The /odom subscription is best effort: a sensor-data (best-effort) publisher reaches it."""
+    t0 = 1_700_000_000_000_000_000
+    with RosHarness() as ros:
+        slam = ros.add_node(EkfSlamNode(context=ros.context))
+        pub = ros._helper.create_publisher(Odometry, 'odom', qos_profile_sensor_data)
+        assert ros.wait_for_subscribers([pub])
+        for k in range(5):
+            pub.publish(make_odometry(t0 + k * 100_000_000, 'odom', 'base_link',
+                                      [0.01 * k, 0.0, 0.0]))
+        assert ros.wait_until(lambda: slam.odom_count == 5, 5)
+        assert slam.frontend.events['accepted'] == 5
 
 
 def corner_cloud(t, rows):
@@ -115,24 +146,31 @@ def test_bad_input():
             """Publish an odometry pose."""
             pub_odom.publish(make_odometry(t, 'odom', 'base_link', [x, 0.0, 0.0]))
 
-        pub_c.publish(corner_cloud(t0, [good]))  # before any odometry: skipped
+        pub_c.publish(corner_cloud(t0 - 10_000_000, [good]))  # waits for the first odometry
         assert ros.wait_until(lambda: slam.corner_count == 1, 5)
-        assert slam.warner.count == 1 and not slam.pending
-        odom(t0, 0.0)
+        assert slam.warner.count == 0 and len(slam.pending) == 1
+        odom(t0, 0.0)  # ... which comes later: the set is older, skipped
         odom(t0 + 100_000_000, 0.01)
         assert ros.wait_until(lambda: slam.odom_count == 2, 5)
+        assert slam.warner.count == 1 and not slam.pending
         pub_c.publish(corner_cloud(t0 + 50_000_000, [good, [np.nan] * 8]))  # NaN row dropped
         assert ros.wait_until(lambda: len(poses) == 1, 5)
         assert slam.warner.count == 2
         assert abs(poses[0].pose.pose.position.x - 0.005) < 1e-9
-        odom(t0 + 50_000_000, 0.02)  # back in time: clean reset
+        odom(t0 + 50_000_000, 0.02)  # back in time (by 50 ms): dropped, no reset
         assert ros.wait_until(lambda: slam.odom_count == 3, 5)
-        assert slam.resets == 1 and slam.slam.num_landmarks == 0 and len(slam.odo_t) == 1
-        odom(t0 + 200_000_000, 2.0)  # jump: reset at the scan step
+        assert slam.resets == 0 and slam.frontend.events['backward'] == 1
+        assert slam.warner.count == 3
+        odom(t0 + 200_000_000, 2.0)  # 1.99 m in 0.1 s: a frame jump, bridged (map kept)
         assert ros.wait_until(lambda: slam.odom_count == 4, 5)
         pub_c.publish(corner_cloud(t0 + 200_000_000, [good]))
         assert ros.wait_until(lambda: len(poses) == 2, 5)
-        assert slam.resets == 2 and abs(poses[1].pose.pose.position.x - 2.0) < 1e-9
+        assert slam.resets == 0 and slam.frontend.events['jump'] == 1
+        assert abs(poses[1].pose.pose.position.x - 0.01) < 1e-9  # no motion across the jump
+        assert poses[1].pose.covariance[0] > 0.1 ** 2  # ... but its uncertainty
+        odom(t0 - 2_000_000_000, 0.0)  # 2.2 s back: the source restarted, so does the filter
+        assert ros.wait_until(lambda: slam.odom_count == 5, 5)
+        assert slam.resets == 1 and slam.slam.num_landmarks == 0
 
 
 def test_out_of_order_corner_sets_are_processed_in_stamp_order():
@@ -142,7 +180,7 @@ def test_out_of_order_corner_sets_are_processed_in_stamp_order():
     with RosHarness() as ros:
         slam = EkfSlamNode(context=ros.context)
         stamps = []
-        slam._publish = lambda t: stamps.append(t)
+        slam._publish = lambda t, pose, cov: stamps.append(t)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
         slam.on_corners(corner_cloud(t0 + 200_000_000, [good]))  # waits for odometry
@@ -220,4 +258,56 @@ def test_negative_corner_covariance_is_warned_with_its_value():
         slam.on_corners(corner_cloud(t0 + 50_000_000, [good, bad]))
         assert updates == [1]  # the good corner only
         assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings
+        slam.destroy_node()
+
+
+def test_config_file_matches_declared_parameters():
+    """config/ekf_slam.yaml lists every declared parameter with its default."""
+    values = parameter_file(OFFICE.parents[1], 'ekf_slam')
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context)
+        declared = declared_parameters(node)
+        noise = node.params.odometry
+        node.destroy_node()
+    assert set(values) == set(declared)
+    for name, value in values.items():
+        if isinstance(value, float):
+            assert declared[name] == pytest.approx(value)
+        else:
+            assert declared[name] == value
+    assert noise == ODOMETRY_NOISE_MODELS['pioneer']
+
+
+def test_odometry_model_parameter_sets_the_noise_and_rejects_bad_gains():
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('odometry.model', value='k_d=0.02 k_theta=0.03 k_dtheta=0.04')])
+        noise = node.params.odometry
+        node.destroy_node()
+        with pytest.raises(ParameterError, match='odometry.model'):
+            EkfSlamNode(context=ros.context, parameter_overrides=[
+                Parameter('odometry.model', value='k_d=fast')])
+    assert (noise.sigma_xy_per_sqrt_m, noise.sigma_yaw_per_sqrt_m,
+            noise.sigma_yaw_per_sqrt_rad) == (0.02, 0.03, 0.04)
+
+
+def test_waiting_sets_are_processed_when_odometry_stops():
+    """A set whose last beam the odometry never reaches is processed after odometry_timeout."""
+    t0 = 1_700_000_000_000_000_000
+    names = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy', 'time')
+    row = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4, 0.05]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t, pose, cov: stamps.append((t, pose[0]))
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.1, 0.0, 0.0]))
+        slam.on_corners(make_feature_cloud(t0 + 80_000_000, 'laser', names,
+                                           dict(zip(names, np.array([row]).T)), True))
+        slam.check_odometry_timeout()
+        assert stamps == [] and len(slam.pending) == 1  # its last beam is at 130 ms
+        slam.last_odom_wall -= slam.odometry_timeout + 0.1  # no odometry for that long
+        slam.check_odometry_timeout()
+        assert stamps == [(t0 + 80_000_000, pytest.approx(0.08, abs=1e-12))]
+        assert slam.frontend.events['held'] == 1 and not slam.pending
         slam.destroy_node()

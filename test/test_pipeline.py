@@ -56,3 +56,13 @@ def test_replay_pipeline_runs_prefixes_output_and_stops_on_ctrl_c():
     assert 'ekf_slam         | ' in out and 'association jcbb' in out, out
     for node in PIPELINES['replay']:
         assert f'{node} stopped (rc=0)' in out, out
+
+
+def test_replay_gives_ekf_slam_what_the_bag_states():
+    """The simulator bag's laser mount and odometry noise model, before the user's --set."""
+    cmd = pipeline_commands('replay', ['ekf_slam.odometry.model=pioneer'],
+                            bag=str(REPO / 'bags' / 'office'))['ekf_slam']
+    stated = cmd[cmd.index('--params-file') + 2:]
+    assert stated == ['-p', 'laser_pose:=[0.0,0.0,0.0]', '-p', 'odometry.model:=simulator',
+                      '-p', 'odometry.model:=pioneer']  # the last one wins
+    assert pipeline_commands('replay', bag='no/such/bag')['ekf_slam'][-1].endswith('.yaml')

@@ -65,12 +65,15 @@ class BagScenario:
         reference: where the reference comes from (topic or file); None without one.
         notes: facts the user should read (defaults taken, frames changed).
         scan_period: median time between scans [s].
+        custom_data: the bag's ``custom_data`` (imported-bag facts, e.g. the drift model).
+        simulator: whether the bag is a simulator recording (has ``ground_truth.yaml``).
     """
 
     def __init__(self, name: str, world: Optional[World], laser: LaserConfig, events: List,
                  truth_stamps: np.ndarray, truth_poses: Optional[np.ndarray],
                  reference: Optional[str] = '',
-                 notes: Sequence[str] = (), scan_period: float = 0.1) -> None:
+                 notes: Sequence[str] = (), scan_period: float = 0.1,
+                 custom_data: Optional[Dict[str, str]] = None, simulator: bool = False) -> None:
         """Wrap the decoded bag content (``truth_poses`` None: no reference)."""
         self.name = name
         self.world = world
@@ -80,6 +83,8 @@ class BagScenario:
         self.reference = reference
         self.notes = list(notes)
         self.scan_period = float(scan_period)
+        self.custom_data = dict(custom_data or {})
+        self.simulator = bool(simulator)
         self._t = np.asarray(truth_stamps, dtype=np.int64)
         self._rel = (self._t - self._t[0]).astype(float)
         self._poses = None if truth_poses is None else np.asarray(truth_poses, dtype=float)
@@ -127,6 +132,7 @@ class BagScenario:
 class _Stamped:
     stamp_ns: int
     pose: np.ndarray
+    covariance: Optional[np.ndarray] = None
 
 
 def _parse_floats(text: str, n: int, what: str) -> np.ndarray:
@@ -245,6 +251,7 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
     if meta is not None and 'laser' in meta and not meta.get('laser'):
         raise ValueError(f'{bag} was recorded without a laser')
     odo, scans, truth = [], [], []
+    order = []  # (is scan, index) in log-time order: the order a subscriber gets them
     with BagReader(bag) as reader:
         topics = reader.topics()
         custom = reader.custom_data
@@ -264,6 +271,7 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
         for topic, _, msg in reader.decoded(wanted):
             if topic == '/scan':
                 d = scan_to_data(msg)
+                order.append((True, len(scans)))
                 scans.append(ScanSample(
                     stamp_ns=int(d.stamp_ns), ranges=np.asarray(d.ranges, dtype=np.float32),
                     angle_min=float(d.angle_min), angle_max=float(d.angle_max),
@@ -273,7 +281,10 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
                     true_ranges=None))
             else:
                 p = odometry_to_pose(msg)
-                (odo if topic == '/odom' else truth).append(_Stamped(int(p.stamp_ns), p.pose))
+                if topic == '/odom':
+                    order.append((False, len(odo)))
+                (odo if topic == '/odom' else truth).append(
+                    _Stamped(int(p.stamp_ns), p.pose, p.covariance))
     if reference is not None:
         tum = read_tum(reference)
         truth = [_Stamped(int(t), p) for t, p in zip(tum.stamps_ns, tum.planar())]
@@ -282,22 +293,27 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
         ref_name = REFERENCE_TOPIC
     else:
         ref_name = None
-    odo.sort(key=lambda e: e.stamp_ns)
+    # /odom stays in log-time order (repeated or backward stamps included): the SLAM front
+    # end judges them as the node does; spans and the anchor use it sorted.
+    by_time = sorted(odo, key=lambda e: e.stamp_ns)
     if not has_ref:  # the odometry span stands for the reference span below
-        truth = [_Stamped(odo[0].stamp_ns, np.zeros(3)), _Stamped(odo[-1].stamp_ns, np.zeros(3))]
+        truth = [_Stamped(by_time[0].stamp_ns, np.zeros(3)),
+                 _Stamped(by_time[-1].stamp_ns, np.zeros(3))]
         if truth[1].stamp_ns == truth[0].stamp_ns:
             truth = truth[:1]
     truth.sort(key=lambda e: e.stamp_ns)
     ts = np.array([e.stamp_ns for e in truth], dtype=np.int64)
-    if np.any(np.diff(ts) <= 0) or np.any(np.diff([e.stamp_ns for e in odo]) <= 0):
-        raise ValueError(f'{bag}: duplicate stamps in /odom or the reference')
-    t_end = min(odo[-1].stamp_ns, ts[-1])
+    if np.any(np.diff(ts) <= 0):
+        raise ValueError(f'{bag}: duplicate stamps in the reference')
+    t_end = min(by_time[-1].stamp_ns, ts[-1])
     if max_seconds is not None:
-        t_end = min(t_end, odo[0].stamp_ns + int(max_seconds * 1e9))
-    odo = [e for e in odo if e.stamp_ns <= t_end or e is odo[0]]
-    t_start = max(odo[0].stamp_ns, ts[0])
+        t_end = min(t_end, by_time[0].stamp_ns + int(max_seconds * 1e9))
+    use_odo = [e.stamp_ns <= t_end or e is by_time[0] for e in odo]
+    by_time = [e for e in by_time if e.stamp_ns <= t_end or e is by_time[0]]
+    t_start = max(by_time[0].stamp_ns, ts[0])
     sweep = [int(round(len(s.ranges) * s.time_increment * 1e9)) for s in scans]
-    kept = [s for s, w in zip(scans, sweep) if t_start <= s.stamp_ns and s.stamp_ns + w <= t_end]
+    use_scan = [t_start <= s.stamp_ns and s.stamp_ns + w <= t_end for s, w in zip(scans, sweep)]
+    kept = [s for s, u in zip(scans, use_scan) if u]
     if not kept:
         raise ValueError(f'{bag}: no /scan message inside the odometry / reference span'
                          if has_ref else f'{bag}: no /scan message inside the odometry span')
@@ -308,10 +324,11 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
                      f'the {span} time span{why})')
     op = np.array([e.pose for e in odo], dtype=float)
     truth_poses = np.array([e.pose for e in truth])
-    t_a = max(odo[0].stamp_ns, int(ts[0]))  # first stamp with odometry and reference
-    if has_ref and t_a <= min(odo[-1].stamp_ns, int(ts[-1])):
-        o_t = np.array([e.stamp_ns for e in odo], dtype=np.int64)
-        odo_a = interpolate_pose(float(t_a - o_t[0]), (o_t - o_t[0]).astype(float), op)
+    t_a = max(by_time[0].stamp_ns, int(ts[0]))  # first stamp with odometry and reference
+    if has_ref and t_a <= min(by_time[-1].stamp_ns, int(ts[-1])):
+        o_t = np.array([e.stamp_ns for e in by_time], dtype=np.int64)
+        odo_a = interpolate_pose(float(t_a - o_t[0]), (o_t - o_t[0]).astype(float),
+                                 np.array([e.pose for e in by_time], dtype=float))
         ref_a = interpolate_pose(float(t_a - ts[0]), (ts - ts[0]).astype(float), truth_poses)
         d = relative(odo_a, ref_a)
         if np.hypot(d[0], d[1]) > ANCHOR_TOLERANCE or abs(d[2]) > ANCHOR_TOLERANCE:
@@ -319,18 +336,22 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
             notes.append('odometry re-expressed to start at the reference pose (it was '
                          f'{np.hypot(d[0], d[1]):.3f} m / {np.degrees(d[2]):.1f} deg away)')
     zero3 = np.zeros(3)
-    events = [OdometrySample(stamp_ns=e.stamp_ns, pose=p, covariance=np.zeros((3, 3)),
-                             twist=zero3, wheel_velocities=np.zeros(2),
-                             wheel_positions=np.zeros(2))
-              for e, p in zip(odo, op)]
-    events += kept
-    events.sort(key=lambda e: e.stamp_ns)
+    events = []
+    for is_scan, i in order:
+        if is_scan and use_scan[i]:
+            events.append(scans[i])
+        elif not is_scan and use_odo[i]:
+            e = odo[i]
+            events.append(OdometrySample(
+                stamp_ns=e.stamp_ns, pose=op[i], twist=zero3, wheel_velocities=np.zeros(2),
+                covariance=np.zeros((3, 3)) if e.covariance is None
+                else np.asarray(e.covariance, dtype=float), wheel_positions=np.zeros(2)))
     st = np.array([s.stamp_ns for s in kept], dtype=np.int64)
     period = float(np.median(np.diff(st))) * 1e-9 if st.size > 1 else 1.0 / laser.rate_hz
     if meta is not None and meta.get('laser'):
         period = 1.0 / float(laser.rate_hz)
     return BagScenario(str(bag), world, laser, events, ts, truth_poses if has_ref else None,
-                       ref_name, notes, period)
+                       ref_name, notes, period, custom, meta is not None)
 
 
 __all__ = ['BagScenario', 'laser_config', 'load_bag', 'REFERENCE_TOPIC']

@@ -42,26 +42,26 @@ bag's odometry is re-expressed to start at the reference pose when it does not):
   band ``[chi2_3(0.025), chi2_3(0.975)]`` (and below the one-sided ``chi2_3(0.95)``).
 """
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 import json
 import math
 from pathlib import Path
 import time
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
+from landmark_nav.conversions import classify_ranges
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.features import corner_truth
 from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
                                                 STATISTICS, Trajectory, write_tum)
-from landmark_nav.geometry import (covariance_ellipse, interpolate_pose, relative,
-                                   transform_points)
+from landmark_nav.geometry import covariance_ellipse, transform_points
 from landmark_nav.laser.corners import CornerParams, extract_corners
 from landmark_nav.sim import OdometrySample, run_scenario, ScanSample, ScenarioResult
 from landmark_nav.sim.laser import compose as sensor_pose
 from landmark_nav.slam.consistency import chi2_band, chi2_gate, nees
-from landmark_nav.slam.ekf_slam import (EkfSlam, odometry_check, odometry_increment, SlamParams,
-                                        UpdateResult)
-from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
+from landmark_nav.slam.ekf_slam import EkfSlam, OdometryNoise, SlamParams, UpdateResult
+from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
+                                        SlamFrontend, Step)
 import numpy as np
 
 ASSOCIATIONS = ('icnn', 'jcbb')
@@ -69,6 +69,8 @@ ASSOCIATIONS = ('icnn', 'jcbb')
 ALIGN_DEFAULT = 'se2'
 #: Default RPE distance [m].
 RPE_DISTANCE_M = 1.0
+#: custom_data key of the importer's drift model (imported-bag contract).
+DRIFT_KEY = 'landmark_nav.drift_model'
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,7 +94,13 @@ class SlamRun:
     stats: Dict[str, int]
     resets: int
     seconds: float            # filter time (predict + update) [s]
-    reset_reasons: Dict[str, int] = field(default_factory=dict)  # failed odometry checks
+    reset_reasons: Dict[str, int] = field(default_factory=dict)  # why the filter restarted
+    #: Odometry / feature-set events of the front end other than used as they came
+    #: (:data:`~landmark_nav.slam.frontend.ODOMETRY_EVENTS`, ``FEATURE_EVENTS``).
+    events: Dict[str, int] = field(default_factory=dict)
+    #: (S,) index of each step's scan among the scenario's scans (a scan the front end
+    #: skipped, e.g. before any odometry, has no step).
+    scan_index: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -118,100 +126,116 @@ class SlamScore:
     ms_per_scan: float
 
 
-#: Words of :func:`~landmark_nav.slam.ekf_slam.odometry_check`'s messages -> reset kind.
-_RESET_KINDS = {'jumped': 'odometry jump', 'turned': 'odometry turn',
-                'back in time': 'odometry back in time', 'not finite': 'odometry not finite'}
-
-
 def scan_angles(scan: ScanSample) -> np.ndarray:
     """Return the (N,) beam angles ``angle_min + i * angle_increment`` of a scan."""
     return scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
 
 
+def scan_corners(scan: ScanSample, corner_params: Optional[CornerParams] = None) -> list:
+    """Corners of one scan as the ``corner_extractor`` node finds them.
+
+    Beams valid per REP 117 (:func:`landmark_nav.conversions.classify_ranges`: finite and
+    within ``[range_min, range_max]``), beam angles :func:`scan_angles`, the node's default
+    segmentation (incidence 10 deg, 5 points).
+    """
+    valid = classify_ranges(scan.ranges, scan.range_min, scan.range_max)[0]
+    return extract_corners(scan.ranges, scan_angles(scan), valid, scan.angle_increment,
+                           corner_params)
+
+
 def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              corner_params: Optional[CornerParams] = None, deskew: bool = True,
              descriptors: bool = True,
-             callback: Optional[Callable[[int, EkfSlam, UpdateResult], None]] = None
-             ) -> SlamRun:
-    """Run the filter over a simulated scenario (module docstring).
+             callback: Optional[Callable[[int, EkfSlam, UpdateResult], None]] = None,
+             frontend: Optional[FrontendParams] = None) -> SlamRun:
+    """Run the filter over a simulated scenario or a bag through :class:`SlamFrontend`.
+
+    The odometry samples and each scan's corners (:func:`scan_corners`) go to the front end
+    in time order, as the ``ekf_slam`` node receives them; whatever the front end leaves
+    waiting at the end is flushed.
 
     Args:
-        result: Output of :func:`landmark_nav.sim.run_scenario` (with a laser).
+        result: Output of :func:`landmark_nav.sim.run_scenario` (with a laser) or a
+            :class:`~landmark_nav.evaluation.bags.BagScenario`.
         params: Filter parameters.
         corner_params: Corner extractor parameters.
-        deskew: Compensate the motion during the laser sweep with odometry.
-        descriptors: Pass the corners' bisector / opening to the association.
+        deskew: Compensate the motion during the laser sweep with odometry (overrides
+            ``frontend.deskew``).
+        descriptors: Pass the corners' bisector / opening to the association (overrides
+            ``frontend.descriptors``).
         callback: Called as ``callback(scan index, filter, update result)`` after each scan.
+        frontend: Front-end parameters (odometry checks).
 
     Returns:
         The per-scan record.
     """
-    odo = result.of_type(OdometrySample)
-    scans = result.of_type(ScanSample)
-    ot = np.array([o.stamp_ns for o in odo], dtype=np.int64)
-    op = np.array([o.pose for o in odo])
-    t0 = ot[0]
-    ots = (ot - t0) * 1e-9
+    fp = replace(frontend or FrontendParams(), deskew=deskew, descriptors=descriptors)
     mount = np.asarray(result.laser.mount, dtype=float)
-    slam = EkfSlam(params, initial_pose=op[0])
-    prm = slam.params
-    prev_t, prev_pose = int(ot[0]), op[0]
-    stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
-    odo_at = interpolate_pose((stamps - t0) * 1e-9, ots, op)
-    truth = result.truth_at(stamps)
-    poses, covs, nis_v, nis_d = [], [], [], []
+    fe = SlamFrontend(params, mount, fp, on_step=lambda st: record(st))
+    seconds = record_s = 0.0
+    scan_k = 0
     o_scan, o_world, o_status, o_lm = [], [], [], []
-    resets = 0
-    reasons: Dict[str, int] = {}
-    seconds = 0.0
-    for k, scan in enumerate(scans):
-        corners = extract_corners(scan.ranges, scan_angles(scan), np.isfinite(scan.ranges),
-                                  scan.angle_increment, corner_params)
-        motion = None
-        if deskew and corners:
-            tb = (scan.stamp_ns - t0) * 1e-9 + scan.time_increment * np.array(
-                [c.index for c in corners], dtype=float)
-            motion = relative(odo_at[k], interpolate_pose(tb, ots, op, extrapolate=True))
-        z, r = corners_to_observations(corners, mount, motion)
-        desc = corner_descriptors(corners, mount, motion) if descriptors else None
+    poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
+
+    def record(st: Step) -> None:  # right after the step (several may come at once)
+        nonlocal record_s
         tic = time.perf_counter()
-        bad = odometry_check(prev_t, prev_pose, int(scan.stamp_ns), odo_at[k],
-                             prm.max_odometry_jump_m, prm.max_odometry_jump_rad)
-        if bad is not None:
-            slam.reset(odo_at[k])
-            resets += 1
-            kind = _RESET_KINDS.get(next((w for w in _RESET_KINDS if w in bad), ''), 'other')
-            reasons[kind] = reasons.get(kind, 0) + 1
-        else:
-            slam.predict(odometry_increment(prev_pose, odo_at[k]))
-        res: UpdateResult = slam.update(z, r, desc)
-        seconds += time.perf_counter() - tic
-        prev_t, prev_pose = int(scan.stamp_ns), odo_at[k]
+        k = st.tag
         if callback is not None:
-            callback(k, slam, res)
-        poses.append(slam.pose)
-        covs.append(slam.pose_covariance)
-        nis_v.append(res.nis)
-        nis_d.append(res.nis_dof)
+            callback(k, st.slam, st.result)
+        stamps.append(st.stamp_ns)
+        index.append(k)
+        poses.append(st.pose)
+        covs.append(st.covariance)
+        odo_at.append(st.odometry)
+        nis_v.append(st.result.nis)
+        nis_d.append(st.result.nis_dof)
+        scan, corners = pending.pop(k)
         if len(corners):
             lp = np.array([c.position for c in corners]).reshape(-1, 2)
             beam_ns = scan.stamp_ns + np.rint(np.array([c.index for c in corners])
                                               * scan.time_increment * 1e9).astype(np.int64)
             beam_ns = np.minimum(beam_ns, result.end_ns)
-            o_world.append(transform_points(sensor_pose(result.truth_at(beam_ns), tuple(mount)),
-                                            lp))
-            o_scan.append(np.full(len(corners), k))
-            o_status.append(res.status)
-            o_lm.append(res.landmark_id)
+            o_world.append(transform_points(
+                sensor_pose(result.truth_at(beam_ns), tuple(mount)), lp))
+            o_scan.append(np.full(len(corners), len(stamps) - 1))
+            o_status.append(st.result.status)
+            o_lm.append(st.result.landmark_id)
+        record_s += time.perf_counter() - tic
+
+    pending: Dict[int, Tuple[ScanSample, list]] = {}  # scan index -> scan, corners
+    for ev in result.events:
+        if isinstance(ev, OdometrySample):
+            tic = time.perf_counter()
+            fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
+            seconds += time.perf_counter() - tic
+        elif isinstance(ev, ScanSample):
+            corners = scan_corners(ev, corner_params)
+            pending[scan_k] = (ev, corners)
+            tic = time.perf_counter()
+            fe.add_features(Corners.from_corners(ev.stamp_ns, corners, ev.time_increment),
+                            scan_k)
+            scan_k += 1
+            seconds += time.perf_counter() - tic
+    tic = time.perf_counter()
+    fe.flush()
+    seconds += time.perf_counter() - tic
+    seconds -= record_s  # the filter's time only
+    slam = fe.slam
+    truth = result.truth_at(np.array(stamps, dtype=np.int64))
+    events = {k: v for k, v in fe.events.items() if v and k not in ('accepted', 'processed')}
     cat = (lambda a, shape, dt=float: np.concatenate(a) if a else np.zeros(shape, dtype=dt))
-    return SlamRun(stamps=stamps, poses=np.array(poses), covariances=np.array(covs),
-                   truth=truth, odometry=odo_at, obs_scan=cat(o_scan, (0,), np.int64),
+    return SlamRun(stamps=np.array(stamps, dtype=np.int64), poses=np.array(poses).reshape(-1, 3),
+                   covariances=np.array(covs).reshape(-1, 3, 3), truth=truth,
+                   odometry=np.array(odo_at).reshape(-1, 3),
+                   obs_scan=cat(o_scan, (0,), np.int64),
                    obs_world_true=cat(o_world, (0, 2)), obs_status=cat(o_status, (0,), '<U9'),
                    obs_landmark=cat(o_lm, (0,), np.int64), nis=np.array(nis_v),
                    nis_dof=np.array(nis_d), landmark_ids=slam.landmark_ids,
                    landmarks=slam.landmarks, landmark_covariances=slam.landmark_covariances,
-                   stats=dict(slam.stats), resets=resets, seconds=seconds,
-                   reset_reasons=reasons)
+                   stats=dict(slam.stats), resets=fe.restarts, seconds=seconds,
+                   reset_reasons={'odometry restart': fe.restarts} if fe.restarts else {},
+                   events=events, scan_index=np.array(index, dtype=np.int64))
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
@@ -359,7 +383,9 @@ def _scan_points(scenario, run: SlamRun, max_points: int = 200_000) -> np.ndarra
     step = max(1, int(math.ceil(n / max_points)))
     mount = tuple(float(v) for v in scenario.laser.mount)
     out = []
-    for k, scan in enumerate(scans):
+    index = run.scan_index if run.scan_index is not None else np.arange(len(run.poses))
+    for k, i in enumerate(index):
+        scan = scans[i]
         ok = np.isfinite(scan.ranges)
         if not np.any(ok):
             continue
@@ -487,6 +513,27 @@ def _add_figures_without_reference(result: dict, run: SlamRun, align: str,
     result['final_pose_covariance'] = run.covariances[-1].tolist()
 
 
+def bag_odometry_noise(scenario) -> Tuple[OdometryNoise, str]:
+    """Odometry noise model of a bag (:mod:`landmark_nav.slam.frontend`) and its source.
+
+    The imported-bag contract's ``custom_data`` key ``landmark_nav.drift_model`` when present
+    (the gains the importer drifted the odometry with), else ``simulator`` for a simulator
+    recording, else ``pioneer``.
+
+    Raises:
+        ValueError: A malformed drift model (names the bag and the key).
+    """
+    text = getattr(scenario, 'custom_data', {}).get(DRIFT_KEY)
+    if text is not None:
+        try:
+            return odometry_noise_model(text), f'custom_data {DRIFT_KEY}'
+        except ValueError as err:
+            raise ValueError(f'{scenario.name}: custom_data {DRIFT_KEY}: {err}') from None
+    if getattr(scenario, 'simulator', True):
+        return odometry_noise_model('simulator'), 'simulator'
+    return odometry_noise_model('pioneer'), 'default pioneer'
+
+
 def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = True,
                  params: Optional[SlamParams] = None, max_seconds: Optional[float] = None,
                  reference=None, align: str = ALIGN_DEFAULT,
@@ -536,6 +583,13 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     prm = params or SlamParams()
     prm = SlamParams(**{**{f.name: getattr(prm, f.name) for f in fields(SlamParams)},
                         'association': association})
+    noise_source = 'params'
+    if params is None:
+        noise, noise_source = bag_odometry_noise(scenario)
+        prm = replace(prm, odometry=noise)
+        if noise_source.startswith('default'):
+            scenario.notes.append('no odometry noise model in the bag (custom_data '
+                                  f'{DRIFT_KEY}): using the pioneer model')
     corner_params = CornerParams(sigma_r=float(scenario.laser.sigma_range),
                                  sigma_phi=float(scenario.laser.sigma_angle))
     n_scans = len(scenario.of_type(ScanSample))
@@ -556,6 +610,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     result = {'bag': str(bag), 'association': association, 'scans': int(len(run.stamps)),
               'duration_s': float(duration), 'resets': int(run.resets),
               'reset_reasons': dict(run.reset_reasons),
+              'frontend_events': dict(run.events),
+              'odometry_noise': {**asdict(prm.odometry), 'source': noise_source},
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
               'laser_sigma_range': float(scenario.laser.sigma_range)}
@@ -631,9 +687,11 @@ def format_summary(r: dict) -> str:
         return 'n/a' if v is None else fmt.format(v)
     a = r['align']
     why = ', '.join(f'{k}: {v}' for k, v in sorted(r.get('reset_reasons', {}).items()))
+    events = ', '.join(f'{v} {k}' for k, v in sorted(r.get('frontend_events', {}).items()))
     lines = [f'{r["bag"]} ({r["association"]}): {r["scans"]} scans, {r["duration_s"]:.1f} s, '
              f'reference {r["reference"] or "none"}, {r["resets"]} filter resets'
-             + (f' ({why})' if why else '')]
+             + (f' ({why})' if why else '')
+             + (f'; inputs not used as they came: {events}' if events else '')]
     lines += [f'note: {n}' for n in r.get('notes', [])]
     if r['reference'] is None:
         return '\n'.join(lines + _lines_without_reference(r))
@@ -662,6 +720,7 @@ def format_summary(r: dict) -> str:
     return '\n'.join(lines)
 
 
-__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'evaluate', 'evaluate_bag', 'format_summary',
-           'plot_run', 'RPE_DISTANCE_M', 'run_slam', 'scan_angles', 'score_run', 'SlamRun',
+__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_odometry_noise', 'DRIFT_KEY', 'evaluate',
+           'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M', 'run_slam',
+           'scan_angles', 'scan_corners', 'score_run', 'SlamRun',
            'SlamScore', 'true_visible_corners']

@@ -4,8 +4,9 @@ Subscribes ``scan`` (sensor_msgs/LaserScan, sensor-data QoS). Publishes, with th
 stamp and frame:
 
 * ``corners`` (geometry_msgs/PoseArray): corner positions, orientation = bisector;
-* ``corners/features`` (sensor_msgs/PointCloud2): position, bisector, opening angle and
-  the 2x2 position covariance per corner (see :mod:`landmark_nav.feature_msgs`);
+* ``corners/features`` (sensor_msgs/PointCloud2, float64 fields): position, bisector,
+  opening angle, the 2x2 position covariance and the beam time after the stamp (for the
+  de-skew of ``ekf_slam``) per corner (see :mod:`landmark_nav.feature_msgs`);
 * ``corners/markers`` (visualization_msgs/MarkerArray) for RViz.
 
 A malformed scan is dropped with a warning naming the problem (throttled per kind).
@@ -80,7 +81,8 @@ class CornerExtractor(ScanFeatureNode):
         corners = detect_corners(clusters, self.params)
         stamp, frame = scan.stamp_ns, scan.frame_id
         self.pub_corners.publish(make_corner_pose_array(stamp, frame, corners))
-        self.pub_features.publish(make_corner_cloud(stamp, frame, corners))
+        self.pub_features.publish(
+            make_corner_cloud(stamp, frame, corners, scan.time_increment))
         self.pub_markers.publish(make_corner_markers(stamp, frame, corners))
 
 

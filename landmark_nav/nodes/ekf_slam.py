@@ -2,61 +2,63 @@
 
 Subscribes:
 
-* ``odom`` (nav_msgs/Odometry, sensor-data QoS): wheel odometry, buffered;
+* ``odom`` (nav_msgs/Odometry; best-effort, keep last 200: it takes reliable and
+  best-effort publishers alike and does not lose samples in a burst);
 * ``corners/features`` (sensor_msgs/PointCloud2 from ``corner_extractor``). Not the
   ``corners`` PoseArray: the cloud carries each corner's 2x2 position covariance (the
-  observation noise ``R``) and its opening angle and bisector, which the association
-  gate (descriptors) uses.
+  observation noise ``R``), its opening angle and bisector (the association's descriptors)
+  and its beam time (the de-skew).
 
-Each corner set is processed once odometry at or after its stamp has arrived: the buffered
-odometry is linearly interpolated to the stamp (no message_filters), checked
-(:func:`~landmark_nav.slam.ekf_slam.odometry_check`), turned into a prediction, and the
-corners go through the laser mount (parameter ``laser_pose``) into the update; this is
-the per-scan step of :func:`landmark_nav.evaluation.slam.run_slam` without the sweep
-deskewing (the cloud has no beam times).
-
-Corner sets are queued in stamp order, so one arriving late (older than a set still
-waiting for odometry) is processed before the newer one; a set older than the last
-processed step is skipped (the filter cannot go back in time).
+Everything between the messages and the filter is :class:`~landmark_nav.slam.frontend.
+SlamFrontend`, the same code :func:`landmark_nav.evaluation.slam.run_slam` runs offline: the
+odometry buffer and its checks (repeated, backward and implausible stamps; an ``/odom`` gap
+is waited for, a discontinuity bridged, the map never reset by the data), each corner set
+waiting until the odometry covers its last beam, interpolation at the stamp, de-skew,
+prediction, association, update. When no odometry has come for ``odometry_timeout``
+seconds (wall clock) the sets the odometry reaches are processed holding its last pose for
+later beams. Corner sets arriving out of order are processed in stamp order; a set older
+than the last processed step is skipped.
 
 Publishes (frame ``map_frame``, stamp of the corner set): ``pose``
 (PoseWithCovarianceStamped) and ``odometry`` (nav_msgs/Odometry, child ``base_frame``) per
 step; ``path`` (nav_msgs/Path: the last ``path_max_poses`` poses) and ``landmarks``
-(MarkerArray: points and 2-sigma ellipses) every ``display_period`` seconds when they have
-changed, so the cost per step and the memory do not grow with the length of the run.
+(MarkerArray: 2-sigma ellipses) every ``display_period`` seconds when they have changed, so
+the cost per step and the memory do not grow with the length of the run.
 
 Services (std_srvs/Trigger): ``save_map`` writes the landmarks and their covariances as
 YAML to parameter ``map_file`` (a relative name is under ``$ROS_HOME/landmark_nav``,
 ``~/.ros/landmark_nav`` by default); ``reset`` restarts the filter at the next odometry.
 
+Odometry noise: the ``odometry.*`` parameters (defaults: the ``pioneer`` model of
+:mod:`landmark_nav.slam.frontend`), or ``odometry.model`` = ``pioneer``, ``simulator`` or
+the gains ``'k_d=.. k_theta=.. k_dtheta=..'`` an imported bag states.
+
 Bad input is reported with a warning throttled per kind of problem and counted on
-``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry going back in
-time or jumping resets the filter cleanly; corners with NaN or with a covariance that is
-not positive semi-definite are dropped; corner sets before any odometry, older than the
-buffered odometry or than the last step are skipped; the oldest waiting set is dropped when
+``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry that is not
+finite, repeated, older than the last sample or a jump (front-end events); corners with NaN
+or with a covariance that is not positive semi-definite are dropped; corner sets before any
+odometry or older than the last step are skipped; the oldest waiting set is dropped when
 more than ``MAX_PENDING`` wait for odometry.
 """
 
-import bisect
 from collections import deque
 from dataclasses import replace
-from types import SimpleNamespace
+import time
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, make_odometry,
                                       make_pose_with_covariance_stamped, ns_to_stamp,
                                       odometry_to_pose, pose_msg_from_2d, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
-from landmark_nav.geometry import interpolate_pose
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
-                                       output_path, ParameterError, ProblemWarner, run_node,
-                                       SENSOR_QOS)
-from landmark_nav.slam.ekf_slam import (EkfSlam, odometry_check, odometry_increment,
-                                        OdometryNoise, SlamParams)
-from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
+                                       output_path, ParameterError, ProblemWarner, run_node)
+from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
+from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
+                                        ODOMETRY_NOISE_MODELS, SlamFrontend, Step)
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
@@ -85,35 +87,65 @@ SLAM_PARAMETERS = {
     'jcbb_max_nodes': ('node budget of JCBB per scan', None, None),
     'psd_tolerance': ('relative jitter of the PSD test of P', None, None),
     'psd_check_interval': ('test P every this many updates', None, None),
-    'max_odometry_jump_m': ('odometry increment above this resets the filter [m]', None,
-                            None),
-    'max_odometry_jump_rad': ('odometry rotation above this resets the filter [rad]', None,
-                              None),
     'max_update_iterations': ('largest number of linearisations of one update (1 = plain EKF)',
                               None, None),
     'relinearize_ratio': ('re-linearise when a landmark moves by more than this fraction of its '
                           'range', None, None),
 }
 ODOMETRY_PARAMETERS = {
-    'sigma_xy_per_sqrt_m': ('odometry translation std per sqrt(m)', None, None),
-    'sigma_yaw_per_sqrt_m': ('odometry heading std per sqrt(m)', None, None),
-    'sigma_yaw_per_sqrt_rad': ('odometry heading std per sqrt(rad)', None, None),
-    'sigma_xy_floor': ('odometry translation std floor per step [m]', None, None),
-    'sigma_yaw_floor': ('odometry heading std floor per step [rad]', None, None),
+    'sigma_xy_per_sqrt_m': 'odometry translation std per sqrt(m) [m/sqrt(m)]',
+    'sigma_yaw_per_sqrt_m': 'odometry heading std per sqrt(m) [rad/sqrt(m)]',
+    'sigma_yaw_per_sqrt_rad': 'odometry heading std per sqrt(rad) turned [rad/sqrt(rad)]',
+    'sigma_xy_floor': 'odometry translation std floor per step [m]',
+    'sigma_yaw_floor': 'odometry heading std floor per step [rad]',
 }
-MAX_BUFFER = 1000
+FRONTEND_PARAMETERS = {
+    'deskew': ('move each corner through the odometry motion up to its beam time', None,
+               None),
+    'max_speed': ('fastest plausible translation of the base [m/s] (odometry check)',
+                  (1e-3, 100.0), None),
+    'max_turn_rate': ('fastest plausible rotation of the base [rad/s] (odometry check)',
+                      (1e-3, 100.0), None),
+    'jump_sigmas': ('odometry noise stds allowed on top of the speed limits', (0.1, 100.0),
+                    None),
+    'min_step_s': ('smallest elapsed time the odometry check uses [s]', (1e-6, 10.0), None),
+    'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
+                       (1e-3, 1e6), None),
+    'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
+}
+#: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
+ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
+                      history=HistoryPolicy.KEEP_LAST)
 MAX_PENDING = 100
+CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
+#: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
+_FEATURE_DROPS = {'out_of_order': 'out_of_order', 'before_odometry': 'no_odometry'}
+
+
+def _declare_odometry_noise(node: Node) -> OdometryNoise:
+    """Declare ``odometry.*`` (pioneer defaults) and ``odometry.model``; return the noise."""
+    base = ODOMETRY_NOISE_MODELS['pioneer']
+    values = {name: declare(node, f'odometry.{name}', float(getattr(base, name)), doc,
+                            (0.0, 10.0)) for name, doc in ODOMETRY_PARAMETERS.items()}
+    model = declare(node, 'odometry.model', '', "'' = the odometry.* values; else pioneer, "
+                    "simulator or drift gains 'k_d=.. k_theta=.. k_dtheta=..' (replace them)")
+    try:
+        if model.strip():
+            return odometry_noise_model(model)
+        return OdometryNoise(**values)
+    except ValueError as err:
+        raise ParameterError(f'parameter odometry.model: {err}') from None
 
 
 class EkfSlamNode(Node):
-    """Thin node: odometry + corner clouds -> :class:`EkfSlam` -> pose, path, map."""
+    """Thin node: odometry + corner clouds -> :class:`SlamFrontend` -> pose, path, map."""
 
     def __init__(self, **kwargs) -> None:
         """Declare the parameters, create subscriptions, publishers and services."""
         super().__init__('ekf_slam', **kwargs)
         params = declare_dataclass(self, SlamParams, SLAM_PARAMETERS)
-        noise = declare_dataclass(self, OdometryNoise, ODOMETRY_PARAMETERS, 'odometry.')
-        self.params = replace(params, odometry=noise)
+        self.params = replace(params, odometry=_declare_odometry_noise(self))
+        self.frontend_params = declare_dataclass(self, FrontendParams, FRONTEND_PARAMETERS)
         self.laser_pose = np.array(declare(
             self, 'laser_pose', [0.0, 0.0, 0.0], 'laser pose [x, y, yaw] in base_link'))
         if self.laser_pose.shape != (3,) or not np.all(np.isfinite(self.laser_pose)):
@@ -129,101 +161,102 @@ class EkfSlamNode(Node):
         display_period = declare(self, 'display_period', 0.5, 'period of the path and '
                                  'landmarks topics (published when changed) [s]',
                                  (0.01, 3600.0))
+        self.odometry_timeout = declare(
+            self, 'odometry_timeout', 1.0, 'wall time without odometry after which waiting '
+            'corner sets the odometry reaches are processed (last pose held) [s]',
+            (0.01, 3600.0))
         self.warner = ProblemWarner(self)
         self.stats = InputStats(self, self.warner)
         self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10)
         self.pub_odom = self.create_publisher(Odometry, 'odometry', 10)
         self.pub_path = self.create_publisher(PathMsg, 'path', 10)
         self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10)
-        self.stats.subscribe(Odometry, 'odom', self.on_odom, SENSOR_QOS)
+        self.stats.subscribe(Odometry, 'odom', self.on_odom, ODOM_QOS)
         self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10)
         self.create_timer(display_period, self.publish_display)
+        self.create_timer(0.5 * self.odometry_timeout, self.check_odometry_timeout)
         self.create_service(Trigger, 'save_map', self.on_save_map)
         self.create_service(Trigger, 'reset', self.on_reset)
         self.odom_count = 0
         self.corner_count = 0
         self.resets = 0
+        self.last_odom_wall = time.monotonic()
+        self.frontend = SlamFrontend(self.params, self.laser_pose, self.frontend_params,
+                                     self._on_event)
         self._clear()
-        self.get_logger().info(f'ekf_slam: association {self.params.association}')
+        self.get_logger().info(f'ekf_slam: association {self.params.association}, odometry '
+                               f'noise {self.params.odometry}')
+
+    @property
+    def slam(self):
+        """The filter (None before the first odometry)."""
+        return self.frontend.slam
+
+    @property
+    def pending(self) -> list:
+        """Corner sets waiting for odometry, ``(stamp_ns, received_ns)`` in stamp order."""
+        return self.frontend.pending
 
     def _clear(self) -> None:
         """Forget the filter, odometry buffer, pending corner sets and path."""
-        self.slam = None
-        self.t0 = None
-        self.odo_t, self.odo_p = [], []
-        self.pending = []
-        self.prev = None
+        self.frontend.clear()
         self.path_poses = deque(maxlen=self.path_max_poses)
         self.display_stamp = None
 
-    def _restart(self, reason: str) -> None:
-        self.warner.warn(f'Resetting EKF-SLAM: {reason}')
-        self.resets += 1
-        self._clear()
+    def _on_event(self, kind: str, message: str) -> None:
+        """Report a front-end event (an input not used as it came)."""
+        if kind in _FEATURE_DROPS:
+            self.stats.drop(_FEATURE_DROPS[kind], f'Skipping corners: {message}')
+            return
+        if kind == 'restart':
+            self.resets += 1
+            self.path_poses.clear()
+        self.warner.warn(f'Odometry ({kind}): {message}')
 
     def on_odom(self, msg: Odometry) -> None:
-        """Buffer one odometry pose and process the corner sets it completes."""
+        """Give one odometry sample to the front end; publish the steps it completes."""
         self.odom_count += 1
+        self.last_odom_wall = time.monotonic()
         try:
             d = odometry_to_pose(msg)
         except ConversionError as err:
             self.warner.warn(f'Dropping odometry: {err}')
             return
-        t, pose = int(d.stamp_ns), np.asarray(d.pose, dtype=float)
-        if not np.all(np.isfinite(pose)):
-            self.warner.warn(f'Dropping odometry: pose {pose.tolist()} is not finite')
-            return
-        if self.odo_t and t <= self.odo_t[-1]:
-            self._restart(f'odometry went back in time ({self.odo_t[-1]} -> {t} ns)')
-        if self.slam is None:
-            self.slam = EkfSlam(self.params, initial_pose=pose)
-            self.t0, self.prev = t, (t, pose)
-        self.odo_t.append(t)
-        self.odo_p.append(pose)
-        if len(self.odo_t) > MAX_BUFFER:
-            del self.odo_t[0], self.odo_p[0]
-        received = self.stats.received_ns
-        while self.pending and self.pending[0][0] <= t:
-            self._step(*self.pending.pop(0), received)
+        _, steps = self.frontend.add_odometry(int(d.stamp_ns), d.pose, d.covariance)
+        self._publish_steps(steps, self.stats.received_ns)
 
     def on_corners(self, msg: PointCloud2) -> None:
-        """Validate one corner set and queue it until odometry covers its stamp."""
+        """Validate one corner set and give it to the front end."""
         self.corner_count += 1
         try:
             a = feature_cloud_to_arrays(msg)
-            names = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
-            missing = [n for n in names if n not in a]
+            missing = [n for n in CORNER_NAMES if n not in a]
             if missing:
                 raise ConversionError(f'PointCloud2: missing fields {", ".join(missing)}')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping corners: {err}')
             return
+        cols = np.column_stack([a[n] for n in CORNER_NAMES]
+                               + [a.get('time', np.zeros(len(a['x'])))])
+        cols = self._valid_corners(cols.reshape(-1, len(CORNER_NAMES) + 1))
         t = stamp_to_ns(msg.header.stamp)
-        if self.slam is None:
-            self.stats.drop('no_odometry', 'Skipping corners: no odometry received yet')
-            return
-        if t < self.odo_t[0]:
-            self.stats.drop('too_old', f'Skipping corners: stamp {t} ns is older than the '
-                            f'buffered odometry (from {self.odo_t[0]} ns)')
-            return
-        if t < self.prev[0]:
-            self.stats.drop('out_of_order', f'Skipping corners: stamp {t} ns is older than '
-                            f'the last step at {self.prev[0]} ns (arrived out of order)')
-            return
-        cols = self._valid_corners(np.column_stack([a[n] for n in names]).reshape(
-            -1, len(names)))
-        corners = [SimpleNamespace(position=c[:2], bisector=c[2], opening=c[3],
-                                   covariance=np.array([[c[4], c[5]], [c[5], c[6]]]))
-                   for c in cols]
+        corners = Corners(t, cols[:, :2], np.stack([cols[:, [4, 5]], cols[:, [5, 6]]], axis=1),
+                          cols[:, 2], cols[:, 3], cols[:, 7])
         received = self.stats.received_ns
-        bisect.insort(self.pending, (t, received, corners), key=lambda item: item[0])
-        if len(self.pending) > MAX_PENDING:
-            old = self.pending.pop(0)
+        steps = self.frontend.add_features(corners, received)
+        if len(self.frontend.pending) > MAX_PENDING:
+            old = self.frontend.drop_oldest_pending()
+            span = self.frontend.odometry_span
             self.stats.drop('not_covered', f'Dropping corners at {old[0]} ns: more than '
                             f'{MAX_PENDING} corner sets wait for odometry (newest {t} ns, '
-                            f'odometry up to {self.odo_t[-1]} ns)')
-        while self.pending and self.pending[0][0] <= self.odo_t[-1]:
-            self._step(*self.pending.pop(0))
+                            f'odometry up to {span[1] if span else None} ns)')
+        self._publish_steps(steps)
+
+    def check_odometry_timeout(self) -> None:
+        """Process waiting sets the odometry reaches when it has stopped coming."""
+        if (self.frontend.pending
+                and time.monotonic() - self.last_odom_wall > self.odometry_timeout):
+            self._publish_steps(self.frontend.flush())
 
     def _valid_corners(self, cols: np.ndarray) -> np.ndarray:
         """Drop corner rows with NaN / inf or a covariance that is not PSD (with a warning)."""
@@ -243,47 +276,29 @@ class EkfSlamNode(Node):
                              f'cov_xy={c[5]:g}, cov_yy={c[6]:g})')
         return cols[finite & psd]
 
-    def _step(self, t: int, received_ns: int, corners: list,
-              odometry_received_ns: int = 0) -> None:
-        """Predict to the corner stamp with interpolated odometry and update."""
-        rel = (np.asarray(self.odo_t, dtype=np.int64) - self.t0) * 1e-9
-        odo = interpolate_pose((t - self.t0) * 1e-9, rel, np.array(self.odo_p))
-        odo = np.asarray(odo, dtype=float).reshape(3)
-        prm = self.params
-        bad = odometry_check(self.prev[0], self.prev[1], t, odo, prm.max_odometry_jump_m,
-                             prm.max_odometry_jump_rad)
-        if bad is not None:
-            self.warner.warn(f'Resetting EKF-SLAM: {bad}')
-            self.resets += 1
-            self.slam.reset(odo)
-            self.path_poses.clear()
-        else:
-            self.slam.predict(odometry_increment(self.prev[1], odo))
-        self.prev = (t, odo)
-        z, r = corners_to_observations(corners, self.laser_pose)
-        desc = corner_descriptors(corners, self.laser_pose)
-        self.slam.update(z, r, desc)
-        self._publish(t)
-        self.stats.processed(max(received_ns, odometry_received_ns))
+    def _publish_steps(self, steps: list, odometry_received_ns: int = 0) -> None:
+        """Publish each step's pose and count it."""
+        for st in steps:
+            st: Step
+            self._publish(st.stamp_ns, st.pose, st.covariance)
+            self.stats.processed(max(int(st.tag or 0), odometry_received_ns))
 
-    def _publish(self, t: int) -> None:
+    def _publish(self, t: int, pose: np.ndarray, cov: np.ndarray) -> None:
         """Publish the pose of one step and remember it for the path."""
-        pose, cov = self.slam.pose, self.slam.pose_covariance
         self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
         self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
-        self.path_poses.append((t, pose.copy()))
+        ps = PoseStamped()  # built once per step: the path message only lists them
+        ps.header.stamp = ns_to_stamp(t)
+        ps.header.frame_id = self.map_frame
+        ps.pose = pose_msg_from_2d(pose)
+        self.path_poses.append(ps)
         self.display_stamp = t
 
     def path_message(self) -> PathMsg:
         """Return the path of the last ``path_max_poses`` steps."""
         path = PathMsg()
         path.header.frame_id = self.map_frame
-        for t, pose in self.path_poses:
-            ps = PoseStamped()
-            ps.header.stamp = ns_to_stamp(t)
-            ps.header.frame_id = self.map_frame
-            ps.pose = pose_msg_from_2d(pose)
-            path.poses.append(ps)
+        path.poses = list(self.path_poses)
         if path.poses:
             path.header.stamp = path.poses[-1].header.stamp
         return path

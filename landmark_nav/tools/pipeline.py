@@ -16,7 +16,9 @@ Pipelines:
   the user's; ``--set landmark_detector.landmark_map=/path/landmarks.yaml`` for robot fixes);
 * ``replay``: a bag's ``/scan`` and ``/odom`` through the SLAM nodes, bag_player +
   corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
-  subscribed, so no scan is lost to the nodes' start-up).
+  subscribed, so no scan is lost to the nodes' start-up). ``ekf_slam`` gets what the bag
+  states, as ``landmark_nav evaluate`` uses it (:func:`bag_slam_settings`): the laser mount
+  and the odometry noise model (an ``--set`` wins).
 """
 
 import argparse
@@ -54,6 +56,40 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
     return out
 
 
+def bag_slam_settings(bag: str) -> List[str]:
+    """``ekf_slam`` parameters a bag states, as ``-p`` arguments (module docstring).
+
+    The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
+    ``ground_truth.yaml``) and ``odometry.model``: ``custom_data``
+    ``landmark_nav.drift_model``, ``simulator`` for a simulator recording, else nothing (the
+    node's default, ``pioneer``). Nothing for what the bag does not state or a bag that
+    cannot be read (the player reports that).
+    """
+    from pathlib import Path
+
+    from landmark_nav.bag import BagReader
+    from landmark_nav.evaluation.bags import laser_config
+    from landmark_nav.evaluation.slam import DRIFT_KEY
+    from landmark_nav.sim.record import GROUND_TRUTH_FILE
+    import yaml
+    try:
+        with BagReader(bag) as reader:
+            custom = reader.custom_data
+        meta_path = Path(bag) / GROUND_TRUTH_FILE
+        meta = yaml.safe_load(meta_path.read_text()) if meta_path.is_file() else None
+        laser, notes = laser_config(custom, meta if isinstance(meta, dict) else None)
+    except Exception:  # noqa: B902 - the player names the problem with the bag
+        return []
+    out = []
+    if not any('(default)' in n for n in notes):
+        mount = ','.join(repr(float(v)) for v in laser.mount)
+        out += ['-p', f'laser_pose:=[{mount}]']
+    model = custom.get(DRIFT_KEY) or ('simulator' if meta is not None else None)
+    if model:
+        out += ['-p', f'odometry.model:={model}']
+    return out
+
+
 def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str] = None,
                       rate: float = 1.0, loop: bool = False) -> Dict[str, List[str]]:
     """Return the command line of every process of a pipeline, by node name.
@@ -76,7 +112,8 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
             cmd += [bag, '--rate', repr(float(rate)), '--topics', '/scan', '/odom',
                     '--wait-for-subscribers', '30'] + (['--loop'] if loop else [])
         else:
-            cmd += ['--ros-args', '--params-file', str(config_path(node))] + extra[node]
+            stated = bag_slam_settings(bag) if (node == 'ekf_slam' and bag) else []
+            cmd += ['--ros-args', '--params-file', str(config_path(node))] + stated + extra[node]
         commands[node] = cmd
     return commands
 

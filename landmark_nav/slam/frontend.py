@@ -1,0 +1,522 @@
+"""SLAM front end: odometry as it comes and feature sets in, filter steps out (ROS free).
+
+One pipeline for the ``ekf_slam`` node and the offline evaluation
+(:func:`landmark_nav.evaluation.slam.run_slam`): both feed odometry samples and laser
+feature sets (corners with their beam times) to :class:`SlamFrontend` in whatever order they
+arrive and get the same filter steps, to the last bit, whenever the same messages arrived.
+
+Odometry buffer (:meth:`SlamFrontend.add_odometry`)
+---------------------------------------------------
+Each sample ``(stamp, pose, covariance)`` is judged against the previous accepted one:
+
+* not finite: dropped (``'invalid'``);
+* the same stamp again: dropped (``'repeated'`` when the pose is the same, ``'conflicting'``
+  when it differs: the first one stays);
+* an older stamp: dropped (``'backward'``), unless it lies more than ``max_backward_s``
+  back: the odometry source restarted (a replayed bag looping, a driver restart) and the
+  front end starts over with an empty map (``'restart'``, the only reset);
+* a newer stamp: the increment ``u = (-)o_prev (+) o`` (eq. 13) must be reachable in the
+  elapsed time ``dt`` plus the odometry noise::
+
+      |(u_x, u_y)| <= v_max dt + k sigma_xy,   |u_psi| <= w_max dt + k sigma_psi
+
+  with ``dt`` at least ``min_step_s`` (stamp jitter), ``k = jump_sigmas`` and ``sigma`` the
+  larger of the noise model's (:class:`~landmark_nav.slam.ekf_slam.OdometryNoise` at the
+  increment: ``sigma_xy^2 = s_xy^2 d``, ``sigma_psi^2 = s_yd^2 d + s_yr^2 |u_psi|``) and
+  the growth of the sample's own covariance since the previous one (position: the largest
+  eigenvalue of the difference of the x-y blocks). A long gap in ``/odom`` is therefore no
+  jump: the robot had time to move, and the motion across the gap is interpolated. An
+  increment that fails is a discontinuity of the odometry frame (a driver re-zeroing its
+  pose), not a motion: it is *bridged* (``'jump'``), i.e. the odometry after it is
+  re-expressed so that it continues from the pose before it (zero motion across the step),
+  and the prediction over that step gets the variance of the largest plausible motion,
+  ``diag((v_max dt)^2, (v_max dt)^2, (w_max dt)^2)``, on top of ``U``. The map is kept.
+
+Feature sets (:meth:`SlamFrontend.add_features`)
+------------------------------------------------
+A set of corners (laser frame, each with its covariance, bisector, opening and beam time
+after the set's stamp) waits until the odometry covers its last beam (``stamp +
+max(beam_time)``; with de-skew off, the stamp), then is processed in stamp order; a set
+older than the last processed step is dropped (``'out_of_order'``), and so is a set that
+came before any odometry and turns out older than the first sample (``'before_odometry'``).
+:meth:`flush` processes the sets still waiting whose stamp the odometry covers, holding
+the last odometry pose for beams after it (end of a recording; the node calls it when
+odometry stops coming).
+
+Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
+(:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
+sample), ``u`` (eq. 13) goes to :meth:`EkfSlam.predict` (``U`` from the parameters' noise
+model, plus the bridged variance), each corner goes through the odometry motion between
+the stamp and its beam time (de-skew) and the laser mount into range and bearing
+(:func:`.observations.corners_to_observations`, eqs. 18-22) and :meth:`EkfSlam.update`
+(association, update, candidates, augmentation; the core's map management runs there).
+
+Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
+--------------------------------------------------------------------------------------
+The filter's ``U`` (:func:`.ekf_slam.odometry_noise`) is distance- and rotation-driven:
+``sigma_xy = s_xy sqrt(d)`` on each axis, ``sigma_psi^2 = s_yd^2 d + s_yr^2 |dpsi|``.
+
+* ``pioneer`` (the default of the node and of bags that state nothing): ``s_xy`` 0.05
+  m/sqrt(m), ``s_yd`` 0.05 rad/sqrt(m), ``s_yr`` 0.1 rad/sqrt(rad): an uncalibrated
+  Pioneer-class base, 16 cm and 9 deg of spread after 10 m straight and 14 deg per turn on
+  the spot (the self-localization chapter's calibration factors alone give 8 deg per 10 m
+  and 3.4 deg per turn; real floors add slip). The same numbers as the importer's default
+  drift model, whose gains ``k_d, k_theta, k_dtheta`` map one to one onto ``s_xy, s_yd,
+  s_yr`` (the importer's distance error lies along the motion; the filter spreads it on both
+  axes, which is conservative across the motion).
+* ``simulator``: :class:`~.ekf_slam.OdometryNoise` defaults (1.5 mm/sqrt(m), 0.01
+  rad/sqrt(m), 0.01 rad/sqrt(rad)), the random wheel noise of the package's simulated
+  Pioneer; used for the simulator's bags.
+* ``'k_d=.. k_theta=.. k_dtheta=..'``: the gains an imported bag states in its
+  ``custom_data`` key ``landmark_nav.drift_model`` (the imported-bag contract).
+"""
+
+import bisect
+from dataclasses import dataclass, field, replace
+import math
+import re
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+from landmark_nav.geometry import compose, interpolate_pose, inverse, relative
+import numpy as np
+
+from .ekf_slam import EkfSlam, odometry_noise, OdometryNoise, SlamParams, UpdateResult
+from .observations import corner_descriptors, corners_to_observations
+
+#: Named odometry noise models (module docstring).
+ODOMETRY_NOISE_MODELS: Dict[str, OdometryNoise] = {
+    'pioneer': OdometryNoise(sigma_xy_per_sqrt_m=0.05, sigma_yaw_per_sqrt_m=0.05,
+                             sigma_yaw_per_sqrt_rad=0.1),
+    'simulator': OdometryNoise(),
+}
+#: Odometry events counted by :attr:`SlamFrontend.events`.
+ODOMETRY_EVENTS = ('accepted', 'invalid', 'repeated', 'conflicting', 'backward', 'restart',
+                   'jump')
+#: Feature-set events counted by :attr:`SlamFrontend.events`.
+FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held')
+_GAIN = re.compile(r'^(k_d|k_theta|k_dtheta)=(\S+)$')
+_GAIN_FIELD = {'k_d': 'sigma_xy_per_sqrt_m', 'k_theta': 'sigma_yaw_per_sqrt_m',
+               'k_dtheta': 'sigma_yaw_per_sqrt_rad'}
+
+
+def odometry_noise_model(text: str) -> OdometryNoise:
+    """Return the odometry noise of a model name or of drift gains (module docstring).
+
+    Args:
+        text: ``'pioneer'``, ``'simulator'`` or ``'k_d=0.05 k_theta=0.05 k_dtheta=0.1'``
+            (the importer's ``landmark_nav.drift_model``; gains not given keep the
+            ``pioneer`` values).
+
+    Returns:
+        The noise model.
+
+    Raises:
+        ValueError: Unknown name or malformed gain (one line naming it).
+    """
+    text = str(text).strip()
+    if text in ODOMETRY_NOISE_MODELS:
+        return ODOMETRY_NOISE_MODELS[text]
+    gains = {}
+    for token in text.replace(',', ' ').split():
+        m = _GAIN.match(token)
+        try:
+            value = float(m.group(2)) if m else math.nan
+        except ValueError:
+            value = math.nan
+        if not m or not math.isfinite(value) or value < 0.0:
+            raise ValueError(f'odometry noise model: expected {" or ".join(ODOMETRY_NOISE_MODELS)}'
+                             f' or k_d=.. k_theta=.. k_dtheta=.. (numbers >= 0), got {token!r}')
+        gains[_GAIN_FIELD[m.group(1)]] = value
+    if not gains:
+        raise ValueError('odometry noise model: empty')
+    return replace(ODOMETRY_NOISE_MODELS['pioneer'], **gains)
+
+
+@dataclass(frozen=True)
+class FrontendParams:
+    """Front-end parameters (SI units; module docstring).
+
+    Attributes:
+        deskew: Move each corner through the odometry motion between the stamp and its beam
+            time.
+        descriptors: Pass the corners' bisector and opening to the association.
+        max_speed: Fastest plausible translation of the base [m/s] (Pioneer 3-DX: 1.2).
+        max_turn_rate: Fastest plausible rotation [rad/s] (Pioneer 3-DX: 300 deg/s).
+        jump_sigmas: Odometry noise standard deviations allowed on top of the speed limits.
+        min_step_s: Smallest elapsed time the check uses (stamp jitter) [s].
+        max_backward_s: A stamp further back than this restarts the front end [s].
+        buffer_s: Odometry kept behind the newest sample [s] (bounded memory when no
+            feature sets come; a set older than the buffer is dropped as out of order).
+    """
+
+    deskew: bool = True
+    descriptors: bool = True
+    max_speed: float = 1.5
+    max_turn_rate: float = 5.3
+    jump_sigmas: float = 5.0
+    min_step_s: float = 0.02
+    max_backward_s: float = 1.0
+    buffer_s: float = 60.0
+
+    def __post_init__(self) -> None:
+        """Validate; raise ValueError naming the bad field."""
+        for name in ('max_speed', 'max_turn_rate', 'jump_sigmas', 'min_step_s',
+                     'max_backward_s', 'buffer_s'):
+            v = getattr(self, name)
+            if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
+                    or v <= 0.0):
+                raise ValueError(f'FrontendParams.{name} must be a finite number > 0, got {v!r}')
+        for name in ('deskew', 'descriptors'):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f'FrontendParams.{name} must be a bool')
+
+
+@dataclass(frozen=True, eq=False)
+class Corners:
+    """One scan's corners in the laser frame (M corners; the corner cloud's content).
+
+    Attributes:
+        stamp_ns: Stamp of the scan (its first beam) [ns].
+        positions: (M, 2) corner positions [m].
+        covariances: (M, 2, 2) their covariances [m^2].
+        bisector: (M,) free-space bisector directions [rad].
+        opening: (M,) free-space openings [rad].
+        beam_time: (M,) time of each corner's beam after ``stamp_ns`` [s] (index times the
+            scan's ``time_increment``; zeros when unknown).
+    """
+
+    stamp_ns: int
+    positions: np.ndarray
+    covariances: np.ndarray
+    bisector: np.ndarray
+    opening: np.ndarray
+    beam_time: np.ndarray
+
+    @classmethod
+    def from_corners(cls, stamp_ns: int, corners: Sequence, time_increment: float = 0.0
+                     ) -> 'Corners':
+        """Build from :class:`~landmark_nav.laser.corners.Corner` objects of one scan."""
+        m = len(corners)
+        return cls(int(stamp_ns),
+                   np.array([c.position for c in corners], dtype=float).reshape(m, 2),
+                   np.array([c.covariance for c in corners], dtype=float).reshape(m, 2, 2),
+                   np.array([c.bisector for c in corners], dtype=float).reshape(m),
+                   np.array([c.opening for c in corners], dtype=float).reshape(m),
+                   float(time_increment) * np.array([c.index for c in corners],
+                                                    dtype=float).reshape(m))
+
+    def __len__(self) -> int:
+        """Return the number of corners."""
+        return self.positions.shape[0]
+
+    def items(self) -> List['_Corner']:
+        """Per-corner records for :func:`.observations.corners_to_observations`."""
+        return [_Corner(p, c, b, o) for p, c, b, o in zip(self.positions, self.covariances,
+                                                          self.bisector, self.opening)]
+
+
+@dataclass(frozen=True, eq=False)
+class _Corner:
+    position: np.ndarray
+    covariance: np.ndarray
+    bisector: float
+    opening: float
+
+
+@dataclass(frozen=True, eq=False)
+class Step:
+    """One processed feature set.
+
+    Attributes:
+        stamp_ns: Its stamp [ns].
+        odometry: (3,) odometry pose interpolated at the stamp (bridged frame).
+        increment: (3,) the increment predicted with (eq. 13).
+        bridged_variance: (3,) variance added for bridged odometry jumps in the step.
+        result: The filter's association result.
+        pose: (3,) the filter's robot pose after the step (a copy).
+        covariance: (3, 3) its covariance (a copy).
+        slam: The filter (the live object: when several steps come back at once it is
+            already past the earlier ones; use ``pose`` / ``covariance``, or the
+            ``on_step`` callback of :class:`SlamFrontend` for the full state).
+        tag: The ``tag`` given to :meth:`SlamFrontend.add_features`.
+    """
+
+    stamp_ns: int
+    odometry: np.ndarray
+    increment: np.ndarray
+    bridged_variance: np.ndarray
+    result: UpdateResult
+    pose: np.ndarray
+    covariance: np.ndarray
+    slam: EkfSlam
+    tag: object = None
+
+
+@dataclass
+class _Pending:
+    stamp_ns: int
+    need_ns: int
+    corners: Corners
+    tag: object = None
+    seq: int = 0
+
+
+@dataclass
+class _Buffer:
+    """Accepted odometry (bridged frame) and the raw sample before it."""
+
+    t: List[int] = field(default_factory=list)
+    pose: List[np.ndarray] = field(default_factory=list)
+    extra: List[np.ndarray] = field(default_factory=list)  # bridged variance ending here
+    raw_last: Optional[np.ndarray] = None
+    cov_last: Optional[np.ndarray] = None
+    offset: Optional[np.ndarray] = None  # bridged = offset (+) raw (None: bridged = raw)
+
+
+class SlamFrontend:
+    """Odometry buffer, checks, interpolation, de-skew and the filter (module docstring).
+
+    Args:
+        params: Filter parameters (``params.odometry`` is the noise model ``U``).
+        laser_mount: Laser pose ``[x, y, yaw]`` in base_link.
+        frontend: Front-end parameters.
+        on_event: Called as ``on_event(kind, message)`` for every odometry or feature set
+            that is not used as it came (kinds of :data:`ODOMETRY_EVENTS` /
+            :data:`FEATURE_EVENTS` other than 'accepted' and 'processed').
+        on_step: Called as ``on_step(step)`` right after each step, before the next one.
+    """
+
+    def __init__(self, params: Optional[SlamParams] = None,
+                 laser_mount: Sequence[float] = (0.0, 0.0, 0.0),
+                 frontend: Optional[FrontendParams] = None,
+                 on_event: Optional[Callable[[str, str], None]] = None,
+                 on_step: Optional[Callable[['Step'], None]] = None) -> None:
+        """Start empty: the filter starts at the first accepted odometry sample."""
+        self.params = params or SlamParams()
+        self.frontend = frontend or FrontendParams()
+        self.mount = np.asarray(laser_mount, dtype=float).reshape(3)
+        if not np.all(np.isfinite(self.mount)):
+            raise ValueError(f'laser_mount must be 3 finite numbers, got {laser_mount!r}')
+        self.on_event = on_event
+        self.on_step = on_step
+        self.events: Dict[str, int] = dict.fromkeys(ODOMETRY_EVENTS + FEATURE_EVENTS, 0)
+        self.restarts = 0
+        self._seq = 0
+        self.clear()
+
+    # ------------------------------------------------------------------ state
+    def clear(self) -> None:
+        """Forget the filter, the odometry and the waiting feature sets."""
+        self.slam: Optional[EkfSlam] = None
+        self.t0: Optional[int] = None
+        self._buf = _Buffer()
+        self._pending: List[_Pending] = []
+        self.last_step: Optional[Tuple[int, np.ndarray]] = None
+        self._extra_since = np.zeros(3)  # bridged variance already predicted with
+
+    @property
+    def pending(self) -> List[Tuple[int, object]]:
+        """Feature sets waiting for odometry as ``(stamp_ns, tag)``, stamp order."""
+        return [(p.stamp_ns, p.tag) for p in self._pending]
+
+    @property
+    def odometry_span(self) -> Optional[Tuple[int, int]]:
+        """(first, last) stamp of the buffered odometry [ns], None when empty."""
+        return (self._buf.t[0], self._buf.t[-1]) if self._buf.t else None
+
+    def _event(self, kind: str, message: str = '') -> str:
+        self.events[kind] += 1
+        if self.on_event is not None and kind not in ('accepted', 'processed'):
+            self.on_event(kind, message)
+        return kind
+
+    # ------------------------------------------------------------------ odometry
+    def add_odometry(self, stamp_ns: int, pose: Sequence[float],
+                     covariance: Optional[np.ndarray] = None) -> Tuple[str, List[Step]]:
+        """Buffer one odometry sample and process the feature sets it completes.
+
+        Args:
+            stamp_ns: Stamp [ns].
+            pose: (3,) odometry pose ``[x, y, psi]`` (odom frame).
+            covariance: Optional (3, 3) covariance of the pose (used by the jump check).
+
+        Returns:
+            ``(event, steps)``: one of :data:`ODOMETRY_EVENTS` and the steps made.
+        """
+        stamp_ns = int(stamp_ns)
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        cov = None if covariance is None else np.asarray(covariance, dtype=float).reshape(3, 3)
+        if not np.all(np.isfinite(pose)):
+            return self._event('invalid', f'odometry pose {pose.tolist()} is not finite'), []
+        if cov is not None and not np.all(np.isfinite(cov)):
+            cov = None
+        b = self._buf
+        if not b.t:
+            self._accept(stamp_ns, pose, pose.copy(), cov, np.zeros(3))
+            if self.slam is None:
+                self.slam = EkfSlam(self.params, initial_pose=pose)
+                self.t0 = stamp_ns
+                self.last_step = (stamp_ns, pose.copy())
+                while self._pending and self._pending[0].stamp_ns < stamp_ns:
+                    old = self._pending.pop(0)
+                    self._event('before_odometry', f'corners at {old.stamp_ns} ns are older '
+                                f'than the first odometry ({stamp_ns} ns): skipped')
+            return self._event('accepted'), self.process()
+        last = b.t[-1]
+        if stamp_ns == last:
+            if np.array_equal(pose, b.raw_last):
+                return self._event('repeated', f'odometry stamp {stamp_ns} ns repeated'), []
+            return self._event('conflicting', f'odometry stamp {stamp_ns} ns repeated with '
+                               f'another pose {pose.tolist()} (kept the first '
+                               f'{b.raw_last.tolist()})'), []
+        if stamp_ns < last:
+            back = (last - stamp_ns) * 1e-9
+            if back > self.frontend.max_backward_s:
+                self.restarts += 1
+                self.clear()
+                kind = self._event('restart', f'odometry went {back:.3f} s back in time '
+                                   f'({last} -> {stamp_ns} ns): restarting with an empty map')
+                return kind, self.add_odometry(stamp_ns, pose, covariance)[1]
+            return self._event('backward', f'odometry stamp {stamp_ns} ns is {back:.3f} s '
+                               f'older than the last one ({last} ns): dropped'), []
+        dt = (stamp_ns - last) * 1e-9
+        u = relative(b.raw_last, pose)  # eq. 13
+        why = self._implausible(u, dt, cov)
+        if why is None:
+            bridged = pose if b.offset is None else compose(b.offset, pose)
+            self._accept(stamp_ns, pose, bridged, cov, np.zeros(3))
+            return self._event('accepted'), self.process()
+        f = self.frontend
+        span = max(dt, f.min_step_s)
+        extra = np.array([(f.max_speed * span) ** 2, (f.max_speed * span) ** 2,
+                          (f.max_turn_rate * span) ** 2])
+        b.offset = compose(b.pose[-1], inverse(pose))  # bridged(pose) == last bridged pose
+        self._accept(stamp_ns, pose, b.pose[-1].copy(), cov, extra)
+        return self._event('jump', f'odometry {why} in {dt:.3f} s: bridged as a '
+                           f'discontinuity of the odometry frame (map kept)'), self.process()
+
+    def _accept(self, t: int, raw: np.ndarray, bridged: np.ndarray,
+                cov: Optional[np.ndarray], extra: np.ndarray) -> None:
+        b = self._buf
+        b.t.append(t)
+        b.pose.append(bridged)
+        b.extra.append(extra)
+        b.raw_last, b.cov_last = raw, cov
+        keep_from = t - int(self.frontend.buffer_s * 1e9)
+        drop = bisect.bisect_left(b.t, keep_from) - 1  # keep one sample before keep_from
+        if drop > 0:
+            del b.t[:drop], b.pose[:drop], b.extra[:drop]
+
+    def _implausible(self, u: np.ndarray, dt: float, cov: Optional[np.ndarray]
+                     ) -> Optional[str]:
+        """Return why an increment cannot be a motion in ``dt`` (module docstring) or None."""
+        f, n = self.frontend, self.params.odometry
+        d, turn = math.hypot(u[0], u[1]), abs(float(u[2]))
+        var_xy = n.sigma_xy_per_sqrt_m ** 2 * d
+        var_psi = n.sigma_yaw_per_sqrt_m ** 2 * d + n.sigma_yaw_per_sqrt_rad ** 2 * turn
+        prev = self._buf.cov_last
+        if cov is not None and prev is not None:
+            grow = cov - prev
+            sym = 0.5 * (grow[:2, :2] + grow[:2, :2].T)
+            var_xy = max(var_xy, float(np.linalg.eigvalsh(sym)[-1]))
+            var_psi = max(var_psi, float(grow[2, 2]))
+        span = max(dt, f.min_step_s)
+        lim_xy = f.max_speed * span + f.jump_sigmas * math.sqrt(var_xy)
+        lim_psi = f.max_turn_rate * span + f.jump_sigmas * math.sqrt(var_psi)
+        if d > lim_xy:
+            return f'moved {d:.3f} m (> {lim_xy:.3f} m plausible)'
+        if turn > lim_psi:
+            return f'turned {turn:.3f} rad (> {lim_psi:.3f} rad plausible)'
+        return None
+
+    # ------------------------------------------------------------------ features
+    def add_features(self, corners: Corners, tag: object = None) -> List[Step]:
+        """Queue one scan's corners; process what the odometry covers.
+
+        Args:
+            corners: The scan's corners.
+            tag: Anything the caller wants back with the set (e.g. a receive time).
+
+        Returns:
+            The steps made (possibly none, possibly older sets too).
+        """
+        t = int(corners.stamp_ns)
+        if self.slam is not None and self.last_step is not None and t < self.last_step[0] or (
+                self._buf.t and t < self._buf.t[0]):
+            self._event('out_of_order', f'corners at {t} ns are older than the last step '
+                        f'({self.last_step[0]} ns) or the buffered odometry: skipped')
+            return []
+        bt = corners.beam_time
+        need = t + (int(math.ceil(float(np.max(bt)) * 1e9))
+                    if self.frontend.deskew and len(corners) and np.max(bt) > 0 else 0)
+        self._seq += 1
+        bisect.insort(self._pending, _Pending(t, need, corners, tag, self._seq),
+                      key=lambda p: (p.stamp_ns, p.seq))
+        return self.process()
+
+    def drop_oldest_pending(self) -> Optional[Tuple[int, object]]:
+        """Remove and return the oldest waiting set ``(stamp_ns, tag)`` (queue bound)."""
+        if not self._pending:
+            return None
+        p = self._pending.pop(0)
+        return p.stamp_ns, p.tag
+
+    def process(self) -> List[Step]:
+        """Process waiting feature sets the odometry covers, in stamp order."""
+        steps = []
+        while self._pending and self._buf.t and self._pending[0].need_ns <= self._buf.t[-1]:
+            steps.append(self._step(self._pending.pop(0)))
+        return steps
+
+    def flush(self) -> List[Step]:
+        """Process the waiting sets whose stamp the odometry covers (beams after: held)."""
+        steps = self.process()
+        while self._pending and self._buf.t and self._pending[0].stamp_ns <= self._buf.t[-1]:
+            p = self._pending.pop(0)
+            self._event('held', f'corners at {p.stamp_ns} ns: odometry ends before the last '
+                        f'beam, holding its last pose for the de-skew')
+            steps.append(self._step(p))
+        return steps
+
+    def _step(self, p: _Pending) -> Step:
+        b = self._buf
+        t = p.stamp_ns
+        # The samples around [stamp, last beam] (interpolation uses the bracketing pair only).
+        lo = max(bisect.bisect_right(b.t, t) - 1, 0)
+        hi = min(bisect.bisect_left(b.t, p.need_ns) + 1, len(b.t))
+        ts = (np.asarray(b.t[lo:hi], dtype=np.int64) - self.t0) * 1e-9
+        ps = np.array(b.pose[lo:hi])
+        odo = np.asarray(interpolate_pose((t - self.t0) * 1e-9, ts, ps), dtype=float).reshape(3)
+        prev_t, prev_odo = self.last_step
+        # Bridged variance of the jumps in (prev_t, t].
+        extra = np.zeros(3)
+        for k in range(bisect.bisect_right(b.t, prev_t), bisect.bisect_right(b.t, t)):
+            extra += b.extra[k]
+        u = relative(prev_odo, odo)  # eq. 13
+        if np.any(extra > 0.0):
+            self.slam.predict(u, odometry_noise(u, self.params.odometry) + np.diag(extra))
+        else:
+            self.slam.predict(u)
+        c = p.corners
+        motion = None
+        if self.frontend.deskew and len(c) and np.any(c.beam_time != 0.0):
+            tb = (t - self.t0) * 1e-9 + c.beam_time
+            tb = np.minimum(tb, ts[-1])  # beyond the odometry (flush): hold its last pose
+            motion = relative(odo, interpolate_pose(tb, ts, ps, extrapolate=True))
+        items = c.items()
+        z, r = corners_to_observations(items, self.mount, motion)
+        desc = (corner_descriptors(items, self.mount, motion) if self.frontend.descriptors
+                else None)
+        res = self.slam.update(z, r, desc)
+        self.last_step = (t, odo)
+        self._event('processed')
+        step = Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
+                    pose=self.slam.pose, covariance=self.slam.pose_covariance, slam=self.slam,
+                    tag=p.tag)
+        if self.on_step is not None:
+            self.on_step(step)
+        return step
+
+
+__all__ = ['Corners', 'FEATURE_EVENTS', 'FrontendParams', 'ODOMETRY_EVENTS',
+           'ODOMETRY_NOISE_MODELS', 'odometry_noise_model', 'SlamFrontend', 'Step']

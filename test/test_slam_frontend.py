@@ -1,0 +1,196 @@
+"""SLAM front end: odometry as it comes (gaps, repeats, backward stamps, jumps), de-skew, order."""
+
+import math
+
+from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
+from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
+                                        ODOMETRY_NOISE_MODELS, SlamFrontend)
+import numpy as np
+import pytest
+
+T0 = 1_700_000_000_000_000_000
+MS = 1_000_000
+
+
+def corners(t_ns, xy=((2.0, 1.0),), beam_time=None):
+    """Corners at ``xy`` (laser frame) with a small covariance."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    m = len(xy)
+    cov = np.tile(np.eye(2) * 1e-4, (m, 1, 1))
+    bt = np.zeros(m) if beam_time is None else np.asarray(beam_time, dtype=float)
+    return Corners(t_ns, xy, cov, np.full(m, math.pi), np.full(m, math.pi / 2), bt)
+
+
+def test_noise_models_and_drift_gains():
+    assert odometry_noise_model('simulator') == OdometryNoise()
+    pioneer = odometry_noise_model('pioneer')
+    assert (pioneer.sigma_xy_per_sqrt_m, pioneer.sigma_yaw_per_sqrt_m,
+            pioneer.sigma_yaw_per_sqrt_rad) == (0.05, 0.05, 0.1)
+    n = odometry_noise_model('k_d=0.02 k_theta=0.05 k_dtheta=0.01')  # the contract's example
+    assert (n.sigma_xy_per_sqrt_m, n.sigma_yaw_per_sqrt_m, n.sigma_yaw_per_sqrt_rad) == (
+        0.02, 0.05, 0.01)
+    assert odometry_noise_model('k_d=0.01').sigma_yaw_per_sqrt_rad == 0.1  # others: pioneer
+    for bad in ('fast', 'k_d=-1', 'k_d=abc', 'k_x=1', ''):
+        with pytest.raises(ValueError, match='odometry noise model'):
+            odometry_noise_model(bad)
+    assert set(ODOMETRY_NOISE_MODELS) == {'pioneer', 'simulator'}
+
+
+def test_large_plausible_step_and_gap_are_motion_not_jump():
+    """A 1.05 m step in 2 s (a sparse log) and a 5 s /odom gap are motion, never a reset."""
+    fe = SlamFrontend(SlamParams(odometry=ODOMETRY_NOISE_MODELS['pioneer']))
+    assert fe.add_odometry(T0, [0, 0, 0])[0] == 'accepted'
+    assert fe.add_odometry(T0 + 2000 * MS, [1.05, 0, 0.3])[0] == 'accepted'
+    assert fe.add_odometry(T0 + 7000 * MS, [4.0, 0.5, 0.3])[0] == 'accepted'  # gap of 5 s
+    steps = fe.add_features(corners(T0 + 4500 * MS))
+    assert len(steps) == 1 and fe.restarts == 0 and fe.events['jump'] == 0
+    # Interpolated across the gap: halfway between the two samples.
+    np.testing.assert_allclose(steps[0].odometry, [2.525, 0.25, 0.3], atol=1e-12)
+
+
+def test_implausible_step_is_bridged_keeping_the_map():
+    f = FrontendParams()
+    fe = SlamFrontend(SlamParams(odometry=ODOMETRY_NOISE_MODELS['pioneer'], confirm_hits=1,
+                                 confirm_window=1), frontend=f)
+    fe.add_odometry(T0, [0, 0, 0])
+    fe.add_odometry(T0 + 100 * MS, [0.05, 0, 0])
+    fe.add_features(corners(T0 + 100 * MS))
+    assert fe.slam.num_landmarks == 1
+    # Limit over 0.1 s at 5 sigma of 0.05 m/sqrt(m): 0.15 + 0.25 sqrt(d); 3 m is beyond.
+    kind, _ = fe.add_odometry(T0 + 200 * MS, [3.05, 0, 0])
+    assert kind == 'jump' and fe.restarts == 0
+    fe.add_odometry(T0 + 300 * MS, [3.10, 0, 0])  # motion continues in the new frame
+    (step,) = fe.add_features(corners(T0 + 300 * MS))
+    assert fe.slam.num_landmarks >= 1  # the map is kept
+    np.testing.assert_allclose(step.odometry, [0.10, 0, 0], atol=1e-12)  # jump removed
+    np.testing.assert_allclose(step.bridged_variance, [(1.5 * 0.1) ** 2] * 2
+                               + [(5.3 * 0.1) ** 2], rtol=1e-12)
+    # Just inside the limit is motion: 0.15 + 0.25 * sqrt(0.3) = 0.287 m in 0.1 s.
+    fe.add_odometry(T0 + 400 * MS, [3.10 + 0.28, 0, 0])
+    assert fe.events['jump'] == 1
+
+
+def test_turn_limit_and_odometry_covariance_widen_the_check():
+    fe = SlamFrontend(SlamParams(odometry=OdometryNoise(0.0, 0.0, 0.0)))
+    fe.add_odometry(T0, [0, 0, 0], np.zeros((3, 3)))
+    # 0.6 rad in 0.1 s is above 5.3 rad/s ...
+    assert fe.add_odometry(T0 + 100 * MS, [0, 0, 0.6], np.zeros((3, 3)))[0] == 'jump'
+    # ... unless the odometry's own covariance grew enough (5 sigma of 0.05 rad = 0.25 rad).
+    fe = SlamFrontend(SlamParams(odometry=OdometryNoise(0.0, 0.0, 0.0)))
+    fe.add_odometry(T0, [0, 0, 0], np.zeros((3, 3)))
+    assert fe.add_odometry(T0 + 100 * MS, [0, 0, 0.6],
+                           np.diag([0.0, 0.0, 0.05 ** 2]))[0] == 'accepted'
+
+
+def test_repeated_backward_and_restart():
+    fe = SlamFrontend()
+    fe.add_odometry(T0, [0, 0, 0])
+    fe.add_odometry(T0 + 100 * MS, [0.01, 0, 0])
+    assert fe.add_odometry(T0 + 100 * MS, [0.01, 0, 0])[0] == 'repeated'
+    assert fe.add_odometry(T0 + 100 * MS, [0.02, 0, 0])[0] == 'conflicting'
+    assert fe.add_odometry(T0 + 50 * MS, [0.02, 0, 0])[0] == 'backward'
+    assert fe.add_odometry(T0 + 150 * MS, [0.015, 0, 0])[0] == 'accepted'
+    assert fe.add_odometry(T0 + 200 * MS, [np.nan, 0, 0])[0] == 'invalid'
+    (step,) = fe.add_features(corners(T0 + 125 * MS))
+    np.testing.assert_allclose(step.odometry, [0.0125, 0, 0], atol=1e-15)
+    assert fe.restarts == 0
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'restart'
+    assert fe.restarts == 1 and fe.slam.num_landmarks == 0
+    np.testing.assert_allclose(fe.slam.pose, [5.0, 0, 0])
+
+
+def test_sets_wait_for_their_last_beam_and_order_does_not_matter():
+    """Same steps whether corners come before or after the odometry that covers them."""
+    rng = np.random.default_rng(3)
+    odo = [(T0 + k * 100 * MS, [0.03 * k, 0.01 * k * k / 20, 0.02 * k]) for k in range(30)]
+    sets = [corners(T0 + 50 * MS + k * 100 * MS, rng.uniform(1, 4, (4, 2)),
+                    beam_time=rng.uniform(0, 0.08, 4)) for k in range(25)]
+
+    def run(corners_first):
+        fe = SlamFrontend(SlamParams(odometry=ODOMETRY_NOISE_MODELS['pioneer']))
+        out = []
+        if corners_first:
+            fe.add_odometry(*odo[0])
+            for c in sets:
+                out += fe.add_features(c)
+            for o in odo[1:]:
+                out += fe.add_odometry(*o)[1]
+        else:
+            for o in odo:
+                out += fe.add_odometry(*o)[1]
+            for c in sets:
+                out += fe.add_features(c)
+        return np.array([s.odometry for s in out]), fe.slam.state
+
+    a_odo, a_state = run(True)
+    b_odo, b_state = run(False)
+    assert len(a_odo) == 25
+    np.testing.assert_array_equal(a_odo, b_odo)
+    np.testing.assert_array_equal(a_state, b_state)
+
+
+def test_deskew_moves_corners_by_the_motion_during_the_sweep():
+    """A corner seen 0.1 s after the stamp while driving at 1 m/s is 0.1 m further ahead."""
+    prm = SlamParams(confirm_hits=1, confirm_window=1)
+    out = {}
+    for deskew in (True, False):
+        fe = SlamFrontend(prm, frontend=FrontendParams(deskew=deskew))
+        fe.add_odometry(T0, [0, 0, 0])
+        fe.add_odometry(T0 + 200 * MS, [0.2, 0, 0])
+        fe.add_features(corners(T0, [(2.0, 0.5)], beam_time=[0.1]))
+        out[deskew] = fe.slam.landmarks[0]
+    np.testing.assert_allclose(out[True] - out[False], [0.1, 0.0], atol=1e-12)
+
+
+def test_a_set_waits_until_the_odometry_covers_its_last_beam_then_flush_holds():
+    fe = SlamFrontend()
+    fe.add_odometry(T0, [0, 0, 0])
+    fe.add_odometry(T0 + 100 * MS, [0.1, 0, 0])
+    assert fe.add_features(corners(T0 + 80 * MS, beam_time=[0.05])) == []  # needs 130 ms
+    assert [t for t, _ in fe.pending] == [T0 + 80 * MS]
+    (step,) = fe.flush()  # odometry stopped: last pose held for the late beam
+    assert fe.events['held'] == 1 and not fe.pending
+    np.testing.assert_allclose(step.odometry, [0.08, 0, 0], atol=1e-12)
+
+
+def test_corners_before_the_first_odometry_wait_then_older_ones_are_skipped():
+    fe = SlamFrontend()
+    fe.add_features(corners(T0 - 10 * MS))
+    fe.add_features(corners(T0))
+    kind, steps = fe.add_odometry(T0, [0, 0, 0])
+    assert kind == 'accepted' and [s.stamp_ns for s in steps] == [T0]
+    assert fe.events['before_odometry'] == 1
+
+
+def test_frontend_params_are_validated():
+    with pytest.raises(ValueError, match='max_speed'):
+        FrontendParams(max_speed=0.0)
+    with pytest.raises(ValueError, match='deskew'):
+        FrontendParams(deskew=1)
+    with pytest.raises(ValueError, match='laser_mount'):
+        SlamFrontend(laser_mount=[0, 0, np.nan])
+
+
+def test_steps_made_at_once_carry_their_own_pose():
+    """Sets released together (after an /odom gap) each report the pose of their step."""
+    seen = []
+    fe = SlamFrontend(on_step=lambda st: seen.append(st.slam.pose))
+    fe.add_odometry(T0, [0, 0, 0])
+    for k in (1, 2, 3):
+        assert fe.add_features(corners(T0 + k * 100 * MS)) == []
+    _, steps = fe.add_odometry(T0 + 400 * MS, [0.4, 0, 0])
+    assert [s.stamp_ns for s in steps] == [T0 + k * 100 * MS for k in (1, 2, 3)]
+    np.testing.assert_allclose([s.pose[0] for s in steps], [0.1, 0.2, 0.3], atol=1e-12)
+    np.testing.assert_array_equal(np.array([s.pose for s in steps]), np.array(seen))
+
+
+def test_the_odometry_buffer_is_bounded_without_feature_sets():
+    fe = SlamFrontend(frontend=FrontendParams(buffer_s=1.0))
+    for k in range(500):  # 50 s at 10 Hz, no scan
+        fe.add_odometry(T0 + k * 100 * MS, [0.01 * k, 0, 0])
+    first, last = fe.odometry_span
+    assert last == T0 + 499 * 100 * MS and last - first <= 1100 * MS
+    assert fe.add_features(corners(T0 + 10_000 * MS)) == []  # older than the buffer
+    assert fe.events['out_of_order'] == 1
+    (step,) = fe.add_features(corners(T0 + 49_850 * MS))
+    np.testing.assert_allclose(step.odometry, [4.985, 0, 0], atol=1e-9)
