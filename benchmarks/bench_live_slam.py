@@ -109,7 +109,8 @@ def main() -> int:
                    str(out / 'truth.tum')], env=env, stdout=emu_log, stderr=subprocess.STDOUT))
         time.sleep(2.0)
         procs.append(subprocess.Popen(
-            cli + ['pipeline', 'slam', '--set', f'base_driver.port={base_link}'] + laser_set,
+            cli + ['pipeline', 'slam', '--set', f'base_driver.port={base_link}',
+                   '--set', 'ekf_slam.odometry.model=simulator'] + laser_set,
             env=env, stdout=log, stderr=subprocess.STDOUT))
         started = time.monotonic()
         try:

@@ -228,6 +228,9 @@ class DeviceServer:
             self.tcp_port = listener.getsockname()[1]
 
     def _close_endpoints(self) -> None:
+        # the link goes first: a driver that sees the port break must not find it still there
+        if self.link is not None and os.path.islink(self.link):
+            os.unlink(self.link)
         for fd in (self._master, self._slave):
             if fd is not None:
                 try:
@@ -239,8 +242,6 @@ class DeviceServer:
             if sock is not None:
                 sock.close()
         self._client = self._listener = None
-        if self.link is not None and os.path.islink(self.link):
-            os.unlink(self.link)
         self.device.disconnected()
 
     @property
