@@ -1,0 +1,215 @@
+"""Image lines by the Random Window Randomized Hough Transform (self-localization chapter §5.2).
+
+Algorithm 2 of the chapter (after Kälviäinen et al. 1994), on a Canny edge image
+(:func:`landmark_nav.vision.image_lines.canny_edges`):
+
+1. ``D`` <- all edge points;
+2. ``d_i`` <- a random point of ``D``;
+3. ``m`` <- a random window size, ``m_min <= m <= m_max``;
+4. ``W`` <- the edge points of the ``m x m`` neighbourhood of ``d_i``;
+5-7. RHT on ``W``, ``R`` times: two random points of ``W`` give one line ``(rho, theta)``
+   that votes for one accumulator cell;
+8-11. if the best cell has ``>= threshold`` votes its parameters are a detected line,
+   otherwise go to 2.
+
+The chapter gives no more; our completions, each a field of :class:`RWRHTParams`:
+
+* the ``R`` point pairs of a window are drawn at once (vectorised); a pair closer than
+  ``min_pair_px`` is not drawn twice but skipped (its angle is too uncertain); the
+  accumulator is in window-centred coordinates so its ``rho`` bins do not stretch with the
+  distance from the image origin;
+* a detected line is completed as in the RHT: its edge points (within ``band_px`` of the
+  line, anywhere in ``D``) are split into runs at gaps wider than ``max_gap_px``; the run
+  holding the window's points is refitted by total least squares (twice, the second time
+  with the band around the refitted line), becomes a segment, and its points leave ``D``;
+* the search stops after ``max_failures`` windows in a row without a line, when ``D`` has
+  fewer than ``threshold`` points, or after ``max_lines`` lines.
+
+Randomness comes only from the ``rng`` passed in (deterministic per seed).
+
+:func:`detect_model_lines` offers the line sources of the monocular localizer behind one
+name: ``'rwrht'`` (this module), and ``'hough_p'``, ``'lsd'``, ``'segmented_hough'`` of
+:mod:`.image_lines` as in-run references.
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Optional
+
+from landmark_nav.vision.image_lines import (CannyParams, canny_edges, detect_lines,
+                                             ImageLines, LineParams, METHODS, to_gray)
+import numpy as np
+
+MODEL_LINE_METHODS = ('rwrht',) + METHODS
+
+
+@dataclass(frozen=True)
+class RWRHTParams:
+    """Parameters of :func:`rwrht` (see the module docstring).
+
+    Attributes:
+        window_min: m_min, smallest window side [px] (odd).
+        window_max: m_max, largest window side [px].
+        trials: R, point pairs drawn per window.
+        threshold: votes of the best cell to accept a line (out of ``trials``).
+        theta_bin_deg: accumulator bin of the line normal angle [deg].
+        rho_bin_px: accumulator bin of the line distance from the window centre [px].
+        min_pair_px: pairs of points closer than this [px] do not vote.
+        band_px: edge points within this distance [px] of a detected line belong to it.
+        max_gap_px: a segment is split at gaps wider than this [px] along the line.
+        min_length_px: shorter segments are dropped (their points still leave D).
+        max_failures: windows in a row without a line before the search stops.
+        max_lines: at most this many lines per image.
+    """
+
+    window_min: int = 9
+    window_max: int = 25
+    trials: int = 24
+    threshold: int = 6
+    theta_bin_deg: float = 3.0
+    rho_bin_px: float = 1.0
+    min_pair_px: float = 3.0
+    band_px: float = 1.5
+    max_gap_px: float = 4.0
+    min_length_px: float = 12.0
+    max_failures: int = 150
+    max_lines: int = 80
+
+
+def _tls(x: np.ndarray, y: np.ndarray) -> tuple:
+    """Centroid and unit direction of the total-least-squares line through the points."""
+    cx, cy = x.mean(), y.mean()
+    dx, dy = x - cx, y - cy
+    sxx, syy, sxy = (dx * dx).mean(), (dy * dy).mean(), (dx * dy).mean()
+    a = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    return cx, cy, math.cos(a), math.sin(a)
+
+
+def _support(xs: np.ndarray, ys: np.ndarray, alive: np.ndarray, cx: float, cy: float,
+             ux: float, uy: float, seed_t: float, p: RWRHTParams) -> np.ndarray:
+    """Indices of the alive points of the run along the line that contains ``seed_t``."""
+    idx = np.nonzero(alive)[0]
+    dx, dy = xs[idx] - cx, ys[idx] - cy
+    near = np.abs(-uy * dx + ux * dy) <= p.band_px
+    idx = idx[near]
+    if idx.size == 0:
+        return idx
+    t = (xs[idx] - cx) * ux + (ys[idx] - cy) * uy
+    order = np.argsort(t)
+    idx, t = idx[order], t[order]
+    cut = np.nonzero(np.diff(t) > p.max_gap_px)[0]
+    starts = np.concatenate([[0], cut + 1])
+    ends = np.concatenate([cut + 1, [t.size]])
+    k = int(np.searchsorted(t[starts], seed_t, side='right')) - 1
+    k = min(max(k, 0), starts.size - 1)
+    return idx[starts[k]:ends[k]]
+
+
+def rwrht(edges: np.ndarray, params: RWRHTParams = RWRHTParams(),
+          rng: Optional[np.random.Generator] = None) -> ImageLines:
+    """Lines of an edge image by the Random Window RHT (Algorithm 2).
+
+    Args:
+        edges: (H, W) edge image, non-zero on edge pixels.
+        params: see :class:`RWRHTParams`.
+        rng: random generator (default: seeded with 0, so repeatable).
+
+    Returns:
+        Segments with their supporting edge-pixel counts as weights.
+    """
+    p = params
+    edges = np.asarray(edges)
+    if edges.ndim != 2:
+        raise ValueError(f'edge image must be 2-D; got shape {edges.shape}')
+    if not 3 <= p.window_min <= p.window_max:
+        raise ValueError(f'need 3 <= window_min <= window_max; got {p.window_min}, '
+                         f'{p.window_max}')
+    rng = np.random.default_rng(0) if rng is None else rng
+    h, w = edges.shape
+    ys_i, xs_i = np.nonzero(edges)                          # 1: D
+    xs, ys = xs_i.astype(float), ys_i.astype(float)
+    n = xs.size
+    alive = np.ones(n, dtype=bool)
+    index_img = np.full((h, w), -1, dtype=np.int64)
+    index_img[ys_i, xs_i] = np.arange(n)
+    n_theta = int(round(180.0 / p.theta_bin_deg))
+    segs, weights = [], []
+    failures = 0
+    n_alive = n
+    while failures < p.max_failures and n_alive >= p.threshold and len(segs) < p.max_lines:
+        pick = np.nonzero(alive)[0]
+        d = pick[rng.integers(pick.size)]                    # 2: d_i
+        m = int(rng.integers(p.window_min // 2, p.window_max // 2 + 1))   # 3: half of m
+        x0, y0 = int(xs_i[d]), int(ys_i[d])
+        win = index_img[max(0, y0 - m):y0 + m + 1, max(0, x0 - m):x0 + m + 1]
+        wi = win[win >= 0]
+        wi = wi[alive[wi]]                                   # 4: W
+        if wi.size < p.threshold:
+            failures += 1
+            continue
+        a = wi[rng.integers(wi.size, size=p.trials)]        # 5-7: R pairs at once
+        b = wi[rng.integers(wi.size, size=p.trials)]
+        ddx, ddy = xs[b] - xs[a], ys[b] - ys[a]
+        ok = np.hypot(ddx, ddy) >= p.min_pair_px
+        if np.count_nonzero(ok) < p.threshold:
+            failures += 1
+            continue
+        a, ddx, ddy = a[ok], ddx[ok], ddy[ok]
+        theta = np.arctan2(ddx, -ddy) % math.pi              # line normal in [0, pi)
+        rho = (xs[a] - x0) * np.cos(theta) + (ys[a] - y0) * np.sin(theta)
+        tb = np.floor(theta / math.pi * n_theta).astype(np.int64) % n_theta
+        rb = np.floor(rho / p.rho_bin_px + 0.5).astype(np.int64)
+        cells, counts = np.unique(tb * 100003 + rb, return_counts=True)
+        best = int(np.argmax(counts))
+        if counts[best] < p.threshold:                       # 8: accumulator >= threshold?
+            failures += 1                                    # 11: goto 2
+            continue
+        voters = np.unique(np.concatenate([a, b[ok]])[np.concatenate(
+            [tb * 100003 + rb == cells[best]] * 2)])
+        # 9: the detected line; completed from all of D and refitted
+        cx, cy, ux, uy = _tls(xs[voters], ys[voters])
+        seed_t = (xs[d] - cx) * ux + (ys[d] - cy) * uy
+        sup = voters
+        for _ in range(2):
+            sup = _support(xs, ys, alive, cx, cy, ux, uy, seed_t, p)
+            if sup.size < 2:
+                break
+            cx, cy, ux, uy = _tls(xs[sup], ys[sup])
+            seed_t = (xs[d] - cx) * ux + (ys[d] - cy) * uy
+        if sup.size < p.threshold:
+            failures += 1
+            continue
+        alive[sup] = False
+        n_alive -= sup.size
+        t = (xs[sup] - cx) * ux + (ys[sup] - cy) * uy
+        if t.max() - t.min() >= p.min_length_px:
+            segs.append([cx + t.min() * ux, cy + t.min() * uy, cx + t.max() * ux,
+                         cy + t.max() * uy])
+            weights.append(float(sup.size))
+        failures = 0
+    return ImageLines(np.array(segs).reshape(-1, 4), np.array(weights))
+
+
+@dataclass(frozen=True)
+class ModelLineParams:
+    """Line sources of the monocular localizer: Canny + RWRHT, or a reference method."""
+
+    canny: CannyParams = field(default_factory=CannyParams)
+    rwrht: RWRHTParams = field(default_factory=RWRHTParams)
+    reference: LineParams = field(default_factory=LineParams)
+
+
+def detect_model_lines(image: np.ndarray, method: str = 'rwrht',
+                       params: ModelLineParams = ModelLineParams(),
+                       rng: Optional[np.random.Generator] = None) -> ImageLines:
+    """Return the line segments of an image by one of :data:`MODEL_LINE_METHODS`.
+
+    Raises:
+        ValueError: unknown method or unusable image.
+    """
+    if method not in MODEL_LINE_METHODS:
+        raise ValueError(f'unknown line method {method!r}; expected one of '
+                         f'{MODEL_LINE_METHODS}')
+    if method != 'rwrht':
+        return detect_lines(image, method, params.reference)
+    return rwrht(canny_edges(to_gray(image), params.canny), params.rwrht, rng)
