@@ -30,7 +30,7 @@ from typing import List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import wrap_angle
 from landmark_nav.localization.odometry import calibrate_control, control_from_poses
-from landmark_nav.monocular.localizer import (CHAPTER_START_COV, LOST, LocalizerParams,
+from landmark_nav.monocular.localizer import (CHAPTER_START_COV, LocalizerParams, LOST,
                                               ModelLocalizer)
 from landmark_nav.monocular.model import hallway_model, LineModel
 from landmark_nav.monocular.visibility import camera_pose, CameraMount, Intrinsics
@@ -141,7 +141,7 @@ class HallwayRun:
 
     def converged_after(self, pos_tol: float = 0.05, head_tol: float = math.radians(1.0)
                         ) -> float:
-        """True distance [m] travelled before the error stays within the tolerances."""
+        """Return the true distance [m] travelled before the error stays within the tolerances."""
         bad = (self.position_error > pos_tol) | (self.heading_error > head_tol)
         if not bad.any():
             return 0.0

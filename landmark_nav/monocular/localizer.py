@@ -14,8 +14,9 @@ projected model point lies on the image line and eq. 60 that the directions agre
 are two independent scalar conditions per pair, which we write in the line's Hough
 coordinates: ``z = h(i) - H(P M1, P M2)`` (eq. 64), so that ``z^ = 0`` (eq. 67),
 ``H = d z / d p = -J_H blockdiag(J_P, J_P)`` (eqs. 62, 64) and ``R = V`` (``dz/dh = I``, the
-image line covariance of :mod:`.matching`). All pairs of a frame form one stacked update
-(eqs. 69-71), relinearised ``iterations`` times (iterated EKF; 1 = the chapter's EKF).
+image line covariance of :mod:`.matching` plus the model's own). All pairs of a frame form
+one stacked update (eqs. 69-71), relinearised ``iterations`` times (iterated EKF; 1 = the
+chapter's EKF).
 
 Lost state: when fewer than ``min_matches`` pairs are found for longer than ``lost_after_s``
 of image time, the filter reports ``lost`` and inflates its covariance once by
@@ -30,13 +31,13 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
+from .matching import (align, align_cov, image_line_covariance, innovation, match_lines,
+                       Matches, MatchParams, predict_lines, PredictedLines)
+from .model import LineModel
+from .visibility import CameraMount, Intrinsics, visible_lines, VisibleLines
 from ..geometry import wrap_angle
 from ..localization.odometry import (motion_jacobians, motion_model, process_noise,
                                      ProcessNoise)
-from .matching import (align, image_line_covariance, innovation, match_lines, Matches,
-                       MatchParams, predict_lines, PredictedLines)
-from .model import LineModel
-from .visibility import CameraMount, Intrinsics, visible_lines, VisibleLines
 
 TRACKING = 'tracking'
 LOST = 'lost'
@@ -60,6 +61,7 @@ class LocalizerParams:
         lost_inflation: (3,) standard deviations [m, m, rad] added (as variances) to the
             covariance when the filter gets lost.
         recover_matches: pairs needed in one frame to leave the lost state.
+        model_sigma_m: std [m] of the model's end points (:func:`~.matching.predict_lines`).
         association_rounds: rounds of :meth:`ModelLocalizer.associate` (0 = plain gating
             and assignment at the prior).
     """
@@ -75,6 +77,7 @@ class LocalizerParams:
     lost_inflation: Tuple[float, float, float] = (0.15, 0.15, math.radians(5.0))
     recover_matches: int = 4
     association_rounds: int = 2
+    model_sigma_m: float = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,7 +172,7 @@ class ModelLocalizer:
         cov = self.cov if cov is None else cov
         vis = visible_lines(self.model, pose, self.mount, self.K, self.params.near,
                             self.params.far, min_length_px=self.params.min_line_px)
-        return predict_lines(vis, pose, cov, self.mount, self.K)
+        return predict_lines(vis, pose, cov, self.mount, self.K, self.params.model_sigma_m)
 
     def update(self, segments: np.ndarray, stamp_s: float) -> FrameResult:
         """Measurement update with the image line segments of one frame (eqs. 56-71).
@@ -228,7 +231,8 @@ class ModelLocalizer:
         2. every line is predicted again at the tentative pose with the reduced covariance
            and matched by :func:`~.matching.match_lines` (gate + one-to-one assignment);
            steps 1-2 repeat ``association_rounds`` times from the new pairs;
-        3. the final pairs, re-expressed at the prior's predicted lines, go to the update.
+        3. the final pairs, re-expressed at the prior's predicted lines and gated there
+           too, go to the update.
 
         Without unique pairs this is :func:`~.matching.match_lines` at the prior.
         """
@@ -243,7 +247,8 @@ class ModelLocalizer:
         M = len(pred)
         nu = innovation(np.broadcast_to(h_img[None], (M, seg.shape[0], 2)),
                         np.broadcast_to(pred.h[:, None], (M, seg.shape[0], 2)))
-        d2 = np.einsum('mni,mnij,mnj->mn', nu, np.linalg.inv(pred.cov[:, None] + V[None]), nu)
+        S = (pred.cov + pred.model_cov)[:, None] + V[None]
+        d2 = np.einsum('mni,mnij,mnj->mn', nu, np.linalg.inv(S), nu)
         gated = (d2 <= p.match.gate) & usable[None]
         unique = (gated.sum(axis=1) == 1)[:, None] & gated & (gated.sum(axis=0) == 1)[None]
         rows, cols = np.nonzero(unique)
@@ -252,7 +257,7 @@ class ModelLocalizer:
         edge_to_pred = {int(e): k for k, e in enumerate(pred.visible.index)}
         for _ in range(p.association_rounds):
             pairs = Matches(rows, cols, d2[rows, cols], align(h_img[cols], pred.h[rows]),
-                            V[cols])
+                            align_cov(V[cols], h_img[cols], pred.h[rows]))
             x1, P1 = self._corrected(pred, pairs)
             pr1 = self.predict_lines(x1, P1)
             m1 = match_lines(pr1, seg, p.match)
@@ -265,8 +270,12 @@ class ModelLocalizer:
             if not r_new:
                 return base
             rows, cols = np.array(r_new), np.array(c_new)
-        return Matches(rows, cols, d2[rows, cols], align(h_img[cols], pred.h[rows]), V[cols],
-                       m1.n_ambiguous)
+            ok = d2[rows, cols] <= p.match.gate                    # gated at the prior too
+            rows, cols = rows[ok], cols[ok]
+            if rows.size == 0:
+                return base
+        return Matches(rows, cols, d2[rows, cols], align(h_img[cols], pred.h[rows]),
+                       align_cov(V[cols], h_img[cols], pred.h[rows]), m1.n_ambiguous)
 
     def _correct(self, pred: PredictedLines, matches: Matches) -> None:
         """Apply the stacked update of :meth:`_corrected`."""
@@ -279,14 +288,15 @@ class ModelLocalizer:
         edges = pred.visible.index[matches.model]
         pts = pred.visible.points[matches.model]
         vis = VisibleLines(edges, pts, np.zeros((len(edges), 4)))
-        R = np.zeros((2 * len(matches), 2 * len(matches)))
-        for k in range(len(matches)):
-            R[2 * k:2 * k + 2, 2 * k:2 * k + 2] = matches.V[k]     # R = V (dz/dh = I)
         x = prior.copy()
         for _ in range(max(1, self.params.iterations)):
-            lin = predict_lines(vis, x, P, self.mount, self.K)
-            nu = np.column_stack([matches.h[:, 0] - lin.h[:, 0],
-                                  wrap_angle(matches.h[:, 1] - lin.h[:, 1])]).reshape(-1)
+            lin = predict_lines(vis, x, P, self.mount, self.K, self.params.model_sigma_m)
+            # the image lines in the orientation of the lines predicted at x (rho >= 0 fold)
+            nu = innovation(matches.h, lin.h).reshape(-1)
+            V = align_cov(matches.V, matches.h, lin.h) + lin.model_cov
+            R = np.zeros((2 * len(matches), 2 * len(matches)))
+            for k in range(len(matches)):
+                R[2 * k:2 * k + 2, 2 * k:2 * k + 2] = V[k]          # R = V (dz/dh = I)
             H = lin.H.reshape(-1, 3)                                # d h^ / dp = -dz/dp
             S = H @ P @ H.T + R
             K = np.linalg.solve(S, H @ P).T                        # eq. 69

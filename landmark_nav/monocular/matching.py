@@ -41,9 +41,9 @@ from typing import Tuple
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ..geometry import wrap_angle
 from .model import LineModel
 from .visibility import CameraMount, Intrinsics, projection_jacobian, VisibleLines
+from ..geometry import wrap_angle
 
 
 def hough(segments: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -84,6 +84,15 @@ def align(h_img: np.ndarray, h_ref: np.ndarray) -> np.ndarray:
     return h
 
 
+def align_cov(V: np.ndarray, h_img: np.ndarray, h_ref: np.ndarray) -> np.ndarray:
+    """Covariances (..., 2, 2) of image lines after :func:`align` (rho negated: cov negated)."""
+    opposite = np.cos(np.asarray(h_img)[..., 1] - np.asarray(h_ref)[..., 1]) < 0
+    out = np.array(V, dtype=float)
+    out[..., 0, 1] = np.where(opposite, -out[..., 0, 1], out[..., 0, 1])
+    out[..., 1, 0] = np.where(opposite, -out[..., 1, 0], out[..., 1, 0])
+    return out
+
+
 def innovation(h_img: np.ndarray, h_pred: np.ndarray) -> np.ndarray:
     """``h - h^`` (..., 2) with the image line aligned and the angle wrapped."""
     h = align(h_img, h_pred)
@@ -100,12 +109,15 @@ class PredictedLines:
         h: (M, 2) predicted ``(rho, gamma)``.
         H: (M, 2, 3) ``d(rho, gamma) / d(p_x, p_y, phi)`` = J_H blockdiag(J_P, J_P).
         cov: (M, 2, 2) Sigma_rho_gamma (eq. 65) for the pose covariance given.
+        model_cov: (M, 2, 2) covariance of ``h^`` from the model's own inaccuracy (end
+            points uncertain by ``model_sigma_m`` across the viewing ray), added to ``V``.
     """
 
     visible: VisibleLines
     h: np.ndarray
     H: np.ndarray
     cov: np.ndarray
+    model_cov: np.ndarray
 
     def __len__(self) -> int:
         """Return the number of predicted lines."""
@@ -113,12 +125,17 @@ class PredictedLines:
 
 
 def predict_lines(visible: VisibleLines, pose, pose_cov: np.ndarray, mount: CameraMount,
-                  K: Intrinsics) -> PredictedLines:
-    """Project visible model lines to Hough space with covariance (eqs. 62-65)."""
+                  K: Intrinsics, model_sigma_m: float = 0.0) -> PredictedLines:
+    """Project visible model lines to Hough space with covariance (eqs. 62-65).
+
+    ``model_sigma_m`` [m]: std of the model's end points (our addition: the drawn model
+    and the built hallway differ, and unmodelled lines such as door frames sit a few
+    centimetres from modelled ones); it enters as ``J_H diag((f sigma / Z)^2) J_H^T``.
+    """
     m = len(visible)
     if m == 0:
         return PredictedLines(visible, np.zeros((0, 2)), np.zeros((0, 2, 3)),
-                              np.zeros((0, 2, 2)))
+                              np.zeros((0, 2, 2)), np.zeros((0, 2, 2)))
     pts = visible.points.reshape(-1, 3)
     uv, J_P = projection_jacobian(pts, pose, mount, K)             # eq. 62
     seg = uv.reshape(m, 4)
@@ -126,7 +143,13 @@ def predict_lines(visible: VisibleLines, pose, pose_cov: np.ndarray, mount: Came
     J_PP = J_P.reshape(m, 4, 3)                                    # blockdiag(J_P1, J_P2) stacked
     H = J_H @ J_PP                                                 # (M, 2, 3)
     cov = H @ np.asarray(pose_cov, dtype=float) @ np.swapaxes(H, 1, 2)   # eq. 65
-    return PredictedLines(visible, h, H, cov)
+    from .visibility import world_to_camera
+    depth = np.maximum(world_to_camera(pts, pose, mount)[:, 2], 1e-3).reshape(m, 2)
+    sd = model_sigma_m * np.repeat(np.column_stack([K.fx / depth[:, 0], K.fy / depth[:, 0],
+                                                    K.fx / depth[:, 1], K.fy / depth[:, 1]]),
+                                   1, axis=0)
+    model_cov = (J_H * sd[:, None, :] ** 2) @ np.swapaxes(J_H, 1, 2)
+    return PredictedLines(visible, h, H, cov, model_cov)
 
 
 @dataclass(frozen=True)
@@ -146,7 +169,7 @@ class MatchParams:
     """
 
     gate: float = 9.21
-    sigma_px: float = 1.0
+    sigma_px: float = 1.5
     min_length_px: float = 15.0
     overlap_margin_px: float = 10.0
     ambiguity_deg: float = 3.0
@@ -161,8 +184,8 @@ class Matches:
         model: (K,) indices into the predicted lines.
         image: (K,) indices into the image lines.
         d2: (K,) squared Mahalanobis distances.
-        h: (K, 2) image ``(rho, gamma)`` aligned with the prediction.
-        V: (K, 2, 2) image line covariances.
+        h: (K, 2) image ``(rho, gamma)`` aligned with the prediction (:func:`align`).
+        V: (K, 2, 2) image line covariances, in the same (aligned) convention.
         n_ambiguous: model lines dropped as ambiguous.
     """
 
@@ -222,7 +245,7 @@ def match_lines(pred: PredictedLines, segments: np.ndarray,
     M, N = len(pred), seg.shape[0]
     nu = innovation(np.broadcast_to(h_img[None], (M, N, 2)),
                     np.broadcast_to(pred.h[:, None], (M, N, 2)))
-    S = pred.cov[:, None] + V[None]                               # (M, N, 2, 2)
+    S = (pred.cov + pred.model_cov)[:, None] + V[None]            # (M, N, 2, 2)
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
     det = np.where(det > 0, det, np.nan)
     d2 = (S[..., 1, 1] * nu[..., 0] ** 2 - 2 * S[..., 0, 1] * nu[..., 0] * nu[..., 1]
@@ -250,7 +273,8 @@ def match_lines(pred: PredictedLines, segments: np.ndarray,
     good = cost[r, c] < big
     r, c = r[good], c[good]
     h_al = align(h_img[c], pred.h[r])
-    return Matches(r.astype(np.int64), keep[c].astype(np.int64), d2[r, c], h_al, V[c], n_amb)
+    V_al = align_cov(V[c], h_img[c], pred.h[r])
+    return Matches(r.astype(np.int64), keep[c].astype(np.int64), d2[r, c], h_al, V_al, n_amb)
 
 
 def model_is_empty(model: LineModel) -> bool:

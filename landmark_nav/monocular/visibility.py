@@ -77,7 +77,7 @@ class Intrinsics:
 
     @classmethod
     def chapter(cls) -> 'Intrinsics':
-        """The chapter's calibrated SONY EVI-D31 at 320 x 240 (§3.2)."""
+        """Return the chapter's calibrated SONY EVI-D31 at 320 x 240 (§3.2)."""
         return cls(379.0, 379.0, 165.9, 140.0, 320, 240)
 
     @property
@@ -227,7 +227,8 @@ def visible_lines(model: LineModel, pose, mount: CameraMount, K: Intrinsics,
         pose: robot pose ``(p_x, p_y, phi)``.
         mount: camera mount.
         K: intrinsics.
-        near, far: frustum depth range [m] (the chapter's nearer / further planes).
+        near: nearest depth [m] (the chapter's nearer frustum plane).
+        far: furthest depth [m] (its further plane).
         tolerance: distance [m] below which a face hit counts as the midpoint itself.
         min_length_px: projected parts shorter than this are dropped.
     """

@@ -13,12 +13,13 @@ floor (normal up, z = 0)           95
 ceiling / lintel underside (down)  230 / 205
 walls facing +-y at the hallway    180
 doors (facing +-y, set back)       120
-niche sides and end walls (+-x)    150 / 200
+niche sides and end walls (+-x)    150 / 215
 =================================  ==========
 
 Optional clutter (:class:`SceneClutter`): people (two-sided 0.5 m x 1.7 m boards) walking
 along the hallway at their own speed, and unmodelled door frames. The photometry (exposure,
-gradient, noise) is set per frame by the caller (:mod:`landmark_nav.evaluation.model_localization`).
+gradient, noise) is set per frame by the caller
+(:mod:`landmark_nav.evaluation.model_localization`).
 """
 
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ def _face_grey(n: np.ndarray, centre: np.ndarray, half_width: float) -> float:
         return 230.0 if centre[2] > 2.3 else 205.0
     if abs(n[1]) > 0.9:
         return 120.0 if abs(centre[1]) > half_width + 0.05 else 180.0
-    return 150.0 if 0.5 < centre[0] < 21.0 else 200.0
+    return 150.0 if 0.5 < centre[0] < 21.0 else 215.0
 
 
 def model_planes(model: LineModel, seed: int, texel: float = TEXEL) -> List[Plane]:

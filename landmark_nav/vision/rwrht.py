@@ -19,8 +19,8 @@ The chapter gives no more; our completions, each a field of :class:`RWRHTParams`
   accumulator is in window-centred coordinates so its ``rho`` bins do not stretch with the
   distance from the image origin;
 * a detected line is completed as in the RHT: its edge points (within ``band_px`` of the
-  line, anywhere in ``D``) are split into runs at gaps wider than ``max_gap_px``; the run
-  holding the window's points is refitted by total least squares (twice, the second time
+  line, anywhere in ``D`` or taken by an earlier line, since crossing lines share pixels)
+  are split into runs at gaps wider than ``max_gap_px``; the run holding the window's points is refitted by total least squares (twice, the second time
   with the band around the refitted line), becomes a segment, and its points leave ``D``;
 * the search stops after ``max_failures`` windows in a row without a line, when ``D`` has
   fewer than ``threshold`` points, or after ``max_lines`` lines.
@@ -87,9 +87,13 @@ def _tls(x: np.ndarray, y: np.ndarray) -> tuple:
 
 def _support(xs: np.ndarray, ys: np.ndarray, alive: np.ndarray, cx: float, cy: float,
              ux: float, uy: float, seed_t: float, p: RWRHTParams) -> np.ndarray:
-    """Indices of the alive points of the run along the line that contains ``seed_t``."""
-    idx = np.nonzero(alive)[0]
-    dx, dy = xs[idx] - cx, ys[idx] - cy
+    """Indices of the points of the run along the line that contains ``seed_t``.
+
+    Points already taken by another line count for the run (crossing lines share pixels)
+    but are not returned.
+    """
+    idx = np.arange(xs.size)
+    dx, dy = xs - cx, ys - cy
     near = np.abs(-uy * dx + ux * dy) <= p.band_px
     idx = idx[near]
     if idx.size == 0:
@@ -102,7 +106,8 @@ def _support(xs: np.ndarray, ys: np.ndarray, alive: np.ndarray, cx: float, cy: f
     ends = np.concatenate([cut + 1, [t.size]])
     k = int(np.searchsorted(t[starts], seed_t, side='right')) - 1
     k = min(max(k, 0), starts.size - 1)
-    return idx[starts[k]:ends[k]]
+    run = idx[starts[k]:ends[k]]
+    return run[alive[run]]
 
 
 def rwrht(edges: np.ndarray, params: RWRHTParams = RWRHTParams(),
