@@ -1,4 +1,4 @@
-"""Monocular localization cores: line model, visibility, Hough matching, RWRHT, EKF (chapter §5)."""
+"""Monocular localization cores: line model, visibility, Hough matching, RWRHT, EKF (§5)."""
 
 import math
 

@@ -20,7 +20,8 @@ The chapter gives no more; our completions, each a field of :class:`RWRHTParams`
   distance from the image origin;
 * a detected line is completed as in the RHT: its edge points (within ``band_px`` of the
   line, anywhere in ``D`` or taken by an earlier line, since crossing lines share pixels)
-  are split into runs at gaps wider than ``max_gap_px``; the run holding the window's points is refitted by total least squares (twice, the second time
+  are split into runs at gaps wider than ``max_gap_px``; the run holding the window's
+  points is refitted by total least squares (twice, the second time
   with the band around the refitted line), becomes a segment, and its points leave ``D``;
 * the search stops after ``max_failures`` windows in a row without a line, when ``D`` has
   fewer than ``threshold`` points, or after ``max_lines`` lines.
@@ -36,7 +37,7 @@ from dataclasses import dataclass, field
 import math
 from typing import Optional
 
-from landmark_nav.vision.image_lines import (CannyParams, canny_edges, detect_lines,
+from landmark_nav.vision.image_lines import (canny_edges, CannyParams, detect_lines,
                                              ImageLines, LineParams, METHODS, to_gray)
 import numpy as np
 
@@ -87,7 +88,7 @@ def _tls(x: np.ndarray, y: np.ndarray) -> tuple:
 
 def _support(xs: np.ndarray, ys: np.ndarray, alive: np.ndarray, cx: float, cy: float,
              ux: float, uy: float, seed_t: float, p: RWRHTParams) -> np.ndarray:
-    """Indices of the points of the run along the line that contains ``seed_t``.
+    """Return the indices of the points of the run along the line that contains ``seed_t``.
 
     Points already taken by another line count for the run (crossing lines share pixels)
     but are not returned.
