@@ -223,6 +223,60 @@ def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
                       np.array(cols[9]))
 
 
+def write_hallway_bag(path, seed: int, duration_s: float,
+                      cfg: HallwayRunConfig = HallwayRunConfig(),
+                      model: Optional[LineModel] = None) -> int:
+    """Record the start of a rendered hallway run as a rosbag2 (MCAP) directory.
+
+    Topics: ``/odom`` (10 Hz, the drifting nominal odometry), ``/ground_truth/odom``,
+    ``/camera/camera_info`` and ``/camera/image_raw`` (mono8 at ``cfg.camera_rate``),
+    rendered as in :func:`run_hallway` (clutter, lighting, noise, ``cfg.cover``).
+
+    Returns:
+        The number of images written.
+    """
+    from landmark_nav.bag.writer import BagWriter
+    from landmark_nav.conversions import array_to_image, make_camera_info, make_odometry
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import CameraInfo, Image
+    model = hallway_model() if model is None else model
+    scen = run_scenario('hallway', seed, laser=None, sonar=None)
+    odo: List[OdometrySample] = scen.of_type(OdometrySample)
+    K = cfg.intrinsics
+    cam = CameraModel(K.width, K.height, K.K, np.zeros(5))
+    sim = CameraSimulator(cam, RenderOptions(supersample=cfg.supersample))
+    static = model_planes(model, seed) + (door_frame_planes(model)
+                                          if cfg.clutter.door_frames else [])
+    rng = np.random.default_rng(seed + 1000)
+    every = max(1, int(round(10.0 / cfg.camera_rate)))
+    t0 = odo[0].stamp_ns
+    n = 0
+    with BagWriter(path) as bag:
+        bag.add_topic('/odom', Odometry)
+        bag.add_topic('/ground_truth/odom', Odometry)
+        bag.add_topic('/camera/camera_info', CameraInfo)
+        bag.add_topic('/camera/image_raw', Image)
+        for i, sample in enumerate(odo):
+            stamp = sample.stamp_ns
+            t = (stamp - t0) / NS
+            if t > duration_s:
+                break
+            truth = scen.truth_at(stamp)
+            bag.write('/odom', stamp, make_odometry(stamp, 'odom', 'base_link', sample.pose))
+            bag.write('/ground_truth/odom', stamp,
+                      make_odometry(stamp, 'map', 'base_link', truth))
+            if i % every:
+                continue
+            covered = cfg.cover is not None and cfg.cover[0] <= t < cfg.cover[1]
+            R, c = camera_pose(truth, cfg.mount)
+            img = sim.render(scene_at(static, cfg.clutter, t, 21.5, seed), R, c,
+                             _photometry(t, cfg, covered), rng)
+            bag.write('/camera/camera_info', stamp, make_camera_info(cam, stamp, 'camera'))
+            bag.write('/camera/image_raw', stamp, array_to_image(img, 'mono8', stamp, 'camera'))
+            n += 1
+    return n
+
+
 def summarize(run: HallwayRun) -> dict:
     """Return the figures of one run."""
     bound = chi2.ppf(0.95, 3)

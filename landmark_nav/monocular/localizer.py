@@ -135,8 +135,8 @@ class ModelLocalizer:
     def reset(self, pose: Sequence[float], cov: np.ndarray, stamp_s: Optional[float] = None
               ) -> None:
         """Set the pose and covariance (initial pose or RViz ``initialpose``)."""
-        p = np.asarray(pose, dtype=float).reshape(3)
-        c = np.asarray(cov, dtype=float).reshape(3, 3)
+        p = np.array(pose, dtype=float).reshape(3)
+        c = np.array(cov, dtype=float).reshape(3, 3)
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(c))):
             raise ValueError('initial pose and covariance must be finite')
         if np.any(np.linalg.eigvalsh(0.5 * (c + c.T)) <= 0):
@@ -199,7 +199,7 @@ class ModelLocalizer:
             matches = self.associate(pred, segments)
             need = p.recover_matches if self.status == LOST else p.min_matches
             if len(matches) >= need:
-                self._correct(pred, matches)
+                matches = self._correct(pred, matches)
                 updated = True
             elif len(segments) == 0:
                 problem = 'no lines in the image'
@@ -258,7 +258,7 @@ class ModelLocalizer:
         for _ in range(p.association_rounds):
             pairs = Matches(rows, cols, d2[rows, cols], align(h_img[cols], pred.h[rows]),
                             align_cov(V[cols], h_img[cols], pred.h[rows]))
-            x1, P1 = self._corrected(pred, pairs)
+            x1, P1, _ = self._robust(pred, pairs)
             pr1 = self.predict_lines(x1, P1)
             m1 = match_lines(pr1, seg, p.match)
             r_new, c_new = [], []
@@ -277,9 +277,37 @@ class ModelLocalizer:
         return Matches(rows, cols, d2[rows, cols], align(h_img[cols], pred.h[rows]),
                        align_cov(V[cols], h_img[cols], pred.h[rows]), m1.n_ambiguous)
 
-    def _correct(self, pred: PredictedLines, matches: Matches) -> None:
-        """Apply the stacked update of :meth:`_corrected`."""
-        self.pose, self.cov = self._corrected(pred, matches)
+    def _correct(self, pred: PredictedLines, matches: Matches) -> Matches:
+        """Apply the stacked update of :meth:`_robust`; return the pairs kept."""
+        self.pose, self.cov, kept = self._robust(pred, matches)
+        return kept
+
+    def _robust(self, pred: PredictedLines, matches: Matches) -> Tuple[np.ndarray, np.ndarray,
+                                                                       Matches]:
+        """Stacked update that drops pairs the updated pose does not explain.
+
+        After each update (:meth:`_corrected`) the pair with the largest residual
+        ``d^2 = nu^T (V + model_cov)^-1 nu`` at the new pose is dropped when ``d^2``
+        exceeds the gate, and the update is redone from the prior (at most half the
+        pairs are dropped). A wrong pair that passed the gates at a loose prior is thus
+        removed once the other pairs have pinned the pose down.
+        """
+        gate = self.params.match.gate
+        keep = np.arange(len(matches))
+        while True:
+            sub = _subset(matches, keep)
+            x, P = self._corrected(pred, sub)
+            vis = VisibleLines(pred.visible.index[sub.model], pred.visible.points[sub.model],
+                               np.zeros((len(sub), 4)))
+            lin = predict_lines(vis, x, P, self.mount, self.K, self.params.model_sigma_m)
+            nu = innovation(sub.h, lin.h)
+            S = align_cov(sub.V, sub.h, lin.h) + lin.model_cov
+            d2 = np.einsum('ki,kij,kj->k', nu, np.linalg.inv(S), nu)
+            worst = int(np.argmax(d2))
+            if d2[worst] <= gate or len(keep) <= max(self.params.min_matches,
+                                                      len(matches) // 2):
+                return x, P, sub
+            keep = np.delete(keep, worst)
 
     def _corrected(self, pred: PredictedLines, matches: Matches) -> Tuple[np.ndarray,
                                                                           np.ndarray]:
@@ -308,3 +336,9 @@ class ModelLocalizer:
         I_KH = np.eye(3) - K @ H
         cov = I_KH @ P @ I_KH.T + K @ R @ K.T                       # eq. 71 (Joseph form)
         return x, 0.5 * (cov + cov.T)
+
+
+def _subset(m: Matches, keep: np.ndarray) -> Matches:
+    """Return the pairs ``keep`` of ``m``."""
+    return Matches(m.model[keep], m.image[keep], m.d2[keep], m.h[keep], m.V[keep],
+                   m.n_ambiguous)
