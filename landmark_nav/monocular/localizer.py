@@ -304,8 +304,8 @@ class ModelLocalizer:
             S = align_cov(sub.V, sub.h, lin.h) + lin.model_cov
             d2 = np.einsum('ki,kij,kj->k', nu, np.linalg.inv(S), nu)
             worst = int(np.argmax(d2))
-            if d2[worst] <= gate or len(keep) <= max(self.params.min_matches,
-                                                      len(matches) // 2):
+            floor = max(self.params.min_matches, len(matches) // 2)
+            if d2[worst] <= gate or len(keep) <= floor:
                 return x, P, sub
             keep = np.delete(keep, worst)
 
