@@ -4,7 +4,8 @@ Algorithm 2 of the chapter (after Kälviäinen et al. 1994), on a Canny edge ima
 (:func:`landmark_nav.vision.image_lines.canny_edges`):
 
 1. ``D`` <- all edge points;
-2. ``d_i`` <- a random point of ``D``;
+2. ``d_i`` <- a random point of ``D`` (here: the next point of a random permutation of the
+   edge points that is still in ``D``);
 3. ``m`` <- a random window size, ``m_min <= m <= m_max``;
 4. ``W`` <- the edge points of the ``m x m`` neighbourhood of ``d_i``;
 5-7. RHT on ``W``, ``R`` times: two random points of ``W`` give one line ``(rho, theta)``
@@ -14,7 +15,9 @@ Algorithm 2 of the chapter (after Kälviäinen et al. 1994), on a Canny edge ima
 
 The chapter gives no more; our completions, each a field of :class:`RWRHTParams`:
 
-* the ``R`` point pairs of a window are drawn at once (vectorised); a pair closer than
+* ``batch`` windows are drawn and voted at once (vectorised), then taken in order as the
+  sequential algorithm would (a window whose voters were taken by a line found earlier in
+  the batch is a failure); a pair closer than
   ``min_pair_px`` is not drawn twice but skipped (its angle is too uncertain); the
   accumulator is in window-centred coordinates so its ``rho`` bins do not stretch with the
   distance from the image origin;
@@ -33,6 +36,7 @@ name: ``'rwrht'`` (this module), and ``'hough_p'``, ``'lsd'``, ``'segmented_houg
 :mod:`.image_lines` as in-run references.
 """
 
+from collections import Counter
 from dataclasses import dataclass, field
 import math
 from typing import Optional
@@ -61,6 +65,7 @@ class RWRHTParams:
         min_length_px: shorter segments are dropped (their points still leave D).
         max_failures: windows in a row without a line before the search stops.
         max_lines: at most this many lines per image.
+        batch: windows whose random trials are drawn and voted at once (speed only).
     """
 
     window_min: int = 9
@@ -73,8 +78,9 @@ class RWRHTParams:
     band_px: float = 1.5
     max_gap_px: float = 4.0
     min_length_px: float = 12.0
-    max_failures: int = 150
+    max_failures: int = 60
     max_lines: int = 80
+    batch: int = 32
 
 
 def _tls(x: np.ndarray, y: np.ndarray) -> tuple:
@@ -86,17 +92,31 @@ def _tls(x: np.ndarray, y: np.ndarray) -> tuple:
     return cx, cy, math.cos(a), math.sin(a)
 
 
-def _support(xs: np.ndarray, ys: np.ndarray, alive: np.ndarray, cx: float, cy: float,
-             ux: float, uy: float, seed_t: float, p: RWRHTParams) -> np.ndarray:
-    """Return the indices of the points of the run along the line that contains ``seed_t``.
+def _support(xs: np.ndarray, ys: np.ndarray, alive: np.ndarray, index_img: np.ndarray,
+             cx: float, cy: float, ux: float, uy: float, seed_t: float,
+             p: RWRHTParams) -> np.ndarray:
+    """Return the indices of the alive points of the run along the line that holds ``seed_t``.
 
+    The edge points within ``band_px`` of the line are looked up in ``index_img`` along
+    the line (half-pixel steps across the whole image), not searched among all points.
     Points already taken by another line count for the run (crossing lines share pixels)
     but are not returned.
     """
-    idx = np.arange(xs.size)
-    dx, dy = xs - cx, ys - cy
-    near = np.abs(-uy * dx + ux * dy) <= p.band_px
-    idx = idx[near]
+    h, w = index_img.shape
+    lo, hi = -math.hypot(h, w), math.hypot(h, w)      # t range inside the image (slabs)
+    for c, u, size in ((cx, ux, w), (cy, uy, h)):
+        if abs(u) > 1e-12:
+            ta, tb = (-1.0 - c) / u, (size - c) / u
+            lo, hi = max(lo, min(ta, tb)), min(hi, max(ta, tb))
+    t = np.arange(lo - 2.0, hi + 2.0, 0.5)
+    off = np.arange(-math.ceil(p.band_px), math.ceil(p.band_px) + 0.5, 0.5)
+    px = np.rint(cx + t[:, None] * ux - off[None, :] * uy).ravel().astype(np.int64)
+    py = np.rint(cy + t[:, None] * uy + off[None, :] * ux).ravel().astype(np.int64)
+    inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
+    idx = index_img[py[inside], px[inside]]
+    idx = np.unique(idx[idx >= 0])
+    dx, dy = xs[idx] - cx, ys[idx] - cy
+    idx = idx[np.abs(-uy * dx + ux * dy) <= p.band_px]
     if idx.size == 0:
         return idx
     t = (xs[idx] - cx) * ux + (ys[idx] - cy) * uy
@@ -142,57 +162,97 @@ def rwrht(edges: np.ndarray, params: RWRHTParams = RWRHTParams(),
     segs, weights = [], []
     failures = 0
     n_alive = n
+    perm, ptr = rng.permutation(n), 0
+    half_lo, half_hi = p.window_min // 2, p.window_max // 2
+    R = p.trials
     while failures < p.max_failures and n_alive >= p.threshold and len(segs) < p.max_lines:
-        pick = np.nonzero(alive)[0]
-        d = pick[rng.integers(pick.size)]                    # 2: d_i
-        m = int(rng.integers(p.window_min // 2, p.window_max // 2 + 1))   # 3: half of m
-        x0, y0 = int(xs_i[d]), int(ys_i[d])
-        win = index_img[max(0, y0 - m):y0 + m + 1, max(0, x0 - m):x0 + m + 1]
-        wi = win[win >= 0]
-        wi = wi[alive[wi]]                                   # 4: W
-        if wi.size < p.threshold:
-            failures += 1
-            continue
-        a = wi[rng.integers(wi.size, size=p.trials)]        # 5-7: R pairs at once
-        b = wi[rng.integers(wi.size, size=p.trials)]
-        ddx, ddy = xs[b] - xs[a], ys[b] - ys[a]
-        ok = np.hypot(ddx, ddy) >= p.min_pair_px
-        if np.count_nonzero(ok) < p.threshold:
-            failures += 1
-            continue
-        a, ddx, ddy = a[ok], ddx[ok], ddy[ok]
-        theta = np.arctan2(ddx, -ddy) % math.pi              # line normal in [0, pi)
-        rho = (xs[a] - x0) * np.cos(theta) + (ys[a] - y0) * np.sin(theta)
-        tb = np.floor(theta / math.pi * n_theta).astype(np.int64) % n_theta
-        rb = np.floor(rho / p.rho_bin_px + 0.5).astype(np.int64)
-        cells, counts = np.unique(tb * 100003 + rb, return_counts=True)
-        best = int(np.argmax(counts))
-        if counts[best] < p.threshold:                       # 8: accumulator >= threshold?
-            failures += 1                                    # 11: goto 2
-            continue
-        voters = np.unique(np.concatenate([a, b[ok]])[np.concatenate(
-            [tb * 100003 + rb == cells[best]] * 2)])
-        # 9: the detected line; completed from all of D and refitted
-        cx, cy, ux, uy = _tls(xs[voters], ys[voters])
-        seed_t = (xs[d] - cx) * ux + (ys[d] - cy) * uy
-        sup = voters
-        for _ in range(2):
-            sup = _support(xs, ys, alive, cx, cy, ux, uy, seed_t, p)
-            if sup.size < 2:
-                break
-            cx, cy, ux, uy = _tls(xs[sup], ys[sup])
+        # steps 2-8 for a batch of windows at once (vectorised); the windows are then taken
+        # in order, as the sequential algorithm would, skipping any whose line lost its
+        # points to a line found earlier in the batch
+        B = int(min(p.batch, max(1, p.max_failures - failures)))
+        seeds = []
+        while len(seeds) < B:                               # 2: d_i, random alive points
+            if ptr == n:
+                if not alive[perm].any():
+                    break
+                perm, ptr = rng.permutation(n), 0
+            d = perm[ptr]
+            ptr += 1
+            if alive[d]:
+                seeds.append(d)
+        if not seeds:
+            break
+        B = len(seeds)
+        U = rng.random((B, 2 * R + 1))
+        pa, pb, wid, x0s, y0s = [], [], [], [], []
+        for k, d in enumerate(seeds):
+            m = half_lo + int(U[k, 0] * (half_hi - half_lo + 1))   # 3: half the size m
+            x0, y0 = int(xs_i[d]), int(ys_i[d])
+            win = index_img[max(0, y0 - m):y0 + m + 1, max(0, x0 - m):x0 + m + 1]
+            wi = win[win >= 0]
+            wi = wi[alive[wi]]                               # 4: W
+            if wi.size < p.threshold:
+                continue
+            pick = (U[k, 1:] * wi.size).astype(np.int64)     # 5-7: R point pairs
+            pa.append(wi[pick[:R]])
+            pb.append(wi[pick[R:]])
+            wid.append(k)
+            x0s.append(x0)
+            y0s.append(y0)
+        best_cell = {}
+        if wid:
+            a, b = np.concatenate(pa), np.concatenate(pb)
+            win_of = np.repeat(np.arange(len(wid)), R)
+            ddx, ddy = xs[b] - xs[a], ys[b] - ys[a]
+            ok = ddx * ddx + ddy * ddy >= p.min_pair_px ** 2
+            theta = np.arctan2(ddx, -ddy) % math.pi          # line normal in [0, pi)
+            ox = np.array(x0s, float)[win_of]
+            oy = np.array(y0s, float)[win_of]
+            rho = (xs[a] - ox) * np.cos(theta) + (ys[a] - oy) * np.sin(theta)
+            tb = (theta * (n_theta / math.pi)).astype(np.int64) % n_theta
+            rb = np.floor(rho / p.rho_bin_px + 0.5).astype(np.int64) + 50000
+            code = (win_of * n_theta + tb) * 100003 + rb
+            cells, inv, counts = np.unique(code[ok], return_inverse=True, return_counts=True)
+            cw = cells // (n_theta * 100003)                 # window of each cell
+            for j in np.nonzero(counts >= p.threshold)[0]:   # 8: accumulator >= threshold
+                w_ = int(cw[j])
+                if w_ not in best_cell or counts[j] > counts[best_cell[w_]]:
+                    best_cell[w_] = j
+        for w_ in range(len(seeds)):
+            j = best_cell.get(wid.index(w_) if w_ in wid else -1)
+            if j is None:
+                failures += 1                                # 11: goto 2
+                continue
+            sel = np.nonzero(ok)[0][inv == j]
+            voters = np.unique(np.concatenate([a[sel], b[sel]]))
+            voters = voters[alive[voters]]
+            d = seeds[w_]
+            if voters.size < 2 or not alive[d]:
+                failures += 1
+                continue
+            # 9: the detected line; completed from all of D and refitted
+            cx, cy, ux, uy = _tls(xs[voters], ys[voters])
             seed_t = (xs[d] - cx) * ux + (ys[d] - cy) * uy
-        if sup.size < p.threshold:
-            failures += 1
-            continue
-        alive[sup] = False
-        n_alive -= sup.size
-        t = (xs[sup] - cx) * ux + (ys[sup] - cy) * uy
-        if t.max() - t.min() >= p.min_length_px:
-            segs.append([cx + t.min() * ux, cy + t.min() * uy, cx + t.max() * ux,
-                         cy + t.max() * uy])
-            weights.append(float(sup.size))
-        failures = 0
+            sup = voters
+            for _ in range(2):
+                sup = _support(xs, ys, alive, index_img, cx, cy, ux, uy, seed_t, p)
+                if sup.size < 2:
+                    break
+                cx, cy, ux, uy = _tls(xs[sup], ys[sup])
+                seed_t = (xs[d] - cx) * ux + (ys[d] - cy) * uy
+            if sup.size < p.threshold:
+                failures += 1
+                continue
+            alive[sup] = False
+            n_alive -= sup.size
+            t = (xs[sup] - cx) * ux + (ys[sup] - cy) * uy
+            if t.max() - t.min() >= p.min_length_px:
+                segs.append([cx + t.min() * ux, cy + t.min() * uy, cx + t.max() * ux,
+                             cy + t.max() * uy])
+                weights.append(float(sup.size))
+            failures = 0
+            if len(segs) >= p.max_lines:
+                break
     return ImageLines(np.array(segs).reshape(-1, 4), np.array(weights))
 
 
