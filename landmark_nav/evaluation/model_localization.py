@@ -319,9 +319,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     print('seed ' + ' '.join(f'{k[:13]:>13}' for k in keys))
     table = []
     for seed in range(a.first_seed, a.first_seed + a.seeds):
-        s = summarize(run_hallway(seed, cfg))
+        run = run_hallway(seed, cfg)
+        s = summarize(run)
         table.append([s[k] for k in keys])
         print(f'{seed:4d} ' + ' '.join(f'{s[k]:13.3f}' for k in keys), flush=True)
+        episodes = ', '.join(f'{a:.1f}-{b:.1f} s' for a, b in run.lost_episodes())
+        print(f'     lost: {episodes or "never"}', flush=True)
     arr = np.array(table, dtype=float)
     print('mean ' + ' '.join(f'{v:13.3f}' for v in arr.mean(axis=0)))
     worst = [arr[:, j].min() if k.startswith('nees') else arr[:, j].max()
