@@ -45,7 +45,7 @@ def main() -> None:
     K = Intrinsics.chapter()
     mount = CameraMount()
     sim = CameraSimulator(CameraModel(K.width, K.height, K.K, np.zeros(5)),
-                          RenderOptions(supersample=1))
+                          RenderOptions(supersample=4))
     static = model_planes(model, a.seed) + door_frame_planes(model)
     rng = np.random.default_rng(a.seed)
     frames = []

@@ -62,7 +62,8 @@ class HallwayRunConfig:
         offset: fixed initial error ``(dx, dy, dphi)`` instead of a draw from ``init_cov``.
         init_cov: the initial covariance given to the filter (default: the chapter's).
         max_frames: stop after this many frames (0: the whole run).
-        supersample: renderer supersampling.
+        supersample: renderer supersampling (4: edges within 0.05 px, see
+            :func:`~landmark_nav.sim.model_scene.model_planes`).
         localizer: filter parameters.
     """
 
@@ -77,7 +78,7 @@ class HallwayRunConfig:
     offset: Optional[Tuple[float, float, float]] = None
     init_cov: Tuple[float, ...] = tuple(CHAPTER_START_COV.ravel())
     max_frames: int = 0
-    supersample: int = 1
+    supersample: int = 4
     localizer: LocalizerParams = field(default_factory=LocalizerParams)
 
 
