@@ -62,6 +62,8 @@ class LocalizerParams:
             covariance when the filter gets lost.
         recover_matches: pairs needed in one frame to leave the lost state.
         model_sigma_m: std [m] of the model's end points (:func:`~.matching.predict_lines`).
+        heading_hypotheses: heading hypotheses per side tried in the first frame after a
+            reset and when lost (:meth:`ModelLocalizer._hypotheses`; 0 = off).
         association_rounds: rounds of :meth:`ModelLocalizer.associate` (0 = plain gating
             and assignment at the prior).
     """
@@ -77,6 +79,7 @@ class LocalizerParams:
     lost_inflation: Tuple[float, float, float] = (0.15, 0.15, math.radians(5.0))
     recover_matches: int = 4
     association_rounds: int = 2
+    heading_hypotheses: int = 2
     model_sigma_m: float = 0.02
 
 
@@ -145,6 +148,7 @@ class ModelLocalizer:
         self.pose, self.cov = p, 0.5 * (c + c.T)
         self.status = TRACKING
         self.initialised = True
+        self._fresh = True
         self._last_update_s = stamp_s
 
     def set_intrinsics(self, intrinsics: Intrinsics) -> None:
@@ -195,12 +199,20 @@ class ModelLocalizer:
         pred = matches = None
         updated = False
         if not problem:
-            pred = self.predict_lines()
-            matches = self.associate(pred, segments)
             need = p.recover_matches if self.status == LOST else p.min_matches
-            if len(matches) >= need:
-                matches = self._correct(pred, matches)
-                updated = True
+            if (self._fresh or self.status == LOST) and p.heading_hypotheses > 0:
+                pred, matches, best = self._hypotheses(segments)
+                if best is not None and len(matches) >= need:
+                    self.pose, self.cov = best
+                    updated = True
+            else:
+                pred = self.predict_lines()
+                matches = self.associate(pred, segments)
+                if len(matches) >= need:
+                    matches = self._correct(pred, matches)
+                    updated = True
+            if updated:
+                self._fresh = False
             elif len(segments) == 0:
                 problem = 'no lines in the image'
         became_lost = recovered = False
@@ -215,6 +227,44 @@ class ModelLocalizer:
             became_lost = True
         return FrameResult(self.pose.copy(), self.cov.copy(), self.status, pred, matches,
                            updated, became_lost, recovered, problem)
+
+    def _hypotheses(self, segments: np.ndarray) -> tuple:
+        """Association and update from several heading hypotheses (first frame, lost).
+
+        A wrong association in the first frame after a reset, or when leaving the lost
+        state, is locked in by the covariance it leaves. The prior is therefore tried at
+        the headings ``phi + k sigma_phi`` (``|k| <= heading_hypotheses``) with the heading
+        variance of each reduced to ``(sigma_phi / 2)^2``; the hypothesis whose update
+        keeps the most pairs wins (ties: the smaller sum of d^2).
+
+        Returns:
+            ``(predicted lines, pairs, (pose, cov) or None)`` of the winner.
+        """
+        pose0, cov0 = self.pose.copy(), self.cov.copy()
+        sd = math.sqrt(cov0[2, 2])
+        best = None
+        try:
+            for k in range(-self.params.heading_hypotheses, self.params.heading_hypotheses + 1):
+                x = pose0.copy()
+                x[2] = wrap_angle(x[2] + k * sd)
+                P = cov0.copy()
+                P[2, :] *= 0.5
+                P[:, 2] *= 0.5
+                self.pose, self.cov = x, P
+                pred = self.predict_lines()
+                matches = self.associate(pred, segments)
+                if len(matches) == 0:
+                    key = (0, 0.0)
+                    result = (pred, matches, None)
+                else:
+                    xk, Pk, kept = self._robust(pred, matches)
+                    key = (len(kept), -float(kept.d2.sum()))
+                    result = (pred, kept, (xk, Pk))
+                if best is None or key > best[0]:
+                    best = (key, result)
+        finally:
+            self.pose, self.cov = pose0, cov0
+        return best[1]
 
     def associate(self, pred: PredictedLines, segments: np.ndarray) -> Matches:
         """Pairs for one frame: unique pairs first, then gating + assignment (§5.3).
