@@ -22,7 +22,10 @@ Lost state: when fewer than ``min_matches`` pairs are found for longer than ``lo
 of image time, the filter reports ``lost`` and inflates its covariance once by
 ``lost_inflation`` (so the gates open to where the robot may be); odometry keeps predicting.
 The first frame with at least ``recover_matches`` pairs that pass the gates updates the pose
-and the state returns to ``tracking`` -- no reset needed.
+and the state returns to ``tracking`` -- no reset needed. The first frame after a reset
+and the frames while lost try ``2 heading_hypotheses + 1`` headings
+(:meth:`ModelLocalizer._hypotheses`), since a wrong first association is locked in by the
+covariance it leaves.
 """
 
 from dataclasses import dataclass, field
