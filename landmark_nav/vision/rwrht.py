@@ -36,7 +36,6 @@ name: ``'rwrht'`` (this module), and ``'hough_p'``, ``'lsd'``, ``'segmented_houg
 :mod:`.image_lines` as in-run references.
 """
 
-from collections import Counter
 from dataclasses import dataclass, field
 import math
 from typing import Optional
