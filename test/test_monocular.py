@@ -283,3 +283,42 @@ def test_prediction_grows_the_covariance_along_the_motion():
     assert loc.cov[0, 0] > P0[0, 0] and loc.cov[1, 1] > P0[1, 1]
     assert camera_pose(loc.pose, MOUNT)[1][2] == MOUNT.z
     assert project(np.array([0.0, 0.0, 1.0]), K) == pytest.approx([K.cx, K.cy])
+
+
+# ---------------------------------------------------------------------- rendered frames
+@pytest.mark.slow
+def test_rendered_wall_edges_are_unbiased():
+    """Vertical wall edges of the rendered hallway sit where the model projects them.
+
+    With the planes drawn without supersampling they sat 0.44 px towards the image centre
+    (the renderer's fillPoly coverage), a -2 cm bias of the localizer along the hallway.
+    """
+    from landmark_nav.sim.camera import CameraSimulator, Photometry, RenderOptions
+    from landmark_nav.sim.model_scene import model_planes
+    from landmark_nav.vision.camera import CameraModel
+    from landmark_nav.monocular.matching import MatchParams
+    m = hallway_model()
+    sim = CameraSimulator(CameraModel(K.width, K.height, K.K, np.zeros(5)),
+                          RenderOptions(supersample=4))
+    planes = model_planes(m, 1)
+    rng = np.random.default_rng(0)
+    res = []
+    for x in np.arange(2.0, 14.0, 1.5):
+        pose = np.array([x, rng.uniform(-0.2, 0.2), rng.uniform(-0.05, 0.05)])
+        R, c = camera_pose(pose, MOUNT)
+        img = sim.render(planes, R, c, Photometry(noise_sigma=2.0), rng)
+        lines = detect_model_lines(img, 'rwrht', rng=rng)
+        vis = visible_lines(m, pose, MOUNT, K, min_length_px=15)
+        pr = predict_lines(vis, pose, np.diag([1e-8, 1e-8, 1e-9]), MOUNT, K)
+        mt = match_lines(pr, lines.segments, MatchParams(sigma_px=1.0))
+        nu = innovation(mt.h, pr.h[mt.model])
+        ends = m.edge_points[vis.index[mt.model]]
+        wall = (np.abs(ends[:, 0, 2] - ends[:, 1, 2]) > 0.5) & (
+            np.abs(np.abs(ends[:, 0, 1]) - 1.0) < 0.01)
+        side = np.sign(pr.visible.pixels[mt.model, 0] - K.cx) * np.sign(
+            np.cos(pr.h[mt.model, 1]))
+        res.extend(nu[wall, 0] * side[wall])     # > 0: away from the image centre
+    res = np.array(res)
+    # measured: mean +0.08 px over these 63 edges (standard error 0.08 px); -0.49 px with
+    # model_planes(..., detail=False)
+    assert res.size > 40 and abs(res.mean()) < 0.2
