@@ -18,7 +18,8 @@ Figures per run: position / heading error over all frames (max, RMS), NEES (the 
 frames inside the 95 % chi-square bound, 3 dof), lost episodes, time per frame of the line
 detector and of the filter, and the distance travelled before the error stays within
 5 cm / 1 deg. ``python -m landmark_nav.evaluation.model_localization --seeds 10`` prints
-the table (``--method`` picks the line source; ``--cover`` covers the camera).
+the table (``--method`` picks the line source; ``--cover`` covers the camera);
+``--write-bag DIR --duration S`` records a run as a small bag instead.
 """
 
 import argparse
@@ -307,9 +308,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--offset', type=float, nargs=3, metavar=('DX', 'DY', 'DPHI_DEG'))
     ap.add_argument('--cover', type=float, nargs=2, metavar=('T0', 'T1'))
     ap.add_argument('--max-frames', type=int, default=0)
+    ap.add_argument('--write-bag', metavar='DIR', help='record the first --duration seconds '
+                    'of seed --first-seed as a rosbag2 (MCAP) directory instead')
+    ap.add_argument('--duration', type=float, default=10.0)
     a = ap.parse_args(argv)
     cfg = HallwayRunConfig(method=a.method, max_frames=a.max_frames,
                            cover=tuple(a.cover) if a.cover else None)
+    if a.write_bag:
+        n = write_hallway_bag(a.write_bag, a.first_seed, a.duration, cfg)
+        print(f'{a.write_bag}: {n} images, {a.duration} s')
+        return 0
     if a.offset:
         sd = (0.3, 0.3, math.radians(10.0))
         cfg = replace(cfg, offset=(a.offset[0], a.offset[1], math.radians(a.offset[2])),
