@@ -20,6 +20,7 @@ EXECUTABLES = {
     'landmark_detector': 'landmark_nav.nodes.landmark_detector:main',
     'laser_driver': 'landmark_nav.nodes.laser_driver:main',
     'line_extractor': 'landmark_nav.nodes.line_extractor:main',
+    'model_localizer': 'landmark_nav.nodes.model_localizer:main',
     'sonar_localizer': 'landmark_nav.nodes.sonar_localizer:main',
 }
 
@@ -27,6 +28,7 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
+    package_data={'landmark_nav.monocular': ['hallway_model.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

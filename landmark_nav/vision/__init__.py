@@ -16,6 +16,9 @@ Pure Python/numpy/OpenCV; no rclpy and no message types (see
 * :mod:`.image_lines` -- straight line segments: Canny + the segmented Hough transform of
   the visual navigation chapter §3.1.1, OpenCV HoughLinesP and LSD behind one interface
   (shared by the corridor follower and the monocular localizer).
+* :mod:`.rwrht` -- Canny + the Random Window Randomized Hough Transform (self-localization
+  chapter §5.2, Algorithm 2) and :func:`~.rwrht.detect_model_lines`, the line sources of
+  the monocular localizer.
 * :mod:`landmark_nav.evaluation.vision` (not in this package) -- Table 1 / Table 2 style
   statistics on rendered frames
   (``python -m landmark_nav.evaluation.vision``).
