@@ -55,13 +55,18 @@ from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, positi
                                                 STATISTICS, Trajectory, write_tum)
 from landmark_nav.geometry import (covariance_ellipse, interpolate_pose, relative,
                                    transform_points)
-from landmark_nav.laser.corners import CornerParams, extract_corners
+from landmark_nav.laser.corners import CornerParams
+from landmark_nav.laser.lines import LineParams
 from landmark_nav.sim import OdometrySample, run_scenario, ScanSample, ScenarioResult
 from landmark_nav.sim.laser import compose as sensor_pose
 from landmark_nav.slam.consistency import chi2_band, chi2_gate, nees
-from landmark_nav.slam.ekf_slam import (EkfSlam, odometry_check, odometry_increment, SlamParams,
-                                        UpdateResult)
+from landmark_nav.slam.ekf_slam import (CORNER, EkfSlam, LINE, odometry_check,
+                                        odometry_increment, SlamParams, UpdateResult)
+from landmark_nav.slam.features import check_landmarks, extract_scan_features
+from landmark_nav.slam.line_landmarks import lines_to_observations
 from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
+from landmark_nav.slam.slam_map import SlamMap
+from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 
 ASSOCIATIONS = ('icnn', 'jcbb')
@@ -93,6 +98,11 @@ class SlamRun:
     resets: int
     seconds: float            # filter time (predict + update) [s]
     reset_reasons: Dict[str, int] = field(default_factory=dict)  # failed odometry checks
+    # Line landmarks (landmarks 'lines' / 'both'); ``landmarks`` above holds the corners only.
+    line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (L, 2) rho, alpha
+    line_ends: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    final_map: Optional[SlamMap] = None  # the filter's map at the end (save_map)
 
 
 @dataclass(frozen=True)
@@ -131,8 +141,10 @@ def scan_angles(scan: ScanSample) -> np.ndarray:
 def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              corner_params: Optional[CornerParams] = None, deskew: bool = True,
              descriptors: bool = True,
-             callback: Optional[Callable[[int, EkfSlam, UpdateResult], None]] = None
-             ) -> SlamRun:
+             callback: Optional[Callable[[int, EkfSlam, UpdateResult], None]] = None,
+             landmarks: str = 'corners', line_params: Optional[LineParams] = None,
+             visibility: bool = True, slam_map: Optional[SlamMap] = None,
+             map_pose_covariance: Optional[np.ndarray] = None) -> SlamRun:
     """Run the filter over a simulated scenario (module docstring).
 
     Args:
@@ -142,10 +154,24 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         deskew: Compensate the motion during the laser sweep with odometry.
         descriptors: Pass the corners' bisector / opening to the association.
         callback: Called as ``callback(scan index, filter, update result)`` after each scan.
+        landmarks: ``'corners'``, ``'lines'`` or ``'both'``
+            (:func:`landmark_nav.slam.features.extract_scan_features`).
+        line_params: Line extractor parameters (default: ``LineParams`` with the corner
+            parameters' noise).
+        visibility: Pass each scan's geometry to the filter (visibility-aware pruning,
+            ``SlamParams.prune_misses``).
+        slam_map: Start on this saved map (:meth:`EkfSlam.load_map`), e.g. with
+            ``params.mode == 'localization'``; the start pose is the first odometry pose.
+        map_pose_covariance: (3, 3) covariance of that start pose (default zeros).
 
     Returns:
         The per-scan record.
     """
+    check_landmarks(landmarks)
+    corner_params = corner_params or CornerParams()
+    if line_params is None and landmarks != 'corners':
+        line_params = LineParams(sigma_r=corner_params.sigma_r,
+                                 sigma_phi=corner_params.sigma_phi)
     odo = result.of_type(OdometrySample)
     scans = result.of_type(ScanSample)
     ot = np.array([o.stamp_ns for o in odo], dtype=np.int64)
@@ -154,7 +180,11 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     ots = (ot - t0) * 1e-9
     mount = np.asarray(result.laser.mount, dtype=float)
     slam = EkfSlam(params, initial_pose=op[0])
+    if slam_map is not None:
+        slam.load_map(slam_map, op[0], np.zeros((3, 3)) if map_pose_covariance is None
+                      else map_pose_covariance)
     prm = slam.params
+    sigma_laser = float(getattr(result.laser, 'sigma_range', prm.sigma_range))
     prev_t, prev_pose = int(ot[0]), op[0]
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     odo_at = interpolate_pose((stamps - t0) * 1e-9, ots, op)
@@ -165,8 +195,9 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     reasons: Dict[str, int] = {}
     seconds = 0.0
     for k, scan in enumerate(scans):
-        corners = extract_corners(scan.ranges, scan_angles(scan), np.isfinite(scan.ranges),
-                                  scan.angle_increment, corner_params)
+        corners, segs = extract_scan_features(scan.ranges, scan_angles(scan),
+                                              np.isfinite(scan.ranges), scan.angle_increment,
+                                              landmarks, corner_params, line_params)
         motion = None
         if deskew and corners:
             tb = (scan.stamp_ns - t0) * 1e-9 + scan.time_increment * np.array(
@@ -174,6 +205,18 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             motion = relative(odo_at[k], interpolate_pose(tb, ots, op, extrapolate=True))
         z, r = corners_to_observations(corners, mount, motion)
         desc = corner_descriptors(corners, mount, motion) if descriptors else None
+        line_obs, geometry = None, None
+        if segs:
+            lmotion = None
+            if deskew:
+                tb = (scan.stamp_ns - t0) * 1e-9 + scan.time_increment * np.array(
+                    [0.5 * (ln.first_index + ln.last_index) for ln in segs])
+                lmotion = relative(odo_at[k], interpolate_pose(tb, ots, op, extrapolate=True))
+            line_obs = lines_to_observations(segs, mount, lmotion)
+        if visibility:
+            geometry = ScanGeometry(np.asarray(scan.ranges, dtype=float), scan.angle_min,
+                                    scan.angle_increment, scan.range_min, scan.range_max,
+                                    mount, sigma_laser)
         tic = time.perf_counter()
         bad = odometry_check(prev_t, prev_pose, int(scan.stamp_ns), odo_at[k],
                              prm.max_odometry_jump_m, prm.max_odometry_jump_rad)
@@ -184,7 +227,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             reasons[kind] = reasons.get(kind, 0) + 1
         else:
             slam.predict(odometry_increment(prev_pose, odo_at[k]))
-        res: UpdateResult = slam.update(z, r, desc)
+        res: UpdateResult = slam.update(z, r, desc, line_obs, geometry)
         seconds += time.perf_counter() - tic
         prev_t, prev_pose = int(scan.stamp_ns), odo_at[k]
         if callback is not None:
@@ -201,17 +244,22 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             o_world.append(transform_points(sensor_pose(result.truth_at(beam_ns), tuple(mount)),
                                             lp))
             o_scan.append(np.full(len(corners), k))
-            o_status.append(res.status)
-            o_lm.append(res.landmark_id)
+            o_status.append(res.status[:len(corners)])
+            o_lm.append(res.landmark_id[:len(corners)])
     cat = (lambda a, shape, dt=float: np.concatenate(a) if a else np.zeros(shape, dtype=dt))
+    kinds = slam.landmark_kinds
+    cn, ln = kinds == CORNER, kinds == LINE
     return SlamRun(stamps=stamps, poses=np.array(poses), covariances=np.array(covs),
                    truth=truth, odometry=odo_at, obs_scan=cat(o_scan, (0,), np.int64),
                    obs_world_true=cat(o_world, (0, 2)), obs_status=cat(o_status, (0,), '<U9'),
                    obs_landmark=cat(o_lm, (0,), np.int64), nis=np.array(nis_v),
-                   nis_dof=np.array(nis_d), landmark_ids=slam.landmark_ids,
-                   landmarks=slam.landmarks, landmark_covariances=slam.landmark_covariances,
+                   nis_dof=np.array(nis_d), landmark_ids=slam.landmark_ids[cn],
+                   landmarks=slam.landmarks[cn],
+                   landmark_covariances=slam.landmark_covariances[cn],
                    stats=dict(slam.stats), resets=resets, seconds=seconds,
-                   reset_reasons=reasons)
+                   reset_reasons=reasons, line_ids=slam.landmark_ids[ln],
+                   lines=slam.landmarks[ln], line_ends=slam.line_ends[ln],
+                   final_map=slam.export_map())
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
