@@ -147,7 +147,7 @@ from .line_landmarks import (ends_to_map, extents_overlap, line_initialization,
                              line_observation_model, LineObservations, merge_extent,
                              project_extent)
 from .slam_map import SlamMap
-from .visibility import expected_visible, ScanGeometry
+from .visibility import landmarks_missed, ScanGeometry
 
 ASSOCIATION_METHODS = ('icnn', 'jcbb')
 STATUSES = ('matched', 'confirmed', 'tentative', 'new', 'rejected')
@@ -216,9 +216,11 @@ class SlamParams:
         map_full: ``'evict'`` (default): a landmark confirmed while the map is full replaces
             the least recently seen landmark (marginalised out of the state), so mapping
             of new areas never stops; ``'reject'``: the observation is rejected ('cap').
-        prune_misses: A landmark that should have been seen in this many consecutive scans
-            (:mod:`.visibility`: in the field of view and range, facing the robot, not
-            occluded per the scan) and was not, is removed; 0 disables. Needs the scan
+        prune_misses: Visibility-aware pruning (module docstring, "Map management"): a
+            landmark that this many consecutive scans should have shown and did not (in
+            the field of view and range, facing the robot, and the laser saw through its
+            place, :mod:`.visibility`) is removed; 0 disables. Default ``confirm_hits``
+            (None): as many scans to leave the map as to enter it. Needs the scan
             geometry passed to :meth:`EkfSlam.update`.
         line_min_beams: Unoccluded beams a line landmark must cover to count as visible
             (the line extractor's ``min_points``).
@@ -254,7 +256,7 @@ class SlamParams:
     confirm_window: int = 5
     max_landmarks: int = 200
     map_full: str = 'evict'
-    prune_misses: int = 0
+    prune_misses: Optional[int] = None
     line_min_beams: int = 8
     mode: str = 'slam'
     jcbb_max_nodes: int = 5000
@@ -292,6 +294,8 @@ class SlamParams:
         if self.map_full not in MAP_FULL_POLICIES:
             raise ValueError(f'SlamParams.map_full must be one of {MAP_FULL_POLICIES}, '
                              f'got {self.map_full!r}')
+        if self.prune_misses is None:
+            object.__setattr__(self, 'prune_misses', self.confirm_hits)
         if not isinstance(self.prune_misses, int) or isinstance(self.prune_misses, bool) \
                 or self.prune_misses < 0:
             raise ValueError(f'SlamParams.prune_misses must be an integer >= 0, '
@@ -1115,6 +1119,8 @@ class EkfSlam:
                 graze = keep & (half - view < prm.min_view_margin)
             reason[graze] = 'grazing'
             keep &= ~graze
+        else:
+            graze = np.zeros(m, dtype=bool)
         use = np.flatnonzero(keep)
         zu = z[use]
         zu[:, 1] = _wrap(zu[:, 1])
@@ -1175,6 +1181,15 @@ class EkfSlam:
         if scan is not None and prm.prune_misses > 0 and prm.mode == 'slam' and lm_before:
             seen = np.zeros(lm_before, dtype=bool)
             seen[hyp[ok]] = True
+            gz = np.flatnonzero(graze)
+            if gz.size:  # a corner rejected as grazing was still seen
+                zg = z[gz].copy()
+                zg[:, 1] = _wrap(zg[:, 1])
+                rg = prm.r_scale * r[gz]
+                _, d2g, _ = do_data_association(self._x, self._p, zg, rg, 'icnn',
+                                                prm.gate_probability, 0, None,
+                                                kind_all[gz], self._kind)
+                near |= np.any(d2g < chi2_gate(2, prm.new_landmark_probability), axis=0)
             self._count_misses(scan, seen | near)
         if rest.size and prm.mode == 'localization':
             reason[use[rest]] = 'localization'
@@ -1246,13 +1261,13 @@ class EkfSlam:
         index = np.arange(n)
         kind = self._kind[:n]
         zhat, hr, hf = observation_model(self._x, index, kind)
-        var = predicted_observation_covariance(self._p, index, hr, hf)[:, 0, 0]
-        exp = expected_visible(self._x[:3], kind, self._x[3:3 + 2 * n].reshape(-1, 2),
-                               self._ends[:n], self._bis[:n], self._open[:n],
-                               self._max_seen[:n], np.sqrt(np.maximum(var, 0.0)), scan,
-                               math.sqrt(chi2_gate(1, prm.gate_probability)),
-                               prm.min_view_margin, prm.line_min_beams)
-        miss = exp & ~seen
+        var = np.diagonal(predicted_observation_covariance(self._p, index, hr, hf), 0, 1, 2)
+        miss = landmarks_missed(self._x[:3], kind, self._x[3:3 + 2 * n].reshape(-1, 2),
+                                self._ends[:n], self._bis[:n], self._open[:n],
+                                np.sqrt(np.maximum(var, 0.0)), scan,
+                                math.sqrt(chi2_gate(1, prm.gate_probability)),
+                                prm.min_view_margin, prm.line_min_beams)
+        miss &= ~seen
         self._misses[:n][miss] += 1
         self._misses[:n][seen] = 0
         drop = np.flatnonzero(self._misses[:n] >= prm.prune_misses)
