@@ -65,7 +65,7 @@ from landmark_nav.slam.ekf_slam import (CORNER, EkfSlam, LINE, odometry_check,
 from landmark_nav.slam.features import check_landmarks, extract_scan_features
 from landmark_nav.slam.line_landmarks import lines_to_observations
 from landmark_nav.slam.observations import corner_descriptors, corners_to_observations
-from landmark_nav.slam.slam_map import SlamMap
+from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
 from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 
@@ -260,6 +260,31 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    reset_reasons=reasons, line_ids=slam.landmark_ids[ln],
                    lines=slam.landmarks[ln], line_ends=slam.line_ends[ln],
                    final_map=slam.export_map())
+
+
+def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
+    """Share of steps whose reference position lies inside the filter's position ellipse.
+
+    The ellipse is ``d^T P_xy^-1 d <= chi2_2(probability)`` with ``d`` the position error
+    and ``P_xy`` the filter's 2 x 2 position covariance (the chapter's "error within 2
+    sigma" in two dimensions); a step with a singular ``P_xy`` counts as inside only with
+    zero error.
+
+    Args:
+        run: Output of :func:`run_slam` (with a reference).
+        probability: Ellipse confidence.
+
+    Returns:
+        The share in [0, 1].
+    """
+    d = run.poses[:, :2] - run.truth[:, :2]
+    c = run.covariances[:, :2, :2]
+    a, b, e = c[:, 0, 0], 0.5 * (c[:, 0, 1] + c[:, 1, 0]), c[:, 1, 1]
+    det = a * e - b * b
+    with np.errstate(divide='ignore', invalid='ignore'):
+        m2 = (e * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / det
+    m2 = np.where(det > 0.0, m2, np.where(np.hypot(d[:, 0], d[:, 1]) == 0.0, 0.0, np.inf))
+    return float(np.mean(m2 <= chi2_gate(2, probability)))
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
@@ -539,7 +564,9 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
                  params: Optional[SlamParams] = None, max_seconds: Optional[float] = None,
                  reference=None, align: str = ALIGN_DEFAULT,
                  laser_pose: Optional[Sequence[float]] = None, sigma_r: Optional[float] = None,
-                 rpe_delta: float = RPE_DISTANCE_M, plots: bool = True) -> dict:
+                 rpe_delta: float = RPE_DISTANCE_M, plots: bool = True,
+                 landmarks: str = 'corners', slam_map=None, save_map_to=None,
+                 map_pose_covariance: Optional[np.ndarray] = None) -> dict:
     """Run EKF-SLAM over a bag and score it against its reference.
 
     Any bag with ``/scan``, ``/odom`` and a reference (``/ground_truth/odom`` or
@@ -567,6 +594,12 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         sigma_r: Laser range noise [m] when the bag does not state it.
         rpe_delta: RPE distance [m].
         plots: Write the PNGs (with ``out_dir``).
+        landmarks: ``'corners'``, ``'lines'`` or ``'both'`` (what the filter maps).
+        slam_map: A saved map (path or :class:`~landmark_nav.slam.slam_map.SlamMap`) to
+            start on (e.g. with ``params.mode == 'localization'``); the start pose is the
+            first odometry pose, with ``map_pose_covariance`` (default zeros).
+        save_map_to: Write the final map there (:func:`landmark_nav.slam.slam_map.save_map`).
+        map_pose_covariance: (3, 3) covariance of the start pose on ``slam_map``.
 
     Returns:
         The figures (see ``slam.json``).
@@ -594,7 +627,10 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     callback = None if bar is None else (lambda k, slam, res: bar.update(1))
     tic = time.perf_counter()
     try:
-        run = run_slam(scenario, prm, corner_params, callback=callback)
+        if slam_map is not None and not isinstance(slam_map, SlamMap):
+            slam_map = load_map(slam_map)
+        run = run_slam(scenario, prm, corner_params, callback=callback, landmarks=landmarks,
+                       slam_map=slam_map, map_pose_covariance=map_pose_covariance)
     finally:
         if bar is not None:
             bar.close()
@@ -606,8 +642,14 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
               'reset_reasons': dict(run.reset_reasons),
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
-              'laser_sigma_range': float(scenario.laser.sigma_range)}
+              'laser_sigma_range': float(scenario.laser.sigma_range),
+              'landmarks': landmarks, 'mode': prm.mode}
     result.update({k: _clean(v) for k, v in asdict(score).items()})
+    result['lines_mapped'] = int(run.lines.shape[0])
+    if scenario.has_reference:
+        result['ellipse95_share'] = ellipse_share(run)
+    if save_map_to is not None and run.final_map is not None:
+        result['map_file'] = str(save_map(save_map_to, run.final_map))
     est = {'': Trajectory.from_planar(run.stamps, run.poses),
            'odom_': Trajectory.from_planar(run.stamps, run.odometry)}
     result['align'] = align
@@ -710,6 +752,7 @@ def format_summary(r: dict) -> str:
     return '\n'.join(lines)
 
 
-__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'evaluate', 'evaluate_bag', 'format_summary',
+__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'ellipse_share', 'evaluate', 'evaluate_bag',
+           'format_summary',
            'plot_run', 'RPE_DISTANCE_M', 'run_slam', 'scan_angles', 'score_run', 'SlamRun',
            'SlamScore', 'true_visible_corners']
