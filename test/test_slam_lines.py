@@ -61,7 +61,8 @@ def observe_walls(pose, rng=None, walls=WALLS, max_len=8.0):
         z.append([rho, alpha])
         ends.append([vis[0], vis[-1]])
     z = np.array(z).reshape(-1, 2)
-    return LineObservations(z, np.repeat(R_LINE[None], len(z), 0), np.array(ends).reshape(-1, 2, 2))
+    return LineObservations(z, np.repeat(R_LINE[None], len(z), 0),
+                            np.array(ends).reshape(-1, 2, 2))
 
 
 def test_line_model_jacobians_match_finite_differences():
@@ -117,8 +118,8 @@ def test_lines_to_observations_applies_the_mount():
     obs = lines_to_observations([seg], mount)
     rho_b, alpha_b = obs.z[0]
     for e in obs.ends[0]:  # the endpoints moved with the mount lie on the moved line
-        assert e @ np.array([math.cos(alpha_b), math.sin(alpha_b)]) == pytest.approx(rho_b,
-                                                                                  abs=1e-12)
+        normal = np.array([math.cos(alpha_b), math.sin(alpha_b)])
+        assert e @ normal == pytest.approx(rho_b, abs=1e-12)
     assert obs.beams.tolist() == [19.5]
     assert np.linalg.eigvalsh(obs.r[0]).min() > 0
 

@@ -25,7 +25,7 @@ def rs(m):
 
 
 def scan_with(ranges_fn, n=361):
-    """A 180 deg scan (0.5 deg beams) whose range per beam angle is ranges_fn(angles)."""
+    """Return a 180 deg scan (0.5 deg beams) with ranges_fn(angles) as its ranges."""
     angles = -math.pi / 2 + INC * np.arange(n)
     return ScanGeometry(np.asarray(ranges_fn(angles), dtype=float), -math.pi / 2, INC, 0.02,
                         30.0, np.zeros(3), 0.01)
@@ -100,6 +100,7 @@ def test_moved_object_is_pruned_after_prune_misses_scans_and_a_real_corner_is_ke
     assert slam.num_landmarks == 2
     # The object at (3, 0) is gone: the beams toward it reach a wall at 6 m. The corner at
     # (2, 2) is not detected either, but its beam returns at it (detector failure).
+
     def ranges(a):
         r = wall_at(6.0)(a)
         return np.where(np.abs(a - math.pi / 4) < math.radians(3), math.hypot(2, 2), r)
@@ -182,7 +183,7 @@ def test_bad_policy_and_mode_are_rejected():
 
 # ---------------------------------------------------------------------------- map reuse
 def mapped_filter():
-    """A filter that mapped four corners and a line from a few poses."""
+    """Return a filter that mapped four corners and a line from a few poses."""
     slam = EkfSlam(SlamParams(confirm_hits=2, confirm_window=3))
     from landmark_nav.slam.line_landmarks import LineObservations
     pts = np.array([[3.0, 1.0], [4.0, -2.0], [2.0, 3.0], [5.0, 0.5]])
@@ -190,7 +191,8 @@ def mapped_filter():
         pose = np.array([0.1 * k, 0.0, 0.02 * k])
         if k:
             slam.predict(np.array([0.1, 0.0, 0.02]), np.diag([1e-6, 1e-6, 1e-6]))
-        lines = LineObservations(np.array([[6.0 - 0.1 * k, -0.02 * k]]), np.diag([1e-4, 1e-5])[None],
+        lines = LineObservations(np.array([[6.0 - 0.1 * k, -0.02 * k]]),
+                                 np.diag([1e-4, 1e-5])[None],
                                  np.array([[[6.0 - 0.1 * k, -1.0], [6.0 - 0.1 * k, 1.0]]]))
         slam.update(observe(pose, pts), rs(4), None, lines)
     return slam, pts

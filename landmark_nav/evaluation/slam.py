@@ -212,7 +212,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                 tb = (scan.stamp_ns - t0) * 1e-9 + scan.time_increment * np.array(
                     [0.5 * (ln.first_index + ln.last_index) for ln in segs])
                 lmotion = relative(odo_at[k], interpolate_pose(tb, ots, op, extrapolate=True))
-            line_obs = lines_to_observations(segs, mount, lmotion)
+            line_obs = lines_to_observations(segs, mount, lmotion, line_params.sigma_r)
         if visibility:
             geometry = ScanGeometry(np.asarray(scan.ranges, dtype=float), scan.angle_min,
                                     scan.angle_increment, scan.range_min, scan.range_max,

@@ -128,7 +128,8 @@ def transform_lines(pose: np.ndarray, rho: np.ndarray, alpha: np.ndarray,
 
 
 def lines_to_observations(lines: Sequence, mount: Sequence[float] = (0.0, 0.0, 0.0),
-                          beam_motion: Optional[np.ndarray] = None) -> LineObservations:
+                          beam_motion: Optional[np.ndarray] = None,
+                          sigma_r: Optional[float] = None) -> LineObservations:
     """Convert laser-frame line segments to base_link observations (module docstring).
 
     Args:
@@ -137,6 +138,11 @@ def lines_to_observations(lines: Sequence, mount: Sequence[float] = (0.0, 0.0, 0
         mount: Laser pose ``[x, y, yaw]`` in base_link.
         beam_motion: Optional (L, 3) base_link pose at each line's middle beam time in
             base_link at the scan stamp (sweep motion); None = static.
+        sigma_r: The laser's stated range noise [m]. When given, a line whose residuals
+            exceed it gets its covariance scaled by the a-posteriori variance factor
+            ``max(1, rmse^2 n / ((n - 2) sigma_r^2))`` (least-squares practice: the residual
+            variance replaces the a-priori one when the points scatter more than the sensor
+            model says, e.g. a wall that is not quite straight).
 
     Returns:
         The observations (empty for no lines).
@@ -148,6 +154,13 @@ def lines_to_observations(lines: Sequence, mount: Sequence[float] = (0.0, 0.0, 0
     cov = np.array([ln.covariance for ln in lines], dtype=float).reshape(-1, 2, 2)
     ends = np.array([[ln.start, ln.end] for ln in lines], dtype=float).reshape(-1, 2, 2)
     beams = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
+    if sigma_r is not None and sigma_r > 0.0:
+        n = np.array([ln.num_points for ln in lines], dtype=float)
+        rmse = np.array([ln.rmse for ln in lines], dtype=float)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            factor = rmse ** 2 * n / ((n - 2.0) * sigma_r ** 2)
+        factor = np.where(np.isfinite(factor) & (n > 2), np.maximum(factor, 1.0), 1.0)
+        cov = cov * factor[:, None, None]
     mount = np.asarray(mount, dtype=float).reshape(3)
     rho, alpha, cov = transform_lines(mount, rho, alpha, cov)
     ends = _transform_points(np.broadcast_to(mount, (rho.size, 3)), ends)

@@ -23,7 +23,8 @@ angle constant of its own:
   corner has an arm return on a beam next to the vertex, and at the filter's grazing limit
   that return can lie this far beyond the vertex along the beam (``dphi`` the beam
   spacing: 35 cm at 5.5 m with 0.5 deg beams and the default 8 deg margin; a convex
-  corner is an object's edge, so the beam nearest the vertex may pass beside it). A line is seen through when at least
+  corner is an object's edge, so the beam nearest the vertex may pass beside it). A line
+  is seen through when at least
   ``line_min_beams`` of its beams return beyond it and fewer than ``line_min_beams``
   return on it. No return (+inf: a blackout, a dark or specular surface) and NaN (sensor
   error) are unknown and never count as seen through.
