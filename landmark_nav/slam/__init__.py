@@ -1,4 +1,4 @@
-"""EKF-SLAM with corner landmarks (corner chapter section 3): filter, association, checks.
+"""EKF-SLAM with corner and line landmarks (corner chapter section 3): filter, association.
 
 Modules:
 
@@ -7,6 +7,10 @@ Modules:
 * :mod:`.association` -- ICNN (eqs. 49-55) and JCBB (Neira & Tardos 2001) on innovations.
 * :mod:`.consistency` -- NEES (eq. 59), NIS (eq. 60), chi-square gates and bands.
 * :mod:`.observations` -- laser corners to base_link range-bearing with propagated ``R``.
+* :mod:`.line_landmarks` -- line landmarks ``(rho, alpha)``: model, Jacobians, extents.
+* :mod:`.features` -- a scan's corners and / or lines (``landmarks: corners|lines|both``).
+* :mod:`.visibility` -- which landmarks a scan shows to be gone (pruning).
+* :mod:`.slam_map` -- :class:`.slam_map.SlamMap`, ``save_map`` / ``load_map`` (file format).
 * :mod:`landmark_nav.evaluation.slam` (not in this package) -- runs the filter on a simulated
   scenario or a bag and scores it against a reference.
 """

@@ -1,13 +1,15 @@
-"""EKF-SLAM with point (corner) landmarks, corner chapter section 3 (eqs. 12-60, Fig. 17).
+"""EKF-SLAM with corner and line landmarks, corner chapter section 3 (eqs. 12-60, Fig. 17).
 
 State layout (the one place it is defined)
 ------------------------------------------
 ``x = [x_r, y_r, psi_r, x_1, y_1, ..., x_N, y_N]`` (m, m, rad, m, ...), length ``3 + 2N``,
 and its covariance ``P`` (``3 + 2N`` square). The robot pose is the pose of base_link in the
 map frame, ``psi_r`` wrapped to [-pi, pi); landmark ``k`` (0-based, in the order it entered
-the map) occupies ``x[3 + 2k : 5 + 2k]``. Landmarks never leave the state and each keeps the
-integer id it got when it was added (ids count up from 0 and are never reused until
-:meth:`EkfSlam.reset`). The map frame is the robot pose at step 0 (eqs. 23-24: ``P = 0``);
+the map) occupies ``x[3 + 2k : 5 + 2k]`` (a corner's ``x, y`` or a line's ``rho, alpha``,
+see "Line landmarks"). Each landmark keeps the integer id it got when it was added (ids
+count up from 0 and are never reused until :meth:`EkfSlam.reset`); a landmark leaves the
+state only by pruning or eviction ("Map management"), and the others keep their order.
+The map frame is the robot pose at step 0 (eqs. 23-24: ``P = 0``);
 :class:`EkfSlam` takes that pose as ``initial_pose`` (default ``[0, 0, 0]``) so the map can
 be expressed in the frame of the odometry / the simulator.
 
@@ -111,6 +113,51 @@ extractor's covariance average 7-9 instead of 2 (one arm has few returns, nearly
 beam). The margin is kept small because rejecting too much starves the filter: along a wall
 the corner ahead is seen with a small margin for metres.
 
+Line landmarks
+--------------
+A landmark is a corner (``x, y``) or a line (``rho, alpha``, Hessian normal form, corner
+chapter eq. 5), both in two state slots, so the layout above, the prediction, the batch
+update and JCBB are shared; :attr:`EkfSlam.landmark_kinds` tells them apart and
+:attr:`EkfSlam.line_ends` keeps each line's seen extent (map frame; display and
+association only). :func:`observation_model`, :func:`feature_initialization` and
+:func:`augment_map` dispatch per kind to :mod:`.line_landmarks` (model, Jacobians and the
+mount transform of the extractor's covariance). Association: an observation pairs only
+with a landmark of its kind; a line only with a line seen from its front (predicted
+``rho_b > 0``) whose extent overlaps the observed segment (endpoints put in the map with
+the predicted pose), then the same chi-square gate (eq. 55) decides; JCBB tests the joint
+compatibility of the mixed hypothesis. A matched line's extent grows by the observed
+segment; candidates of lines work as those of corners (with the extent test). The corner
+floors of ``R_eff`` do not apply to lines. ``landmarks: corners|lines|both`` is chosen by
+what the caller passes (:func:`.features.extract_scan_features`).
+
+Map management
+--------------
+Tentative landmarks (above) keep one-off clutter out of the state. A landmark that did
+enter it and then disappears (a moved cart, a person, a ghost corner of mixed pixels) is
+removed by visibility-aware pruning (:mod:`.visibility`): a scan whose beams pass through
+the landmark's place (in view, facing, not occluded, every beam near it returning from
+beyond it) is a *miss*; a detection (or an observation inside the
+``new_landmark_probability`` gate, ambiguous or grazing) resets the count; after
+``prune_misses`` consecutive misses (default ``confirm_hits``) the landmark is
+marginalised out (its rows and columns dropped). A detector failure with a return at the
+landmark is no miss: on the simulated office no landmark is pruned. Map size:
+``max_landmarks`` is a budget; with ``map_full='evict'`` (default) a confirmed landmark
+that finds the map full replaces the least recently seen one (ties: fewest detections)
+that was not seen in this scan, so mapping never stops in a new area; ``'reject'`` keeps
+the former behaviour (reason ``'cap'``).
+
+Map reuse
+---------
+:meth:`EkfSlam.export_map` returns a :class:`.slam_map.SlamMap` (landmarks, kinds, their
+joint covariance, extents, corner descriptors; file format in :mod:`.slam_map`,
+:func:`.slam_map.save_map` / :func:`.slam_map.load_map`). :meth:`EkfSlam.load_map` starts
+the filter on it at a user-given pose and pose covariance (independent of the map). With
+``mode='localization'`` the filter then tracks the robot on the map: associations and
+updates as usual (the map is refined by the robot's observations, keeping the joint
+covariance consistent), but unexplained observations are rejected (``'localization'``):
+no candidates, no new landmarks, no pruning or eviction; :meth:`EkfSlam.reset` keeps the
+loaded map.
+
 Association statuses per observation (:class:`UpdateResult`)
 -------------------------------------------------------------
 ``'matched'`` (landmark id), ``'confirmed'`` (confirmed a candidate; new landmark id),
@@ -119,7 +166,8 @@ Association statuses per observation (:class:`UpdateResult`)
 non-positive-definite ``R``), ``'range'`` (beyond ``max_range``), ``'grazing'`` (an arm seen
 nearly edge-on, see above), ``'ambiguous'`` (not associated but inside the
 ``new_landmark_probability`` gate of a landmark: neither matched nor allowed to create a
-duplicate), ``'cap'`` (the map holds ``max_landmarks``).
+duplicate), ``'cap'`` (the map holds ``max_landmarks`` and nothing can be evicted, or
+``map_full='reject'``), ``'localization'`` (unexplained in localization mode).
 
 Numerics
 --------
