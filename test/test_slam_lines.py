@@ -224,3 +224,16 @@ def test_mixed_corners_and_lines(association):
     # observation_model dispatches per kind
     zhat, _, _ = observation_model(slam.state, np.arange(slam.num_landmarks), slam.landmark_kinds)
     assert np.all(zhat[~ck, 0] > 0)  # the robot is in front of every wall
+
+
+def test_line_covariance_takes_the_residual_variance_when_it_is_larger():
+    """A fit scattering 3x the stated noise gets 9 n / (n - 2) times its covariance."""
+    def seg(rmse):
+        return LineSegment(rho=2.0, alpha=0.0, start=np.array([2.0, -0.5]),
+                           end=np.array([2.0, 0.5]), num_points=20, rmse=rmse,
+                           covariance=np.diag([1e-4, 4e-5]), first_index=0, last_index=19)
+    base = lines_to_observations([seg(0.005)], sigma_r=0.01).r[0]
+    assert base == pytest.approx(np.diag([1e-4, 4e-5]), rel=1e-12)  # below the noise: as is
+    noisy = lines_to_observations([seg(0.03)], sigma_r=0.01).r[0]
+    assert noisy == pytest.approx(base * 9.0 * 20 / 18, rel=1e-12)
+    assert lines_to_observations([seg(0.03)]).r[0] == pytest.approx(base, rel=1e-12)
