@@ -189,7 +189,7 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf
 
 from ._linalg import solve_lower
-from .association import icnn, jcbb, mahalanobis_table
+from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table
 from .consistency import chi2_gate
 from .line_landmarks import (ends_to_map, extents_overlap, line_initialization,
                              line_observation_model, LineObservations, merge_extent,
@@ -249,6 +249,8 @@ class SlamParams:
             range, ``f^2 / r^2`` on the bearing) [m].
         max_range: Observations farther than this are rejected [m].
         association: ``'icnn'`` (default) or ``'jcbb'``.
+        joint_check: With ICNN, fall back to JCBB when the ICNN hypothesis fails a joint
+            compatibility test at ``new_landmark_probability`` (:func:`do_data_association`).
         bisector_gate: Largest bisector difference of a corner pair (descriptors) [rad].
         opening_gate: Largest opening difference of a corner pair (descriptors) [rad].
         min_view_margin: Reject corners whose arm is seen within this angle of edge-on
@@ -294,6 +296,7 @@ class SlamParams:
     position_floor: float = 0.003
     max_range: float = math.inf
     association: str = 'icnn'
+    joint_check: bool = True
     bisector_gate: float = math.radians(45.0)
     opening_gate: float = math.radians(60.0)
     min_view_margin: float = math.radians(8.0)
@@ -605,7 +608,8 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
                         method: str = 'icnn', probability: float = 0.95,
                         max_nodes: int = 5000, allowed: Optional[np.ndarray] = None,
                         obs_kind: Optional[np.ndarray] = None,
-                        lm_kind: Optional[np.ndarray] = None
+                        lm_kind: Optional[np.ndarray] = None, joint_check: bool = False,
+                        joint_probability: float = 0.99999
                         ) -> Tuple[np.ndarray, np.ndarray, int]:
     """Associate observations with map landmarks (eqs. 49-55), ICNN or JCBB.
 
@@ -625,6 +629,13 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
             gate, extent overlap); the others get ``D2 = inf``.
         obs_kind: Optional (M,) kind of each observation (None: all corners).
         lm_kind: Optional (N,) kind of each landmark (None: all corners).
+        joint_check: With ICNN, test the joint compatibility of the whole hypothesis
+            (``D2_H < chi2_{2p, joint_probability}``, JCBB's statistic) and, when it fails,
+            associate with JCBB instead: pairs that pass one by one can be jointly
+            impossible (a Carmen log: joint NIS 4600 for 6 dof), and one such batch can move
+            the robot by metres.
+        joint_probability: Confidence of that check; high (a gross-error test) so that a
+            correct ICNN hypothesis is almost never sent to JCBB.
 
     Returns:
         ``(hypothesis (M,) landmark index or -1 (eq. 49), d2 (M, N) eq. 54, jcbb nodes)``.
@@ -649,7 +660,16 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
         d2 = np.where(ok, d2, np.inf)
     gate = chi2_gate(2, probability)
     if method == 'icnn':
-        return icnn(d2, gate), d2, 0  # eq. 55 + nearest neighbour
+        hyp = icnn(d2, gate)  # eq. 55 + nearest neighbour
+        if not joint_check or np.count_nonzero(hyp >= 0) < 2:
+            return hyp, d2, 0
+        obs = np.flatnonzero(hyp >= 0)
+        feat = hyp[obs]
+        s_h = joint_observation_covariance(p, feat, hr[feat], hf[feat])
+        if joint_mahalanobis(nu[obs][:, feat], s_h, r[obs], np.arange(obs.size)) < chi2_gate(
+                2 * obs.size, joint_probability):
+            return hyp, d2, 0
+        # Individually compatible, jointly not: decide with JCBB (below).
     sub = np.flatnonzero(np.any(d2 < gate, axis=0))
     hyp = np.full(m, -1, dtype=np.int64)
     if sub.size == 0:
@@ -1192,7 +1212,8 @@ class EkfSlam:
         mixed = bool(np.any(ku == LINE) or np.any(self._kind == LINE))
         hyp, d2, nodes = do_data_association(
             self._x, self._p, zu, ru, prm.association, prm.gate_probability,
-            prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None)
+            prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
+            prm.joint_check, prm.new_landmark_probability)
         ok = hyp >= 0
         nis, dof = 0.0, 0
         if np.any(ok):
