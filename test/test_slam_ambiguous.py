@@ -5,9 +5,10 @@ row of 0.3 m posts whose corners of the same kind are 0.45-0.77 m apart is mappe
 is blind during a 72 m loop (the odometry error grows to tens of centimetres and degrees)
 and the row is re-observed. The same simulated run goes through the filter with the default
 parameters once per association method: JCBB, ICNN as the chapter has it (``icnn-plain``:
-``joint_check=False``) and ICNN with the filter's default joint-compatibility check. Wrong associations are counted against the
-ground-truth corner ids (:func:`landmark_nav.evaluation.slam.score_run`). Seeds 0-2 here; the
-10-seed table comes from ``benchmarks/bench_slam_ambiguous.py``.
+``joint_check=False``) and ICNN with the filter's default joint-compatibility check. Wrong
+associations are counted against the ground-truth corner ids
+(:func:`landmark_nav.evaluation.slam.score_run`). Seeds 0-2 here; the 10-seed table comes
+from ``benchmarks/bench_slam_ambiguous.py``.
 """
 
 from dataclasses import replace
