@@ -747,6 +747,11 @@ def format_summary(r: dict) -> str:
         lines.append(f'landmarks: {r["mapped"]} mapped (no true corners: not a simulator bag); '
                      f'associations {r["associations"]}; NEES against the reference in the '
                      f'95 % band {100 * r["nees_share_band"]:.1f} %')
+    if r.get('lines_mapped') or r.get('landmarks', 'corners') != 'corners':
+        share = r.get('ellipse95_share')
+        lines.append(f'landmark types {r.get("landmarks")}: {r["mapped"]} corners, '
+                     f'{r.get("lines_mapped", 0)} lines; reference inside the 95 % position '
+                     f'ellipse {"n/a" if share is None else f"{100 * share:.1f} %"} of steps')
     lines.append(f'filter {r["ms_per_scan"]:.2f} ms/step, total {r["ms_per_step_total"]:.2f} '
                  f'ms/step, real-time factor {num(r["real_time_factor"], "{:.0f}")}x')
     return '\n'.join(lines)
