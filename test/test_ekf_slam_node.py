@@ -96,8 +96,10 @@ def test_node_equals_offline_with_deskew_and_services(tmp_path):
     assert max(np.max(feature_cloud_to_arrays(c)['time'], initial=0.0) for c in clouds) > 0.0
     scenario = load_bag(OFFICE, max_seconds=SECONDS)
     laser = scenario.laser
+    # The node gets no scan geometry (no visibility-aware pruning): the same offline.
     ref = run_slam(scenario, None, CornerParams(sigma_r=laser.sigma_range,
-                                                sigma_phi=laser.sigma_angle), deskew=True)
+                                                sigma_phi=laser.sigma_angle), deskew=True,
+                   visibility=False)
     stamps = np.array([stamp_to_ns(p.header.stamp) for p in poses])
     xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
     assert len(stamps) == len(ref.stamps) and np.array_equal(stamps, ref.stamps)
@@ -254,7 +256,8 @@ def test_negative_corner_covariance_is_warned_with_its_value():
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
         real_update = slam.slam.update
-        slam.slam.update = lambda z, r, d: (updates.append(len(z)), real_update(z, r, d))
+        slam.slam.update = lambda z, r, d, **kw: (updates.append(len(z)),
+                                                  real_update(z, r, d, **kw))
         slam.on_corners(corner_cloud(t0 + 50_000_000, [good, bad]))
         assert updates == [1]  # the good corner only
         assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings
