@@ -7,15 +7,12 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 
 Each log is imported with ``landmark_nav import`` defaults (synthetic ``pioneer`` drift,
 seed 0) into a temporary directory and evaluated as ``landmark_nav evaluate BAG`` does
-(:func:`landmark_nav.evaluation.slam.evaluate_bag`), with two settings that the front-end
-work replaces and that this script states rather than hides:
-
-* the odometry noise model of the filter is the importer's stated drift model
-  (``k_d = 0.05 m/sqrt(m)`` on both axes, ``k_theta = 0.05 rad/sqrt(m)``, ``k_dtheta = 0.1
-  rad/sqrt(rad)``) instead of the simulator's 1.5 mm/sqrt(m) default;
-* ``max_odometry_jump_m`` 3 m and ``max_odometry_jump_rad`` 3.2 rad: these logs step up
-  to 1 m and turn up to 1.5 rad between scans, which the absolute default limits (0.5 m,
-  1 rad) take for odometry failures.
+(:func:`landmark_nav.evaluation.slam.evaluate_bag`) with the default front end
+(:mod:`landmark_nav.slam.frontend`: odometry checks against elapsed time and noise, no
+absolute jump limit) and the filter's odometry noise model taken from the bag's stated
+drift model (the importer's ``pioneer`` gains ``k_d = 0.05 m/sqrt(m)``, ``k_theta = 0.05
+rad/sqrt(m)``, ``k_dtheta = 0.1 rad/sqrt(rad)``); ``--prune-misses`` sets that one filter
+parameter on top of the same noise model.
 
 Printed per log and landmark type: filter resets, corner and line landmarks at the end,
 the SE(2)-aligned ATE RMSE of EKF-SLAM and of the odometry, the RPE over 1 m (translation
@@ -33,7 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.slam import evaluate_bag  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
-from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams  # noqa: E402
+from landmark_nav.slam.ekf_slam import SlamParams  # noqa: E402
+from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
@@ -52,8 +50,10 @@ def main() -> int:
     if not carmen.is_dir():
         print(f'missing {carmen}', file=sys.stderr)
         return 1
-    prm = SlamParams(max_odometry_jump_m=3.0, max_odometry_jump_rad=3.2,
-                     odometry=OdometryNoise(0.05, 0.05, 0.1), prune_misses=args.prune_misses)
+    prm = None  # evaluate_bag: SlamParams with the bag's stated noise model
+    if args.prune_misses is not None:  # the importer's default drift model is 'pioneer'
+        prm = SlamParams(odometry=odometry_noise_model('pioneer'),
+                         prune_misses=args.prune_misses)
     print('log landmarks resets corners lines ate_m odom_ate_m rpe_m odom_rpe_m ellipse95 '
           'pruned ms')
     with tempfile.TemporaryDirectory() as tmp:
