@@ -8,8 +8,10 @@ The ``ambiguous`` scenario (:func:`landmark_nav.sim.scenarios.ambiguous_world`):
 maps an irregular row of 0.3 m posts whose corners of the same kind are 0.45-0.77 m apart,
 then drives a 72 m loop with the laser blind, so that its pose error grows to tens of
 centimetres and degrees, and re-observes the row from 2.5 m. For every seed the same
-simulated run goes through the filter twice with the default :class:`SlamParams`, once with
-``association='icnn'`` and once with ``'jcbb'`` (nothing else differs), and is scored by
+simulated run goes through the filter with the default :class:`SlamParams` once per method:
+``ICNN`` (the chapter's: ``association='icnn'``, ``joint_check=False``), ``JCBB`` and
+``ICNN+JOINT`` (the filter's default: ICNN whose hypothesis, when jointly incompatible at a
+gross-error level, is decided by JCBB) (nothing else differs), and is scored by
 :func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth corner
 ids). Printed per seed: the odometry error accumulated over the blackout (position, heading),
 then per method the wrong associations out of all associations, the ATE RMSE over the scans
@@ -31,7 +33,7 @@ from landmark_nav.sim import run_scenario  # noqa: E402
 from landmark_nav.slam import SlamParams  # noqa: E402
 import numpy as np  # noqa: E402
 
-METHODS = ('icnn', 'jcbb')
+METHODS = ('icnn', 'jcbb', 'icnn+joint')
 
 
 def parse_seeds(text: str) -> List[int]:
@@ -53,7 +55,8 @@ def run_seed(seed: int) -> Dict[str, object]:
         'seed': seed, 'drift_m': float(np.hypot(drift[0], drift[1])),
         'drift_deg': float(np.degrees(wrap_angle(drift[2])))}
     for method in METHODS:
-        params = SlamParams(association=method)
+        params = SlamParams(association='jcbb' if method == 'jcbb' else 'icnn',
+                            joint_check=method == 'icnn+joint')
         tic = time.perf_counter()
         run = run_slam(res, params)
         seconds = time.perf_counter() - tic

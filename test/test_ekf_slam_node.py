@@ -1,5 +1,6 @@
 """ekf_slam node: office bag through DDS equals the offline run (de-skew on); bad input; QoS."""
 
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -13,7 +14,9 @@ from landmark_nav.laser.corners import CornerParams
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
+from landmark_nav.slam.ekf_slam import SlamParams
 from landmark_nav.slam.frontend import ODOMETRY_NOISE_MODELS
+from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
@@ -96,8 +99,10 @@ def test_node_equals_offline_with_deskew_and_services(tmp_path):
     assert max(np.max(feature_cloud_to_arrays(c)['time'], initial=0.0) for c in clouds) > 0.0
     scenario = load_bag(OFFICE, max_seconds=SECONDS)
     laser = scenario.laser
+    # The node gets no scan geometry (no visibility-aware pruning): the same offline.
     ref = run_slam(scenario, None, CornerParams(sigma_r=laser.sigma_range,
-                                                sigma_phi=laser.sigma_angle), deskew=True)
+                                                sigma_phi=laser.sigma_angle), deskew=True,
+                   visibility=False)
     stamps = np.array([stamp_to_ns(p.header.stamp) for p in poses])
     xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
     assert len(stamps) == len(ref.stamps) and np.array_equal(stamps, ref.stamps)
@@ -107,6 +112,55 @@ def test_node_equals_offline_with_deskew_and_services(tmp_path):
     assert events['processed'] == len(ref.stamps) and events['jump'] == 0
     assert len(saved['landmarks']) == n_landmarks == ref.landmarks.shape[0] > 5
     assert len(saved['landmarks'][0]['covariance']) == 4
+
+
+@pytest.mark.dds
+def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
+    """Localization on a load_map map: node = offline run on the same map; .npz save_map."""
+    scenario = load_bag(OFFICE, max_seconds=SECONDS)
+    laser = scenario.laser
+    cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
+    simulator = SlamParams(odometry=ODOMETRY_NOISE_MODELS['simulator'])
+    built = run_slam(scenario, simulator, cp, visibility=False).final_map
+    assert built.size > 5
+    map_path = save_map(tmp_path / 'built.npz', built)
+    seconds = 15.0
+    msgs = bag_messages(seconds)
+    with RosHarness() as ros:
+        ros.add_node(CornerExtractor(context=ros.context))
+        slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('mode', value='localization'),
+            Parameter('load_map', value=str(map_path)),
+            Parameter('map_file', value=str(tmp_path / 'after.npz')),
+            Parameter('odometry.model', value='simulator'),
+            Parameter('odometry_timeout', value=3600.0)]))
+        poses = ros.collect('pose', PoseWithCovarianceStamped)
+        n_scan = replay(ros, msgs, slam)
+        assert ros.wait_until(lambda: len(poses) >= n_scan - 1, 5)
+        res = call(ros, 'save_map', Trigger)
+        assert res.success, res.message
+        stats = dict(slam.slam.stats)
+    after = load_map(tmp_path / 'after.npz')
+    ref = run_slam(load_bag(OFFICE, max_seconds=seconds), replace(simulator, mode='localization'),
+                   cp, visibility=False, slam_map=built)
+    xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
+    assert len(xy) == len(ref.stamps) > 50
+    err = np.hypot(*(xy - ref.poses[:, :2]).T)
+    print('localization: max node-offline difference', err.max(), 'm; stats', stats)
+    assert err.max() < 1e-9
+    # Localization adds nothing: the saved map has the loaded landmarks only.
+    assert np.array_equal(after.ids, built.ids) and stats['confirmed'] == 0
+    assert stats['matched'] > 0
+
+
+def test_localization_without_a_map_is_a_parameter_error():
+    with RosHarness() as ros:
+        with pytest.raises(ParameterError, match='load_map'):
+            EkfSlamNode(context=ros.context,
+                        parameter_overrides=[Parameter('mode', value='localization')])
+        with pytest.raises(ParameterError, match='load_map'):
+            EkfSlamNode(context=ros.context,
+                        parameter_overrides=[Parameter('load_map', value='/nonexistent.npz')])
 
 
 @pytest.mark.dds
@@ -254,7 +308,8 @@ def test_negative_corner_covariance_is_warned_with_its_value():
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
         real_update = slam.slam.update
-        slam.slam.update = lambda z, r, d: (updates.append(len(z)), real_update(z, r, d))
+        slam.slam.update = lambda z, r, d, **kw: (updates.append(len(z)),
+                                                  real_update(z, r, d, **kw))
         slam.on_corners(corner_cloud(t0 + 50_000_000, [good, bad]))
         assert updates == [1]  # the good corner only
         assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings

@@ -6,10 +6,13 @@ from pathlib import Path
 from landmark_nav.bag import BagError, BagReader, BagWriter
 from landmark_nav.conversions import make_odometry, odometry_to_pose
 from landmark_nav.evaluation.bags import load_bag
-from landmark_nav.evaluation.slam import evaluate_bag, format_summary
+from landmark_nav.evaluation.occupancy_check import check_run, load_occupancy_grid
+from landmark_nav.evaluation.slam import (bag_odometry_noise, evaluate_bag, format_summary,
+                                          run_slam)
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
 from landmark_nav.importers import import_log
+from landmark_nav.laser.corners import CornerParams
 from landmark_nav.slam.ekf_slam import SlamParams
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
@@ -196,23 +199,43 @@ def test_bag_without_reference(tmp_path, office_result):
 
 
 def test_evaluate_imported_wean_log_without_reference(tmp_path, capsys):
-    """A Wean log (no reference) through ``landmark_nav import`` and ``landmark_nav evaluate``."""
+    """A Wean log (no reference) through ``landmark_nav import`` and ``landmark_nav evaluate``.
+
+    Without trajectory truth the result is judged on the building's grid ``wean.dat``
+    (:mod:`landmark_nav.evaluation.occupancy_check`). The raw Wean odometry drifts: the
+    filter may differ from it by metres (measured 7.1 m) and still fit the building
+    better, so the old "SLAM close to odometry" bound is no criterion. Corners and lines:
+    with corners alone (the CLI default) the scans fit the walls worse than with the
+    odometry (measured 0.505 vs 0.575), the corridor needs the lines.
+    """
     log = shared_data('wean', 'robotdata1.log.gz')
     imported = import_log(log, tmp_path / 'bag')
     assert cli_main(['evaluate', str(tmp_path / 'bag'), '--no-progress', '--out',
-                     str(tmp_path / 'out')]) == 0
+                     str(tmp_path / 'out'), '--landmarks', 'both', '--save-map',
+                     str(tmp_path / 'map.npz')]) == 0
     text = capsys.readouterr().out
     assert 'ATE, RPE and NEES need one' in text and 'path length: EKF-SLAM' in text
     r = json.loads((tmp_path / 'out' / 'slam.json').read_text())
     assert r['reference'] is None and r['ate_rmse'] is None and r['rpe_trans_rmse'] is None
     assert 0 < r['scans'] <= imported.counts['/scan']
-    assert sum(r['reset_reasons'].values()) == r['resets']
-    assert r['mapped'] > 0 and r['associations'] > 0
-    # measured: 41.48 m filter vs 41.20 m odometry, largest gap 0.37 m
-    assert r['path_length_m'] == pytest.approx(r['odom_path_length_m'], rel=0.02)
-    assert 0.0 < r['max_slam_odom_difference_m'] < 0.5
+    assert sum(r['reset_reasons'].values()) == r['resets'] == 0
+    assert r['mapped'] > 0 and r['lines_mapped'] > 0 and r['associations'] > 0
     assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
     assert not (tmp_path / 'out' / 'trajectory_gt.tum').exists()
+    # The same run as the CLI's (the bag's stated odometry noise model), on the grid.
+    scenario = load_bag(tmp_path / 'bag', require_reference=False)
+    run = run_slam(scenario, SlamParams(odometry=bag_odometry_noise(scenario)[0]),
+                   CornerParams(sigma_r=scenario.laser.sigma_range,
+                                sigma_phi=scenario.laser.sigma_angle), landmarks='both')
+    assert run.landmarks.shape[0] == r['mapped'] and run.lines.shape[0] == r['lines_mapped']
+    grid = load_occupancy_grid(shared_data('wean', 'wean.dat.gz'))
+    fit = check_run(grid, scenario, run)
+    print('wean map check', fit)
+    # Share of scan end points within 10 cm of a wall cell after the best rigid alignment:
+    # placed with the filter's poses they fit the building better than with the odometry's
+    # (measured 0.687 vs 0.575).
+    assert fit['slam']['point_share'] > fit['odometry']['point_share'] + 0.05
+    assert fit['slam']['poses_unknown'] == 0
 
 
 def test_evaluate_imported_carmen_log(tmp_path):

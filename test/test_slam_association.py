@@ -81,10 +81,11 @@ def test_jcbb_prefers_more_pairings_and_respects_node_budget():
     assert nodes1 == 1 and hyp1.tolist() == [-1, -1, -1]
 
 
-def filter_with_two_landmarks(method: str) -> EkfSlam:
+def filter_with_two_landmarks(method: str, joint_check: bool = False) -> EkfSlam:
     """Map two landmarks 0.1 rad apart at 5 m, then make the heading uncertain."""
     slam = EkfSlam(SlamParams(association=method, confirm_hits=1, confirm_window=1,
-                              r_scale=1.0, range_floor=0.0, bearing_floor=0.0))
+                              r_scale=1.0, range_floor=0.0, bearing_floor=0.0,
+                              joint_check=joint_check))
     r = np.array([np.diag([1e-8, 1e-8])] * 2)
     res = slam.update(np.array([[5.0, 0.0], [5.0, 0.1]]), r)
     assert res.status.tolist() == ['confirmed', 'confirmed']
@@ -94,7 +95,11 @@ def filter_with_two_landmarks(method: str) -> EkfSlam:
 
 @pytest.mark.parametrize('method, expected', [('icnn', [1, 0]), ('jcbb', [0, 1])])
 def test_filter_ambiguity_experiment(method, expected):
-    """In the filter: the robot actually turned +SIG_PSI; ICNN swaps the ids, JCBB does not."""
+    """In the filter: the robot actually turned +SIG_PSI; ICNN swaps the ids, JCBB does not.
+
+    ICNN here is the chapter's (``joint_check=False``); the filter's default joint check
+    is :func:`test_icnn_joint_check_repairs_the_swap`.
+    """
     slam = filter_with_two_landmarks(method)
     r = np.array([np.diag([SIG_R ** 2, SIG_B ** 2])] * 2)
     res = slam.update(np.array([[5.0, -SIG_PSI], [5.0, 0.1 - SIG_PSI]]), r)
@@ -107,3 +112,13 @@ def test_filter_ambiguity_experiment(method, expected):
     else:
         assert res.nis > chi2_gate(4, 0.999)  # the swapped pairs cannot both be right
     assert math.isfinite(res.nis)
+
+
+def test_icnn_joint_check_repairs_the_swap():
+    """With the default joint check the swapped ICNN pairs (NIS far beyond the gate) go to JCBB."""
+    slam = filter_with_two_landmarks('icnn', joint_check=True)
+    r = np.array([np.diag([SIG_R ** 2, SIG_B ** 2])] * 2)
+    res = slam.update(np.array([[5.0, -SIG_PSI], [5.0, 0.1 - SIG_PSI]]), r)
+    assert res.landmark_id.tolist() == [0, 1]
+    assert res.jcbb_nodes > 0 and res.nis < chi2_gate(4, 0.95)
+    assert slam.pose[2] == pytest.approx(SIG_PSI, abs=0.005)

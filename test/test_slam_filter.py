@@ -199,3 +199,27 @@ def test_parameter_validation():
         OdometryNoise(sigma_xy_per_sqrt_m=-1.0)
     with pytest.raises(ValueError, match='gate_probability'):
         SlamParams(gate_probability=1.0)
+
+
+def test_icnn_jointly_incompatible_batch_goes_to_jcbb():
+    """Two pairs that pass one by one but imply opposite robot shifts are not both used."""
+    from landmark_nav.slam.ekf_slam import do_data_association
+    slam = EkfSlam(SlamParams(confirm_hits=1, confirm_window=1))
+    pts = np.array([[3.0, 2.0], [3.0, -2.0]])
+    slam.update(observe(np.zeros(3), pts), rs(2))
+    # A large, purely translational robot uncertainty (0.3 m per axis), no heading error.
+    slam.predict(np.zeros(3), np.diag([0.09, 0.09, 1e-12]))
+    # Landmark 0 seen 0.3 m farther along x, landmark 1 0.3 m nearer: each within its gate
+    # (d2 about 1), jointly impossible (they share the robot's translation).
+    z = np.vstack([observe(np.zeros(3), pts[:1] - [0.3, 0.0]),
+                   observe(np.zeros(3), pts[1:] + [0.3, 0.0])])
+    r = rs(2)
+    x, p = slam.state, slam.covariance
+    hyp, d2, _ = do_data_association(x, p, z, r, 'icnn', 0.95, 5000, joint_check=False)
+    assert hyp.tolist() == [0, 1] and np.all(np.diag(d2) < 5.99)
+    hyp, _, nodes = do_data_association(x, p, z, r, 'icnn', 0.95, 5000, joint_check=True)
+    assert nodes > 0 and sorted(hyp.tolist()) in ([-1, 0], [-1, 1])
+    # The filter (joint_check on by default) updates with one pair only.
+    res = slam.update(z, r)
+    assert int(np.sum(res.status == 'matched')) == 1
+    assert SlamParams().joint_check

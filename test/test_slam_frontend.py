@@ -1,10 +1,12 @@
 """SLAM front end: odometry as it comes (gaps, repeats, backward stamps, jumps), de-skew, order."""
 
 import math
+from types import SimpleNamespace
 
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
 from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
                                         ODOMETRY_NOISE_MODELS, SlamFrontend)
+from landmark_nav.slam.line_landmarks import lines_to_observations
 import numpy as np
 import pytest
 
@@ -194,3 +196,30 @@ def test_the_odometry_buffer_is_bounded_without_feature_sets():
     assert fe.events['out_of_order'] == 1
     (step,) = fe.add_features(corners(T0 + 49_850 * MS))
     np.testing.assert_allclose(step.odometry, [4.985, 0, 0], atol=1e-9)
+
+
+def test_lines_wait_for_their_beams_and_are_deskewed():
+    """A set's lines go to the filter, moved by the odometry up to their middle beam."""
+    seg = SimpleNamespace(rho=2.0, alpha=0.0, start=np.array([2.0, -1.0]),
+                          end=np.array([2.0, 1.0]), num_points=50, rmse=0.005,
+                          covariance=np.diag([1e-4, 1e-4]), first_index=100, last_index=300)
+    fe = SlamFrontend(SlamParams(odometry=ODOMETRY_NOISE_MODELS['pioneer'], confirm_hits=1,
+                                 confirm_window=1))
+    seen = []
+    fe.add_odometry(T0, [0, 0, 0])
+    real = fe.slam.update
+    fe.slam.update = lambda z, r, d, lines=None, scan=None: (
+        seen.append(lines), real(z, r, d, lines=lines, scan=scan))[1]
+    c = Corners.from_corners(T0, [], 1e-4, [seg])  # middle beam 200: 20 ms after the stamp
+    assert c.line_beam_time.tolist() == [0.02]
+    fe.add_odometry(T0 + 10 * MS, [0.01, 0, 0])
+    assert fe.add_features(c) == [] and len(fe.pending) == 1  # odometry ends before 20 ms
+    steps = fe.add_odometry(T0 + 40 * MS, [0.04, 0, 0])[1]
+    assert len(steps) == 1 and len(seen) == 1 and len(seen[0]) == 1
+    # At the middle beam the base was 2 cm further on: seen from the stamp's pose, the wall
+    # measured 2 m away then is 2.02 m away.
+    motion = np.array([[0.02, 0.0, 0.0]])
+    np.testing.assert_allclose(seen[0].z, lines_to_observations([seg], (0, 0, 0), motion).z,
+                               atol=1e-12)
+    assert seen[0].z[0, 0] == pytest.approx(2.02, abs=1e-12)
+    assert fe.slam.num_landmarks == 1  # a line landmark

@@ -1,15 +1,13 @@
 """Run :class:`~landmark_nav.slam.ekf_slam.EkfSlam` on a scenario and score it against truth.
 
-Pipeline per :class:`~landmark_nav.sim.ScanSample` (time order): the odometry is linearly
-interpolated to the scan stamp (:func:`landmark_nav.geometry.interpolate_pose`), checked
-(:func:`~landmark_nav.slam.ekf_slam.odometry_check`; a failed check resets the filter) and
-turned into the increment of eq. 13 for
-:meth:`~landmark_nav.slam.ekf_slam.EkfSlam.predict`; the scan's corners
-(:func:`~landmark_nav.laser.corners.extract_corners` on ``angle_min + i * increment``,
-``valid = isfinite``) go through the laser mount and, with ``deskew``, through the odometry
-motion between the scan stamp and each corner's beam time (``stamp + index *
-time_increment``) into :func:`~landmark_nav.slam.observations.corners_to_observations` and
-:meth:`~landmark_nav.slam.ekf_slam.EkfSlam.update`. The estimate is for the scan stamp.
+Pipeline: the scenario's odometry samples and scans go, in time order, through
+:class:`~landmark_nav.slam.frontend.SlamFrontend`, the front end the ``ekf_slam`` node uses
+(odometry checks judged against elapsed time and noise, bridging, interpolation to the scan
+stamp, the increment of eq. 13 for :meth:`~landmark_nav.slam.ekf_slam.EkfSlam.predict`,
+de-skew of each feature by the odometry motion up to its beam time). Each scan's features
+(:func:`scan_features`: corners and / or lines, ``landmarks``, on ``angle_min + i *
+increment`` with REP 117 validity) and its geometry (visibility-aware pruning) go with it
+to :meth:`~landmark_nav.slam.ekf_slam.EkfSlam.update`. The estimate is for the scan stamp.
 
 The scenario is a simulated run (:func:`landmark_nav.sim.run_scenario`) or a bag
 (:func:`landmark_nav.evaluation.bags.load_bag`: any bag with ``/scan``, ``/odom`` and a
@@ -55,13 +53,18 @@ from landmark_nav.evaluation.features import corner_truth
 from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
                                                 STATISTICS, Trajectory, write_tum)
 from landmark_nav.geometry import covariance_ellipse, transform_points
-from landmark_nav.laser.corners import CornerParams, extract_corners
+from landmark_nav.laser.corners import CornerParams
+from landmark_nav.laser.lines import LineParams
 from landmark_nav.sim import OdometrySample, run_scenario, ScanSample, ScenarioResult
 from landmark_nav.sim.laser import compose as sensor_pose
 from landmark_nav.slam.consistency import chi2_band, chi2_gate, nees
-from landmark_nav.slam.ekf_slam import EkfSlam, OdometryNoise, SlamParams, UpdateResult
+from landmark_nav.slam.ekf_slam import (CORNER, EkfSlam, LINE, OdometryNoise, SlamParams,
+                                        UpdateResult)
+from landmark_nav.slam.features import check_landmarks, extract_scan_features
 from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
                                         SlamFrontend, Step)
+from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
+from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 
 ASSOCIATIONS = ('icnn', 'jcbb')
@@ -101,6 +104,11 @@ class SlamRun:
     #: (S,) index of each step's scan among the scenario's scans (a scan the front end
     #: skipped, e.g. before any odometry, has no step).
     scan_index: Optional[np.ndarray] = None
+    # Line landmarks (landmarks 'lines' / 'both'); ``landmarks`` above holds the corners only.
+    line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (L, 2) rho, alpha
+    line_ends: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    final_map: Optional[SlamMap] = None  # the filter's map at the end (save_map)
 
 
 @dataclass(frozen=True)
@@ -138,20 +146,38 @@ def scan_corners(scan: ScanSample, corner_params: Optional[CornerParams] = None)
     within ``[range_min, range_max]``), beam angles :func:`scan_angles`, the node's default
     segmentation (incidence 10 deg, 5 points).
     """
+    return scan_features(scan, 'corners', corner_params)[0]
+
+
+def scan_features(scan: ScanSample, landmarks: str = 'corners',
+                  corner_params: Optional[CornerParams] = None,
+                  line_params: Optional[LineParams] = None) -> Tuple[list, list]:
+    """Corners and / or lines of one scan in the laser frame.
+
+    :func:`~landmark_nav.slam.features.extract_scan_features` on the beams valid per REP 117
+    (as :func:`scan_corners`).
+
+    Returns:
+        ``(corners, lines)`` in the laser frame.
+    """
     valid = classify_ranges(scan.ranges, scan.range_min, scan.range_max)[0]
-    return extract_corners(scan.ranges, scan_angles(scan), valid, scan.angle_increment,
-                           corner_params)
+    return extract_scan_features(scan.ranges, scan_angles(scan), valid, scan.angle_increment,
+                                 landmarks, corner_params, line_params)
 
 
 def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              corner_params: Optional[CornerParams] = None, deskew: bool = True,
              descriptors: bool = True,
              callback: Optional[Callable[[int, EkfSlam, UpdateResult], None]] = None,
-             frontend: Optional[FrontendParams] = None) -> SlamRun:
+             frontend: Optional[FrontendParams] = None, landmarks: str = 'corners',
+             line_params: Optional[LineParams] = None, visibility: bool = True,
+             slam_map: Optional[SlamMap] = None,
+             map_pose_covariance: Optional[np.ndarray] = None) -> SlamRun:
     """Run the filter over a simulated scenario or a bag through :class:`SlamFrontend`.
 
-    The odometry samples and each scan's corners (:func:`scan_corners`) go to the front end
-    in time order, as the ``ekf_slam`` node receives them; whatever the front end leaves
+    The odometry samples and each scan's features (:func:`scan_features`: corners and / or
+    lines, with the scan's geometry for visibility-aware pruning) go to the front end in
+    time order, as the ``ekf_slam`` node receives them; whatever the front end leaves
     waiting at the end is flushed.
 
     Args:
@@ -165,13 +191,29 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             ``frontend.descriptors``).
         callback: Called as ``callback(scan index, filter, update result)`` after each scan.
         frontend: Front-end parameters (odometry checks).
+        landmarks: ``'corners'``, ``'lines'`` or ``'both'``
+            (:func:`landmark_nav.slam.features.extract_scan_features`).
+        line_params: Line extractor parameters (default: ``LineParams`` with the corner
+            parameters' noise).
+        visibility: Pass each scan's geometry to the filter (visibility-aware pruning,
+            ``SlamParams.prune_misses``).
+        slam_map: Start on this saved map (:meth:`EkfSlam.load_map`), e.g. with
+            ``params.mode == 'localization'``; the start pose is the first odometry pose.
+        map_pose_covariance: (3, 3) covariance of that start pose (default zeros).
 
     Returns:
         The per-scan record.
     """
+    check_landmarks(landmarks)
+    corner_params = corner_params or CornerParams()
+    if line_params is None and landmarks != 'corners':
+        line_params = LineParams(sigma_r=corner_params.sigma_r,
+                                 sigma_phi=corner_params.sigma_phi)
     fp = replace(frontend or FrontendParams(), deskew=deskew, descriptors=descriptors)
     mount = np.asarray(result.laser.mount, dtype=float)
-    fe = SlamFrontend(params, mount, fp, on_step=lambda st: record(st))
+    fe = SlamFrontend(params, mount, fp, on_step=lambda st: record(st), slam_map=slam_map,
+                      map_pose_covariance=map_pose_covariance)
+    sigma_laser = float(getattr(result.laser, 'sigma_range', fe.params.sigma_range))
     seconds = record_s = 0.0
     scan_k = 0
     o_scan, o_world, o_status, o_lm = [], [], [], []
@@ -199,8 +241,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             o_world.append(transform_points(
                 sensor_pose(result.truth_at(beam_ns), tuple(mount)), lp))
             o_scan.append(np.full(len(corners), len(stamps) - 1))
-            o_status.append(st.result.status)
-            o_lm.append(st.result.landmark_id)
+            o_status.append(st.result.status[:len(corners)])  # corners first, then lines
+            o_lm.append(st.result.landmark_id[:len(corners)])
         record_s += time.perf_counter() - tic
 
     pending: Dict[int, Tuple[ScanSample, list]] = {}  # scan index -> scan, corners
@@ -210,11 +252,17 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
             seconds += time.perf_counter() - tic
         elif isinstance(ev, ScanSample):
-            corners = scan_corners(ev, corner_params)
+            corners, segs = scan_features(ev, landmarks, corner_params, line_params)
             pending[scan_k] = (ev, corners)
+            geometry = None
+            if visibility:
+                geometry = ScanGeometry(np.asarray(ev.ranges, dtype=float), ev.angle_min,
+                                        ev.angle_increment, ev.range_min, ev.range_max,
+                                        mount, sigma_laser)
             tic = time.perf_counter()
-            fe.add_features(Corners.from_corners(ev.stamp_ns, corners, ev.time_increment),
-                            scan_k)
+            fe.add_features(Corners.from_corners(
+                ev.stamp_ns, corners, ev.time_increment, segs,
+                None if line_params is None else line_params.sigma_r, geometry), scan_k)
             scan_k += 1
             seconds += time.perf_counter() - tic
     tic = time.perf_counter()
@@ -225,17 +273,47 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     truth = result.truth_at(np.array(stamps, dtype=np.int64))
     events = {k: v for k, v in fe.events.items() if v and k not in ('accepted', 'processed')}
     cat = (lambda a, shape, dt=float: np.concatenate(a) if a else np.zeros(shape, dtype=dt))
+    kinds = slam.landmark_kinds
+    cn, ln = kinds == CORNER, kinds == LINE
     return SlamRun(stamps=np.array(stamps, dtype=np.int64), poses=np.array(poses).reshape(-1, 3),
                    covariances=np.array(covs).reshape(-1, 3, 3), truth=truth,
                    odometry=np.array(odo_at).reshape(-1, 3),
                    obs_scan=cat(o_scan, (0,), np.int64),
                    obs_world_true=cat(o_world, (0, 2)), obs_status=cat(o_status, (0,), '<U9'),
                    obs_landmark=cat(o_lm, (0,), np.int64), nis=np.array(nis_v),
-                   nis_dof=np.array(nis_d), landmark_ids=slam.landmark_ids,
-                   landmarks=slam.landmarks, landmark_covariances=slam.landmark_covariances,
+                   nis_dof=np.array(nis_d), landmark_ids=slam.landmark_ids[cn],
+                   landmarks=slam.landmarks[cn],
+                   landmark_covariances=slam.landmark_covariances[cn],
                    stats=dict(slam.stats), resets=fe.restarts, seconds=seconds,
                    reset_reasons={'odometry restart': fe.restarts} if fe.restarts else {},
-                   events=events, scan_index=np.array(index, dtype=np.int64))
+                   events=events, scan_index=np.array(index, dtype=np.int64),
+                   line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
+                   line_ends=slam.line_ends[ln], final_map=slam.export_map())
+
+
+def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
+    """Share of steps whose reference position lies inside the filter's position ellipse.
+
+    The ellipse is ``d^T P_xy^-1 d <= chi2_2(probability)`` with ``d`` the position error
+    and ``P_xy`` the filter's 2 x 2 position covariance (the chapter's "error within 2
+    sigma" in two dimensions); a step with a singular ``P_xy`` counts as inside only with
+    zero error.
+
+    Args:
+        run: Output of :func:`run_slam` (with a reference).
+        probability: Ellipse confidence.
+
+    Returns:
+        The share in [0, 1].
+    """
+    d = run.poses[:, :2] - run.truth[:, :2]
+    c = run.covariances[:, :2, :2]
+    a, b, e = c[:, 0, 0], 0.5 * (c[:, 0, 1] + c[:, 1, 0]), c[:, 1, 1]
+    det = a * e - b * b
+    with np.errstate(divide='ignore', invalid='ignore'):
+        m2 = (e * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / det
+    m2 = np.where(det > 0.0, m2, np.where(np.hypot(d[:, 0], d[:, 1]) == 0.0, 0.0, np.inf))
+    return float(np.mean(m2 <= chi2_gate(2, probability)))
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
@@ -538,7 +616,10 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
                  params: Optional[SlamParams] = None, max_seconds: Optional[float] = None,
                  reference=None, align: str = ALIGN_DEFAULT,
                  laser_pose: Optional[Sequence[float]] = None, sigma_r: Optional[float] = None,
-                 rpe_delta: float = RPE_DISTANCE_M, plots: bool = True) -> dict:
+                 rpe_delta: float = RPE_DISTANCE_M, plots: bool = True,
+                 landmarks: str = 'corners', slam_map=None, save_map_to=None,
+                 map_pose_covariance: Optional[np.ndarray] = None,
+                 mode: Optional[str] = None) -> dict:
     """Run EKF-SLAM over a bag and score it against its reference.
 
     Any bag with ``/scan``, ``/odom`` and a reference (``/ground_truth/odom`` or
@@ -558,7 +639,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         out_dir: Directory for the TUM files, ``slam.json`` and the PNGs (None: nothing
             written).
         progress: Show a tqdm progress bar.
-        params: Filter parameters (default :class:`SlamParams`; ``association`` wins).
+        params: Filter parameters (default :class:`SlamParams` with the bag's odometry noise
+            model, :func:`bag_odometry_noise`; ``association`` and ``mode`` win).
         max_seconds: Use only the first seconds of the bag.
         reference: TUM file of the reference (None: ``/ground_truth/odom``).
         align: ATE alignment, one of :data:`~landmark_nav.evaluation.trajectory.ALIGNMENTS`.
@@ -566,6 +648,13 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         sigma_r: Laser range noise [m] when the bag does not state it.
         rpe_delta: RPE distance [m].
         plots: Write the PNGs (with ``out_dir``).
+        landmarks: ``'corners'``, ``'lines'`` or ``'both'`` (what the filter maps).
+        slam_map: A saved map (path or :class:`~landmark_nav.slam.slam_map.SlamMap`) to
+            start on (e.g. with ``params.mode == 'localization'``); the start pose is the
+            first odometry pose, with ``map_pose_covariance`` (default zeros).
+        save_map_to: Write the final map there (:func:`landmark_nav.slam.slam_map.save_map`).
+        map_pose_covariance: (3, 3) covariance of the start pose on ``slam_map``.
+        mode: ``'slam'`` or ``'localization'`` (on ``slam_map``); None: ``params.mode``.
 
     Returns:
         The figures (see ``slam.json``).
@@ -582,7 +671,10 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
                         require_reference=False)
     prm = params or SlamParams()
     prm = SlamParams(**{**{f.name: getattr(prm, f.name) for f in fields(SlamParams)},
-                        'association': association})
+                        'association': association, 'mode': mode or prm.mode})
+    if prm.mode == 'localization' and slam_map is None:
+        raise ValueError('mode localization needs a map (slam_map: a file saved with '
+                         'save_map_to / --save-map)')
     noise_source = 'params'
     if params is None:
         noise, noise_source = bag_odometry_noise(scenario)
@@ -600,7 +692,10 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     callback = None if bar is None else (lambda k, slam, res: bar.update(1))
     tic = time.perf_counter()
     try:
-        run = run_slam(scenario, prm, corner_params, callback=callback)
+        if slam_map is not None and not isinstance(slam_map, SlamMap):
+            slam_map = load_map(slam_map)
+        run = run_slam(scenario, prm, corner_params, callback=callback, landmarks=landmarks,
+                       slam_map=slam_map, map_pose_covariance=map_pose_covariance)
     finally:
         if bar is not None:
             bar.close()
@@ -614,8 +709,14 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
               'odometry_noise': {**asdict(prm.odometry), 'source': noise_source},
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
-              'laser_sigma_range': float(scenario.laser.sigma_range)}
+              'laser_sigma_range': float(scenario.laser.sigma_range),
+              'landmarks': landmarks, 'mode': prm.mode}
     result.update({k: _clean(v) for k, v in asdict(score).items()})
+    result['lines_mapped'] = int(run.lines.shape[0])
+    if scenario.has_reference:
+        result['ellipse95_share'] = ellipse_share(run)
+    if save_map_to is not None and run.final_map is not None:
+        result['map_file'] = str(save_map(save_map_to, run.final_map))
     est = {'': Trajectory.from_planar(run.stamps, run.poses),
            'odom_': Trajectory.from_planar(run.stamps, run.odometry)}
     result['align'] = align
@@ -715,12 +816,17 @@ def format_summary(r: dict) -> str:
         lines.append(f'landmarks: {r["mapped"]} mapped (no true corners: not a simulator bag); '
                      f'associations {r["associations"]}; NEES against the reference in the '
                      f'95 % band {100 * r["nees_share_band"]:.1f} %')
+    if r.get('lines_mapped') or r.get('landmarks', 'corners') != 'corners':
+        share = r.get('ellipse95_share')
+        lines.append(f'landmark types {r.get("landmarks")}: {r["mapped"]} corners, '
+                     f'{r.get("lines_mapped", 0)} lines; reference inside the 95 % position '
+                     f'ellipse {"n/a" if share is None else f"{100 * share:.1f} %"} of steps')
     lines.append(f'filter {r["ms_per_scan"]:.2f} ms/step, total {r["ms_per_step_total"]:.2f} '
                  f'ms/step, real-time factor {num(r["real_time_factor"], "{:.0f}")}x')
     return '\n'.join(lines)
 
 
-__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_odometry_noise', 'DRIFT_KEY', 'evaluate',
-           'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M', 'run_slam',
-           'scan_angles', 'scan_corners', 'score_run', 'SlamRun',
+__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_odometry_noise', 'DRIFT_KEY', 'ellipse_share',
+           'evaluate', 'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M',
+           'run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'score_run', 'SlamRun',
            'SlamScore', 'true_visible_corners']

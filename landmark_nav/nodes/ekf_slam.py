@@ -27,7 +27,16 @@ the cost per step and the memory do not grow with the length of the run.
 
 Services (std_srvs/Trigger): ``save_map`` writes the landmarks and their covariances as
 YAML to parameter ``map_file`` (a relative name is under ``$ROS_HOME/landmark_nav``,
-``~/.ros/landmark_nav`` by default); ``reset`` restarts the filter at the next odometry.
+``~/.ros/landmark_nav`` by default), or, for a ``.npz`` name, the filter's map in the
+:mod:`landmark_nav.slam.slam_map` format; ``reset`` restarts the filter at the next
+odometry.
+
+Map reuse: parameter ``load_map`` (a ``.npz`` map: ``save_map`` above or ``landmark_nav
+evaluate --save-map``) starts the filter on that map at the first odometry pose (1-sigma
+``map_pose_sigma``), again after a reset; with ``mode: localization`` it tracks the robot
+on it without adding landmarks. Landmarks: corners only (the ``landmarks: lines|both``
+setting of the offline evaluation needs the line extractor's cloud, not subscribed here),
+and no visibility-aware pruning (no scan geometry reaches the node).
 
 Odometry noise: the ``odometry.*`` parameters (defaults: the ``pioneer`` model of
 :mod:`landmark_nav.slam.frontend`), or ``odometry.model`` = ``pioneer``, ``simulator`` or
@@ -55,6 +64,7 @@ from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
 from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
                                         ODOMETRY_NOISE_MODELS, SlamFrontend, Step)
+from landmark_nav.slam.slam_map import load_map, save_map
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 from rclpy.node import Node
@@ -83,7 +93,11 @@ SLAM_PARAMETERS = {
     'candidate_probability': ('gate confidence for matching candidates', None, None),
     'confirm_hits': ('observations a candidate needs to enter the map', None, None),
     'confirm_window': ('...within this many consecutive scans', None, None),
-    'max_landmarks': ('cap on the map size', None, None),
+    'max_landmarks': ('map size budget (see map_full)', None, None),
+    'map_full': ('when the map is full: evict the least recently seen landmark, or reject',
+                 None, ['evict', 'reject']),
+    'mode': ('slam, or localization on the load_map map (no new landmarks)', None,
+             ['slam', 'localization']),
     'jcbb_max_nodes': ('node budget of JCBB per scan', None, None),
     'psd_tolerance': ('relative jitter of the PSD test of P', None, None),
     'psd_check_interval': ('test P every this many updates', None, None),
@@ -153,8 +167,26 @@ class EkfSlamNode(Node):
         self.map_frame = declare(self, 'map_frame', 'map', 'frame of the estimates')
         self.base_frame = declare(self, 'base_frame', 'base_link', 'robot frame')
         self.map_file = declare(self, 'map_file', 'landmarks.yaml',
-                                'YAML file written by the save_map service (relative: under '
+                                'file written by the save_map service: .npz = the filter map '
+                                '(load_map format), else YAML (relative: under '
                                 '$ROS_HOME/landmark_nav, default ~/.ros/landmark_nav)')
+        load_file = declare(self, 'load_map', '', "'' = start with an empty map; else a .npz "
+                            'map (save_map with map_file *.npz, landmark_nav evaluate '
+                            '--save-map) the filter starts on at the first odometry pose '
+                            '(relative: as map_file)')
+        pose_sigma = np.array(declare(self, 'map_pose_sigma', [0.0, 0.0, 0.0],
+                                      '1-sigma [x, y, yaw] of that start pose [m, m, rad]'))
+        if pose_sigma.shape != (3,) or not np.all(np.isfinite(pose_sigma)) or np.any(
+                pose_sigma < 0.0):
+            raise ParameterError('parameter map_pose_sigma must be 3 finite numbers >= 0')
+        self.slam_map = None
+        if load_file:
+            try:
+                self.slam_map = load_map(output_path(load_file))
+            except (OSError, ValueError) as err:
+                raise ParameterError(f'parameter load_map: {err}') from None
+        elif self.params.mode == 'localization':
+            raise ParameterError('parameter mode localization needs load_map (a .npz map)')
         self.path_max_poses = declare(self, 'path_max_poses', 2000,
                                       'poses kept in the published path (the latest)',
                                       (1, 1000000))
@@ -182,7 +214,8 @@ class EkfSlamNode(Node):
         self.resets = 0
         self.last_odom_wall = time.monotonic()
         self.frontend = SlamFrontend(self.params, self.laser_pose, self.frontend_params,
-                                     self._on_event)
+                                     self._on_event, slam_map=self.slam_map,
+                                     map_pose_covariance=np.diag(pose_sigma ** 2))
         self._clear()
         self.get_logger().info(f'ekf_slam: association {self.params.association}, odometry '
                                f'noise {self.params.odometry}')
@@ -331,10 +364,16 @@ class EkfSlamNode(Node):
     def on_save_map(self, request, response):
         """Write the landmarks and covariances to ``map_file``."""
         data = self.map_dict()
+        path = output_path(self.map_file)
         try:
-            path = output_path(self.map_file)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(yaml.safe_dump(data, sort_keys=False))
+            if path.suffix == '.npz':
+                if self.slam is None:
+                    response.success, response.message = False, 'no map yet (no odometry)'
+                    return response
+                path = save_map(path, self.slam.export_map())
+            else:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(yaml.safe_dump(data, sort_keys=False))
         except OSError as err:
             response.success, response.message = False, f'cannot write {path}: {err}'
             return response

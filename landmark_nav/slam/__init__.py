@@ -1,4 +1,4 @@
-"""EKF-SLAM with corner landmarks (corner chapter section 3): filter, association, checks.
+"""EKF-SLAM with corner and line landmarks (corner chapter section 3): filter, association.
 
 Modules:
 
@@ -9,6 +9,10 @@ Modules:
 * :mod:`.observations` -- laser corners to base_link range-bearing with propagated ``R``.
 * :mod:`.frontend` -- :class:`SlamFrontend`: odometry buffer and checks, interpolation,
   de-skew, predict and update; the one pipeline of the ``ekf_slam`` node and the offline run.
+* :mod:`.line_landmarks` -- line landmarks ``(rho, alpha)``: model, Jacobians, extents.
+* :mod:`.features` -- a scan's corners and / or lines (``landmarks: corners|lines|both``).
+* :mod:`.visibility` -- which landmarks a scan shows to be gone (pruning).
+* :mod:`.slam_map` -- :class:`.slam_map.SlamMap`, ``save_map`` / ``load_map`` (file format).
 * :mod:`landmark_nav.evaluation.slam` (not in this package) -- runs the filter on a simulated
   scenario or a bag and scores it against a reference.
 """

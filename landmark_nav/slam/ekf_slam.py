@@ -1,13 +1,15 @@
-"""EKF-SLAM with point (corner) landmarks, corner chapter section 3 (eqs. 12-60, Fig. 17).
+"""EKF-SLAM with corner and line landmarks, corner chapter section 3 (eqs. 12-60, Fig. 17).
 
 State layout (the one place it is defined)
 ------------------------------------------
 ``x = [x_r, y_r, psi_r, x_1, y_1, ..., x_N, y_N]`` (m, m, rad, m, ...), length ``3 + 2N``,
 and its covariance ``P`` (``3 + 2N`` square). The robot pose is the pose of base_link in the
 map frame, ``psi_r`` wrapped to [-pi, pi); landmark ``k`` (0-based, in the order it entered
-the map) occupies ``x[3 + 2k : 5 + 2k]``. Landmarks never leave the state and each keeps the
-integer id it got when it was added (ids count up from 0 and are never reused until
-:meth:`EkfSlam.reset`). The map frame is the robot pose at step 0 (eqs. 23-24: ``P = 0``);
+the map) occupies ``x[3 + 2k : 5 + 2k]`` (a corner's ``x, y`` or a line's ``rho, alpha``,
+see "Line landmarks"). Each landmark keeps the integer id it got when it was added (ids
+count up from 0 and are never reused until :meth:`EkfSlam.reset`); a landmark leaves the
+state only by pruning or eviction ("Map management"), and the others keep their order.
+The map frame is the robot pose at step 0 (eqs. 23-24: ``P = 0``);
 :class:`EkfSlam` takes that pose as ``initial_pose`` (default ``[0, 0, 0]``) so the map can
 be expressed in the frame of the odometry / the simulator.
 
@@ -111,6 +113,51 @@ extractor's covariance average 7-9 instead of 2 (one arm has few returns, nearly
 beam). The margin is kept small because rejecting too much starves the filter: along a wall
 the corner ahead is seen with a small margin for metres.
 
+Line landmarks
+--------------
+A landmark is a corner (``x, y``) or a line (``rho, alpha``, Hessian normal form, corner
+chapter eq. 5), both in two state slots, so the layout above, the prediction, the batch
+update and JCBB are shared; :attr:`EkfSlam.landmark_kinds` tells them apart and
+:attr:`EkfSlam.line_ends` keeps each line's seen extent (map frame; display and
+association only). :func:`observation_model`, :func:`feature_initialization` and
+:func:`augment_map` dispatch per kind to :mod:`.line_landmarks` (model, Jacobians and the
+mount transform of the extractor's covariance). Association: an observation pairs only
+with a landmark of its kind; a line only with a line seen from its front (predicted
+``rho_b > 0``) whose extent overlaps the observed segment (endpoints put in the map with
+the predicted pose), then the same chi-square gate (eq. 55) decides; JCBB tests the joint
+compatibility of the mixed hypothesis. A matched line's extent grows by the observed
+segment; candidates of lines work as those of corners (with the extent test). The corner
+floors of ``R_eff`` do not apply to lines. ``landmarks: corners|lines|both`` is chosen by
+what the caller passes (:func:`.features.extract_scan_features`).
+
+Map management
+--------------
+Tentative landmarks (above) keep one-off clutter out of the state. A landmark that did
+enter it and then disappears (a moved cart, a person, a ghost corner of mixed pixels) is
+removed by visibility-aware pruning (:mod:`.visibility`): a scan whose beams pass through
+the landmark's place (in view, facing, not occluded, every beam near it returning from
+beyond it) is a *miss*; a detection (or an observation inside the
+``new_landmark_probability`` gate, ambiguous or grazing) resets the count; after
+``prune_misses`` consecutive misses (default ``confirm_hits``) the landmark is
+marginalised out (its rows and columns dropped). A detector failure with a return at the
+landmark is no miss: on the simulated office no landmark is pruned. Map size:
+``max_landmarks`` is a budget; with ``map_full='evict'`` (default) a confirmed landmark
+that finds the map full replaces the least recently seen one (ties: fewest detections)
+that was not seen in this scan, so mapping never stops in a new area; ``'reject'`` keeps
+the former behaviour (reason ``'cap'``).
+
+Map reuse
+---------
+:meth:`EkfSlam.export_map` returns a :class:`.slam_map.SlamMap` (landmarks, kinds, their
+joint covariance, extents, corner descriptors; file format in :mod:`.slam_map`,
+:func:`.slam_map.save_map` / :func:`.slam_map.load_map`). :meth:`EkfSlam.load_map` starts
+the filter on it at a user-given pose and pose covariance (independent of the map). With
+``mode='localization'`` the filter then tracks the robot on the map: associations and
+updates as usual (the map is refined by the robot's observations, keeping the joint
+covariance consistent), but unexplained observations are rejected (``'localization'``):
+no candidates, no new landmarks, no pruning or eviction; :meth:`EkfSlam.reset` keeps the
+loaded map.
+
 Association statuses per observation (:class:`UpdateResult`)
 -------------------------------------------------------------
 ``'matched'`` (landmark id), ``'confirmed'`` (confirmed a candidate; new landmark id),
@@ -119,7 +166,8 @@ Association statuses per observation (:class:`UpdateResult`)
 non-positive-definite ``R``), ``'range'`` (beyond ``max_range``), ``'grazing'`` (an arm seen
 nearly edge-on, see above), ``'ambiguous'`` (not associated but inside the
 ``new_landmark_probability`` gate of a landmark: neither matched nor allowed to create a
-duplicate), ``'cap'`` (the map holds ``max_landmarks``).
+duplicate), ``'cap'`` (the map holds ``max_landmarks`` and nothing can be evicted, or
+``map_full='reject'``), ``'localization'`` (unexplained in localization mode).
 
 Numerics
 --------
@@ -141,11 +189,22 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf
 
 from ._linalg import solve_lower
-from .association import icnn, jcbb, mahalanobis_table
+from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table
 from .consistency import chi2_gate
+from .line_landmarks import (ends_to_map, extents_overlap, line_initialization,
+                             line_observation_model, LineObservations, merge_extent,
+                             project_extent)
+from .slam_map import SlamMap
+from .visibility import landmarks_missed, ScanGeometry
 
 ASSOCIATION_METHODS = ('icnn', 'jcbb')
 STATUSES = ('matched', 'confirmed', 'tentative', 'new', 'rejected')
+#: Filter modes: ``'slam'`` maps and localizes, ``'localization'`` only tracks on the map.
+MODES = ('slam', 'localization')
+#: What to do when a confirmed landmark finds the map at ``max_landmarks``.
+MAP_FULL_POLICIES = ('evict', 'reject')
+#: Landmark kinds (values of :attr:`EkfSlam.landmark_kinds`).
+CORNER, LINE = 0, 1
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
@@ -190,6 +249,8 @@ class SlamParams:
             range, ``f^2 / r^2`` on the bearing) [m].
         max_range: Observations farther than this are rejected [m].
         association: ``'icnn'`` (default) or ``'jcbb'``.
+        joint_check: With ICNN, fall back to JCBB when the ICNN hypothesis fails a joint
+            compatibility test at ``new_landmark_probability`` (:func:`do_data_association`).
         bisector_gate: Largest bisector difference of a corner pair (descriptors) [rad].
         opening_gate: Largest opening difference of a corner pair (descriptors) [rad].
         min_view_margin: Reject corners whose arm is seen within this angle of edge-on
@@ -200,7 +261,21 @@ class SlamParams:
         candidate_probability: Gate confidence for matching candidates.
         confirm_hits: Observations a candidate needs to enter the map (N).
         confirm_window: ...within this many consecutive scans from its first one (M >= N).
-        max_landmarks: Cap on the map size.
+        max_landmarks: Map size budget (the state grows as ``3 + 2N``, an update costs
+            ``O(N^2)``); what happens when it is reached is ``map_full``.
+        map_full: ``'evict'`` (default): a landmark confirmed while the map is full replaces
+            the least recently seen landmark (marginalised out of the state), so mapping
+            of new areas never stops; ``'reject'``: the observation is rejected ('cap').
+        prune_misses: Visibility-aware pruning (module docstring, "Map management"): a
+            landmark that this many consecutive scans should have shown and did not (in
+            the field of view and range, facing the robot, and the laser saw through its
+            place, :mod:`.visibility`) is removed; 0 disables. Default ``confirm_hits``
+            (None): as many scans to leave the map as to enter it. Needs the scan
+            geometry passed to :meth:`EkfSlam.update`.
+        line_min_beams: Unoccluded beams a line landmark must cover to count as visible
+            (the line extractor's ``min_points``).
+        mode: ``'slam'`` or ``'localization'`` (track on the map; no candidates, no new
+            landmarks, no pruning or eviction).
         jcbb_max_nodes: Node budget of JCBB per scan.
         psd_tolerance: Relative jitter of the positive semi-definiteness test.
         psd_check_interval: Test P every this many updates (1 = always).
@@ -221,6 +296,7 @@ class SlamParams:
     position_floor: float = 0.003
     max_range: float = math.inf
     association: str = 'icnn'
+    joint_check: bool = True
     bisector_gate: float = math.radians(45.0)
     opening_gate: float = math.radians(60.0)
     min_view_margin: float = math.radians(8.0)
@@ -230,6 +306,10 @@ class SlamParams:
     confirm_hits: int = 3
     confirm_window: int = 5
     max_landmarks: int = 200
+    map_full: str = 'evict'
+    prune_misses: Optional[int] = None
+    line_min_beams: int = 8
+    mode: str = 'slam'
     jcbb_max_nodes: int = 5000
     psd_tolerance: float = 1e-9
     psd_check_interval: int = 1
@@ -260,10 +340,21 @@ class SlamParams:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 < v < 1.0):
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
+        if self.mode not in MODES:
+            raise ValueError(f'SlamParams.mode must be one of {MODES}, got {self.mode!r}')
+        if self.map_full not in MAP_FULL_POLICIES:
+            raise ValueError(f'SlamParams.map_full must be one of {MAP_FULL_POLICIES}, '
+                             f'got {self.map_full!r}')
+        if self.prune_misses is None:
+            object.__setattr__(self, 'prune_misses', self.confirm_hits)
+        if not isinstance(self.prune_misses, int) or isinstance(self.prune_misses, bool) \
+                or self.prune_misses < 0:
+            raise ValueError(f'SlamParams.prune_misses must be an integer >= 0, '
+                             f'got {self.prune_misses!r}')
         if self.new_landmark_probability < self.gate_probability:
             raise ValueError('SlamParams.new_landmark_probability must be >= gate_probability')
         for name in ('confirm_hits', 'confirm_window', 'max_landmarks', 'jcbb_max_nodes',
-                     'psd_check_interval', 'max_update_iterations'):
+                     'psd_check_interval', 'max_update_iterations', 'line_min_beams'):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f'SlamParams.{name} must be an integer >= 1, got {v!r}')
@@ -296,6 +387,7 @@ class UpdateResult:
         nis_dof: Its degrees of freedom (2 x matched).
         psd_repaired: Whether P had to be projected to the PSD cone after this update.
         jcbb_nodes: Nodes visited by JCBB (0 for ICNN).
+        kind: (M,) :data:`CORNER` / :data:`LINE` of each observation (corners first).
     """
 
     status: np.ndarray
@@ -307,6 +399,7 @@ class UpdateResult:
     nis_dof: int
     psd_repaired: bool
     jcbb_nodes: int
+    kind: Optional[np.ndarray] = None
 
     @property
     def matched(self) -> np.ndarray:
@@ -326,6 +419,9 @@ class _Candidate:
     bis: np.ndarray    # (2,) sum of unit vectors of the world bisectors (zeros: unknown)
     opening: float     # mean opening (nan: unknown)
     n_open: int        # observations averaged into ``opening``
+    kind: int = CORNER
+    ends: Optional[np.ndarray] = None  # (2, 2) map-frame extent of a line candidate
+    max_seen: float = 0.0  # largest detection distance
 
 
 # ------------------------------------------------------------------- filter step functions
@@ -399,9 +495,13 @@ def ekf_predict(x: np.ndarray, p: np.ndarray, u: np.ndarray, u_cov: np.ndarray) 
     p[:3, :3] = 0.5 * (p[:3, :3] + p[:3, :3].T)
 
 
-def observation_model(x: np.ndarray, index: np.ndarray
+def observation_model(x: np.ndarray, index: np.ndarray, kind: Optional[np.ndarray] = None
                       ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Predicted range-bearing observations of landmarks and their Jacobians.
+    """Predicted observations of landmarks and their Jacobians (corners and lines).
+
+    Corners (``kind`` 0, or ``kind`` None) are seen as range and bearing; lines (``kind``
+    1) as ``(rho_b, alpha_b)`` (:func:`.line_landmarks.line_observation_model`). In both
+    the second component is an angle (wrapped in innovations).
 
     ``r = sqrt(dx^2 + dy^2)`` (eq. 19), ``theta = atan2(dy, dx) - psi_r`` (eq. 20) with
     ``(dx, dy) = (x_i - x_r, y_i - y_r)``; eq. 53 splits ``H`` into::
@@ -412,10 +512,24 @@ def observation_model(x: np.ndarray, index: np.ndarray
     Args:
         x: (3 + 2N,) state.
         index: (K,) landmark indices (0-based positions in the state).
+        kind: Optional (K,) kind of each indexed landmark (:data:`CORNER` / :data:`LINE`).
 
     Returns:
         ``(zhat (K, 2), H_r (K, 2, 3), H_F (K, 2, 2))`` (eqs. 37, 50, 53).
     """
+    if kind is not None and np.any(kind == LINE):
+        with np.errstate(divide='ignore', invalid='ignore'):  # rows overwritten below
+            zhat, hr, hf = _corner_model(x, index)
+        ln = np.flatnonzero(kind == LINE)
+        zl, hrl, hfl = line_observation_model(x[:3], x[3:].reshape(-1, 2)[index[ln]])
+        zhat[ln], hr[ln], hf[ln] = zl, hrl, hfl
+        return zhat, hr, hf
+    return _corner_model(x, index)
+
+
+def _corner_model(x: np.ndarray, index: np.ndarray
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Range-bearing model of :func:`observation_model` for every indexed landmark."""
     lm = x[3:].reshape(-1, 2)[index]
     dx = lm[:, 0] - x[0]
     dy = lm[:, 1] - x[1]
@@ -492,9 +606,16 @@ def _dense_h(n: int, index: np.ndarray, hr: np.ndarray, hf: np.ndarray) -> np.nd
 
 def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
                         method: str = 'icnn', probability: float = 0.95,
-                        max_nodes: int = 5000, allowed: Optional[np.ndarray] = None
+                        max_nodes: int = 5000, allowed: Optional[np.ndarray] = None,
+                        obs_kind: Optional[np.ndarray] = None,
+                        lm_kind: Optional[np.ndarray] = None, joint_check: bool = False,
+                        joint_probability: float = 0.99999
                         ) -> Tuple[np.ndarray, np.ndarray, int]:
     """Associate observations with map landmarks (eqs. 49-55), ICNN or JCBB.
+
+    With kinds, an observation pairs only with a landmark of its kind, and a line only
+    with a line it sees from the front (predicted ``rho_b > 0``); JCBB then runs over the
+    mixed hypothesis (its joint covariance couples corners and lines through the robot).
 
     Args:
         x: State.
@@ -505,7 +626,16 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
         probability: Gate confidence (eq. 55).
         max_nodes: JCBB node budget.
         allowed: Optional (M, N) bool mask of pairs that may be associated (descriptor
-            gate); the others get ``D2 = inf``.
+            gate, extent overlap); the others get ``D2 = inf``.
+        obs_kind: Optional (M,) kind of each observation (None: all corners).
+        lm_kind: Optional (N,) kind of each landmark (None: all corners).
+        joint_check: With ICNN, test the joint compatibility of the whole hypothesis
+            (``D2_H < chi2_{2p, joint_probability}``, JCBB's statistic) and, when it fails,
+            associate with JCBB instead: pairs that pass one by one can be jointly
+            impossible (a Carmen log: joint NIS 4600 for 6 dof), and one such batch can move
+            the robot by metres.
+        joint_probability: Confidence of that check; high (a gross-error test) so that a
+            correct ICNN hypothesis is almost never sent to JCBB.
 
     Returns:
         ``(hypothesis (M,) landmark index or -1 (eq. 49), d2 (M, N) eq. 54, jcbb nodes)``.
@@ -515,16 +645,31 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
     if m == 0 or n_lm == 0:
         return np.full(m, -1, dtype=np.int64), np.full((m, n_lm), np.inf), 0
     index = np.arange(n_lm)
-    zhat, hr, hf = observation_model(x, index)  # eq. 50
+    zhat, hr, hf = observation_model(x, index, lm_kind)  # eq. 50
     c = predicted_observation_covariance(p, index, hr, hf)
     nu = z[:, None, :] - zhat[None, :, :]  # eq. 51
     nu[..., 1] = _wrap(nu[..., 1])
     d2 = mahalanobis_table(nu, c[None] + r[:, None])  # eqs. 52, 54
     if allowed is not None:
         d2 = np.where(allowed, d2, np.inf)
+    if obs_kind is not None or lm_kind is not None:
+        ok = (np.zeros(m, dtype=np.int8) if obs_kind is None else obs_kind)[:, None] == (
+            np.zeros(n_lm, dtype=np.int8) if lm_kind is None else lm_kind)[None, :]
+        if lm_kind is not None:
+            ok &= ~((lm_kind == LINE) & ~(zhat[:, 0] > 0.0))[None, :]  # front side only
+        d2 = np.where(ok, d2, np.inf)
     gate = chi2_gate(2, probability)
     if method == 'icnn':
-        return icnn(d2, gate), d2, 0  # eq. 55 + nearest neighbour
+        hyp = icnn(d2, gate)  # eq. 55 + nearest neighbour
+        if not joint_check or np.count_nonzero(hyp >= 0) < 2:
+            return hyp, d2, 0
+        obs = np.flatnonzero(hyp >= 0)
+        feat = hyp[obs]
+        s_h = joint_observation_covariance(p, feat, hr[feat], hf[feat])
+        if joint_mahalanobis(nu[obs][:, feat], s_h, r[obs], np.arange(obs.size)) < chi2_gate(
+                2 * obs.size, joint_probability):
+            return hyp, d2, 0
+        # Individually compatible, jointly not: decide with JCBB (below).
     sub = np.flatnonzero(np.any(d2 < gate, axis=0))
     hyp = np.full(m, -1, dtype=np.int64)
     if sub.size == 0:
@@ -538,7 +683,8 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
 
 def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
                index: np.ndarray, max_iterations: int = 1,
-               relinearize_ratio: float = 0.02) -> Tuple[np.ndarray, float]:
+               relinearize_ratio: float = 0.02, kind: Optional[np.ndarray] = None
+               ) -> Tuple[np.ndarray, float]:
     """Batch EKF update with observations of map landmarks (eqs. 32-37), in place.
 
     ``nu = z - h(x)`` (eqs. 36-37, bearings wrapped), ``S = H P H^T + R`` (eq. 33),
@@ -559,7 +705,9 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         r: (K, 2, 2) their covariances.
         index: (K,) landmark index of each observation (distinct).
         max_iterations: Largest number of linearisations (1 = plain EKF).
-        relinearize_ratio: Relative move that triggers another linearisation.
+        relinearize_ratio: Relative move that triggers another linearisation (a line's
+            "position" relative to the robot is its foot point ``rho_b (cos, sin)(alpha)``).
+        kind: Optional (K,) kind of each observed landmark (None: corners).
 
     Returns:
         ``(P, NIS)``: the symmetrised covariance (a new array) and ``nu^T S^-1 nu`` (eq. 60)
@@ -578,7 +726,7 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
     x_lin = x
     nis_value = 0.0
     for it in range(max(1, int(max_iterations))):
-        zhat, hr, hf = observation_model(x_lin, index)  # eq. 37
+        zhat, hr, hf = observation_model(x_lin, index, kind)  # eq. 37
         nu = z - zhat  # eq. 36
         nu[:, 1] = _wrap(nu[:, 1])
         if it > 0:  # iterated EKF: nu_i = z - h(x_i) - H_i (x_0 - x_i)
@@ -604,9 +752,8 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         x_new[2] = _wrap(x_new[2])
         if it + 1 >= max_iterations:
             break
-        lm_old = x_lin[3:].reshape(-1, 2)[index]
-        rel_old = lm_old - x_lin[:2]
-        move = x_new[3:].reshape(-1, 2)[index] - x_new[:2] - rel_old
+        rel_old = _relative_points(x_lin, index, kind)
+        move = _relative_points(x_new, index, kind) - rel_old
         if np.all(np.hypot(move[:, 0], move[:, 1])
                   <= relinearize_ratio * np.hypot(rel_old[:, 0], rel_old[:, 1])):
             break
@@ -616,17 +763,38 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
     return 0.5 * (p + p.T), nis_value
 
 
-def feature_initialization(pose: np.ndarray, z: np.ndarray
+def _relative_points(x: np.ndarray, index: np.ndarray, kind: Optional[np.ndarray]
+                     ) -> np.ndarray:
+    """(K, 2) landmark positions relative to the robot (a line: its foot point)."""
+    lm = x[3:].reshape(-1, 2)[index]
+    rel = lm - x[:2]
+    if kind is not None and np.any(kind == LINE):
+        ln = np.flatnonzero(kind == LINE)
+        a = lm[ln, 1]
+        n = np.column_stack([np.cos(a), np.sin(a)])
+        rho_b = lm[ln, 0] - n @ x[:2]
+        rel[ln] = rho_b[:, None] * n
+    return rel
+
+
+def feature_initialization(pose: np.ndarray, z: np.ndarray, kind: Optional[np.ndarray] = None
                            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return new landmark positions and their Jacobians (eqs. 39-40, 45-48).
 
     Args:
         pose: (3,) robot pose [x_r, y_r, psi_r].
-        z: (L, 2) observations [r, theta].
+        z: (L, 2) observations [r, theta] (lines: [rho_b, alpha_b]).
+        kind: Optional (L,) kinds (None: corners); lines use
+            :func:`.line_landmarks.line_initialization`.
 
     Returns:
         ``(g (L, 2), G_r (L, 2, 3), G_z (L, 2, 2))``.
     """
+    if kind is not None and np.any(kind == LINE):
+        g, gr, gz = feature_initialization(pose, z)
+        ln = np.flatnonzero(kind == LINE)
+        g[ln], gr[ln], gz[ln] = line_initialization(pose, z[ln])
+        return g, gr, gz
     rng, a = z[:, 0], z[:, 1] + pose[2]
     c, s = np.cos(a), np.sin(a)
     g = np.column_stack([pose[0] + rng * c, pose[1] + rng * s])  # eq. 40
@@ -639,8 +807,8 @@ def feature_initialization(pose: np.ndarray, z: np.ndarray
     return g, gr, gz
 
 
-def augment_map(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray
-                ) -> Tuple[np.ndarray, np.ndarray]:
+def augment_map(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
+                kind: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
     """Append landmarks initialised from observations to the state (eqs. 38-48).
 
     ``P* = Y [[P, 0], [0, R]] Y^T`` (eq. 43) with ``Y`` of eq. 44 evaluated block-wise: the
@@ -651,12 +819,13 @@ def augment_map(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray
         p: Covariance.
         z: (L, 2) observations of the new landmarks.
         r: (L, 2, 2) their covariances.
+        kind: Optional (L,) kinds (None: corners).
 
     Returns:
         ``(x*, P*)`` new arrays of size ``n + 2L``.
     """
     n, nl = x.size, z.shape[0]
-    g, gr, gz = feature_initialization(x[:3], z)
+    g, gr, gz = feature_initialization(x[:3], z, kind)
     gr2 = gr.reshape(2 * nl, 3)
     x_new = np.concatenate([x, g.reshape(-1)])  # eqs. 38-39, 41
     p_new = np.empty((n + 2 * nl, n + 2 * nl))
@@ -755,6 +924,10 @@ class EkfSlam:
         slam = EkfSlam(SlamParams(), initial_pose=odom_pose_0)
         slam.predict(odometry_increment(odom_prev, odom_now))
         result = slam.update(z, R)   # z (M, 2) range-bearing in base_link
+
+    Line landmarks, visibility pruning and map reuse: :meth:`update` (``lines``, ``scan``),
+    :meth:`export_map` / :meth:`load_map` (module docstring, "Line landmarks", "Map
+    management", "Map reuse").
     """
 
     def __init__(self, params: Optional[SlamParams] = None,
@@ -762,11 +935,15 @@ class EkfSlam:
         """Create the filter with the map initialised at ``initial_pose`` (eqs. 23-24)."""
         self.params = params or SlamParams()
         self._initial_pose = np.array(initial_pose, dtype=float).reshape(3)
+        self._loaded: Optional[Tuple[SlamMap, np.ndarray]] = None
         self.reset()
 
     # ------------------------------------------------------------------ state access
     def reset(self, initial_pose: Optional[Sequence[float]] = None) -> None:
         """Forget the map, the candidates and the statistics; restart at a pose.
+
+        In ``'localization'`` mode with a map given to :meth:`load_map`, the map is kept
+        (loaded again) and the pose restarts with the covariance given there.
 
         Args:
             initial_pose: New start pose (default: the one given to the constructor).
@@ -775,16 +952,25 @@ class EkfSlam:
             self._initial_pose = np.array(initial_pose, dtype=float).reshape(3)
         self._x, self._p = map_initialization(self._initial_pose)
         self._ids = np.zeros(0, dtype=np.int64)
+        self._kind = np.zeros(0, dtype=np.int8)
+        self._ends = np.zeros((0, 2, 2))   # per landmark: line extent in the map (nan: corner)
         self._bis = np.zeros((0, 2))      # per landmark: sum of world bisector unit vectors
         self._open = np.zeros(0)          # per landmark: mean opening (nan: unknown)
         self._n_open = np.zeros(0, dtype=np.int64)
+        self._hits = np.zeros(0, dtype=np.int64)
+        self._misses = np.zeros(0, dtype=np.int64)   # consecutive expected-but-unseen scans
+        self._last_seen = np.zeros(0, dtype=np.int64)
+        self._max_seen = np.zeros(0)
         self._next_id = 0
         self._candidates: List[_Candidate] = []
         self._next_cid = 0
         self._scan = 0
         self.stats: Dict[str, int] = {'predictions': 0, 'updates': 0, 'psd_repairs': 0,
                                       'matched': 0, 'confirmed': 0, 'new_candidates': 0,
-                                      'dropped_candidates': 0, 'rejected': 0}
+                                      'dropped_candidates': 0, 'rejected': 0, 'pruned': 0,
+                                      'evicted': 0}
+        if self._loaded is not None and self.params.mode == 'localization':
+            self._install_map(self._loaded[0], self._initial_pose, self._loaded[1])
 
     @property
     def state(self) -> np.ndarray:
@@ -817,9 +1003,22 @@ class EkfSlam:
         return self._ids.copy()
 
     @property
+    def landmark_kinds(self) -> np.ndarray:
+        """(N,) kind of each landmark: :data:`CORNER` (0) or :data:`LINE` (1)."""
+        return self._kind.copy()
+
+    @property
     def landmarks(self) -> np.ndarray:
-        """(N, 2) landmark positions in the map frame, state order."""
+        """(N, 2) landmark parameters in the map frame, state order.
+
+        Corners: position ``(x, y)``; lines: ``(rho, alpha)`` (see :attr:`landmark_kinds`).
+        """
         return self._x[3:].reshape(-1, 2).copy()
+
+    @property
+    def line_ends(self) -> np.ndarray:
+        """(N, 2, 2) endpoints of each line landmark's extent in the map (NaN: corners)."""
+        return self._ends.copy()
 
     @property
     def landmark_covariances(self) -> np.ndarray:
@@ -831,6 +1030,67 @@ class EkfSlam:
     def candidates(self) -> List[Tuple[int, np.ndarray, int]]:
         """Tentative landmarks as ``(candidate id, position (2,), hits)``."""
         return [(c.cid, c.xy.copy(), c.hits) for c in self._candidates]
+
+    # ------------------------------------------------------------------ map reuse
+    def export_map(self) -> SlamMap:
+        """Return the current map (landmarks and their joint covariance, no robot)."""
+        n = self.num_landmarks
+        return SlamMap(ids=self._ids.copy(), kinds=self._kind.copy(),
+                       means=self.landmarks, covariance=self._p[3:, 3:].copy(),
+                       ends=self._ends.copy(), bisectors=self._bis.copy(),
+                       openings=self._open.copy(), n_openings=self._n_open.copy(),
+                       hits=self._hits.copy(), max_seen=self._max_seen.copy(),
+                       next_id=int(max(self._next_id, int(self._ids.max()) + 1 if n else 0)))
+
+    def load_map(self, slam_map: SlamMap, pose: Sequence[float],
+                 pose_covariance: np.ndarray) -> None:
+        """Start on a saved map at a given pose (module docstring, "Map reuse").
+
+        The state becomes ``[pose, map]`` with ``P = blkdiag(pose_covariance, map
+        covariance)`` (the pose guess is independent of the map). In ``'slam'`` mode the
+        map then grows as usual; in ``'localization'`` mode it is only used (and refined).
+
+        Args:
+            slam_map: The map (:func:`.slam_map.load_map`).
+            pose: (3,) initial robot pose in the map frame.
+            pose_covariance: (3, 3) its covariance (how well the user knows it).
+
+        Raises:
+            ValueError: If the pose or its covariance is not finite, or the covariance is
+                not symmetric positive semi-definite.
+        """
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        pc = np.asarray(pose_covariance, dtype=float)
+        if not np.all(np.isfinite(pose)):
+            raise ValueError(f'load_map: pose must be finite, got {pose!r}')
+        if pc.shape != (3, 3) or not np.all(np.isfinite(pc)) or not np.allclose(pc, pc.T) \
+                or not is_psd(pc):
+            raise ValueError('load_map: pose_covariance must be a finite symmetric PSD (3, 3)')
+        self._loaded = (slam_map, pc.copy())
+        self._initial_pose = pose.copy()
+        saved, self._loaded = self._loaded, None
+        self.reset(pose)
+        self._loaded = saved
+        self._install_map(slam_map, pose, pc)
+
+    def _install_map(self, m: SlamMap, pose: np.ndarray, pc: np.ndarray) -> None:
+        n = m.size
+        self._x = np.concatenate([pose, np.asarray(m.means, dtype=float).reshape(-1)])
+        self._x[2] = wrap_angle(self._x[2])
+        self._p = np.zeros((3 + 2 * n, 3 + 2 * n))
+        self._p[:3, :3] = pc
+        self._p[3:, 3:] = m.covariance
+        self._ids = np.asarray(m.ids, dtype=np.int64).copy()
+        self._kind = np.asarray(m.kinds, dtype=np.int8).copy()
+        self._ends = np.asarray(m.ends, dtype=float).copy()
+        self._bis = np.asarray(m.bisectors, dtype=float).copy()
+        self._open = np.asarray(m.openings, dtype=float).copy()
+        self._n_open = np.asarray(m.n_openings, dtype=np.int64).copy()
+        self._hits = np.asarray(m.hits, dtype=np.int64).copy()
+        self._misses = np.zeros(n, dtype=np.int64)
+        self._last_seen = np.zeros(n, dtype=np.int64)
+        self._max_seen = np.asarray(m.max_seen, dtype=float).copy()
+        self._next_id = int(m.next_id)
 
     # ------------------------------------------------------------------ filter steps
     def predict(self, u: Sequence[float], u_cov: Optional[np.ndarray] = None) -> None:
@@ -863,34 +1123,57 @@ class EkfSlam:
         return r
 
     def update(self, z: np.ndarray, r: Optional[np.ndarray] = None,
-               descriptors: Optional[np.ndarray] = None) -> UpdateResult:
+               descriptors: Optional[np.ndarray] = None,
+               lines: Optional[LineObservations] = None,
+               scan: Optional[ScanGeometry] = None) -> UpdateResult:
         """Associate, update, manage candidates and augment with one scan's observations.
 
         Args:
-            z: (M, 2) range-bearing observations [m, rad] in base_link (laser mount applied,
-                e.g. :func:`.observations.corners_to_observations`).
+            z: (M, 2) range-bearing corner observations [m, rad] in base_link (laser mount
+                applied, e.g. :func:`.observations.corners_to_observations`).
             r: (M, 2, 2) covariance per observation; None = :meth:`default_r`.
             descriptors: Optional (M, 2) ``[bisector in base_link, opening]`` [rad] per
                 observation (:func:`.observations.corner_descriptors`); NaN = unknown.
+            lines: Optional line observations in base_link
+                (:func:`.line_landmarks.lines_to_observations`).
+            scan: Optional geometry of the scan the observations come from; with it (and
+                ``prune_misses > 0``) landmarks that should have been seen and were not
+                count misses (:mod:`.visibility`).
 
         Returns:
-            The per-observation association result.
+            The per-observation association result: the M corners first, then the lines.
         """
         prm = self.params
         z = np.asarray(z, dtype=float).reshape(-1, 2).copy()
+        mc = z.shape[0]
+        r = self.default_r(mc) if r is None else np.asarray(r, dtype=float).reshape(mc, 2, 2)
+        if descriptors is None:
+            desc_all = np.full((mc, 2), np.nan)
+        else:
+            desc_all = np.asarray(descriptors, dtype=float).reshape(mc, 2)
+        kind_all = np.zeros(mc, dtype=np.int8)
+        ends_all = np.full((mc, 2, 2), np.nan)
+        if lines is not None and len(lines):
+            nl = len(lines)
+            z = np.vstack([z, np.asarray(lines.z, dtype=float).reshape(nl, 2)])
+            r = np.concatenate([r, np.asarray(lines.r, dtype=float).reshape(nl, 2, 2)])
+            desc_all = np.vstack([desc_all, np.full((nl, 2), np.nan)])
+            kind_all = np.concatenate([kind_all, np.full(nl, LINE, dtype=np.int8)])
+            ends_all = np.concatenate([ends_all, np.asarray(lines.ends, dtype=float)])
         m = z.shape[0]
-        r = self.default_r(m) if r is None else np.asarray(r, dtype=float).reshape(m, 2, 2)
         self._scan += 1
         self.stats['updates'] += 1
         status = np.full(m, 'rejected', dtype='<U9')
-        reason = np.full(m, '', dtype='<U9')
+        reason = np.full(m, '', dtype='<U12')
         lm_id = np.full(m, -1, dtype=np.int64)
         cand_id = np.full(m, -1, dtype=np.int64)
         d2_out = np.full(m, np.nan)
+        is_line = kind_all == LINE
 
         # Validation: NaN / inf, ranges, covariances.
         with np.errstate(invalid='ignore'):
             finite = np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(r), axis=(1, 2))
+            finite &= ~is_line | np.all(np.isfinite(ends_all), axis=(1, 2))
             det = r[:, 0, 0] * r[:, 1, 1] - r[:, 0, 1] * r[:, 1, 0]
             valid = finite & (z[:, 0] > 0.0) & (r[:, 0, 0] > 0.0) & (det > 0.0)
         reason[~valid] = 'invalid'
@@ -898,38 +1181,45 @@ class EkfSlam:
         reason[far] = 'range'
         keep = valid & ~far
         if descriptors is not None and prm.min_view_margin > 0.0:
-            d_all = np.asarray(descriptors, dtype=float).reshape(m, 2)
-            view = np.abs(_wrap(z[:, 1] + _PI - d_all[:, 0]))
-            half = 0.5 * np.minimum(d_all[:, 1], _TWO_PI - d_all[:, 1])
+            view = np.abs(_wrap(z[:, 1] + _PI - desc_all[:, 0]))
+            half = 0.5 * np.minimum(desc_all[:, 1], _TWO_PI - desc_all[:, 1])
             with np.errstate(invalid='ignore'):
                 graze = keep & (half - view < prm.min_view_margin)
             reason[graze] = 'grazing'
             keep &= ~graze
+        else:
+            graze = np.zeros(m, dtype=bool)
         use = np.flatnonzero(keep)
         zu = z[use]
         zu[:, 1] = _wrap(zu[:, 1])
+        ku = kind_all[use]
+        cu = ku == CORNER
         ru = prm.r_scale * 0.5 * (r[use] + np.transpose(r[use], (0, 2, 1)))
-        ru[:, 0, 0] += prm.range_floor ** 2 + prm.position_floor ** 2
-        ru[:, 1, 1] += prm.bearing_floor ** 2 + (prm.position_floor / zu[:, 0]) ** 2
-        if descriptors is None:
-            desc = np.full((use.size, 2), np.nan)
-        else:
-            desc = np.asarray(descriptors, dtype=float).reshape(m, 2)[use]
+        # Floors stand for the corner extractor's biases (module docstring): corners only.
+        ru[cu, 0, 0] += prm.range_floor ** 2 + prm.position_floor ** 2
+        ru[cu, 1, 1] += prm.bearing_floor ** 2 + (prm.position_floor / zu[cu, 0]) ** 2
+        desc = desc_all[use]
+        ends_w = ends_to_map(self._x[:3], ends_all[use])  # observed extents, predicted pose
         # World bisector unit vectors (zeros where unknown) and openings of the observations.
         wb = desc[:, 0] + self._x[2]
         known = np.isfinite(wb)
         bvec = np.where(known[:, None], np.column_stack([np.cos(wb), np.sin(wb)]), 0.0)
+        lm_before = self.num_landmarks
 
         # Data association (eqs. 49-55) and update (eqs. 32-37).
         allowed = self._descriptor_gate(bvec, desc[:, 1], self._bis, self._open)
-        hyp, d2, nodes = do_data_association(self._x, self._p, zu, ru, prm.association,
-                                             prm.gate_probability, prm.jcbb_max_nodes,
-                                             allowed)
+        allowed = self._extent_gate(allowed, ku, ends_w)
+        mixed = bool(np.any(ku == LINE) or np.any(self._kind == LINE))
+        hyp, d2, nodes = do_data_association(
+            self._x, self._p, zu, ru, prm.association, prm.gate_probability,
+            prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
+            prm.joint_check, prm.new_landmark_probability)
         ok = hyp >= 0
         nis, dof = 0.0, 0
         if np.any(ok):
             self._p, nis = ekf_update(self._x, self._p, zu[ok], ru[ok], hyp[ok],
-                                      prm.max_update_iterations, prm.relinearize_ratio)
+                                      prm.max_update_iterations, prm.relinearize_ratio,
+                                      self._kind[hyp[ok]] if mixed else None)
             dof = 2 * int(ok.sum())
             sel = use[ok]
             status[sel] = 'matched'
@@ -943,15 +1233,39 @@ class EkfSlam:
             prev = np.where(self._n_open[jo] > 0, self._open[jo], 0.0)
             self._n_open[jo] += 1
             self._open[jo] = prev + (o[has] - prev) / self._n_open[jo]
+            self._hits[j] += 1
+            self._misses[j] = 0
+            self._last_seen[j] = self._scan
+            self._max_seen[j] = np.maximum(self._max_seen[j], zu[ok, 0])
+            self._grow_extents(j, ends_all[use[ok]])
         # Unassociated observations near a landmark are ambiguous: no duplicate landmark.
         rest = np.flatnonzero(~ok)
+        near = np.zeros(lm_before, dtype=bool)  # landmarks some observation may have seen
+        if d2.shape[1]:
+            near = np.any(d2 < chi2_gate(2, prm.new_landmark_probability), axis=0)
         if rest.size and d2.shape[1]:
             amb = np.min(d2[rest], axis=1) < chi2_gate(2, prm.new_landmark_probability)
             reason[use[rest[amb]]] = 'ambiguous'
             rest = rest[~amb]
-        if rest.size:
+        if scan is not None and prm.prune_misses > 0 and prm.mode == 'slam' and lm_before:
+            seen = np.zeros(lm_before, dtype=bool)
+            seen[hyp[ok]] = True
+            gz = np.flatnonzero(graze)
+            if gz.size:  # a corner rejected as grazing was still seen
+                zg = z[gz].copy()
+                zg[:, 1] = _wrap(zg[:, 1])
+                rg = prm.r_scale * r[gz]
+                _, d2g, _ = do_data_association(self._x, self._p, zg, rg, 'icnn',
+                                                prm.gate_probability, 0, None,
+                                                kind_all[gz], self._kind)
+                near |= np.any(d2g < chi2_gate(2, prm.new_landmark_probability), axis=0)
+            self._count_misses(scan, seen | near)
+        if rest.size and prm.mode == 'localization':
+            reason[use[rest]] = 'localization'
+        elif rest.size:
             self._handle_candidates(zu[rest], ru[rest], use[rest], bvec[rest],
-                                    desc[rest, 1], status, reason, lm_id, cand_id)
+                                    desc[rest, 1], status, reason, lm_id, cand_id, ku[rest],
+                                    ends_all[use[rest]])
         self._expire_candidates()
 
         repaired = False
@@ -963,7 +1277,7 @@ class EkfSlam:
         self.stats['rejected'] += int(np.sum(status == 'rejected'))
         return UpdateResult(status=status, landmark_id=lm_id, candidate_id=cand_id,
                             reason=reason, d2=d2_out, nis=nis, nis_dof=dof,
-                            psd_repaired=repaired, jcbb_nodes=nodes)
+                            psd_repaired=repaired, jcbb_nodes=nodes, kind=kind_all)
 
     def step(self, u: Sequence[float], z: np.ndarray, r: Optional[np.ndarray] = None,
              u_cov: Optional[np.ndarray] = None) -> UpdateResult:
@@ -984,24 +1298,104 @@ class EkfSlam:
             bad |= np.abs(opening[:, None] - feat_open[None, :]) > self.params.opening_gate
         return ~bad
 
+    def _extent_gate(self, allowed: Optional[np.ndarray], kind: np.ndarray,
+                     ends_w: np.ndarray) -> Optional[np.ndarray]:
+        """Add the extent-overlap condition of line pairs to a (M, N) mask."""
+        lm_line = np.flatnonzero(self._kind == LINE)
+        ob_line = np.flatnonzero(kind == LINE)
+        if lm_line.size == 0 or ob_line.size == 0:
+            return allowed
+        if allowed is None:
+            allowed = np.ones((kind.size, self.num_landmarks), dtype=bool)
+        ov = extents_overlap(self._x[3:].reshape(-1, 2)[lm_line], self._ends[lm_line],
+                             ends_w[ob_line])
+        allowed[np.ix_(ob_line, lm_line)] &= ov
+        return allowed
+
+    def _grow_extents(self, index: np.ndarray, ends_b: np.ndarray) -> None:
+        """Extend matched line landmarks by their observed segments (updated pose)."""
+        ln = np.flatnonzero(self._kind[index] == LINE)
+        if ln.size == 0:
+            return
+        ends_w = ends_to_map(self._x[:3], ends_b[ln])
+        lm = self._x[3:].reshape(-1, 2)
+        for k, j in enumerate(index[ln]):
+            self._ends[j] = merge_extent(lm[j], self._ends[j], ends_w[k])
+
+    # ------------------------------------------------------------------ map management
+    def _count_misses(self, scan: ScanGeometry, seen: np.ndarray) -> None:
+        """Count misses of landmarks the scan should have shown; prune (module docstring)."""
+        prm = self.params
+        n = seen.size
+        index = np.arange(n)
+        kind = self._kind[:n]
+        zhat, hr, hf = observation_model(self._x, index, kind)
+        var = np.diagonal(predicted_observation_covariance(self._p, index, hr, hf), 0, 1, 2)
+        miss = landmarks_missed(self._x[:3], kind, self._x[3:3 + 2 * n].reshape(-1, 2),
+                                self._ends[:n], self._bis[:n], self._open[:n],
+                                np.sqrt(np.maximum(var, 0.0)), scan,
+                                math.sqrt(chi2_gate(1, prm.gate_probability)),
+                                prm.min_view_margin, prm.line_min_beams)
+        miss &= ~seen
+        self._misses[:n][miss] += 1
+        self._misses[:n][seen] = 0
+        drop = np.flatnonzero(self._misses[:n] >= prm.prune_misses)
+        if drop.size:
+            self._remove_landmarks(drop)
+            self.stats['pruned'] += int(drop.size)
+
+    def _remove_landmarks(self, index: np.ndarray) -> None:
+        """Marginalise landmarks out of the state (drop their rows and columns)."""
+        keep = np.ones(self.num_landmarks, dtype=bool)
+        keep[index] = False
+        cols = np.concatenate([np.arange(3), _landmark_cols(np.flatnonzero(keep)).reshape(-1)])
+        self._x = self._x[cols]
+        self._p = self._p[np.ix_(cols, cols)]
+        for name in ('_ids', '_kind', '_ends', '_bis', '_open', '_n_open', '_hits', '_misses',
+                     '_last_seen', '_max_seen'):
+            setattr(self, name, getattr(self, name)[keep])
+
+    def _make_room(self, need: int, protect: np.ndarray) -> int:
+        """Evict up to ``need`` least recently seen landmarks; return the room made."""
+        cand = np.setdiff1d(np.arange(self.num_landmarks), protect)
+        if cand.size == 0 or need <= 0:
+            return 0
+        order = np.lexsort((self._hits[cand], self._last_seen[cand]))  # oldest, fewest hits
+        drop = cand[order[:need]]
+        self._remove_landmarks(drop)
+        self.stats['evicted'] += int(drop.size)
+        return int(drop.size)
+
     # ------------------------------------------------------------------ candidates
     def _handle_candidates(self, z: np.ndarray, r: np.ndarray, obs: np.ndarray,
                            bvec: np.ndarray, opening: np.ndarray, status: np.ndarray,
-                           reason: np.ndarray, lm_id: np.ndarray,
-                           cand_id: np.ndarray) -> None:
+                           reason: np.ndarray, lm_id: np.ndarray, cand_id: np.ndarray,
+                           kind: np.ndarray, ends_b: np.ndarray) -> None:
         """Match unexplained observations to candidates, start new ones, confirm (augment)."""
         prm = self.params
-        if self.num_landmarks >= prm.max_landmarks:
+        if self.num_landmarks >= prm.max_landmarks and prm.map_full == 'reject':
             reason[obs] = 'cap'
             return
-        g, gr, gz = feature_initialization(self._x[:3], z)  # eq. 40 with the updated pose
+        line = kind == LINE
+        g, gr, gz = feature_initialization(self._x[:3], z, kind)  # eq. 40, updated pose
         cov = (gr @ self._p[:3, :3] @ np.transpose(gr, (0, 2, 1))
                + gz @ r @ np.transpose(gz, (0, 2, 1)))
+        ends_w = ends_to_map(self._x[:3], ends_b)
         assigned = np.full(z.shape[0], -1, dtype=np.int64)
         if self._candidates:
             cxy = np.array([c.xy for c in self._candidates])
             ccov = np.array([c.cov for c in self._candidates])
-            d2 = mahalanobis_table(g[:, None, :] - cxy[None], cov[:, None] + ccov[None])
+            ckind = np.array([c.kind for c in self._candidates])
+            diff = g[:, None, :] - cxy[None]
+            diff[..., 1] = np.where(line[:, None], _wrap(diff[..., 1]), diff[..., 1])
+            d2 = mahalanobis_table(diff, cov[:, None] + ccov[None])
+            d2 = np.where(kind[:, None] == ckind[None, :], d2, np.inf)
+            cl = np.flatnonzero(ckind == LINE)
+            if cl.size and np.any(line):
+                ov = extents_overlap(cxy[cl], np.array([self._candidates[i].ends for i in cl]),
+                                     ends_w[line])
+                sub = d2[np.ix_(np.flatnonzero(line), cl)]
+                d2[np.ix_(np.flatnonzero(line), cl)] = np.where(ov, sub, np.inf)
             allowed = self._descriptor_gate(
                 bvec, opening, np.array([c.bis for c in self._candidates]),
                 np.array([c.opening for c in self._candidates]))
@@ -1016,8 +1410,15 @@ class EkfSlam:
                 info_old, info_new = np.linalg.inv(c.cov), np.linalg.inv(cov[k])
                 c.cov = np.linalg.inv(info_old + info_new)
                 c.cov = 0.5 * (c.cov + c.cov.T)
-                c.xy = c.cov @ (info_old @ c.xy + info_new @ g[k])
+                dg = g[k] - c.xy
+                if line[k]:
+                    dg[1] = _wrap(dg[1])
+                c.xy = c.xy + c.cov @ info_new @ dg  # information-form fusion
+                if line[k]:
+                    c.xy[1] = _wrap(c.xy[1])
+                    c.ends = merge_extent(c.xy, c.ends, ends_w[k])
                 c.hits += 1
+                c.max_seen = max(c.max_seen, float(z[k, 0]))
                 c.bis = c.bis + bvec[k]
                 if np.isfinite(opening[k]):
                     prev = c.opening if c.n_open else 0.0
@@ -1032,7 +1433,9 @@ class EkfSlam:
                 c = _Candidate(cid=self._next_cid, xy=g[k].copy(), cov=cov[k].copy(),
                                first_scan=self._scan, hits=1, bis=bvec[k].copy(),
                                opening=float(opening[k]) if has else math.nan,
-                               n_open=int(has))
+                               n_open=int(has), kind=int(kind[k]),
+                               ends=project_extent(g[k], ends_w[k]) if line[k] else None,
+                               max_seen=float(z[k, 0]))
                 self._next_cid += 1
                 self._candidates.append(c)
                 self.stats['new_candidates'] += 1
@@ -1043,21 +1446,38 @@ class EkfSlam:
         if not confirm:
             return
         room = prm.max_landmarks - self.num_landmarks
+        if room < len(confirm) and prm.map_full == 'evict':
+            matched = np.flatnonzero(self._last_seen == self._scan)
+            room += self._make_room(len(confirm) - room, matched)
+        room = max(room, 0)
         take = np.array(confirm[:room], dtype=np.int64)
         for k in confirm[room:]:
             status[obs[k]] = 'rejected'
             reason[obs[k]] = 'cap'
         if take.size == 0:
             return
-        self._x, self._p = augment_map(self._x, self._p, z[take], r[take])  # eqs. 38-48
+        self._x, self._p = augment_map(self._x, self._p, z[take], r[take],
+                                       kind[take])  # eqs. 38-48
         new_ids = self._next_id + np.arange(take.size, dtype=np.int64)
         self._next_id += take.size
         self._ids = np.concatenate([self._ids, new_ids])
         by_id = {c.cid: c for c in self._candidates}
         new_c = [by_id[int(cand_id[obs[k]])] for k in take]
+        self._kind = np.concatenate([self._kind, kind[take].astype(np.int8)])
+        lm_new = self._x[3:].reshape(-1, 2)[-take.size:]
+        ends_new = np.full((take.size, 2, 2), np.nan)
+        for q, (k, c) in enumerate(zip(take, new_c)):
+            if line[k]:
+                ends_new[q] = merge_extent(lm_new[q], c.ends, ends_w[k])
+        self._ends = np.concatenate([self._ends, ends_new])
         self._bis = np.vstack([self._bis, np.array([c.bis for c in new_c])])
         self._open = np.concatenate([self._open, [c.opening for c in new_c]])
         self._n_open = np.concatenate([self._n_open, [c.n_open for c in new_c]])
+        self._hits = np.concatenate([self._hits, [c.hits for c in new_c]])
+        self._misses = np.concatenate([self._misses, np.zeros(take.size, dtype=np.int64)])
+        self._last_seen = np.concatenate([self._last_seen,
+                                          np.full(take.size, self._scan, dtype=np.int64)])
+        self._max_seen = np.concatenate([self._max_seen, [c.max_seen for c in new_c]])
         done = {int(cand_id[obs[k]]) for k in take}
         self._candidates = [c for c in self._candidates if c.cid not in done]
         status[obs[take]] = 'confirmed'
@@ -1073,7 +1493,8 @@ class EkfSlam:
         self._candidates = keep
 
 
-__all__ = ['ASSOCIATION_METHODS', 'augment_map', 'do_data_association', 'EkfSlam',
+__all__ = ['ASSOCIATION_METHODS', 'augment_map', 'CORNER', 'do_data_association', 'EkfSlam',
+           'LINE', 'MAP_FULL_POLICIES', 'MODES',
            'ekf_predict', 'ekf_update', 'feature_initialization', 'is_psd',
            'joint_observation_covariance', 'map_initialization', 'nearest_psd',
            'observation_model', 'odometry_check', 'odometry_increment', 'odometry_noise',

@@ -35,7 +35,8 @@ Each sample ``(stamp, pose, covariance)`` is judged against the previous accepte
 Feature sets (:meth:`SlamFrontend.add_features`)
 ------------------------------------------------
 A set of corners (laser frame, each with its covariance, bisector, opening and beam time
-after the set's stamp) waits until the odometry covers its last beam (``stamp +
+after the set's stamp; optionally line segments with their middle beam's time and the
+scan's geometry, :class:`Corners`) waits until the odometry covers its last beam (``stamp +
 max(beam_time)``; with de-skew off, the stamp), then is processed in stamp order; a set
 older than the last processed step is dropped (``'out_of_order'``), and so is a set that
 came before any odometry and turns out older than the first sample (``'before_odometry'``).
@@ -48,8 +49,12 @@ Per step (one iteration of Fig. 17): the odometry is linearly interpolated to th
 sample), ``u`` (eq. 13) goes to :meth:`EkfSlam.predict` (``U`` from the parameters' noise
 model, plus the bridged variance), each corner goes through the odometry motion between
 the stamp and its beam time (de-skew) and the laser mount into range and bearing
-(:func:`.observations.corners_to_observations`, eqs. 18-22) and :meth:`EkfSlam.update`
-(association, update, candidates, augmentation; the core's map management runs there).
+(:func:`.observations.corners_to_observations`, eqs. 18-22), each line likewise through
+the motion at its middle beam (:func:`.line_landmarks.lines_to_observations`), and all go
+with the scan's geometry (visibility-aware pruning, :mod:`.visibility`) to
+:meth:`EkfSlam.update` (association, update, candidates, augmentation; the core's map
+management runs there). With a saved map (``slam_map``, e.g. ``mode: localization``) the
+filter starts on it at the first odometry pose (:meth:`EkfSlam.load_map`).
 
 Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
 --------------------------------------------------------------------------------------
@@ -81,7 +86,10 @@ from landmark_nav.geometry import compose, interpolate_pose, inverse, relative
 import numpy as np
 
 from .ekf_slam import EkfSlam, odometry_noise, OdometryNoise, SlamParams, UpdateResult
+from .line_landmarks import lines_to_observations
 from .observations import corner_descriptors, corners_to_observations
+from .slam_map import SlamMap
+from .visibility import ScanGeometry
 
 #: Named odometry noise models (module docstring).
 ODOMETRY_NOISE_MODELS: Dict[str, OdometryNoise] = {
@@ -173,7 +181,10 @@ class FrontendParams:
 
 @dataclass(frozen=True, eq=False)
 class Corners:
-    """One scan's corners in the laser frame (M corners; the corner cloud's content).
+    """One scan's features in the laser frame: M corners, optionally L lines and the scan.
+
+    The corner cloud's content, plus what the ``landmarks: lines|both`` setting and the
+    visibility-aware pruning need (:mod:`.line_landmarks`, :mod:`.visibility`).
 
     Attributes:
         stamp_ns: Stamp of the scan (its first beam) [ns].
@@ -183,6 +194,13 @@ class Corners:
         opening: (M,) free-space openings [rad].
         beam_time: (M,) time of each corner's beam after ``stamp_ns`` [s] (index times the
             scan's ``time_increment``; zeros when unknown).
+        lines: L line segments (:class:`~landmark_nav.laser.lines.LineSegment`: ``rho``,
+            ``alpha``, ``covariance``, ``start``, ``end``, ``num_points``, ``rmse``,
+            ``first_index``, ``last_index``); empty: no line observations.
+        line_beam_time: (L,) time of each line's middle beam after ``stamp_ns`` [s].
+        line_sigma_r: The laser's stated range noise for the lines' a-posteriori variance
+            factor (:func:`.line_landmarks.lines_to_observations`); None: not applied.
+        scan: The scan's geometry for visibility-aware pruning (None: no pruning evidence).
     """
 
     stamp_ns: int
@@ -191,19 +209,39 @@ class Corners:
     bisector: np.ndarray
     opening: np.ndarray
     beam_time: np.ndarray
+    lines: Tuple = ()
+    line_beam_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    line_sigma_r: Optional[float] = None
+    scan: Optional[ScanGeometry] = None
 
     @classmethod
-    def from_corners(cls, stamp_ns: int, corners: Sequence, time_increment: float = 0.0
-                     ) -> 'Corners':
-        """Build from :class:`~landmark_nav.laser.corners.Corner` objects of one scan."""
+    def from_corners(cls, stamp_ns: int, corners: Sequence, time_increment: float = 0.0,
+                     lines: Sequence = (), line_sigma_r: Optional[float] = None,
+                     scan: Optional[ScanGeometry] = None) -> 'Corners':
+        """Build from one scan's :class:`~landmark_nav.laser.corners.Corner` objects.
+
+        Args:
+            stamp_ns: Scan stamp [ns].
+            corners: The corners.
+            time_increment: The scan's time between beams [s].
+            lines: The scan's line segments (``landmarks: lines|both``).
+            line_sigma_r: See the class attributes.
+            scan: See the class attributes.
+        """
         m = len(corners)
+        lines = tuple(lines)
         return cls(int(stamp_ns),
                    np.array([c.position for c in corners], dtype=float).reshape(m, 2),
                    np.array([c.covariance for c in corners], dtype=float).reshape(m, 2, 2),
                    np.array([c.bisector for c in corners], dtype=float).reshape(m),
                    np.array([c.opening for c in corners], dtype=float).reshape(m),
                    float(time_increment) * np.array([c.index for c in corners],
-                                                    dtype=float).reshape(m))
+                                                    dtype=float).reshape(m),
+                   lines,
+                   float(time_increment) * np.array(
+                       [0.5 * (ln.first_index + ln.last_index) for ln in lines],
+                       dtype=float).reshape(len(lines)),
+                   line_sigma_r, scan)
 
     def __len__(self) -> int:
         """Return the number of corners."""
@@ -284,14 +322,26 @@ class SlamFrontend:
             that is not used as it came (kinds of :data:`ODOMETRY_EVENTS` /
             :data:`FEATURE_EVENTS` other than 'accepted' and 'processed').
         on_step: Called as ``on_step(step)`` right after each step, before the next one.
+        slam_map: Start the filter on this saved map (:meth:`EkfSlam.load_map`, e.g. with
+            ``params.mode == 'localization'``), the first accepted odometry pose being the
+            robot's pose on it; after a restart the filter starts on it again.
+        map_pose_covariance: (3, 3) covariance of that start pose (default zeros).
     """
 
     def __init__(self, params: Optional[SlamParams] = None,
                  laser_mount: Sequence[float] = (0.0, 0.0, 0.0),
                  frontend: Optional[FrontendParams] = None,
                  on_event: Optional[Callable[[str, str], None]] = None,
-                 on_step: Optional[Callable[['Step'], None]] = None) -> None:
+                 on_step: Optional[Callable[['Step'], None]] = None,
+                 slam_map: Optional[SlamMap] = None,
+                 map_pose_covariance: Optional[np.ndarray] = None) -> None:
         """Start empty: the filter starts at the first accepted odometry sample."""
+        self.slam_map = slam_map
+        self.map_pose_covariance = (np.zeros((3, 3)) if map_pose_covariance is None else
+                                    np.asarray(map_pose_covariance, dtype=float))
+        if self.map_pose_covariance.shape != (3, 3):
+            raise ValueError('map_pose_covariance must be a (3, 3) matrix, got shape '
+                             f'{self.map_pose_covariance.shape}')
         self.params = params or SlamParams()
         self.frontend = frontend or FrontendParams()
         self.mount = np.asarray(laser_mount, dtype=float).reshape(3)
@@ -355,6 +405,8 @@ class SlamFrontend:
             self._accept(stamp_ns, pose, pose.copy(), cov, np.zeros(3))
             if self.slam is None:
                 self.slam = EkfSlam(self.params, initial_pose=pose)
+                if self.slam_map is not None:
+                    self.slam.load_map(self.slam_map, pose, self.map_pose_covariance)
                 self.t0 = stamp_ns
                 self.last_step = (stamp_ns, pose.copy())
                 while self._pending and self._pending[0].stamp_ns < stamp_ns:
@@ -446,9 +498,9 @@ class SlamFrontend:
             self._event('out_of_order', f'corners at {t} ns are older than the last step '
                         f'({self.last_step[0]} ns) or the buffered odometry: skipped')
             return []
-        bt = corners.beam_time
+        bt = np.concatenate([corners.beam_time, corners.line_beam_time])
         need = t + (int(math.ceil(float(np.max(bt)) * 1e9))
-                    if self.frontend.deskew and len(corners) and np.max(bt) > 0 else 0)
+                    if self.frontend.deskew and bt.size and np.max(bt) > 0 else 0)
         self._seq += 1
         bisect.insort(self._pending, _Pending(t, need, corners, tag, self._seq),
                       key=lambda p: (p.stamp_ns, p.seq))
@@ -498,16 +550,23 @@ class SlamFrontend:
         else:
             self.slam.predict(u)
         c = p.corners
-        motion = None
-        if self.frontend.deskew and len(c) and np.any(c.beam_time != 0.0):
-            tb = (t - self.t0) * 1e-9 + c.beam_time
-            tb = np.minimum(tb, ts[-1])  # beyond the odometry (flush): hold its last pose
-            motion = relative(odo, interpolate_pose(tb, ts, ps, extrapolate=True))
+        motion = lmotion = None
+        if self.frontend.deskew:
+            t_rel = (t - self.t0) * 1e-9
+            if len(c) and np.any(c.beam_time != 0.0):
+                # Beyond the odometry (flush): hold its last pose.
+                tb = np.minimum(t_rel + c.beam_time, ts[-1])
+                motion = relative(odo, interpolate_pose(tb, ts, ps, extrapolate=True))
+            if len(c.lines) and np.any(c.line_beam_time != 0.0):
+                tb = np.minimum(t_rel + c.line_beam_time, ts[-1])
+                lmotion = relative(odo, interpolate_pose(tb, ts, ps, extrapolate=True))
         items = c.items()
         z, r = corners_to_observations(items, self.mount, motion)
         desc = (corner_descriptors(items, self.mount, motion) if self.frontend.descriptors
                 else None)
-        res = self.slam.update(z, r, desc)
+        lines = (lines_to_observations(c.lines, self.mount, lmotion, c.line_sigma_r)
+                 if len(c.lines) else None)
+        res = self.slam.update(z, r, desc, lines=lines, scan=c.scan)
         self.last_step = (t, odo)
         self._event('processed')
         step = Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,

@@ -150,12 +150,23 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
+    import numpy as np
     progress = not args.no_progress and sys.stderr.isatty()
+    if args.mode == 'localization' and args.map is None:
+        raise ValueError('--mode localization needs --map FILE.npz (a map saved with '
+                         '--save-map)')
+    pose_cov = None if args.map_pose_sigma is None else np.diag(
+        np.square(np.asarray(args.map_pose_sigma, dtype=float)))
     result = evaluate_bag(args.bag, args.association, args.out, progress=progress,
-                          max_seconds=args.max_seconds, reference=args.reference,
-                          align=args.align, laser_pose=args.laser_pose, sigma_r=args.sigma_r,
-                          rpe_delta=args.rpe_delta)
+                          max_seconds=args.max_seconds,
+                          reference=args.reference, align=args.align,
+                          laser_pose=args.laser_pose, sigma_r=args.sigma_r,
+                          rpe_delta=args.rpe_delta, landmarks=args.landmarks,
+                          slam_map=args.map, save_map_to=args.save_map,
+                          map_pose_covariance=pose_cov, mode=args.mode)
     print(format_summary(result))
+    if result.get('map_file'):
+        print(f'map written: {result["map_file"]}')
     if args.view is not None:
         from landmark_nav.evaluation.viewer import write_slam_view
         view = write_slam_view(args.bag, args.view, args.association,
@@ -381,6 +392,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help='also write the inputs and outputs as one MCAP for Foxglove / '
                         'Lichtblick into the new bag directory DIR')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.add_argument('--landmarks', choices=['corners', 'lines', 'both'], default='corners',
+                   help='landmarks the filter maps (default corners)')
+    p.add_argument('--mode', choices=['slam', 'localization'], default='slam',
+                   help='slam (default) or localization on --map (no new landmarks)')
+    p.add_argument('--map', default=None, metavar='FILE.npz',
+                   help='start on this saved map (the first odometry pose is its start pose)')
+    p.add_argument('--map-pose-sigma', type=float, nargs=3, default=None,
+                   metavar=('SX', 'SY', 'SYAW'),
+                   help='1-sigma of that start pose [m m rad] (default 0 0 0)')
+    p.add_argument('--save-map', default=None, metavar='FILE.npz',
+                   help='write the final map (landmark_nav.slam.slam_map format)')
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')

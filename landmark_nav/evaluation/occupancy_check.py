@@ -1,0 +1,348 @@
+"""Check a SLAM map against a building's occupancy grid (no trajectory truth needed).
+
+For logs without a reference trajectory but with a map of the building (the CMU Wean Hall
+runs and ``wean.dat``), a SLAM result is judged by where its landmarks and poses fall on
+the grid after the best rigid alignment (the SLAM map frame is the odometry's start, the
+grid has its own origin):
+
+* landmark share: the share of mapped landmarks (corner positions) within ``tolerance``
+  (10 cm) of a wall cell (grid value in ``[0, wall_max]``; the distance is to the cell's
+  square);
+* poses: the number of estimated poses in a wall cell or an unknown cell (value < 0);
+* optionally scan end points placed with the estimated poses (:func:`scan_end_points`):
+  the share within ``tolerance`` of a wall (bilinear distance transform between cell
+  centres minus half a cell). A trajectory that is consistent puts the walls of
+  successive scans on top of each other and on the building's walls; comparing that
+  share for the filter's poses and for the odometry's tells whether SLAM helped.
+
+The alignment ``T = (t_x, t_y, theta)`` (map frame -> grid frame) maximises
+``share of landmarks near a wall + share of poses in known non-wall cells``: for each
+``theta`` of a 1 deg grid the score of every translation on the grid's cells is one
+cross-correlation (FFT, :func:`scipy.signal.fftconvolve`) of the rasterised landmarks /
+poses with the near-wall / open indicator grids; the best ``theta`` is refined on a 0.1 deg
+grid, and the translation then continuously (Nelder-Mead on the mean clipped squared
+distance of the landmarks to the walls, bilinear on the distance transform).
+
+Grid file (:func:`load_occupancy_grid`): the Carnegie Mellon ``beesoft`` map format of
+``wean.dat`` (plain or gzip): header lines ``robot_specifications->resolution <cm>``, then
+``global_map[0]: <size_x> <size_y>`` and ``size_x`` lines of ``size_y`` values; ``-1`` is
+unknown, the other values lie in [0, 1]. In ``wean.dat`` they are the probability that the
+cell is *free* (1 in corridors, 0 on walls; its ``instruct.txt`` says occupied, the image
+says otherwise), so walls are the values <= ``wall_max``. Line ``i`` holds the cells of
+``x = i * resolution``, value ``j`` the cell of ``y = j * resolution`` (``prob[x][y]``
+as the format's reader ``bee-map.c`` fills it).
+"""
+
+from dataclasses import dataclass
+import gzip
+import math
+from pathlib import Path
+from typing import Dict, Optional, Tuple, Union
+
+from landmark_nav.slam.ekf_slam import CORNER
+from landmark_nav.slam.slam_map import load_map
+import numpy as np
+from scipy import ndimage, optimize, signal
+from scipy.spatial import cKDTree
+
+
+@dataclass(frozen=True, eq=False)
+class OccupancyGrid:
+    """A grid map.
+
+    Attributes:
+        values: (NX, NY) cell values, ``values[i, j]`` at ``x = (i + 0.5) * resolution``,
+            ``y = (j + 0.5) * resolution``; -1 unknown.
+        resolution: Cell size [m].
+        name: Where it came from (messages).
+    """
+
+    values: np.ndarray
+    resolution: float
+    name: str = 'grid'
+
+
+def load_occupancy_grid(path: Union[str, Path]) -> OccupancyGrid:
+    """Read a beesoft map file (module docstring), plain or ``.gz``.
+
+    Raises:
+        ValueError: Malformed file (names the file and line).
+    """
+    path = Path(path)
+    opener = gzip.open if path.suffix == '.gz' else open
+    with opener(path, 'rt') as f:
+        lines = f.read().splitlines()
+    resolution = None
+    for n, line in enumerate(lines, 1):
+        tok = line.split()
+        if len(tok) == 2 and tok[0].endswith('->resolution'):
+            try:
+                resolution = float(tok[1]) / 100.0
+            except ValueError:
+                raise ValueError(f'{path}:{n}: resolution {tok[1]!r} is not a number') from None
+        if tok and tok[0].startswith('global_map['):
+            if len(tok) != 3:
+                raise ValueError(f'{path}:{n}: expected "global_map[0]: size_x size_y"')
+            try:
+                nx, ny = int(tok[1]), int(tok[2])
+            except ValueError:
+                raise ValueError(f'{path}:{n}: map size {tok[1:]} is not two integers') from None
+            rows = lines[n:n + nx]
+            if len(rows) != nx:
+                raise ValueError(f'{path}: {len(rows)} map lines after line {n}, expected {nx}')
+            bad = next((k for k, r in enumerate(rows) if len(r.split()) != ny), None)
+            if bad is not None:
+                raise ValueError(f'{path}:{n + 1 + bad}: {len(rows[bad].split())} values, '
+                                 f'expected {ny}')
+            try:
+                values = np.array([r.split() for r in rows], dtype=float)
+            except ValueError as err:
+                raise ValueError(f'{path}: map lines {n + 1}-{n + nx}: {err}') from None
+            if resolution is None or not resolution > 0.0:
+                raise ValueError(f'{path}: no positive robot_specifications->resolution '
+                                 'before the map')
+            return OccupancyGrid(values, resolution, str(path))
+    raise ValueError(f'{path}: no "global_map[0]:" line')
+
+
+def _rot(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _transform(xy: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return xy @ _rot(t[2]).T + t[:2]
+
+
+def _raster(xy: np.ndarray, res: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Count points per cell; return the counts and the cell of index (0, 0)."""
+    ij = np.floor(xy / res).astype(np.int64)
+    lo = ij.min(axis=0)
+    ij -= lo
+    counts = np.zeros(ij.max(axis=0) + 1)
+    np.add.at(counts, (ij[:, 0], ij[:, 1]), 1.0)
+    return counts, lo
+
+
+def _best_shift(near: np.ndarray, open_: np.ndarray, lm: np.ndarray, poses: np.ndarray,
+                res: float) -> Tuple[float, np.ndarray]:
+    """Best integer-cell translation for points already rotated: (score, translation)."""
+    cl, lo_l = _raster(lm, res)
+    cp, lo_p = _raster(poses, res)
+    # score[s] = sum_k near[s + ij_k]: correlation = convolution with the flipped raster.
+    sl = signal.fftconvolve(near, cl[::-1, ::-1], mode='full') / lm.shape[0]
+    sp = signal.fftconvolve(open_, cp[::-1, ::-1], mode='full') / poses.shape[0]
+    # sl[a] is the score of shift s = a - (shape(cl) - 1) - lo_l, likewise sp.
+    off_l = np.array(cl.shape) - 1 + lo_l
+    off_p = np.array(cp.shape) - 1 + lo_p
+    d = off_p - off_l  # sp index = sl index + d for the same shift
+    total = sl.copy()
+    a0 = np.maximum(0, -d)
+    a1 = np.minimum(np.array(sl.shape), np.array(sp.shape) - d)
+    if np.all(a1 > a0):
+        total[a0[0]:a1[0], a0[1]:a1[1]] += sp[a0[0] + d[0]:a1[0] + d[0],
+                                              a0[1] + d[1]:a1[1] + d[1]]
+    a = np.unravel_index(int(np.argmax(total)), total.shape)
+    shift = (np.array(a) - off_l) * res
+    return float(total[a]), shift
+
+
+def _square_distance(grid_xy: np.ndarray, walls: cKDTree, res: float, reach: float
+                     ) -> np.ndarray:
+    """Distance of points to the nearest wall cell's square (inf beyond ``reach``)."""
+    out = np.full(grid_xy.shape[0], np.inf)
+    for k, idx in enumerate(walls.query_ball_point(grid_xy, reach + res)):
+        if idx:
+            c = walls.data[idx]
+            dx = np.maximum(np.abs(grid_xy[k, 0] - c[:, 0]) - 0.5 * res, 0.0)
+            dy = np.maximum(np.abs(grid_xy[k, 1] - c[:, 1]) - 0.5 * res, 0.0)
+            out[k] = float(np.min(np.hypot(dx, dy)))
+    return out
+
+
+def _pool(a: np.ndarray, f: int) -> np.ndarray:
+    """Max over f x f blocks (the coarse search's grids)."""
+    nx, ny = (a.shape[0] + f - 1) // f, (a.shape[1] + f - 1) // f
+    pad = np.zeros((nx * f, ny * f))
+    pad[:a.shape[0], :a.shape[1]] = a
+    return pad.reshape(nx, f, ny, f).max(axis=(1, 3))
+
+
+def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarray,
+                    points: Optional[np.ndarray] = None, tolerance: float = 0.1,
+                    wall_max: float = 0.1, coarse_step_deg: float = 2.0,
+                    fine_step_deg: float = 0.2, coarse_factor: int = 2) -> Dict[str, object]:
+    """Align the SLAM result to the grid and score it (module docstring).
+
+    Args:
+        grid: The building's grid.
+        landmarks: (L, 2) mapped landmark positions (SLAM map frame) [m].
+        poses: (P, 2) estimated robot positions (same frame) [m].
+        points: Optional (K, 2) scan end points placed with the estimated poses (same
+            frame): when given they, not the landmarks, drive the alignment (a few dozen
+            landmarks fit a large building in several places) and their share near a wall
+            is reported too.
+        tolerance: Distance to a wall counted as on the wall [m].
+        wall_max: Largest grid value of a wall cell (values are the free probability).
+        coarse_step_deg: Rotation grid of the global search [deg].
+        fine_step_deg: Rotation grid of the refinement [deg].
+        coarse_factor: The global search runs on cells this many times larger.
+
+    Returns:
+        ``landmarks``, ``landmarks_near_wall``, ``landmark_share`` (within ``tolerance``),
+        ``poses``, ``poses_in_wall``, ``poses_unknown``, ``point_share`` (None without
+        points), ``transform`` ``[t_x, t_y, theta]`` (map frame -> grid frame).
+
+    Raises:
+        ValueError: Empty or non-finite input.
+    """
+    lm = np.asarray(landmarks, dtype=float).reshape(-1, 2)
+    ps = np.asarray(poses, dtype=float).reshape(-1, 2)
+    pts = None if points is None else np.asarray(points, dtype=float).reshape(-1, 2)
+    if lm.shape[0] == 0 or ps.shape[0] == 0 or (pts is not None and pts.shape[0] == 0):
+        raise ValueError('occupancy_check: needs at least one landmark, pose and point')
+    if not all(np.all(np.isfinite(a)) for a in (lm, ps, pts) if a is not None):
+        raise ValueError('occupancy_check: landmarks, poses and points must be finite')
+    v, res = grid.values, grid.resolution
+    wall = (v >= 0.0) & (v <= wall_max)
+    if not np.any(wall):
+        raise ValueError(f'{grid.name}: no wall cell (value in [0, {wall_max}])')
+    dist = ndimage.distance_transform_edt(~wall) * res  # centre to centre
+    near = (dist <= tolerance + 0.5 * res).astype(float)
+    open_ = (v > wall_max).astype(float)
+    fit = lm if pts is None else pts
+    centre = ps.mean(axis=0)
+    fit0, ps0 = fit - centre, ps - centre
+
+    def search(thetas, near_g, open_g, res_g):
+        best = (-np.inf, None, None)
+        for th in thetas:
+            r = _rot(th)
+            score, shift = _best_shift(near_g, open_g, fit0 @ r.T, ps0 @ r.T, res_g)
+            if score > best[0]:
+                best = (score, th, shift)
+        return best
+
+    f = int(coarse_factor)
+    coarse = np.radians(np.arange(0.0, 360.0, coarse_step_deg))
+    _, th, _ = search(coarse, _pool(near, f), _pool(open_, f), res * f)
+    fine = th + np.radians(np.arange(-coarse_step_deg, coarse_step_deg + 1e-9, fine_step_deg))
+    _, th, shift = search(fine, near, open_, res)
+    # Continuous refinement on the fitted points' clipped distance to the walls.
+    clip = 3.0 * tolerance
+
+    def cost(p):
+        g = _transform(fit0, np.array([shift[0] + p[0], shift[1] + p[1], th + p[2]])) / res
+        d = ndimage.map_coordinates(dist, (g - 0.5).T, order=1, mode='nearest')
+        return float(np.mean(np.minimum(d, clip) ** 2))
+
+    simplex = [[0, 0, 0], [res / 2, 0, 0], [0, res / 2, 0], [0, 0, math.radians(fine_step_deg)]]
+    p = optimize.minimize(cost, np.zeros(3), method='Nelder-Mead',
+                          options={'xatol': 1e-3, 'fatol': 1e-8, 'initial_simplex': simplex}).x
+    th_f = th + p[2]
+    t_xy = shift + p[:2] - centre @ _rot(th_f).T
+    t = np.array([t_xy[0], t_xy[1], th_f])
+    walls = cKDTree((np.argwhere(wall) + 0.5) * res)
+    d_lm = _square_distance(_transform(lm, t), walls, res, tolerance)
+    ps_g = _transform(ps, t)
+    ij = np.floor(ps_g / res).astype(np.int64)
+    inside = np.all((ij >= 0) & (ij < np.array(v.shape)), axis=1)
+    val = np.full(ps.shape[0], -1.0)
+    val[inside] = v[ij[inside, 0], ij[inside, 1]]
+    near_lm = int(np.sum(d_lm <= tolerance))
+    point_share = None
+    if pts is not None:
+        g = _transform(pts, t) / res - 0.5
+        d_pt = ndimage.map_coordinates(dist, g.T, order=1, mode='nearest')
+        point_share = float(np.mean(d_pt <= tolerance + 0.5 * res))
+    return {'landmarks': int(lm.shape[0]), 'landmarks_near_wall': near_lm,
+            'landmark_share': near_lm / lm.shape[0], 'poses': int(ps.shape[0]),
+            'poses_in_wall': int(np.sum((val >= 0.0) & (val <= wall_max))),
+            'poses_unknown': int(np.sum(val < 0.0)), 'point_share': point_share,
+            'transform': [float(x) for x in t]}
+
+
+def scan_end_points(poses: np.ndarray, mount: np.ndarray, ranges: np.ndarray,
+                    angles: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Scan end points in the map frame: each scan's valid returns through its pose.
+
+    Args:
+        poses: (S, 3) robot poses.
+        mount: (3,) laser pose in base_link.
+        ranges: (S, B) ranges [m].
+        angles: (B,) beam angles [rad].
+        valid: (S, B) bool.
+
+    Returns:
+        (K, 2) points.
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    mount = np.asarray(mount, dtype=float).reshape(3)
+    lx = mount[0] + np.cos(mount[2]) * (ranges * np.cos(angles)) - np.sin(mount[2]) * (
+        ranges * np.sin(angles))
+    ly = mount[1] + np.sin(mount[2]) * (ranges * np.cos(angles)) + np.cos(mount[2]) * (
+        ranges * np.sin(angles))
+    c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
+    x = poses[:, 0:1] + c * lx - s * ly
+    y = poses[:, 1:2] + s * lx + c * ly
+    return np.column_stack([x[valid], y[valid]])
+
+
+def occupancy_check_files(grid: Union[str, Path, OccupancyGrid], map_file: Union[str, Path],
+                          trajectory_tum: Union[str, Path], tolerance: float = 0.1,
+                          wall_max: float = 0.1, points: Optional[np.ndarray] = None
+                          ) -> Dict[str, object]:
+    """:func:`occupancy_check` on a saved SLAM map (its corners) and a TUM trajectory."""
+    m = load_map(map_file)
+    lm = np.asarray(m.means, dtype=float).reshape(-1, 2)[np.asarray(m.kinds) == CORNER]
+    tum = np.loadtxt(trajectory_tum, ndmin=2)
+    if not isinstance(grid, OccupancyGrid):
+        grid = load_occupancy_grid(grid)
+    return occupancy_check(grid, lm, tum[:, 1:3], points, tolerance, wall_max)
+
+
+def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: float = 8.0,
+              tolerance: float = 0.1, wall_max: float = 0.1) -> Dict[str, Dict[str, object]]:
+    """:func:`occupancy_check` of a SLAM run and of its odometry on the same grid.
+
+    The scan end points (every ``every``-th step, valid returns up to ``max_range``: far
+    returns amplify heading errors and leave the building through doors) are placed once
+    with the filter's poses and once with the odometry, each set aligned on its own; the
+    landmarks are the filter's corners in both (their share is meaningful for ``'slam'``).
+
+    Args:
+        grid: The building's grid.
+        scenario: The bag (:func:`landmark_nav.evaluation.bags.load_bag`).
+        run: :func:`landmark_nav.evaluation.slam.run_slam` on it.
+        every: Step subsampling of the scan points.
+        max_range: Longest range used [m].
+        tolerance: See :func:`occupancy_check`.
+        wall_max: See :func:`occupancy_check`.
+
+    Returns:
+        ``{'slam': figures, 'odometry': figures}``.
+    """
+    from landmark_nav.conversions import classify_ranges
+    from landmark_nav.sim import ScanSample
+    scans = scenario.of_type(ScanSample)
+    sel = np.asarray(run.scan_index)[::every]
+    ranges = np.array([scans[k].ranges for k in sel], dtype=float)
+    valid = np.array([classify_ranges(scans[k].ranges, scans[k].range_min,
+                                      scans[k].range_max)[0] for k in sel])
+    with np.errstate(invalid='ignore'):
+        valid &= ranges <= max_range
+    s0 = scans[int(sel[0])]
+    angles = s0.angle_min + s0.angle_increment * np.arange(ranges.shape[1])
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    out = {}
+    for name, poses in (('slam', run.poses), ('odometry', run.odometry)):
+        pts = scan_end_points(poses[::every], mount, np.where(valid, ranges, 0.0), angles,
+                              valid)
+        out[name] = occupancy_check(grid, run.landmarks, poses[:, :2], pts, tolerance,
+                                    wall_max)
+    return out
+
+
+__all__ = ['check_run', 'load_occupancy_grid', 'occupancy_check', 'occupancy_check_files',
+           'OccupancyGrid',
+           'scan_end_points']

@@ -1,0 +1,63 @@
+"""Occupancy-grid check of a SLAM result (landmark_nav.evaluation.occupancy_check)."""
+
+import gzip
+import math
+
+from landmark_nav.evaluation.occupancy_check import (load_occupancy_grid, occupancy_check,
+                                                     OccupancyGrid, scan_end_points)
+import numpy as np
+import pytest
+
+
+def _room_grid():
+    """Return a 20 x 12 m room (10 cm cells, walls 1 cell thick, unknown outside, a stub)."""
+    v = -np.ones((300, 200))
+    v[50:251, 40:161] = 0.0
+    v[51:250, 41:160] = 1.0
+    v[100, 41:90] = 0.0  # x = 10.05 m, y 4.1 - 9.0 m: no symmetry left
+    return OccupancyGrid(v, 0.1, 'room')
+
+
+def _rot(th):
+    return np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+
+
+def test_recovers_a_rigid_transform():
+    """Landmarks on the walls and poses inside, seen from a rotated and shifted frame."""
+    grid = _room_grid()
+    rng = np.random.default_rng(0)
+    # Wall centre lines: x = 5.05 / 24.95, y = 4.05 / 15.95 (grid frame).
+    lm = np.array([[5.05, 6.0], [5.05, 12.0], [24.95, 8.0], [10.0, 4.05], [18.0, 15.95],
+                   [5.05, 4.05], [24.95, 15.95], [13.0, 4.05], [10.05, 6.5], [10.05, 8.5]])
+    poses = np.column_stack([rng.uniform(11, 23, 50), rng.uniform(6, 14, 50)])
+    th, t = 0.7, np.array([-3.0, 2.5])  # grid -> SLAM frame
+    to_slam = (lambda p: p @ _rot(th).T + t)
+    r = occupancy_check(grid, to_slam(lm), to_slam(poses), points=to_slam(
+        np.vstack([lm, lm + [[0.0, 0.02]]])))
+    assert r['landmark_share'] == 1.0 and r['poses_in_wall'] == 0 and r['poses_unknown'] == 0
+    assert r['point_share'] == 1.0
+    back = to_slam(lm) @ _rot(r['transform'][2]).T + r['transform'][:2]
+    assert np.max(np.hypot(*(back - lm).T)) < 0.1  # within the tolerance of the walls
+
+
+def test_scan_end_points_through_pose_and_mount():
+    pts = scan_end_points(np.array([[1.0, 2.0, math.pi / 2]]), np.array([0.25, 0.0, 0.0]),
+                          np.array([[1.0, 2.0]]), np.array([0.0, math.pi / 2]),
+                          np.array([[True, True]]))
+    assert np.allclose(pts, [[1.0, 3.25], [-1.0, 2.25]])
+
+
+def test_load_errors_name_file_and_line(tmp_path):
+    good = 'robot_specifications->resolution 10\nglobal_map[0]: 2 3\n0 1 -1\n1 0.5 0\n'
+    p = tmp_path / 'm.dat.gz'
+    with gzip.open(p, 'wt') as f:
+        f.write(good)
+    g = load_occupancy_grid(p)
+    assert g.resolution == 0.1 and g.values.shape == (2, 3) and g.values[0, 2] == -1
+    bad = tmp_path / 'bad.dat'
+    bad.write_text(good.replace('1 0.5 0', '1 0.5'))
+    with pytest.raises(ValueError, match=r'bad.dat:4: 2 values, expected 3'):
+        load_occupancy_grid(bad)
+    bad.write_text('global_map[0]: 1 1\n0\n')
+    with pytest.raises(ValueError, match='resolution'):
+        load_occupancy_grid(bad)
