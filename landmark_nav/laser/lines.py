@@ -1035,6 +1035,24 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
 _NEXT = np.array([[0], [1]])
 
 
+def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return (beam, line, rho, range, cos incidence) of the valid beams in the lines' extents.
+
+    The extent of a line runs from its first to its last supporting beam in beam order;
+    ``cos incidence`` is the ray direction dotted with the line's normal.
+    """
+    wr, wc, ws, wv = scan.beams()
+    b0, b1 = scan.beam[first], scan.beam[last]
+    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
+    idx, _ = _gather(lo, hi)
+    line = np.arange(first.size).repeat(hi - lo + 1)
+    ok = wv[idx]
+    idx, line = idx[ok], line[ok]
+    rho, _, nx, ny = f.params[:, line]
+    return idx, line, rho, wr[idx], wc[idx] * nx + ws[idx] * ny
+
+
 def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
                   params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return (line, beam, opening) of the valid beams the lines hide (step 5).
@@ -1048,16 +1066,7 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     rare large error). Beams in front of the line (occluders) and missing beams are
     allowed here (occluders are left out of the extents by :func:`_occluded_extents`).
     """
-    wr, wc, ws, wv = scan.beams()
-    b0, b1 = scan.beam[first], scan.beam[last]
-    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
-    idx, _ = _gather(lo, hi)
-    line = np.arange(first.size).repeat(hi - lo + 1)
-    ok = wv[idx]
-    idx, line = idx[ok], line[ok]
-    rho, _, nx, ny = f.params[:, line]
-    r = wr[idx]
-    cos_in = wc[idx] * nx + ws[idx] * ny  # cosine of the incidence: ray . normal
+    idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     with np.errstate(divide='ignore', invalid='ignore'):
         beyond = r - rho / cos_in
         bad = (cos_in > 1e-9) & (beyond > params.see_through_tolerance)
@@ -1202,16 +1211,8 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     pointing to its line's fit. Without occluders every line is one piece.
     """
     same = np.arange(first.size), first, last
-    wr, wc, ws, wv = scan.beams()
-    b0, b1 = scan.beam[first], scan.beam[last]
-    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
-    idx, _ = _gather(lo, hi)
-    line = np.arange(first.size).repeat(hi - lo + 1)
-    ok = wv[idx]
-    idx, line = idx[ok], line[ok]
-    rho, _, nx, ny = f.params[:, line]
-    r = wr[idx]
-    cos_in = wc[idx] * nx + ws[idx] * ny
+    idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
+    b1 = scan.beam[last]
     with np.errstate(divide='ignore', invalid='ignore'):
         front = rho / cos_in - r  # how far the return lies in front of the line
         c2 = cos_in * cos_in

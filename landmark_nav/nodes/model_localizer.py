@@ -29,7 +29,7 @@ import cv2
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.conversions import (array_to_image, camera_info_to_model, ConversionError,
                                       make_pose_with_covariance_stamped, odometry_to_pose,
-                                      pose_with_covariance_to_pose, stamp_to_ns)
+                                      stamp_to_ns)
 from landmark_nav.landmark_msgs import image_to_gray
 from landmark_nav.localization.odometry import (calibrate_control, control_from_poses,
                                                 ProcessNoise)
@@ -37,8 +37,8 @@ from landmark_nav.monocular.localizer import LocalizerParams, LOST, ModelLocaliz
 from landmark_nav.monocular.matching import MatchParams
 from landmark_nav.monocular.model import DEFAULT_MODEL_PATH, load_model, ModelError
 from landmark_nav.monocular.visibility import CameraMount, Intrinsics
-from landmark_nav.nodes.common import (declare, InputStats, ParameterError, ProblemWarner,
-                                       run_node, SENSOR_QOS)
+from landmark_nav.nodes.common import (declare, initial_pose, InputStats, ParameterError,
+                                       ProblemWarner, run_node, SENSOR_QOS)
 from landmark_nav.vision.image_lines import undistort_segments
 from landmark_nav.vision.rwrht import detect_model_lines, MODEL_LINE_METHODS
 from nav_msgs.msg import Odometry
@@ -191,22 +191,11 @@ class ModelLocalizerNode(Node):
 
     def on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """Reset the estimate (e.g. RViz "2D Pose Estimate")."""
-        try:
-            data = pose_with_covariance_to_pose(msg)
-        except ConversionError as err:
-            self.warner.warn(f'Dropping initial pose: {err}')
+        given = initial_pose(msg, self.frame_id, self.warner, self.initial_cov, 'initial_std')
+        if given is None:
             return
-        if data.frame_id not in ('', self.frame_id):
-            self.warner.warn(f'Dropping initial pose in frame {data.frame_id!r}: expected '
-                             f'{self.frame_id!r}')
-            return
-        cov = np.asarray(data.covariance, dtype=float)
-        if not (np.isfinite(cov).all() and np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() > 0):
-            self.warner.warn('initial pose covariance is not positive definite: using '
-                             'initial_std')
-            cov = self.initial_cov
-        self.loc.reset(data.pose, cov)
-        x, y, yaw = data.pose
+        self.loc.reset(*given)
+        x, y, yaw = given[0]
         self.get_logger().info(f'estimate reset to x={x:.3f} m, y={y:.3f} m, '
                                f'yaw={math.degrees(yaw):.1f} deg')
 

@@ -45,16 +45,15 @@ import math
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, grid_to_data, make_odometry,
                                       make_pose_with_covariance_stamped, odometry_to_pose,
-                                      pose_with_covariance_to_pose, range_to_value,
-                                      stamp_to_ns)
+                                      range_to_value, stamp_to_ns)
 from landmark_nav.hardware import SONAR_MOUNTS
 from landmark_nav.localization.grid import GridMap, load_map_yaml
 from landmark_nav.localization.odometry import ProcessNoise
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.tracking import sonar_reading, SonarTracker
 from landmark_nav.nodes.common import (declare, declare_dataclass, declare_strings,
-                                       InputStats, ParameterError, ProblemWarner, run_node,
-                                       SENSOR_QOS)
+                                       initial_pose, InputStats, ParameterError, ProblemWarner,
+                                       run_node, SENSOR_QOS)
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 from rclpy.node import Node
@@ -255,23 +254,12 @@ class SonarLocalizer(Node):
 
     def on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """Reset the estimate to a pose given by the user (e.g. RViz "2D Pose Estimate")."""
-        try:
-            data = pose_with_covariance_to_pose(msg)
-        except ConversionError as err:
-            self.warner.warn(f'Dropping initial pose: {err}')
+        given = initial_pose(msg, self.global_frame, self.warner, self.initial_cov,
+                             'the initial_pose.std_* parameters')
+        if given is None:
             return
-        if data.frame_id not in ('', self.global_frame):
-            self.warner.warn(f'Dropping initial pose in frame {data.frame_id!r}: expected '
-                             f'{self.global_frame!r}')
-            return
-        cov = np.asarray(data.covariance, dtype=float)
-        if not (np.isfinite(cov).all() and np.allclose(cov, cov.T)
-                and np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() > 0.0):
-            self.warner.warn('initial pose covariance is not positive definite: using the '
-                             'initial_pose.std_* parameters')
-            cov = self.initial_cov
-        self.tracker.reset(data.pose, cov)
-        x, y, yaw = data.pose
+        self.tracker.reset(*given)
+        x, y, yaw = given[0]
         self.get_logger().info(f'estimate reset to x={x:.3f} m, y={y:.3f} m, '
                                f'yaw={math.degrees(yaw):.1f} deg')
 
