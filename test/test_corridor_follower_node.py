@@ -143,6 +143,27 @@ def test_lost_estimate_stops_the_robot_and_bad_camera_info_is_survived():
         before = node.warner.count
         pub.publish(bad)
         assert ros.wait_until(lambda: node.warner.count > before, 10)
+        said = []
+        warn = node.warner.warn
+        node.warner.warn = lambda message: (said.append(message), warn(message))
+        # a saturated frame (no edges) after a good CameraInfo: lost, warned, still stopped
+        pub.publish(make_camera_info(CAM, 9_000_000_000, 'camera'))
+        pub_img = ros._helper.create_publisher(Image, 'camera/image_raw', 10)
+        assert ros.wait_for_subscribers([pub_img])
+        white = np.full((CAM.height, CAM.width), 255, np.uint8)
+        pub_img.publish(array_to_image(white, 'mono8', 9_000_000_000, 'camera'))
+        assert ros.wait_until(lambda: any(m.startswith('Corridor lost') for m in said), 10)
+        assert node.ekf is None and node.frames == 0
+        # odometry going back in time: warned, the increments restart, the robot stays stopped
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        assert ros.wait_for_subscribers([pub_odom])
+        last = node.last_odom[0]
+        n_cmds = len(cmds)
+        pub_odom.publish(make_odometry(last - 500_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        assert ros.wait_until(lambda: node.last_odom[0] == last - 500_000_000, 10)
+        assert any('went back in time' in m for m in said)
+        assert ros.wait_until(lambda: len(cmds) > n_cmds, 10)
+        assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in cmds)
 
 
 @pytest.fixture(scope='module')
