@@ -163,21 +163,27 @@ def _photometry(t: float, cfg: HallwayRunConfig, covered: bool) -> Photometry:
                       shot_noise=0.05)
 
 
-def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
-                model: Optional[LineModel] = None) -> HallwayRun:
-    """Simulate one rendered hallway run and localize along it (module docstring)."""
-    if cfg.method not in MODEL_LINE_METHODS:
-        raise ValueError(f'unknown line method {cfg.method!r}')
+def _hallway_setup(seed: int, cfg: 'HallwayRunConfig', model: Optional[LineModel]):
+    """Return (model, scenario, odometry, camera, renderer, static planes, rng) of a run."""
     model = hallway_model() if model is None else model
     scen = run_scenario('hallway', seed, laser=None, sonar=None)
-    robot = scen.robot
     odo: List[OdometrySample] = scen.of_type(OdometrySample)
     K = cfg.intrinsics
     cam = CameraModel(K.width, K.height, K.K, np.zeros(5))
     sim = CameraSimulator(cam, RenderOptions(supersample=cfg.supersample))
     static = model_planes(model, seed) + (door_frame_planes(model)
                                           if cfg.clutter.door_frames else [])
-    rng = np.random.default_rng(seed + 1000)
+    return model, scen, odo, cam, sim, static, np.random.default_rng(seed + 1000)
+
+
+def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
+                model: Optional[LineModel] = None) -> HallwayRun:
+    """Simulate one rendered hallway run and localize along it (module docstring)."""
+    if cfg.method not in MODEL_LINE_METHODS:
+        raise ValueError(f'unknown line method {cfg.method!r}')
+    model, scen, odo, cam, sim, static, rng = _hallway_setup(seed, cfg, model)
+    robot = scen.robot
+    K = cfg.intrinsics
     t0 = odo[0].stamp_ns
     truth0 = scen.truth_at(t0)
     if cfg.offset is not None:
@@ -241,15 +247,7 @@ def write_hallway_bag(path, seed: int, duration_s: float,
     from landmark_nav.conversions import array_to_image, make_camera_info, make_odometry
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import CameraInfo, Image
-    model = hallway_model() if model is None else model
-    scen = run_scenario('hallway', seed, laser=None, sonar=None)
-    odo: List[OdometrySample] = scen.of_type(OdometrySample)
-    K = cfg.intrinsics
-    cam = CameraModel(K.width, K.height, K.K, np.zeros(5))
-    sim = CameraSimulator(cam, RenderOptions(supersample=cfg.supersample))
-    static = model_planes(model, seed) + (door_frame_planes(model)
-                                          if cfg.clutter.door_frames else [])
-    rng = np.random.default_rng(seed + 1000)
+    model, scen, odo, cam, sim, static, rng = _hallway_setup(seed, cfg, model)
     every = max(1, int(round(10.0 / cfg.camera_rate)))
     t0 = odo[0].stamp_ns
     n = 0
