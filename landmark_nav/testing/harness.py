@@ -5,8 +5,10 @@ subprocesses it starts with ``os.environ``) on a domain id of its own with disco
 restricted to localhost, so parallel test runs and robots on the network never meet.
 """
 
+import fcntl
 import os
 from pathlib import Path
+import tempfile
 import threading
 import time
 from typing import Any, Callable, Dict, Iterable, List, Optional
@@ -19,10 +21,47 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 
+_DOMAINS = range(20, 100)  # clear of the default domain 0 and of the port-range limit
+_claimed: Dict[int, Any] = {}  # domain id -> the open lock file that holds it
+
+
+def claim_domain(start: int, lock_dir: Optional[Path] = None) -> int:
+    """Return a DDS domain id no other process on this machine holds, and hold it.
+
+    Each domain of 20..99 has a lock file; the first one from ``start`` on (wrapping)
+    whose ``flock`` can be taken is held until this process exits. Two test runs that
+    would share a domain (their pids equal modulo 80) would otherwise discover each
+    other's nodes and mix their topics.
+
+    Raises:
+        RuntimeError: every domain is held by another process.
+    """
+    lock_dir = Path(lock_dir or tempfile.gettempdir())
+    count = len(_DOMAINS)
+    for k in range(count):
+        domain_id = _DOMAINS[(start - _DOMAINS[0] + k) % count]
+        if domain_id in _claimed:
+            return domain_id
+        handle = open(lock_dir / f'landmark_nav-dds-domain-{domain_id}.lock', 'a')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _claimed[domain_id] = handle
+        return domain_id
+    raise RuntimeError(f'all DDS domains {_DOMAINS[0]}..{_DOMAINS[-1]} are held by other '
+                       f'processes (lock files in {lock_dir})')
+
+
 def isolate_dds(domain_id: Optional[int] = None) -> int:
-    """Use a private DDS domain (derived from the pid unless given) on localhost only."""
+    """Use a private DDS domain on localhost only.
+
+    Without ``domain_id`` the domain is claimed with :func:`claim_domain`, starting from
+    one derived from the pid, so concurrent runs on one machine never share a domain.
+    """
     if domain_id is None:
-        domain_id = 20 + os.getpid() % 80  # 20..99: clear of the default domain 0
+        domain_id = claim_domain(_DOMAINS[0] + os.getpid() % len(_DOMAINS))
     os.environ['ROS_DOMAIN_ID'] = str(domain_id)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.pop('ROS_LOCALHOST_ONLY', None)
