@@ -106,12 +106,9 @@ class TerrainParams:
     roughness_max: float = 0.013
     step_max: float = 0.04
     height_max: float = 0.3
-    split_ratio: float = 40.0
     split_rms: float = 0.008
-    rough_ratio: float = 1.5
-    grow_sigmas: float = 2.0
-    rough_lag: int = 3
-    rough_gain: float = 20.0
+    rough_ratio: float = 2.0
+    range_sigma: float = 0.005
     slope_max: float = 0.25
     curvature_max: float = 0.6
     min_width: float = 0.5
@@ -122,8 +119,8 @@ class TerrainParams:
 
     def __post_init__(self) -> None:
         """Check the ranges."""
-        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio',
-                     'split_rms', 'rough_gain',
+        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_rms',
+                     'range_sigma',
                      'slope_max', 'curvature_max', 'min_width', 'obstacle_height',
                      'obstacle_depth'):
             value = getattr(self, name)
@@ -279,82 +276,126 @@ def _prefix_sse(t: np.ndarray, z: np.ndarray, degree: int) -> np.ndarray:
     return sse
 
 
-def _split_profile(first: int, last: int, s: np.ndarray, z: np.ndarray,
-                   params: TerrainParams, out: list) -> None:
-    """Split a group where two quadratic height profiles fit far better than one (F_t, F_c).
+def _piece_nll(sse: np.ndarray, n: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """Gaussian negative log-likelihood of pieces with their own variance (ML, floored).
 
-    The best split point minimises the summed SSE of the two pieces (each at least
-    ``min_width / 2`` long); it is kept when the SSE drop, in units of the two-piece residual
-    variance, exceeds ``split_ratio`` (an F-test of 2 extra parameters) and the fit improves
-    by more than ``split_rms`` metres rms (a physical size, not only a significant one):
-    e.g. the slope break between a crowned road and its flat shoulder.
+    ``v = max(SSE / n, floor)``; ``NLL = (n log v + SSE / v) / 2`` (constants dropped): the
+    floor is the sensor's height noise, so a piece is never smoother than the laser.
     """
-    n = last - first + 1
-    if n < 2 * params.min_points + 6 or s[last] - s[first] < params.min_width:
+    with np.errstate(divide='ignore', invalid='ignore'):
+        v = np.maximum(sse / np.maximum(n, 1), floor)
+        return 0.5 * (n * np.log(v) + sse / v)
+
+
+def _segment_profile(first: int, last: int, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
+                     params: TerrainParams, out: list) -> None:
+    """Split a stretch of readings where the height profile or its roughness changes.
+
+    Each piece is a quadratic height profile ``z = a + b s + c s^2`` (slope ``F_t``,
+    curvature ``F_c``) with its own residual variance (roughness ``F_sigma``), floored by
+    the sensor's height noise ``var0``. Binary segmentation: the best split point
+    maximises the log-likelihood gain of two such pieces over one (computed for every
+    reading from prefix sums, so the edge falls on the reading where the profile bends or
+    the roughness changes, not on a window's end); it is kept when the gain exceeds the
+    Bayesian information criterion's penalty for the extra piece (3 coefficients, a
+    variance and the split point: ``5/2 ln n``). :func:`_merge_pieces` then rejoins the
+    neighbours that do not differ physically.
+    """
+    best, gain = _best_split(first, last, s, z, var0, params)
+    if best is None or gain <= 2.5 * math.log(last - first + 1):
         out.append((first, last))
         return
+    _segment_profile(first, best - 1, s, z, var0, params, out)
+    _segment_profile(best, last, s, z, var0, params, out)
+
+
+def _best_split(first: int, last: int, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
+                params: TerrainParams) -> tuple[Optional[int], float]:
+    """Return the reading that starts the second of the best two pieces, and the gain."""
+    n = last - first + 1
+    if n < 2 * params.min_points:
+        return None, -math.inf
     t = s[first:last + 1] - 0.5 * (s[first] + s[last])
     zz = z[first:last + 1]
-    # One piece bends (quadratic: a crowned road), the other is straight (a shoulder, a
-    # verge): the kink between them is located far more sharply than by two quadratics.
-    quad_l, line_l = _prefix_sse(t, zz, 2), _prefix_sse(t, zz, 1)                # [0, k)
-    quad_r = _prefix_sse(t[::-1], zz[::-1], 2)[::-1]                           # [k, n)
-    line_r = _prefix_sse(t[::-1], zz[::-1], 1)[::-1]
-    k = np.arange(n + 1)
-    total = np.minimum(quad_l + line_r, line_l + quad_r)
-    left = quad_l
-    span = 0.25 * params.min_width
-    allowed = ((k >= params.min_points) & (k <= n - params.min_points)
-               & (s[first + np.minimum(k, n - 1)] - s[first] >= span)
-               & (s[last] - s[first + np.minimum(k, n - 1)] >= span))
-    if not allowed.any():
-        out.append((first, last))
-        return
-    total[~allowed] = np.inf
-    best = int(np.argmin(total))
-    var = total[best] / max(n - 5, 1)
-    gain = (left[n] - total[best]) / (2.0 * max(var, 1e-12))
-    rms_gain = math.sqrt(max(left[n] - total[best], 0.0) / n)
-    if gain <= params.split_ratio or rms_gain <= params.split_rms:
-        best = _roughness_change(zz, allowed, params)
-        if best is None:
-            out.append((first, last))
-            return
-    _split_profile(first, first + best - 1, s, z, params, out)
-    _split_profile(first + best, last, s, z, params, out)
-
-
-def _roughness_change(z: np.ndarray, allowed: np.ndarray,
-                      params: TerrainParams) -> Optional[int]:
-    """Split point where the small-scale roughness changes level (F_sigma groups), or None.
-
-    The second differences of the heights along the scan, over ``rough_lag`` readings
-    either side (a few centimetres: longer than the range noise's one reading), measure the
-    roughness of each reading; the change point maximises the Gaussian log-likelihood gain
-    of two variances
-    over one and is kept when the gain exceeds ``rough_gain`` and the rougher piece's
-    roughness exceeds the smoother one's ``rough_ratio`` times (e.g. asphalt next to a
-    gravel or grass verge at the same height).
-    """
-    n = z.size
-    lag = min(params.rough_lag, (n - 1) // 2)
-    e2 = np.zeros(n)
-    e2[lag:n - lag] = (z[lag:n - lag] - 0.5 * (z[:n - 2 * lag] + z[2 * lag:])) ** 2
-    e2[:lag], e2[n - lag:] = e2[lag], e2[n - lag - 1]
-    c = np.concatenate([[0.0], np.cumsum(e2)])
+    c0 = np.concatenate([[0.0], np.cumsum(var0[first:last + 1])])
     k = np.arange(n + 1)
     with np.errstate(divide='ignore', invalid='ignore'):
-        v_l = c / k
-        v_r = (c[-1] - c) / (n - k)
-        floor = 1e-12
-        gain = 0.5 * (n * np.log(max(c[-1] / n, floor)) - k * np.log(np.maximum(v_l, floor))
-                      - (n - k) * np.log(np.maximum(v_r, floor)))
+        f_l = c0 / k
+        f_r = (c0[-1] - c0) / (n - k)
+    # Each piece is a quadratic (a crowned road) or a line (a flat shoulder, a verge: one
+    # parameter fewer, 1/2 ln n less penalty), which locates a kink sharply.
+    half = 0.5 * math.log(n)
+    nll_l = np.minimum(_piece_nll(_prefix_sse(t, zz, 2), k, f_l) + half,
+                       _piece_nll(_prefix_sse(t, zz, 1), k, f_l))             # [0, k)
+    nll_r = np.minimum(_piece_nll(_prefix_sse(t[::-1], zz[::-1], 2)[::-1], n - k, f_r) + half,
+                       _piece_nll(_prefix_sse(t[::-1], zz[::-1], 1)[::-1], n - k, f_r))
+    gain = nll_l[n] - nll_l - nll_r
+    allowed = (k >= params.min_points) & (k <= n - params.min_points)
     gain[~allowed] = -np.inf
     best = int(np.argmax(gain))
-    if not np.isfinite(gain[best]) or gain[best] <= params.rough_gain:
-        return None
-    ratio = math.sqrt(max(v_l[best], v_r[best]) / max(min(v_l[best], v_r[best]), 1e-12))
-    return best if ratio >= params.rough_ratio else None
+    if not np.isfinite(gain[best]):
+        return None, -math.inf
+    return first + best, float(gain[best])
+
+
+def _fit_piece(first: int, last: int, s: np.ndarray, z: np.ndarray,
+               var0: np.ndarray) -> tuple[float, float, int]:
+    """SSE of a piece's quadratic profile, its unbiased variance (floored) and its size."""
+    t = s[first:last + 1] - s[first:last + 1].mean()
+    zz = z[first:last + 1]
+    n = last - first + 1
+    coef = np.polyfit(t, zz, min(2, n - 1))
+    sse = float(np.sum((zz - np.polyval(coef, t)) ** 2))
+    return sse, max(sse / max(n - 3, 1), float(var0[first:last + 1].mean())), n
+
+
+def _merge_pieces(pieces: list, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
+                  params: TerrainParams) -> list:
+    """Rejoin neighbouring pieces whose boundary is not a physical change.
+
+    A boundary stays when the two pieces' roughness differs by ``rough_ratio`` (e.g. smooth
+    asphalt next to a rough verge at the same height) or two profiles fit better than one
+    by more than ``split_rms`` metres rms (a kink, e.g. a crowned road and its flat
+    shoulder), and the split is still significant (the BIC of :func:`_segment_profile`);
+    otherwise the pieces merge (a crowned road split by its random texture).
+    """
+    out = []
+    for first, last in pieces:
+        if out and out[-1][1] + 1 == first:
+            pf, _ = out[-1]
+            sse_a, v_a, n_a = _fit_piece(pf, first - 1, s, z, var0)
+            sse_b, v_b, n_b = _fit_piece(first, last, s, z, var0)
+            sse_ab, v_ab, n = _fit_piece(pf, last, s, z, var0)
+            rough = math.sqrt(max(v_a, v_b) / min(v_a, v_b)) >= params.rough_ratio
+            kink = math.sqrt(max(sse_ab - sse_a - sse_b, 0.0) / min(n_a, n_b)) > params.split_rms
+            nll = _piece_nll(np.array([sse_ab, sse_a, sse_b]), np.array([n, n_a, n_b]),
+                             np.array([var0[pf:last + 1].mean(), var0[pf:first].mean(),
+                                       var0[first:last + 1].mean()]))
+            significant = nll[0] - nll[1] - nll[2] > 2.5 * math.log(n)
+            if not (significant and (rough or kink)):
+                out[-1] = (pf, last)
+                continue
+        out.append((first, last))
+    return out
+
+
+def _verges(pieces: list, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
+            params: TerrainParams) -> list:
+    """Flag the rougher of two neighbours whose roughness differs by ``rough_ratio``.
+
+    The rougher piece is a verge (shoulder, grass) beside a smoother piece at least
+    ``min_width`` wide (the road, whose roughness is well estimated): not traversable.
+    """
+    rough = [_fit_piece(first, last, s, z, var0)[1] for first, last in pieces]
+    wide = [abs(s[last] - s[first]) >= params.min_width for first, last in pieces]
+    verge = [False] * len(pieces)
+    for j in range(len(pieces) - 1):
+        if pieces[j][1] + 1 != pieces[j + 1][0]:
+            continue
+        smooth, other = (j, j + 1) if rough[j] < rough[j + 1] else (j + 1, j)
+        if wide[smooth] and rough[other] >= params.rough_ratio ** 2 * rough[smooth]:
+            verge[other] = True
+    return verge
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -433,18 +474,37 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     # Height profiles across the scan are functions of the lateral position (base_link y,
     # increasing along the scan), which a crowned road's profile is a quadratic of.
     lateral = p[:, 1]
-    pieces = []
-    for first, last in groups:
-        _split_profile(first, last, lateral, z, params, pieces)
-    groups = pieces
-    segments = []
-    grown_last = -1
+    # The sensor's height noise per reading: the range noise along the beam's z component.
+    beam = mount.rotation() @ np.vstack([np.cos(a[idx]), np.sin(a[idx]), np.zeros(idx.size)])
+    var0 = (params.range_sigma * beam[2]) ** 2
+    # The windowed roughness of the readings within half a window of a rougher neighbour is
+    # raised by it, which trims every group by up to window / 2 at each end: each group is
+    # widened by half a window (not across a step or a gap, nor into the next group) and
+    # the profile segmentation puts the edge on the reading where the profile or its
+    # roughness changes.
+    stretches = []
     for g, (first, last) in enumerate(groups):
+        taken = stretches[-1][1] if stretches else -1
+        nxt = groups[g + 1][0] if g + 1 < len(groups) else idx.size
+        while first - 1 > taken and not cut[first] and \
+                s[first - 1] >= s[first] - 0.5 * params.window and ground[first - 1]:
+            first -= 1
+        while last + 1 < nxt and not cut[last + 1] and \
+                s[last + 1] <= s[last] + 0.5 * params.window and ground[last + 1]:
+            last += 1
+        if stretches and stretches[-1][1] + 1 == first and not cut[first]:
+            first = stretches.pop()[0]         # a rough gap shorter than the window
+        stretches.append((first, last))
+    pieces = []
+    for first, last in stretches:
+        found = []
+        _segment_profile(first, last, lateral, z, var0, params, found)
+        merged = _merge_pieces(found, lateral, z, var0, params)
+        pieces += [pc for pc, v in zip(merged, _verges(merged, lateral, z, var0, params))
+                   if not v]
+    segments = []
+    for g, (first, last) in enumerate(pieces):
         groups_all[idx[first:last + 1]] = g
-        lo = max(groups[g - 1][1] if g > 0 else -1, grown_last) + 1
-        hi = groups[g + 1][0] - 1 if g + 1 < len(groups) else idx.size - 1
-        first, last = _grow(first, last, lateral, z, params, lo, hi)
-        grown_last = last
         seg = _segment(first, last, p, lateral, rough, idx, params)
         if seg is not None:
             segments.append(seg)
@@ -483,36 +543,6 @@ def _combine(groups: list, s: np.ndarray, z: np.ndarray, cut: np.ndarray,
     return out
 
 
-def _grow(first: int, last: int, s: np.ndarray, z: np.ndarray, params: TerrainParams,
-          lo_index: int, hi_index: int) -> tuple[int, int]:
-    """Extend a group over the neighbouring readings that continue its height profile.
-
-    The windowed roughness of the readings within half a window of a rougher neighbour is
-    raised by that neighbour, which trims every group by up to ``window / 2`` at each end;
-    a reading next to the group is taken in while its height lies within
-    ``grow_sigmas`` residual standard deviations of the group's quadratic profile (and no
-    step lies between), one reading at a time outwards, at most ``window / 2`` far and not
-    into the neighbouring groups (readings ``lo_index`` .. ``hi_index`` are free).
-    """
-    if last - first + 1 < params.min_points:
-        return first, last
-    t = s[first:last + 1]
-    coef = np.polyfit(t - t.mean(), z[first:last + 1], 2)
-    sigma = max(float(np.std(z[first:last + 1] - np.polyval(coef, t - t.mean()))), 0.003)
-    limit = params.grow_sigmas * sigma
-    lo, hi = s[first] - 0.5 * params.window, s[last] + 0.5 * params.window
-
-    def fits(k: int, inner: int) -> bool:
-        off = abs(z[k] - np.polyval(coef, s[k] - t.mean()))
-        return off <= limit and abs(z[k] - z[inner]) <= params.step_max
-
-    while first > lo_index and s[first - 1] >= lo and fits(first - 1, first):
-        first -= 1
-    while last < hi_index and s[last + 1] <= hi and fits(last + 1, last):
-        last += 1
-    return first, last
-
-
 def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndarray,
              idx: np.ndarray, params: TerrainParams) -> Optional[Segment]:
     """Filter one roughness group by width, slope and curvature; return its segment."""
@@ -523,9 +553,11 @@ def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndar
         return None
     t = s[first:last + 1] - 0.5 * (s[first] + s[last])
     zz = p[first:last + 1, 2]
-    c2, c1, _ = np.polyfit(t, zz, 2)
-    slope, curvature = float(c1), float(2.0 * c2)                     # F_t, F_c
+    coef = np.polyfit(t, zz, 2)
+    slope, curvature = float(coef[1]), float(2.0 * coef[0])          # F_t, F_c
     if abs(slope) > params.slope_max or abs(curvature) > params.curvature_max:
+        return None
+    if np.median(rough[first:last + 1]) > params.roughness_max:      # F_sigma of the piece
         return None
     return Segment(int(idx[first]), int(idx[last]), tuple(map(float, p[first, :2])),
                    tuple(map(float, p[last, :2])), width, float(zz.mean()),
