@@ -15,15 +15,28 @@ F_w width}``:
    ``roughness_max``, a raw height ``|H_h|`` below ``height_max`` and no *step* ``F_z``
    (height jump between neighbours) above ``step_max``;
 4. groups separated by at most ``gap_max`` metres of rough readings at a compatible height
-   are combined (a stone or a tuft of grass does not cut a road in two); a group is then
-   split where a bent and a straight height profile (slope ``F_t`` and curvature ``F_c``
-   changing) fit far better than one quadratic: e.g. the kink between a crowned road and its
-   flat shoulder, which roughness alone does not separate on gravel (the chapter's +0.7 m);
-5. each group is filtered by its quadratic height profile ``z = a + b s + c s^2`` across
-   the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|`` below
-   ``curvature_max``, width ``F_w`` (end-to-end distance) at least ``min_width``
-   (the robot's width): the groups that pass are the *traversable segments*, their readings
-   ``C_t``; the other valid readings are ``C_n``;
+   are combined (a stone or a tuft of grass does not cut a road in two);
+5. *edges at the reading*: the windowed roughness of a reading within half a window of a
+   rougher one is raised by it, so the groups end up to ``window / 2`` short of (or, beside
+   a smooth verge, past) the true edge. Each group is widened by half a window (stretches
+   that then touch are joined) and segmented along the lateral position into pieces, each
+   a quadratic (crowned road) or straight (flat shoulder) height profile with its own
+   residual variance (roughness), floored by the laser's height noise
+   (``range_sigma`` times the beam's vertical component): binary segmentation by the
+   likelihood gain with the Bayesian information criterion's penalty, then neighbours
+   are rejoined, least significant boundary first (per reading), unless they differ
+   physically -- roughness by ``rough_ratio`` (F-test at ``rough_alpha``) or profile by a
+   kink of more than ``split_rms`` -- and the rougher of two pieces beside a road-wide
+   smooth piece is a verge. So the edge is the reading where the profile bends or the
+   roughness changes: the kink between a crowned road and its flat shoulder, which
+   roughness alone does not separate on gravel (the chapter's +0.7 m), or smooth asphalt
+   next to a rough verge;
+   each piece is then filtered by its quadratic height profile ``z = a + b s + c s^2``
+   across the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|``
+   below ``curvature_max``, median roughness ``F_sigma`` below ``roughness_max``, width
+   ``F_w`` (end-to-end distance) at least ``min_width`` (the robot's width): the pieces that
+   pass are the *traversable segments*, their readings ``C_t``; the other valid readings
+   are ``C_n``;
 6. *obstacles*: runs of valid readings higher than ``obstacle_height`` above the ground
    plane (a kerb face, a post), or not traversable, between traversable readings and more
    than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
@@ -37,6 +50,7 @@ import math
 from typing import Optional, Sequence
 
 import numpy as np
+from scipy.special import fdtri
 
 #: Reading classes (the chapter's C_0, C_t, C_n).
 INVALID = 0
@@ -107,7 +121,8 @@ class TerrainParams:
     step_max: float = 0.04
     height_max: float = 0.3
     split_rms: float = 0.008
-    rough_ratio: float = 2.0
+    rough_ratio: float = 1.5
+    rough_alpha: float = 0.05
     range_sigma: float = 0.005
     slope_max: float = 0.25
     curvature_max: float = 0.6
@@ -257,23 +272,25 @@ def _roughness(plane: np.ndarray, s: np.ndarray, window: float, min_points: int)
     return out
 
 
-def _prefix_sse(t: np.ndarray, z: np.ndarray, degree: int) -> np.ndarray:
-    """SSE of the least-squares polynomial z(t) of ``degree`` over every prefix ``[0, k)``."""
-    n, d = t.size, degree + 1
-    powers = np.vstack([t ** k for k in range(2 * d - 1)])
-    m = np.concatenate([np.zeros((2 * d - 1, 1)), np.cumsum(powers, axis=1)], axis=1)
-    tz = np.vstack([z * t ** k for k in range(d)])
-    b = np.concatenate([np.zeros((d, 1)), np.cumsum(tz, axis=1)], axis=1)
-    zz = np.concatenate([[0.0], np.cumsum(z * z)])
-    a = np.empty((n + 1, d, d))
-    for i in range(d):
-        for j in range(d):
-            a[:, i, j] = m[i + j]
-    sse = np.zeros(n + 1)
-    ok = np.arange(n + 1) > d
-    coef = np.linalg.solve(a[ok] + 1e-12 * np.eye(d), b.T[ok][..., None])[..., 0]
-    sse[ok] = np.maximum(zz[ok] - np.sum(coef * b.T[ok], axis=1), 0.0)
-    return sse
+def _poly_sse(m: np.ndarray, degree: int) -> np.ndarray:
+    """SSE of least-squares lines (1) or quadratics (2) z(t) from their sums (closed form).
+
+    ``m`` rows: sums of t^0..t^4, z, z t, z t^2, z^2 (one column per piece); pieces with
+    no more readings than coefficients get 0.
+    """
+    s0, s1, s2, s3, s4, b0, b1, b2, zz = m[:9]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        if degree == 1:
+            det = s0 * s2 - s1 * s1
+            fit = (b0 * b0 * s2 - 2.0 * b0 * b1 * s1 + b1 * b1 * s0) / det
+        else:
+            c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+            c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
+            det = s0 * c00 + s1 * c01 + s2 * c02
+            fit = (b0 * b0 * c00 + b1 * b1 * c11 + b2 * b2 * c22
+                   + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det
+    sse = np.maximum(zz - fit, 0.0)
+    return np.where(s0 > degree + 1.5, sse, 0.0)
 
 
 def _piece_nll(sse: np.ndarray, n: np.ndarray, floor: np.ndarray) -> np.ndarray:
@@ -287,8 +304,8 @@ def _piece_nll(sse: np.ndarray, n: np.ndarray, floor: np.ndarray) -> np.ndarray:
         return 0.5 * (n * np.log(v) + sse / v)
 
 
-def _segment_profile(first: int, last: int, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
-                     params: TerrainParams, out: list) -> None:
+def _segment_profile(first: int, last: int, table: np.ndarray, params: TerrainParams,
+                     out: list) -> None:
     """Split a stretch of readings where the height profile or its roughness changes.
 
     Each piece is a quadratic height profile ``z = a + b s + c s^2`` (slope ``F_t``,
@@ -301,35 +318,47 @@ def _segment_profile(first: int, last: int, s: np.ndarray, z: np.ndarray, var0: 
     variance and the split point: ``5/2 ln n``). :func:`_merge_pieces` then rejoins the
     neighbours that do not differ physically.
     """
-    best, gain = _best_split(first, last, s, z, var0, params)
+    best, gain = _best_split(first, last, table, params)
     if best is None or gain <= 2.5 * math.log(last - first + 1):
         out.append((first, last))
         return
-    _segment_profile(first, best - 1, s, z, var0, params, out)
-    _segment_profile(best, last, s, z, var0, params, out)
+    _segment_profile(first, best - 1, table, params, out)
+    _segment_profile(best, last, table, params, out)
 
 
-def _best_split(first: int, last: int, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
+def _moment_table(s: np.ndarray, z: np.ndarray, var0: np.ndarray) -> np.ndarray:
+    """Prefix sums (with a leading zero column) of t^0..t^4, z t^0..t^2, z^2 and ``var0``.
+
+    ``t`` is ``s`` about the stretch's middle; the sums over readings [a, b) of the stretch
+    are ``table[:, b] - table[:, a]``.
+    """
+    t = s - 0.5 * (s[0] + s[-1])
+    t2 = t * t
+    rows = np.vstack([np.ones_like(t), t, t2, t2 * t, t2 * t2, z, z * t, z * t2, z * z, var0])
+    return np.concatenate([np.zeros((10, 1)), np.cumsum(rows, axis=1)], axis=1)
+
+
+def _best_split(first: int, last: int, table: np.ndarray,
                 params: TerrainParams) -> tuple[Optional[int], float]:
-    """Return the reading that starts the second of the best two pieces, and the gain."""
+    """Return the reading that starts the second of the best two pieces, and the gain.
+
+    ``first`` and ``last`` index the stretch of :func:`_moment_table`.
+    """
     n = last - first + 1
     if n < 2 * params.min_points:
         return None, -math.inf
-    t = s[first:last + 1] - 0.5 * (s[first] + s[last])
-    zz = z[first:last + 1]
-    c0 = np.concatenate([[0.0], np.cumsum(var0[first:last + 1])])
+    cum = table[:, first:last + 2] - table[:, first:first + 1]       # sums over [0, k)
     k = np.arange(n + 1)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        f_l = c0 / k
-        f_r = (c0[-1] - c0) / (n - k)
     # Each piece is a quadratic (a crowned road) or a line (a flat shoulder, a verge: one
     # parameter fewer, 1/2 ln n less penalty), which locates a kink sharply.
     half = 0.5 * math.log(n)
-    nll_l = np.minimum(_piece_nll(_prefix_sse(t, zz, 2), k, f_l) + half,
-                       _piece_nll(_prefix_sse(t, zz, 1), k, f_l))             # [0, k)
-    nll_r = np.minimum(_piece_nll(_prefix_sse(t[::-1], zz[::-1], 2)[::-1], n - k, f_r) + half,
-                       _piece_nll(_prefix_sse(t[::-1], zz[::-1], 1)[::-1], n - k, f_r))
-    gain = nll_l[n] - nll_l - nll_r
+    m = np.concatenate([cum, cum[:, -1:] - cum], axis=1)        # [0, k) then [k, n)
+    cnt = m[0]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        floor = m[9] / cnt
+    nll = np.minimum(_piece_nll(_poly_sse(m, 2), cnt, floor) + half,
+                     _piece_nll(_poly_sse(m, 1), cnt, floor))
+    gain = nll[n] - nll[:n + 1] - nll[n + 1:]
     allowed = (k >= params.min_points) & (k <= n - params.min_points)
     gain[~allowed] = -np.inf
     best = int(np.argmax(gain))
@@ -338,62 +367,95 @@ def _best_split(first: int, last: int, s: np.ndarray, z: np.ndarray, var0: np.nd
     return first + best, float(gain[best])
 
 
-def _fit_piece(first: int, last: int, s: np.ndarray, z: np.ndarray,
-               var0: np.ndarray) -> tuple[float, float, int]:
-    """SSE of a piece's quadratic profile, its unbiased variance (floored) and its size."""
-    t = s[first:last + 1] - s[first:last + 1].mean()
-    zz = z[first:last + 1]
+def _fit_piece(first: int, last: int, table: np.ndarray) -> tuple[float, float, float, int]:
+    """Return a piece's quadratic-profile SSE, unbiased variance (floored), floor and size.
+
+    ``first`` and ``last`` index the stretch of :func:`_moment_table` (as :func:`_poly_sse`,
+    on floats).
+    """
+    s0, s1, s2, s3, s4, b0, b1, b2, zz, f = (table[:, last + 1] - table[:, first]).tolist()
     n = last - first + 1
-    coef = np.polyfit(t, zz, min(2, n - 1))
-    sse = float(np.sum((zz - np.polyval(coef, t)) ** 2))
-    return sse, max(sse / max(n - 3, 1), float(var0[first:last + 1].mean())), n
+    c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+    c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
+    det = s0 * c00 + s1 * c01 + s2 * c02
+    sse = 0.0
+    if n > 3 and det > 0.0:
+        sse = max(zz - (b0 * b0 * c00 + b1 * b1 * c11 + b2 * b2 * c22 + 2.0 * (
+            b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det, 0.0)
+    return sse, max(sse / max(n - 3, 1), f / n), f / n, n
 
 
-def _merge_pieces(pieces: list, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
-                  params: TerrainParams) -> list:
+def _rougher(v_a: float, n_a: int, v_b: float, n_b: int, params: TerrainParams) -> bool:
+    """Whether one piece is rougher than the other by ``rough_ratio``, significantly.
+
+    F-test of the variance ratio against ``rough_ratio^2`` at ``rough_alpha`` (quadratic
+    pieces: n - 3 degrees of freedom): a short piece's variance is too uncertain for the
+    plain ratio (a smooth stretch of a few readings in a gravel road).
+    """
+    (v_hi, n_hi), (v_lo, n_lo) = sorted(((v_a, n_a), (v_b, n_b)), reverse=True)
+    crit = float(fdtri(max(n_hi - 3, 1), max(n_lo - 3, 1), 1.0 - params.rough_alpha))
+    return v_hi >= params.rough_ratio ** 2 * crit * v_lo
+
+
+def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> list:
     """Rejoin neighbouring pieces whose boundary is not a physical change.
 
     A boundary stays when the two pieces' roughness differs by ``rough_ratio`` (e.g. smooth
     asphalt next to a rough verge at the same height) or two profiles fit better than one
-    by more than ``split_rms`` metres rms (a kink, e.g. a crowned road and its flat
-    shoulder), and the split is still significant (the BIC of :func:`_segment_profile`);
-    otherwise the pieces merge (a crowned road split by its random texture).
+    by more than ``split_rms`` metres rms over the shorter piece (a kink, e.g. a crowned
+    road and its flat shoulder), and the split is still significant (the BIC of
+    :func:`_segment_profile`); otherwise the pieces merge (a crowned road split by its
+    random texture).
     """
-    out = []
-    for first, last in pieces:
-        if out and out[-1][1] + 1 == first:
-            pf, _ = out[-1]
-            sse_a, v_a, n_a = _fit_piece(pf, first - 1, s, z, var0)
-            sse_b, v_b, n_b = _fit_piece(first, last, s, z, var0)
-            sse_ab, v_ab, n = _fit_piece(pf, last, s, z, var0)
-            rough = math.sqrt(max(v_a, v_b) / min(v_a, v_b)) >= params.rough_ratio
-            kink = math.sqrt(max(sse_ab - sse_a - sse_b, 0.0) / min(n_a, n_b)) > params.split_rms
-            nll = _piece_nll(np.array([sse_ab, sse_a, sse_b]), np.array([n, n_a, n_b]),
-                             np.array([var0[pf:last + 1].mean(), var0[pf:first].mean(),
-                                       var0[first:last + 1].mean()]))
-            significant = nll[0] - nll[1] - nll[2] > 2.5 * math.log(n)
-            if not (significant and (rough or kink)):
-                out[-1] = (pf, last)
-                continue
-        out.append((first, last))
+    def nll(sse: float, n: int, floor: float) -> float:
+        v = max(sse / n, floor)
+        return 0.5 * (n * math.log(v) + sse / v)
+
+    def weakness(j: int) -> float:
+        """Return the boundary's gain per reading over the penalty if it may go, else inf."""
+        (pf, pl), (first, last) = out[j], out[j + 1]
+        if pl + 1 != first:
+            return math.inf
+        sse_a, v_a, f_a, n_a = _fit_piece(pf, pl, table)
+        sse_b, v_b, f_b, n_b = _fit_piece(first, last, table)
+        sse_ab, _, f_ab, n = _fit_piece(pf, last, table)
+        gain = nll(sse_ab, n, f_ab) - nll(sse_a, n_a, f_a) - nll(sse_b, n_b, f_b) \
+            - 2.5 * math.log(n)
+        kink = math.sqrt(max(sse_ab - sse_a - sse_b, 0.0) / min(n_a, n_b)) > params.split_rms
+        if gain > 0.0 and (kink or _rougher(v_a, n_a, v_b, n_b, params)):
+            return math.inf
+        return gain / n
+
+    out = list(pieces)
+    weak = [weakness(j) for j in range(len(out) - 1)]
+    while weak and min(weak) < math.inf:
+        # The least significant boundary goes first: two pieces of the road merge before
+        # either is merged with a verge.
+        j = int(np.argmin(weak))
+        out[j:j + 2] = [(out[j][0], out[j + 1][1])]
+        del weak[j]
+        for i in (j - 1, j):
+            if 0 <= i < len(weak):
+                weak[i] = weakness(i)
     return out
 
 
-def _verges(pieces: list, s: np.ndarray, z: np.ndarray, var0: np.ndarray,
-            params: TerrainParams) -> list:
+def _verges(pieces: list, s: np.ndarray, table: np.ndarray, params: TerrainParams) -> list:
     """Flag the rougher of two neighbours whose roughness differs by ``rough_ratio``.
 
-    The rougher piece is a verge (shoulder, grass) beside a smoother piece at least
-    ``min_width`` wide (the road, whose roughness is well estimated): not traversable.
+    The rougher piece is a verge (shoulder, grass) beside a smoother and wider piece, at
+    least ``min_width`` wide (the road, whose roughness is well estimated): not
+    traversable. A smooth patch of a gravel road does not make the road a verge.
     """
-    rough = [_fit_piece(first, last, s, z, var0)[1] for first, last in pieces]
-    wide = [abs(s[last] - s[first]) >= params.min_width for first, last in pieces]
+    rough = [_fit_piece(first, last, table)[1::2] for first, last in pieces]
+    width = [abs(s[last] - s[first]) for first, last in pieces]
     verge = [False] * len(pieces)
     for j in range(len(pieces) - 1):
         if pieces[j][1] + 1 != pieces[j + 1][0]:
             continue
-        smooth, other = (j, j + 1) if rough[j] < rough[j + 1] else (j + 1, j)
-        if wide[smooth] and rough[other] >= params.rough_ratio ** 2 * rough[smooth]:
+        smooth, other = (j, j + 1) if rough[j][0] < rough[j + 1][0] else (j + 1, j)
+        if width[smooth] >= max(params.min_width, width[other]) and \
+                _rougher(*rough[j], *rough[j + 1], params):
             verge[other] = True
     return verge
 
@@ -497,11 +559,13 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
         stretches.append((first, last))
     pieces = []
     for first, last in stretches:
+        table = _moment_table(lateral[first:last + 1], z[first:last + 1],
+                              var0[first:last + 1])
         found = []
-        _segment_profile(first, last, lateral, z, var0, params, found)
-        merged = _merge_pieces(found, lateral, z, var0, params)
-        pieces += [pc for pc, v in zip(merged, _verges(merged, lateral, z, var0, params))
-                   if not v]
+        _segment_profile(0, last - first, table, params, found)
+        merged = _merge_pieces(found, table, params)
+        verge = _verges(merged, lateral[first:last + 1], table, params)
+        pieces += [(a + first, b + first) for (a, b), v in zip(merged, verge) if not v]
     segments = []
     for g, (first, last) in enumerate(pieces):
         groups_all[idx[first:last + 1]] = g
