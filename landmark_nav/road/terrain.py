@@ -42,7 +42,8 @@ F_w width}``:
    than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
    pedestrian's legs just before the ground).
 
-Pure numpy (and scipy.special for the F-test); the node is :mod:`landmark_nav.nodes.road_classifier`.
+Pure numpy (and scipy.special for the F-test); the node is
+:mod:`landmark_nav.nodes.road_classifier`.
 """
 
 from dataclasses import dataclass, field
