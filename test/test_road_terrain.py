@@ -91,14 +91,35 @@ def test_pedestrian_on_the_road_is_an_obstacle_and_cuts_the_segment():
 def test_per_reading_accuracy_and_road_width_against_the_simulator(kind):
     """Acceptance: >= 95 % of the readings right on both road types.
 
-    The widths (Table 3 style) guard the figures measured on these 200 scans (asphalt
-    5.08 m sigma 0.21, gravel 3.71 m sigma 0.60; on 1000 scans 5.08 / 0.21 and 3.81 / 0.50):
-    the issue's 0.1 m / 0.15 m is not met yet (see the README).
+    The widths (Table 3 style): the issue's bound (mean within 0.1 m, sigma <= 0.15 m)
+    on asphalt (measured on these 200 scans 4.92 m, sigma 0.125); on gravel the mean
+    (3.94 m) within 0.1 m, sigma 0.17 guarded at 0.2 (the issue's 0.15 is not met yet).
     """
     s = evaluate_laser_road(kind, 200, seed=1)
     assert s.accuracy >= 0.95
     assert s.failures == 0 and s.widths == 200
     if kind == 'asphalt':
-        assert abs(s.width_mean - 4.9) < 0.22 and s.width_std < 0.25
+        assert abs(s.width_mean - 4.9) < 0.05 and s.width_std <= 0.15
     else:
-        assert abs(s.width_mean - 4.0) < 0.35 and s.width_std < 0.7
+        assert abs(s.width_mean - 4.0) < 0.1 and s.width_std < 0.2
+
+
+def test_road_edges_fall_on_the_reading_where_the_surface_changes():
+    """The edge is located at the reading (not half a 0.45 m roughness window outside).
+
+    30 asphalt scans at a random offset and heading: the road segment's end points, across
+    the road, lie within 5 cm of the true edges in the median (measured 3.6 / 3.6 cm; half
+    the window's smear gave 8-10 cm outwards).
+    """
+    road = ParkRoad.of_kind('asphalt')
+    rng = np.random.default_rng(3)
+    errors = []
+    for i in range(30):
+        y0, yaw = rng.normal(0.0, 0.3), rng.normal(0.0, 0.05)
+        sc = cast_scan(road, (0.05 * i, y0, yaw), MOUNT, ANGLES, rng=rng)
+        seg = classify_scan(sc.ranges, sc.angles, MOUNT).best_segment()
+        ys = sorted(y0 + math.sin(yaw) * p[0] + math.cos(yaw) * p[1]
+                    for p in (seg.start, seg.end))
+        errors.append((ys[0] + 2.45, ys[1] - 2.45))
+    med = np.median(np.abs(errors), axis=0)
+    assert np.all(med < 0.05)

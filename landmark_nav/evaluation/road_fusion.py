@@ -44,6 +44,8 @@ class FusedFrame:
     vision_width: Optional[float]
     vision_lines: int
     image: np.ndarray
+    outline: Optional[np.ndarray] = None     # (H, W) bool road mask of the vision outline
+    seed: Optional[np.ndarray] = None        # (H, W) bool seed area (the laser segment)
 
 
 def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Lighting(),
@@ -62,10 +64,11 @@ def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Light
     pts = ts.points[seg.first:seg.last + 1]
     px = ground_to_pixels(CAMERA, CAMERA_MOUNT, pts[np.isfinite(pts).all(axis=1)])
     seed = polyline_seed(img.shape, px[np.isfinite(px).all(axis=1)], 9)
-    ground = None
+    ground = mask = None
     if seed is not None:
         try:
             out = road_outline(img, seed, outline)
+            mask = out.mask
             ground = pixels_to_ground(CAMERA, CAMERA_MOUNT, out.polygon, fusion.max_distance)
             ground = ground[np.isfinite(ground).all(axis=1)]
         except SeedError:
@@ -75,7 +78,7 @@ def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Light
     route = choose_route(plan_routes([extended], obstacles, fusion))
     lw, vw = road_widths(extended)
     lines = sum(i.source == 'vision' for i in extended.intervals)
-    return FusedFrame(route, extended, lw, vw, lines, img)
+    return FusedFrame(route, extended, lw, vw, lines, img, mask, seed)
 
 
 @dataclass(frozen=True)
@@ -110,3 +113,68 @@ def evaluate_vision_road(kind: str, lighting: str = 'overcast', frames: int = 25
     return VisionRoadScore(kind, lighting, road.width, frames,
                            float(w.mean()) if w.size else math.nan,
                            float(w.std()) if w.size else math.nan, int(w.size), failures)
+
+
+#: The five overlay cases of the README: (title, road kind, lighting, markings, pedestrian).
+OVERLAY_CASES = (('asphalt, overcast', 'asphalt', 'overcast', False, False),
+                 ('asphalt, soft shadows', 'asphalt', 'soft_shadows', False, False),
+                 ('asphalt, hard shadows', 'asphalt', 'hard_shadows', False, False),
+                 ('gravel, overcast', 'gravel', 'overcast', False, False),
+                 ('markings, pedestrian 7 m', 'asphalt', 'overcast', True, True))
+
+
+def sim_overlay(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
+                title: str = '') -> np.ndarray:
+    """Return a BGR overlay of one fused frame.
+
+    Vision outline green, seed (the laser segment) blue, the true road edges red, the
+    chosen route yellow.
+    """
+    import cv2
+    vis = cv2.cvtColor(frame.image, cv2.COLOR_RGB2BGR)
+    if frame.outline is not None:
+        m = frame.outline
+        vis[m] = (0.55 * vis[m] + np.array([0, 110, 0])).astype(np.uint8)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dx = np.linspace(0.5, 40.0, 200)      # world x ahead of the robot
+    for edge in road.edges():             # world (x, edge) -> base_link
+        dy = edge - pose[1]
+        pts = np.column_stack([c * dx + s * dy, -s * dx + c * dy])
+        px = ground_to_pixels(CAMERA, CAMERA_MOUNT, pts)
+        px = px[np.isfinite(px).all(axis=1)].round().astype(np.int32)
+        cv2.polylines(vis, [px], False, (0, 0, 255), 1)
+    if frame.seed is not None:
+        vis[frame.seed] = (255, 60, 0)
+    if frame.route is not None:
+        px = ground_to_pixels(CAMERA, CAMERA_MOUNT, frame.route.points)
+        px = px[np.isfinite(px).all(axis=1)].round().astype(np.int32)
+        cv2.polylines(vis, [px], False, (0, 230, 255), 2)
+    if title:
+        cv2.putText(vis, title, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1)
+    return vis
+
+
+def write_sim_overlays(out, seed: int = 0, scale: float = 0.75, quality: int = 70):
+    """Write the five README overlays (:data:`OVERLAY_CASES`) as one JPEG montage.
+
+    Rendered park-road frames (nothing from a data set), the robot 0.2 m left of the
+    centre, heading 2 degrees off the road; the pedestrian stands 7 m ahead, 0.6 m left.
+    """
+    import cv2
+    from pathlib import Path
+    tiles = []
+    for title, kind, light, markings, pedestrian in OVERLAY_CASES:
+        road = ParkRoad.of_kind(kind, seed=seed,
+                                cylinders=((7.0, 0.6, 0.25, 1.75),) if pedestrian else ())
+        pose = (1.0, 0.2, math.radians(2.0))
+        frame = fuse_frame(road, pose, LIGHTING[light], markings, np.random.default_rng(seed))
+        vis = sim_overlay(road, pose, frame, title)
+        tiles.append(cv2.resize(vis, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA))
+    top = np.hstack(tiles[:3])
+    bottom = np.hstack(tiles[3:] + [np.zeros_like(tiles[0])])
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), np.vstack([top, bottom]),
+                       [cv2.IMWRITE_JPEG_QUALITY, quality]):
+        raise OSError(f'{path}: could not write the image')
+    return path

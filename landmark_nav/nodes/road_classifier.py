@@ -56,6 +56,8 @@ _TERRAIN_DOCS = {
     'min_width': ('narrowest traversable segment (the robot width) [m]', (0.05, 10.0)),
     'obstacle_height': ('readings higher than this above the ground are obstacles [m]',
                         (1e-3, 5.0)),
+    'range_sigma': ("the laser's 1-sigma range noise: floor of a piece's height noise [m]",
+                    (1e-5, 1.0)),
 }
 
 

@@ -15,21 +15,35 @@ F_w width}``:
    ``roughness_max``, a raw height ``|H_h|`` below ``height_max`` and no *step* ``F_z``
    (height jump between neighbours) above ``step_max``;
 4. groups separated by at most ``gap_max`` metres of rough readings at a compatible height
-   are combined (a stone or a tuft of grass does not cut a road in two); a group is then
-   split where a bent and a straight height profile (slope ``F_t`` and curvature ``F_c``
-   changing) fit far better than one quadratic: e.g. the kink between a crowned road and its
-   flat shoulder, which roughness alone does not separate on gravel (the chapter's +0.7 m);
-5. each group is filtered by its quadratic height profile ``z = a + b s + c s^2`` across
-   the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|`` below
-   ``curvature_max``, width ``F_w`` (end-to-end distance) at least ``min_width``
-   (the robot's width): the groups that pass are the *traversable segments*, their readings
-   ``C_t``; the other valid readings are ``C_n``;
+   are combined (a stone or a tuft of grass does not cut a road in two);
+5. *edges at the reading*: the windowed roughness of a reading within half a window of a
+   rougher one is raised by it, so the groups end up to ``window / 2`` short of (or, beside
+   a smooth verge, past) the true edge. Each group is widened by half a window (stretches
+   that then touch are joined) and segmented along the lateral position into pieces, each
+   a quadratic (crowned road) or straight (flat shoulder) height profile with its own
+   residual variance (roughness), floored by the laser's height noise
+   (``range_sigma`` times the beam's vertical component): binary segmentation by the
+   likelihood gain with the Bayesian information criterion's penalty, then neighbours
+   are rejoined, least significant boundary first (per reading), unless they differ
+   physically -- roughness by ``rough_ratio`` (F-test at ``rough_alpha``) or profile by a
+   kink of more than ``split_rms`` -- and the rougher of two pieces beside a road-wide
+   smooth piece is a verge. So the edge is the reading where the profile bends or the
+   roughness changes: the kink between a crowned road and its flat shoulder, which
+   roughness alone does not separate on gravel (the chapter's +0.7 m), or smooth asphalt
+   next to a rough verge;
+   each piece is then filtered by its quadratic height profile ``z = a + b s + c s^2``
+   across the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|``
+   below ``curvature_max``, median roughness ``F_sigma`` below ``roughness_max``, width
+   ``F_w`` (end-to-end distance) at least ``min_width`` (the robot's width): the pieces that
+   pass are the *traversable segments*, their readings ``C_t``; the other valid readings
+   are ``C_n``;
 6. *obstacles*: runs of valid readings higher than ``obstacle_height`` above the ground
    plane (a kerb face, a post), or not traversable, between traversable readings and more
    than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
    pedestrian's legs just before the ground).
 
-Pure numpy; the node is :mod:`landmark_nav.nodes.road_classifier`.
+Pure numpy (and scipy.special for the F-test); the node is
+:mod:`landmark_nav.nodes.road_classifier`.
 """
 
 from dataclasses import dataclass, field
@@ -37,6 +51,7 @@ import math
 from typing import Optional, Sequence
 
 import numpy as np
+from scipy.special import fdtri
 
 #: Reading classes (the chapter's C_0, C_t, C_n).
 INVALID = 0
@@ -106,12 +121,10 @@ class TerrainParams:
     roughness_max: float = 0.013
     step_max: float = 0.04
     height_max: float = 0.3
-    split_ratio: float = 40.0
     split_rms: float = 0.008
     rough_ratio: float = 1.5
-    grow_sigmas: float = 2.0
-    rough_lag: int = 3
-    rough_gain: float = 20.0
+    rough_alpha: float = 0.05
+    range_sigma: float = 0.005
     slope_max: float = 0.25
     curvature_max: float = 0.6
     min_width: float = 0.5
@@ -122,8 +135,8 @@ class TerrainParams:
 
     def __post_init__(self) -> None:
         """Check the ranges."""
-        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_ratio',
-                     'split_rms', 'rough_gain',
+        for name in ('window', 'roughness_max', 'step_max', 'height_max', 'split_rms',
+                     'range_sigma',
                      'slope_max', 'curvature_max', 'min_width', 'obstacle_height',
                      'obstacle_depth'):
             value = getattr(self, name)
@@ -260,101 +273,192 @@ def _roughness(plane: np.ndarray, s: np.ndarray, window: float, min_points: int)
     return out
 
 
-def _prefix_sse(t: np.ndarray, z: np.ndarray, degree: int) -> np.ndarray:
-    """SSE of the least-squares polynomial z(t) of ``degree`` over every prefix ``[0, k)``."""
-    n, d = t.size, degree + 1
-    powers = np.vstack([t ** k for k in range(2 * d - 1)])
-    m = np.concatenate([np.zeros((2 * d - 1, 1)), np.cumsum(powers, axis=1)], axis=1)
-    tz = np.vstack([z * t ** k for k in range(d)])
-    b = np.concatenate([np.zeros((d, 1)), np.cumsum(tz, axis=1)], axis=1)
-    zz = np.concatenate([[0.0], np.cumsum(z * z)])
-    a = np.empty((n + 1, d, d))
-    for i in range(d):
-        for j in range(d):
-            a[:, i, j] = m[i + j]
-    sse = np.zeros(n + 1)
-    ok = np.arange(n + 1) > d
-    coef = np.linalg.solve(a[ok] + 1e-12 * np.eye(d), b.T[ok][..., None])[..., 0]
-    sse[ok] = np.maximum(zz[ok] - np.sum(coef * b.T[ok], axis=1), 0.0)
-    return sse
+def _poly_sse(m: np.ndarray, degree: int) -> np.ndarray:
+    """SSE of least-squares lines (1) or quadratics (2) z(t) from their sums (closed form).
+
+    ``m`` rows: sums of t^0..t^4, z, z t, z t^2, z^2 (one column per piece); pieces with
+    no more readings than coefficients get 0.
+    """
+    s0, s1, s2, s3, s4, b0, b1, b2, zz = m[:9]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        if degree == 1:
+            det = s0 * s2 - s1 * s1
+            fit = (b0 * b0 * s2 - 2.0 * b0 * b1 * s1 + b1 * b1 * s0) / det
+        else:
+            c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+            c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
+            det = s0 * c00 + s1 * c01 + s2 * c02
+            fit = (b0 * b0 * c00 + b1 * b1 * c11 + b2 * b2 * c22
+                   + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det
+    sse = np.maximum(zz - fit, 0.0)
+    return np.where(s0 > degree + 1.5, sse, 0.0)
 
 
-def _split_profile(first: int, last: int, s: np.ndarray, z: np.ndarray,
-                   params: TerrainParams, out: list) -> None:
-    """Split a group where two quadratic height profiles fit far better than one (F_t, F_c).
+def _piece_nll(sse: np.ndarray, n: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """Gaussian negative log-likelihood of pieces with their own variance (ML, floored).
 
-    The best split point minimises the summed SSE of the two pieces (each at least
-    ``min_width / 2`` long); it is kept when the SSE drop, in units of the two-piece residual
-    variance, exceeds ``split_ratio`` (an F-test of 2 extra parameters) and the fit improves
-    by more than ``split_rms`` metres rms (a physical size, not only a significant one):
-    e.g. the slope break between a crowned road and its flat shoulder.
+    ``v = max(SSE / n, floor)``; ``NLL = (n log v + SSE / v) / 2`` (constants dropped): the
+    floor is the sensor's height noise, so a piece is never smoother than the laser.
+    """
+    with np.errstate(divide='ignore', invalid='ignore'):
+        v = np.maximum(sse / np.maximum(n, 1), floor)
+        return 0.5 * (n * np.log(v) + sse / v)
+
+
+def _segment_profile(first: int, last: int, table: np.ndarray, params: TerrainParams,
+                     out: list) -> None:
+    """Split a stretch of readings where the height profile or its roughness changes.
+
+    Each piece is a quadratic height profile ``z = a + b s + c s^2`` (slope ``F_t``,
+    curvature ``F_c``) with its own residual variance (roughness ``F_sigma``), floored by
+    the sensor's height noise ``var0``. Binary segmentation: the best split point
+    maximises the log-likelihood gain of two such pieces over one (computed for every
+    reading from prefix sums, so the edge falls on the reading where the profile bends or
+    the roughness changes, not on a window's end); it is kept when the gain exceeds the
+    Bayesian information criterion's penalty for the extra piece (3 coefficients, a
+    variance and the split point: ``5/2 ln n``). :func:`_merge_pieces` then rejoins the
+    neighbours that do not differ physically.
+    """
+    best, gain = _best_split(first, last, table, params)
+    if best is None or gain <= 2.5 * math.log(last - first + 1):
+        out.append((first, last))
+        return
+    _segment_profile(first, best - 1, table, params, out)
+    _segment_profile(best, last, table, params, out)
+
+
+def _moment_table(s: np.ndarray, z: np.ndarray, var0: np.ndarray) -> np.ndarray:
+    """Prefix sums (with a leading zero column) of t^0..t^4, z t^0..t^2, z^2 and ``var0``.
+
+    ``t`` is ``s`` about the stretch's middle; the sums over readings [a, b) of the stretch
+    are ``table[:, b] - table[:, a]``.
+    """
+    t = s - 0.5 * (s[0] + s[-1])
+    t2 = t * t
+    rows = np.vstack([np.ones_like(t), t, t2, t2 * t, t2 * t2, z, z * t, z * t2, z * z, var0])
+    return np.concatenate([np.zeros((10, 1)), np.cumsum(rows, axis=1)], axis=1)
+
+
+def _best_split(first: int, last: int, table: np.ndarray,
+                params: TerrainParams) -> tuple[Optional[int], float]:
+    """Return the reading that starts the second of the best two pieces, and the gain.
+
+    ``first`` and ``last`` index the stretch of :func:`_moment_table`.
     """
     n = last - first + 1
-    if n < 2 * params.min_points + 6 or s[last] - s[first] < params.min_width:
-        out.append((first, last))
-        return
-    t = s[first:last + 1] - 0.5 * (s[first] + s[last])
-    zz = z[first:last + 1]
-    # One piece bends (quadratic: a crowned road), the other is straight (a shoulder, a
-    # verge): the kink between them is located far more sharply than by two quadratics.
-    quad_l, line_l = _prefix_sse(t, zz, 2), _prefix_sse(t, zz, 1)                # [0, k)
-    quad_r = _prefix_sse(t[::-1], zz[::-1], 2)[::-1]                           # [k, n)
-    line_r = _prefix_sse(t[::-1], zz[::-1], 1)[::-1]
+    if n < 2 * params.min_points:
+        return None, -math.inf
+    cum = table[:, first:last + 2] - table[:, first:first + 1]       # sums over [0, k)
     k = np.arange(n + 1)
-    total = np.minimum(quad_l + line_r, line_l + quad_r)
-    left = quad_l
-    span = 0.25 * params.min_width
-    allowed = ((k >= params.min_points) & (k <= n - params.min_points)
-               & (s[first + np.minimum(k, n - 1)] - s[first] >= span)
-               & (s[last] - s[first + np.minimum(k, n - 1)] >= span))
-    if not allowed.any():
-        out.append((first, last))
-        return
-    total[~allowed] = np.inf
-    best = int(np.argmin(total))
-    var = total[best] / max(n - 5, 1)
-    gain = (left[n] - total[best]) / (2.0 * max(var, 1e-12))
-    rms_gain = math.sqrt(max(left[n] - total[best], 0.0) / n)
-    if gain <= params.split_ratio or rms_gain <= params.split_rms:
-        best = _roughness_change(zz, allowed, params)
-        if best is None:
-            out.append((first, last))
-            return
-    _split_profile(first, first + best - 1, s, z, params, out)
-    _split_profile(first + best, last, s, z, params, out)
-
-
-def _roughness_change(z: np.ndarray, allowed: np.ndarray,
-                      params: TerrainParams) -> Optional[int]:
-    """Split point where the small-scale roughness changes level (F_sigma groups), or None.
-
-    The second differences of the heights along the scan, over ``rough_lag`` readings
-    either side (a few centimetres: longer than the range noise's one reading), measure the
-    roughness of each reading; the change point maximises the Gaussian log-likelihood gain
-    of two variances
-    over one and is kept when the gain exceeds ``rough_gain`` and the rougher piece's
-    roughness exceeds the smoother one's ``rough_ratio`` times (e.g. asphalt next to a
-    gravel or grass verge at the same height).
-    """
-    n = z.size
-    lag = min(params.rough_lag, (n - 1) // 2)
-    e2 = np.zeros(n)
-    e2[lag:n - lag] = (z[lag:n - lag] - 0.5 * (z[:n - 2 * lag] + z[2 * lag:])) ** 2
-    e2[:lag], e2[n - lag:] = e2[lag], e2[n - lag - 1]
-    c = np.concatenate([[0.0], np.cumsum(e2)])
-    k = np.arange(n + 1)
+    # Each piece is a quadratic (a crowned road) or a line (a flat shoulder, a verge: one
+    # parameter fewer, 1/2 ln n less penalty), which locates a kink sharply.
+    half = 0.5 * math.log(n)
+    m = np.concatenate([cum, cum[:, -1:] - cum], axis=1)        # [0, k) then [k, n)
+    cnt = m[0]
     with np.errstate(divide='ignore', invalid='ignore'):
-        v_l = c / k
-        v_r = (c[-1] - c) / (n - k)
-        floor = 1e-12
-        gain = 0.5 * (n * np.log(max(c[-1] / n, floor)) - k * np.log(np.maximum(v_l, floor))
-                      - (n - k) * np.log(np.maximum(v_r, floor)))
+        floor = m[9] / cnt
+    nll = np.minimum(_piece_nll(_poly_sse(m, 2), cnt, floor) + half,
+                     _piece_nll(_poly_sse(m, 1), cnt, floor))
+    gain = nll[n] - nll[:n + 1] - nll[n + 1:]
+    allowed = (k >= params.min_points) & (k <= n - params.min_points)
     gain[~allowed] = -np.inf
     best = int(np.argmax(gain))
-    if not np.isfinite(gain[best]) or gain[best] <= params.rough_gain:
-        return None
-    ratio = math.sqrt(max(v_l[best], v_r[best]) / max(min(v_l[best], v_r[best]), 1e-12))
-    return best if ratio >= params.rough_ratio else None
+    if not np.isfinite(gain[best]):
+        return None, -math.inf
+    return first + best, float(gain[best])
+
+
+def _fit_piece(first: int, last: int, table: np.ndarray) -> tuple[float, float, float, int]:
+    """Return a piece's quadratic-profile SSE, unbiased variance (floored), floor and size.
+
+    ``first`` and ``last`` index the stretch of :func:`_moment_table` (as :func:`_poly_sse`,
+    on floats).
+    """
+    s0, s1, s2, s3, s4, b0, b1, b2, zz, f = (table[:, last + 1] - table[:, first]).tolist()
+    n = last - first + 1
+    c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+    c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
+    det = s0 * c00 + s1 * c01 + s2 * c02
+    sse = 0.0
+    if n > 3 and det > 0.0:
+        sse = max(zz - (b0 * b0 * c00 + b1 * b1 * c11 + b2 * b2 * c22 + 2.0 * (
+            b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det, 0.0)
+    return sse, max(sse / max(n - 3, 1), f / n), f / n, n
+
+
+def _rougher(v_a: float, n_a: int, v_b: float, n_b: int, params: TerrainParams) -> bool:
+    """Whether one piece is rougher than the other by ``rough_ratio``, significantly.
+
+    F-test of the variance ratio against ``rough_ratio^2`` at ``rough_alpha`` (quadratic
+    pieces: n - 3 degrees of freedom): a short piece's variance is too uncertain for the
+    plain ratio (a smooth stretch of a few readings in a gravel road).
+    """
+    (v_hi, n_hi), (v_lo, n_lo) = sorted(((v_a, n_a), (v_b, n_b)), reverse=True)
+    crit = float(fdtri(max(n_hi - 3, 1), max(n_lo - 3, 1), 1.0 - params.rough_alpha))
+    return v_hi >= params.rough_ratio ** 2 * crit * v_lo
+
+
+def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> list:
+    """Rejoin neighbouring pieces whose boundary is not a physical change.
+
+    A boundary stays when the two pieces' roughness differs by ``rough_ratio`` (e.g. smooth
+    asphalt next to a rough verge at the same height) or two profiles fit better than one
+    by more than ``split_rms`` metres rms over the shorter piece (a kink, e.g. a crowned
+    road and its flat shoulder), and the split is still significant (the BIC of
+    :func:`_segment_profile`); otherwise the pieces merge (a crowned road split by its
+    random texture).
+    """
+    def nll(sse: float, n: int, floor: float) -> float:
+        v = max(sse / n, floor)
+        return 0.5 * (n * math.log(v) + sse / v)
+
+    def weakness(j: int) -> float:
+        """Return the boundary's gain per reading over the penalty if it may go, else inf."""
+        (pf, pl), (first, last) = out[j], out[j + 1]
+        if pl + 1 != first:
+            return math.inf
+        sse_a, v_a, f_a, n_a = _fit_piece(pf, pl, table)
+        sse_b, v_b, f_b, n_b = _fit_piece(first, last, table)
+        sse_ab, _, f_ab, n = _fit_piece(pf, last, table)
+        gain = nll(sse_ab, n, f_ab) - nll(sse_a, n_a, f_a) - nll(sse_b, n_b, f_b) \
+            - 2.5 * math.log(n)
+        kink = math.sqrt(max(sse_ab - sse_a - sse_b, 0.0) / min(n_a, n_b)) > params.split_rms
+        if gain > 0.0 and (kink or _rougher(v_a, n_a, v_b, n_b, params)):
+            return math.inf
+        return gain / n
+
+    out = list(pieces)
+    weak = [weakness(j) for j in range(len(out) - 1)]
+    while weak and min(weak) < math.inf:
+        # The least significant boundary goes first: two pieces of the road merge before
+        # either is merged with a verge.
+        j = int(np.argmin(weak))
+        out[j:j + 2] = [(out[j][0], out[j + 1][1])]
+        del weak[j]
+        for i in (j - 1, j):
+            if 0 <= i < len(weak):
+                weak[i] = weakness(i)
+    return out
+
+
+def _verges(pieces: list, s: np.ndarray, table: np.ndarray, params: TerrainParams) -> list:
+    """Flag the rougher of two neighbours whose roughness differs by ``rough_ratio``.
+
+    The rougher piece is a verge (shoulder, grass) beside a smoother and wider piece, at
+    least ``min_width`` wide (the road, whose roughness is well estimated): not
+    traversable. A smooth patch of a gravel road does not make the road a verge.
+    """
+    rough = [_fit_piece(first, last, table)[1::2] for first, last in pieces]
+    width = [abs(s[last] - s[first]) for first, last in pieces]
+    verge = [False] * len(pieces)
+    for j in range(len(pieces) - 1):
+        if pieces[j][1] + 1 != pieces[j + 1][0]:
+            continue
+        smooth, other = (j, j + 1) if rough[j][0] < rough[j + 1][0] else (j + 1, j)
+        if width[smooth] >= max(params.min_width, width[other]) and \
+                _rougher(*rough[j], *rough[j + 1], params):
+            verge[other] = True
+    return verge
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -433,18 +537,39 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     # Height profiles across the scan are functions of the lateral position (base_link y,
     # increasing along the scan), which a crowned road's profile is a quadratic of.
     lateral = p[:, 1]
-    pieces = []
-    for first, last in groups:
-        _split_profile(first, last, lateral, z, params, pieces)
-    groups = pieces
-    segments = []
-    grown_last = -1
+    # The sensor's height noise per reading: the range noise along the beam's z component.
+    beam = mount.rotation() @ np.vstack([np.cos(a[idx]), np.sin(a[idx]), np.zeros(idx.size)])
+    var0 = (params.range_sigma * beam[2]) ** 2
+    # The windowed roughness of the readings within half a window of a rougher neighbour is
+    # raised by it, which trims every group by up to window / 2 at each end: each group is
+    # widened by half a window (not across a step or a gap, nor into the next group) and
+    # the profile segmentation puts the edge on the reading where the profile or its
+    # roughness changes.
+    stretches = []
     for g, (first, last) in enumerate(groups):
+        taken = stretches[-1][1] if stretches else -1
+        nxt = groups[g + 1][0] if g + 1 < len(groups) else idx.size
+        while first - 1 > taken and not cut[first] and \
+                s[first - 1] >= s[first] - 0.5 * params.window and ground[first - 1]:
+            first -= 1
+        while last + 1 < nxt and not cut[last + 1] and \
+                s[last + 1] <= s[last] + 0.5 * params.window and ground[last + 1]:
+            last += 1
+        if stretches and stretches[-1][1] + 1 == first and not cut[first]:
+            first = stretches.pop()[0]         # a rough gap shorter than the window
+        stretches.append((first, last))
+    pieces = []
+    for first, last in stretches:
+        table = _moment_table(lateral[first:last + 1], z[first:last + 1],
+                              var0[first:last + 1])
+        found = []
+        _segment_profile(0, last - first, table, params, found)
+        merged = _merge_pieces(found, table, params)
+        verge = _verges(merged, lateral[first:last + 1], table, params)
+        pieces += [(a + first, b + first) for (a, b), v in zip(merged, verge) if not v]
+    segments = []
+    for g, (first, last) in enumerate(pieces):
         groups_all[idx[first:last + 1]] = g
-        lo = max(groups[g - 1][1] if g > 0 else -1, grown_last) + 1
-        hi = groups[g + 1][0] - 1 if g + 1 < len(groups) else idx.size - 1
-        first, last = _grow(first, last, lateral, z, params, lo, hi)
-        grown_last = last
         seg = _segment(first, last, p, lateral, rough, idx, params)
         if seg is not None:
             segments.append(seg)
@@ -483,36 +608,6 @@ def _combine(groups: list, s: np.ndarray, z: np.ndarray, cut: np.ndarray,
     return out
 
 
-def _grow(first: int, last: int, s: np.ndarray, z: np.ndarray, params: TerrainParams,
-          lo_index: int, hi_index: int) -> tuple[int, int]:
-    """Extend a group over the neighbouring readings that continue its height profile.
-
-    The windowed roughness of the readings within half a window of a rougher neighbour is
-    raised by that neighbour, which trims every group by up to ``window / 2`` at each end;
-    a reading next to the group is taken in while its height lies within
-    ``grow_sigmas`` residual standard deviations of the group's quadratic profile (and no
-    step lies between), one reading at a time outwards, at most ``window / 2`` far and not
-    into the neighbouring groups (readings ``lo_index`` .. ``hi_index`` are free).
-    """
-    if last - first + 1 < params.min_points:
-        return first, last
-    t = s[first:last + 1]
-    coef = np.polyfit(t - t.mean(), z[first:last + 1], 2)
-    sigma = max(float(np.std(z[first:last + 1] - np.polyval(coef, t - t.mean()))), 0.003)
-    limit = params.grow_sigmas * sigma
-    lo, hi = s[first] - 0.5 * params.window, s[last] + 0.5 * params.window
-
-    def fits(k: int, inner: int) -> bool:
-        off = abs(z[k] - np.polyval(coef, s[k] - t.mean()))
-        return off <= limit and abs(z[k] - z[inner]) <= params.step_max
-
-    while first > lo_index and s[first - 1] >= lo and fits(first - 1, first):
-        first -= 1
-    while last < hi_index and s[last + 1] <= hi and fits(last + 1, last):
-        last += 1
-    return first, last
-
-
 def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndarray,
              idx: np.ndarray, params: TerrainParams) -> Optional[Segment]:
     """Filter one roughness group by width, slope and curvature; return its segment."""
@@ -523,9 +618,11 @@ def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndar
         return None
     t = s[first:last + 1] - 0.5 * (s[first] + s[last])
     zz = p[first:last + 1, 2]
-    c2, c1, _ = np.polyfit(t, zz, 2)
-    slope, curvature = float(c1), float(2.0 * c2)                     # F_t, F_c
+    coef = np.polyfit(t, zz, 2)
+    slope, curvature = float(coef[1]), float(2.0 * coef[0])          # F_t, F_c
     if abs(slope) > params.slope_max or abs(curvature) > params.curvature_max:
+        return None
+    if np.median(rough[first:last + 1]) > params.roughness_max:      # F_sigma of the piece
         return None
     return Segment(int(idx[first]), int(idx[last]), tuple(map(float, p[first, :2])),
                    tuple(map(float, p[last, :2])), width, float(zz.mean()),

@@ -62,9 +62,12 @@ def add_parsers(sub, parser_class) -> None:
     p.add_argument('--lighting', nargs='+', default=['overcast', 'soft_shadows',
                                                      'hard_shadows'],
                    choices=['overcast', 'soft_shadows', 'hard_shadows'], help='lighting')
-    p.add_argument('--frames', type=int, default=250, help='frames per case (default 250)')
+    p.add_argument('--frames', type=int, default=250, help='frames per case (default 250; '
+                   '0: only --overlays)')
     p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     p.add_argument('--markings', action='store_true', help='paint a dashed centre line')
+    p.add_argument('--overlays', help='also write the five rendered overlays (overcast, soft '
+                   'and hard shadows, gravel, markings + pedestrian) to this image file')
     p.set_defaults(func=_cmd_evaluate_road_vision)
 
 
@@ -81,13 +84,17 @@ def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
-    from landmark_nav.evaluation.road_fusion import evaluate_vision_road
+    from landmark_nav.evaluation.road_fusion import evaluate_vision_road, write_sim_overlays
     print(f'{"road":8s} {"lighting":13s} {"true m":>6s} {"frames":>6s} {"width":>6s} '
           f'{"sigma":>6s} {"N":>5s} {"fail %":>6s}')
-    for kind in args.kinds:
+    if args.frames < 0:
+        raise SystemExit(f'evaluate-road-vision: --frames must be >= 0; got {args.frames}')
+    for kind in args.kinds if args.frames else ():
         for light in args.lighting:
             s = evaluate_vision_road(kind, light, args.frames, args.seed, args.markings)
             print(f'{kind:8s} {light:13s} {s.true_width:6.2f} {s.frames:6d} '
                   f'{s.width_mean:6.3f} {s.width_std:6.3f} {s.widths:5d} '
                   f'{100 * s.failures / s.frames:6.1f}')
+    if args.overlays:
+        print(f'overlays: {write_sim_overlays(args.overlays, args.seed)}')
     return 0
