@@ -168,3 +168,22 @@ def test_rate_multiplies_the_data_rates_not_the_motion():
     t = np.linspace(0.2, 2.9, 28)  # the commands act one cycle (100 or 10 ms) later
     lag = np.abs(base10.pose_at(t)[:, :2] - base1.pose_at(t)[:, :2]).max()
     assert 0.0 < lag < 0.09 * 0.25  # at most the 90 ms earlier response at 0.25 m/s (11 mm)
+
+
+def test_scans_and_status_packets_a_late_host_loses_are_counted():
+    """At 10x a busy host polls the emulator late: what it cannot send is counted, not lost."""
+    base, laser = make_robot('urg', 'utm-30lx', MOUNT, QUIET, {'baud': 0}, rate=10.0)
+    _open(base, 0.0)
+    base.poll(0.0)
+    laser.receive(b'MD0000108001000\n', 0.0)
+    for i in range(1, 51):
+        laser.poll(0.002 * i)
+    sent = laser.scans_sent
+    assert sent >= 38 and laser.scans_skipped == 0  # 2.5 ms scans ready by 0.1 s
+    laser.poll(0.2)  # polled 100 ms late: 40 periods passed, the last ones cast
+    assert laser.scans_skipped + laser.scans_sent - sent == 40 and laser.scans_skipped >= 35
+    base, _ = make_robot('urg', rate=10.0)
+    _open(base, 0.0)
+    base.poll(0.0)
+    frames = base.poll(0.1)  # its thread 100 ms late: 10 cycles run, the last ones sent
+    assert (len(frames), base.packets_not_sent) == (2, 8) and base.seq == 10

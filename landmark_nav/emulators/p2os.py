@@ -185,6 +185,7 @@ class P2osDevice(Device):
         self.flash_max_rot_deg_s = math.degrees(max_rot_speed)
         self.robot_radius = robot_radius
         self.cycle_s = cycle_s
+        self.packets_not_sent = 0  # status packets of cycles run too late (a busy host)
         self._rng = np.random.default_rng(seed)
         self._lock = threading.RLock()
         self._decoder = P2osDecoder(parse=lambda data: (bytes(data), parse_command(data)))
@@ -284,6 +285,8 @@ class P2osDevice(Device):
                 frame = self._cycle(t)
                 if frame is not None and t >= now - 1.5 * self.cycle_s:
                     frames.append(frame)  # older ones went out while nobody listened
+                elif frame is not None:
+                    self.packets_not_sent += 1
             return frames
 
     def disconnected(self) -> None:

@@ -407,6 +407,11 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
             server.stop()
         if truth_file is not None:
             truth_file.close()
+        announce(f'base: {base.seq} cycles, {base.packets_not_sent} status packets not sent '
+                 f'(cycles run too late), {servers[0].bytes_dropped} bytes not written (pty '
+                 f'full); laser: {getattr(laser, "scans_sent", "?")} scans sent, '
+                 f'{getattr(laser, "scans_skipped", 0)} scans skipped (polled '
+                 f'too late), {servers[1].bytes_dropped} bytes not written (pty full)')
     return 0
 
 
