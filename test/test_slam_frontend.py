@@ -211,6 +211,16 @@ def test_corners_before_a_moving_start_or_too_old_are_skipped():
     np.testing.assert_allclose(step.odometry, [0.025, 0, 0], atol=1e-12)
 
 
+def test_default_hold_covers_sets_that_came_1_2_s_before_the_odometry():
+    """The loaded soak: /odom matched 1.2 s after corners/features; 6 sets were dropped."""
+    fe = SlamFrontend()
+    for t in (T0 - 3100 * MS, T0 - 1177 * MS, T0 - 1152 * MS):
+        fe.add_features(corners(t))
+    fe.add_odometry(T0, [0, 0, 0])
+    fe.add_odometry(T0 + 100 * MS, [0, 0, 0])
+    assert fe.events['start_held'] == 2 and fe.events['before_odometry'] == 1
+
+
 def test_flush_with_one_odometry_sample_drops_the_undecided_older_sets():
     fe = SlamFrontend()
     fe.add_odometry(T0, [0, 0, 0])

@@ -40,19 +40,22 @@ scan's geometry, :class:`Corners`) waits until the odometry covers its last beam
 max(beam_time)``; with de-skew off, the stamp), then is processed in stamp order; a set
 older than the last processed step is dropped (``'out_of_order'``).
 
-Start-up: the filter starts at the first odometry sample, but the laser's path to the front
-end (the sweep, the transfer, the extractor) is slower than the odometry's, so the first
-sets to arrive after the first odometry sample are usually stamped before it (measured on
-the live pipeline: 1 to 6 sets, up to 126 ms before it, at every start). Such a set, or
-one that came before any odometry and is older than the first sample, is processed at the
-first odometry pose (held back in time, ``'start_held'``) when the robot stands still:
-the first two accepted odometry samples differ by no more than the noise model's floors
-(``sigma_xy_floor``, ``sigma_yaw_floor``) and the set is at most ``start_hold_s`` older
-than the first sample. It waits for the second sample to decide; otherwise (the robot
-moves at the start, or the set is older) it is dropped (``'before_odometry'``).
 :meth:`flush` processes the sets still waiting whose stamp the odometry covers, holding
 the last odometry pose for beams after it (end of a recording; the node calls it when
 odometry stops coming).
+
+Start-up: the filter starts at the first odometry sample, but the laser's path to the front
+end (the sweep, the transfer, the extractor) is slower than the odometry's, so the first
+sets to arrive after the first odometry sample are usually stamped before it (measured on
+the live pipeline: 1 to 6 sets, up to 126 ms before it, at every start; under load corner
+sets also came for up to 1.2 s before the first odometry, the subscriptions matching
+apart). Such a set, or one that came before any odometry and is older than the first
+sample, is processed at the first odometry pose (held back in time, ``'start_held'``) when
+the robot stands still: the first two accepted odometry samples differ by no more than the
+noise model's floors (``sigma_xy_floor``, ``sigma_yaw_floor``), and the set is at most
+``start_hold_s`` older than the first sample (default 3 s: the node's queue of 100 waiting
+sets spans 2.5 s at 40 Hz). It waits for the second sample to decide; otherwise (the robot
+moves at the start, or the set is older) it is dropped (``'before_odometry'``).
 
 Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
 (:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
@@ -178,7 +181,7 @@ class FrontendParams:
     min_step_s: float = 0.02
     max_backward_s: float = 1.0
     buffer_s: float = 60.0
-    start_hold_s: float = 1.0
+    start_hold_s: float = 3.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
