@@ -189,6 +189,12 @@ def main() -> int:
         print(f'{name}: ' + ', '.join(f'{k} {values.get(k)}' for k in keys)
               + f' (reasons: {reasons or "none"})')
     report_warnings(log_lines)
+    growth = {n: rss_end[n] - rss[n] for n in rss_end if n in rss}
+    dropped = {n.split(':')[0]: int(v.get('dropped', 0)) for n, v in last.items()}
+    p95 = float(last.get('ekf_slam: input', {}).get('latency_p95_ms', 'nan'))
+    print(f'soak targets (issue 16, at 1x): dropped {sum(dropped.values())} (target 0), '
+          f'ekf_slam latency p95 {p95:.1f} ms (target <= 100), largest RSS growth '
+          + (f'{max(growth.values()):+.1f} MB (target <= 5)' if growth else 'n/a (< 1 min)'))
     emulator = [line for line in (out / 'emulator.log').read_text().splitlines()
                 if line.startswith('base: ')]
     print('emulator: ' + (emulator[-1][6:] if emulator else 'no summary'))

@@ -185,5 +185,7 @@ def test_scans_and_status_packets_a_late_host_loses_are_counted():
     base, _ = make_robot('urg', rate=10.0)
     _open(base, 0.0)
     base.poll(0.0)
-    frames = base.poll(0.1)  # its thread 100 ms late: 10 cycles run, the last ones sent
-    assert (len(frames), base.packets_not_sent) == (2, 8) and base.seq == 10
+    frames = base.poll(0.1)  # its thread 100 ms late: 10 cycles, all sent (late)
+    assert (len(frames), base.packets_not_sent) == (10, 0)
+    frames = base.poll(0.405)  # 300 ms late: those of the last 150 ms go out
+    assert (len(frames), base.packets_not_sent) == (15, 15) and base.seq == 40
