@@ -20,8 +20,9 @@ and every node's RSS after one minute and at the end. ``--loop --seconds 600 --s
 is a soak through the live drivers (40 scans/s, 10 Hz odometry).
 
 Drops: each node's ``/diagnostics`` counts by reason (``dropped.<reason>``) and its drop
-rate, the number of drop-rate warnings the nodes logged (:class:`~landmark_nav.nodes.
-common.InputStats`) with the last one, and the laser driver's lost-scan warnings.
+rate, the drop warnings the nodes logged (throttled; each states the drop rate,
+:class:`~landmark_nav.nodes.common.InputStats`) with the first and the last, the laser
+driver's lost-scan warnings and what the emulator could not send.
 ``--rate 10`` runs the devices at ten times their data rates (``emulate robot --rate 10``:
 400 scans/s and 100 Hz odometry, ``base_driver.cycle_time`` 0.01 s) with the robot moving
 as at rate 1: the 10x soak, where the nodes cannot keep up and must say how much they drop.
@@ -202,25 +203,22 @@ def main() -> int:
 
 
 def report_warnings(log_lines) -> None:
-    """Print the nodes' drop-rate warnings (count, last one) and the scans the driver lost."""
+    """Print the nodes' drop warnings (they state the drop rate) and the driver's lost scans."""
     import re
-    rates, lost_scans, skips = {}, 0, {}
+    rates, lost_scans = {}, 0
     for line in log_lines:
         m = re.match(r'\S+ (\w+)\s+\| \[WARN\].*?\]: (.*)$', line)
         if not m:
             continue
         node, text = m.groups()
-        if text.startswith('Dropped ') and ' inputs in the last ' in text:
+        if '(drop rate: ' in text:
             rates.setdefault(node, []).append(text)
         elif node == 'laser_driver' and 'scan(s) lost' in text:
             n = re.search(r'about (\d+) scan', text)
             lost_scans += int(n.group(1)) if n else 1
-        elif text.startswith(('Skipping ', 'Dropping ', 'Lost ')):
-            skips.setdefault(node, []).append(text)
     for node, texts in sorted(rates.items()):
-        print(f'{node}: {len(texts)} drop-rate warnings; last: {texts[-1]}')
-    for node, texts in sorted(skips.items()):
-        print(f'{node}: {len(texts)} drop warnings (throttled); first: {texts[0]}')
+        print(f'{node}: {len(texts)} drop warnings with the drop rate (throttled); first: '
+              f'{texts[0]}' + (f'\n  last: {texts[-1]}' if len(texts) > 1 else ''))
     print(f'laser_driver: {lost_scans} scans reported lost before publishing')
 
 

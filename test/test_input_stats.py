@@ -1,4 +1,4 @@
-"""InputStats: a node that drops inputs warns with the drop rate (throttled) and reports it."""
+"""InputStats: every drop warning states the drop rate; the warnings stay throttled."""
 
 from landmark_nav.nodes.common import InputStats, ProblemWarner
 from landmark_nav.testing import RosHarness
@@ -15,7 +15,7 @@ class _Logger:
         self.messages.append(message)
 
 
-def test_drops_give_a_throttled_warning_with_the_drop_rate_and_a_diagnostic_value():
+def test_drop_warnings_state_the_drop_rate_and_stay_throttled():
     with RosHarness() as ros:
         node = Node('rate_probe', context=ros.context)
         warner = ProblemWarner(node)
@@ -25,24 +25,22 @@ def test_drops_give_a_throttled_warning_with_the_drop_rate_and_a_diagnostic_valu
             stats.processed(1)
         stats.drop('lost', 'Lost 9 messages on scan', 9)
         stats.drop('no_odometry', 'Skipping corners: before the odometry')
-        stats.publish()
-        assert log.messages[-1] == (
-            'Dropped 10 of 100 inputs in the last 60 s (10 %); since start 10 of 100 '
-            '(10 %: lost 9, no_odometry 1)')
+        assert log.messages == [
+            'Lost 9 messages on scan (drop rate: 9 of 99 inputs in this 60 s period (9.09 %), '
+            '9 of 99 since start (9.09 %: lost 9))',
+            'Skipping corners: before the odometry (drop rate: 10 of 100 inputs in this 60 s '
+            'period (10 %), 10 of 100 since start (10 %: lost 9, no_odometry 1))']
         values = {v.key: v.value for v in stats.status().values}
         assert values['drop_rate_percent'] == '10.000' and values['dropped.lost'] == '9'
-        n = len(log.messages)
-        stats.publish()  # no drop since: no rate warning
-        assert len(log.messages) == n
+        stats.publish()  # a new period
         for _ in range(300):
             stats.processed(1)
-        stats.drop('lost', 'Lost 100 messages on scan', 100)
-        stats.publish()  # the same kind of problem within the throttle period: suppressed
-        assert len(log.messages) == n
+        stats.drop('lost', 'Lost 100 messages on scan', 100)  # within the throttle period
+        assert len(log.messages) == 2 and warner.count == 3
         warner._last.clear()  # the throttle period has passed
         stats.drop('lost', 'Lost 1 messages on scan')
-        stats.publish()
         assert log.messages[-1] == (
-            'Dropped 1 of 1 inputs in the last 60 s (100 %); since start 111 of 501 '
-            '(22.2 %: lost 110, no_odometry 1) (1 more like this in the last 5 s)')
+            'Lost 1 messages on scan (drop rate: 101 of 401 inputs in this 60 s period '
+            '(25.2 %), 111 of 501 since start (22.2 %: lost 110, no_odometry 1)) '
+            '(1 more like this in the last 5 s)')
         node.destroy_node()

@@ -254,10 +254,17 @@ class ProblemWarner:
         self._suppressed = Counter()
         self.count = 0
 
-    def warn(self, message: str) -> None:
-        """Log a warning unless the same kind of problem was reported recently."""
+    def warn(self, message: str, detail: str = '') -> None:
+        """Log a warning unless the same kind of problem was reported recently.
+
+        Args:
+            message: The problem; its kind decides the throttling.
+            detail: Appended in parentheses, not part of the kind (e.g. a drop rate).
+        """
         self.count += 1
         key = problem_kind(message)
+        if detail:
+            message += f' ({detail})'
         now = time.monotonic()
         if now - self._last.get(key, -math.inf) >= self._period:
             self._last[key] = now
@@ -297,9 +304,9 @@ class InputStats:
     dropped since start), and ``latency_p50_ms`` / ``latency_p95_ms`` / ``latency_max_ms``
     over the last ``window`` processed inputs (from the reception of the input, or of the
     later message it waited for, to the end of its processing). Level WARN while inputs were
-    dropped in the last period, else OK. A period with drops also gives a warning stating the
-    drop rate (of that period and since start, with the reasons), throttled like every
-    warning of the node: a node that cannot keep up says how much it loses.
+    dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
+    by the node's :class:`ProblemWarner`) ends with the drop rate, of the current period and
+    since start with the reasons: a node that cannot keep up says how much it loses.
     """
 
     def __init__(self, node: Node, warner: ProblemWarner, period_s: float = 1.0,
@@ -352,9 +359,9 @@ class InputStats:
             self.latencies.append(max(0.0, (time.time_ns() - start) * 1e-9))
 
     def drop(self, reason: str, message: str, count: int = 1) -> None:
-        """Count ``count`` dropped inputs for ``reason`` and warn (throttled per kind)."""
+        """Count ``count`` dropped inputs for ``reason``; warn with the drop rate (throttled)."""
         self.dropped[reason] += count
-        self.warner.warn(message)
+        self.warner.warn(message, self.drop_rate_text())
 
     def status(self) -> DiagnosticStatus:
         """Return the DiagnosticStatus of the inputs so far."""
@@ -375,24 +382,19 @@ class InputStats:
             hardware_id=self._node.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
-    def drop_rate_message(self) -> Optional[str]:
-        """Return the drop-rate warning of the period since the last report (None: none)."""
+    def drop_rate_text(self) -> str:
+        """Return the drop rate of the current period and since start, with the reasons."""
         dropped, processed = self.dropped_count, self.processed_count
         recent = dropped - self._reported_drops
-        if not recent:
-            return None
         done = processed - self._reported_processed
         reasons = ', '.join(f'{k} {v}' for k, v in sorted(self.dropped.items()))
-        return (f'Dropped {recent} of {recent + done} inputs in the last {self.period_s:g} s '
-                f'({_percent(recent, done):.3g} %); since start {dropped} of '
-                f'{dropped + processed} ({_percent(dropped, processed):.3g} %: {reasons})')
+        return (f'drop rate: {recent} of {recent + done} inputs in this {self.period_s:g} s '
+                f'period ({_percent(recent, done):.3g} %), {dropped} of {dropped + processed} '
+                f'since start ({_percent(dropped, processed):.3g} %: {reasons})')
 
     def publish(self) -> None:
-        """Publish the status on ``/diagnostics``; warn with the drop rate after drops."""
+        """Publish the status on ``/diagnostics``."""
         status = self.status()
-        message = self.drop_rate_message()
-        if message is not None:
-            self.warner.warn(message)
         self._reported_drops = self.dropped_count
         self._reported_processed = self.processed_count
         msg = DiagnosticArray()
