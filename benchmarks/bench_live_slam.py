@@ -3,7 +3,7 @@
 Run from the repository root::
 
     python benchmarks/bench_live_slam.py [--seconds 120] [--route office] [--laser urg]
-        [--skip 3]
+        [--skip 3] [--loop] [--rate 1]
 
 Starts, each as its own process on a private DDS domain, exactly what the README shows:
 ``landmark_nav emulate robot --truth truth.tum`` (the P2OS base and the laser on one
@@ -18,6 +18,14 @@ the SE(2)-aligned ATE (evo's metric); the distance driven; and ekf_slam's and th
 extractor's last ``/diagnostics`` input status (processed, dropped, latency percentiles)
 and every node's RSS after one minute and at the end. ``--loop --seconds 600 --skip 0``
 is a soak through the live drivers (40 scans/s, 10 Hz odometry).
+
+Drops: each node's ``/diagnostics`` counts by reason (``dropped.<reason>``) and its drop
+rate, the drop warnings the nodes logged (throttled; each states the drop rate,
+:class:`~landmark_nav.nodes.common.InputStats`) with the first and the last, the laser
+driver's lost-scan warnings and what the emulator could not send.
+``--rate 10`` runs the devices at ten times their data rates (``emulate robot --rate 10``:
+400 scans/s and 100 Hz odometry, ``base_driver.cycle_time`` 0.01 s) with the robot moving
+as at rate 1: the 10x soak, where the nodes cannot keep up and must say how much they drop.
 """
 
 import argparse
@@ -80,6 +88,9 @@ def main() -> int:
     parser.add_argument('--domain', type=int, default=101,
                         help="DDS domain (default 101, outside the tests' 20..99: another "
                              "process's odometry on the domain resets the filter)")
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='data rate factor of the emulated devices (10: the 10x soak, '
+                             '400 scans/s with --skip 0 and 100 Hz odometry)')
     parser.add_argument('--out', default=None, help='keep the files here')
     args = parser.parse_args()
 
@@ -106,10 +117,12 @@ def main() -> int:
         procs.append(subprocess.Popen(
             cli + ['emulate', 'robot', '--link', str(base_link), '--tcp', '0', '--laser',
                    args.laser, '--laser-link', str(laser_link), '--truth',
-                   str(out / 'truth.tum')], env=env, stdout=emu_log, stderr=subprocess.STDOUT))
+                   str(out / 'truth.tum'), '--rate', str(args.rate)],
+            env=env, stdout=emu_log, stderr=subprocess.STDOUT))
         time.sleep(2.0)
         procs.append(subprocess.Popen(
             cli + ['pipeline', 'slam', '--set', f'base_driver.port={base_link}',
+                   '--set', f'base_driver.cycle_time={0.1 / args.rate!r}',
                    '--set', 'ekf_slam.odometry.model=simulator'] + laser_set,
             env=env, stdout=log, stderr=subprocess.STDOUT))
         started = time.monotonic()
@@ -162,17 +175,51 @@ def main() -> int:
         for status in array.status:
             if status.name.endswith(': input'):
                 last[status.name] = {v.key: v.value for v in status.values}
-    resets = [line for line in (out / 'pipeline.log').read_text().splitlines()
-              if 'Resetting EKF-SLAM' in line]
+    log_lines = (out / 'pipeline.log').read_text().splitlines()
+    resets = [line for line in log_lines if 'Resetting EKF-SLAM' in line]
     print(f'ekf_slam resets: {len(resets)}' + ''.join(f'\n  {line}' for line in resets[:3]))
     for node in sorted(rss_end):
         if node in rss:
             print(f'{node}: RSS {rss[node]:.1f} MB at 1 min, {rss_end[node]:.1f} MB at the end '
                   f'({rss_end[node] - rss[node]:+.1f} MB)')
     for name, values in sorted(last.items()):
-        keys = ('processed', 'dropped', 'latency_p50_ms', 'latency_p95_ms', 'latency_max_ms')
-        print(f'{name}: ' + ', '.join(f'{k} {values.get(k)}' for k in keys))
+        keys = ('processed', 'dropped', 'drop_rate_percent', 'latency_p50_ms',
+                'latency_p95_ms', 'latency_max_ms')
+        reasons = ', '.join(f'{k[8:]} {v}' for k, v in sorted(values.items())
+                            if k.startswith('dropped.'))
+        print(f'{name}: ' + ', '.join(f'{k} {values.get(k)}' for k in keys)
+              + f' (reasons: {reasons or "none"})')
+    report_warnings(log_lines)
+    growth = {n: rss_end[n] - rss[n] for n in rss_end if n in rss}
+    dropped = {n.split(':')[0]: int(v.get('dropped', 0)) for n, v in last.items()}
+    p95 = float(last.get('ekf_slam: input', {}).get('latency_p95_ms', 'nan'))
+    print(f'soak targets (issue 16, at 1x): dropped {sum(dropped.values())} (target 0), '
+          f'ekf_slam latency p95 {p95:.1f} ms (target <= 100), largest RSS growth '
+          + (f'{max(growth.values()):+.1f} MB (target <= 5)' if growth else 'n/a (< 1 min)'))
+    emulator = [line for line in (out / 'emulator.log').read_text().splitlines()
+                if line.startswith('base: ')]
+    print('emulator: ' + (emulator[-1][6:] if emulator else 'no summary'))
     return 0
+
+
+def report_warnings(log_lines) -> None:
+    """Print the nodes' drop warnings (they state the drop rate) and the driver's lost scans."""
+    import re
+    rates, lost_scans = {}, 0
+    for line in log_lines:
+        m = re.match(r'\S+ (\w+)\s+\| \[WARN\].*?\]: (.*)$', line)
+        if not m:
+            continue
+        node, text = m.groups()
+        if '(drop rate: ' in text:
+            rates.setdefault(node, []).append(text)
+        elif node == 'laser_driver' and 'scan(s) lost' in text:
+            n = re.search(r'about (\d+) scan', text)
+            lost_scans += int(n.group(1)) if n else 1
+    for node, texts in sorted(rates.items()):
+        print(f'{node}: {len(texts)} drop warnings with the drop rate (throttled); first: '
+              f'{texts[0]}' + (f'\n  last: {texts[-1]}' if len(texts) > 1 else ''))
+    print(f'laser_driver: {lost_scans} scans reported lost before publishing')
 
 
 if __name__ == '__main__':

@@ -249,6 +249,29 @@ def test_out_of_order_corner_sets_are_processed_in_stamp_order():
         slam.destroy_node()
 
 
+def test_corner_sets_stamped_before_the_first_odometry_are_not_lost_at_start():
+    """The live soak lost the first corner sets at every start (all 6 of its drops).
+
+    Stamped before the first odometry (the laser path is slower than /odom), they arrived
+    after it and were dropped.
+    """
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t, pose, cov: stamps.append(t)
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        for dt in (-126_000_000, -101_000_000, -1_000_000, 24_000_000):
+            slam.on_corners(corner_cloud(t0 + dt, [good]))
+        assert stamps == [] and len(slam.pending) == 4
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        assert stamps == [t0 - 126_000_000, t0 - 101_000_000, t0 - 1_000_000, t0 + 24_000_000]
+        assert slam.stats.dropped_count == 0 and slam.stats.processed_count == 4
+        assert slam.frontend.events['start_held'] == 3
+        slam.destroy_node()
+
+
 @pytest.mark.dds
 def test_path_is_bounded_and_published_at_the_display_rate():
     """The path was republished whole at every step and never trimmed (cost grew per scan)."""

@@ -34,11 +34,12 @@ def _open(base: RobotBase, now: float) -> None:
 
 
 def _drive(laser_model, laser_first: bool, commands, seconds: float, step: float = 0.002,
-           base_every: int = 1):
-    base, laser = make_robot('urg', laser_model, MOUNT, QUIET, {'baud': 0},
+           base_every: int = 1, rate: float = 1.0):
+    base, laser = make_robot('urg', laser_model, MOUNT, QUIET, {'baud': 0}, rate=rate,
                              start_pose=(1.2, 1.2, 0.0), sonar_noise=False)
     truth = io.StringIO()
-    base.listeners.append(TruthWriter(truth, origin=(1.2, 1.2, 0.0), wall_offset=100.0))
+    base.listeners.append(TruthWriter(truth, origin=(1.2, 1.2, 0.0), wall_offset=100.0,
+                                      cycle=base.cycle_s, period=min(0.01, base.cycle_s)))
     _open(base, 0.0)
     laser.receive(b'MD0000108001000\n' if laser_model != 'urg-04lx'
                   else b'MD0044072501000\n', 0.0)
@@ -59,13 +60,15 @@ COMMANDS = [(0.3, 'VEL', 250), (0.3, 'RVEL', 0), (1.0, 'RVEL', 25), (1.45, 'RVEL
             (1.9, 'VEL', 100), (2.2, 'RVEL', 0), (2.5, 'PULSE', None), (2.8, 'STOP', None)]
 
 
-@pytest.mark.parametrize('model,laser_first,base_every', [
-    ('utm-30lx', True, 1), ('utm-30lx', False, 1), ('urg-04lx', True, 1),
-    ('utm-30lx', True, 150)])  # the base's thread polled every 0.3 s only (a loaded host)
-def test_every_scan_is_cast_from_the_bases_true_path(model, laser_first, base_every):
-    base, laser, _ = _drive(model, laser_first, COMMANDS, 3.0, base_every=base_every)
+@pytest.mark.parametrize('model,laser_first,base_every,rate', [
+    ('utm-30lx', True, 1, 1.0), ('utm-30lx', False, 1, 1.0), ('urg-04lx', True, 1, 1.0),
+    ('utm-30lx', True, 150, 1.0),  # the base's thread polled every 0.3 s only (a loaded host)
+    ('utm-30lx', False, 1, 10.0)])  # the load test's data rates: 400 scans/s, 10 ms cycles
+def test_every_scan_is_cast_from_the_bases_true_path(model, laser_first, base_every, rate):
+    base, laser, _ = _drive(model, laser_first, COMMANDS, 3.0, base_every=base_every,
+                            rate=rate)
     sent = list(laser.sent)
-    assert len(sent) >= (110 if model == 'utm-30lx' else 28)
+    assert len(sent) >= min(laser.sent.maxlen, rate * (110 if model == 'utm-30lx' else 28))
     assert base.predicted_queries > 0  # some beams lay past the base's last cycle
     p = laser.params
     steps = np.arange(sent[0].start_step, sent[0].end_step + 1)
@@ -144,3 +147,45 @@ def test_bad_robot_options_are_clear_errors():
     with pytest.raises(ValueError, match='laser mount'):
         make_robot('urg', mount=(0.0, math.nan, 0.0))
     assert URG_04LX.params.model == 'URG-04LX'
+    for rate in (0.0, math.inf):
+        with pytest.raises(ValueError, match='rate must be in'):
+            make_robot('urg', rate=rate)
+    with pytest.raises(ValueError, match='1 for the lms200'):
+        make_robot('lms200', rate=10.0)
+
+
+def test_rate_multiplies_the_data_rates_not_the_motion():
+    """--rate 10 (the soak's 10x): 400 scans/s and 100 status packets/s, same motion."""
+    runs = {rate: _drive('utm-30lx', False, COMMANDS, 3.0, rate=rate) for rate in (1.0, 10.0)}
+    (base1, laser1, _), (base10, laser10, _) = runs[1.0], runs[10.0]
+    assert (laser1.period, laser10.period) == pytest.approx((0.025, 0.0025), rel=1e-9)
+    assert (base1.cycle_s, base10.cycle_s) == (0.1, 0.01)
+    assert len(base10.sent) == pytest.approx(10 * len(base1.sent), abs=10)
+    for laser, hz in ((laser1, 40.0), (laser10, 400.0)):  # the last 400 scans are kept
+        span = laser.sent[-1].step0_time - laser.sent[0].step0_time
+        assert (len(laser.sent) - 1) / span == pytest.approx(hz, rel=1e-6)
+        assert laser.sent[-1].step0_time > 2.95  # scanning to the end
+    t = np.linspace(0.2, 2.9, 28)  # the commands act one cycle (100 or 10 ms) later
+    lag = np.abs(base10.pose_at(t)[:, :2] - base1.pose_at(t)[:, :2]).max()
+    assert 0.0 < lag < 0.09 * 0.25  # at most the 90 ms earlier response at 0.25 m/s (11 mm)
+
+
+def test_scans_and_status_packets_a_late_host_loses_are_counted():
+    """At 10x a busy host polls the emulator late: what it cannot send is counted, not lost."""
+    base, laser = make_robot('urg', 'utm-30lx', MOUNT, QUIET, {'baud': 0}, rate=10.0)
+    _open(base, 0.0)
+    base.poll(0.0)
+    laser.receive(b'MD0000108001000\n', 0.0)
+    for i in range(1, 51):
+        laser.poll(0.002 * i)
+    sent = laser.scans_sent
+    assert sent >= 38 and laser.scans_skipped == 0  # 2.5 ms scans ready by 0.1 s
+    laser.poll(0.2)  # polled 100 ms late: 40 periods passed, the last ones cast
+    assert laser.scans_skipped + laser.scans_sent - sent == 40 and laser.scans_skipped >= 35
+    base, _ = make_robot('urg', rate=10.0)
+    _open(base, 0.0)
+    base.poll(0.0)
+    frames = base.poll(0.1)  # its thread 100 ms late: 10 cycles, all sent (late)
+    assert (len(frames), base.packets_not_sent) == (10, 0)
+    frames = base.poll(0.405)  # 300 ms late: those of the last 150 ms go out
+    assert (len(frames), base.packets_not_sent) == (15, 15) and base.seq == 40

@@ -68,6 +68,8 @@ WAIT_SYNC0, WAIT_SYNC1, WAIT_SYNC2, CONNECTED, OPEN = (
 NO_ECHO_RAW = 0xFFFF
 DEFAULT_TCP_PORT = 8101  # MobileSim's port
 HEADING_GAIN = 2.0  # 1/s, HEAD / DHEAD proportional heading control
+#: Status packets of cycles run this late still go out (whatever the cycle time) [s].
+LATE_SEND_S = 0.15
 MAX_CATCH_UP = 600  # cycles simulated at most when the device was not polled for a while
 
 
@@ -185,6 +187,7 @@ class P2osDevice(Device):
         self.flash_max_rot_deg_s = math.degrees(max_rot_speed)
         self.robot_radius = robot_radius
         self.cycle_s = cycle_s
+        self.packets_not_sent = 0  # status packets of cycles run too late (a busy host)
         self._rng = np.random.default_rng(seed)
         self._lock = threading.RLock()
         self._decoder = P2osDecoder(parse=lambda data: (bytes(data), parse_command(data)))
@@ -282,8 +285,12 @@ class P2osDevice(Device):
                 t = self._next_tick
                 self._next_tick += self.cycle_s
                 frame = self._cycle(t)
-                if frame is not None and t >= now - 1.5 * self.cycle_s:
-                    frames.append(frame)  # older ones went out while nobody listened
+                # Packets of cycles run up to 150 ms late (a busy host; 1.5 cycles at 100 ms)
+                # go out late; older ones went out while nobody listened.
+                if frame is not None and t >= now - max(1.5 * self.cycle_s, LATE_SEND_S):
+                    frames.append(frame)
+                elif frame is not None:
+                    self.packets_not_sent += 1
             return frames
 
     def disconnected(self) -> None:

@@ -29,6 +29,7 @@ DeviceServer`), so the laser's beam times and the base's cycles are on one time 
 
 import argparse
 from collections import deque
+from dataclasses import replace
 import math
 from pathlib import Path
 import threading
@@ -253,7 +254,8 @@ class TruthWriter:
 
 def make_robot(laser: str = 'urg', laser_model: str = 'utm-30lx',
                mount: Sequence[float] = DEFAULT_MOUNT, scene: Optional[SceneConfig] = None,
-               laser_kwargs: Optional[dict] = None, **base_kwargs) -> Tuple[RobotBase, Device]:
+               laser_kwargs: Optional[dict] = None, rate: float = 1.0,
+               **base_kwargs) -> Tuple[RobotBase, Device]:
     """Build the base and the laser it carries on one world (default: the office world).
 
     Args:
@@ -262,6 +264,9 @@ def make_robot(laser: str = 'urg', laser_model: str = 'utm-30lx',
         mount: ``base_link -> laser`` (x, y, yaw) [m, m, rad].
         scene: Laser noise (its pose and motion are ignored: the laser rides on the base).
         laser_kwargs: Further arguments of the laser device (baud, jitter, ...).
+        rate: Data rate factor for load tests: the URG's scans per second (its motor speed)
+            and the base's status packets per second (``cycle_s`` 0.1 / ``rate``; one
+            minute of cycles kept) times ``rate``; the robot moves as at rate 1.
         **base_kwargs: Arguments of :class:`RobotBase` (start pose, k, model, ...).
 
     Returns:
@@ -269,7 +274,11 @@ def make_robot(laser: str = 'urg', laser_model: str = 'utm-30lx',
     """
     if laser not in LASERS:
         raise ValueError(f'laser must be one of {", ".join(LASERS)}, got {laser!r}')
+    if not (math.isfinite(rate) and 0.0 < rate <= 100.0) or (laser != 'urg' and rate != 1.0):
+        raise ValueError(f'rate must be in (0, 100] (and 1 for the {laser}), got {rate!r}')
     base_kwargs.setdefault('world', office_world())
+    base_kwargs.setdefault('cycle_s', 0.1 / rate)
+    base_kwargs.setdefault('history', int(round(60.0 / base_kwargs['cycle_s'])))
     base = RobotBase(**base_kwargs)
     sc = mounted_scene(base, mount, scene)
     if laser == 'urg':
@@ -277,7 +286,11 @@ def make_robot(laser: str = 'urg', laser_model: str = 'utm-30lx',
         if laser_model not in MODELS:
             raise ValueError(f'URG model must be one of {", ".join(MODELS)}, '
                              f'got {laser_model!r}')
-        return base, UrgDevice(MODELS[laser_model], sc, **(laser_kwargs or {}))
+        model = MODELS[laser_model]
+        if rate != 1.0:
+            model = replace(model, params=replace(
+                model.params, scan_rpm=int(round(model.params.scan_rpm * rate))))
+        return base, UrgDevice(model, sc, **(laser_kwargs or {}))
     from landmark_nav.emulators.lms200 import LmsDevice
     return base, LmsDevice(sc, **(laser_kwargs or {}))
 
@@ -320,6 +333,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='laser: probability per beam of a too-close return')
     parser.add_argument('--jitter-ms', type=float, default=0.0,
                         help='laser: mean extra delivery delay per frame (exponential) [ms]')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='data rate factor for load tests (URG only): scans/s and base '
+                             'status packets/s times RATE, the motion unchanged; start '
+                             'base_driver with cycle_time 0.1/RATE (--rate 10: 400 scans/s, '
+                             '100 Hz odometry)')
     parser.add_argument('--truth', default=None, metavar='FILE.tum',
                         help='write the true base path here (TUM, ROS time, every 10 ms)')
     parser.add_argument('--truth-frame', choices=('start', 'world'), default='start',
@@ -335,7 +353,7 @@ def make_from_args(args: argparse.Namespace) -> Tuple[RobotBase, Device]:
     if args.laser_baud is not None:
         laser_kwargs['baud'] = args.laser_baud
     return make_robot(args.laser, args.laser_model, args.laser_mount, scene, laser_kwargs,
-                      **kwargs)
+                      rate=args.rate, **kwargs)
 
 
 def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
@@ -356,7 +374,8 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
     if args.truth:
         truth_file = Path(args.truth).open('w', buffering=1)
         start = base.true_pose.copy() if args.truth_frame == 'start' else None
-        base.listeners.append(TruthWriter(truth_file, origin=start, cycle=base.cycle_s))
+        base.listeners.append(TruthWriter(truth_file, origin=start, cycle=base.cycle_s,
+                                          period=min(0.01, base.cycle_s)))
     stop = stop or threading.Event()
 
     def _terminate(signum, frame):
@@ -375,7 +394,9 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
         x, y, yaw = base.true_pose
         announce(f'robot at ({x:g}, {y:g}, {math.degrees(yaw):g} deg) in the office world; '
                  f'laser mount {",".join(f"{v:g}" for v in args.laser_mount)}'
-                 + (f'; truth -> {args.truth}' if args.truth else ''))
+                 + (f'; truth -> {args.truth}' if args.truth else '')
+                 + (f'; data rate x{args.rate:g} (base cycle {1e3 * base.cycle_s:g} ms, '
+                    f'{1.0 / laser.period:.0f} scans/s)' if args.rate != 1.0 else ''))
         if args.fault:
             threading.Thread(target=_schedule, args=(servers, args.fault, stop),
                              daemon=True).start()
@@ -386,6 +407,11 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
             server.stop()
         if truth_file is not None:
             truth_file.close()
+        announce(f'base: {base.seq} cycles, {base.packets_not_sent} status packets not sent '
+                 f'(cycles run too late), {servers[0].bytes_dropped} bytes not written (pty '
+                 f'full); laser: {getattr(laser, "scans_sent", "?")} scans sent, '
+                 f'{getattr(laser, "scans_skipped", 0)} scans skipped (polled '
+                 f'too late), {servers[1].bytes_dropped} bytes not written (pty full)')
     return 0
 
 

@@ -202,6 +202,7 @@ class DeviceServer:
         self.pty_path: Optional[str] = None
         self.bytes_in = 0
         self.bytes_out = 0
+        self.bytes_dropped = 0  # not written: the pty was full (the client did not read)
 
     # --- endpoints -------------------------------------------------------------------
 
@@ -357,7 +358,7 @@ class DeviceServer:
         if not out:
             return
         if self._master is not None:
-            self._write_fd(self._master, out)
+            self.bytes_dropped += self._write_fd(self._master, out)
         if self._client is not None:
             try:
                 self._client.sendall(out)
@@ -368,19 +369,24 @@ class DeviceServer:
         self.bytes_out += len(out)
 
     @staticmethod
-    def _write_fd(fd: int, data: bytes) -> None:
-        """Write to the pty master; drop what does not fit (nobody is reading)."""
+    def _write_fd(fd: int, data: bytes) -> int:
+        """Write to the pty master; drop what does not fit (nobody is reading).
+
+        Returns:
+            The number of bytes dropped.
+        """
         view = memoryview(data)
         while view:
             try:
                 n = os.write(fd, view)
             except BlockingIOError:
-                return
+                return len(view)
             except OSError as err:
                 if err.errno in (errno.EIO, errno.EAGAIN):
-                    return
+                    return len(view)
                 raise
             view = view[n:]
+        return 0
 
 
 def serve_forever(server: DeviceServer, announce: Callable[[str], None] = print) -> None:

@@ -164,6 +164,8 @@ class UrgDevice(Device):
         self._clock_start_ms = float(clock_start_ms)
         self._queue = LineQueue(self.default_baud, jitter, np.random.default_rng(seed))
         self.sent: Deque[SentScan] = deque(maxlen=history)
+        self.scans_sent = 0
+        self.scans_skipped = 0  # scan periods passed over when polled too late (a busy host)
         self.commands: List[str] = []  # every command line received, for tests
         self._buf = b''
         self._t0: Optional[float] = None
@@ -251,7 +253,9 @@ class UrgDevice(Device):
         """Produce the scans that completed by ``now``; release frames that are due."""
         self._start(now)
         if now - self._scan_ready(self._k_next) > 5 * self.period:  # long pause: catch up
-            self._k_next = self._base_k + int((now - self._base_time) / self.period) - 1
+            k = self._base_k + int((now - self._base_time) / self.period) - 1
+            self.scans_skipped += max(0, k - self._k_next)
+            self._k_next = k
         while self._scan_ready(self._k_next) <= now:
             self._scan(self._k_next)
             self._k_next += 1
@@ -524,6 +528,7 @@ class UrgDevice(Device):
             a.setflags(write=False)
         self.sent.append(SentScan(command, stamp, start, end, cluster, raw, expected,
                                   intensities, t_step0, due))
+        self.scans_sent += 1
 
 
 # ---------------------------------------------------------------------------- command line

@@ -254,10 +254,17 @@ class ProblemWarner:
         self._suppressed = Counter()
         self.count = 0
 
-    def warn(self, message: str) -> None:
-        """Log a warning unless the same kind of problem was reported recently."""
+    def warn(self, message: str, detail: str = '') -> None:
+        """Log a warning unless the same kind of problem was reported recently.
+
+        Args:
+            message: The problem; its kind decides the throttling.
+            detail: Appended in parentheses, not part of the kind (e.g. a drop rate).
+        """
         self.count += 1
         key = problem_kind(message)
+        if detail:
+            message += f' ({detail})'
         now = time.monotonic()
         if now - self._last.get(key, -math.inf) >= self._period:
             self._last[key] = now
@@ -277,6 +284,12 @@ def _percentile_ms(values: Sequence[float], q: float) -> float:
     return 1e3 * ordered[min(len(ordered) - 1, int(math.ceil(q / 100.0 * len(ordered))) - 1)]
 
 
+def _percent(dropped: int, processed: int) -> float:
+    """Return ``dropped`` in percent of ``dropped + processed`` (0 when both are 0)."""
+    total = dropped + processed
+    return 100.0 * dropped / total if total else 0.0
+
+
 class InputStats:
     """Count a node's processed and dropped inputs and its latency; report them.
 
@@ -287,10 +300,13 @@ class InputStats:
     :meth:`drop` (with a warning naming the problem) when it skips one. Every
     ``period_s`` a diagnostic_msgs/DiagnosticArray goes out on ``/diagnostics`` with one
     DiagnosticStatus ``<node>: input``: the counts ``processed``, ``dropped`` and
-    ``dropped.<reason>`` since start, and ``latency_p50_ms`` / ``latency_p95_ms`` /
-    ``latency_max_ms`` over the last ``window`` processed inputs (from the reception of the
-    input, or of the later message it waited for, to the end of its processing). Level WARN
-    while inputs were dropped in the last period, else OK.
+    ``dropped.<reason>`` since start, ``drop_rate_percent`` (dropped of processed plus
+    dropped since start), and ``latency_p50_ms`` / ``latency_p95_ms`` / ``latency_max_ms``
+    over the last ``window`` processed inputs (from the reception of the input, or of the
+    later message it waited for, to the end of its processing). Level WARN while inputs were
+    dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
+    by the node's :class:`ProblemWarner`) ends with the drop rate, of the current period and
+    since start with the reasons: a node that cannot keep up says how much it loses.
     """
 
     def __init__(self, node: Node, warner: ProblemWarner, period_s: float = 1.0,
@@ -298,12 +314,14 @@ class InputStats:
         """Create the ``/diagnostics`` publisher and its timer."""
         self._node = node
         self.warner = warner
+        self.period_s = float(period_s)
         self.processed_count = 0
         self.dropped = Counter()
         self.latencies = deque(maxlen=window)
         self.received_ns = 0
         self._last_seq = {}
         self._reported_drops = 0
+        self._reported_processed = 0
         self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._timer = node.create_timer(period_s, self.publish)
 
@@ -341,16 +359,17 @@ class InputStats:
             self.latencies.append(max(0.0, (time.time_ns() - start) * 1e-9))
 
     def drop(self, reason: str, message: str, count: int = 1) -> None:
-        """Count ``count`` dropped inputs for ``reason`` and warn (throttled per kind)."""
+        """Count ``count`` dropped inputs for ``reason``; warn with the drop rate (throttled)."""
         self.dropped[reason] += count
-        self.warner.warn(message)
+        self.warner.warn(message, self.drop_rate_text())
 
     def status(self) -> DiagnosticStatus:
         """Return the DiagnosticStatus of the inputs so far."""
         lat = list(self.latencies)
         dropped = self.dropped_count
         recent = dropped - self._reported_drops
-        values = {'processed': self.processed_count, 'dropped': dropped}
+        values = {'processed': self.processed_count, 'dropped': dropped,
+                  'drop_rate_percent': f'{_percent(dropped, self.processed_count):.3f}'}
         values.update({f'dropped.{k}': v for k, v in sorted(self.dropped.items())})
         values.update({'latency_p50_ms': f'{_percentile_ms(lat, 50):.2f}',
                        'latency_p95_ms': f'{_percentile_ms(lat, 95):.2f}',
@@ -363,10 +382,21 @@ class InputStats:
             hardware_id=self._node.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
+    def drop_rate_text(self) -> str:
+        """Return the drop rate of the current period and since start, with the reasons."""
+        dropped, processed = self.dropped_count, self.processed_count
+        recent = dropped - self._reported_drops
+        done = processed - self._reported_processed
+        reasons = ', '.join(f'{k} {v}' for k, v in sorted(self.dropped.items()))
+        return (f'drop rate: {recent} of {recent + done} inputs in this {self.period_s:g} s '
+                f'period ({_percent(recent, done):.3g} %), {dropped} of {dropped + processed} '
+                f'since start ({_percent(dropped, processed):.3g} %: {reasons})')
+
     def publish(self) -> None:
         """Publish the status on ``/diagnostics``."""
         status = self.status()
         self._reported_drops = self.dropped_count
+        self._reported_processed = self.processed_count
         msg = DiagnosticArray()
         msg.header.stamp = self._node.get_clock().now().to_msg()
         msg.status = [status]

@@ -126,6 +126,9 @@ FRONTEND_PARAMETERS = {
     'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
                        (1e-3, 1e6), None),
     'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
+    'start_hold_s': ('corner sets up to this much older than the first odometry are '
+                     'processed at its pose if the robot stands still at the start [s]',
+                     (1e-3, 60.0), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,

@@ -38,11 +38,24 @@ A set of corners (laser frame, each with its covariance, bisector, opening and b
 after the set's stamp; optionally line segments with their middle beam's time and the
 scan's geometry, :class:`Corners`) waits until the odometry covers its last beam (``stamp +
 max(beam_time)``; with de-skew off, the stamp), then is processed in stamp order; a set
-older than the last processed step is dropped (``'out_of_order'``), and so is a set that
-came before any odometry and turns out older than the first sample (``'before_odometry'``).
+older than the last processed step is dropped (``'out_of_order'``).
+
 :meth:`flush` processes the sets still waiting whose stamp the odometry covers, holding
 the last odometry pose for beams after it (end of a recording; the node calls it when
 odometry stops coming).
+
+Start-up: the filter starts at the first odometry sample, but the laser's path to the front
+end (the sweep, the transfer, the extractor) is slower than the odometry's, so the first
+sets to arrive after the first odometry sample are usually stamped before it (measured on
+the live pipeline: 1 to 6 sets, up to 126 ms before it, at every start; under load corner
+sets also came for up to 1.2 s before the first odometry, the subscriptions matching
+apart). Such a set, or one that came before any odometry and is older than the first
+sample, is processed at the first odometry pose (held back in time, ``'start_held'``) when
+the robot stands still: the first two accepted odometry samples differ by no more than the
+noise model's floors (``sigma_xy_floor``, ``sigma_yaw_floor``), and the set is at most
+``start_hold_s`` older than the first sample (default 3 s: the node's queue of 100 waiting
+sets spans 2.5 s at 40 Hz). It waits for the second sample to decide; otherwise (the robot
+moves at the start, or the set is older) it is dropped (``'before_odometry'``).
 
 Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
 (:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
@@ -101,7 +114,7 @@ ODOMETRY_NOISE_MODELS: Dict[str, OdometryNoise] = {
 ODOMETRY_EVENTS = ('accepted', 'invalid', 'repeated', 'conflicting', 'backward', 'restart',
                    'jump')
 #: Feature-set events counted by :attr:`SlamFrontend.events`.
-FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held')
+FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held', 'start_held')
 _GAIN = re.compile(r'^(k_d|k_theta|k_dtheta)=(\S+)$')
 _GAIN_FIELD = {'k_d': 'sigma_xy_per_sqrt_m', 'k_theta': 'sigma_yaw_per_sqrt_m',
                'k_dtheta': 'sigma_yaw_per_sqrt_rad'}
@@ -155,6 +168,9 @@ class FrontendParams:
         max_backward_s: A stamp further back than this restarts the front end [s].
         buffer_s: Odometry kept behind the newest sample [s] (bounded memory when no
             feature sets come; a set older than the buffer is dropped as out of order).
+        start_hold_s: A set stamped up to this long before the first odometry sample is
+            processed at that sample's pose when the robot stands still at the start
+            (module docstring) [s].
     """
 
     deskew: bool = True
@@ -165,11 +181,12 @@ class FrontendParams:
     min_step_s: float = 0.02
     max_backward_s: float = 1.0
     buffer_s: float = 60.0
+    start_hold_s: float = 3.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
         for name in ('max_speed', 'max_turn_rate', 'jump_sigmas', 'min_step_s',
-                     'max_backward_s', 'buffer_s'):
+                     'max_backward_s', 'buffer_s', 'start_hold_s'):
             v = getattr(self, name)
             if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
                     or v <= 0.0):
@@ -362,6 +379,8 @@ class SlamFrontend:
         self._buf = _Buffer()
         self._pending: List[_Pending] = []
         self.last_step: Optional[Tuple[int, np.ndarray]] = None
+        self._stepped = False  # a set was processed since the start
+        self._at_rest: Optional[bool] = None  # the first two samples: robot still (None: one)
         self._extra_since = np.zeros(3)  # bridged variance already predicted with
 
     @property
@@ -409,10 +428,9 @@ class SlamFrontend:
                     self.slam.load_map(self.slam_map, pose, self.map_pose_covariance)
                 self.t0 = stamp_ns
                 self.last_step = (stamp_ns, pose.copy())
-                while self._pending and self._pending[0].stamp_ns < stamp_ns:
-                    old = self._pending.pop(0)
-                    self._event('before_odometry', f'corners at {old.stamp_ns} ns are older '
-                                f'than the first odometry ({stamp_ns} ns): skipped')
+                hold = stamp_ns - int(self.frontend.start_hold_s * 1e9)
+                while self._pending and self._pending[0].stamp_ns < hold:
+                    self._before_odometry(self._pending.pop(0).stamp_ns)
             return self._event('accepted'), self.process()
         last = b.t[-1]
         if stamp_ns == last:
@@ -434,6 +452,10 @@ class SlamFrontend:
         dt = (stamp_ns - last) * 1e-9
         u = relative(b.raw_last, pose)  # eq. 13
         why = self._implausible(u, dt, cov)
+        if self._at_rest is None:  # the second sample: did the robot stand still?
+            n = self.params.odometry
+            self._at_rest = why is None and bool(math.hypot(u[0], u[1]) <= n.sigma_xy_floor
+                                                 and abs(u[2]) <= n.sigma_yaw_floor)
         if why is None:
             bridged = pose if b.offset is None else compose(b.offset, pose)
             self._accept(stamp_ns, pose, bridged, cov, np.zeros(3))
@@ -493,11 +515,16 @@ class SlamFrontend:
             The steps made (possibly none, possibly older sets too).
         """
         t = int(corners.stamp_ns)
-        if self.slam is not None and self.last_step is not None and t < self.last_step[0] or (
-                self._buf.t and t < self._buf.t[0]):
-            self._event('out_of_order', f'corners at {t} ns are older than the last step '
-                        f'({self.last_step[0]} ns) or the buffered odometry: skipped')
-            return []
+        if self.slam is not None:
+            first = self._buf.t[0]
+            if self._stepped and t < self.last_step[0] or first != self.t0 and t < first:
+                self._event('out_of_order', f'corners at {t} ns are older than the last step '
+                            f'({self.last_step[0]} ns) or the buffered odometry: skipped')
+                return []
+            if t < self.t0 and (self._at_rest is False or t < self.t0 - int(
+                    self.frontend.start_hold_s * 1e9)):
+                self._before_odometry(t)
+                return []
         bt = np.concatenate([corners.beam_time, corners.line_beam_time])
         need = t + (int(math.ceil(float(np.max(bt)) * 1e9))
                     if self.frontend.deskew and bt.size and np.max(bt) > 0 else 0)
@@ -513,16 +540,40 @@ class SlamFrontend:
         p = self._pending.pop(0)
         return p.stamp_ns, p.tag
 
+    def _before_odometry(self, t: int) -> None:
+        """Report a set older than the first odometry sample that cannot be held."""
+        why = ('the robot moved between the first two samples' if self._at_rest is False else
+               f'more than start_hold_s = {self.frontend.start_hold_s:g} s')
+        self._event('before_odometry', f'corners at {t} ns are older than the first odometry '
+                    f'({self.t0} ns) and {why}: skipped')
+
+    def _start_decided(self, final: bool = False) -> bool:
+        """Drop the waiting sets before the first odometry that cannot be held.
+
+        Returns:
+            False while the oldest waiting set is before it and the second sample, which
+            decides, has not come (``final``: it will not come; they are dropped).
+        """
+        while self._pending and self.t0 is not None and self._pending[0].stamp_ns < self.t0:
+            if self._at_rest is None and not final:
+                return False
+            if self._at_rest:
+                return True
+            self._before_odometry(self._pending.pop(0).stamp_ns)
+        return True
+
     def process(self) -> List[Step]:
         """Process waiting feature sets the odometry covers, in stamp order."""
         steps = []
-        while self._pending and self._buf.t and self._pending[0].need_ns <= self._buf.t[-1]:
+        while (self._start_decided() and self._pending and self._buf.t
+               and self._pending[0].need_ns <= self._buf.t[-1]):
             steps.append(self._step(self._pending.pop(0)))
         return steps
 
     def flush(self) -> List[Step]:
         """Process the waiting sets whose stamp the odometry covers (beams after: held)."""
         steps = self.process()
+        self._start_decided(final=True)
         while self._pending and self._buf.t and self._pending[0].stamp_ns <= self._buf.t[-1]:
             p = self._pending.pop(0)
             self._event('held', f'corners at {p.stamp_ns} ns: odometry ends before the last '
@@ -538,7 +589,11 @@ class SlamFrontend:
         hi = min(bisect.bisect_left(b.t, p.need_ns) + 1, len(b.t))
         ts = (np.asarray(b.t[lo:hi], dtype=np.int64) - self.t0) * 1e-9
         ps = np.array(b.pose[lo:hi])
-        odo = np.asarray(interpolate_pose((t - self.t0) * 1e-9, ts, ps), dtype=float).reshape(3)
+        if t < self.t0:  # before the first sample, robot still: its pose held (docstring)
+            self._event('start_held', f'corners at {t} ns, {(self.t0 - t) * 1e-6:.1f} ms before '
+                        'the first odometry, robot still: processed at its pose')
+        odo = np.asarray(interpolate_pose((max(t, self.t0) - self.t0) * 1e-9, ts, ps),
+                         dtype=float).reshape(3)
         prev_t, prev_odo = self.last_step
         # Bridged variance of the jumps in (prev_t, t].
         extra = np.zeros(3)
@@ -555,10 +610,10 @@ class SlamFrontend:
             t_rel = (t - self.t0) * 1e-9
             if len(c) and np.any(c.beam_time != 0.0):
                 # Beyond the odometry (flush): hold its last pose.
-                tb = np.minimum(t_rel + c.beam_time, ts[-1])
+                tb = np.clip(t_rel + c.beam_time, ts[0], ts[-1])
                 motion = relative(odo, interpolate_pose(tb, ts, ps, extrapolate=True))
             if len(c.lines) and np.any(c.line_beam_time != 0.0):
-                tb = np.minimum(t_rel + c.line_beam_time, ts[-1])
+                tb = np.clip(t_rel + c.line_beam_time, ts[0], ts[-1])
                 lmotion = relative(odo, interpolate_pose(tb, ts, ps, extrapolate=True))
         items = c.items()
         z, r = corners_to_observations(items, self.mount, motion)
@@ -568,6 +623,7 @@ class SlamFrontend:
                  if len(c.lines) else None)
         res = self.slam.update(z, r, desc, lines=lines, scan=c.scan)
         self.last_step = (t, odo)
+        self._stepped = True
         self._event('processed')
         step = Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
                     pose=self.slam.pose, covariance=self.slam.pose_covariance, slam=self.slam,
