@@ -194,7 +194,8 @@ def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
     loc.reset(start, np.reshape(cfg.init_cov, (3, 3)), 0.0)
     every = max(1, int(round(10.0 / cfg.camera_rate)))
     k_cal = (robot.k1, robot.k2, robot.k3)
-    rows = []
+    det_rng = np.random.default_rng(seed + 2000)    # RWRHT's draws: the frames do not depend
+    rows = []                                       # on the line source
     travelled = 0.0
     prev_truth = truth0
     for i in range(1, len(odo)):
@@ -213,7 +214,7 @@ def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
         img = sim.render(scene_at(static, cfg.clutter, t, 21.5, seed), R, c,
                          _photometry(t, cfg, covered), rng)
         tic = time.perf_counter()
-        lines = detect_model_lines(img, cfg.method, rng=rng)
+        lines = detect_model_lines(img, cfg.method, rng=det_rng)
         toc = time.perf_counter()
         res = loc.update(lines.segments, t)
         tac = time.perf_counter()
