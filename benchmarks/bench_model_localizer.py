@@ -5,15 +5,16 @@ Run from the repository root::
     python benchmarks/bench_model_localizer.py [--frames N] [--seeds S] [--first-seed K]
 
 Per line source (:data:`~landmark_nav.vision.rwrht.MODEL_LINE_METHODS`) the rendered hallway
-run of :func:`landmark_nav.evaluation.model_localization.run_hallway` (320 x 240, the
-chapter's intrinsics, people, door frames, lighting changes and pixel noise; initial
+run (:func:`landmark_nav.evaluation.model_localization.run_hallway_methods`: 320 x 240,
+the chapter's intrinsics, people, door frames, lighting changes and pixel noise; initial
 estimate drawn from the chapter's start covariance) for the first ``N`` frames of ``S``
-seeds. The rendered frames do not depend on the line source, so every source sees the same
-frames. Printed per source: position error max / RMS and heading max over all frames, the
-NEES fraction inside the 95 % bound, the median time per frame of the line detector and of
-the filter (tracking: association, matching and the EKF update), end-to-end frames/s
-(image lines + filter, the node's work per image) and the ratio of that end-to-end time to
-LSD's on the same frames, since absolute times vary between machines and with load.
+seeds. Every source sees the same rendered frames and the sources take turns on each frame
+(rotating order), so their times see the same load. Printed per source: position error
+max / RMS and heading max over all frames, the NEES fraction inside the 95 % bound, the
+median time per frame of the line detector and of the filter (tracking: association,
+matching and the EKF update), end-to-end frames/s (image lines + filter, the node's work
+per image) and the ratio of that end-to-end time to LSD's on the same frames, since
+absolute times vary between machines and with load.
 Target (issue): >= 10 frames/s end to end at 320 x 240.
 """
 
@@ -24,7 +25,7 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.model_localization import (HallwayRunConfig,  # noqa: E402
-                                                        run_hallway, summarize)
+                                                        run_hallway_methods, summarize)
 from landmark_nav.nodes.common import limit_threads  # noqa: E402
 from landmark_nav.vision.rwrht import MODEL_LINE_METHODS  # noqa: E402
 import numpy as np  # noqa: E402
@@ -40,10 +41,11 @@ def main() -> None:
     a = ap.parse_args()
     limit_threads()                      # as in the node
     seeds = range(a.first_seed, a.first_seed + a.seeds)
+    by_seed = [run_hallway_methods(s, MODEL_LINE_METHODS, HallwayRunConfig(max_frames=a.frames))
+               for s in seeds]
     rows = {}
     for method in MODEL_LINE_METHODS:
-        runs = [run_hallway(s, HallwayRunConfig(method=method, max_frames=a.frames))
-                for s in seeds]
+        runs = [r[method] for r in by_seed]
         s = [summarize(r) for r in runs]
         line_ms = np.concatenate([r.line_ms for r in runs])
         filt_ms = np.concatenate([r.filter_ms for r in runs])

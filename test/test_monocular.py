@@ -370,7 +370,7 @@ def test_rendered_run_converges_from_30_cm_and_10_deg_off(offset):
                            init_cov=tuple(np.diag(sd ** 2).ravel()), max_frames=40)
     run = run_hallway(0, cfg)
     # measured: within the bounds from the first frame on (0 m of travel) for each offset;
-    # max 1.1-2.6 cm, 0.22-0.23 deg over the 40 frames (2.26 m)
+    # max 1.1-2.6 cm, 0.11-0.12 deg over the 40 frames (2.26 m)
     assert run.converged_after() == 0.0
     assert run.travelled[-1] > 2.0 and not run.lost.any()
 
@@ -387,3 +387,19 @@ def test_rendered_run_covered_for_3_s_reports_lost_and_recovers_without_reset():
     # odometry only)
     assert run.position_error[after].max() < 0.03
     assert math.degrees(run.heading_error[after].max()) < 0.25
+
+
+@pytest.mark.slow
+def test_line_sources_side_by_side_equal_their_single_runs():
+    """The benchmark's side-by-side runs are the runs of each source alone (same frames)."""
+    from landmark_nav.evaluation.model_localization import (HallwayRunConfig, run_hallway,
+                                                            run_hallway_methods)
+    cfg = HallwayRunConfig(max_frames=4)
+    both = run_hallway_methods(2, ('lsd', 'rwrht'), cfg)
+    for method in ('lsd', 'rwrht'):
+        alone = run_hallway(2, replace(cfg, method=method))
+        np.testing.assert_array_equal(both[method].estimate, alone.estimate)
+        np.testing.assert_array_equal(both[method].n_lines, alone.n_lines)
+    assert not np.array_equal(both['lsd'].n_lines, both['rwrht'].n_lines)
+    with pytest.raises(ValueError, match='unknown line method'):
+        run_hallway_methods(2, ('canny',), cfg)

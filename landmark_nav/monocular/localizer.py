@@ -374,10 +374,14 @@ class ModelLocalizer:
         """Stacked update that drops pairs the updated pose does not explain.
 
         After each update (:meth:`_corrected`) the pair with the largest residual
-        ``d^2 = nu^T (V + model_cov)^-1 nu`` at the new pose is dropped when ``d^2``
-        exceeds the gate, and the update is redone from the prior (at most half the
-        pairs are dropped). A wrong pair that passed the gates at a loose prior is thus
-        removed once the other pairs have pinned the pose down.
+        ``d^2 = nu^T S^-1 nu`` at the new pose is dropped when ``d^2`` exceeds the gate,
+        and the update is redone from the prior (at most half the pairs are dropped). A
+        wrong pair that passed the gates at a loose prior is thus removed once the other
+        pairs have pinned the pose down. ``S = V + model_cov - H P+ H^T`` is the covariance
+        of a residual after an update that included the pair (the update pulls the pose
+        towards every pair, so ``V + model_cov`` alone understates d^2 of a wrong pair by
+        the share the pose took up); where that difference is not positive definite
+        (numerically) ``V + model_cov`` is used.
         """
         gate = self.params.match.gate
         keep = np.arange(len(matches))
@@ -389,6 +393,9 @@ class ModelLocalizer:
             lin = predict_lines(vis, x, P, self.mount, self.K, self.params.model_sigma_m)
             nu = innovation(sub.h, lin.h)
             S = align_cov(sub.V, sub.h, lin.h) + lin.model_cov
+            S_post = S - lin.H @ P @ np.swapaxes(lin.H, 1, 2)     # residual covariance
+            ok = np.all(np.linalg.eigvalsh(S_post) > 1e-3 * np.linalg.eigvalsh(S), axis=1)
+            S = np.where(ok[:, None, None], S_post, S)
             d2 = np.einsum('ki,kij,kj->k', nu, np.linalg.inv(S), nu)
             worst = int(np.argmax(d2))
             floor = max(self.params.min_matches, len(matches) // 2)
