@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import math
 import sys
 import time
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import wrap_angle
 from landmark_nav.localization.odometry import calibrate_control, control_from_poses
@@ -179,8 +179,22 @@ def _hallway_setup(seed: int, cfg: 'HallwayRunConfig', model: Optional[LineModel
 def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
                 model: Optional[LineModel] = None) -> HallwayRun:
     """Simulate one rendered hallway run and localize along it (module docstring)."""
-    if cfg.method not in MODEL_LINE_METHODS:
-        raise ValueError(f'unknown line method {cfg.method!r}')
+    return run_hallway_methods(seed, (cfg.method,), cfg, model)[cfg.method]
+
+
+def run_hallway_methods(seed: int, methods: Sequence[str],
+                        cfg: HallwayRunConfig = HallwayRunConfig(),
+                        model: Optional[LineModel] = None) -> Dict[str, HallwayRun]:
+    """Localize one rendered hallway run with several line sources side by side.
+
+    Every source gets its own filter and its own RWRHT random stream (seed + 2000), so its
+    run equals :func:`run_hallway` with ``cfg.method`` set to it; the frames are rendered
+    once and the sources take turns in a rotating order on each frame, so their times per
+    frame see the same machine load (``cfg.method`` is ignored).
+    """
+    for method in methods:
+        if method not in MODEL_LINE_METHODS:
+            raise ValueError(f'unknown line method {method!r}')
     model, scen, odo, cam, sim, static, rng = _hallway_setup(seed, cfg, model)
     robot = scen.robot
     K = cfg.intrinsics
@@ -190,17 +204,22 @@ def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
         start = truth0 + np.asarray(cfg.offset, dtype=float)
     else:
         start = rng.multivariate_normal(truth0, np.reshape(cfg.init_cov, (3, 3)))
-    loc = ModelLocalizer(model, K, cfg.mount, cfg.localizer)
-    loc.reset(start, np.reshape(cfg.init_cov, (3, 3)), 0.0)
-    every = max(1, int(round(10.0 / cfg.camera_rate)))
+    locs, det_rngs = {}, {}
+    for method in methods:
+        locs[method] = ModelLocalizer(model, K, cfg.mount, cfg.localizer)
+        locs[method].reset(start, np.reshape(cfg.init_cov, (3, 3)), 0.0)
+        det_rngs[method] = np.random.default_rng(seed + 2000)   # RWRHT's draws: the frames
+    every = max(1, int(round(10.0 / cfg.camera_rate)))          # do not depend on the source
     k_cal = (robot.k1, robot.k2, robot.k3)
-    rows = []
+    rows = {method: [] for method in methods}
     travelled = 0.0
     prev_truth = truth0
+    frame = 0
     for i in range(1, len(odo)):
         u = calibrate_control(control_from_poses(odo[i - 1].pose, odo[i].pose),
                               robot.axle_length, k_cal)
-        loc.predict(u)
+        for loc in locs.values():
+            loc.predict(u)
         stamp = odo[i].stamp_ns
         truth = scen.truth_at(stamp)
         travelled += float(np.hypot(*(truth[:2] - prev_truth[:2])))
@@ -212,23 +231,29 @@ def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
         R, c = camera_pose(truth, cfg.mount)
         img = sim.render(scene_at(static, cfg.clutter, t, 21.5, seed), R, c,
                          _photometry(t, cfg, covered), rng)
-        tic = time.perf_counter()
-        lines = detect_model_lines(img, cfg.method, rng=rng)
-        toc = time.perf_counter()
-        res = loc.update(lines.segments, t)
-        tac = time.perf_counter()
         truth_w = truth.copy()
         truth_w[2] = wrap_angle(truth_w[2])
-        rows.append((t, travelled, truth_w, res.pose, res.cov, res.status == LOST,
-                     len(res.matches) if res.matches is not None and res.updated else 0,
-                     len(lines), 1e3 * (toc - tic), 1e3 * (tac - toc)))
-        if cfg.max_frames and len(rows) >= cfg.max_frames:
+        for k in range(len(methods)):
+            method = methods[(frame + k) % len(methods)]
+            tic = time.perf_counter()
+            lines = detect_model_lines(img, method, rng=det_rngs[method])
+            toc = time.perf_counter()
+            res = locs[method].update(lines.segments, t)
+            tac = time.perf_counter()
+            rows[method].append((t, travelled, truth_w, res.pose, res.cov, res.status == LOST,
+                                 len(res.matches) if res.matches is not None and res.updated
+                                 else 0, len(lines), 1e3 * (toc - tic), 1e3 * (tac - toc)))
+        frame += 1
+        if cfg.max_frames and frame >= cfg.max_frames:
             break
-    cols = list(zip(*rows))
-    return HallwayRun(np.array(cols[0]), np.array(cols[1]), np.array(cols[2]),
-                      np.array(cols[3]), np.array(cols[4]), np.array(cols[5], dtype=bool),
-                      np.array(cols[6]), np.array(cols[7]), np.array(cols[8]),
-                      np.array(cols[9]))
+    out = {}
+    for method, r in rows.items():
+        cols = list(zip(*r))
+        out[method] = HallwayRun(np.array(cols[0]), np.array(cols[1]), np.array(cols[2]),
+                                 np.array(cols[3]), np.array(cols[4]),
+                                 np.array(cols[5], dtype=bool), np.array(cols[6]),
+                                 np.array(cols[7]), np.array(cols[8]), np.array(cols[9]))
+    return out
 
 
 def write_hallway_bag(path, seed: int, duration_s: float,

@@ -255,9 +255,10 @@ def visible_lines(model: LineModel, pose, mount: CameraMount, K: Intrinsics,
         before = valid & (t > 0) & ((1.0 - t) * dist1[:, None] > tolerance)
         hit = t[:, :, None] * mid[:, None, :]                  # (M, F, 3)
         e = np.roll(fv, -1, axis=1) - fv                       # (F, 4, 3) polygon edges
-        rel = hit[:, :, None, :] - fv[None, :, :, :]           # (M, F, 4, 3)
-        cr = np.cross(np.broadcast_to(e[None], rel.shape), rel)
-        side = np.einsum('mfkc,fc->mfk', cr, n)                # > 0: inside of edge k
+        # (e_k x (hit - v_k)) . n = (hit - v_k) . (n x e_k): > 0 inside of edge k
+        ne = np.cross(np.broadcast_to(n[:, None], e.shape), e)  # (F, 4, 3)
+        side = (np.einsum('mfc,fkc->mfk', hit, ne)
+                - np.einsum('fkc,fkc->fk', fv, ne)[None])
         degenerate = np.linalg.norm(e, axis=2) < 1e-12         # triangles: repeated vertex
         inside = np.all((side >= -1e-9) | degenerate[None], axis=2)
         visible = ~np.any(before & inside, axis=1)
