@@ -32,6 +32,9 @@ line (all opportunities, and in brackets those seen again): lines of few points 
 uncertain angles (a 1 m line of 12 points with 1.5 cm residuals: sigma(alpha) about
 0.8 deg, so about 1.2 deg for the difference of two scans, against the 2 deg gate).
 
+The corner row gives in brackets the ICP figure over the corners the next scan saw
+again (:func:`corners_seen_again`: both arms have returns of the next scan).
+
 It also prints the ICP corrections (median and 90th percentile of |dx|, |dy| in cm and
 |dtheta| in deg): the reference poses' error between consecutive scans; the failures of
 the line metric as defined in classes: no overlapping segment at all, or one off only in
@@ -162,6 +165,46 @@ def line_matches(seg_k, pose_k, seg_n, scan_n, midpoint, seen_pose=None, params=
                      (~ok & ~none & ~rho_only).sum(), seen.sum(), (seen & ok).sum()])
 
 
+def corners_seen_again(corners_k, pose_k, corners_n, scan_n, params: CornerParams
+                       ) -> np.ndarray:
+    """Return (seen, seen and re-detected) of scan k's corners in view of scan n.
+
+    Seen: each arm (``Corner.arms``, placed by ``pose_k``) has at least three returns of
+    scan n within 5 cm of its line, beside the vertex, reaching ``arm_length`` (the
+    detector's smallest arm) from it; re-detected as :func:`corner_repeatability` (a
+    corner of scan n within 10 cm).
+    """
+    if not corners_k:
+        return np.zeros(2, dtype=int)
+    world = transform_points(pose_k, np.array([c.position for c in corners_k]))
+    look = in_view(scan_n, world, 0.1)
+    other = transform_points(scan_n.pose, corners_n) if len(corners_n) else np.zeros((0, 2))
+    r = np.where(scan_n.valid, scan_n.ranges, 0.0)
+    pts = np.stack([r * np.cos(scan_n.angles), r * np.sin(scan_n.angles)], axis=1)
+    pts = pts[scan_n.valid]
+    out = np.zeros(2, dtype=int)
+    for i in look.nonzero()[0]:
+        arms = inverse_transform_points(scan_n.pose, transform_points(
+            pose_k, corners_k[i].arms.reshape(-1, 2))).reshape(2, 2, 2)
+        rel = pts - inverse_transform_points(scan_n.pose, world[i:i + 1])[0]
+        both = True
+        for arm in arms:
+            d = arm[1] - arm[0]
+            length = math.hypot(d[0], d[1])
+            if length < 1e-9:
+                both = False
+                break
+            t = d / length
+            along = rel @ t
+            on = ((np.abs(rel @ np.array([-t[1], t[0]])) <= 0.05) & (along > 0.0)
+                  & (along <= min(params.fit_length, max(length, params.arm_length) + 0.1)))
+            both &= bool(on.sum() >= 3 and along[on].max() >= params.arm_length)
+        if both:
+            out[0] += 1
+            out[1] += bool(len(other)) and np.hypot(*(other - world[i]).T).min() <= 0.1
+    return out
+
+
 def corner_distances(c_k, pose_k, c_n, scan_n) -> np.ndarray:
     """Return the distance of each corner of scan k in view of scan n to n's nearest [m]."""
     if not len(c_k):
@@ -221,8 +264,8 @@ def main() -> None:
             print(f'| {name} | {method} ICP, by points of the scan-k line | '
                   + '; '.join(bins) + ' | | | | |', flush=True)
         params = CornerParams()
-        corners = [np.array([c.position for c in detect_corners(cl, params)]).reshape(-1, 2)
-                   for cl in clusters]
+        found = [detect_corners(cl, params) for cl in clusters]
+        corners = [np.array([c.position for c in cs]).reshape(-1, 2) for cs in found]
         tally = {}
         for key, use_icp in (('reference', False), ('ICP', True)):
             score = Repeatability()
@@ -233,8 +276,13 @@ def main() -> None:
         near = [corner_distances(corners[k], scans[k].pose, corners[k + 1], scans[k + 1])
                 for k in range(len(scans) - 1)]
         near = np.concatenate(near) if near else np.zeros(0)
-        print(f'| {name} | minus_cosine corners ({tally["reference"].opportunities}) | '
-              f'{tally["reference"].fraction:.3f} | | {tally["ICP"].fraction:.3f} | | '
+        seen = np.zeros(2, dtype=int)  # seen again, of which re-detected (ICP)
+        for k in range(len(scans) - 1):
+            seen += corners_seen_again(found[k], refined[k], corners[k + 1], scans[k + 1],
+                                       params)
+        print(f'| {name} | minus_cosine corners ({tally["reference"].opportunities}, seen '
+              f'{seen[0]}) | {tally["reference"].fraction:.3f} | | {tally["ICP"].fraction:.3f} '
+              f'({seen[1] / max(seen[0], 1):.3f}) | | '
               f'next corner 10-50 cm away: {np.mean((near > 0.1) & (near <= 0.5)):.3f}, '
               f'none within 50 cm: {np.mean(near > 0.5):.3f} |')
         a = np.abs(corr)
