@@ -31,9 +31,9 @@ from landmark_nav.evaluation.scan_metrics import (evaluate_scans,  # noqa: E402
                                                   ray_metrics, segments_of)
 from landmark_nav.importers.carmen import read_carmen_scans  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
-from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
+from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 from landmark_nav.tools.evaluate_features import (bag_metric_scans,  # noqa: E402
                                                   evaluate_truth_free, sensor_facts)
 import numpy as np  # noqa: E402
