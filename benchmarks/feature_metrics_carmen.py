@@ -13,7 +13,9 @@ on ``--scans`` scans drawn with ``numpy.random.default_rng(--seed)``; false-surf
 on every scan; repeatability between consecutive scans through the corrected poses
 (``/ground_truth/odom`` composed with the laser mount); milliseconds per scan
 (segmentation included). See :mod:`landmark_nav.evaluation.scan_metrics` for the
-definitions. ``--direct`` reads the logs with the simple FLASER reader instead (FLASER pose
+definitions. Also the ray-metric f of the ``detailed`` profile
+(``config/line_extractor_detailed.yaml``) on the same sampled scans against 0.9 x the full
+baseline's. ``--direct`` reads the logs with the simple FLASER reader instead (FLASER pose
 = laser pose, readings >= 40 m = no return), without the importer.
 """
 import argparse
@@ -25,11 +27,15 @@ import tempfile
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.scan_metrics import (evaluate_scans,  # noqa: E402
-                                                  format_scan_metrics, MetricScan)
+                                                  format_scan_metrics, MetricScan,
+                                                  ray_metrics, segments_of)
 from landmark_nav.importers.carmen import read_carmen_scans  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
+from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
+from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
-from landmark_nav.tools.evaluate_features import evaluate_truth_free  # noqa: E402
+from landmark_nav.tools.evaluate_features import (bag_metric_scans,  # noqa: E402
+                                                  evaluate_truth_free, sensor_facts)
 import numpy as np  # noqa: E402
 
 CARMEN = SHARED_DATA / 'carmen'
@@ -45,6 +51,33 @@ def carmen_metric_scans(path: Path) -> list:
         valid = np.isfinite(r) & (r > 0.0)
         out.append(MetricScan(r, s.angles, valid, np.isposinf(r), 0.0, MAX_RANGE,
                               np.asarray(s.pose, dtype=float)))
+    return out
+
+
+DETAILED = {'min_points': 3, 'min_length': 0.05}  # config/line_extractor_detailed.yaml
+DETAILED_SEGMENTATION_MIN_POINTS = 1
+
+
+def detailed_f(scans: list, sample, sigma_r: float) -> dict:
+    """Return the ray-metric f of the ``detailed`` profile on the sampled scans, per method.
+
+    The profile of ``config/line_extractor_detailed.yaml`` (``min_points`` 3,
+    ``min_length`` 0.05 m, segmentation ``min_points`` 1) on the same scans as the PLE
+    figures (issue target: f >= 0.9 x the full approxPolyDP baseline's f).
+    """
+    out = {}
+    for method in ('split_merge', 'alfa'):
+        params = LineParams(method=method, **DETAILED)
+        f = []
+        for k in sample:
+            s = scans[k]
+            clusters = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment,
+                                    sigma_r=params.sigma_r,
+                                    min_points=DETAILED_SEGMENTATION_MIN_POINTS)
+            f.append(ray_metrics(s.ranges, s.angles, s.valid,
+                                 segments_of(extract_lines(clusters, params)), sigma_r,
+                                 s.no_return).f)
+        out[method] = float(np.mean(f))
     return out
 
 
@@ -91,18 +124,30 @@ def main() -> None:
             print(f'{path}: not present')
             continue
         if args.direct:
-            res = evaluate_scans(carmen_metric_scans(path), sigma_r=args.sigma_r,
+            scans = carmen_metric_scans(path)
+            res = evaluate_scans(scans, sigma_r=args.sigma_r,
                                  ple_scans=args.scans, seed=args.seed, progress=name)
+            res['detailed_f'] = detailed_f(scans, res['sample'], args.sigma_r)
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 import_log(path, Path(tmp) / name)
                 res, notes = evaluate_truth_free(Path(tmp) / name, scans=args.scans,
                                                  seed=args.seed, progress=True)
+                mount, sigma_r, _ = sensor_facts(Path(tmp) / name)
+                scans, _ = bag_metric_scans(Path(tmp) / name, mount)
+                res['detailed_f'] = detailed_f(scans, res['sample'], sigma_r)
             for note in notes:
                 print(note)
         results[name] = res
         print(format_scan_metrics(res, f'{name}: '), '\n', flush=True)
     print(summary(results))
+    print('\n| log | approxPolyDP f | 0.9 x | detailed split_merge f | detailed alfa f |\n'
+          '| --- | --- | --- | --- | --- |')
+    for log, res in results.items():
+        base = res['lines']['approxPolyDP']['f']
+        det = res['detailed_f']
+        print(f'| {log} | {base:.3f} | {0.9 * base:.3f} | {det["split_merge"]:.3f} | '
+              f'{det["alfa"]:.3f} |')
     pooled = {m: [] for m in ('split_merge', 'alfa', 'approxPolyDP', 'approxPolyDP_min_size')}
     for res in results.values():
         for m in pooled:

@@ -65,9 +65,11 @@ vectorised batch (fits from prefix sums of point moments):
    line). A lone beam in front (one return cannot tell an object from a spurious return)
    stays inside. See :func:`_occluded_extents`.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
-   RMSE above the split tolerance are dropped. End points are the projections of the
-   first and last supporting points, moved onto the ray of that beam when the projection
-   falls outside the supporting beams' bearings: a segment covers no beam outside them.
+   RMSE above the split tolerance are dropped. End points are where the rays of the first
+   and last supporting beams meet the line: a segment covers the bearings of its support,
+   no beam outside them, and its end beams hit it. Where that crossing lies more than
+   ``see_through_tolerance`` beyond the projection of the end point on the line (grazing
+   incidence, where the crossing swings with the line's angle) the projection is kept.
 
 Choices where the chapters are silent, or misprinted:
 
@@ -108,9 +110,10 @@ class LineSegment:
     Attributes:
         rho: Distance of the line to the laser origin, >= 0 [m] (eq. 5).
         alpha: Angle of the line normal, wrapped to [-pi, pi) [rad].
-        start: (2,) projection of the first supporting point onto the line, or the
-            crossing of its beam's ray with the line when that is nearer the middle [m].
-        end: (2,) the same at the last supporting point [m].
+        start: (2,) crossing of the first supporting beam's ray with the line, or the
+            projection of its point onto the line when the crossing lies more than
+            ``see_through_tolerance`` beyond it (grazing incidence) [m].
+        end: (2,) the same at the last supporting beam [m].
         num_points: Number of supporting points (the points of the fit; a line that hides
             its own noisy returns at grazing incidence keeps them in the fit but not in
             its extent, see step 5 above).
@@ -323,17 +326,25 @@ def _prefix5(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
-@dataclass(frozen=True, eq=False)
 class _Fit:
-    """TLS fits of G point sets from their sums (internal).
+    """TLS fits of G point sets from their sums (internal; a plain class: built per step).
 
-    ``params`` holds the rows rho, alpha, nx, ny (one gather takes all of them).
+    ``params`` (4, G) holds the rows rho, alpha, nx, ny (one gather takes all of them);
+    ``rmse`` (G,) or None when not asked for; ``count`` (G,) number of points (float);
+    ``cov`` (G, 2, 2) covariance of (rho, alpha), or None. ``extent`` caches the last
+    :func:`_extent_beams` of these fits (the first / last arrays it was for, the result).
     """
 
-    params: np.ndarray  # (4, G)
-    rmse: Optional[np.ndarray]  # (G,), or None when not asked for
-    count: np.ndarray  # (G,) number of points (float)
-    cov: Optional[np.ndarray]  # (G, 2, 2) covariance of (rho, alpha), or None
+    __slots__ = ('params', 'rmse', 'count', 'cov', 'extent')
+
+    def __init__(self, params: np.ndarray, rmse: Optional[np.ndarray], count: np.ndarray,
+                 cov: Optional[np.ndarray]) -> None:
+        """Hold the arrays (not copied)."""
+        self.params = params
+        self.rmse = rmse
+        self.count = count
+        self.cov = cov
+        self.extent: Optional[tuple] = None
 
     @property
     def rho(self) -> np.ndarray:
@@ -393,7 +404,7 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     ax, ay = cx + float(origin[0]), cy + float(origin[1])  # centroid in the laser frame (eq. 10)
     rho = np.add(ax * nx, ay * ny, out=out[0])  # eq. 9
     flip = rho < 0.0
-    if flip.any():
+    if np.count_nonzero(flip):
         np.abs(rho, out=rho)
         alpha = _wrap(np.where(flip, alpha + math.pi, alpha))
         np.negative(out[2:], out=out[2:], where=flip)
@@ -420,18 +431,17 @@ def _covariance(sums: np.ndarray, n: np.ndarray, cx: np.ndarray, cy: np.ndarray,
     t2 = (b2 * w[3] - ab * w[5] + a2 * w[4] - 2.0 * tcl * tw
           + tcl * tcl * w[0])  # sum s^2 (t.q)^2
     lever = tx * ax + ty * ay  # t.c in the laser frame
-    with np.errstate(divide='ignore', invalid='ignore'):
-        big_l = 2.0 * root
-        caa = t2 / (big_l * big_l)
-        nl = n * big_l
-        cra = lever * caa - t1 / nl
-        crr = lever * lever * caa - 2.0 * lever * t1 / nl + w[0] / (n * n)
+    big_l = 2.0 * root
+    caa = t2 / (big_l * big_l)
+    nl = n * big_l
+    cra = lever * caa - t1 / nl
+    crr = lever * lever * caa - 2.0 * lever * t1 / nl + w[0] / (n * n)
     cov = np.empty(n.shape + (2, 2))
     cov[..., 0, 0] = crr
     cov[..., 0, 1] = cra
     cov[..., 1, 0] = cra
     cov[..., 1, 1] = caa
-    if not (np.isfinite(cov).all() and (root > 0.0).all()):
+    if np.count_nonzero(np.isfinite(cov)) < cov.size or np.count_nonzero(root > 0.0) < root.size:
         bad = ~(np.isfinite(crr) & np.isfinite(cra) & np.isfinite(caa) & (root > 0.0))
         cov[bad] = np.inf
     return cov
@@ -483,7 +493,8 @@ def fit_line(points: np.ndarray, ranges: Optional[np.ndarray] = None,
     q = p - origin
     feats = _features(q[:, 0], q[:, 1], rng, np.cos(phi), np.sin(phi), float(sigma_r),
                       float(sigma_phi))
-    f = _solve(feats.sum(axis=1)[:, None], origin)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        f = _solve(feats.sum(axis=1)[:, None], origin)
     res = p @ np.array([f.nx[0], f.ny[0]]) - f.rho[0]  # direct residuals: exact RMSE
     return float(f.rho[0]), float(f.alpha[0]), f.cov[0], float(np.sqrt(np.mean(res * res)))
 
@@ -529,47 +540,64 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     All pieces of one recursion level in one batch. The farthest point from a chord is
     found on the unnormalised cross product ``|(q - p0) x (p1 - p0)|`` (the distance of
     eq. 4 times the chord length, constant within a piece), compared with the tolerance
-    times the chord length: no chord equation is formed.
+    times the chord length: no chord equation is formed. A level's interior points are
+    laid out as a (pieces, longest interior) array whose rows are padded with copies of
+    their last interior point, so that a row's first maximum is its first farthest point
+    (padding repeats a value, never precedes it); when the padding would outweigh the
+    points (one long piece among many short ones) the rows are concatenated instead.
     """
-    pxy = np.vstack((px, py))
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
+    steps = np.arange(1, max(int(e.max(initial=0) - s.min(initial=0)), 1) + 1)
     while s.size:
-        inner = e - s >= 2
-        if not inner.all():
+        cnt = e - s - 1  # interior points of every piece
+        inner = cnt > 0
+        if np.count_nonzero(inner) < inner.size:
             done_s.append(s[~inner])
             done_e.append(e[~inner])
-            s, e = s[inner], e[inner]
+            s, e, cnt = s[inner], e[inner], cnt[inner]
             if not s.size:
                 break
-        cnt = e - s - 1  # interior points of every piece
-        offs = cnt.cumsum()
-        total = int(offs[-1])
-        offs -= cnt
-        idx = (s + 1 - offs).repeat(cnt)
-        idx += np.arange(total)
-        p0 = pxy[:, s]
-        chord = pxy[:, e] - p0
-        rel = pxy[:, idx] - p0.repeat(cnt, axis=1)
-        chord_p = chord.repeat(cnt, axis=1)
-        cross = rel[0] * chord_p[1]
-        cross -= rel[1] * chord_p[0]
-        np.abs(cross, out=cross)  # eq. 4 distance times the chord length
-        cmax = np.maximum.reduceat(cross, offs)
-        at = (cross == cmax.repeat(cnt)).nonzero()[0]
-        k = idx[at[np.searchsorted(at, offs)]]  # the first farthest point
-        split = cmax > tol[k] * np.hypot(chord[0], chord[1])
-        if not split.all():
+        x0, y0 = px[s], py[s]
+        cx = px[e] - x0
+        cy = py[e] - y0
+        width = int(np.maximum.reduce(cnt))
+        if s.size * width <= 2 * int(np.add.reduce(cnt)) + 64:
+            idx = s[:, None] + steps[:width]
+            np.minimum(idx, (e - 1)[:, None], out=idx)  # pad with the last interior point
+            cross = (px[idx] - x0[:, None]) * cy[:, None]
+            cross -= (py[idx] - y0[:, None]) * cx[:, None]
+            np.abs(cross, out=cross)  # eq. 4 distance times the chord length
+            at = cross.argmax(axis=1)  # the first farthest point
+            cmax = cross.ravel()[at + width * np.arange(s.size)]
+            k = s + 1 + at
+        else:
+            offs = cnt.cumsum()
+            total = int(offs[-1])
+            offs -= cnt
+            idx = (s + 1 - offs).repeat(cnt)
+            idx += np.arange(total)
+            cross = (px[idx] - x0.repeat(cnt)) * cy.repeat(cnt)
+            cross -= (py[idx] - y0.repeat(cnt)) * cx.repeat(cnt)
+            np.abs(cross, out=cross)
+            cmax = np.maximum.reduceat(cross, offs)
+            at = (cross == cmax.repeat(cnt)).nonzero()[0]
+            k = idx[at[at.searchsorted(offs)]]  # the first farthest point
+        split = cmax > tol[k] * np.hypot(cx, cy)
+        if np.count_nonzero(split) < split.size:
             done_s.append(s[~split])
             done_e.append(e[~split])
             s, e, k = s[split], e[split], k[split]
-        s = np.concatenate([s, k])
-        e = np.concatenate([k, e])
+        s = np.concatenate((s, k))
+        e = np.concatenate((k, e))
     if not done_s:
         return np.zeros((2, 0), dtype=np.int64)
     s, e = np.concatenate(done_s), np.concatenate(done_e)
     order = np.lexsort((e, s))
-    return np.stack([s[order], e[order]])
+    out = np.empty((2, s.size), dtype=np.int64)
+    np.take(s, order, out=out[0])
+    np.take(e, order, out=out[1])
+    return out
 
 
 # ---------------------------------------------------------------------- ALFA
@@ -782,7 +810,7 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     e[adj] = best
     s[adj + 1] = best + oo[:, 0]
     good = e - s >= 2  # breaks of a chain moved past each other: drop the squeezed piece
-    if good.all():
+    if np.count_nonzero(good) == good.size:
         return s, e
     return s[good], e[good]
 
@@ -859,7 +887,7 @@ def _chi2(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarr
     if cov2 is not None:
         c00 = c00 + cov2[:, 0, 0]
         c11 = c11 + cov2[:, 1, 1]
-    if opposite.any():
+    if np.count_nonzero(opposite):
         dr = np.where(opposite, rho1 + rho2, dr)
         da = np.where(opposite, _wrap(da + math.pi), da)
         if cov2 is not None:
@@ -867,8 +895,7 @@ def _chi2(rho1: np.ndarray, alpha1: np.ndarray, cov1: np.ndarray, rho2: np.ndarr
     elif cov2 is not None:
         c01 = c01 + cov2[:, 0, 1]
     det = c00 * c11 - c01 * c01
-    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        d2 = (c11 * dr * dr - 2.0 * c01 * dr * da + c00 * da * da) / det
+    d2 = (c11 * dr * dr - 2.0 * c01 * dr * da + c00 * da * da) / det
     return np.where((det > 0.0) & (d2 > -np.inf) & ~np.isnan(d2), d2, np.inf)
 
 
@@ -889,11 +916,10 @@ def _variance_factor(sums: np.ndarray, f: _Fit) -> np.ndarray:
     nx, ny = f.nx, f.ny
     var = (nx * nx * sums[6] + ny * ny * sums[12] + 2.0 * nx * ny * sums[18]) / n
     dof = np.maximum(n - 2.0, 1.0)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        stat = n * f.rmse * f.rmse / var  # RSS / sigma^2
-        h = 2.0 / (9.0 * dof)
-        q95 = dof * (1.0 - h + _Z95 * np.sqrt(h)) ** 3
-        return np.where(stat > q95, stat / dof, 1.0)
+    stat = n * f.rmse * f.rmse / var  # RSS / sigma^2
+    h = 2.0 / (9.0 * dof)
+    q95 = dof * (1.0 - h + _Z95 * np.sqrt(h)) ** 3
+    return np.where(stat > q95, stat / dof, 1.0)
 
 
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
@@ -920,14 +946,14 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     gate = params.merge_chi2
     join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
                          f.cov[1:]) <= gate)
-    if not join.any():
+    if not np.count_nonzero(join):
         return sums, s, e, f, np.arange(s.size)
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
     x, y, _, _, _, tol = scan.cols[:_PHI, ends]
     ox, oy = scan.origin
-    while join.any():
+    while np.count_nonzero(join):
         new = np.empty(s.size, dtype=bool)
         new[0] = True
         np.logical_not(join, out=new[1:])
@@ -947,7 +973,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         np.fmax(badness, dist.max(axis=0), out=badness)
         badness[~(g_end > g_start)[label]] = 0.0  # single pieces are not merged
         worst = np.maximum.reduceat(badness, g_start)
-        if not (worst > 1.0).any():
+        if not np.count_nonzero(worst > 1.0):
             return g_sums, s[g_start], e[g_end], g, label
         # The worst member of a failing chain leaves it; the rest are merged again (a
         # piece off its wall, e.g. a short noisy fit between two pieces of the wall, no
@@ -992,7 +1018,8 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     np.subtract(gaps, 1, out=owner[0])
     owner[1] = gaps
     has = (owner >= 0) & (owner < n_lines)
-    rho, _, nx, ny = f.params[:, np.clip(owner, 0, n_lines - 1).repeat(size_g, axis=1)]
+    clipped = np.minimum(np.maximum(owner, 0), n_lines - 1)
+    rho, _, nx, ny = f.params[:, clipped.repeat(size_g, axis=1)]
     x, y, rng, cp, sp, tol = scan.cols[:_PHI, idx]
     ox, oy = scan.origin
     d = (x + ox) * nx + (y + oy) * ny - rho
@@ -1010,7 +1037,7 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     run_f = np.minimum(np.minimum.reduceat(np.where(ok[0], pos.size, within), starts), size_g)
     run_b = np.minimum(size_g - 1 - np.maximum.reduceat(np.where(ok[1], -1, within), starts),
                        size_g - run_f)
-    if not (run_f.any() or run_b.any()):
+    if not (np.count_nonzero(run_f) or np.count_nonzero(run_b)):
         return sums, first, last, False
     grow = np.zeros((2, n_lines + 1), dtype=np.int64)  # by gap: forward, backward
     grow[0, gaps] = run_f
@@ -1040,8 +1067,12 @@ def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
     """Return (beam, line, rho, range, cos incidence) of the valid beams in the lines' extents.
 
     The extent of a line runs from its first to its last supporting beam in beam order;
-    ``cos incidence`` is the ray direction dotted with the line's normal.
+    ``cos incidence`` is the ray direction dotted with the line's normal. The result is
+    kept on ``f`` for the same ``first`` and ``last`` arrays (the see-through and occluder
+    steps look at the same extents when no line was cut).
     """
+    if f.extent is not None and f.extent[0] is first and f.extent[1] is last:
+        return f.extent[2]
     wr, wc, ws, wv = scan.beams()
     b0, b1 = scan.beam[first], scan.beam[last]
     lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
@@ -1050,7 +1081,9 @@ def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
     rho, _, nx, ny = f.params[:, line]
-    return idx, line, rho, wr[idx], wc[idx] * nx + ws[idx] * ny
+    out = idx, line, rho, wr[idx], wc[idx] * nx + ws[idx] * ny
+    f.extent = (first, last, out)
+    return out
 
 
 def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
@@ -1067,10 +1100,9 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     allowed here (occluders are left out of the extents by :func:`_occluded_extents`).
     """
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        beyond = r - rho / cos_in
-        bad = (cos_in > 1e-9) & (beyond > params.see_through_tolerance)
-    if not bad.any():
+    beyond = r - rho / cos_in
+    bad = (cos_in > 1e-9) & (beyond > params.see_through_tolerance)
+    if not np.count_nonzero(bad):
         return line[:0], idx[:0], bad[:0]
     line, idx, beyond, r, cos_in = line[bad], idx[bad], beyond[bad], r[bad], cos_in[bad]
     c2 = cos_in * cos_in
@@ -1110,7 +1142,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
     rounds = 0
     two, runs = _splits_in_two(scan, owner, line, beam, params)
     opening |= two
-    while opening.any():
+    while np.count_nonzero(opening):
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
             ok = np.ones(first.size, dtype=bool)
             ok[line[opening]] = False
@@ -1213,17 +1245,16 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     same = np.arange(first.size), first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     b1 = scan.beam[last]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        front = rho / cos_in - r  # how far the return lies in front of the line
-        c2 = cos_in * cos_in
-        var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
-        hit = ((cos_in > 1e-9)
-               & (front > params.see_through_tolerance + 3.0 * np.sqrt(var))).nonzero()[0]
+    front = rho / cos_in - r  # how far the return lies in front of the line
+    c2 = cos_in * cos_in
+    var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
+    hit = ((cos_in > 1e-9)
+           & (front > params.see_through_tolerance + 3.0 * np.sqrt(var))).nonzero()[0]
     if hit.size < 2:
         return same
     fl, fb = line[hit], idx[hit]
     pair = (fl[1:] == fl[:-1]) & (fb[1:] - fb[:-1] == 1)
-    if not pair.any():
+    if not np.count_nonzero(pair):
         return same
     occ = np.zeros(hit.size, dtype=bool)
     occ[1:] |= pair
@@ -1265,21 +1296,23 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     proj = np.empty((2, first.size, 2))  # end point (first, last), line, (x, y)
     np.subtract(x, d * nx, out=proj[..., 0])
     np.subtract(y, d * ny, out=proj[..., 1])
-    # End points at the end beams: where a projection lies outside the bearings of the
-    # supporting beams, the end beam's ray meets the line (the segment then covers no beam
-    # outside its support). Inside, the projection stays (it does not depend on the range
-    # noise along a grazing ray).
+    # End points at the end beams: where the end beam's ray meets the line, so that the
+    # segment covers exactly the bearings of its support (no beam outside it, and its end
+    # beams too). The crossing moves an end outward from the projection by at most the
+    # see-through tolerance: at grazing incidence the crossing swings with the line's angle
+    # (rho d alpha / cos^2 of the incidence) while the projection does not, so there the
+    # projection stays.
     cp, sp = scan.cols[_COS:_TOL, ends]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        t = rho / (cp * nx + sp * ny)
+    t = rho / (cp * nx + sp * ny)
     along = proj[..., 1] * nx - proj[..., 0] * ny  # position along the line (tangent)
     along_ray = t * (sp * nx - cp * ny)
     inward = np.where(along[1] >= along[0], 1.0, -1.0) * (along_ray - along) * _INWARD
     # nan fails; a ray along the line (through the origin) meets it nowhere useful
-    inner = (t > 0.0) & (inward > 0.0) & (inward < np.abs(along[1] - along[0]))
-    if inner.any():
-        proj[..., 0] = np.where(inner, t * cp, proj[..., 0])
-        proj[..., 1] = np.where(inner, t * sp, proj[..., 1])
+    to_ray = ((t > 0.0) & (inward > -params.see_through_tolerance)
+              & (inward < np.abs(along[1] - along[0])))
+    if np.count_nonzero(to_ray):
+        proj[..., 0] = np.where(to_ray, t * cp, proj[..., 0])
+        proj[..., 1] = np.where(to_ray, t * sp, proj[..., 1])
     length = np.hypot(proj[1, :, 0] - proj[0, :, 0], proj[1, :, 1] - proj[0, :, 1])
     cov = f.cov
     ok = ((f.count >= params.min_points) & (length >= params.min_length)
@@ -1313,6 +1346,14 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
 
     """
     params = params or LineParams()
+    # The fits divide by zero for degenerate point sets (their covariance becomes inf and
+    # they are dropped): one error state for the whole scan.
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        return _extract(clusters, params)
+
+
+def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegment]:
+    """Return the lines of :func:`extract_lines` (floating-point errors ignored)."""
     scan = _concat(clusters, params)
     if scan is None:
         return []
@@ -1352,7 +1393,7 @@ def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = No
     if not first.size:
         return []
     col, first, last = _occluded_extents(scan, fit, first, last, params)
-    if col.size != fit.count.size or (col != np.arange(col.size)).any():
+    if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
         fit = _Fit(fit.params[:, col], fit.rmse[col], fit.count[col], fit.cov[col])
     return _build(scan, params, fit, first, last)
 
