@@ -70,13 +70,14 @@ Noise models
   ends). ``R_eff = R + line_end_covariance(z, ends, line_floor)``: independent offsets of
   std ``line_floor`` of the segment's two ends along its normal
   (:func:`.line_landmarks.line_end_covariance`; 1 cm is the order of a SICK LMS2xx's
-  stated systematic range error). On the Carmen logs (seattle, each mapped line's
-  observations put in the map with the reference poses) the spread about the line is 1 cm
-  at the middle of the segment and 0.2-0.8 deg in direction (shorter segments more),
-  against a stated std of 2-3 mm and 0.04-0.45 deg: median squared Mahalanobis error 1073
-  instead of 2; with ``line_floor = 0.01`` the share of scans whose joint NIS exceeds its
-  95 % bound falls from 23 % to 7 %. The default is 0 (off): over drift seeds 1-2 of the
-  six Carmen logs it did not improve ATE or RPE (benchmarks/slam_landmarks_carmen.py).
+  stated systematic range error). On the Carmen logs (each mapped line's observations put
+  in the map with the reference poses) the spread about the line is about 1 cm at the
+  middle of the segment and 0.2-0.8 deg in direction (seattle; shorter segments more),
+  against a stated std of 2-3 mm and 0.04-0.45 deg: the median squared Mahalanobis error is
+  31-93 instead of 2 on the six logs, and 8-30 % of the updates have a joint NIS above its
+  95 % bound; with ``line_floor = 0.01`` 4-13 % (benchmarks/slam_consistency_carmen.py).
+  The default is 0 (off): over drift seeds 1-2 of the six logs it did not improve ATE or
+  RPE (benchmarks/slam_landmarks_carmen.py).
 
 Iterated update
 ---------------
