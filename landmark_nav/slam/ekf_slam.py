@@ -64,6 +64,20 @@ Noise models
   corner twice; with the former 5 mm/sqrt(m) odometry noise three seeds lose track); the
   former 5 mm floor made ``R_eff`` twice too large (mean 1.29) and, with 5 mm/sqrt(m)
   odometry noise, the robot NEES pessimistic (mean 1.8 instead of 3).
+* Lines: the extractor's ``(rho, alpha)`` covariance is a least-squares fit covariance of
+  independent beams, so it shrinks with the number of beams; errors common to a segment's
+  beams do not (a wall that is not straight, the laser's range bias, mixed returns at the
+  ends). ``R_eff = R + line_end_covariance(z, ends, line_floor)``: independent offsets of
+  std ``line_floor`` of the segment's two ends along its normal
+  (:func:`.line_landmarks.line_end_covariance`; 1 cm is the order of a SICK LMS2xx's
+  stated systematic range error). On the Carmen logs (each mapped line's observations put
+  in the map with the reference poses) the spread about the line is about 1 cm at the
+  middle of the segment and 0.2-0.8 deg in direction (seattle; shorter segments more),
+  against a stated std of 2-3 mm and 0.04-0.45 deg: the median squared Mahalanobis error is
+  31-93 instead of 2 on the six logs, and 8-30 % of the updates have a joint NIS above its
+  95 % bound; with ``line_floor = 0.01`` 4-13 % (benchmarks/slam_consistency_carmen.py).
+  The default is 0 (off): over drift seeds 1-2 of the six logs it did not improve ATE or
+  RPE (benchmarks/slam_landmarks_carmen.py).
 
 Iterated update
 ---------------
@@ -75,7 +89,34 @@ Gauss-Newton on the prior and the observations) while an observed landmark moves
 to the robot, by more than ``relinearize_ratio`` (2 %) of its range, at most
 ``max_update_iterations`` times. The association is decided once, at the prediction. In
 ordinary tracking the moves stay below the ratio (office seeds 0-9: at most 1.8 %), so the
-update is the plain EKF there.
+update is the plain EKF there. With ``jacobians='observability'`` the covariance takes the
+first linearisation instead (at the prior, constrained Jacobians, see "Consistency"):
+Jacobians taken at the iterate, which moved in the unobservable directions too, would add
+information there.
+
+Consistency (observability-constrained Jacobians)
+-------------------------------------------------
+Moving the robot and the whole map together, or turning them together about the map
+origin, changes no observation: the global position and heading are unobservable. The EKF's
+Jacobians, taken at estimates that change between the prediction and the update, do not
+respect this and the filter gains information about the global heading from relative
+observations (Huang, Mourikis and Roumeliotis, "Observability-based rules for designing
+consistent EKF SLAM estimators", IJRR 2010). With the drift of real odometry (a few degrees
+of heading per metre) and corrections of decimetres per scan the effect is large: on the
+Carmen logs the filter's heading std fell to 0.5 deg with errors of 3-5 deg (seattle).
+With ``jacobians='observability'``: the prediction's ``J1`` takes its lever arm from
+the previous prior position (so the unobservable directions propagate exactly), and the
+covariance update uses ``H* = H (I - N (N^T N)^-1 N^T)``, the Jacobians closest to ``H``
+that map the unobservable directions ``N`` (:func:`unobservable_directions`, taken at the
+robot's prior and at each landmark's estimate when it entered the map) to zero
+(:func:`constrain_jacobians`). The mean update keeps the gain of ``H`` (the most accurate
+linearisation; the constrained gain, with landmarks' first estimates metres off after a
+long drift, made the updates diverge on the Carmen logs). It keeps the map's heading
+uncertainty (seattle, drift seed 0, with ``line_floor = 0.01``: median robot NEES 8.8
+instead of 219, reference inside the 95 % ellipse on 46 % of steps instead of 23 %), but
+the wider covariance lets more distant and ambiguous pairs into the gates and the RPE over
+1 m got worse on the held-out drift seeds (median ratio to odometry 5.3 instead of 2.1), so
+``jacobians='standard'`` (the chapter's filter) stays the default.
 
 Tentative landmarks (ghost protection)
 --------------------------------------
@@ -191,7 +232,8 @@ from scipy.linalg.lapack import dpotrf
 from ._linalg import solve_lower
 from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table
 from .consistency import chi2_gate
-from .line_landmarks import (ends_to_map, extents_overlap, line_initialization,
+from .line_landmarks import (ends_to_map, extents_overlap, line_end_covariance,
+                             line_initialization,
                              line_observation_model, LineObservations, merge_extent,
                              project_extent)
 from .slam_map import SlamMap
@@ -201,6 +243,8 @@ ASSOCIATION_METHODS = ('icnn', 'jcbb')
 STATUSES = ('matched', 'confirmed', 'tentative', 'new', 'rejected')
 #: Filter modes: ``'slam'`` maps and localizes, ``'localization'`` only tracks on the map.
 MODES = ('slam', 'localization')
+#: Jacobian choices (``SlamParams.jacobians``).
+JACOBIANS = ('observability', 'standard')
 #: What to do when a confirmed landmark finds the map at ``max_landmarks``.
 MAP_FULL_POLICIES = ('evict', 'reject')
 #: Landmark kinds (values of :attr:`EkfSlam.landmark_kinds`).
@@ -247,10 +291,18 @@ class SlamParams:
         bearing_floor: Std added in quadrature to every bearing [rad].
         position_floor: Isotropic corner position std added in quadrature (``f^2`` on the
             range, ``f^2 / r^2`` on the bearing) [m].
+        line_floor: Std of the offset of each end of an observed line segment along its
+            normal, independent between the ends [m]: errors common to a segment's beams
+            that its fit covariance ignores (:func:`.line_landmarks.line_end_covariance`);
+            added to every line observation's ``R`` (module docstring, "Noise models");
+            0 (default) disables.
         max_range: Observations farther than this are rejected [m].
         association: ``'icnn'`` (default) or ``'jcbb'``.
         joint_check: With ICNN, fall back to JCBB when the ICNN hypothesis fails a joint
-            compatibility test at ``new_landmark_probability`` (:func:`do_data_association`).
+            compatibility test at ``joint_probability`` (:func:`do_data_association`).
+        joint_probability: Confidence of that test; None (default):
+            ``new_landmark_probability`` (a gross-error test); ``gate_probability`` makes
+            it JCBB's own test.
         bisector_gate: Largest bisector difference of a corner pair (descriptors) [rad].
         opening_gate: Largest opening difference of a corner pair (descriptors) [rad].
         min_view_margin: Reject corners whose arm is seen within this angle of edge-on
@@ -283,6 +335,9 @@ class SlamParams:
         max_odometry_jump_rad: :func:`odometry_check` threshold on one increment [rad].
         max_update_iterations: Largest number of linearisations of one update (1 = plain
             EKF; see "Iterated update" in the module docstring).
+        jacobians: ``'standard'`` (default): the chapter's, at the latest estimates;
+            ``'observability'``: the covariance update uses observability-constrained
+            Jacobians (module docstring, "Consistency").
         relinearize_ratio: Linearise again when an observed landmark moved, relative to the
             robot, by more than this fraction of its range during the update.
     """
@@ -294,9 +349,11 @@ class SlamParams:
     range_floor: float = 0.0
     bearing_floor: float = 0.0
     position_floor: float = 0.003
+    line_floor: float = 0.0
     max_range: float = math.inf
     association: str = 'icnn'
     joint_check: bool = True
+    joint_probability: Optional[float] = None
     bisector_gate: float = math.radians(45.0)
     opening_gate: float = math.radians(60.0)
     min_view_margin: float = math.radians(8.0)
@@ -317,6 +374,7 @@ class SlamParams:
     max_odometry_jump_rad: float = 1.0
     max_update_iterations: int = 5
     relinearize_ratio: float = 0.02
+    jacobians: str = 'standard'
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -324,8 +382,8 @@ class SlamParams:
             raise ValueError(f'SlamParams.odometry must be an OdometryNoise, '
                              f'got {self.odometry!r}')
         for name in ('sigma_range', 'sigma_bearing', 'range_floor', 'bearing_floor',
-                     'position_floor', 'psd_tolerance', 'bisector_gate', 'opening_gate',
-                     'min_view_margin'):
+                     'position_floor', 'line_floor', 'psd_tolerance', 'bisector_gate',
+                     'opening_gate', 'min_view_margin'):
             _check_number(f'SlamParams.{name}', getattr(self, name), minimum=0.0)
         for name in ('max_odometry_jump_m', 'max_odometry_jump_rad', 'r_scale',
                      'relinearize_ratio'):
@@ -340,6 +398,9 @@ class SlamParams:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 < v < 1.0):
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
+        if self.jacobians not in JACOBIANS:
+            raise ValueError(f'SlamParams.jacobians must be one of {JACOBIANS}, '
+                             f'got {self.jacobians!r}')
         if self.mode not in MODES:
             raise ValueError(f'SlamParams.mode must be one of {MODES}, got {self.mode!r}')
         if self.map_full not in MAP_FULL_POLICIES:
@@ -351,6 +412,11 @@ class SlamParams:
                 or self.prune_misses < 0:
             raise ValueError(f'SlamParams.prune_misses must be an integer >= 0, '
                              f'got {self.prune_misses!r}')
+        if self.joint_probability is None:
+            object.__setattr__(self, 'joint_probability', self.new_landmark_probability)
+        v = self.joint_probability
+        if not (isinstance(v, (int, float)) and 0.0 < v < 1.0):
+            raise ValueError(f'SlamParams.joint_probability must be in (0, 1), got {v!r}')
         if self.new_landmark_probability < self.gate_probability:
             raise ValueError('SlamParams.new_landmark_probability must be >= gate_probability')
         for name in ('confirm_hits', 'confirm_window', 'max_landmarks', 'jcbb_max_nodes',
@@ -473,7 +539,8 @@ def odometry_noise(u: np.ndarray, noise: OdometryNoise) -> np.ndarray:
     return np.diag([vxy, vxy, vyaw])
 
 
-def ekf_predict(x: np.ndarray, p: np.ndarray, u: np.ndarray, u_cov: np.ndarray) -> None:
+def ekf_predict(x: np.ndarray, p: np.ndarray, u: np.ndarray, u_cov: np.ndarray,
+                lever_from: Optional[np.ndarray] = None) -> None:
     """Prediction with the odometry increment as control input (eqs. 25-30), in place.
 
     Args:
@@ -481,12 +548,17 @@ def ekf_predict(x: np.ndarray, p: np.ndarray, u: np.ndarray, u_cov: np.ndarray) 
         p: (3 + 2N, 3 + 2N) covariance, modified in place.
         u: (3,) odometry increment (eq. 13).
         u_cov: (3, 3) its covariance ``U``.
+        lever_from: Optional (2,) position the heading column of ``J1`` takes its lever arm
+            from (observability-constrained: the previous prior, module docstring
+            "Consistency"); None: the current estimate (eq. 28).
     """
     j1, j2 = compose_jacobians(x[:3], u)  # eqs. 27-30 (eq. 28 sign typo fixed)
     c, s = math.cos(x[2]), math.sin(x[2])
     x[0] += u[0] * c - u[1] * s  # eq. 25 (x_r (+) u, eq. 16)
     x[1] += u[0] * s + u[1] * c
     x[2] = _wrap(x[2] + u[2])
+    if lever_from is not None:  # Phi of the OC-EKF: lever arm from the previous prior
+        j1[0, 2], j1[1, 2] = -(x[1] - lever_from[1]), x[0] - lever_from[0]
     # eq. 26 with J2 U J2^T (the chapter prints J1^T in the second term).
     p[:3, :3] = j1 @ p[:3, :3] @ j1.T + j2 @ u_cov @ j2.T
     if p.shape[0] > 3:
@@ -683,8 +755,8 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
 
 def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
                index: np.ndarray, max_iterations: int = 1,
-               relinearize_ratio: float = 0.02, kind: Optional[np.ndarray] = None
-               ) -> Tuple[np.ndarray, float]:
+               relinearize_ratio: float = 0.02, kind: Optional[np.ndarray] = None,
+               nullspace: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
     """Batch EKF update with observations of map landmarks (eqs. 32-37), in place.
 
     ``nu = z - h(x)`` (eqs. 36-37, bearings wrapped), ``S = H P H^T + R`` (eq. 33),
@@ -708,6 +780,9 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         relinearize_ratio: Relative move that triggers another linearisation (a line's
             "position" relative to the robot is its foot point ``rho_b (cos, sin)(alpha)``).
         kind: Optional (K,) kind of each observed landmark (None: corners).
+        nullspace: Optional (K, 5, 3) unobservable directions of ``[robot, landmark]`` per
+            observation (:func:`unobservable_directions`); each ``[H_r, H_F]`` is replaced
+            by the closest matrix that maps them to zero (observability-constrained EKF).
 
     Returns:
         ``(P, NIS)``: the symmetrised covariance (a new array) and ``nu^T S^-1 nu`` (eq. 60)
@@ -716,12 +791,9 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
     Raises:
         numpy.linalg.LinAlgError: If ``S`` is not positive definite.
     """
-    k = index.size
-    n = x.size
-    if k == 0:
+    if index.size == 0:
         return p, 0.0
     cols = _landmark_cols(index)
-    rows = np.arange(k)
     x0 = x
     x_lin = x
     nis_value = 0.0
@@ -733,21 +805,12 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
             dx = x0 - x_lin
             dx[2] = _wrap(dx[2])
             nu -= hr @ dx[:3] + np.einsum('kij,kj->ki', hf, dx[cols])
-        hr2 = hr.reshape(2 * k, 3)
-        # P H^T, (n, 2K): robot part plus each observation's landmark block.
-        pht = p[:, :3] @ hr2.T
-        p_cols = np.transpose(p[:, cols], (1, 0, 2))  # (K, n, 2)
-        pht += np.transpose(p_cols @ np.transpose(hf, (0, 2, 1)), (1, 0, 2)).reshape(n, 2 * k)
-        # S = H P H^T + R (eq. 33).
-        s = hr2 @ pht[:3] + (hf @ pht[cols]).reshape(2 * k, 2 * k)
-        s4 = s.reshape(k, 2, k, 2)
-        s4[rows, :, rows, :] += r
-        s = 0.5 * (s + s.T)
-        low = np.linalg.cholesky(s)
-        w1 = solve_lower(low, pht.T).T  # P H^T L^-T
+        w1, low = _gain_factor(p, hr, hf, r, cols)
         y = solve_lower(low, nu.reshape(-1))
         if it == 0:
             nis_value = float(y @ y)
+            if nullspace is not None:  # covariance: constrained Jacobians at the prior
+                w1_cov = _gain_factor(p, *constrain_jacobians(hr, hf, nullspace), r, cols)[0]
         x_new = x0 + w1 @ y  # eqs. 32, 34
         x_new[2] = _wrap(x_new[2])
         if it + 1 >= max_iterations:
@@ -759,8 +822,81 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
             break
         x_lin = x_new
     x[:] = x_new
-    p -= w1 @ w1.T  # eq. 35 (in place: no fresh n x n allocation)
+    if nullspace is None:
+        w1_cov = w1  # the last linearisation (the iterated EKF's covariance)
+    p -= w1_cov @ w1_cov.T  # eq. 35 (in place: no fresh n x n allocation)
     return 0.5 * (p + p.T), nis_value
+
+
+def _gain_factor(p: np.ndarray, hr: np.ndarray, hf: np.ndarray, r: np.ndarray,
+                 cols: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Return ``W1 = P H^T L^-T`` and ``L`` (``S = H P H^T + R = L L^T``, eq. 33)."""
+    k, n = hr.shape[0], p.shape[0]
+    rows = np.arange(k)
+    hr2 = hr.reshape(2 * k, 3)
+    # P H^T, (n, 2K): robot part plus each observation's landmark block.
+    pht = p[:, :3] @ hr2.T
+    p_cols = np.transpose(p[:, cols], (1, 0, 2))  # (K, n, 2)
+    pht += np.transpose(p_cols @ np.transpose(hf, (0, 2, 1)), (1, 0, 2)).reshape(n, 2 * k)
+    s = hr2 @ pht[:3] + (hf @ pht[cols]).reshape(2 * k, 2 * k)
+    s4 = s.reshape(k, 2, k, 2)
+    s4[rows, :, rows, :] += r
+    s = 0.5 * (s + s.T)
+    low = np.linalg.cholesky(s)
+    return solve_lower(low, pht.T).T, low
+
+
+def unobservable_directions(robot_xy: np.ndarray, first: np.ndarray,
+                            kind: Optional[np.ndarray] = None) -> np.ndarray:
+    """Unobservable directions of ``[x_r, y_r, psi_r, landmark]`` (module docstring).
+
+    Moving the whole map and robot by ``(dx, dy)`` and turning it by ``dtheta`` about the
+    map origin changes no observation. Columns: ``x``, ``y``, rotation; rows: the robot
+    ``[[1, 0, -y_r], [0, 1, x_r], [0, 0, 1]]``, a corner ``[[1, 0, -y], [0, 1, x]]``, a line
+    ``(rho, alpha)`` ``[[cos(alpha), sin(alpha), 0], [0, 0, 1]]``.
+
+    Args:
+        robot_xy: (2,) robot position the directions are taken at.
+        first: (K, 2) landmark parameters they are taken at.
+        kind: Optional (K,) kinds (None: corners).
+
+    Returns:
+        (K, 5, 3) directions.
+    """
+    k = first.shape[0]
+    n = np.zeros((k, 5, 3))
+    n[:, 0, 0] = n[:, 1, 1] = n[:, 2, 2] = 1.0
+    n[:, 0, 2], n[:, 1, 2] = -robot_xy[1], robot_xy[0]
+    n[:, 3, 0] = n[:, 4, 1] = 1.0
+    n[:, 3, 2], n[:, 4, 2] = -first[:, 1], first[:, 0]
+    if kind is not None and np.any(kind == LINE):
+        ln = np.flatnonzero(kind == LINE)
+        a = first[ln, 1]
+        n[ln, 3:] = 0.0
+        n[ln, 3, 0], n[ln, 3, 1] = np.cos(a), np.sin(a)
+        n[ln, 4, 2] = 1.0
+    return n
+
+
+def constrain_jacobians(hr: np.ndarray, hf: np.ndarray, nullspace: np.ndarray
+                        ) -> Tuple[np.ndarray, np.ndarray]:
+    """Closest ``[H_r, H_F]`` (Frobenius) with ``[H_r, H_F] N = 0`` (OC-EKF).
+
+    ``H* = H (I - N (N^T N)^-1 N^T)`` per observation.
+
+    Args:
+        hr: (K, 2, 3) robot Jacobians.
+        hf: (K, 2, 2) landmark Jacobians.
+        nullspace: (K, 5, 3) directions ``N`` (:func:`unobservable_directions`).
+
+    Returns:
+        ``(H_r*, H_F*)``.
+    """
+    h = np.concatenate([hr, hf], axis=2)  # (K, 2, 5)
+    nt = np.transpose(nullspace, (0, 2, 1))
+    hn = h @ nullspace  # (K, 2, 3)
+    h = h - hn @ np.linalg.solve(nt @ nullspace, nt)
+    return h[:, :, :3], h[:, :, 3:]
 
 
 def _relative_points(x: np.ndarray, index: np.ndarray, kind: Optional[np.ndarray]
@@ -961,6 +1097,8 @@ class EkfSlam:
         self._misses = np.zeros(0, dtype=np.int64)   # consecutive expected-but-unseen scans
         self._last_seen = np.zeros(0, dtype=np.int64)
         self._max_seen = np.zeros(0)
+        self._first = np.zeros((0, 2))     # per landmark: estimate when it entered (OC-EKF)
+        self._prior_xy = self._x[:2].copy()  # robot position of the latest prior (OC-EKF)
         self._next_id = 0
         self._candidates: List[_Candidate] = []
         self._next_cid = 0
@@ -1090,6 +1228,8 @@ class EkfSlam:
         self._misses = np.zeros(n, dtype=np.int64)
         self._last_seen = np.zeros(n, dtype=np.int64)
         self._max_seen = np.asarray(m.max_seen, dtype=float).copy()
+        self._first = np.asarray(m.means, dtype=float).reshape(-1, 2).copy()
+        self._prior_xy = self._x[:2].copy()
         self._next_id = int(m.next_id)
 
     # ------------------------------------------------------------------ filter steps
@@ -1112,7 +1252,9 @@ class EkfSlam:
             u_cov = np.asarray(u_cov, dtype=float)
             if u_cov.shape != (3, 3) or not np.all(np.isfinite(u_cov)):
                 raise ValueError('predict: U must be a finite (3, 3) matrix')
-        ekf_predict(self._x, self._p, u, u_cov)
+        oc = self.params.jacobians == 'observability'
+        ekf_predict(self._x, self._p, u, u_cov, self._prior_xy if oc else None)
+        self._prior_xy = self._x[:2].copy()
         self.stats['predictions'] += 1
 
     def default_r(self, m: int) -> np.ndarray:
@@ -1198,6 +1340,9 @@ class EkfSlam:
         # Floors stand for the corner extractor's biases (module docstring): corners only.
         ru[cu, 0, 0] += prm.range_floor ** 2 + prm.position_floor ** 2
         ru[cu, 1, 1] += prm.bearing_floor ** 2 + (prm.position_floor / zu[cu, 0]) ** 2
+        if prm.line_floor > 0.0 and not np.all(cu):  # segment-wide errors of lines
+            lu = ~cu
+            ru[lu] += line_end_covariance(zu[lu], ends_all[use[lu]], prm.line_floor)
         desc = desc_all[use]
         ends_w = ends_to_map(self._x[:3], ends_all[use])  # observed extents, predicted pose
         # World bisector unit vectors (zeros where unknown) and openings of the observations.
@@ -1213,13 +1358,17 @@ class EkfSlam:
         hyp, d2, nodes = do_data_association(
             self._x, self._p, zu, ru, prm.association, prm.gate_probability,
             prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
-            prm.joint_check, prm.new_landmark_probability)
+            prm.joint_check, prm.joint_probability)
         ok = hyp >= 0
         nis, dof = 0.0, 0
         if np.any(ok):
+            null = None
+            if prm.jacobians == 'observability':
+                null = unobservable_directions(self._prior_xy, self._first[hyp[ok]],
+                                               self._kind[hyp[ok]])
             self._p, nis = ekf_update(self._x, self._p, zu[ok], ru[ok], hyp[ok],
                                       prm.max_update_iterations, prm.relinearize_ratio,
-                                      self._kind[hyp[ok]] if mixed else None)
+                                      self._kind[hyp[ok]] if mixed else None, null)
             dof = 2 * int(ok.sum())
             sel = use[ok]
             status[sel] = 'matched'
@@ -1352,7 +1501,7 @@ class EkfSlam:
         self._x = self._x[cols]
         self._p = self._p[np.ix_(cols, cols)]
         for name in ('_ids', '_kind', '_ends', '_bis', '_open', '_n_open', '_hits', '_misses',
-                     '_last_seen', '_max_seen'):
+                     '_last_seen', '_max_seen', '_first'):
             setattr(self, name, getattr(self, name)[keep])
 
     def _make_room(self, need: int, protect: np.ndarray) -> int:
@@ -1478,6 +1627,7 @@ class EkfSlam:
         self._last_seen = np.concatenate([self._last_seen,
                                           np.full(take.size, self._scan, dtype=np.int64)])
         self._max_seen = np.concatenate([self._max_seen, [c.max_seen for c in new_c]])
+        self._first = np.vstack([self._first, self._x[3:].reshape(-1, 2)[-take.size:]])
         done = {int(cand_id[obs[k]]) for k in take}
         self._candidates = [c for c in self._candidates if c.cid not in done]
         status[obs[take]] = 'confirmed'
@@ -1494,9 +1644,9 @@ class EkfSlam:
 
 
 __all__ = ['ASSOCIATION_METHODS', 'augment_map', 'CORNER', 'do_data_association', 'EkfSlam',
-           'LINE', 'MAP_FULL_POLICIES', 'MODES',
+           'constrain_jacobians', 'JACOBIANS', 'LINE', 'MAP_FULL_POLICIES', 'MODES',
            'ekf_predict', 'ekf_update', 'feature_initialization', 'is_psd',
            'joint_observation_covariance', 'map_initialization', 'nearest_psd',
            'observation_model', 'odometry_check', 'odometry_increment', 'odometry_noise',
            'OdometryNoise', 'predicted_observation_covariance', 'SlamParams', 'STATUSES',
-           'UpdateResult']
+           'unobservable_directions', 'UpdateResult']

@@ -178,6 +178,44 @@ def _transform_points(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.stack([pose[:, :1] + c * x - s * y, pose[:, 1:2] + s * x + c * y], axis=-1)
 
 
+def line_end_covariance(z: np.ndarray, ends: np.ndarray, sigma: float) -> np.ndarray:
+    """Covariance of ``(rho, alpha)`` from independent offsets of a segment's two ends.
+
+    The fit covariance of a line (the extractor's, from independent beam errors) shrinks
+    with the number of beams; errors common to the beams of a segment do not: a wall that is
+    not quite straight, the laser's range bias (a SICK LMS2xx states a systematic error of
+    the order of its random one), mixed returns at the ends. They are modelled as offsets
+    ``e_1, e_2 ~ N(0, sigma^2)`` of the segment's two ends along the normal, independent
+    between the ends, so the segment pivots and shifts as a whole. With ``t_i = end_i . d``
+    the ends' positions along the direction ``d = (-sin(alpha), cos(alpha))`` (from the foot
+    point of ``rho``) and ``L = t_2 - t_1``, the moved line has::
+
+        d rho   = (t_2 e_1 - t_1 e_2) / L      (the offset interpolated to the foot point)
+        d alpha = (e_1 - e_2) / L
+
+    so ``C = sigma^2 J J^T`` with ``J = [[t_2, -t_1], [1, -1]] / L``: at the middle of the
+    segment the offset has std ``sigma / sqrt(2)``, the direction ``sqrt(2) sigma / L``.
+
+    Args:
+        z: (L, 2) lines ``(rho, alpha)`` in the frame of ``ends``.
+        ends: (L, 2, 2) endpoints of each segment.
+        sigma: Std of each end's offset [m].
+
+    Returns:
+        (L, 2, 2) covariances (zeros where the segment has no length).
+    """
+    z = np.asarray(z, dtype=float).reshape(-1, 2)
+    d = np.column_stack([-np.sin(z[:, 1]), np.cos(z[:, 1])])
+    t = np.einsum('kij,kj->ki', np.asarray(ends, dtype=float).reshape(-1, 2, 2), d)
+    length = t[:, 1] - t[:, 0]
+    ok = np.isfinite(length) & (np.abs(length) > 0.0)
+    inv = np.where(ok, 1.0 / np.where(ok, length, 1.0), 0.0)
+    jac = np.zeros((z.shape[0], 2, 2))
+    jac[:, 0, 0], jac[:, 0, 1] = t[:, 1] * inv, -t[:, 0] * inv
+    jac[:, 1, 0], jac[:, 1, 1] = inv, -inv
+    return sigma ** 2 * (jac @ np.transpose(jac, (0, 2, 1)))
+
+
 def line_observation_model(pose: np.ndarray, lines: np.ndarray
                            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Predicted ``(rho_b, alpha_b)`` of map lines and the Jacobians (module docstring).
@@ -282,6 +320,7 @@ def project_extent(line: np.ndarray, ends: np.ndarray) -> np.ndarray:
     return merge_extent(line, ends, ends[:0])
 
 
-__all__ = ['ends_to_map', 'extent_interval', 'extents_overlap', 'line_initialization',
+__all__ = ['ends_to_map', 'extent_interval', 'extents_overlap', 'line_end_covariance',
+           'line_initialization',
            'line_observation_model', 'LineObservations', 'lines_to_observations',
            'merge_extent', 'project_extent', 'transform_lines']

@@ -1,0 +1,178 @@
+"""Consistency diagnosis of EKF-SLAM on the Carmen logs (issue 14).
+
+Run from the repository root (needs ``../shared/data/carmen``)::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
+        [--seed 0] [--line-floor M] [--jacobians standard|observability]
+        [--joint-probability P] [LOG ...]
+
+Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
+seed) and run through :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated
+odometry noise model. Printed per log:
+
+* ``odo_nees``: mean (and share above the chi-square 95 % bound) of the odometry's 3-dof
+  NEES over windows of 1 m of reference path: the reference's relative motion against the
+  odometry's, with the filter's noise model ``U`` propagated along the window (3 expected).
+* ``line_m2``: median squared Mahalanobis distance (2 expected) of each line observation
+  put in the map with the reference pose, from the mean of the observations the filter
+  associated with the same landmark (landmarks seen at least 5 times), under the stated
+  covariance moved to the map (the extractor's, through the mount, as the filter gets it,
+  without ``line_floor``; the sweep motion is left out). The reference poses are
+  scan-matched, a few cm, so this overstates the error a little.
+* ``nis95``: share of updates whose joint NIS exceeds its chi-square 95 % bound (0.05
+  expected) and ``d2``: mean individual d2 of the accepted pairs (1.6 for a 95 % gate).
+* ``nees_med``: median robot NEES (3 dof, unaligned), ``psi_err`` / ``psi_sd``: RMS heading
+  error and median heading std of the filter [deg], ``ellipse95``: share of steps with the
+  reference inside the 95 % position ellipse.
+* ``jump5``: share of the squared per-step translation error (relative motion against the
+  reference's) that the worst 5 % of steps carry (what the RPE over 1 m is made of).
+"""
+
+import argparse
+from dataclasses import replace
+import math
+from pathlib import Path
+import sys
+import tempfile
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from landmark_nav.evaluation.bags import load_bag  # noqa: E402
+from landmark_nav.evaluation.slam import (bag_odometry_noise,  # noqa: E402
+                                          ellipse_share, run_slam, scan_features)
+from landmark_nav.geometry import compose, compose_jacobians, relative  # noqa: E402
+from landmark_nav.importers.writer import import_log  # noqa: E402
+from landmark_nav.laser.corners import CornerParams  # noqa: E402
+from landmark_nav.laser.lines import LineParams  # noqa: E402
+from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
+from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
+from landmark_nav.slam.ekf_slam import LINE, odometry_noise, SlamParams  # noqa: E402
+from landmark_nav.slam.line_landmarks import (line_initialization,  # noqa: E402
+                                              lines_to_observations)
+from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
+import numpy as np  # noqa: E402
+
+LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
+
+
+def _wrap(a):
+    return np.mod(np.asarray(a) + math.pi, 2.0 * math.pi) - math.pi
+
+
+def odometry_nees(scenario, noise) -> np.ndarray:
+    """3-dof NEES of the odometry over 1 m windows of reference path (module docstring)."""
+    odo = [e for e in scenario.events if isinstance(e, OdometrySample)]
+    t = np.array([e.stamp_ns for e in odo], dtype=np.int64)
+    pose = np.array([e.pose for e in odo])
+    ref = scenario.truth_at(t)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref[:, :2], axis=0).T))])
+    out = []
+    i = 0
+    while True:
+        j = int(np.searchsorted(s, s[i] + 1.0))
+        if j >= len(t):
+            break
+        cov, x = np.zeros((3, 3)), np.zeros(3)
+        for k in range(i, j):
+            u = relative(pose[k], pose[k + 1])
+            j1, j2 = compose_jacobians(x, u)
+            cov = j1 @ cov @ j1.T + j2 @ odometry_noise(u, noise) @ j2.T
+            x = compose(x, u)
+        e = relative(relative(ref[i], ref[j]), relative(pose[i], pose[j]))
+        e[2] = _wrap(e[2])
+        out.append(e @ np.linalg.solve(cov, e))
+        i = j
+    return np.array(out)
+
+
+def diagnose(bag: Path, landmarks: str, extra: dict) -> dict:
+    """Run the filter on one bag and return the figures of the module docstring."""
+    scenario = load_bag(bag, require_reference=False)
+    noise = bag_odometry_noise(scenario)[0]
+    prm = replace(SlamParams(**extra), odometry=noise)
+    cp = CornerParams(sigma_r=float(scenario.laser.sigma_range),
+                      sigma_phi=float(scenario.laser.sigma_angle))
+    lp = LineParams(sigma_r=cp.sigma_r, sigma_phi=cp.sigma_phi)
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    scans = scenario.of_type(ScanSample)
+    groups, nis, d2 = {}, [], []
+
+    def callback(k, slam, res):
+        if res.nis_dof:
+            nis.append(res.nis > chi2_gate(res.nis_dof, 0.95))
+        d2.extend(res.d2[res.status == 'matched'].tolist())
+        if landmarks == 'corners':
+            return
+        corners, lines = scan_features(scans[k], landmarks, cp, lp)
+        if not lines:
+            return
+        obs = lines_to_observations(lines, mount, None, lp.sigma_r)
+        ref = scenario.truth_at(np.array([scans[k].stamp_ns]))[0]
+        g, _, gz = line_initialization(ref, obs.z)
+        cov = gz @ obs.r @ np.transpose(gz, (0, 2, 1))
+        ids = res.landmark_id[len(corners):]
+        for q in np.flatnonzero((res.status[len(corners):] == 'matched')
+                                & (res.kind[len(corners):] == LINE)):
+            groups.setdefault(int(ids[q]), []).append((g[q], cov[q]))
+
+    run = run_slam(scenario, prm, cp, callback=callback, landmarks=landmarks)
+    m2 = []
+    for obs in groups.values():
+        if len(obs) < 5:
+            continue
+        g = np.array([o[0] for o in obs])
+        g[:, 1] = g[0, 1] + _wrap(g[:, 1] - g[0, 1])
+        mean = g.mean(axis=0)
+        f = len(g) / (len(g) - 1.0)
+        m2 += [f * (v - mean) @ np.linalg.solve(c, v - mean) for v, (_, c) in zip(g, obs)]
+    odo = odometry_nees(scenario, noise)
+    err = run.poses - run.truth
+    err[:, 2] = _wrap(err[:, 2])
+    nees = np.einsum('ki,ki->k', err, np.linalg.solve(
+        run.covariances + 1e-12 * np.eye(3), err[:, :, None])[:, :, 0])
+    step = np.array([np.hypot(*(relative(run.poses[k], run.poses[k + 1])[:2]
+                                - relative(run.truth[k], run.truth[k + 1])[:2]))
+                     for k in range(len(run.poses) - 1)])
+    sq = np.sort(step ** 2)[::-1]
+    return {'odo_nees': float(odo.mean()), 'odo_out': float(np.mean(odo > chi2_gate(3, 0.95))),
+            'line_m2': float(np.median(m2)) if m2 else math.nan,
+            'nis95': float(np.mean(nis)) if nis else math.nan,
+            'd2': float(np.mean(d2)) if d2 else math.nan,
+            'nees_med': float(np.median(nees)),
+            'psi_err': float(np.degrees(np.sqrt(np.mean(err[:, 2] ** 2)))),
+            'psi_sd': float(np.degrees(np.median(np.sqrt(run.covariances[:, 2, 2])))),
+            'ellipse95': ellipse_share(run),
+            'jump5': float(sq[:max(1, len(sq) // 20)].sum() / sq.sum())}
+
+
+def main() -> int:
+    """Import, diagnose, print one line per log."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('logs', nargs='*', default=list(LOGS))
+    ap.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--line-floor', type=float, default=None)
+    ap.add_argument('--jacobians', default=None, choices=['standard', 'observability'])
+    ap.add_argument('--joint-probability', type=float, default=None)
+    args = ap.parse_args()
+    carmen = SHARED_DATA / 'carmen'
+    if not carmen.is_dir():
+        print(f'missing {carmen}', file=sys.stderr)
+        return 1
+    given = {'line_floor': args.line_floor, 'jacobians': args.jacobians,
+             'joint_probability': args.joint_probability}
+    extra = {k: v for k, v in given.items() if v is not None}
+    keys = ('odo_nees', 'odo_out', 'line_m2', 'nis95', 'd2', 'nees_med', 'psi_err', 'psi_sd',
+            'ellipse95', 'jump5')
+    print('log ' + ' '.join(keys))
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.logs:
+            bag = Path(tmp) / name
+            import_log(carmen / f'{name}-corrected.log.gz', bag, seed=args.seed)
+            r = diagnose(bag, args.landmarks, extra)
+            print(name + ' ' + ' '.join(f'{r[k]:.3g}' for k in keys), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
