@@ -182,13 +182,23 @@ def make_line_markers(stamp_ns: int, frame_id: str, lines) -> MarkerArray:
 
 
 def make_landmark_markers(stamp_ns: int, frame_id: str, ids, positions, covariances,
-                          sigmas: float = 2.0) -> MarkerArray:
-    """Build RViz markers: a ``sigmas``-sigma ellipse (LINE_STRIP) per landmark, id = its id."""
+                          sigmas: float = 2.0, line_ids=(), line_ends=()) -> MarkerArray:
+    """Build RViz markers: an ellipse per point landmark, a segment per line landmark.
+
+    The ``sigmas``-sigma ellipse (LINE_STRIP, namespace ``landmark_ellipses``) of each point
+    landmark, the seen extent (LINE_STRIP, namespace ``landmark_lines``) of each line
+    landmark; marker id = the landmark's id.
+    """
     out = MarkerArray(markers=[_clear()])
     for lid, mean, cov in zip(ids, positions, covariances):
         mk = _marker(stamp_ns, frame_id, 'landmark_ellipses', int(lid), Marker.LINE_STRIP,
                      (0.0, 0.0, 1.0), 0.01)
         mk.points = [Point(x=float(x), y=float(y))
                      for x, y in covariance_ellipse(mean, cov, sigmas, 25)]
+        out.markers.append(mk)
+    for lid, ends in zip(line_ids, line_ends):
+        mk = _marker(stamp_ns, frame_id, 'landmark_lines', int(lid), Marker.LINE_STRIP,
+                     (0.0, 0.3, 1.0), 0.03)
+        mk.points = [Point(x=float(x), y=float(y)) for x, y in np.asarray(ends).reshape(2, 2)]
         out.markers.append(mk)
     return out
