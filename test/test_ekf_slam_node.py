@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 from pathlib import Path
+import time
 from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -316,6 +317,7 @@ def test_path_is_bounded_and_published_at_the_display_rate():
         pub_c = ros._helper.create_publisher(PointCloud2, 'corners/features', 10)
         assert ros.wait_for_subscribers([pub_odom, pub_c])
         stamps = [t0 + k * 25_000_000 for k in range(steps)]
+        wall = time.monotonic()
         for k, t in enumerate(stamps):
             pub_odom.publish(make_odometry(t, 'odom', 'base_link', [0.01 * k, 0.0, 0.0]))
             assert ros.wait_until(lambda: slam.odom_count == k + 1, 10)
@@ -324,10 +326,13 @@ def test_path_is_bounded_and_published_at_the_display_rate():
                 assert ros.wait_until(lambda: len(poses) == k, 10)
         assert ros.wait_until(
             lambda: paths and stamp_to_ns(paths[-1].header.stamp) == stamps[-1], 10)
+        wall = time.monotonic() - wall
     last = paths[-1]
     assert [stamp_to_ns(p.header.stamp) for p in last.poses] == stamps[-keep:]
     assert max(len(p.poses) for p in paths) == keep
-    assert len(paths) < steps // 4  # at the display rate, not once per step
+    # At the display rate (one per 0.2 s of the run, which a loaded machine stretches), not
+    # once per step.
+    assert len(paths) <= wall / 0.2 + 2 and len(paths) < steps // 2
     assert slam.stats.processed_count == steps - 1 and slam.stats.dropped_count == 0
 
 

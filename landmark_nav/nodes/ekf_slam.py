@@ -38,9 +38,13 @@ than the last processed step is skipped.
 
 Publishes (frame ``map_frame``, stamp of the corner set): ``pose``
 (PoseWithCovarianceStamped) and ``odometry`` (nav_msgs/Odometry, child ``base_frame``) per
-step; ``path`` (nav_msgs/Path: the last ``path_max_poses`` poses) and ``landmarks``
-(MarkerArray: 2-sigma ellipses) every ``display_period`` seconds when they have changed, so
-the cost per step and the memory do not grow with the length of the run.
+step (two reused messages, filled in place); ``path`` (nav_msgs/Path: the last
+``path_max_poses`` poses) and ``landmarks`` (MarkerArray: 2-sigma ellipses of corners, the
+seen extent of lines) every ``display_period`` seconds when they have changed and have a
+subscriber, so the cost per step and the memory do not grow with the length of the run
+(path poses are built at display time, the new ones only). The outputs have no rclpy
+default QoS-event handlers and each subscription only the incompatible-QoS warning: every
+handler is a waitable the executor scans at each wait (``benchmarks/bench_node_cpu.py``).
 
 Services (std_srvs/Trigger): ``save_map`` writes the landmarks and their covariances as
 YAML to parameter ``map_file`` (a relative name is under ``$ROS_HOME/landmark_nav``,
@@ -67,13 +71,14 @@ more than ``MAX_PENDING`` wait for odometry.
 
 from collections import deque
 from dataclasses import replace
+import itertools
 import time
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, make_odometry,
-                                      make_pose_with_covariance_stamped, ns_to_stamp,
-                                      odometry_to_pose, pose_msg_from_2d, scan_to_data,
-                                      stamp_to_ns)
+                                      make_pose_with_covariance_stamped,
+                                      odometry_pose_covariance, scan_to_data, set_covariance3,
+                                      set_pose_2d, set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.laser.lines import LineParams
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
@@ -90,8 +95,9 @@ from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.slam.visibility import ScanGeometry
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, qos_policy_name_from_kind, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan, PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
@@ -233,23 +239,37 @@ class EkfSlamNode(Node):
             (0.01, 3600.0))
         self.warner = ProblemWarner(self)
         self.stats = InputStats(self, self.warner)
-        self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10)
-        self.pub_odom = self.create_publisher(Odometry, 'odometry', 10)
-        self.pub_path = self.create_publisher(PathMsg, 'path', 10)
-        self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10)
-        self.stats.subscribe(Odometry, 'odom', self.on_odom, ODOM_QOS)
+        # Outputs without rclpy's default QoS-event handlers (two waitables each, which its
+        # executor scans at every wait: a third of the node's CPU per step went there); an
+        # incompatible subscriber still reports it on its side.
+        quiet = PublisherEventCallbacks(use_default_callbacks=False)
+        self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10,
+                                              event_callbacks=quiet)
+        self.pub_odom = self.create_publisher(Odometry, 'odometry', 10, event_callbacks=quiet)
+        self.pub_path = self.create_publisher(PathMsg, 'path', 10, event_callbacks=quiet)
+        self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10,
+                                               event_callbacks=quiet)
+        self.stats.subscribe(Odometry, 'odom', self.on_odom, ODOM_QOS, self._sub_events('odom'))
         parts = []
         if self.landmarks in ('corners', 'both'):
             parts.append('corners')
-            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10)
+            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10,
+                                 self._sub_events('corners/features'))
         if self.landmarks in ('lines', 'both') or self.visibility:
             parts.append('scan')
-            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SENSOR_QOS)
+            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SENSOR_QOS,
+                                 self._sub_events('scan'))
         self.join = StampJoin(parts, MAX_JOIN)
         self._topics = {'corners': 'corners/features', 'scan': 'scan'}
         self._absent_noted = set()
-        self.create_timer(display_period, self.publish_display)
-        self.create_timer(0.5 * self.odometry_timeout, self.check_odometry_timeout)
+        self._publisher_counts = {}  # part -> (monotonic time, publisher count)
+        # Reused per step (publish serialises at once); only stamp, pose, covariance change.
+        self._pose_msg = make_pose_with_covariance_stamped(0, self.map_frame, [0.0] * 3)
+        self._odom_msg = make_odometry(0, self.map_frame, self.base_frame, [0.0] * 3)
+        # One timer for both periodic checks (every timer is scanned at each executor wait).
+        self.display_period = display_period
+        self._next_display = time.monotonic()
+        self.create_timer(min(display_period, 0.5 * self.odometry_timeout), self.on_timer)
         self.create_service(Trigger, 'save_map', self.on_save_map)
         self.create_service(Trigger, 'reset', self.on_reset)
         self.odom_count = 0
@@ -279,8 +299,13 @@ class EkfSlamNode(Node):
         """Forget the filter, odometry buffer, pending corner sets and path."""
         self.frontend.clear()
         self.join.clear()
-        self.path_poses = deque(maxlen=self.path_max_poses)
+        self._clear_path()
         self.display_stamp = None
+
+    def _clear_path(self) -> None:
+        self.path_steps = deque(maxlen=self.path_max_poses)  # (stamp_ns, pose) per step
+        self.path_poses = deque(maxlen=self.path_max_poses)  # PoseStamped, built at display
+        self._path_new = 0  # steps not yet in path_poses
 
     def _on_event(self, kind: str, message: str) -> None:
         """Report a front-end event (an input not used as it came)."""
@@ -289,7 +314,7 @@ class EkfSlamNode(Node):
             return
         if kind == 'restart':
             self.resets += 1
-            self.path_poses.clear()
+            self._clear_path()
         self.warner.warn(f'Odometry ({kind}): {message}')
 
     def on_odom(self, msg: Odometry) -> None:
@@ -297,11 +322,11 @@ class EkfSlamNode(Node):
         self.odom_count += 1
         self.last_odom_wall = time.monotonic()
         try:
-            d = odometry_to_pose(msg)
+            t, pose, cov = odometry_pose_covariance(msg)
         except ConversionError as err:
             self.warner.warn(f'Dropping odometry: {err}')
             return
-        _, steps = self.frontend.add_odometry(int(d.stamp_ns), d.pose, d.covariance)
+        _, steps = self.frontend.add_odometry(t, pose, cov)
         self._publish_steps(steps, self.stats.received_ns)
 
     def on_corners(self, msg: PointCloud2) -> None:
@@ -347,7 +372,13 @@ class EkfSlamNode(Node):
                                                  have.get('scan')))
 
     def _has_publisher(self, part: str) -> bool:
-        return self.count_publishers(self._topics[part]) > 0
+        """Whether the part's topic has a publisher (graph queried at most once a second)."""
+        now = time.monotonic()
+        known = self._publisher_counts.get(part)
+        if known is None or now - known[0] > 1.0:
+            known = (now, self.count_publishers(self._topics[part]))
+            self._publisher_counts[part] = known
+        return known[1] > 0
 
     def _feature_set(self, t: int, cols, scan) -> Corners:
         """Build the front end's feature set from corner rows and / or a scan."""
@@ -380,6 +411,23 @@ class EkfSlamNode(Node):
                             f'{MAX_PENDING} corner sets wait for odometry (newest {t} ns, '
                             f'odometry up to {span[1] if span else None} ns)')
         self._publish_steps(steps)
+
+    def _sub_events(self, topic: str) -> SubscriptionEventCallbacks:
+        """Only the incompatible-QoS warning of rclpy's default event handlers (one waitable)."""
+        def warn(event) -> None:
+            self.get_logger().warning(
+                f'New publisher on {topic} offers an incompatible QoS '
+                f'({qos_policy_name_from_kind(event.last_policy_kind)}): none of its messages '
+                'will arrive')
+        return SubscriptionEventCallbacks(incompatible_qos=warn, use_default_callbacks=False)
+
+    def on_timer(self) -> None:
+        """Check the odometry timeout; publish the display every ``display_period``."""
+        self.check_odometry_timeout()
+        now = time.monotonic()
+        if now >= self._next_display:
+            self._next_display = now + self.display_period - 1e-3
+            self.publish_display()
 
     def check_odometry_timeout(self) -> None:
         """Process waiting sets the odometry reaches when it has stopped coming."""
@@ -414,17 +462,27 @@ class EkfSlamNode(Node):
 
     def _publish(self, t: int, pose: np.ndarray, cov: np.ndarray) -> None:
         """Publish the pose of one step and remember it for the path."""
-        self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
-        self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
-        ps = PoseStamped()  # built once per step: the path message only lists them
-        ps.header.stamp = ns_to_stamp(t)
-        ps.header.frame_id = self.map_frame
-        ps.pose = pose_msg_from_2d(pose)
-        self.path_poses.append(ps)
+        for msg in (self._pose_msg, self._odom_msg):
+            p = msg.pose
+            set_stamp(msg.header, t)
+            set_pose_2d(p.pose, pose)
+            p.covariance = set_covariance3(p.covariance, cov)
+        self.pub_pose.publish(self._pose_msg)
+        self.pub_odom.publish(self._odom_msg)
+        self.path_steps.append((t, pose))
+        self._path_new += 1
         self.display_stamp = t
 
     def path_message(self) -> PathMsg:
         """Return the path of the last ``path_max_poses`` steps."""
+        n = min(self._path_new, len(self.path_steps))
+        for t, pose in itertools.islice(self.path_steps, len(self.path_steps) - n, None):
+            ps = PoseStamped()  # built once per step: the path message only lists them
+            set_stamp(ps.header, t)
+            ps.header.frame_id = self.map_frame
+            set_pose_2d(ps.pose, pose)
+            self.path_poses.append(ps)
+        self._path_new = 0
         path = PathMsg()
         path.header.frame_id = self.map_frame
         path.poses = list(self.path_poses)
@@ -433,12 +491,18 @@ class EkfSlamNode(Node):
         return path
 
     def publish_display(self) -> None:
-        """Publish the path and the landmarks if a step was made since the last time."""
+        """Publish the path and the landmarks if a step was made since the last time.
+
+        Each only while it has a subscriber (the cost of a display nobody looks at is
+        skipped; a display that subscribes gets the next change).
+        """
         if self.display_stamp is None:
             return
         t, self.display_stamp = self.display_stamp, None
-        self.pub_path.publish(self.path_message())
-        self.pub_marks.publish(self.landmark_markers(t))
+        if self.pub_path.get_subscription_count():
+            self.pub_path.publish(self.path_message())
+        if self.pub_marks.get_subscription_count():
+            self.pub_marks.publish(self.landmark_markers(t))
 
     def landmark_markers(self, t: int) -> MarkerArray:
         """Return the map: a 2-sigma ellipse per corner, the seen extent of each line."""
