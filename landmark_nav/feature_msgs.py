@@ -72,9 +72,18 @@ def feature_cloud_to_arrays(msg: PointCloud2) -> Dict[str, np.ndarray]:
         raise ConversionError(f'PointCloud2: {len(msg.data)} data bytes for {n} points of '
                               f'{msg.point_step} bytes')
     out = {}
+    sizes = {PointField.FLOAT32: 4, PointField.FLOAT64: 8}
+    fields = msg.fields
+    size = sizes.get(fields[0].datatype) if fields else None
+    if (size is not None and n and msg.point_step == size * len(fields)
+            and all(f.datatype == fields[0].datatype and f.count == 1 and f.offset == size * j
+                    for j, f in enumerate(fields))):
+        # Packed columns of one type (the clouds this package writes): one view, no copy.
+        table = np.frombuffer(msg.data, dtype=f'<f{size}', count=n * len(fields))
+        table = table.reshape(n, len(fields)).astype(float)
+        return {f.name: table[:, j] for j, f in enumerate(fields)}
     raw = np.frombuffer(bytes(msg.data), dtype=np.uint8)
     rows = raw[: msg.point_step * n].reshape(n, msg.point_step) if n else raw[:0].reshape(0, 0)
-    sizes = {PointField.FLOAT32: 4, PointField.FLOAT64: 8}
     for field in msg.fields:
         size = sizes.get(field.datatype)
         if size is None or field.count != 1:
