@@ -24,9 +24,21 @@ minute; the scan count is then the corner extractor's processed + dropped.
 Ratio in the same run: after the replay the same bag (same ``--seconds``) goes through the
 offline pipeline in this process (:func:`landmark_nav.evaluation.slam.run_slam`, the same
 :class:`~landmark_nav.slam.frontend.SlamFrontend` the node runs, with the bag's odometry
-noise model and laser mount, which the node also gets as parameters); printed: the core's
-time per step (front end + filter, without corner extraction) and ``ekf_slam``'s CPU per
-step over it (the issue's target: at most 2).
+noise model, laser mount and noise, which the node also gets as parameters); printed: the
+core's time per step (front end + filter with the scan's geometry for the visibility-aware
+pruning, and with ``--landmarks lines|both`` the line extraction the node does, without
+the corner extraction of ``corner_extractor``) and ``ekf_slam``'s CPU per step over it (the
+issue's target: at most 2). ``--no-visibility`` runs both without the scan geometry (the
+node does not subscribe ``scan``; what the node before the visibility-aware pruning did).
+``--map-landmarks N`` (the issue's figure is at 200): node and core start on a saved map of
+N landmarks placed 1 km and more away (never in view: no association, no pruning; the
+state and covariance the filter carries are those of an N-landmark map) and map the bag's
+landmarks on top, evicting the least recently seen beyond ``max_landmarks`` (200).
+
+The CPU counters start once both nodes are idle after their start-up (imports, DDS
+discovery), so the start-up is not charged to the scans. ``--profile FILE`` runs
+``ekf_slam`` under cProfile, timed by its main thread's CPU clock (its CPU figure then
+includes the profiler's overhead).
 """
 
 import argparse
@@ -44,6 +56,17 @@ NODES = ('corner_extractor', 'ekf_slam')
 def cpu_seconds(pid: int) -> float:
     """Return the user + system CPU time of a process [s]."""
     fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def main_thread_seconds(pid: int) -> float:
+    """Return the user + system CPU time of a process's main thread (Python) [s]."""
+    return cpu_seconds_path(Path(f'/proc/{pid}/task/{pid}/stat'))
+
+
+def cpu_seconds_path(stat: Path) -> float:
+    """Return the user + system CPU time in a /proc stat file [s]."""
+    fields = stat.read_text().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
@@ -65,6 +88,11 @@ def main() -> int:
     parser.add_argument('--soak', type=float, default=None, metavar='S')
     parser.add_argument('--repo', default=str(REPO), help='checkout whose code is run')
     parser.add_argument('--domain', type=int, default=90 + os.getpid() % 10)
+    parser.add_argument('--landmarks', default='corners', choices=('corners', 'lines', 'both'))
+    parser.add_argument('--no-visibility', dest='visibility', action='store_false')
+    parser.add_argument('--map-landmarks', type=int, default=0, metavar='N')
+    parser.add_argument('--profile', metavar='FILE', default=None,
+                        help='run ekf_slam under cProfile, statistics written to FILE')
     args = parser.parse_args()
     env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -79,8 +107,23 @@ def main() -> int:
     from landmark_nav.bag import BagReader
     from landmark_nav.evaluation.bags import load_bag
     scenario = load_bag(args.bag, max_seconds=args.seconds, require_reference=False)
+    laser = scenario.laser
     node_args = {'ekf_slam': ['--ros-args', '-p', 'laser_pose:=[' + ','.join(
-        f'{v!r}' for v in map(float, scenario.laser.mount)) + ']']}
+        f'{v!r}' for v in map(float, laser.mount)) + ']',
+        '-p', f'landmarks:={args.landmarks}', '-p', f'visibility:={str(args.visibility).lower()}',
+        '-p', f'laser_sigma_range:={float(laser.sigma_range)!r}',
+        '-p', f'lines.sigma_r:={float(laser.sigma_range)!r}',
+        '-p', f'lines.sigma_phi:={float(laser.sigma_angle)!r}'],
+        'corner_extractor': ['--ros-args', '-p', f'sigma_r:={float(laser.sigma_range)!r}',
+                             '-p', f'sigma_phi:={float(laser.sigma_angle)!r}']}
+    slam_map = None
+    if args.map_landmarks:
+        import tempfile
+        from landmark_nav.slam.slam_map import save_map
+        slam_map = far_map(args.map_landmarks)
+        map_file = Path(tempfile.mkdtemp()) / 'far.npz'
+        save_map(map_file, slam_map)
+        node_args['ekf_slam'] += ['-p', f'load_map:={map_file}']
     try:
         from landmark_nav.evaluation.slam import bag_odometry_noise, DRIFT_KEY
         model = scenario.custom_data.get(DRIFT_KEY) or (
@@ -95,15 +138,20 @@ def main() -> int:
             if args.seconds is not None and item.log_time_ns - start > args.seconds * 1e9:
                 break
             scans += 1
-    procs = {n: subprocess.Popen([sys.executable, '-m', f'landmark_nav.nodes.{n}']
+    profile = {'ekf_slam': ['-c', PROFILE, str(Path(args.profile).resolve())]
+               } if args.profile else {}
+    procs = {n: subprocess.Popen([sys.executable] + profile.get(n, ['-m'])
+                                 + [f'landmark_nav.nodes.{n}']
                                  + node_args.get(n, []), env=env,
                                  cwd=args.repo, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)
              for n in NODES}
     diag = subprocess.Popen([sys.executable, '-c', DIAG_LISTENER], env=env, cwd=args.repo,
                             stdout=subprocess.PIPE, text=True)
-    time.sleep(5.0)
+    time.sleep(2.0)
+    wait_idle([p.pid for p in procs.values()])
     cpu0 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
+    main0 = main_thread_seconds(procs['ekf_slam'].pid)
     rss0 = {n: rss_mb(p.pid) for n, p in procs.items()}
     player = [sys.executable, '-m', 'landmark_nav.nodes.bag_player', args.bag, '--topics',
               '/scan', '/odom', '--rate', str(args.rate), '--wait-for-subscribers', '20']
@@ -128,6 +176,7 @@ def main() -> int:
         wall = time.monotonic() - wall
         time.sleep(3.0)
         cpu1 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
+        main1 = main_thread_seconds(procs['ekf_slam'].pid)
         rss1 = {n: rss_mb(p.pid) for n, p in procs.items()}
     finally:
         for p in procs.values():
@@ -149,45 +198,108 @@ def main() -> int:
         print(f'{n:18s} CPU {1e3 * (cpu1[n] - cpu0[n]) / scans:7.2f} ms per scan, RSS '
               f'{rss0[n]:.1f} -> {rss1[n]:.1f} MB; diagnostics: {last.get(n, "none")}')
     if args.soak is None and noise is not None:  # (an older --repo has no front end)
-        core_ms = core_step_ms(scenario, noise)
-        node_ms = 1e3 * (cpu1['ekf_slam'] - cpu0['ekf_slam']) / scans
+        core_ms, size = core_step_ms(scenario, noise, args.landmarks, args.visibility,
+                                     slam_map)
+        print(f'map at the end: {size} landmarks')
+        values = dict(kv.split('=') for kv in last.get('ekf_slam', '').split())
+        steps = int(values.get('processed', scans)) or scans  # (steps: the sets processed)
+        node_ms = 1e3 * (cpu1['ekf_slam'] - cpu0['ekf_slam']) / steps
         print(f'core (SlamFrontend + EkfSlam, offline, same bag) {core_ms:.2f} ms per step; '
-              f'ekf_slam node CPU / core = {node_ms / core_ms:.2f}')
+              f'ekf_slam node CPU / core = {node_ms / core_ms:.2f} (main thread '
+              f'{1e3 * (main1 - main0) / steps:.2f} ms per step, the other threads (DDS) '
+              f'{node_ms - 1e3 * (main1 - main0) / steps:.2f} ms)')
     return 0
 
 
-def core_step_ms(scenario, noise) -> float:
+def wait_idle(pids, timeout: float = 120.0, period: float = 1.0) -> None:
+    """Wait until each process uses under 2 % of a CPU over ``period`` (start-up done)."""
+    end = time.monotonic() + timeout
+    last = [cpu_seconds(p) for p in pids]
+    while time.monotonic() < end:
+        time.sleep(period)
+        now = [cpu_seconds(p) for p in pids]
+        if all(b - a < 0.02 * period for a, b in zip(last, now)):
+            return
+        last = now
+
+
+def far_map(n: int):
+    """Return a map of ``n`` corners 1 km and more from the origin, 1 m apart."""
+    import numpy as np
+    from landmark_nav.slam.slam_map import SlamMap
+    k = np.arange(n)
+    means = np.column_stack([1000.0 + (k % 20), 1000.0 + k // 20]).astype(float)
+    return SlamMap(ids=k.astype(np.int64), kinds=np.zeros(n, np.int8), means=means,
+                   covariance=0.01 * np.eye(2 * n), ends=np.full((n, 2, 2), np.nan),
+                   bisectors=np.zeros((n, 2)), openings=np.full(n, np.nan),
+                   n_openings=np.zeros(n, np.int64), hits=np.full(n, 5, np.int64),
+                   max_seen=np.full(n, 5.0), next_id=n)
+
+
+def core_step_ms(scenario, noise, landmarks: str = 'corners', visibility: bool = True,
+                 slam_map=None) -> tuple:
     """CPU time per step of the offline pipeline on the scenario (corners extracted first).
 
-    The front end gets the bag's odometry and each scan's corners in the bag's order, as
+    The front end gets the bag's odometry and each scan's corners (and lines, extracted
+    in the timed part as the node does) with the scan's geometry in the bag's order, as
     :func:`landmark_nav.evaluation.slam.run_slam` gives them; only its calls are timed
     (process CPU time, as the node's figure).
+
+    Returns:
+        ``(ms per step, landmarks in the map at the end)``.
     """
     from dataclasses import replace
-    from landmark_nav.evaluation.slam import scan_corners
+    from landmark_nav.evaluation.slam import scan_features
     from landmark_nav.laser.corners import CornerParams
+    from landmark_nav.laser.lines import LineParams
     from landmark_nav.sim import OdometrySample, ScanSample
     from landmark_nav.slam.ekf_slam import SlamParams
     from landmark_nav.slam.frontend import Corners, SlamFrontend
+    from landmark_nav.slam.visibility import ScanGeometry
     from threadpoolctl import threadpool_limits
+    import numpy as np
     params = SlamParams() if noise is None else replace(SlamParams(), odometry=noise)
-    cp = CornerParams(sigma_r=scenario.laser.sigma_range, sigma_phi=scenario.laser.sigma_angle)
-    inputs = [(True, e) if isinstance(e, OdometrySample) else
-              (False, Corners.from_corners(e.stamp_ns, scan_corners(e, cp), e.time_increment))
+    laser = scenario.laser
+    cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
+    lp = LineParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
+    mount = np.asarray(laser.mount, dtype=float)
+    inputs = [(True, e, None) if isinstance(e, OdometrySample) else
+              (False, e, scan_features(e, 'corners', cp)[0] if landmarks != 'lines' else [])
               for e in scenario.events if isinstance(e, (OdometrySample, ScanSample))]
-    fe = SlamFrontend(params, scenario.laser.mount)
+    fe = SlamFrontend(params, mount, slam_map=slam_map)
     steps = 0
     with threadpool_limits(1):  # as the nodes (one thread by default)
         cpu = time.process_time()
-        for is_odom, item in inputs:
+        for is_odom, e, corners in inputs:
             if is_odom:
-                steps += len(fe.add_odometry(item.stamp_ns, item.pose, item.covariance)[1])
-            else:
-                steps += len(fe.add_features(item))
+                steps += len(fe.add_odometry(e.stamp_ns, e.pose, e.covariance)[1])
+                continue
+            lines = scan_features(e, 'lines', cp, lp)[1] if landmarks != 'corners' else []
+            geometry = (ScanGeometry(np.asarray(e.ranges, dtype=float), e.angle_min,
+                                     e.angle_increment, e.range_min, e.range_max, mount,
+                                     float(laser.sigma_range)) if visibility else None)
+            steps += len(fe.add_features(Corners.from_corners(
+                e.stamp_ns, corners, e.time_increment, lines, lp.sigma_r, geometry)))
         steps += len(fe.flush())
         cpu = time.process_time() - cpu
-    return 1e3 * cpu / max(steps, 1)
+    return 1e3 * cpu / max(steps, 1), fe.slam.num_landmarks
 
+
+# Run a module under cProfile with the main thread's CPU time as the clock (not the wall).
+PROFILE = """
+import cProfile, runpy, sys, time
+out, module = sys.argv[1], sys.argv[2]
+sys.argv = [module] + sys.argv[3:]
+prof = cProfile.Profile(time.thread_time)
+prof.enable()
+try:
+    runpy.run_module(module, run_name='__main__')
+except SystemExit:
+    pass
+finally:
+    prof.disable()
+    prof.dump_stats(out)
+"""
 
 # A listener printing the last /diagnostics input status of each node.
 DIAG_LISTENER = """

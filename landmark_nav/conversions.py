@@ -354,6 +354,45 @@ def odometry_to_pose(msg: Odometry) -> PoseData:
         twist_covariance=_ro(cov6_to_cov3(msg.twist.covariance)))
 
 
+_COV3_FLAT = np.array([6 * i + j for i in _IDX3 for j in _IDX3])  # 3x3 in the flat 6x6
+
+
+def odometry_pose_covariance(msg: Odometry) -> tuple[int, np.ndarray, np.ndarray]:
+    """Return ``(stamp_ns, [x, y, yaw], 3x3 covariance)`` of an Odometry, per message.
+
+    The numbers of :func:`odometry_to_pose` without its twist and record (a node's
+    odometry callback; the covariance is the message's, unchecked).
+
+    Raises:
+        ConversionError: As :func:`pose_msg_to_2d`, or a covariance of another size.
+    """
+    pose = pose_msg_to_2d(msg.pose.pose, 'Odometry')
+    c = np.asarray(msg.pose.covariance, dtype=float)
+    if c.size != 36:
+        raise ConversionError(f'covariance must have 36 elements; got {c.size}')
+    return stamp_to_ns(msg.header.stamp), pose, c.ravel()[_COV3_FLAT].reshape(3, 3)
+
+
+def set_stamp(header: Header, stamp_ns: int) -> None:
+    """Set ``header.stamp`` from integer nanoseconds (in place; no range check)."""
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    header.stamp.sec, header.stamp.nanosec = sec, nanosec
+
+
+def set_pose_2d(msg: Pose, pose: np.ndarray) -> None:
+    """Set a geometry_msgs/Pose in place from a finite ``[x, y, yaw]`` (z = 0)."""
+    msg.position.x, msg.position.y = float(pose[0]), float(pose[1])
+    half = 0.5 * float(pose[2])
+    q = msg.orientation
+    q.x, q.y, q.z, q.w = 0.0, 0.0, math.sin(half), math.cos(half)
+
+
+def set_covariance3(cov6: np.ndarray, cov3: np.ndarray) -> np.ndarray:
+    """Write a 3x3 (x, y, yaw) covariance into the flat 6x6 ``cov6`` (in place; returned)."""
+    cov6[_COV3_FLAT] = np.asarray(cov3, dtype=float).ravel()
+    return cov6
+
+
 def make_odometry(stamp_ns: int, frame_id: str, child_frame_id: str, pose: Sequence[float],
                   covariance3: Optional[np.ndarray] = None,
                   twist: Optional[Sequence[float]] = None,

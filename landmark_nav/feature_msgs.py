@@ -72,9 +72,18 @@ def feature_cloud_to_arrays(msg: PointCloud2) -> Dict[str, np.ndarray]:
         raise ConversionError(f'PointCloud2: {len(msg.data)} data bytes for {n} points of '
                               f'{msg.point_step} bytes')
     out = {}
+    sizes = {PointField.FLOAT32: 4, PointField.FLOAT64: 8}
+    fields = msg.fields
+    size = sizes.get(fields[0].datatype) if fields else None
+    if (size is not None and n and msg.point_step == size * len(fields)
+            and all(f.datatype == fields[0].datatype and f.count == 1 and f.offset == size * j
+                    for j, f in enumerate(fields))):
+        # Packed columns of one type (the clouds this package writes): one view, no copy.
+        table = np.frombuffer(msg.data, dtype=f'<f{size}', count=n * len(fields))
+        table = table.reshape(n, len(fields)).astype(float)
+        return {f.name: table[:, j] for j, f in enumerate(fields)}
     raw = np.frombuffer(bytes(msg.data), dtype=np.uint8)
     rows = raw[: msg.point_step * n].reshape(n, msg.point_step) if n else raw[:0].reshape(0, 0)
-    sizes = {PointField.FLOAT32: 4, PointField.FLOAT64: 8}
     for field in msg.fields:
         size = sizes.get(field.datatype)
         if size is None or field.count != 1:
@@ -182,13 +191,23 @@ def make_line_markers(stamp_ns: int, frame_id: str, lines) -> MarkerArray:
 
 
 def make_landmark_markers(stamp_ns: int, frame_id: str, ids, positions, covariances,
-                          sigmas: float = 2.0) -> MarkerArray:
-    """Build RViz markers: a ``sigmas``-sigma ellipse (LINE_STRIP) per landmark, id = its id."""
+                          sigmas: float = 2.0, line_ids=(), line_ends=()) -> MarkerArray:
+    """Build RViz markers: an ellipse per point landmark, a segment per line landmark.
+
+    The ``sigmas``-sigma ellipse (LINE_STRIP, namespace ``landmark_ellipses``) of each point
+    landmark, the seen extent (LINE_STRIP, namespace ``landmark_lines``) of each line
+    landmark; marker id = the landmark's id.
+    """
     out = MarkerArray(markers=[_clear()])
     for lid, mean, cov in zip(ids, positions, covariances):
         mk = _marker(stamp_ns, frame_id, 'landmark_ellipses', int(lid), Marker.LINE_STRIP,
                      (0.0, 0.0, 1.0), 0.01)
         mk.points = [Point(x=float(x), y=float(y))
                      for x, y in covariance_ellipse(mean, cov, sigmas, 25)]
+        out.markers.append(mk)
+    for lid, ends in zip(line_ids, line_ends):
+        mk = _marker(stamp_ns, frame_id, 'landmark_lines', int(lid), Marker.LINE_STRIP,
+                     (0.0, 0.3, 1.0), 0.03)
+        mk.points = [Point(x=float(x), y=float(y)) for x, y in np.asarray(ends).reshape(2, 2)]
         out.markers.append(mk)
     return out

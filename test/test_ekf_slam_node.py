@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 from pathlib import Path
+import time
 from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -14,10 +15,10 @@ from landmark_nav.laser.corners import CornerParams
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
-from landmark_nav.slam.ekf_slam import SlamParams
-from landmark_nav.slam.frontend import ODOMETRY_NOISE_MODELS
+from landmark_nav.slam.ekf_slam import LINE, SlamParams
+from landmark_nav.slam.frontend import odometry_noise_model, ODOMETRY_NOISE_MODELS
 from landmark_nav.slam.slam_map import load_map, save_map
-from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness, shared_data
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
 import pytest
@@ -31,9 +32,9 @@ OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
 SECONDS = 40.0
 
 
-def bag_messages(seconds=SECONDS):
+def bag_messages(seconds=SECONDS, bag=OFFICE):
     out = []
-    with BagReader(OFFICE) as reader:
+    with BagReader(bag) as reader:
         t0 = None
         for topic, _, msg in reader.decoded(['/odom', '/scan']):
             t = stamp_to_ns(msg.header.stamp)
@@ -54,11 +55,18 @@ def call(ros, node_name, srv):
 
 
 def replay(ros, msgs, slam, odom_qos=10):
-    """Publish the bag's messages one by one, each after the previous one was received."""
+    """Publish the bag's messages one by one, each after the previous one was received.
+
+    A scan is done when the node has both its corner set (when it maps corners) and the scan
+    (when it subscribes it).
+    """
     pub_odom = ros._helper.create_publisher(Odometry, 'odom', odom_qos)
     pub_scan = ros._helper.create_publisher(LaserScan, 'scan', 10)
     assert ros.wait_for_subscribers([pub_odom, pub_scan])
-    assert ros.wait_until(lambda: slam.count_publishers('corners/features') > 0, 5)
+    corners = slam.landmarks != 'lines'
+    if corners:
+        assert ros.wait_until(lambda: slam.count_publishers('corners/features') > 0, 5)
+    scans = 'scan' in slam.join.parts
     n_odom = n_scan = 0
     for topic, msg in msgs:
         if topic == '/odom':
@@ -68,19 +76,33 @@ def replay(ros, msgs, slam, odom_qos=10):
         else:
             n_scan += 1
             pub_scan.publish(msg)
-            assert ros.wait_until(lambda: slam.corner_count >= n_scan, 5)
+            assert ros.wait_until(lambda: (not corners or slam.corner_count >= n_scan)
+                                  and (not scans or slam.scan_count >= n_scan), 5)
     return n_scan
 
 
-@pytest.mark.dds
-def test_node_equals_offline_with_deskew_and_services(tmp_path):
-    """Node and offline run are one pipeline (SlamFrontend): equal to 1e-9 m, de-skew on."""
-    msgs = bag_messages()
+def node_and_offline(tmp_path, bag, seconds, landmarks, noise):
+    """Replay a bag through corner_extractor + ekf_slam; return the node's and offline runs.
+
+    Both get the bag's laser mount and noise (the node as parameters) and ``noise`` as the
+    odometry model; visibility-aware pruning and de-skew on (the defaults of both).
+    """
+    msgs = bag_messages(seconds, bag)
+    scenario = load_bag(bag, max_seconds=seconds, require_reference=False)
+    laser = scenario.laser
+    mount = [float(v) for v in laser.mount]
     with RosHarness() as ros:
-        ros.add_node(CornerExtractor(context=ros.context))
+        ros.add_node(CornerExtractor(context=ros.context, parameter_overrides=[
+            Parameter('sigma_r', value=float(laser.sigma_range)),
+            Parameter('sigma_phi', value=float(laser.sigma_angle))]))
         slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
             Parameter('map_file', value=str(tmp_path / 'map.yaml')),
-            Parameter('odometry.model', value='simulator'),
+            Parameter('odometry.model', value=noise),
+            Parameter('landmarks', value=landmarks),
+            Parameter('laser_pose', value=mount),
+            Parameter('laser_sigma_range', value=float(laser.sigma_range)),
+            Parameter('lines.sigma_r', value=float(laser.sigma_range)),
+            Parameter('lines.sigma_phi', value=float(laser.sigma_angle)),
             # The test paces the messages; a stall of the machine is no odometry outage.
             Parameter('odometry_timeout', value=3600.0)]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
@@ -90,28 +112,59 @@ def test_node_equals_offline_with_deskew_and_services(tmp_path):
         assert ros.wait_until(lambda: len(poses) >= n_scan - 1, 5)
         res = call(ros, 'save_map', Trigger)
         assert res.success, res.message
-        saved = yaml.safe_load((tmp_path / 'map.yaml').read_text())
-        n_landmarks = slam.slam.num_landmarks
-        events = dict(slam.frontend.events)
+        node = SimpleNamespace(
+            poses=poses, clouds=clouds, n_scan=n_scan, warnings=slam.warner.count,
+            saved=yaml.safe_load((tmp_path / 'map.yaml').read_text()),
+            kinds=slam.slam.landmark_kinds, events=dict(slam.frontend.events),
+            stats=dict(slam.slam.stats), markers=slam.landmark_markers(0))
         assert call(ros, 'reset', Trigger).success
         assert slam.slam is None
-    assert len(clouds) == n_scan
-    assert max(np.max(feature_cloud_to_arrays(c)['time'], initial=0.0) for c in clouds) > 0.0
-    scenario = load_bag(OFFICE, max_seconds=SECONDS)
-    laser = scenario.laser
-    # The node gets no scan geometry (no visibility-aware pruning): the same offline.
-    ref = run_slam(scenario, None, CornerParams(sigma_r=laser.sigma_range,
-                                                sigma_phi=laser.sigma_angle), deskew=True,
-                   visibility=False)
-    stamps = np.array([stamp_to_ns(p.header.stamp) for p in poses])
-    xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
+    params = SlamParams(odometry=odometry_noise_model(noise))
+    ref = run_slam(scenario, params, CornerParams(sigma_r=laser.sigma_range,
+                                                  sigma_phi=laser.sigma_angle), deskew=True,
+                   landmarks=landmarks)
+    return node, ref
+
+
+def assert_node_equals_offline(node, ref):
+    """Assert the same steps, poses equal to 1e-9 m, the same map."""
+    stamps = np.array([stamp_to_ns(p.header.stamp) for p in node.poses])
+    xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in node.poses])
     assert len(stamps) == len(ref.stamps) and np.array_equal(stamps, ref.stamps)
     err = np.hypot(*(xy - ref.poses[:, :2]).T)
     print('max node-offline difference', err.max(), 'm over', len(err), 'poses')
     assert err.max() < 1e-9  # measured 0 (the same arithmetic on the same float64 numbers)
-    assert events['processed'] == len(ref.stamps) and events['jump'] == 0
-    assert len(saved['landmarks']) == n_landmarks == ref.landmarks.shape[0] > 5
-    assert len(saved['landmarks'][0]['covariance']) == 4
+    assert node.events['processed'] == len(ref.stamps)
+    assert node.stats == ref.stats  # matched, confirmed, pruned, ... alike
+    assert node.warnings == 0  # every set complete (corners and scan)
+    saved = node.saved['landmarks']
+    assert len(saved) == ref.landmarks.shape[0] + ref.lines.shape[0]
+    assert sum(s['kind'] == 'line' for s in saved) == ref.lines.shape[0]
+
+
+@pytest.mark.dds
+def test_node_equals_offline_with_deskew_and_services(tmp_path):
+    """Node and offline run are one pipeline (SlamFrontend): equal to 1e-9 m, de-skew on."""
+    node, ref = node_and_offline(tmp_path, OFFICE, SECONDS, 'corners', 'simulator')
+    assert len(node.clouds) == node.n_scan
+    assert max(np.max(feature_cloud_to_arrays(c)['time'], initial=0.0)
+               for c in node.clouds) > 0.0
+    assert_node_equals_offline(node, ref)
+    assert node.events['jump'] == 0 and ref.landmarks.shape[0] > 5
+    assert len(node.saved['landmarks'][0]['covariance']) == 4
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize('landmarks', ['lines', 'both'])
+def test_node_equals_offline_with_lines(tmp_path, landmarks):
+    """Lines from the scan, visibility-aware pruning: node = offline run (de-skew on)."""
+    node, ref = node_and_offline(tmp_path, OFFICE, 20.0, landmarks, 'simulator')
+    assert_node_equals_offline(node, ref)
+    assert ref.lines.shape[0] >= 3 and np.sum(node.kinds == LINE) == ref.lines.shape[0]
+    if landmarks == 'both':
+        assert ref.landmarks.shape[0] > 3
+    lines = [m for m in node.markers.markers if m.ns == 'landmark_lines']
+    assert len(lines) == ref.lines.shape[0] and all(len(m.points) == 2 for m in lines)
 
 
 @pytest.mark.dds
@@ -121,7 +174,7 @@ def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
     laser = scenario.laser
     cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
     simulator = SlamParams(odometry=ODOMETRY_NOISE_MODELS['simulator'])
-    built = run_slam(scenario, simulator, cp, visibility=False).final_map
+    built = run_slam(scenario, simulator, cp).final_map
     assert built.size > 5
     map_path = save_map(tmp_path / 'built.npz', built)
     seconds = 15.0
@@ -142,7 +195,7 @@ def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
         stats = dict(slam.slam.stats)
     after = load_map(tmp_path / 'after.npz')
     ref = run_slam(load_bag(OFFICE, max_seconds=seconds), replace(simulator, mode='localization'),
-                   cp, visibility=False, slam_map=built)
+                   cp, slam_map=built)
     xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])
     assert len(xy) == len(ref.stamps) > 50
     err = np.hypot(*(xy - ref.poses[:, :2]).T)
@@ -287,6 +340,7 @@ def test_path_is_bounded_and_published_at_the_display_rate():
         pub_c = ros._helper.create_publisher(PointCloud2, 'corners/features', 10)
         assert ros.wait_for_subscribers([pub_odom, pub_c])
         stamps = [t0 + k * 25_000_000 for k in range(steps)]
+        wall = time.monotonic()
         for k, t in enumerate(stamps):
             pub_odom.publish(make_odometry(t, 'odom', 'base_link', [0.01 * k, 0.0, 0.0]))
             assert ros.wait_until(lambda: slam.odom_count == k + 1, 10)
@@ -295,10 +349,13 @@ def test_path_is_bounded_and_published_at_the_display_rate():
                 assert ros.wait_until(lambda: len(poses) == k, 10)
         assert ros.wait_until(
             lambda: paths and stamp_to_ns(paths[-1].header.stamp) == stamps[-1], 10)
+        wall = time.monotonic() - wall
     last = paths[-1]
     assert [stamp_to_ns(p.header.stamp) for p in last.poses] == stamps[-keep:]
     assert max(len(p.poses) for p in paths) == keep
-    assert len(paths) < steps // 4  # at the display rate, not once per step
+    # At the display rate (one per 0.2 s of the run, which a loaded machine stretches), not
+    # once per step.
+    assert len(paths) <= wall / 0.2 + 2 and len(paths) < steps // 2
     assert slam.stats.processed_count == steps - 1 and slam.stats.dropped_count == 0
 
 
@@ -389,3 +446,18 @@ def test_waiting_sets_are_processed_when_odometry_stops():
         assert stamps == [(t0 + 80_000_000, pytest.approx(0.08, abs=1e-12))]
         assert slam.frontend.events['held'] == 1 and not slam.pending
         slam.destroy_node()
+
+
+@pytest.mark.dds
+def test_node_equals_offline_on_an_imported_carmen_log(tmp_path):
+    """A real log (aces, corridors, 1 m steps): corners and lines, landmarks pruned alike."""
+    from landmark_nav.evaluation.slam import DRIFT_KEY
+    from landmark_nav.importers.writer import import_log
+    bag = tmp_path / 'aces'
+    import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
+    model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
+    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model)
+    assert_node_equals_offline(node, ref)
+    # The scans' geometry reached the node: visibility-aware pruning removed landmarks
+    # (measured 2; none without the scans).
+    assert ref.stats['pruned'] > 0 and ref.lines.shape[0] > 10

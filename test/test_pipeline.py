@@ -63,6 +63,8 @@ def test_replay_gives_ekf_slam_what_the_bag_states():
     cmd = pipeline_commands('replay', ['ekf_slam.odometry.model=pioneer'],
                             bag=str(REPO / 'bags' / 'office'))['ekf_slam']
     stated = cmd[cmd.index('--params-file') + 2:]
-    assert stated == ['-p', 'laser_pose:=[0.0,0.0,0.0]', '-p', 'odometry.model:=simulator',
+    assert stated == ['-p', 'laser_pose:=[0.0,0.0,0.0]', '-p', 'laser_sigma_range:=0.01',
+                      '-p', 'lines.sigma_r:=0.01', '-p', 'lines.sigma_phi:=0.0017453292519943296',
+                      '-p', 'odometry.model:=simulator',
                       '-p', 'odometry.model:=pioneer']  # the last one wins
     assert pipeline_commands('replay', bag='no/such/bag')['ekf_slam'][-1].endswith('.yaml')

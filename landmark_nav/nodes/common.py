@@ -24,6 +24,7 @@ import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
 import rclpy
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -322,7 +323,11 @@ class InputStats:
         self._last_seq = {}
         self._reported_drops = 0
         self._reported_processed = 0
-        self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # No default QoS-event handlers (waitables the executor scans at every wait of the
+        # node; a diagnostics aggregator reports an incompatible QoS on its side).
+        self._pub = node.create_publisher(
+            DiagnosticArray, '/diagnostics', 10,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         self._timer = node.create_timer(period_s, self.publish)
 
     @property
@@ -330,13 +335,17 @@ class InputStats:
         """Return the number of inputs dropped since start (all reasons)."""
         return sum(self.dropped.values())
 
-    def subscribe(self, msg_type, topic: str, callback: Callable, qos):
-        """Create a subscription whose callback(msg) runs with the reception recorded."""
+    def subscribe(self, msg_type, topic: str, callback: Callable, qos, event_callbacks=None):
+        """Create a subscription whose callback(msg) runs with the reception recorded.
+
+        ``event_callbacks``: rclpy's SubscriptionEventCallbacks (default: rclpy's).
+        """
         def on_message(msg, info, topic=topic):
             self.received_ns = int(info.get('received_timestamp') or time.time_ns())
             self._check_sequence(topic, info.get('publication_sequence_number'))
             callback(msg)
-        return self._node.create_subscription(msg_type, topic, on_message, qos)
+        return self._node.create_subscription(msg_type, topic, on_message, qos,
+                                              event_callbacks=event_callbacks)
 
     def _check_sequence(self, topic: str, seq: Optional[int]) -> None:
         """Count the messages lost between two of one publisher (sequence number gap)."""

@@ -1,13 +1,30 @@
-"""Executable ``ekf_slam``: EKF-SLAM with corner landmarks (corner chapter section 3).
+"""Executable ``ekf_slam``: EKF-SLAM with corner and / or line landmarks.
+
+The filter of the corner chapter (section 3); line landmarks:
+:mod:`landmark_nav.slam.line_landmarks`.
 
 Subscribes:
 
 * ``odom`` (nav_msgs/Odometry; best-effort, keep last 200: it takes reliable and
   best-effort publishers alike and does not lose samples in a burst);
-* ``corners/features`` (sensor_msgs/PointCloud2 from ``corner_extractor``). Not the
-  ``corners`` PoseArray: the cloud carries each corner's 2x2 position covariance (the
-  observation noise ``R``), its opening angle and bisector (the association's descriptors)
-  and its beam time (the de-skew).
+* ``corners/features`` (sensor_msgs/PointCloud2 from ``corner_extractor``; with
+  ``landmarks`` ``corners`` or ``both``). Not the ``corners`` PoseArray: the cloud carries
+  each corner's 2x2 position covariance (the observation noise ``R``), its opening angle
+  and bisector (the association's descriptors) and its beam time (the de-skew);
+* ``scan`` (sensor_msgs/LaserScan, sensor-data QoS; with ``landmarks`` ``lines`` or
+  ``both``, or ``visibility``): the line landmarks are extracted from it here with
+  :func:`landmark_nav.slam.features.extract_scan_features` (parameters ``lines.*``, those
+  of ``line_extractor``), the function the offline evaluation calls: the ``lines`` cloud of
+  ``line_extractor`` has float32 values and no beam indices (no de-skew), and that node
+  drops clusters under ``segmentation.min_points`` beams, where SLAM's lines grow over
+  isolated returns of their wall. The scan's geometry also gives the visibility-aware
+  pruning (:mod:`landmark_nav.slam.visibility`; ``laser_sigma_range``).
+
+The corner cloud and the scan of one stamp make one feature set
+(:class:`~landmark_nav.nodes.stamp_join.StampJoin`); a set whose scan (or corner cloud)
+is lost (a later one came) goes on without it, with a warning (no pruning evidence, no
+lines; or no corners); while a topic has no publisher the sets go on without its part
+(noted once in the log: e.g. ``visibility`` on but no ``scan``).
 
 Everything between the messages and the filter is :class:`~landmark_nav.slam.frontend.
 SlamFrontend`, the same code :func:`landmark_nav.evaluation.slam.run_slam` runs offline: the
@@ -21,9 +38,13 @@ than the last processed step is skipped.
 
 Publishes (frame ``map_frame``, stamp of the corner set): ``pose``
 (PoseWithCovarianceStamped) and ``odometry`` (nav_msgs/Odometry, child ``base_frame``) per
-step; ``path`` (nav_msgs/Path: the last ``path_max_poses`` poses) and ``landmarks``
-(MarkerArray: 2-sigma ellipses) every ``display_period`` seconds when they have changed, so
-the cost per step and the memory do not grow with the length of the run.
+step (two reused messages, filled in place); ``path`` (nav_msgs/Path: the last
+``path_max_poses`` poses) and ``landmarks`` (MarkerArray: 2-sigma ellipses of corners, the
+seen extent of lines) every ``display_period`` seconds when they have changed and have a
+subscriber, so the cost per step and the memory do not grow with the length of the run
+(path poses are built at display time, the new ones only). The outputs have no rclpy
+default QoS-event handlers and each subscription only the incompatible-QoS warning: every
+handler is a waitable the executor scans at each wait (``benchmarks/bench_node_cpu.py``).
 
 Services (std_srvs/Trigger): ``save_map`` writes the landmarks and their covariances as
 YAML to parameter ``map_file`` (a relative name is under ``$ROS_HOME/landmark_nav``,
@@ -34,9 +55,7 @@ odometry.
 Map reuse: parameter ``load_map`` (a ``.npz`` map: ``save_map`` above or ``landmark_nav
 evaluate --save-map``) starts the filter on that map at the first odometry pose (1-sigma
 ``map_pose_sigma``), again after a reset; with ``mode: localization`` it tracks the robot
-on it without adding landmarks. Landmarks: corners only (the ``landmarks: lines|both``
-setting of the offline evaluation needs the line extractor's cloud, not subscribed here),
-and no visibility-aware pruning (no scan geometry reaches the node).
+on it without adding landmarks.
 
 Odometry noise: the ``odometry.*`` parameters (defaults: the ``pioneer`` model of
 :mod:`landmark_nav.slam.frontend`), or ``odometry.model`` = ``pioneer``, ``simulator`` or
@@ -52,24 +71,34 @@ more than ``MAX_PENDING`` wait for odometry.
 
 from collections import deque
 from dataclasses import replace
+import itertools
 import time
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, make_odometry,
-                                      make_pose_with_covariance_stamped, ns_to_stamp,
-                                      odometry_to_pose, pose_msg_from_2d, stamp_to_ns)
+                                      make_pose_with_covariance_stamped,
+                                      odometry_pose_covariance, scan_to_data, set_covariance3,
+                                      set_pose_2d, set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
+from landmark_nav.laser.lines import LineParams
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
-                                       output_path, ParameterError, ProblemWarner, run_node)
-from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
-from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
-                                        ODOMETRY_NOISE_MODELS, SlamFrontend, Step)
+                                       output_path, ParameterError, ProblemWarner, run_node,
+                                       SENSOR_QOS)
+from landmark_nav.nodes.line_extractor import LINE_PARAMETERS
+from landmark_nav.nodes.stamp_join import StampJoin
+from landmark_nav.slam.ekf_slam import CORNER, LINE, OdometryNoise, SlamParams
+from landmark_nav.slam.features import extract_scan_features, LANDMARK_TYPES
+from landmark_nav.slam.frontend import (Corners, FrontendParams, line_beam_times,
+                                        odometry_noise_model, ODOMETRY_NOISE_MODELS,
+                                        SlamFrontend, Step)
 from landmark_nav.slam.slam_map import load_map, save_map
+from landmark_nav.slam.visibility import ScanGeometry
 from nav_msgs.msg import Odometry, Path as PathMsg
 import numpy as np
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import PointCloud2
+from rclpy.qos import HistoryPolicy, qos_policy_name_from_kind, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan, PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 import yaml
@@ -134,6 +163,8 @@ FRONTEND_PARAMETERS = {
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
 MAX_PENDING = 100
+#: Most feature sets waiting for their other part (corner cloud or scan).
+MAX_JOIN = 50
 CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
 #: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
 _FEATURE_DROPS = {'out_of_order': 'out_of_order', 'before_odometry': 'no_odometry'}
@@ -163,6 +194,15 @@ class EkfSlamNode(Node):
         params = declare_dataclass(self, SlamParams, SLAM_PARAMETERS)
         self.params = replace(params, odometry=_declare_odometry_noise(self))
         self.frontend_params = declare_dataclass(self, FrontendParams, FRONTEND_PARAMETERS)
+        self.landmarks = declare(self, 'landmarks', 'corners', 'landmark types mapped: corners '
+                                 '(corners/features), lines (extracted from scan) or both',
+                                 None, list(LANDMARK_TYPES))
+        self.visibility = declare(self, 'visibility', True, 'visibility-aware pruning: a '
+                                  'landmark the scan sees through is missed (needs scan)')
+        self.laser_sigma_range = declare(self, 'laser_sigma_range', 0.01, "the laser's stated "
+                                         '1-sigma range noise [m] (visibility tolerance)',
+                                         (0.0, 10.0))
+        self.line_params = declare_dataclass(self, LineParams, LINE_PARAMETERS, 'lines.')
         self.laser_pose = np.array(declare(
             self, 'laser_pose', [0.0, 0.0, 0.0], 'laser pose [x, y, yaw] in base_link'))
         if self.laser_pose.shape != (3,) or not np.all(np.isfinite(self.laser_pose)):
@@ -202,26 +242,51 @@ class EkfSlamNode(Node):
             (0.01, 3600.0))
         self.warner = ProblemWarner(self)
         self.stats = InputStats(self, self.warner)
-        self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10)
-        self.pub_odom = self.create_publisher(Odometry, 'odometry', 10)
-        self.pub_path = self.create_publisher(PathMsg, 'path', 10)
-        self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10)
-        self.stats.subscribe(Odometry, 'odom', self.on_odom, ODOM_QOS)
-        self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10)
-        self.create_timer(display_period, self.publish_display)
-        self.create_timer(0.5 * self.odometry_timeout, self.check_odometry_timeout)
+        # Outputs without rclpy's default QoS-event handlers (two waitables each, which its
+        # executor scans at every wait: a third of the node's CPU per step went there); an
+        # incompatible subscriber still reports it on its side.
+        quiet = PublisherEventCallbacks(use_default_callbacks=False)
+        self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10,
+                                              event_callbacks=quiet)
+        self.pub_odom = self.create_publisher(Odometry, 'odometry', 10, event_callbacks=quiet)
+        self.pub_path = self.create_publisher(PathMsg, 'path', 10, event_callbacks=quiet)
+        self.pub_marks = self.create_publisher(MarkerArray, 'landmarks', 10,
+                                               event_callbacks=quiet)
+        self.stats.subscribe(Odometry, 'odom', self.on_odom, ODOM_QOS, self._sub_events('odom'))
+        parts = []
+        if self.landmarks in ('corners', 'both'):
+            parts.append('corners')
+            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, 10,
+                                 self._sub_events('corners/features'))
+        if self.landmarks in ('lines', 'both') or self.visibility:
+            parts.append('scan')
+            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SENSOR_QOS,
+                                 self._sub_events('scan'))
+        self.join = StampJoin(parts, MAX_JOIN)
+        self._topics = {'corners': 'corners/features', 'scan': 'scan'}
+        self._absent_noted = set()
+        self._publisher_counts = {}  # part -> (monotonic time, publisher count)
+        # Reused per step (publish serialises at once); only stamp, pose, covariance change.
+        self._pose_msg = make_pose_with_covariance_stamped(0, self.map_frame, [0.0] * 3)
+        self._odom_msg = make_odometry(0, self.map_frame, self.base_frame, [0.0] * 3)
+        # One timer for both periodic checks (every timer is scanned at each executor wait).
+        self.display_period = display_period
+        self._next_display = time.monotonic()
+        self.create_timer(min(display_period, 0.5 * self.odometry_timeout), self.on_timer)
         self.create_service(Trigger, 'save_map', self.on_save_map)
         self.create_service(Trigger, 'reset', self.on_reset)
         self.odom_count = 0
         self.corner_count = 0
+        self.scan_count = 0
         self.resets = 0
         self.last_odom_wall = time.monotonic()
         self.frontend = SlamFrontend(self.params, self.laser_pose, self.frontend_params,
                                      self._on_event, slam_map=self.slam_map,
                                      map_pose_covariance=np.diag(pose_sigma ** 2))
         self._clear()
-        self.get_logger().info(f'ekf_slam: association {self.params.association}, odometry '
-                               f'noise {self.params.odometry}')
+        self.get_logger().info(f'ekf_slam: landmarks {self.landmarks}, visibility '
+                               f'{self.visibility}, association {self.params.association}, '
+                               f'odometry noise {self.params.odometry}')
 
     @property
     def slam(self):
@@ -236,8 +301,14 @@ class EkfSlamNode(Node):
     def _clear(self) -> None:
         """Forget the filter, odometry buffer, pending corner sets and path."""
         self.frontend.clear()
-        self.path_poses = deque(maxlen=self.path_max_poses)
+        self.join.clear()
+        self._clear_path()
         self.display_stamp = None
+
+    def _clear_path(self) -> None:
+        self.path_steps = deque(maxlen=self.path_max_poses)  # (stamp_ns, pose) per step
+        self.path_poses = deque(maxlen=self.path_max_poses)  # PoseStamped, built at display
+        self._path_new = 0  # steps not yet in path_poses
 
     def _on_event(self, kind: str, message: str) -> None:
         """Report a front-end event (an input not used as it came)."""
@@ -246,7 +317,7 @@ class EkfSlamNode(Node):
             return
         if kind == 'restart':
             self.resets += 1
-            self.path_poses.clear()
+            self._clear_path()
         self.warner.warn(f'Odometry ({kind}): {message}')
 
     def on_odom(self, msg: Odometry) -> None:
@@ -254,11 +325,11 @@ class EkfSlamNode(Node):
         self.odom_count += 1
         self.last_odom_wall = time.monotonic()
         try:
-            d = odometry_to_pose(msg)
+            t, pose, cov = odometry_pose_covariance(msg)
         except ConversionError as err:
             self.warner.warn(f'Dropping odometry: {err}')
             return
-        _, steps = self.frontend.add_odometry(int(d.stamp_ns), d.pose, d.covariance)
+        _, steps = self.frontend.add_odometry(t, pose, cov)
         self._publish_steps(steps, self.stats.received_ns)
 
     def on_corners(self, msg: PointCloud2) -> None:
@@ -275,11 +346,67 @@ class EkfSlamNode(Node):
         cols = np.column_stack([a[n] for n in CORNER_NAMES]
                                + [a.get('time', np.zeros(len(a['x'])))])
         cols = self._valid_corners(cols.reshape(-1, len(CORNER_NAMES) + 1))
-        t = stamp_to_ns(msg.header.stamp)
-        corners = Corners(t, cols[:, :2], np.stack([cols[:, [4, 5]], cols[:, [5, 6]]], axis=1),
-                          cols[:, 2], cols[:, 3], cols[:, 7])
-        received = self.stats.received_ns
-        steps = self.frontend.add_features(corners, received)
+        self._offer('corners', stamp_to_ns(msg.header.stamp), cols)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        """Validate one scan (lines, visibility) and join it to its corner set."""
+        self.scan_count += 1
+        try:
+            scan = scan_to_data(msg)
+            if scan.ranges.size == 0:
+                raise ConversionError('LaserScan: empty scan (no ranges)')
+        except ConversionError as err:
+            self.stats.drop('malformed', f'Dropping scan: {err}')
+            return
+        self._offer('scan', scan.stamp_ns, scan)
+
+    def _offer(self, part: str, t: int, item) -> None:
+        """Join one part of a feature set; give the sets it completes to the front end."""
+        for stamp, have, missing in self.join.add(part, t, item, self._has_publisher):
+            lost = [p for p in missing if self._has_publisher(p)]
+            if lost:
+                self.warner.warn(f'Feature set at {stamp} ns without its {" and ".join(lost)} '
+                                 f'(lost: a later one came): using what came')
+            for p in set(missing) - set(lost) - self._absent_noted:
+                self._absent_noted.add(p)
+                self.get_logger().info(f'No publisher on {self._topics[p]}: feature sets go '
+                                       f'on without it (no lines, no visibility pruning)')
+            self._add_features(self._feature_set(stamp, have.get('corners'),
+                                                 have.get('scan')))
+
+    def _has_publisher(self, part: str) -> bool:
+        """Whether the part's topic has a publisher (graph queried at most once a second)."""
+        now = time.monotonic()
+        known = self._publisher_counts.get(part)
+        if known is None or now - known[0] > 1.0:
+            known = (now, self.count_publishers(self._topics[part]))
+            self._publisher_counts[part] = known
+        return known[1] > 0
+
+    def _feature_set(self, t: int, cols, scan) -> Corners:
+        """Build the front end's feature set from corner rows and / or a scan."""
+        if cols is None:
+            cols = np.zeros((0, len(CORNER_NAMES) + 1))
+        lines, time_increment, geometry = (), 0.0, None
+        if scan is not None:
+            if self.landmarks != 'corners':
+                lines = extract_scan_features(scan.ranges, scan.angles, scan.valid,
+                                              scan.angle_increment, 'lines', None,
+                                              self.line_params)[1]
+                time_increment = scan.time_increment
+            if self.visibility:
+                geometry = ScanGeometry(scan.ranges, scan.angle_min, scan.angle_increment,
+                                        scan.range_min, scan.range_max, self.laser_pose,
+                                        self.laser_sigma_range)
+        return Corners(t, cols[:, :2], np.stack([cols[:, [4, 5]], cols[:, [5, 6]]], axis=1),
+                       cols[:, 2], cols[:, 3], cols[:, 7], tuple(lines),
+                       line_beam_times(lines, time_increment),
+                       self.line_params.sigma_r if lines else None, geometry)
+
+    def _add_features(self, corners: Corners) -> None:
+        """Give one feature set to the front end; publish the steps it completes."""
+        t = corners.stamp_ns
+        steps = self.frontend.add_features(corners, self.stats.received_ns)
         if len(self.frontend.pending) > MAX_PENDING:
             old = self.frontend.drop_oldest_pending()
             span = self.frontend.odometry_span
@@ -287,6 +414,23 @@ class EkfSlamNode(Node):
                             f'{MAX_PENDING} corner sets wait for odometry (newest {t} ns, '
                             f'odometry up to {span[1] if span else None} ns)')
         self._publish_steps(steps)
+
+    def _sub_events(self, topic: str) -> SubscriptionEventCallbacks:
+        """Only the incompatible-QoS warning of rclpy's default event handlers (one waitable)."""
+        def warn(event) -> None:
+            self.get_logger().warning(
+                f'New publisher on {topic} offers an incompatible QoS '
+                f'({qos_policy_name_from_kind(event.last_policy_kind)}): none of its messages '
+                'will arrive')
+        return SubscriptionEventCallbacks(incompatible_qos=warn, use_default_callbacks=False)
+
+    def on_timer(self) -> None:
+        """Check the odometry timeout; publish the display every ``display_period``."""
+        self.check_odometry_timeout()
+        now = time.monotonic()
+        if now >= self._next_display:
+            self._next_display = now + self.display_period - 1e-3
+            self.publish_display()
 
     def check_odometry_timeout(self) -> None:
         """Process waiting sets the odometry reaches when it has stopped coming."""
@@ -321,17 +465,27 @@ class EkfSlamNode(Node):
 
     def _publish(self, t: int, pose: np.ndarray, cov: np.ndarray) -> None:
         """Publish the pose of one step and remember it for the path."""
-        self.pub_pose.publish(make_pose_with_covariance_stamped(t, self.map_frame, pose, cov))
-        self.pub_odom.publish(make_odometry(t, self.map_frame, self.base_frame, pose, cov))
-        ps = PoseStamped()  # built once per step: the path message only lists them
-        ps.header.stamp = ns_to_stamp(t)
-        ps.header.frame_id = self.map_frame
-        ps.pose = pose_msg_from_2d(pose)
-        self.path_poses.append(ps)
+        for msg in (self._pose_msg, self._odom_msg):
+            p = msg.pose
+            set_stamp(msg.header, t)
+            set_pose_2d(p.pose, pose)
+            p.covariance = set_covariance3(p.covariance, cov)
+        self.pub_pose.publish(self._pose_msg)
+        self.pub_odom.publish(self._odom_msg)
+        self.path_steps.append((t, pose))
+        self._path_new += 1
         self.display_stamp = t
 
     def path_message(self) -> PathMsg:
         """Return the path of the last ``path_max_poses`` steps."""
+        n = min(self._path_new, len(self.path_steps))
+        for t, pose in itertools.islice(self.path_steps, len(self.path_steps) - n, None):
+            ps = PoseStamped()  # built once per step: the path message only lists them
+            set_stamp(ps.header, t)
+            ps.header.frame_id = self.map_frame
+            set_pose_2d(ps.pose, pose)
+            self.path_poses.append(ps)
+        self._path_new = 0
         path = PathMsg()
         path.header.frame_id = self.map_frame
         path.poses = list(self.path_poses)
@@ -340,29 +494,47 @@ class EkfSlamNode(Node):
         return path
 
     def publish_display(self) -> None:
-        """Publish the path and the landmarks if a step was made since the last time."""
+        """Publish the path and the landmarks if a step was made since the last time.
+
+        Each only while it has a subscriber (the cost of a display nobody looks at is
+        skipped; a display that subscribes gets the next change).
+        """
         if self.display_stamp is None:
             return
         t, self.display_stamp = self.display_stamp, None
-        self.pub_path.publish(self.path_message())
-        self.pub_marks.publish(self.landmark_markers(t))
+        if self.pub_path.get_subscription_count():
+            self.pub_path.publish(self.path_message())
+        if self.pub_marks.get_subscription_count():
+            self.pub_marks.publish(self.landmark_markers(t))
 
     def landmark_markers(self, t: int) -> MarkerArray:
-        """Return the map as one 2-sigma ellipse per landmark."""
+        """Return the map: a 2-sigma ellipse per corner, the seen extent of each line."""
         if self.slam is None:
             return make_landmark_markers(t, self.map_frame, [], [], [])
-        return make_landmark_markers(t, self.map_frame, self.slam.landmark_ids,
-                                     self.slam.landmarks, self.slam.landmark_covariances)
+        s = self.slam
+        kinds = s.landmark_kinds
+        c, ln = kinds == CORNER, kinds == LINE
+        return make_landmark_markers(t, self.map_frame, s.landmark_ids[c], s.landmarks[c],
+                                     s.landmark_covariances[c], line_ids=s.landmark_ids[ln],
+                                     line_ends=s.line_ends[ln])
 
     def map_dict(self) -> dict:
-        """Return the map as a YAML-able dict."""
+        """Return the map as a YAML-able dict (corners: x, y; lines: rho, alpha, ends)."""
         if self.slam is None:
             return {'frame_id': self.map_frame, 'landmarks': []}
-        return {'frame_id': self.map_frame, 'landmarks': [
-            {'id': int(i), 'x': float(m[0]), 'y': float(m[1]),
-             'covariance': [float(v) for v in np.asarray(c).reshape(4)]}
-            for i, m, c in zip(self.slam.landmark_ids, self.slam.landmarks,
-                               self.slam.landmark_covariances)]}
+        s = self.slam
+        out = []
+        for i, k, m, c, e in zip(s.landmark_ids, s.landmark_kinds, s.landmarks,
+                                 s.landmark_covariances, s.line_ends):
+            cov = [float(v) for v in np.asarray(c).reshape(4)]
+            if k == LINE:
+                out.append({'id': int(i), 'kind': 'line', 'rho': float(m[0]),
+                            'alpha': float(m[1]), 'covariance': cov,
+                            'ends': [[float(v) for v in p] for p in e]})
+            else:
+                out.append({'id': int(i), 'kind': 'corner', 'x': float(m[0]),
+                            'y': float(m[1]), 'covariance': cov})
+        return {'frame_id': self.map_frame, 'landmarks': out}
 
     def on_save_map(self, request, response):
         """Write the landmarks and covariances to ``map_file``."""

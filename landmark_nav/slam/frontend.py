@@ -196,6 +196,18 @@ class FrontendParams:
                 raise ValueError(f'FrontendParams.{name} must be a bool')
 
 
+def line_beam_times(lines: Sequence, time_increment: float) -> np.ndarray:
+    """Return (L,) the time of each line's middle beam after the scan stamp [s].
+
+    Args:
+        lines: :class:`~landmark_nav.laser.lines.LineSegment` objects (``first_index``,
+            ``last_index``).
+        time_increment: The scan's time between beams [s].
+    """
+    return float(time_increment) * np.array(
+        [0.5 * (ln.first_index + ln.last_index) for ln in lines], dtype=float).reshape(len(lines))
+
+
 @dataclass(frozen=True, eq=False)
 class Corners:
     """One scan's features in the laser frame: M corners, optionally L lines and the scan.
@@ -254,11 +266,7 @@ class Corners:
                    np.array([c.opening for c in corners], dtype=float).reshape(m),
                    float(time_increment) * np.array([c.index for c in corners],
                                                     dtype=float).reshape(m),
-                   lines,
-                   float(time_increment) * np.array(
-                       [0.5 * (ln.first_index + ln.last_index) for ln in lines],
-                       dtype=float).reshape(len(lines)),
-                   line_sigma_r, scan)
+                   lines, line_beam_times(lines, time_increment), line_sigma_r, scan)
 
     def __len__(self) -> int:
         """Return the number of corners."""
@@ -633,5 +641,5 @@ class SlamFrontend:
         return step
 
 
-__all__ = ['Corners', 'FEATURE_EVENTS', 'FrontendParams', 'ODOMETRY_EVENTS',
+__all__ = ['Corners', 'FEATURE_EVENTS', 'FrontendParams', 'line_beam_times', 'ODOMETRY_EVENTS',
            'ODOMETRY_NOISE_MODELS', 'odometry_noise_model', 'SlamFrontend', 'Step']

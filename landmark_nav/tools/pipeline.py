@@ -60,10 +60,11 @@ def bag_slam_settings(bag: str) -> List[str]:
     """``ekf_slam`` parameters a bag states, as ``-p`` arguments (module docstring).
 
     The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
-    ``ground_truth.yaml``) and ``odometry.model``: ``custom_data``
-    ``landmark_nav.drift_model``, ``simulator`` for a simulator recording, else nothing (the
-    node's default, ``pioneer``). Nothing for what the bag does not state or a bag that
-    cannot be read (the player reports that).
+    ``ground_truth.yaml``), its range noise (``laser_sigma_range``, ``lines.sigma_r``) and
+    bearing noise (``lines.sigma_phi``), as ``evaluate`` uses them, and ``odometry.model``:
+    ``custom_data`` ``landmark_nav.drift_model``, ``simulator`` for a simulator recording,
+    else nothing (the node's default, ``pioneer``). Nothing for what the bag does not state
+    or a bag that cannot be read (the player reports that).
     """
     from pathlib import Path
 
@@ -84,6 +85,10 @@ def bag_slam_settings(bag: str) -> List[str]:
     if not any('(default)' in n for n in notes):
         mount = ','.join(repr(float(v)) for v in laser.mount)
         out += ['-p', f'laser_pose:=[{mount}]']
+    if not any('no laser range noise' in n for n in notes):  # lines and visibility
+        sr, sp = repr(float(laser.sigma_range)), repr(float(laser.sigma_angle))
+        out += ['-p', f'laser_sigma_range:={sr}', '-p', f'lines.sigma_r:={sr}',
+                '-p', f'lines.sigma_phi:={sp}']
     model = custom.get(DRIFT_KEY) or ('simulator' if meta is not None else None)
     if model:
         out += ['-p', f'odometry.model:={model}']
