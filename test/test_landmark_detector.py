@@ -12,9 +12,9 @@ from landmark_nav.sim.camera_scenarios import default_camera, landmark_view, Vie
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.detector import (chain_edges, corner_groups, corner_neighbours,
                                           corner_pixels, detect_landmarks, DetectorParams,
-                                          find_frames, frame_edges, image_problem, read_code,
-                                          saddle_corners, sample_cells, smooth, unblur_code,
-                                          unmix_cells)
+                                          edge_points, find_frames, frame_edges,
+                                          image_problem, read_code, saddle_corners,
+                                          sample_cells, smooth, unblur_code, unmix_cells)
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 import pytest
@@ -480,3 +480,16 @@ def test_fast_mode_finds_the_same_landmarks_with_full_resolution_corners():
         assert [d.code for d in fast] == [d.code for d in full] == [123456789]
         assert np.abs(fast[0].corners - full[0].corners).max() < 1e-3    # 4e-5 measured
         assert fast[0].rotation == full[0].rotation
+
+
+def test_edge_points_of_large_blocks_beyond_the_remap_limit():
+    # 40 segments of 400 px blocks ask for 76 800 profile samples, more than one
+    # cv2.remap call takes (fewer than 32 767 columns); a crash on a cluttered view before
+    img = np.zeros((600, 600), np.float32)
+    img[:, 300:] = 200.0
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    starts = np.tile([300.0, 10.0], (40, 1))
+    ends = np.tile([300.0, 590.0], (40, 1))
+    pts, seg = edge_points(img, starts, ends, np.full(40, 400.0))
+    assert len(pts) == 240 and np.array_equal(np.unique(seg), np.arange(40))
+    np.testing.assert_allclose(pts[:, 0], 299.5, atol=1e-3)    # between columns 299 and 300

@@ -191,6 +191,12 @@ class DetectorParams:
             block: all 18 such codes read correctly, cell margins 0.09-0.77.
         unblur_residual: largest RMS misfit of the pixel model, fraction of the contrast
             (those 18: at most 0.049).
+        unblur_small_px: frames whose mean corner spacing is below this [px] need
+            ``unblur_small_margin`` (at least) for a pixel reading.
+        unblur_small_margin: composites in real photographs, seeds 1-3 at 3-5 px per
+            block: of the codes only the pixel reading found, one was wrong (margin 0.31,
+            3.05 px spacing, contrast 36), 12 of about 150 right ones had margins under
+            0.35 at spacings under 3.5 px (all at 3 px per block but 2 at 4 px).
         corner_method: ``'saddle'`` (extension, default): corner candidates are the strong
             saddle points of G (:func:`saddle_corners`); ``'eq1'``: the chapter's corner
             filters and groups (eq. 1-2, :func:`corner_pixels`, :func:`corner_groups`;
@@ -237,6 +243,8 @@ class DetectorParams:
     decimate: int = 1
     unblur_margin: float = 0.3
     unblur_residual: float = 0.08
+    unblur_small_px: float = 3.5
+    unblur_small_margin: float = 0.35
     corner_method: str = 'saddle'
     saddle_threshold: float = 1000.0
     saddle_kappa: float = 0.1
@@ -263,6 +271,7 @@ class DetectorParams:
             'deblur_residual': (0.0, 1.0), 'second_neighbour_angle': (0.0, 45.0),
             'max_gaps': (0, 2), 'decimate': (1, 4), 'unblur_margin': (0.0, 1.0),
             'unblur_residual': (0.0, 1.0), 'saddle_threshold': (0.0, 1e6),
+            'unblur_small_px': (0.0, 100.0), 'unblur_small_margin': (0.0, 1.0),
             'saddle_kappa': (0.0, 1.0)}
         for name, (lo, hi) in checks.items():
             v = getattr(self, name)
@@ -1033,9 +1042,13 @@ def edge_points(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, depth: 
         pts_img, image = pts - image.offset, image.image
     else:
         pts_img = pts
-    flat = pts_img.reshape(1, -1, 2).astype(np.float32)
-    vals = cv2.remap(image, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:3]).astype(float)
+    flat = pts_img.reshape(-1, 2).astype(np.float32)
+    # cv2.remap maps need fewer than 32767 columns: a frame with blocks of a hundred pixels
+    # and more (a candidate in a cluttered view) asks for more samples than that
+    vals = np.concatenate([
+        cv2.remap(image, flat[None, i:i + 32000, 0], flat[None, i:i + 32000, 1],
+                  cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        for i in range(0, len(flat), 32000)]).reshape(pts.shape[:3]).astype(float)
     rows = np.arange(len(k))[:, None]
     tail = k[:, None] - 1 - np.arange(3)[None, :]                       # last three samples
     lo = vals[:, :, :3].mean(axis=2)                                   # (S, J)
@@ -1796,7 +1809,10 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
         if not _grid_inside(fg.grid, w, h):
             continue
         cells = sample_cells(raw, fg.grid, params.cell_samples, params.cell_margin)
-        smallest = float(np.min(np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2)))
+        spacings = np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2)
+        smallest = float(np.min(spacings))
+        unblur_margin = params.unblur_margin if float(np.mean(spacings)) >= \
+            params.unblur_small_px else max(params.unblur_margin, params.unblur_small_margin)
         margin = params.min_margin if smallest >= params.small_block_px else \
             max(params.min_margin, params.small_block_margin)
         reading = read_code(cells, design, params.min_contrast, margin, params.deblur_margin,
@@ -1812,7 +1828,7 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
                 reading = read_code(cells, design, params.min_contrast, margin,
                                     params.deblur_margin, params.deblur_residual,
                                     params.block_ring, _unblur(raw, fg.grid, design, params),
-                                    params.unblur_margin, params.unblur_residual)
+                                    unblur_margin, params.unblur_residual)
         if debug is not None:
             debug['grids'].append(fg)
             debug['readings'].append(reading)
