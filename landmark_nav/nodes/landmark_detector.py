@@ -86,7 +86,8 @@ DETECTOR_PARAMETERS = {
                         (0.0, 1.0), None),
     'unblur_small_px': ('frames with a mean corner spacing below this [px] need '
                         'unblur_small_margin for a pixel reading', (0.0, 100.0), None),
-    'unblur_small_margin': ('unblur_margin of such small frames', (0.0, 1.0), None),
+    'unblur_small_margin': ('unblur_margin of such small frames (1: no pixel reading)',
+                            (0.0, 1.0), None),
     'corner_method': ('saddle: corner candidates are the strong saddle points of the '
                       'smoothed image (finds 4-5 px blocks at strong tilt); eq1: the '
                       "chapter's corner filters and groups (eq. 1-2)", None,

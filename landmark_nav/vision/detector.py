@@ -193,10 +193,12 @@ class DetectorParams:
             (those 18: at most 0.049).
         unblur_small_px: frames whose mean corner spacing is below this [px] need
             ``unblur_small_margin`` (at least) for a pixel reading.
-        unblur_small_margin: composites in real photographs, seeds 1-3 at 3-5 px per
-            block: of the codes only the pixel reading found, one was wrong (margin 0.31,
-            3.05 px spacing, contrast 36), 12 of about 150 right ones had margins under
-            0.35 at spacings under 3.5 px (all at 3 px per block but 2 at 4 px).
+        unblur_small_margin: the ``unblur_margin`` of such small frames (1: no pixel
+            reading). Below 3.25 px the code cells are under 1.6 px and the pixel model
+            needs the grid to a fraction of that: the only two wrong pixel reads seen were
+            at 3.0 px spacing (composites in real photographs, seeds 1-3, margin 0.31;
+            simulated Table 2 views at 3 px, margin 0.45), while the right ones at 4-5 px
+            per block all had spacings of 3.26 px or more.
         corner_method: ``'saddle'`` (extension, default): corner candidates are the strong
             saddle points of G (:func:`saddle_corners`); ``'eq1'``: the chapter's corner
             filters and groups (eq. 1-2, :func:`corner_pixels`, :func:`corner_groups`;
@@ -243,8 +245,8 @@ class DetectorParams:
     decimate: int = 1
     unblur_margin: float = 0.3
     unblur_residual: float = 0.08
-    unblur_small_px: float = 3.5
-    unblur_small_margin: float = 0.35
+    unblur_small_px: float = 3.25
+    unblur_small_margin: float = 1.0
     corner_method: str = 'saddle'
     saddle_threshold: float = 1000.0
     saddle_kappa: float = 0.1
