@@ -12,7 +12,8 @@ from landmark_nav.sim.camera_scenarios import default_camera, landmark_view, Vie
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.detector import (chain_edges, corner_groups, corner_neighbours,
                                           corner_pixels, detect_landmarks, DetectorParams,
-                                          find_frames, frame_edges, image_problem, read_code,
+                                          edge_points, find_frames, frame_edges,
+                                          image_problem, read_code, saddle_corners,
                                           sample_cells, smooth, unblur_code, unmix_cells)
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
@@ -97,6 +98,63 @@ def test_corner_groups_merge_filters_at_22_5_degrees():
     groups = corner_groups(corner_pixels(smooth(img)))
     assert len(groups.points) == 1                      # C1 and C3 groups merged
     np.testing.assert_allclose(groups.points[0], (20.3, 19.6), atol=0.5)
+
+
+def l_corner(size=41, tip=(20.3, 19.6), angle=0.0, lo=0, hi=220, ss=8):
+    """Return one dark quadrant on white (an L-corner, e.g. a black block at the quiet zone)."""
+    n = size * ss
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / ss - 0.5
+    c, s = math.cos(angle), math.sin(angle)
+    u = c * (x - tip[0]) + s * (y - tip[1])
+    v = -s * (x - tip[0]) + c * (y - tip[1])
+    img = np.where((u < 0) & (v < 0), float(lo), float(hi))
+    return cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA).astype(np.uint8)
+
+
+@pytest.mark.parametrize('angle, polarity, expected', [
+    (0.0, 1, 0), (0.0, -1, 1), (math.pi / 4, 1, 2), (math.pi / 4, -1, 3)])
+def test_saddle_corners_filter_and_saddle_point(angle, polarity, expected):
+    # the same X-corners as eq. 1: one candidate with the eq. 1 filter's label, at the
+    # saddle point (measured within 0.07 px; the eq. 2 centre test allows 0.5)
+    c = saddle_corners(smooth(x_corner(angle=angle, polarity=polarity)), 1000.0, 0.1)
+    assert len(c.points) == 1 and c.filters[0] == expected
+    np.testing.assert_allclose(c.points[0], (20.3, 19.6), atol=0.1)
+    assert c.weights[0] > 10 * 1000.0
+
+
+@pytest.mark.parametrize('blur', [1.0, 1.5])
+def test_saddle_corners_drop_the_tip_of_an_l_corner(blur):
+    # an L-corner has a saddle-like Hessian at its tip too, but a gradient there: its
+    # Newton step is longer than max_step; an X-corner blurred alike is kept
+    def blurred(img):
+        return smooth(cv2.GaussianBlur(img, (0, 0), blur))
+    for angle in (0.0, 0.5, 1.0):
+        lc = blurred(l_corner(angle=angle))
+        assert len(saddle_corners(lc, 1000.0, 0.1, max_step=100.0).points) >= 1
+        assert len(saddle_corners(lc, 1000.0, 0.1).points) == 0
+        xc = saddle_corners(blurred(x_corner(angle=angle, lo=0)), 1000.0, 0.1)
+        assert len(xc.points) == 1
+        np.testing.assert_allclose(xc.points[0], (20.3, 19.6), atol=0.1)
+
+
+def test_saddle_corners_find_every_x_corner_of_a_small_landmark_at_60_degrees():
+    # 3.5 px per block (mean spacing) seen at 60 degrees: the eq. 1 filters miss 5-9 of the
+    # 20 frame X-corners in each view and no landmark is read; the saddle points give all
+    # of them and every landmark
+    eq1_missed = 0
+    for seed in range(6):
+        frame = view(code=156, distance=3.0, tilt=60.0, roll=20.0 * seed, seed=seed, noise=2.0)
+        lm = frame.landmarks[0]
+        truth = lm.edge_corners_px[:, :-1].reshape(-1, 2)
+        g = smooth(frame.image)
+
+        def missed(points):
+            d = np.linalg.norm(truth[:, None] - points[None], axis=2).min(axis=1)
+            return int(np.sum(d > 0.35 * lm.block_px))
+        assert missed(saddle_corners(g, 1000.0, 0.1).points) == 0
+        eq1_missed += missed(corner_groups(corner_pixels(g)).points) > 0
+        assert [d.code for d in detect_landmarks(frame.image, camera=CAMERA)] == [156]
+    assert eq1_missed >= 5
 
 
 # ---------------------------------------------------------------------- eq. 3-4
@@ -273,7 +331,8 @@ def test_image_problems_and_bad_arrays():
 
 @pytest.mark.parametrize('field, value', [('kind', '4x4'), ('k_lim', 0.0), ('k_min', 7.5),
                                           ('neighbour_mode', 'all'), ('max_neighbours', 1),
-                                          ('refine_edges', 1)])
+                                          ('refine_edges', 1), ('corner_method', 'harris'),
+                                          ('saddle_kappa', -0.1)])
 def test_detector_params_are_validated(field, value):
     with pytest.raises(ValueError, match=field):
         DetectorParams(**{field: value})
@@ -421,3 +480,16 @@ def test_fast_mode_finds_the_same_landmarks_with_full_resolution_corners():
         assert [d.code for d in fast] == [d.code for d in full] == [123456789]
         assert np.abs(fast[0].corners - full[0].corners).max() < 1e-3    # 4e-5 measured
         assert fast[0].rotation == full[0].rotation
+
+
+def test_edge_points_of_large_blocks_beyond_the_remap_limit():
+    # 40 segments of 400 px blocks ask for 76 800 profile samples, more than one
+    # cv2.remap call takes (fewer than 32 767 columns); a crash on a cluttered view before
+    img = np.zeros((600, 600), np.float32)
+    img[:, 300:] = 200.0
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    starts = np.tile([300.0, 10.0], (40, 1))
+    ends = np.tile([300.0, 590.0], (40, 1))
+    pts, seg = edge_points(img, starts, ends, np.full(40, 400.0))
+    assert len(pts) == 240 and np.array_equal(np.unique(seg), np.arange(40))
+    np.testing.assert_allclose(pts[:, 0], 299.5, atol=1e-3)    # between columns 299 and 300

@@ -841,8 +841,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='landmark detector second_neighbour_angle [deg] (0: before issue 20)')
     ap.add_argument('--set', nargs='+', default=[], metavar='NAME=VALUE',
                     help='landmark detector parameters (DetectorParams fields), e.g. '
-                    'max_gaps=0 refine_grid=false block_ring=false unblur_margin=1 (the '
-                    'detector before the small-landmark extensions)')
+                    'corner_method=eq1 small_block_px=4.5 (the corner stage of the chapter, '
+                    'the default before the saddle candidates), with max_gaps=0 '
+                    'refine_grid=false block_ring=false unblur_margin=1 (the detector '
+                    'before the small-landmark extensions)')
     ap.add_argument('--no-planar-start', action='store_true',
                     help='landmark pose from the quadrant guesses only (before issue 20)')
     ap.add_argument('--json', type=Path, default=None, help='write every outcome here')

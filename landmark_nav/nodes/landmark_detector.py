@@ -43,8 +43,8 @@ from visualization_msgs.msg import MarkerArray
 
 DETECTOR_PARAMETERS = {
     'sigma': ('std of the 3x3 Gaussian smoothing [px] (chapter: 0.95)', (0.1, 5.0), None),
-    'k_min': ('fixed part of the corner threshold k_c [grey levels] (eq. 1: 7)', (0, 255),
-              None),
+    'k_min': ('eq1 corner method: fixed part of the corner threshold k_c [grey levels] '
+              '(eq. 1: 7)', (0, 255), None),
     'neighbour_fraction': ('neighbour search radius as a fraction of the image height '
                            '(chapter: 0.2)', (0.01, 1.0), None),
     'max_neighbours': ('neighbours per corner (chapter: 8)', (2, 32), None),
@@ -84,6 +84,18 @@ DETECTOR_PARAMETERS = {
                       '(1: off)', (0.0, 1.0), None),
     'unblur_residual': ('largest misfit of the pixel blur model, fraction of the contrast',
                         (0.0, 1.0), None),
+    'unblur_small_px': ('frames with a mean corner spacing below this [px] need '
+                        'unblur_small_margin for a pixel reading', (0.0, 100.0), None),
+    'unblur_small_margin': ('unblur_margin of such small frames (1: no pixel reading)',
+                            (0.0, 1.0), None),
+    'corner_method': ('saddle: corner candidates are the strong saddle points of the '
+                      'smoothed image (finds 4-5 px blocks at strong tilt); eq1: the '
+                      "chapter's corner filters and groups (eq. 1-2)", None,
+                      ['saddle', 'eq1']),
+    'saddle_threshold': ('saddle method: smallest saddle strength (3x3 Sobel units)',
+                         (0.0, 1e6), None),
+    'saddle_kappa': ('saddle method: weight of the squared Hessian trace subtracted from the '
+                     'strength (suppresses saddles along strong edges)', (0.0, 1.0), None),
 }
 POSE_PARAMETERS = {
     'pixel_sigma': ('frame corner noise for the pose covariance [px]', (1e-4, 10.0), None),

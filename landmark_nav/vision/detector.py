@@ -4,7 +4,7 @@ The four steps of §2.2, one function each:
 
 1. :func:`corner_pixels` and :func:`corner_groups` -- the corner filters C1..C4 (eq. 1) on
    the 3 x 3 Gaussian-smoothed image and their 8-connected groups with intensity-weighted
-   centres (eq. 2);
+   centres (eq. 2); by default (extension, see below) :func:`saddle_corners` replaces them;
 2. :func:`corner_neighbours`, :func:`frame_edges` and :func:`find_frames` -- up to eight
    neighbours per corner within 1/5 of the image height, frame edges of six collinear
    corners (eq. 3) and frames of four edges sharing their end corners (eq. 4);
@@ -85,6 +85,15 @@ Readings of the chapter that needed a decision (documented here, tested in
   pattern and the blur (:func:`unblur_code`).
 * Fast mode (``decimate``): the corner filters and groups run on the image averaged over
   2 x 2 pixels, everything after them on the full image.
+* Extension (``corner_method='saddle'``, the default): on composites in real photographs
+  at 4-5 px per block nearly all lost landmarks had frame X-corners that the eq. 1
+  filters miss (samples 2-3 px out leave a block foreshortened to 2-3 px) or whose eq. 2
+  group merged with a neighbour 2 px away. The corner candidates are then the strong
+  saddle points of G (:func:`saddle_corners`: the Hessian of G by 3 x 3 Sobel
+  derivatives, local maxima of minus its determinant, L-corners and edge noise
+  rejected), each with the C1..C4 filter its orientation falls into, and the chains,
+  frames and code reading follow unchanged. ``corner_method='eq1'`` is the chapter's
+  stage.
 """
 
 from dataclasses import dataclass, field
@@ -132,7 +141,11 @@ class DetectorParams:
             under half of it) are read only with ``small_block_margin``.
         small_block_margin: the ``min_margin`` for such small frames: blur mixes cells of
             two pixels or less, and reads that would be wrong come with margins below 0.21
-            (simulated views at 3-4.5 px per block), so twice that is required.
+            (simulated views at 3-4.5 px per block), so twice that is required. On
+            composites in real photographs wrong reads with margins 0.22-0.25 came from
+            frames with 4.5-5 px spacing (2 of 300 trials at 4-6 px per block, seeds
+            11-14), hence ``small_block_px`` 6.5: the unmixed and pixel readings then
+            decide such codes (2 more detections, no wrong code in those 300 trials).
         max_corners: images with more corner groups than this are searched with the
             strongest ones only (bounded time on noise).
         refine_corners: refine the eq. 2 centres of a frame's corners with OpenCV's
@@ -178,6 +191,27 @@ class DetectorParams:
             block: all 18 such codes read correctly, cell margins 0.09-0.77.
         unblur_residual: largest RMS misfit of the pixel model, fraction of the contrast
             (those 18: at most 0.049).
+        unblur_small_px: frames whose mean corner spacing is below this [px] need
+            ``unblur_small_margin`` (at least) for a pixel reading.
+        unblur_small_margin: the ``unblur_margin`` of such small frames (1: no pixel
+            reading). Below 3.25 px the code cells are under 1.6 px and the pixel model
+            needs the grid to a fraction of that: the only two wrong pixel reads seen were
+            at 3.0 px spacing (composites in real photographs, seeds 1-3, margin 0.31;
+            simulated Table 2 views at 3 px, margin 0.45), while the right ones at 4-5 px
+            per block all had spacings of 3.26 px or more.
+        corner_method: ``'saddle'`` (extension, default): corner candidates are the strong
+            saddle points of G (:func:`saddle_corners`); ``'eq1'``: the chapter's corner
+            filters and groups (eq. 1-2, :func:`corner_pixels`, :func:`corner_groups`;
+            ``k_min``, ``axial_offset``, ``diagonal_offset`` and ``merge_distance`` apply
+            to it only). Composites in real photographs, seed 1, 100 per size: 3 / 4 / 5
+            px per block 0.38 / 0.82 / 0.95 instead of 0.09 / 0.64 / 0.77, 0 of 1020
+            landmark-free frames, 9.2 instead of 16.8 ms per frame.
+        saddle_threshold: smallest saddle strength of :func:`saddle_corners` (3 x 3 Sobel
+            units; frame X-corners on the composites at 4 px: median 8000, 5th
+            percentile 1070).
+        saddle_kappa: weight of the squared Hessian trace subtracted from the strength
+            (suppresses weak saddles along strong edges; 0.1: spurious candidates within
+            5 px of a frame corner at 12 px per block 1.1 instead of 9.7 per frame).
     """
 
     kind: str = '3x3'
@@ -196,7 +230,7 @@ class DetectorParams:
     cell_margin: float = 0.2
     min_contrast: float = 20.0
     min_margin: float = 0.2
-    small_block_px: float = 4.5
+    small_block_px: float = 6.5
     small_block_margin: float = 0.4
     max_corners: int = 4000
     refine_corners: bool = True
@@ -211,11 +245,19 @@ class DetectorParams:
     decimate: int = 1
     unblur_margin: float = 0.3
     unblur_residual: float = 0.08
+    unblur_small_px: float = 3.25
+    unblur_small_margin: float = 1.0
+    corner_method: str = 'saddle'
+    saddle_threshold: float = 1000.0
+    saddle_kappa: float = 0.1
 
     def __post_init__(self) -> None:
         """Validate the values (ValueError naming the field)."""
         if self.kind not in ('3x3', '2x2'):
             raise ValueError(f"kind must be '3x3' or '2x2'; got {self.kind!r}")
+        if self.corner_method not in ('eq1', 'saddle'):
+            raise ValueError(f"corner_method must be 'eq1' or 'saddle'; got "
+                             f'{self.corner_method!r}')
         if self.neighbour_mode not in ('closest', 'sectors'):
             raise ValueError(f"neighbour_mode must be 'closest' or 'sectors'; got "
                              f'{self.neighbour_mode!r}')
@@ -230,7 +272,9 @@ class DetectorParams:
             'refine_window': (0.1, 0.5), 'deblur_margin': (0.0, 1.0),
             'deblur_residual': (0.0, 1.0), 'second_neighbour_angle': (0.0, 45.0),
             'max_gaps': (0, 2), 'decimate': (1, 4), 'unblur_margin': (0.0, 1.0),
-            'unblur_residual': (0.0, 1.0)}
+            'unblur_residual': (0.0, 1.0), 'saddle_threshold': (0.0, 1e6),
+            'unblur_small_px': (0.0, 100.0), 'unblur_small_margin': (0.0, 1.0),
+            'saddle_kappa': (0.0, 1.0)}
         for name, (lo, hi) in checks.items():
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) \
@@ -474,6 +518,123 @@ def corner_groups(pixels: Sequence[np.ndarray], merge_distance: float = 1.5) -> 
                                    np.bincount(comp, sy, n_comp) / gw])
             wsum, gfilt = gw, gfilt[strongest]
     return Corners(pts, wsum, gfilt)
+
+
+def saddle_corners(g: np.ndarray, threshold: float = 1000.0, kappa: float = 0.0,
+                   max_step: float = 1.5, relative: float = 0.1, radius: float = 8.0,
+                   border: int = 3) -> Corners:
+    """Return X-corner candidates as strong saddle points of the smoothed image (extension).
+
+    Extension for small and strongly tilted landmarks (``DetectorParams.corner_method``
+    ``'saddle'``, the default; ``'eq1'`` is the chapter's eq. 1-2). The eq. 1 filters
+    sample G 2-3 px from the corner, outside a block foreshortened to 2-3 px, and the
+    8-connected groups (eq. 2) of two X-corners 2 px apart merge into one centre between
+    them. At an X-corner the grey levels of G form a saddle whose strength needs no
+    sample outside the blocks: with the second derivatives of G (3 x 3 Sobel) the
+    strength is ``S = Gxy^2 - Gxx Gyy - kappa (Gxx + Gyy)^2`` (minus the Hessian
+    determinant, less a multiple of the squared trace, which is zero at a symmetric
+    X-corner but large across a straight edge, whose noise otherwise makes weak saddles
+    along every strong edge). Every pixel where S is a 3 x 3 local maximum above
+    ``threshold`` is a candidate, placed at the saddle point of the local quadratic model
+    (one Newton step ``-H^-1 grad G``); a candidate whose step is longer than
+    ``max_step`` is dropped: the gradient vanishes at an X-corner, but not at the tip of
+    an L-corner (one dark quadrant, e.g. a black block's corner at the quiet zone), whose
+    model saddle lies about 1.8 blur sigmas away. The filter (C1..C4, for the polarity
+    test of the edge chains) is the quarter of the saddle orientation ``atan2(Gxy, (Gyy -
+    Gxx) / 2)``: C3 (bright above and below) around 0 degrees, C1 (bright upper-left and
+    lower-right) around 90, C4 around 180, C2 around -90.
+
+    Composites in real photographs (``landmarks_real``, seed 1): a frame X-corner without
+    a candidate within 0.35 block in 3 / 1 of 50 trials at 4 / 5 px per block (every
+    second trial), where eq. 1-2 leave one in 33 / 20 of the 100 trials, with fewer
+    candidates (median 230-370 per frame instead of about 880).
+
+    Args:
+        g: (H, W) smoothed image (:func:`smooth`), uint8 or float.
+        threshold: smallest strength S, in the units of the 3 x 3 Sobel derivatives
+            of grey levels (16 (grey level / px^2)^2).
+        kappa: weight of the squared trace in S.
+        max_step: longest Newton step to the saddle point [px].
+        relative: candidates weaker than this fraction of another candidate within
+            ``radius`` [px] are dropped (0: off).
+        radius: see ``relative``.
+        border: pixels at the image border that are never corners.
+
+    Returns:
+        :class:`Corners` with the strengths S as weights.
+    """
+    g = np.asarray(g)
+    if g.dtype != np.uint8:
+        g = g.astype(np.float32)
+    h, w = g.shape
+    empty = Corners(np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8))
+    if h <= 2 * border + 2 or w <= 2 * border + 2:
+        return empty
+    depth = cv2.CV_16S if g.dtype == np.uint8 else cv2.CV_32F     # exact for 8 bits
+    gxx = cv2.Sobel(g, depth, 2, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    gyy = cv2.Sobel(g, depth, 0, 2, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    gxy = cv2.Sobel(g, depth, 1, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    # S = Gxy^2 + ((Gxx - Gyy) / 2)^2 - (1/4 + kappa) (Gxx + Gyy)^2 <= 2 max(|Gxy|,
+    # |Gxx - Gyy| / 2)^2: only pixels where that bound exceeds the threshold (a few % of a
+    # photograph) can be corners, so S is evaluated there only (the others are 0 below)
+    bound = math.sqrt(max(float(threshold), 0.0) / 2.0)
+    maybe = (np.abs(gxy) > bound) | (np.abs(cv2.subtract(gxx, gyy)) > 2.0 * bound)
+    maybe[:border] = False
+    maybe[h - border:] = False
+    maybe[:, :border] = False
+    maybe[:, w - border:] = False
+    idx = np.flatnonzero(maybe)
+    fxx = gxx.ravel()[idx].astype(np.float64)
+    fyy = gyy.ravel()[idx].astype(np.float64)
+    fxy = gxy.ravel()[idx].astype(np.float64)
+    tr = fxx + fyy
+    strength = fxy * fxy - fxx * fyy - kappa * tr * tr
+    s = np.zeros(h * w)
+    s[idx] = strength
+    sel = np.flatnonzero(strength > threshold)
+    # 3 x 3 local maxima (ties kept) among the strong pixels (none is at the border)
+    for off in (-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1):
+        sel = sel[strength[sel] >= s[idx[sel] + off]]
+    if not len(sel):
+        return empty
+    idx = idx[sel]
+    y, x = np.divmod(idx, w)
+    xy = np.column_stack([x, y])
+    sxx, syy, sxy, wgt = fxx[sel], fyy[sel], fxy[sel], strength[sel]
+    # gradient at the pixel (3 x 3 Sobel: 8 grad, and 4 Hessian, in these units)
+    patch = g[y[:, None, None] + np.arange(-1, 2)[None, :, None],
+              x[:, None, None] + np.arange(-1, 2)[None, None, :]].astype(np.float64)
+    gx = (patch[:, :, 2] - patch[:, :, 0]) @ np.array([1.0, 2.0, 1.0]) / 8.0
+    gy = (patch[:, 2, :] - patch[:, 0, :]) @ np.array([1.0, 2.0, 1.0]) / 8.0
+    hxx, hyy, hxy = sxx / 4.0, syy / 4.0, sxy / 4.0
+    det = hxx * hyy - hxy * hxy                                  # < 0 at a saddle
+    with np.errstate(divide='ignore', invalid='ignore'):
+        dx = -(hyy * gx - hxy * gy) / det                        # -H^-1 grad
+        dy = -(hxx * gy - hxy * gx) / det
+    step = np.column_stack([dx, dy]).astype(np.float64)
+    # the gradient vanishes at an X-corner (its saddle point lies within the peak pixel)
+    # but not at the tip of an L-corner (one dark quadrant: a black block's corner at the
+    # quiet zone), whose quadratic model puts the saddle point about 1.8 blur sigmas away
+    keep = np.all(np.isfinite(step), axis=1) & (np.hypot(step[:, 0], step[:, 1]) <= max_step)
+    pts = xy[keep].astype(np.float64) + step[keep]
+    sxx, syy, sxy, wgt = sxx[keep], syy[keep], sxy[keep], wgt[keep]
+    if relative > 0 and len(pts) > 1:
+        # a candidate weaker than ``relative`` of a candidate within ``radius`` is dropped:
+        # noise and JPEG make weak saddles on the arms of a large, sharp X-corner that
+        # crowd its neighbours out of their direction sectors (composites at 12-15 px per
+        # block: 4-7 % of the corner's strength, 5-8 px away; frame X-corners at 3-5 px
+        # per block are at least 17 % of any candidate near them)
+        pairs = cKDTree(pts).query_pairs(radius, output_type='ndarray')
+        if len(pairs):
+            near = wgt.copy()
+            np.maximum.at(near, pairs[:, 0], wgt[pairs[:, 1]])
+            np.maximum.at(near, pairs[:, 1], wgt[pairs[:, 0]])
+            strong = wgt >= relative * near
+            pts, sxx, syy, sxy, wgt = (a[strong] for a in (pts, sxx, syy, sxy, wgt))
+    ang = np.arctan2(sxy, 0.5 * (syy - sxx))                     # orientation of the saddle
+    quarter = np.floor((ang + 0.25 * math.pi) / (0.5 * math.pi)).astype(np.int64) % 4
+    filt = np.array([2, 0, 3, 1], np.int8)[quarter]              # 0 deg C3, 90 C1, 180 C4, -90 C2
+    return Corners(pts, wgt.astype(np.float64), filt)
 
 
 # ---------------------------------------------------------------------- 2.2.2 frames
@@ -883,9 +1044,13 @@ def edge_points(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, depth: 
         pts_img, image = pts - image.offset, image.image
     else:
         pts_img = pts
-    flat = pts_img.reshape(1, -1, 2).astype(np.float32)
-    vals = cv2.remap(image, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:3]).astype(float)
+    flat = pts_img.reshape(-1, 2).astype(np.float32)
+    # cv2.remap maps need fewer than 32767 columns: a frame with blocks of a hundred pixels
+    # and more (a candidate in a cluttered view) asks for more samples than that
+    vals = np.concatenate([
+        cv2.remap(image, flat[None, i:i + 32000, 0], flat[None, i:i + 32000, 1],
+                  cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        for i in range(0, len(flat), 32000)]).reshape(pts.shape[:3]).astype(float)
     rows = np.arange(len(k))[:, None]
     tail = k[:, None] - 1 - np.arange(3)[None, :]                       # last three samples
     lo = vals[:, :, :3].mean(axis=2)                                   # (S, J)
@@ -1605,8 +1770,16 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
         g8 = smooth(small, params.sigma)
     else:
         g8 = smooth(img, params.sigma)
-    pixels = corner_pixels(g8, params.k_min, params.axial_offset, params.diagonal_offset)
-    corners = corner_groups(pixels, params.merge_distance)
+    if params.corner_method == 'saddle':
+        # in fast mode a feature's second derivatives per (decimated) pixel are up to
+        # decimate^2 larger and the averaged noise smaller: the threshold scales with
+        # decimate^2 (composites at 8 px per block, 50 trials: every frame X-corner found
+        # at 1000 x 4 as at 1000, with a quarter of the candidates)
+        corners = saddle_corners(g8, params.saddle_threshold * params.decimate ** 2,
+                                 params.saddle_kappa)
+    else:
+        pixels = corner_pixels(g8, params.k_min, params.axial_offset, params.diagonal_offset)
+        corners = corner_groups(pixels, params.merge_distance)
     if params.decimate > 1:
         corners = Corners(corners.points * f + 0.5 * (f - 1), corners.weights,
                           corners.filters)
@@ -1638,7 +1811,10 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
         if not _grid_inside(fg.grid, w, h):
             continue
         cells = sample_cells(raw, fg.grid, params.cell_samples, params.cell_margin)
-        smallest = float(np.min(np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2)))
+        spacings = np.linalg.norm(np.diff(fg.edge_corners, axis=1), axis=2)
+        smallest = float(np.min(spacings))
+        unblur_margin = params.unblur_margin if float(np.mean(spacings)) >= \
+            params.unblur_small_px else max(params.unblur_margin, params.unblur_small_margin)
         margin = params.min_margin if smallest >= params.small_block_px else \
             max(params.min_margin, params.small_block_margin)
         reading = read_code(cells, design, params.min_contrast, margin, params.deblur_margin,
@@ -1654,7 +1830,7 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
                 reading = read_code(cells, design, params.min_contrast, margin,
                                     params.deblur_margin, params.deblur_residual,
                                     params.block_ring, _unblur(raw, fg.grid, design, params),
-                                    params.unblur_margin, params.unblur_residual)
+                                    unblur_margin, params.unblur_residual)
         if debug is not None:
             debug['grids'].append(fg)
             debug['readings'].append(reading)
@@ -1687,4 +1863,5 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
 __all__ = ['CodeReading', 'Corners', 'Detection', 'DetectorParams', 'FrameGrid',
            'chain_edges', 'corner_groups', 'corner_neighbours', 'corner_pixels',
            'detect_landmarks', 'edge_points', 'find_frames', 'fit_frame', 'frame_edges',
-           'image_problem', 'read_code', 'refine_corners', 'sample_cells', 'smooth', 'unmix_cells']
+           'image_problem', 'read_code', 'refine_corners', 'saddle_corners', 'sample_cells',
+           'smooth', 'unmix_cells']
