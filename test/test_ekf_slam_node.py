@@ -325,6 +325,32 @@ def test_corner_sets_stamped_before_the_first_odometry_are_not_lost_at_start():
         slam.destroy_node()
 
 
+def test_a_base_that_starts_seconds_after_the_laser_loses_no_corner_set():
+    """The 10-minute live soak dropped 21 sets at its start: odometry came 3 s after the laser.
+
+    Before any odometry the node dropped all but MAX_PENDING (100) waiting sets, 2.5 s at
+    40 Hz, although the front end holds sets for start_hold_s (3 s) before the first sample.
+    """
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t, pose, cov: stamps.append(t)
+        sets = [t0 - 2_950_000_000 + k * 25_000_000 for k in range(120)]  # 2.975 s at 40 Hz
+        for t in sets:
+            slam.on_corners(corner_cloud(t, [good]))
+        assert len(slam.pending) == 120 and slam.stats.dropped_count == 0
+        slam.on_corners(corner_cloud(t0 + 100_000_000, [good]))  # 3.05 s after the first
+        assert slam.stats.dropped['no_odometry'] == 2 and len(slam.pending) == 119
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        assert stamps == sets[2:] + [t0 + 100_000_000]
+        assert slam.stats.dropped_count == 2  # the 118 sets before t0, less 2: held
+        assert slam.frontend.events['start_held'] == 116
+        slam.destroy_node()
+
+
 @pytest.mark.dds
 def test_path_is_bounded_and_published_at_the_display_rate():
     """The path was republished whole at every step and never trimmed (cost grew per scan)."""

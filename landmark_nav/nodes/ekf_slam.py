@@ -65,8 +65,12 @@ Bad input is reported with a warning throttled per kind of problem and counted o
 ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry that is not
 finite, repeated, older than the last sample or a jump (front-end events); corners with NaN
 or with a covariance that is not positive semi-definite are dropped; corner sets before any
-odometry or older than the last step are skipped; the oldest waiting set is dropped when
-more than ``MAX_PENDING`` wait for odometry.
+odometry (by more than ``start_hold_s``, or the robot moved at the start) or older than the
+last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING`` wait
+for odometry (before the first odometry sample: when it is more than ``start_hold_s`` older
+than the newest, the span the front end would hold it for). The scan is received best effort
+with a queue of ``SCAN_DEPTH`` (sensor-data QoS keeps 5: at start-up, while the first steps
+run, that lost scans at 40 Hz).
 """
 
 from collections import deque
@@ -82,8 +86,7 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.laser.lines import LineParams
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
-                                       output_path, ParameterError, ProblemWarner, run_node,
-                                       SENSOR_QOS)
+                                       output_path, ParameterError, ProblemWarner, run_node)
 from landmark_nav.nodes.line_extractor import LINE_PARAMETERS
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.ekf_slam import CORNER, LINE, OdometryNoise, SlamParams
@@ -163,8 +166,12 @@ FRONTEND_PARAMETERS = {
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
 MAX_PENDING = 100
+MAX_PENDING_START = 1000  # before any odometry: start_hold_s binds first
 #: Most feature sets waiting for their other part (corner cloud or scan).
 MAX_JOIN = 50
+SCAN_DEPTH = 20  # 0.5 s of a 40 Hz laser (the corner cloud: reliable, depth 10)
+SCAN_QOS = QoSProfile(depth=SCAN_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT,
+                      history=HistoryPolicy.KEEP_LAST)
 CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
 #: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
 _FEATURE_DROPS = {'out_of_order': 'out_of_order', 'before_odometry': 'no_odometry'}
@@ -260,7 +267,7 @@ class EkfSlamNode(Node):
                                  self._sub_events('corners/features'))
         if self.landmarks in ('lines', 'both') or self.visibility:
             parts.append('scan')
-            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SENSOR_QOS,
+            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SCAN_QOS,
                                  self._sub_events('scan'))
         self.join = StampJoin(parts, MAX_JOIN)
         self._topics = {'corners': 'corners/features', 'scan': 'scan'}
@@ -407,7 +414,19 @@ class EkfSlamNode(Node):
         """Give one feature set to the front end; publish the steps it completes."""
         t = corners.stamp_ns
         steps = self.frontend.add_features(corners, self.stats.received_ns)
-        if len(self.frontend.pending) > MAX_PENDING:
+        if self.frontend.odometry_span is None:
+            # No odometry yet (the base starts after the laser): the front end holds sets up
+            # to start_hold_s before its first sample, so that span, not MAX_PENDING, bounds
+            # the wait; a bound on the count too for a fast laser.
+            hold_s = self.frontend.frontend.start_hold_s
+            while self.frontend.pending and (
+                    self.frontend.pending[0][0] < t - int(hold_s * 1e9)
+                    or len(self.frontend.pending) > MAX_PENDING_START):
+                old = self.frontend.drop_oldest_pending()
+                self.stats.drop('no_odometry', f'Dropping corners at {old[0]} ns: no odometry '
+                                f'yet, and more than start_hold_s = {hold_s:g} s or '
+                                f'{MAX_PENDING_START} sets before the newest ({t} ns)')
+        elif len(self.frontend.pending) > MAX_PENDING:
             old = self.frontend.drop_oldest_pending()
             span = self.frontend.odometry_span
             self.stats.drop('not_covered', f'Dropping corners at {old[0]} ns: more than '
