@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.bag import BagReader
-from landmark_nav.conversions import make_odometry, stamp_to_ns
+from landmark_nav.conversions import make_odometry, make_scan, stamp_to_ns
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import run_slam
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_feature_cloud
@@ -348,6 +348,39 @@ def test_a_base_that_starts_seconds_after_the_laser_loses_no_corner_set():
         assert stamps == sets[2:] + [t0 + 100_000_000]
         assert slam.stats.dropped_count == 2  # the 118 sets before t0, less 2: held
         assert slam.frontend.events['start_held'] == 116
+        slam.destroy_node()
+
+
+def test_a_scan_before_its_corners_makes_one_step_not_two():
+    """The live soak's first 35 stamps were processed twice at start-up.
+
+    Discovery had not yet matched the corner extractor, so each scan went on alone
+    (corners "absent"), then its corners came and made a second step at the same stamp.
+    Now the corners are waited for during discovery, and a part whose set already went on
+    without it is dropped as late.
+    """
+    t0 = 1_700_000_000_000_000_000
+    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+
+    def scan(t):
+        return make_scan(t, 'laser', -1.5, 0.01, [4.0] * 301, 0.1, 30.0)
+
+    with RosHarness() as ros:
+        slam = EkfSlamNode(context=ros.context)
+        stamps = []
+        slam._publish = lambda t, pose, cov: stamps.append(t)
+        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        slam.on_odom(make_odometry(t0 + 200_000_000, 'odom', 'base_link', [0.02, 0.0, 0.0]))
+        slam.on_scan(scan(t0 + 50_000_000))  # no corner publisher yet: discovery
+        assert stamps == []
+        slam.on_corners(corner_cloud(t0 + 50_000_000, [good]))
+        assert stamps == [t0 + 50_000_000] and slam.stats.dropped_count == 0
+        slam._started -= 60.0  # long after start, still no corner publisher: not waited for
+        slam.on_scan(scan(t0 + 100_000_000))
+        assert stamps == [t0 + 50_000_000, t0 + 100_000_000]
+        slam.on_corners(corner_cloud(t0 + 100_000_000, [good]))  # came after all: late
+        assert stamps == [t0 + 50_000_000, t0 + 100_000_000]
+        assert slam.stats.dropped['late'] == 1
         slam.destroy_node()
 
 

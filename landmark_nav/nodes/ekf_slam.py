@@ -169,6 +169,7 @@ MAX_PENDING = 100
 MAX_PENDING_START = 1000  # before any odometry: start_hold_s binds first
 #: Most feature sets waiting for their other part (corner cloud or scan).
 MAX_JOIN = 50
+DISCOVERY_S = 10.0  # a part without a publisher is waited for this long (discovery)
 SCAN_DEPTH = 20  # 0.5 s of a 40 Hz laser (the corner cloud: reliable, depth 10)
 SCAN_QOS = QoSProfile(depth=SCAN_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
@@ -273,6 +274,10 @@ class EkfSlamNode(Node):
         self._topics = {'corners': 'corners/features', 'scan': 'scan'}
         self._absent_noted = set()
         self._publisher_counts = {}  # part -> (monotonic time, publisher count)
+        self._publisher_seen = {}  # part -> monotonic time it last had a publisher
+        self._handed = set()  # stamps of the last incomplete sets handed on
+        self._handed_order = deque()
+        self._started = time.monotonic()
         # Reused per step (publish serialises at once); only stamp, pose, covariance change.
         self._pose_msg = make_pose_with_covariance_stamped(0, self.map_frame, [0.0] * 3)
         self._odom_msg = make_odometry(0, self.map_frame, self.base_frame, [0.0] * 3)
@@ -368,8 +373,21 @@ class EkfSlamNode(Node):
         self._offer('scan', scan.stamp_ns, scan)
 
     def _offer(self, part: str, t: int, item) -> None:
-        """Join one part of a feature set; give the sets it completes to the front end."""
+        """Join one part of a feature set; give the sets it completes to the front end.
+
+        A part whose set already went on without it is dropped (``'late'``): processing it
+        again would make a second step at the same stamp.
+        """
+        if t in self._handed:
+            self.stats.drop('late', f'Dropping {self._topics[part]} at {t} ns: its feature '
+                            'set was processed without it (it came after the set went on)')
+            return
         for stamp, have, missing in self.join.add(part, t, item, self._has_publisher):
+            if missing:
+                self._handed.add(stamp)
+                self._handed_order.append(stamp)
+                if len(self._handed_order) > MAX_JOIN:
+                    self._handed.discard(self._handed_order.popleft())
             lost = [p for p in missing if self._has_publisher(p)]
             if lost:
                 self.warner.warn(f'Feature set at {stamp} ns without its {" and ".join(lost)} '
@@ -382,13 +400,25 @@ class EkfSlamNode(Node):
                                                  have.get('scan')))
 
     def _has_publisher(self, part: str) -> bool:
-        """Whether the part's topic has a publisher (graph queried at most once a second)."""
+        """Whether the part may still come (graph queried at most once a second).
+
+        It may when its topic has a publisher, or, for the corners (the landmarks), had one
+        or the node started less than ``DISCOVERY_S`` ago.
+
+        Without the grace, sets went on without their corners while discovery had not yet
+        matched the corner extractor (the live soak's first 35 steps; the corners then came
+        for sets already processed).
+        """
         now = time.monotonic()
         known = self._publisher_counts.get(part)
         if known is None or now - known[0] > 1.0:
             known = (now, self.count_publishers(self._topics[part]))
             self._publisher_counts[part] = known
-        return known[1] > 0
+            if known[1] > 0:
+                self._publisher_seen[part] = now
+        if known[1] > 0 or part != 'corners':
+            return known[1] > 0
+        return now - self._publisher_seen.get(part, self._started) < DISCOVERY_S
 
     def _feature_set(self, t: int, cols, scan) -> Corners:
         """Build the front end's feature set from corner rows and / or a scan."""
