@@ -344,10 +344,13 @@ def test_a_base_that_starts_seconds_after_the_laser_loses_no_corner_set():
         slam.on_corners(corner_cloud(t0 + 100_000_000, [good]))  # 3.05 s after the first
         assert slam.stats.dropped['no_odometry'] == 2 and len(slam.pending) == 119
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
-        slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
-        assert stamps == sets[2:] + [t0 + 100_000_000]
-        assert slam.stats.dropped_count == 2  # the 118 sets before t0, less 2: held
-        assert slam.frontend.events['start_held'] == 116
+        # No step before the second sample: still bounded by start_hold_s, not MAX_PENDING.
+        slam.on_corners(corner_cloud(t0 + 125_000_000, [good]))
+        assert len(slam.pending) == 119 and slam.stats.dropped['no_odometry'] == 3
+        slam.on_odom(make_odometry(t0 + 200_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        assert stamps == sets[3:] + [t0 + 100_000_000, t0 + 125_000_000]
+        assert slam.stats.dropped_count == 3  # the 118 sets before t0, less 3: held
+        assert slam.frontend.events['start_held'] == 115
         slam.destroy_node()
 
 

@@ -444,16 +444,17 @@ class EkfSlamNode(Node):
         """Give one feature set to the front end; publish the steps it completes."""
         t = corners.stamp_ns
         steps = self.frontend.add_features(corners, self.stats.received_ns)
-        if self.frontend.odometry_span is None:
-            # No odometry yet (the base starts after the laser): the front end holds sets up
-            # to start_hold_s before its first sample, so that span, not MAX_PENDING, bounds
+        if not self.frontend.events['processed']:
+            # No step yet (the base starts after the laser; the second odometry sample
+            # decides whether the robot stood still): the front end holds sets up to
+            # start_hold_s before its first sample, so that span, not MAX_PENDING, bounds
             # the wait; a bound on the count too for a fast laser.
             hold_s = self.frontend.frontend.start_hold_s
             while self.frontend.pending and (
                     self.frontend.pending[0][0] < t - int(hold_s * 1e9)
                     or len(self.frontend.pending) > MAX_PENDING_START):
                 old = self.frontend.drop_oldest_pending()
-                self.stats.drop('no_odometry', f'Dropping corners at {old[0]} ns: no odometry '
+                self.stats.drop('no_odometry', f'Dropping corners at {old[0]} ns: no step '
                                 f'yet, and more than start_hold_s = {hold_s:g} s or '
                                 f'{MAX_PENDING_START} sets before the newest ({t} ns)')
         elif len(self.frontend.pending) > MAX_PENDING:
