@@ -276,51 +276,6 @@ def test_a_piece_off_the_wall_leaves_the_chain_and_the_rest_merges(method):
     assert [round(ln.rho, 4) for ln in lines] == [1.0, 1.005, 1.0]
 
 
-@pytest.mark.parametrize('method', METHODS)
-def test_end_points_lie_on_the_end_beams_rays(method):
-    # A noisy wall seen at 0-35 deg incidence: the first and last supporting beams' rays
-    # end the segment (their points' projections would lie up to ~1 cm inside or outside
-    # the bearings in about half of the trials, and those end beams would miss the
-    # segment). 40 noise draws.
-    rng = np.random.default_rng(5)
-    phi = np.radians(np.arange(-35.0, 35.01, 1.0)) + math.pi / 2
-    for _ in range(40):
-        r = 3.0 / np.cos(phi - math.pi / 2) + rng.normal(0.0, 0.01, phi.size)
-        lines = extract_lines([cluster_of(r, phi)], LineParams(method=method))
-        assert len(lines) == 1
-        ln = lines[0]
-        for end, beam in ((ln.start, ln.first_index), (ln.end, ln.last_index)):
-            assert math.atan2(end[1], end[0]) == pytest.approx(phi[beam], abs=1e-12)
-            assert end @ ln.normal == pytest.approx(ln.rho, abs=1e-12)
-
-
-def test_grazing_end_points_keep_the_projection():
-    # A wall at 80-86 deg incidence, 6-14 m along the rays, with bearing noise (0.1 deg):
-    # there the ray of an end beam can meet the fitted line far beyond the end point's
-    # projection. An end moves outward onto its ray by at most see_through_tolerance
-    # (5 cm), else it stays at its projection (14 of 74 ends with this seed).
-    rng = np.random.default_rng(2)
-    phi = np.radians(np.arange(80.0, 86.01, 0.1))
-    kept, outward = 0, []
-    for _ in range(40):
-        r = (1.0 / np.cos(phi + rng.normal(0.0, SIGMA_PHI, phi.size))
-             + rng.normal(0.0, 0.01, phi.size))
-        pts = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
-        for ln in extract_lines([cluster_of(r, phi)], LineParams()):
-            tangent = np.array([-ln.normal[1], ln.normal[0]])
-            ends = ((ln.start, ln.first_index, -1.0), (ln.end, ln.last_index, 1.0))
-            sign = 1.0 if (ln.end - ln.start) @ tangent >= 0 else -1.0
-            for end, beam, side in ends:
-                proj = pts[beam] - (pts[beam] @ ln.normal - ln.rho) * ln.normal
-                if abs(math.atan2(end[1], end[0]) - phi[beam]) < 1e-12:  # on its ray
-                    outward.append(side * sign * float((end - proj) @ tangent))
-                else:
-                    kept += 1
-                    np.testing.assert_allclose(end, proj, atol=1e-12)
-    assert kept >= 5 and len(outward) >= 40
-    assert max(outward) <= 0.05 + 1e-12
-
-
 def test_split_pieces_eq4():
     pts = np.array([[0, 0], [1, 0.01], [2, 0], [2.01, 1], [2, 2]], float)
     assert split_pieces(pts, [0, 5], 0.05).tolist() == [[0, 2], [2, 4]]
@@ -457,18 +412,18 @@ def test_carmen_logs(name):
         # mean / worst scan, RMSE mean / max [m], scans. A fixed log gives the same figures
         # on every run, so the margin only covers floating-point differences.
         want = {
-            ('aces-corrected.log.gz', 'split_merge'): (0.6593339408629338, 0.15083798882681565,
-                                                       0.018189241776882824,
+            ('aces-corrected.log.gz', 'split_merge'): (0.6564549041505786, 0.05027932960893855,
+                                                       0.01812878451335237,
                                                        0.0266024917038544, 440),
-            ('aces-corrected.log.gz', 'alfa'): (0.6595348653087585, 0.15083798882681565,
-                                                0.01797250925291434, 0.026142912957437828,
+            ('aces-corrected.log.gz', 'alfa'): (0.6565693102482232, 0.05027932960893855,
+                                                0.01791613713786112, 0.025944137711420873,
                                                 440),
-            ('seattle-corrected.log.gz', 'split_merge'): (0.8488546407847778,
-                                                          0.6179775280898876,
-                                                          0.00945857456112102,
+            ('seattle-corrected.log.gz', 'split_merge'): (0.8433604331650956,
+                                                          0.6094182825484764,
+                                                          0.00937483110799954,
                                                           0.02487958366427969, 241),
-            ('seattle-corrected.log.gz', 'alfa'): (0.8473908385085397, 0.6066481994459834,
-                                                   0.008104770716911847, 0.01562691175120255,
+            ('seattle-corrected.log.gz', 'alfa'): (0.8419100924297941, 0.6061452513966481,
+                                                   0.008040752701648078, 0.01562691175120255,
                                                    241),
         }[name, method]
         got = (explained.mean(), explained.min(), rmse.mean(), rmse.max(), explained.size)

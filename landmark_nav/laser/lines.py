@@ -65,11 +65,9 @@ vectorised batch (fits from prefix sums of point moments):
    line). A lone beam in front (one return cannot tell an object from a spurious return)
    stays inside. See :func:`_occluded_extents`.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
-   RMSE above the split tolerance are dropped. End points are where the rays of the first
-   and last supporting beams meet the line: a segment covers the bearings of its support,
-   no beam outside them, and its end beams hit it. Where that crossing lies more than
-   ``see_through_tolerance`` beyond the projection of the end point on the line (grazing
-   incidence, where the crossing swings with the line's angle) the projection is kept.
+   RMSE above the split tolerance are dropped. End points are the projections of the
+   first and last supporting points, moved onto the ray of that beam when the projection
+   falls outside the supporting beams' bearings: a segment covers no beam outside them.
 
 Choices where the chapters are silent, or misprinted:
 
@@ -110,10 +108,9 @@ class LineSegment:
     Attributes:
         rho: Distance of the line to the laser origin, >= 0 [m] (eq. 5).
         alpha: Angle of the line normal, wrapped to [-pi, pi) [rad].
-        start: (2,) crossing of the first supporting beam's ray with the line, or the
-            projection of its point onto the line when the crossing lies more than
-            ``see_through_tolerance`` beyond it (grazing incidence) [m].
-        end: (2,) the same at the last supporting beam [m].
+        start: (2,) projection of the first supporting point onto the line, or the
+            crossing of its beam's ray with the line when that is nearer the middle [m].
+        end: (2,) the same at the last supporting point [m].
         num_points: Number of supporting points (the points of the fit; a line that hides
             its own noisy returns at grazing incidence keeps them in the fit but not in
             its extent, see step 5 above).
@@ -1296,23 +1293,20 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     proj = np.empty((2, first.size, 2))  # end point (first, last), line, (x, y)
     np.subtract(x, d * nx, out=proj[..., 0])
     np.subtract(y, d * ny, out=proj[..., 1])
-    # End points at the end beams: where the end beam's ray meets the line, so that the
-    # segment covers exactly the bearings of its support (no beam outside it, and its end
-    # beams too). The crossing moves an end outward from the projection by at most the
-    # see-through tolerance: at grazing incidence the crossing swings with the line's angle
-    # (rho d alpha / cos^2 of the incidence) while the projection does not, so there the
-    # projection stays.
+    # End points at the end beams: where a projection lies outside the bearings of the
+    # supporting beams, the end beam's ray meets the line (the segment then covers no beam
+    # outside its support). Inside, the projection stays (it does not depend on the range
+    # noise along a grazing ray).
     cp, sp = scan.cols[_COS:_TOL, ends]
     t = rho / (cp * nx + sp * ny)
     along = proj[..., 1] * nx - proj[..., 0] * ny  # position along the line (tangent)
     along_ray = t * (sp * nx - cp * ny)
     inward = np.where(along[1] >= along[0], 1.0, -1.0) * (along_ray - along) * _INWARD
     # nan fails; a ray along the line (through the origin) meets it nowhere useful
-    to_ray = ((t > 0.0) & (inward > -params.see_through_tolerance)
-              & (inward < np.abs(along[1] - along[0])))
-    if np.count_nonzero(to_ray):
-        proj[..., 0] = np.where(to_ray, t * cp, proj[..., 0])
-        proj[..., 1] = np.where(to_ray, t * sp, proj[..., 1])
+    inner = (t > 0.0) & (inward > 0.0) & (inward < np.abs(along[1] - along[0]))
+    if np.count_nonzero(inner):
+        proj[..., 0] = np.where(inner, t * cp, proj[..., 0])
+        proj[..., 1] = np.where(inner, t * sp, proj[..., 1])
     length = np.hypot(proj[1, :, 0] - proj[0, :, 0], proj[1, :, 1] - proj[0, :, 1])
     cov = f.cov
     ok = ((f.count >= params.min_points) & (length >= params.min_length)
