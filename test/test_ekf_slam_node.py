@@ -238,6 +238,18 @@ def corner_cloud(t, rows):
     return make_feature_cloud(t, 'laser', names, dict(zip(names, rows.T)))
 
 
+T0 = 1_700_000_000_000_000_000
+GOOD_CORNER = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]  # corner_cloud row
+
+
+def recording_node(ros):
+    """Return an ekf_slam node whose published steps' stamps go to the returned list."""
+    slam = EkfSlamNode(context=ros.context)
+    stamps = []
+    slam._publish = lambda t, pose, cov: stamps.append(t)
+    return slam, stamps
+
+
 @pytest.mark.dds
 def test_bad_input():
     t0 = 1_700_000_000_000_000_000
@@ -282,12 +294,9 @@ def test_bad_input():
 
 def test_out_of_order_corner_sets_are_processed_in_stamp_order():
     """A corner set older than one already queued used to crash the node (extrapolation)."""
-    t0 = 1_700_000_000_000_000_000
-    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    t0, good = T0, GOOD_CORNER
     with RosHarness() as ros:
-        slam = EkfSlamNode(context=ros.context)
-        stamps = []
-        slam._publish = lambda t, pose, cov: stamps.append(t)
+        slam, stamps = recording_node(ros)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
         slam.on_corners(corner_cloud(t0 + 200_000_000, [good]))  # waits for odometry
@@ -308,12 +317,9 @@ def test_corner_sets_stamped_before_the_first_odometry_are_not_lost_at_start():
     Stamped before the first odometry (the laser path is slower than /odom), they arrived
     after it and were dropped.
     """
-    t0 = 1_700_000_000_000_000_000
-    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    t0, good = T0, GOOD_CORNER
     with RosHarness() as ros:
-        slam = EkfSlamNode(context=ros.context)
-        stamps = []
-        slam._publish = lambda t, pose, cov: stamps.append(t)
+        slam, stamps = recording_node(ros)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         for dt in (-126_000_000, -101_000_000, -1_000_000, 24_000_000):
             slam.on_corners(corner_cloud(t0 + dt, [good]))
@@ -331,12 +337,9 @@ def test_a_base_that_starts_seconds_after_the_laser_loses_no_corner_set():
     Before any odometry the node dropped all but MAX_PENDING (100) waiting sets, 2.5 s at
     40 Hz, although the front end holds sets for start_hold_s (3 s) before the first sample.
     """
-    t0 = 1_700_000_000_000_000_000
-    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    t0, good = T0, GOOD_CORNER
     with RosHarness() as ros:
-        slam = EkfSlamNode(context=ros.context)
-        stamps = []
-        slam._publish = lambda t, pose, cov: stamps.append(t)
+        slam, stamps = recording_node(ros)
         sets = [t0 - 2_950_000_000 + k * 25_000_000 for k in range(120)]  # 2.975 s at 40 Hz
         for t in sets:
             slam.on_corners(corner_cloud(t, [good]))
@@ -362,16 +365,13 @@ def test_a_scan_before_its_corners_makes_one_step_not_two():
     Now the corners are waited for during discovery, and a part whose set already went on
     without it is dropped as late.
     """
-    t0 = 1_700_000_000_000_000_000
-    good = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]
+    t0, good = T0, GOOD_CORNER
 
     def scan(t):
         return make_scan(t, 'laser', -1.5, 0.01, [4.0] * 301, 0.1, 30.0)
 
     with RosHarness() as ros:
-        slam = EkfSlamNode(context=ros.context)
-        stamps = []
-        slam._publish = lambda t, pose, cov: stamps.append(t)
+        slam, stamps = recording_node(ros)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 200_000_000, 'odom', 'base_link', [0.02, 0.0, 0.0]))
         slam.on_scan(scan(t0 + 50_000_000))  # no corner publisher yet: discovery
