@@ -4,7 +4,7 @@
 true path) and ``landmark_nav pipeline slam`` (scans thinned to 10 Hz with
 ``laser_driver.skip=3``) run as processes; this test drives the robot
 by ``cmd_vel`` (``landmark_nav.tools.drive``, closed on ekf_slam's ``/odometry``) along the
-first leg of the ``short`` route and scores ekf_slam's poses against the emulator's truth.
+first leg of the ``short`` route (2 m, to its end) and scores ekf_slam's poses against the emulator's truth.
 The two-minute office run of the README is ``benchmarks/bench_live_slam.py``.
 """
 
@@ -45,7 +45,9 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         with RosHarness() as ros:
-            result = drive(ROUTES['short'][:2], (1.2, 1.2, 0.0), duration=7.0, wait=60.0,
+            # the first leg (2 m) to its end, not for a fixed time: on a loaded machine the
+            # base starts late and 7 s of driving once covered only 1.13 m
+            result = drive(ROUTES['short'][:1], (1.2, 1.2, 0.0), duration=40.0, wait=60.0,
                            record=tmp_path / 'slam.tum', context=ros.context,
                            log=lambda text: None)
     finally:
@@ -55,15 +57,17 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path):
         emu_out, _ = emulator.communicate(timeout=30)
     assert 'Traceback' not in out + emu_out, out + emu_out
     assert result['poses'] > 50, result  # the follower ran on ekf_slam's poses
+    assert result['reached'] == 1, result  # it stopped at the leg's end, not at the time-out
     est, ref = read_tum(tmp_path / 'slam.tum'), read_tum(truth)
     keep = (est.stamps_ns >= ref.stamps_ns[0]) & (est.stamps_ns <= ref.stamps_ns[-1])
     t0 = ref.stamps_ns[0]
     true = interpolate_pose((est.stamps_ns[keep] - t0) * 1e-9, (ref.stamps_ns - t0) * 1e-9,
                             _planar(ref))
     err = np.hypot(*(_planar(est)[keep, :2] - true[:, :2]).T)
-    assert keep.sum() > 50  # 10 scans/s for 7 s
+    assert keep.sum() > 50  # 10 scans/s for about 8 s
     assert float(np.hypot(*(true[-1, :2] - true[0, :2]))) > 1.2  # it really drove
-    print(f'live SLAM on the emulated robot: {keep.sum()} poses, ATE RMSE '
+    print(f'live SLAM on the emulated robot: {keep.sum()} poses in {result["seconds"]:.1f} s, '
+          f'{np.hypot(*(true[-1, :2] - true[0, :2])):.2f} m, ATE RMSE '
           f'{100 * np.sqrt(np.mean(err ** 2)):.2f} cm, max {100 * err.max():.2f} cm')
     # the emulated base has the simulator's wheels, hence odometry.model=simulator (with the
     # node's default 'pioneer' model: RMSE 0.31-0.65 cm). Measured over 5 runs, loaded and
