@@ -27,6 +27,16 @@ def test_a_held_domain_is_skipped_and_a_free_one_reused(tmp_path):
     assert _claim_in_child(58, tmp_path) == 58
 
 
+def test_the_runs_own_domain_is_locked_again_in_another_lock_dir(tmp_path):
+    """Holding domain D in one lock directory says nothing about another.
+
+    The test above once failed when this run's own domain happened to be 57.
+    """
+    domain = int(os.environ['ROS_DOMAIN_ID'])
+    assert claim_domain(domain, tmp_path) == domain
+    assert _claim_in_child(domain, tmp_path) == (20 if domain == 99 else domain + 1)
+
+
 def test_the_search_wraps_from_99_to_20(tmp_path):
     handles = []
     try:

@@ -11,7 +11,7 @@ from pathlib import Path
 import tempfile
 import threading
 import time
-from typing import Any, Callable, Dict, Iterable, List, Optional
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 from landmark_nav.bag import BagReader, message_class
 import rclpy
@@ -22,7 +22,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 
 _DOMAINS = range(20, 100)  # clear of the default domain 0 and of the port-range limit
-_claimed: Dict[int, Any] = {}  # domain id -> the open lock file that holds it
+# (lock directory, domain id) -> the open lock file that holds it
+_claimed: Dict[Tuple[str, int], Any] = {}
 
 
 def claim_domain(start: int, lock_dir: Optional[Path] = None) -> int:
@@ -40,7 +41,8 @@ def claim_domain(start: int, lock_dir: Optional[Path] = None) -> int:
     count = len(_DOMAINS)
     for k in range(count):
         domain_id = _DOMAINS[(start - _DOMAINS[0] + k) % count]
-        if domain_id in _claimed:
+        key = (str(lock_dir.resolve()), domain_id)
+        if key in _claimed:
             return domain_id
         handle = open(lock_dir / f'landmark_nav-dds-domain-{domain_id}.lock', 'a')
         try:
@@ -48,7 +50,7 @@ def claim_domain(start: int, lock_dir: Optional[Path] = None) -> int:
         except OSError:
             handle.close()
             continue
-        _claimed[domain_id] = handle
+        _claimed[key] = handle
         return domain_id
     raise RuntimeError(f'all DDS domains {_DOMAINS[0]}..{_DOMAINS[-1]} are held by other '
                        f'processes (lock files in {lock_dir})')
