@@ -302,12 +302,29 @@ def write_hallway_bag(path, seed: int, duration_s: float,
     return n
 
 
-def summarize(run: HallwayRun) -> dict:
-    """Return the figures of one run."""
+def summarize(run: HallwayRun,
+              lost_inflation_rad: float = LocalizerParams().lost_inflation[2]) -> dict:
+    """Return the figures of one run.
+
+    ``pos_max_moving_cm`` counts from the first frame after the robot has moved 1 cm (the
+    standstill frames after the initial draw apart); ``pos_over_5cm`` / ``head_over_1deg``
+    count the frames above the acceptance bounds from the first update on.
+    ``head_lost_z_max`` is the largest heading error while lost in units of the heading std
+    the filter would have from odometry alone, i.e. without the lost state's inflation by
+    ``lost_inflation_rad`` (exact, since the heading row of the motion Jacobian is
+    ``[0, 0, 1]``): below about 2 the drift while lost is what the odometry model predicts.
+    """
     bound = chi2.ppf(0.95, 3)
     track = ~run.lost
+    moving = run.travelled > 0.01
+    sd_odo = np.sqrt(np.maximum(run.cov[:, 2, 2] - lost_inflation_rad ** 2, 1e-12))
     return {
         'pos_max_cm': 100 * float(run.position_error.max()),
+        'pos_max_moving_cm': 100 * float(run.position_error[moving].max()),
+        'pos_over_5cm': int(np.count_nonzero(run.position_error > 0.05)),
+        'head_over_1deg': int(np.count_nonzero(run.heading_error > math.radians(1.0))),
+        'head_lost_z_max': float((run.heading_error / sd_odo)[run.lost].max())
+        if run.lost.any() else 0.0,
         'pos_max_trk_cm': 100 * float(run.position_error[track].max()),
         'head_max_trk_deg': math.degrees(float(run.heading_error[track].max())),
         'nees_in_95_trk': float(np.mean(run.nees[track] <= bound)),
@@ -345,9 +362,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         sd = (0.3, 0.3, math.radians(10.0))
         cfg = replace(cfg, offset=(a.offset[0], a.offset[1], math.radians(a.offset[2])),
                       init_cov=tuple(np.diag(np.square(sd)).ravel()))
-    keys = ('pos_max_cm', 'pos_rms_cm', 'head_max_deg', 'pos_max_trk_cm', 'head_max_trk_deg',
-            'nees_in_95', 'nees_in_95_trk', 'lost_episodes', 'converged_m', 'line_ms',
-            'filter_ms', 'frames')
+    keys = ('pos_max_cm', 'pos_max_moving_cm', 'pos_rms_cm', 'head_max_deg',
+            'pos_max_trk_cm', 'head_max_trk_deg', 'nees_in_95', 'nees_in_95_trk',
+            'pos_over_5cm', 'head_over_1deg', 'head_lost_z_max', 'lost_episodes',
+            'converged_m', 'line_ms', 'filter_ms', 'frames')
     print('seed ' + ' '.join(f'{k[:13]:>13}' for k in keys))
     table = []
     for seed in range(a.first_seed, a.first_seed + a.seeds):
