@@ -195,7 +195,13 @@ class MatchParams:
 
     Attributes:
         gate: Mahalanobis bound on ``d^2`` (chi-square, 2 dof; the chapter: 2).
-        sigma_px: std of image line end points [px] (measurement noise V).
+        sigma_px: std of image line end points [px] (measurement noise V). 0.9: on rendered
+            hallway runs (seeds 100-101, not the evaluation seeds; 5459 pairs kept by the
+            filter, residuals at the true pose) the smallest value in steps of 0.1 px that
+            leaves at most 1 % of the pairs outside the 99 % gate (0.84 %; 0.8 px: 1.08 %).
+            The errors are heavy-tailed: the median d^2 is 0.03 (chi-square median 1.39),
+            so the core of the pairs is more accurate than this and the tail is left to the
+            gate and the residual test.
         min_length_px: shorter image lines are not used.
         overlap_margin_px: an image segment must overlap the projected model segment
             extended by this much at both ends [px].
@@ -208,7 +214,7 @@ class MatchParams:
     """
 
     gate: float = 9.21
-    sigma_px: float = 1.5
+    sigma_px: float = 0.9
     min_length_px: float = 15.0
     overlap_margin_px: float = 10.0
     ambiguity_deg: float = 3.0
