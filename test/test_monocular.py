@@ -6,8 +6,9 @@ import math
 import cv2
 from landmark_nav.monocular.localizer import (CHAPTER_START_COV, LocalizerParams, LOST,
                                               ModelLocalizer, TRACKING)
-from landmark_nav.monocular.matching import (align, hough, innovation, inseparable_lines,
-                                             match_lines, predict_lines, PredictedLines)
+from landmark_nav.monocular.matching import (align, hough, image_line_covariance, innovation,
+                                             inseparable_lines, match_lines, predict_lines,
+                                             PredictedLines)
 from landmark_nav.monocular.model import (DEFAULT_MODEL_PATH, dump_model, hallway_model,
                                           LineModel, load_model, ModelError)
 from landmark_nav.monocular.visibility import (camera_pose, CameraMount, Intrinsics, project,
@@ -441,3 +442,18 @@ def test_line_sources_side_by_side_equal_their_single_runs():
     assert not np.array_equal(both['lsd'].n_lines, both['rwrht'].n_lines)
     with pytest.raises(ValueError, match='unknown line method'):
         run_hallway_methods(2, ('canny',), cfg)
+
+
+def test_sigma_px_table_recovers_the_end_point_noise_of_gaussian_pairs():
+    from landmark_nav.evaluation.model_localization import sigma_px_table
+    rng = np.random.default_rng(4)
+    seg = np.column_stack([rng.uniform(0, 320, (4000, 2)), rng.uniform(0, 240, (4000, 2))])
+    seg = seg[:, [0, 2, 1, 3]]
+    _, V1 = image_line_covariance(seg, 1.0)
+    mc = np.broadcast_to(np.diag([0.05, 1e-6]), V1.shape)
+    S = 0.9 ** 2 * V1 + mc
+    nu = np.einsum('kij,kj->ki', np.linalg.cholesky(S), rng.standard_normal((4000, 2)))
+    rows = {round(r[0], 1): r for r in sigma_px_table(nu, V1, mc, (0.6, 0.9, 1.5))}
+    assert 1.9 < rows[0.9][1] < 2.1                       # mean d^2 = 2 dof
+    assert 0.005 < rows[0.9][3] < 0.016                   # 1 % outside the 99 % gate
+    assert rows[1.5][1] < 1.0 < 2.5 < rows[0.6][1]

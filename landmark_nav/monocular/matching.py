@@ -197,8 +197,9 @@ class MatchParams:
         gate: Mahalanobis bound on ``d^2`` (chi-square, 2 dof; the chapter: 2).
         sigma_px: std of image line end points [px] (measurement noise V). 0.9: on rendered
             hallway runs (seeds 100-101, not the evaluation seeds; 5459 pairs kept by the
-            filter, residuals at the true pose) the smallest value in steps of 0.1 px that
-            leaves at most 1 % of the pairs outside the 99 % gate (0.84 %; 0.8 px: 1.08 %).
+            filter at 1.5 px, residuals at the true pose) the smallest value in steps of
+            0.1 px that leaves at most 1 % of the pairs outside the 99 % gate (0.84 %;
+            0.8 px: 1.08 %; ``model_localization --sigma-px 1.5 --seeds 2 --first-seed 100``).
             The errors are heavy-tailed: the median d^2 is 0.03 (chi-square median 1.39),
             so the core of the pairs is more accurate than this and the tail is left to the
             gate and the residual test.
