@@ -6,13 +6,14 @@ import math
 import cv2
 from landmark_nav.monocular.localizer import (CHAPTER_START_COV, LocalizerParams, LOST,
                                               ModelLocalizer, TRACKING)
-from landmark_nav.monocular.matching import (align, hough, innovation, match_lines,
-                                             predict_lines)
+from landmark_nav.monocular.matching import (align, hough, image_line_covariance, innovation,
+                                             inseparable_lines, match_lines, predict_lines,
+                                             PredictedLines)
 from landmark_nav.monocular.model import (DEFAULT_MODEL_PATH, dump_model, hallway_model,
                                           LineModel, load_model, ModelError)
 from landmark_nav.monocular.visibility import (camera_pose, CameraMount, Intrinsics, project,
                                                projection_jacobian, visible_lines,
-                                               world_to_camera)
+                                               VisibleLines, world_to_camera)
 from landmark_nav.sim import scenarios
 from landmark_nav.vision.rwrht import detect_model_lines, rwrht, RWRHTParams
 import numpy as np
@@ -175,6 +176,44 @@ def test_exact_lines_match_their_model_lines():
     # collinear model pieces share one Hough point, so pair by line, not by index
     assert len(mt) >= 0.8 * len(vis)
     np.testing.assert_allclose(innovation(mt.h, pr.h[mt.model]), 0.0, atol=1e-6)
+
+
+def _predicted(pixels):
+    px = np.asarray(pixels, float)
+    n = px.shape[0]
+    z = np.zeros((n, 2, 2))
+    return PredictedLines(VisibleLines(np.arange(n), np.zeros((n, 2, 3)), px), hough(px)[0],
+                          np.zeros((n, 2, 3)), z, z)
+
+
+def test_model_lines_closer_than_the_edge_resolution_are_inseparable():
+    base = [100.0, 40.0, 100.0, 160.0]
+    cases = {(102.0, 50.0, 102.0, 150.0): True,        # 2 px beside, overlapping
+             (104.0, 50.0, 104.0, 150.0): False,       # 4 px: two edges
+             (102.0, 170.0, 102.0, 230.0): False,      # 2 px beside, no overlap
+             (98.0, 40.0, 119.0, 160.0): False}        # crossing at 10 deg
+    for other, expected in cases.items():
+        got = inseparable_lines(_predicted([base, other]), 3.0, 3.0)
+        assert list(got) == [expected, expected], other
+
+
+def test_far_niche_corners_are_left_out_of_matching():
+    # from the start the wall corner of the niche at 18.05-18.95 m and its far corner
+    # project 1 px apart; nearer lines stay separable and match
+    m = hallway_model()
+    pose = np.array([0.75, 0.0, 0.0])
+    vis = visible_lines(m, pose, MOUNT, K, min_length_px=15)
+    pr = predict_lines(vis, pose, np.diag([1e-4, 1e-4, 1e-5]), MOUNT, K)
+    ins = inseparable_lines(pr, 3.0, 3.0)
+    start = m.vertices[m.edges[vis.index, 0]]
+    far = {(18.05, 1.0), (18.95, 1.0)}
+    flagged = {(round(x, 2), round(y, 2)) for x, y in start[ins, :2]}
+    assert far <= flagged
+    assert not np.any(ins & (np.maximum(start[:, 0], m.vertices[m.edges[vis.index, 1], 0])
+                             < 10.0))
+    mt = match_lines(pr, vis.pixels)
+    assert not np.any(ins[mt.model])
+    assert len(mt) >= 0.9 * np.count_nonzero(~ins)
 
 
 # ---------------------------------------------------------------------- RWRHT
@@ -403,3 +442,18 @@ def test_line_sources_side_by_side_equal_their_single_runs():
     assert not np.array_equal(both['lsd'].n_lines, both['rwrht'].n_lines)
     with pytest.raises(ValueError, match='unknown line method'):
         run_hallway_methods(2, ('canny',), cfg)
+
+
+def test_sigma_px_table_recovers_the_end_point_noise_of_gaussian_pairs():
+    from landmark_nav.evaluation.model_localization import sigma_px_table
+    rng = np.random.default_rng(4)
+    seg = np.column_stack([rng.uniform(0, 320, (4000, 2)), rng.uniform(0, 240, (4000, 2))])
+    seg = seg[:, [0, 2, 1, 3]]
+    _, V1 = image_line_covariance(seg, 1.0)
+    mc = np.broadcast_to(np.diag([0.05, 1e-6]), V1.shape)
+    S = 0.9 ** 2 * V1 + mc
+    nu = np.einsum('kij,kj->ki', np.linalg.cholesky(S), rng.standard_normal((4000, 2)))
+    rows = {round(r[0], 1): r for r in sigma_px_table(nu, V1, mc, (0.6, 0.9, 1.5))}
+    assert 1.9 < rows[0.9][1] < 2.1                       # mean d^2 = 2 dof
+    assert 0.005 < rows[0.9][3] < 0.016                   # 1 % outside the 99 % gate
+    assert rows[1.5][1] < 1.0 < 2.5 < rows[0.6][1]

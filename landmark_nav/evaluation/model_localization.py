@@ -19,7 +19,8 @@ frames inside the 95 % chi-square bound, 3 dof), lost episodes, time per frame o
 detector and of the filter, and the distance travelled before the error stays within
 5 cm / 1 deg. ``python -m landmark_nav.evaluation.model_localization --seeds 10`` prints
 the table (``--method`` picks the line source; ``--cover`` covers the camera);
-``--write-bag DIR --duration S`` records a run as a small bag instead.
+``--write-bag DIR --duration S`` records a run as a small bag instead, and ``--sigma-px S``
+prints the calibration table of the image line noise (:func:`pair_residuals`).
 """
 
 import argparse
@@ -27,14 +28,17 @@ from dataclasses import dataclass, field, replace
 import math
 import sys
 import time
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import wrap_angle
 from landmark_nav.localization.odometry import calibrate_control, control_from_poses
 from landmark_nav.monocular.localizer import (CHAPTER_START_COV, LocalizerParams, LOST,
                                               ModelLocalizer)
+from landmark_nav.monocular.matching import (align_cov, image_line_covariance, innovation,
+                                             predict_lines)
 from landmark_nav.monocular.model import hallway_model, LineModel
-from landmark_nav.monocular.visibility import camera_pose, CameraMount, Intrinsics
+from landmark_nav.monocular.visibility import (camera_pose, CameraMount, Intrinsics,
+                                               VisibleLines)
 from landmark_nav.sim.camera import CameraSimulator, Photometry, RenderOptions
 from landmark_nav.sim.model_scene import (door_frame_planes, model_planes, scene_at,
                                           SceneClutter)
@@ -184,8 +188,12 @@ def run_hallway(seed: int, cfg: HallwayRunConfig = HallwayRunConfig(),
 
 def run_hallway_methods(seed: int, methods: Sequence[str],
                         cfg: HallwayRunConfig = HallwayRunConfig(),
-                        model: Optional[LineModel] = None) -> Dict[str, HallwayRun]:
+                        model: Optional[LineModel] = None,
+                        on_update: Optional[Callable] = None) -> Dict[str, HallwayRun]:
     """Localize one rendered hallway run with several line sources side by side.
+
+    ``on_update(method, localizer, result, segments, truth)``, if given, is called after
+    every image update (e.g. :func:`pair_residuals`).
 
     Every source gets its own filter and its own RWRHT random stream (seed + 2000), so its
     run equals :func:`run_hallway` with ``cfg.method`` set to it; the frames are rendered
@@ -240,6 +248,8 @@ def run_hallway_methods(seed: int, methods: Sequence[str],
             toc = time.perf_counter()
             res = locs[method].update(lines.segments, t)
             tac = time.perf_counter()
+            if on_update is not None:
+                on_update(method, locs[method], res, lines.segments, truth_w)
             rows[method].append((t, travelled, truth_w, res.pose, res.cov, res.status == LOST,
                                  len(res.matches) if res.matches is not None and res.updated
                                  else 0, len(lines), 1e3 * (toc - tic), 1e3 * (tac - toc)))
@@ -302,12 +312,74 @@ def write_hallway_bag(path, seed: int, duration_s: float,
     return n
 
 
-def summarize(run: HallwayRun) -> dict:
-    """Return the figures of one run."""
+def pair_residuals(seeds: Sequence[int], cfg: HallwayRunConfig = HallwayRunConfig()
+                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residuals at the true pose of the pairs the filter kept, for calibrating ``sigma_px``.
+
+    Returns:
+        ``(nu (K, 2), V1 (K, 2, 2), model_cov (K, 2, 2))``: the pairs' Hough residuals
+        against the model lines projected at the true pose, their image line covariance
+        for an end-point noise of 1 px and the model noise, so that the pairs' ``d^2`` for
+        a given ``sigma_px`` is ``nu^T (sigma_px^2 V1 + model_cov)^-1 nu``
+        (:func:`sigma_px_table`).
+    """
+    nus, v1s, mcs = [], [], []
+
+    def collect(method, loc, res, segments, truth):
+        m = res.matches
+        if not res.updated or m is None or len(m) == 0:
+            return
+        pr = res.predicted
+        vis = VisibleLines(pr.visible.index[m.model], pr.visible.points[m.model],
+                           np.zeros((len(m), 4)))
+        lin = predict_lines(vis, truth, np.zeros((3, 3)), loc.mount, loc.K,
+                            loc.params.model_sigma_m)
+        seg = np.asarray(segments, dtype=float)[m.image]
+        h, V1 = image_line_covariance(seg, 1.0)
+        nus.append(innovation(m.h, lin.h))
+        v1s.append(align_cov(V1, h, lin.h))
+        mcs.append(lin.model_cov)
+
+    for seed in seeds:
+        run_hallway_methods(seed, (cfg.method,), cfg, on_update=collect)
+    return (np.concatenate(nus), np.concatenate(v1s), np.concatenate(mcs))
+
+
+def sigma_px_table(nu: np.ndarray, V1: np.ndarray, model_cov: np.ndarray,
+                   sigmas: Sequence[float], gate: float = 9.21) -> List[Tuple[float, ...]]:
+    """Return ``(sigma_px, mean d^2, median d^2, fraction outside the gate)`` per sigma."""
+    out = []
+    for sd in sigmas:
+        S = sd * sd * V1 + model_cov
+        d2 = np.einsum('ki,kij,kj->k', nu, np.linalg.inv(S), nu)
+        out.append((float(sd), float(d2.mean()), float(np.median(d2)),
+                    float(np.mean(d2 > gate))))
+    return out
+
+
+def summarize(run: HallwayRun,
+              lost_inflation_rad: float = LocalizerParams().lost_inflation[2]) -> dict:
+    """Return the figures of one run.
+
+    ``pos_max_moving_cm`` counts from the first frame after the robot has moved 1 cm (the
+    standstill frames after the initial draw apart); ``pos_over_5cm`` / ``head_over_1deg``
+    count the frames above the acceptance bounds from the first update on.
+    ``head_lost_z_max`` is the largest heading error while lost in units of the heading std
+    the filter would have from odometry alone, i.e. without the lost state's inflation by
+    ``lost_inflation_rad`` (exact, since the heading row of the motion Jacobian is
+    ``[0, 0, 1]``): below about 2 the drift while lost is what the odometry model predicts.
+    """
     bound = chi2.ppf(0.95, 3)
     track = ~run.lost
+    moving = run.travelled > 0.01
+    sd_odo = np.sqrt(np.maximum(run.cov[:, 2, 2] - lost_inflation_rad ** 2, 1e-12))
     return {
         'pos_max_cm': 100 * float(run.position_error.max()),
+        'pos_max_moving_cm': 100 * float(run.position_error[moving].max()),
+        'pos_over_5cm': int(np.count_nonzero(run.position_error > 0.05)),
+        'head_over_1deg': int(np.count_nonzero(run.heading_error > math.radians(1.0))),
+        'head_lost_z_max': float((run.heading_error / sd_odo)[run.lost].max())
+        if run.lost.any() else 0.0,
         'pos_max_trk_cm': 100 * float(run.position_error[track].max()),
         'head_max_trk_deg': math.degrees(float(run.heading_error[track].max())),
         'nees_in_95_trk': float(np.mean(run.nees[track] <= bound)),
@@ -334,9 +406,22 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--write-bag', metavar='DIR', help='record the first --duration seconds '
                     'of seed --first-seed as a rosbag2 (MCAP) directory instead')
     ap.add_argument('--duration', type=float, default=10.0)
+    ap.add_argument('--sigma-px', type=float, metavar='FILTER_SIGMA_PX',
+                    help='instead of the figures: d^2 at the true pose of the pairs kept by a '
+                    'filter with this end-point noise, per candidate end-point noise '
+                    '(calibration of MatchParams.sigma_px; use seeds other than the '
+                    'evaluation seeds)')
     a = ap.parse_args(argv)
     cfg = HallwayRunConfig(method=a.method, max_frames=a.max_frames,
                            cover=tuple(a.cover) if a.cover else None)
+    if a.sigma_px is not None:
+        loc = replace(cfg.localizer, match=replace(cfg.localizer.match, sigma_px=a.sigma_px))
+        nu, V1, mc = pair_residuals(range(a.first_seed, a.first_seed + a.seeds),
+                                    replace(cfg, localizer=loc))
+        print(f'{len(nu)} pairs; sigma_px, mean d2, median d2, outside the 99 % gate')
+        for row in sigma_px_table(nu, V1, mc, np.arange(0.5, 1.55, 0.1)):
+            print(f'{row[0]:4.1f} {row[1]:6.2f} {row[2]:6.3f} {100 * row[3]:6.2f} %')
+        return 0
     if a.write_bag:
         n = write_hallway_bag(a.write_bag, a.first_seed, a.duration, cfg)
         print(f'{a.write_bag}: {n} images, {a.duration} s')
@@ -345,9 +430,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         sd = (0.3, 0.3, math.radians(10.0))
         cfg = replace(cfg, offset=(a.offset[0], a.offset[1], math.radians(a.offset[2])),
                       init_cov=tuple(np.diag(np.square(sd)).ravel()))
-    keys = ('pos_max_cm', 'pos_rms_cm', 'head_max_deg', 'pos_max_trk_cm', 'head_max_trk_deg',
-            'nees_in_95', 'nees_in_95_trk', 'lost_episodes', 'converged_m', 'line_ms',
-            'filter_ms', 'frames')
+    keys = ('pos_max_cm', 'pos_max_moving_cm', 'pos_rms_cm', 'head_max_deg',
+            'pos_max_trk_cm', 'head_max_trk_deg', 'nees_in_95', 'nees_in_95_trk',
+            'pos_over_5cm', 'head_over_1deg', 'head_lost_z_max', 'lost_episodes',
+            'converged_m', 'line_ms', 'filter_ms', 'frames')
     print('seed ' + ' '.join(f'{k[:13]:>13}' for k in keys))
     table = []
     for seed in range(a.first_seed, a.first_seed + a.seeds):

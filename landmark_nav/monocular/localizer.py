@@ -47,8 +47,9 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from .matching import (align, align_cov, image_line_covariance, innovation, match_lines,
-                       Matches, MatchParams, predict_lines, PredictedLines)
+from .matching import (align, align_cov, image_line_covariance, innovation,
+                       inseparable_lines, match_lines, Matches, MatchParams, predict_lines,
+                       PredictedLines)
 from .model import LineModel
 from .visibility import CameraMount, Intrinsics, visible_lines, VisibleLines
 from ..geometry import wrap_angle
@@ -337,6 +338,8 @@ class ModelLocalizer:
         S = (pred.cov + pred.model_cov)[:, None] + V[None]
         d2 = np.einsum('mni,mnij,mnj->mn', nu, np.linalg.inv(S), nu)
         gated = (d2 <= p.match.gate) & usable[None]
+        if p.match.resolve_px > 0:
+            gated[inseparable_lines(pred, p.match.resolve_px, p.match.ambiguity_deg)] = False
         unique = (gated.sum(axis=1) == 1)[:, None] & gated & (gated.sum(axis=0) == 1)[None]
         rows, cols = np.nonzero(unique)
         if rows.size == 0:

@@ -79,9 +79,11 @@ class ModelLocalizerNode(Node):
         match = MatchParams(
             gate=d('gate_chi2', 9.21, 'Mahalanobis gate of a pair (chi-square 2 dof)',
                    (0.5, 100.0)),
-            sigma_px=d('sigma_px', 1.5, 'end-point noise of image lines [px]', (0.05, 10.0)),
+            sigma_px=d('sigma_px', 0.9, 'end-point noise of image lines [px]', (0.05, 10.0)),
             min_length_px=d('min_line_px', 15.0, 'shortest image / model line used [px]',
-                            (1.0, 1000.0)))
+                            (1.0, 1000.0)),
+            resolve_px=d('resolve_px', 3.0, 'model lines closer than this to a parallel '
+                         'model line are not matched [px] (0: off)', (0.0, 50.0)))
         params = LocalizerParams(
             noise=noise, match=match, min_line_px=match.min_length_px,
             model_sigma_m=d('model_sigma_m', 0.02, 'std of the model vertices [m]',
