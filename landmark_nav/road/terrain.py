@@ -39,10 +39,10 @@ F_w width}``:
    are ``C_n``; neighbouring traversable pieces (no step or gap between them) whose
    profiles do not kink by more than ``split_rms`` are one segment (a smoother patch of a
    gravel road kept apart by the roughness test does not split the road);
-6. *obstacles*: runs of valid readings higher than ``obstacle_height`` above the ground
-   plane (a kerb face, a post), or not traversable, between traversable readings and more
-   than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
-   pedestrian's legs just before the ground).
+6. *obstacles*: runs of valid readings outside the traversable segments higher than
+   ``obstacle_height`` above the ground plane (a kerb face, a post), or not traversable,
+   between traversable readings and more than ``obstacle_depth`` short of the ground line
+   they trace (the tilted laser meets a pedestrian's legs just before the ground).
 
 Pure numpy (and scipy.special for the F-test); the node is
 :mod:`landmark_nav.nodes.road_classifier`.
@@ -586,7 +586,9 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     segments = [seg for _, _, seg in segments]
     # Obstacles: readings high above the ground plane, or (a tilted laser meets an object
     # before the ground) well short of the ground line the traversable readings trace.
-    high = z > params.obstacle_height
+    # A traversable segment is ground whatever its height (the crown of a gravel road
+    # stands 0.15 m above its edges).
+    high = (z > params.obstacle_height) & (classes[idx] != TRAVERSABLE)
     trav = np.flatnonzero(classes[idx] == TRAVERSABLE)
     if trav.size >= 2:
         k = np.arange(idx.size)
