@@ -93,7 +93,8 @@ def test_per_reading_accuracy_and_road_width_against_the_simulator(kind):
 
     The widths (Table 3 style): the issue's bound (mean within 0.1 m, sigma <= 0.15 m)
     on asphalt (measured on these 200 scans 4.92 m, sigma 0.125); on gravel the mean
-    (3.94 m) within 0.1 m, sigma 0.17 guarded at 0.2 (the issue's 0.15 is not met yet).
+    (3.95 m) within 0.1 m, sigma 0.164 guarded at 0.18 (0.17 before neighbouring
+    traversable pieces without a kink were joined; the issue's 0.15 is not met yet).
     """
     s = evaluate_laser_road(kind, 200, seed=1)
     assert s.accuracy >= 0.95
@@ -101,7 +102,7 @@ def test_per_reading_accuracy_and_road_width_against_the_simulator(kind):
     if kind == 'asphalt':
         assert abs(s.width_mean - 4.9) < 0.05 and s.width_std <= 0.15
     else:
-        assert abs(s.width_mean - 4.0) < 0.1 and s.width_std < 0.2
+        assert abs(s.width_mean - 4.0) < 0.1 and s.width_std < 0.18
 
 
 def test_road_edges_fall_on_the_reading_where_the_surface_changes():

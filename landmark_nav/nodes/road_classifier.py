@@ -37,8 +37,9 @@ from landmark_nav.geometry import transform_points
 from landmark_nav.nodes.common import (declare, InputStats, ParameterError, ProblemWarner,
                                        run_node, SENSOR_QOS)
 from landmark_nav.road.fusion import (choose_route, extend_with_outline, FusionParams,
-                                      ground_to_pixels, laser_corridors, pixels_to_ground,
-                                      plan_routes, road_widths)
+                                      ground_to_pixels, laser_corridors, MIN_VISION_LINES,
+                                      pixels_to_ground, plan_routes, road_widths,
+                                      vision_lines)
 from landmark_nav.road.outline import OutlineParams, polyline_seed, road_outline, SeedError
 from landmark_nav.road.terrain import (classify_scan, LaserMount, NOT_TRAVERSABLE,
                                        TerrainParams)
@@ -113,6 +114,7 @@ class RoadClassifier(Node):
         self.camera = None
         self.pose = None                 # latest odometry pose (x, y, yaw)
         self.history = []                # per scan, newest first: segment ends in odom
+        self.vision_short = 0            # scans whose route the outline extended too little
         self.last_terrain = None         # (stamp_ns, TerrainScan)
         self.outline = None              # (stamp_ns, ground polygon (K, 2))
         self.scans = 0
@@ -177,6 +179,15 @@ class RoadClassifier(Node):
         obstacles = np.vstack([o.points[:, :2] for o in ts.obstacles]) if ts.obstacles \
             else np.zeros((0, 2))
         route = choose_route(plan_routes(corridors, obstacles, self.fusion))
+        if ground is not None and route is not None and \
+                vision_lines(route.corridor) < MIN_VISION_LINES:
+            # The outline stopped short (a hard shadow band, an unseen border): the laser
+            # corridor carries the route; reported, not taken for the end of the road.
+            self.vision_short += 1
+            self.warner.warn(f'vision outline extends the route by '
+                             f'{vision_lines(route.corridor)} intersection lines (< '
+                             f'{MIN_VISION_LINES}); the route follows the laser corridor '
+                             f'({self.vision_short} scans so far)')
         self.scans += 1
         self._publish(stamp, ts, corridors, route, ground, obstacles)
         self.stats.processed()

@@ -194,6 +194,17 @@ def extend_with_outline(corridor: Corridor, ground_polygon: Optional[np.ndarray]
     return Corridor(tuple(chain))
 
 
+#: Fewer vision intersection lines than this in a corridor: the outline stopped short (e.g.
+#: at a hard shadow band across the road); the laser corridor carries the route and the node
+#: reports a vision failure.
+MIN_VISION_LINES = 4
+
+
+def vision_lines(corridor: Corridor) -> int:
+    """Return the number of the corridor's intersection lines from the vision outline."""
+    return sum(i.source == 'vision' for i in corridor.intervals)
+
+
 def _free_interval(iv: Interval, obstacles: np.ndarray, half: float, prev_y: float,
                    band: float, margin: float) -> Optional[tuple]:
     """Free sub-interval (lo, hi) of ``iv`` for the robot centre, nearest ``prev_y``."""

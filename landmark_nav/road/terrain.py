@@ -36,11 +36,13 @@ F_w width}``:
    below ``curvature_max``, median roughness ``F_sigma`` below ``roughness_max``, width
    ``F_w`` (end-to-end distance) at least ``min_width`` (the robot's width): the pieces that
    pass are the *traversable segments*, their readings ``C_t``; the other valid readings
-   are ``C_n``;
-6. *obstacles*: runs of valid readings higher than ``obstacle_height`` above the ground
-   plane (a kerb face, a post), or not traversable, between traversable readings and more
-   than ``obstacle_depth`` short of the ground line they trace (the tilted laser meets a
-   pedestrian's legs just before the ground).
+   are ``C_n``; neighbouring traversable pieces (no step or gap between them) whose
+   profiles do not kink by more than ``split_rms`` are one segment (a smoother patch of a
+   gravel road kept apart by the roughness test does not split the road);
+6. *obstacles*: runs of valid readings outside the traversable segments higher than
+   ``obstacle_height`` above the ground plane (a kerb face, a post), or not traversable,
+   between traversable readings and more than ``obstacle_depth`` short of the ground line
+   they trace (the tilted laser meets a pedestrian's legs just before the ground).
 
 Pure numpy (and scipy.special for the F-test); the node is
 :mod:`landmark_nav.nodes.road_classifier`.
@@ -572,11 +574,21 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
         groups_all[idx[first:last + 1]] = g
         seg = _segment(first, last, p, lateral, rough, idx, params)
         if seg is not None:
-            segments.append(seg)
+            # A traversable neighbour without a kink between (a smoother patch of the same
+            # road, kept apart by the roughness test) continues the segment.
             classes[idx[first:last + 1]] = TRAVERSABLE
+            if segments and segments[-1][0] + 1 == first and \
+                    not _kink(segments[-1][1][0], first, last, lateral, z, params):
+                joined = _segment(segments[-1][1][0], last, p, lateral, rough, idx, params)
+                if joined is not None:
+                    first, seg = segments.pop()[1][0], joined
+            segments.append((last, (first, last), seg))
+    segments = [seg for _, _, seg in segments]
     # Obstacles: readings high above the ground plane, or (a tilted laser meets an object
     # before the ground) well short of the ground line the traversable readings trace.
-    high = z > params.obstacle_height
+    # A traversable segment is ground whatever its height (the crown of a gravel road
+    # stands 0.15 m above its edges).
+    high = (z > params.obstacle_height) & (classes[idx] != TRAVERSABLE)
     trav = np.flatnonzero(classes[idx] == TRAVERSABLE)
     if trav.size >= 2:
         k = np.arange(idx.size)
@@ -590,6 +602,16 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
                                   float(z[first:last + 1].max())))
     return TerrainScan(pts, classes, rough_all, step_all, groups_all, tuple(segments),
                        tuple(obstacles), int(ground.sum()))
+
+
+def _kink(first: int, mid: int, last: int, lateral: np.ndarray, z: np.ndarray,
+          params: TerrainParams) -> bool:
+    """Whether readings first..mid-1 and mid..last have profiles kinked by > split_rms."""
+    def sse(a: int, b: int) -> float:
+        t = lateral[a:b + 1] - lateral[a:b + 1].mean()
+        return float(np.sum((np.polyval(np.polyfit(t, z[a:b + 1], 2), t) - z[a:b + 1]) ** 2))
+    extra = sse(first, last) - sse(first, mid - 1) - sse(mid, last)
+    return math.sqrt(max(extra, 0.0) / min(mid - first, last - mid + 1)) > params.split_rms
 
 
 def _combine(groups: list, s: np.ndarray, z: np.ndarray, cut: np.ndarray,

@@ -86,7 +86,7 @@ def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
 def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.road_fusion import evaluate_vision_road, write_sim_overlays
     print(f'{"road":8s} {"lighting":13s} {"true m":>6s} {"frames":>6s} {"width":>6s} '
-          f'{"sigma":>6s} {"N":>5s} {"fail %":>6s}')
+          f'{"sigma":>6s} {"N":>5s} {"fail %":>6s} {"open %":>6s} {"reach":>5s}')
     if args.frames < 0:
         raise SystemExit(f'evaluate-road-vision: --frames must be >= 0; got {args.frames}')
     for kind in args.kinds if args.frames else ():
@@ -94,7 +94,8 @@ def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
             s = evaluate_vision_road(kind, light, args.frames, args.seed, args.markings)
             print(f'{kind:8s} {light:13s} {s.true_width:6.2f} {s.frames:6d} '
                   f'{s.width_mean:6.3f} {s.width_std:6.3f} {s.widths:5d} '
-                  f'{100 * s.failures / s.frames:6.1f}')
+                  f'{100 * s.failures / s.frames:6.1f} {100 * s.routes_open / s.frames:6.1f} '
+                  f'{s.reach_median:5.2f}')
     if args.overlays:
         print(f'overlays: {write_sim_overlays(args.overlays, args.seed)}')
     return 0
