@@ -541,50 +541,68 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     laid out as a (pieces, longest interior) array whose rows are padded with copies of
     their last interior point, so that a row's first maximum is its first farthest point
     (padding repeats a value, never precedes it); when the padding would outweigh the
-    points (one long piece among many short ones) the rows are concatenated instead.
+    points (one long piece among many short ones) the rows are concatenated instead. A
+    piece without interior points is padded with its first point, whose cross product is
+    0: it is not split. The small per-level reductions run on Python lists (a numpy
+    reduction costs more than the list on a few pieces).
     """
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
-    steps = np.arange(1, max(int(e.max(initial=0) - s.min(initial=0)), 1) + 1)
+    lone = e <= s  # runs of one point: no chord
+    if np.count_nonzero(lone):
+        done_s.append(s[lone])
+        done_e.append(e[lone])
+        s, e = s[~lone], e[~lone]
+    if s.size:
+        steps = np.arange(1, max(e.tolist()) - min(s.tolist()) + 1)
     while s.size:
-        cnt = e - s - 1  # interior points of every piece
-        inner = cnt > 0
-        if np.count_nonzero(inner) < inner.size:
-            done_s.append(s[~inner])
-            done_e.append(e[~inner])
-            s, e, cnt = s[inner], e[inner], cnt[inner]
-            if not s.size:
-                break
+        cnt = e - s
+        cnt -= 1  # interior points of every piece, >= 0
+        cl = cnt.tolist()
+        width = max(cl)
+        if width == 0:
+            done_s.append(s)
+            done_e.append(e)
+            break
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
         cy = py[e] - y0
-        width = int(np.maximum.reduce(cnt))
-        if s.size * width <= 2 * int(np.add.reduce(cnt)) + 64:
+        if s.size * width <= 2 * sum(cl) + 64:
             idx = s[:, None] + steps[:width]
             np.minimum(idx, (e - 1)[:, None], out=idx)  # pad with the last interior point
             cross = (px[idx] - x0[:, None]) * cy[:, None]
             cross -= (py[idx] - y0[:, None]) * cx[:, None]
             np.abs(cross, out=cross)  # eq. 4 distance times the chord length
             at = cross.argmax(axis=1)  # the first farthest point
-            cmax = cross.ravel()[at + width * np.arange(s.size)]
-            k = s + 1 + at
+            cmax = cross.ravel()[at + steps[:s.size] * width - width]
+            at += s
+            k = at + 1
         else:
+            inner = cnt.nonzero()[0]
+            cmax = np.zeros(s.size)
+            k = s.copy()
+            cnt = cnt[inner]
             offs = cnt.cumsum()
             total = int(offs[-1])
             offs -= cnt
-            idx = (s + 1 - offs).repeat(cnt)
+            idx = (s[inner] + 1 - offs).repeat(cnt)
             idx += np.arange(total)
-            cross = (px[idx] - x0.repeat(cnt)) * cy.repeat(cnt)
-            cross -= (py[idx] - y0.repeat(cnt)) * cx.repeat(cnt)
+            cross = (px[idx] - x0[inner].repeat(cnt)) * cy[inner].repeat(cnt)
+            cross -= (py[idx] - y0[inner].repeat(cnt)) * cx[inner].repeat(cnt)
             np.abs(cross, out=cross)
-            cmax = np.maximum.reduceat(cross, offs)
-            at = (cross == cmax.repeat(cnt)).nonzero()[0]
-            k = idx[at[at.searchsorted(offs)]]  # the first farthest point
+            cm = np.maximum.reduceat(cross, offs)
+            at = (cross == cm.repeat(cnt)).nonzero()[0]
+            cmax[inner] = cm
+            k[inner] = idx[at[at.searchsorted(offs)]]  # the first farthest point
         split = cmax > tol[k] * np.hypot(cx, cy)
-        if np.count_nonzero(split) < split.size:
-            done_s.append(s[~split])
-            done_e.append(e[~split])
-            s, e, k = s[split], e[split], k[split]
+        go = split.nonzero()[0]
+        if go.size < split.size:
+            stop = ~split
+            done_s.append(s[stop])
+            done_e.append(e[stop])
+            if not go.size:
+                break
+            s, e, k = s[go], e[go], k[go]
         s = np.concatenate((s, k))
         e = np.concatenate((k, e))
     if not done_s:
@@ -592,8 +610,8 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     s, e = np.concatenate(done_s), np.concatenate(done_e)
     order = np.lexsort((e, s))
     out = np.empty((2, s.size), dtype=np.int64)
-    np.take(s, order, out=out[0])
-    np.take(e, order, out=out[1])
+    out[0] = s[order]
+    out[1] = e[order]
     return out
 
 
