@@ -500,7 +500,7 @@ def _gather(starts: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarra
     """Return the concatenated inclusive index ranges ``[starts[i], ends[i]]`` and offsets."""
     cnt = ends - starts + 1
     offs = np.zeros(cnt.size + 1, dtype=np.int64)
-    np.cumsum(cnt, out=offs[1:])
+    cnt.cumsum(out=offs[1:])
     idx = np.arange(offs[-1], dtype=np.int64) - (offs[:-1] - starts).repeat(cnt)
     return idx, offs
 
@@ -749,7 +749,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
         return None
     sizes = np.array([c.indices.size for c in cl], dtype=np.int64)
     offsets = np.zeros(sizes.size + 1, dtype=np.int64)
-    np.cumsum(sizes, out=offsets[1:])
+    sizes.cumsum(out=offsets[1:])
     n = int(offsets[-1])
     cols = np.empty((7, n))
     whole = cl[0].scan
@@ -757,11 +757,11 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
                                  for c in cl):
         # Clusters of one segment_scan call: gather from its whole-scan arrays.
         beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
-        xy = np.take(whole.points, beam, axis=0)
-        np.take(whole.ranges, beam, out=cols[_RNG])
-        np.take(whole.cos, beam, out=cols[_COS])
-        np.take(whole.sin, beam, out=cols[_SIN])
-        np.take(whole.angles, beam, out=cols[_PHI])
+        xy = whole.points.take(beam, axis=0)
+        whole.ranges.take(beam, out=cols[_RNG])
+        whole.cos.take(beam, out=cols[_COS])
+        whole.sin.take(beam, out=cols[_SIN])
+        whole.angles.take(beam, out=cols[_PHI])
     else:
         beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
         xy = np.concatenate([c.points for c in cl], dtype=float).reshape(-1, 2)
@@ -769,7 +769,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
         cols[_PHI] = np.concatenate([c.angles for c in cl], dtype=float)
         np.cos(cols[_PHI], out=cols[_COS])
         np.sin(cols[_PHI], out=cols[_SIN])
-    ox, oy = (np.cumsum(xy, axis=0)[-1] / n).tolist()  # the mean (summed in point order)
+    ox, oy = (xy.cumsum(axis=0)[-1] / n).tolist()  # the mean (summed in point order)
     np.subtract(xy[:, 0], ox, out=cols[_X])
     np.subtract(xy[:, 1], oy, out=cols[_Y])
     np.multiply(cols[_RNG], 3.0 * params.sigma_phi, out=cols[_TOL])  # split tolerance
@@ -783,7 +783,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
     n = (hi - lo + 1).astype(float)
-    s = pre[:, hi + 1] - pre[:, lo]
+    s = pre.take(hi + 1, axis=1) - pre.take(lo, axis=1)
     mx, my = s[0] / n, s[1] / n
     cxx = s[2] - n * mx * mx
     cyy = s[3] - n * my * my
@@ -840,7 +840,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         return s, e
     sums = np.empty((6, s.size))
     sums[0] = e - s + 1
-    np.subtract(pre[:, e + 1], pre[:, s], out=sums[1:])
+    np.subtract(pre.take(e + 1, axis=1), pre.take(s, axis=1), out=sums[1:])
     cx, cy, sxx, syy, sxy = _scatter(sums)
     nrm = np.empty((2, s.size))
     _normal(sxx, syy, sxy, nrm)
@@ -878,7 +878,7 @@ def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.nda
 
     ``rho`` is relative to the scan origin.
     """
-    x, y, rng, cp, sp = scan.cols[:_TOL, pts]
+    x, y, rng, cp, sp = scan.cols[:_TOL].take(pts, axis=1)
     nx, ny = nx[:, None], ny[:, None]
     d = x * nx + y * ny - rho[:, None]
     n_u = nx * cp + ny * sp
@@ -954,7 +954,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     if s.size == 1:
         return sums, s, e, f, np.zeros(1, dtype=np.int64)
     f = _Fit(f.params, f.rmse, f.count, f.cov * _variance_factor(sums, f)[:, None, None])
-    gap = scan.cols[:, s[1:]] - scan.cols[:, e[:-1]]
+    gap = scan.cols.take(s[1:], axis=1) - scan.cols.take(e[:-1], axis=1)
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
             | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
             | (np.abs(gap[_PHI]) <= params.merge_gap_angle))
@@ -966,7 +966,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
-    x, y, _, _, _, tol = scan.cols[:_PHI, ends]
+    x, y, _, _, _, tol = scan.cols[:_PHI].take(ends, axis=1)
     ox, oy = scan.origin
     while np.count_nonzero(join):
         new = np.empty(s.size, dtype=bool)
@@ -982,7 +982,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         # Every member must agree with its merged line: chi-square (the merged line taken
         # as exact) and both of its end points within the split tolerance. badness > 1
         # fails either test.
-        rho_g, alpha_g, nx, ny = g.params[:, label]
+        rho_g, alpha_g, nx, ny = g.params.take(label, axis=1)
         badness = _chi2(f.rho, f.alpha, f.cov, rho_g, alpha_g, None) / gate
         dist = np.abs(x * nx + y * ny - (rho_g - nx * ox - ny * oy)) / tol
         np.fmax(badness, dist.max(axis=0), out=badness)
@@ -1034,8 +1034,8 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     owner[1] = gaps
     has = (owner >= 0) & (owner < n_lines)
     clipped = np.minimum(np.maximum(owner, 0), n_lines - 1)
-    rho, _, nx, ny = f.params[:, clipped.repeat(size_g, axis=1)]
-    x, y, rng, cp, sp, tol = scan.cols[:_PHI, idx]
+    rho, _, nx, ny = f.params.take(clipped.repeat(size_g, axis=1), axis=1)
+    x, y, rng, cp, sp, tol = scan.cols[:_PHI].take(idx, axis=1)
     ox, oy = scan.origin
     d = (x + ox) * nx + (y + oy) * ny - rho
     n_u = nx * cp + ny * sp
@@ -1095,7 +1095,7 @@ def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
     line = np.arange(first.size).repeat(hi - lo + 1)
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
-    rho, _, nx, ny = f.params[:, line]
+    rho, _, nx, ny = f.params.take(line, axis=1)
     out = idx, line, rho, wr[idx], wc[idx] * nx + ws[idx] * ny
     f.extent = (first, last, out)
     return out
@@ -1161,7 +1161,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
             ok = np.ones(first.size, dtype=bool)
             ok[line[opening]] = False
-            relabel = np.cumsum(ok) - 1
+            relabel = ok.cumsum() - 1
             owner = np.where((owner >= 0) & ok[np.maximum(owner, 0)],
                              relabel[np.maximum(owner, 0)], -1)
             sums, first, last = sums[:, ok], first[ok], last[ok]
@@ -1177,12 +1177,12 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         big = size >= params.min_points
         owner[:] = -1
         kept = big[run]
-        owner[pos[kept]] = (np.cumsum(big) - 1)[run[kept]]
+        owner[pos[kept]] = (big.cumsum() - 1)[run[kept]]
         starts, size = starts[big], size[big]
         if not starts.size:
             return sums[:, :0], first[:0], last[:0], f
         first, last = pos[starts], pos[starts + size - 1]
-        sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
+        sums = np.add.reduceat(feats.take(pos[kept], axis=1), size.cumsum() - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
         two, runs = _splits_in_two(scan, owner, line, beam, params)
@@ -1303,7 +1303,7 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     ends = np.empty((2, first.size), dtype=np.int64)
     ends[0] = first
     ends[1] = last
-    x, y = scan.cols[:_RNG, ends]
+    x, y = scan.cols[:_RNG].take(ends, axis=1)
     x += ox
     y += oy
     rho, alpha, nx, ny = f.params
@@ -1315,7 +1315,7 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     # supporting beams, the end beam's ray meets the line (the segment then covers no beam
     # outside its support). Inside, the projection stays (it does not depend on the range
     # noise along a grazing ray).
-    cp, sp = scan.cols[_COS:_TOL, ends]
+    cp, sp = scan.cols[_COS:_TOL].take(ends, axis=1)
     t = rho / (cp * nx + sp * ny)
     along = proj[..., 1] * nx - proj[..., 0] * ny  # position along the line (tangent)
     along_ray = t * (sp * nx - cp * ny)
@@ -1332,8 +1332,8 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
           & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1])).nonzero()[0]
     rho, alpha, rmse = rho[ok].tolist(), alpha[ok].tolist(), f.rmse[ok].tolist()
     count = f.count[ok].astype(np.int64).tolist()
-    b0, b1 = scan.beam[ends[:, ok]].tolist()
-    proj, cov = proj[:, ok], cov[ok]
+    b0, b1 = scan.beam[ends.take(ok, axis=1)].tolist()
+    proj, cov = proj.take(ok, axis=1), cov.take(ok, axis=0)
     return [LineSegment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
                         b0[j], b1[j]) for j in range(len(rho))]
 
@@ -1378,7 +1378,7 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     feats = _features(scan.x, scan.y, cols[_RNG], cols[_COS], cols[_SIN], params.sigma_r,
                       params.sigma_phi, pad=1)
     pre = np.zeros((5, n + 1))  # prefix sums of x, y, x^2, y^2, xy (= _prefix5(x, y))
-    np.cumsum(feats[1:6, :n], axis=1, out=pre[:, 1:])
+    feats[1:6, :n].cumsum(axis=1, out=pre[:, 1:])
     if params.method == 'split_merge':
         s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL])
         keep = e - s >= 2
@@ -1386,9 +1386,9 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     else:
         # Smooth each cluster's ranges over the bearing (eqs. 8-10), polar -> Cartesian.
         sub, sub_offs = _gather(offsets[big], offsets[big + 1] - 1)
-        r_s = lowess_groups(cols[_PHI, sub], cols[_RNG, sub], sub_offs, params.lowess_span,
+        r_s = lowess_groups(cols[_PHI][sub], cols[_RNG][sub], sub_offs, params.lowess_span,
                             params.lowess_iterations)
-        pieces = alfa_pieces(np.stack([r_s * cols[_COS, sub], r_s * cols[_SIN, sub]], axis=1),
+        pieces = alfa_pieces(np.stack([r_s * cols[_COS][sub], r_s * cols[_SIN][sub]], axis=1),
                              sub_offs, params)
         pieces = sub[pieces] if pieces.size else pieces
         s, e = pieces[:, 0], pieces[:, 1]
@@ -1406,7 +1406,8 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
         return []
     col, first, last = _occluded_extents(scan, fit, first, last, params)
     if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
-        fit = _Fit(fit.params[:, col], fit.rmse[col], fit.count[col], fit.cov[col])
+        fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
+                   fit.cov.take(col, axis=0))
     return _build(scan, params, fit, first, last)
 
 
