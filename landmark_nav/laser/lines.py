@@ -403,7 +403,8 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     flip = rho < 0.0
     if np.count_nonzero(flip):
         np.abs(rho, out=rho)
-        alpha = _wrap(np.where(flip, alpha + math.pi, alpha))
+        alpha[flip] += math.pi
+        alpha = _wrap(alpha)
         np.negative(out[2:], out=out[2:], where=flip)
     out[1] = alpha
     half = 0.5 * (sxx - syy)
@@ -1303,11 +1304,13 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     ends = np.empty((2, first.size), dtype=np.int64)
     ends[0] = first
     ends[1] = last
-    x, y = scan.cols[:_RNG].take(ends, axis=1)
+    x, y, _, cp, sp = scan.cols[:_TOL].take(ends, axis=1)
     x += ox
     y += oy
-    rho, alpha, nx, ny = f.params
-    d = x * nx + y * ny - rho
+    rho, alpha = f.params[:2]
+    # the line parameters once per end point (2, G): no broadcasting in the steps below
+    rho2, _, nx, ny = np.concatenate((f.params, f.params), axis=1).reshape(4, 2, first.size)
+    d = x * nx + y * ny - rho2
     proj = np.empty((2, first.size, 2))  # end point (first, last), line, (x, y)
     np.subtract(x, d * nx, out=proj[..., 0])
     np.subtract(y, d * ny, out=proj[..., 1])
@@ -1315,8 +1318,7 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     # supporting beams, the end beam's ray meets the line (the segment then covers no beam
     # outside its support). Inside, the projection stays (it does not depend on the range
     # noise along a grazing ray).
-    cp, sp = scan.cols[_COS:_TOL].take(ends, axis=1)
-    t = rho / (cp * nx + sp * ny)
+    t = rho2 / (cp * nx + sp * ny)
     along = proj[..., 1] * nx - proj[..., 0] * ny  # position along the line (tangent)
     along_ray = t * (sp * nx - cp * ny)
     inward = np.where(along[1] >= along[0], 1.0, -1.0) * (along_ray - along) * _INWARD
