@@ -393,6 +393,11 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     n.c`` by ``(t.c) d alpha + e_i / N``; ``C = sum_i J_i J_i^T s_i^2``, ``s_i^2 = n^T Q_i n``.
     The RMSE (eq. 21) is left out unless ``rmse``.
     """
+    if sums.shape[1] <= (_SMALL if sums.shape[0] == NUM_SUMS else _SMALL_NO_COV):
+        try:
+            return _solve_small(sums, origin, rmse)
+        except (ZeroDivisionError, ValueError):  # degenerate fits: numpy's inf / nan below
+            pass
     n = sums[0]
     cx, cy, sxx, syy, sxy = _scatter(sums)
     out = np.empty((4, n.size))
@@ -414,6 +419,95 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     if sums.shape[0] == NUM_SUMS:
         cov = _covariance(sums, n, cx, cy, ax, ay, nx, ny, root)
     return _Fit(out, err, n, cov)
+
+
+# Fits per call up to which _solve_small is faster than the array operations (measured).
+_SMALL = 10
+_SMALL_NO_COV = 14
+
+
+def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
+    """Return :func:`_solve` for a few fits, on Python floats (the same operations in the same
+    order, hence the same results; numpy's arctan2, cos and sin, one call each).
+
+    Raises ZeroDivisionError or ValueError on degenerate sums (e.g. a zero count or scatter),
+    which :func:`_solve` then fits with numpy's inf / nan semantics.
+    """
+    g = sums.shape[1]
+    full = sums.shape[0] == NUM_SUMS
+    sl = sums.tolist()
+    s0, s1, s2, s3, s4, s5 = sl[:6]
+    cxs, cys, sxxs, syys, sxys, a_in, b_in = [], [], [], [], [], [], []
+    for j in range(g):  # _scatter
+        n = s0[j]
+        cx = s1[j] / n
+        cy = s2[j] / n
+        ncx = n * cx
+        sxx = s3[j] - ncx * cx
+        syy = s4[j] - n * cy * cy
+        sxy = s5[j] - ncx * cy
+        cxs.append(cx)
+        cys.append(cy)
+        sxxs.append(sxx)
+        syys.append(syy)
+        sxys.append(sxy)
+        a_in.append(-2.0 * sxy)
+        b_in.append(syy - sxx)
+    alpha_a = 0.5 * np.arctan2(a_in, b_in)  # eq. 8
+    nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
+    alpha_l = alpha_a.tolist()
+    ox, oy = float(origin[0]), float(origin[1])
+    rho_l, axs, ays = [], [], []
+    flip = False
+    for j in range(g):
+        ax = cxs[j] + ox  # centroid in the laser frame (eq. 10)
+        ay = cys[j] + oy
+        rho = ax * nx_l[j] + ay * ny_l[j]  # eq. 9
+        if rho < 0.0:
+            flip = True
+            alpha_l[j] += math.pi
+            nx_l[j] = -nx_l[j]
+            ny_l[j] = -ny_l[j]
+        rho_l.append(rho)
+        axs.append(ax)
+        ays.append(ay)
+    if flip:
+        rho_l = [abs(r) for r in rho_l]
+        alpha_l = [(a + math.pi) % TWO_PI - math.pi for a in alpha_l]  # _wrap
+    err_l, roots = [], []
+    for j in range(g):
+        half = 0.5 * (sxxs[j] - syys[j])
+        root = math.sqrt(half * half + sxys[j] * sxys[j])
+        roots.append(root)
+        if rmse:
+            v = 0.5 * (sxxs[j] + syys[j]) - root
+            err_l.append(math.sqrt(max(v, 0.0) / s0[j]))  # eq. 21
+    cov = None
+    if full:
+        cov_l = []
+        for j in range(g):  # _covariance, term by term
+            n, nx, ny, cx, cy = s0[j], nx_l[j], ny_l[j], cxs[j], cys[j]
+            a2, b2, ab = nx * nx, ny * ny, 2.0 * nx * ny
+            w0, w1, w2, w3, w4, w5 = [a2 * sl[6 + k][j] + b2 * sl[12 + k][j]
+                                      + ab * sl[18 + k][j] for k in range(6)]
+            tx, ty = -ny, nx
+            tcl = tx * cx + ty * cy
+            tw = tx * w1 + ty * w2
+            t1 = tw - tcl * w0
+            t2 = (b2 * w3 - ab * w5 + a2 * w4 - 2.0 * tcl * tw + tcl * tcl * w0)
+            lever = tx * axs[j] + ty * ays[j]
+            big_l = 2.0 * roots[j]
+            caa = t2 / (big_l * big_l)
+            nl = n * big_l
+            cra = lever * caa - t1 / nl
+            crr = lever * lever * caa - 2.0 * lever * t1 / nl + w0 / (n * n)
+            if not (math.isfinite(crr) and math.isfinite(cra) and math.isfinite(caa)
+                    and roots[j] > 0.0):
+                crr = cra = caa = math.inf
+            cov_l.append(((crr, cra), (cra, caa)))
+        cov = np.array(cov_l)
+    out = np.array((rho_l, alpha_l, nx_l, ny_l))
+    return _Fit(out, np.array(err_l) if rmse else None, sums[0], cov)
 
 
 def _covariance(sums: np.ndarray, n: np.ndarray, cx: np.ndarray, cy: np.ndarray,
