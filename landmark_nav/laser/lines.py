@@ -812,6 +812,7 @@ class _Scan:
     beam: np.ndarray
     cluster: np.ndarray  # (N,) cluster number of each point
     offsets: np.ndarray
+    nbeam: int  # largest beam index + 1
     whole: Optional[ScanArrays] = None  # the whole scan, when the clusters share it
 
     def beams(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -824,7 +825,7 @@ class _Scan:
         w = self.whole
         if w is not None:
             return w.ranges, w.cos, w.sin, w.valid
-        size = int(self.beam.max()) + 1
+        size = self.nbeam
         out = np.zeros((3, size))
         out[:, self.beam] = self.cols[_RNG:_TOL]
         valid = np.zeros(size, dtype=bool)
@@ -872,7 +873,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     shared = (whole if whole is not None and whole.valid is not None
               and all(c.scan is whole for c in cl) else None)
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.arange(sizes.size).repeat(sizes), offsets, shared)
+                 np.arange(sizes.size).repeat(sizes), offsets, int(beam.max()) + 1, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -1244,13 +1245,14 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         return sums, first, last, f
     s, e, label, first0, last0 = pieces
     owner = np.full(scan.x.size, -1, dtype=np.int64)
-    idx, _ = _gather(s, e)
-    owner[idx] = label.repeat(e - s + 1)
-    for lo, hi in ((first, first0 - 1), (last0 + 1, last)):
-        idx, _ = _gather(lo, hi)
-        owner[idx] = np.arange(first.size).repeat(np.maximum(hi - lo + 1, 0))
+    # a line's support: its pieces and the runs grown before and after (disjoint, so one
+    # gather of all of them)
+    lines = np.arange(first.size)
+    idx, offs = _gather(np.concatenate((s, first, last0 + 1)),
+                        np.concatenate((e, first0 - 1, last)))
+    owner[idx] = np.concatenate((label, lines, lines)).repeat(offs[1:] - offs[:-1])
     rounds = 0
-    two, runs = _splits_in_two(scan, owner, line, beam, params)
+    two, runs = _splits_in_two(scan, owner, line, beam, first, params)
     opening |= two
     while np.count_nonzero(opening):
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
@@ -1280,7 +1282,7 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         sums = np.add.reduceat(feats.take(pos[kept], axis=1), size.cumsum() - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
-        two, runs = _splits_in_two(scan, owner, line, beam, params)
+        two, runs = _splits_in_two(scan, owner, line, beam, first, params)
         opening |= two
     if line.size:  # only noise: each line's extent becomes its largest run between them
         pos, run, starts, size = (runs if runs is not None
@@ -1297,8 +1299,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
-                   params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
+                   first: np.ndarray, params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
     """Mark the hidden beams (all of a line's) that cut it into two or more lines.
+
+    ``owner`` gives the line of each point (-1: none), ``first`` the lines' first points.
 
     A piece between hidden beams counts as a line when it has ``min_points`` supporting
     points and spans ``min_length``. Also returns the :func:`_support_runs` at all the
@@ -1311,7 +1315,7 @@ def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.nd
     a, b = pos[starts], pos[starts + size - 1]
     span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
     good = (size >= params.min_points) & (span >= params.min_length)
-    n_good = np.bincount(owner[a][good], minlength=int(owner.max()) + 1)
+    n_good = np.bincount(owner[a][good], minlength=first.size)
     return n_good[line] >= 2, runs
 
 
@@ -1325,8 +1329,7 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     """
     pos = (owner >= 0).nonzero()[0]
     bpos = scan.beam[pos]
-    mark = np.zeros(max(int(bpos.max(initial=0)), int(hidden.max(initial=0))) + 1,
-                    dtype=np.int8)
+    mark = np.zeros(scan.nbeam, dtype=np.int8)  # hidden beams lie within the lines' extents
     mark[hidden] = 1
     keep = mark[bpos] == 0
     pos, bpos = pos[keep], bpos[keep]
@@ -1337,8 +1340,10 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     np.not_equal(own[1:], own[:-1], out=new[1:])
     new[1:] |= cut[1:] != cut[:-1]
     starts = new.nonzero()[0]
-    size = np.diff(np.append(starts, pos.size))
-    return pos, new.cumsum() - 1, starts, size
+    bounds = np.empty(starts.size + 1, dtype=np.int64)
+    bounds[:-1] = starts
+    bounds[-1] = pos.size
+    return pos, new.cumsum() - 1, starts, bounds[1:] - bounds[:-1]
 
 
 def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
@@ -1354,7 +1359,6 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     """
     same = np.arange(first.size), first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
-    b1 = scan.beam[last]
     front = rho / cos_in - r  # how far the return lies in front of the line
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
@@ -1369,7 +1373,7 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     occ = np.zeros(hit.size, dtype=bool)
     occ[1:] |= pair
     occ[:-1] |= pair
-    size = int(max(b1.max(), scan.beam.max())) + 1
+    size = scan.nbeam
     key_occ = fl[occ] * size + fb[occ]  # sorted (line-major, beams increasing)
     pts, offs = _gather(first, last)
     own = np.arange(first.size).repeat(offs[1:] - offs[:-1])
@@ -1381,7 +1385,10 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     new[:1] = True
     new[1:] = (own[1:] != own[:-1]) | (cut[1:] != cut[:-1])
     starts = new.nonzero()[0]
-    count = np.diff(np.append(starts, pts.size))
+    bounds = np.empty(starts.size + 1, dtype=np.int64)
+    bounds[:-1] = starts
+    bounds[-1] = pts.size
+    count = bounds[1:] - bounds[:-1]
     big = count >= params.min_points
     starts, count = starts[big], count[big]
     return own[starts], pts[starts], pts[starts + count - 1]
