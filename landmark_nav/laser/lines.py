@@ -427,11 +427,12 @@ _SMALL_NO_COV = 14
 
 
 def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
-    """Return :func:`_solve` for a few fits, on Python floats (the same operations in the same
-    order, hence the same results; numpy's arctan2, cos and sin, one call each).
+    """Return :func:`_solve` for a few fits, computed on Python floats.
 
-    Raises ZeroDivisionError or ValueError on degenerate sums (e.g. a zero count or scatter),
-    which :func:`_solve` then fits with numpy's inf / nan semantics.
+    The same operations in the same order, hence the same results (numpy's arctan2, cos
+    and sin, one call each, as the array version). Raises ZeroDivisionError or ValueError
+    on degenerate sums (e.g. a zero count or scatter), which :func:`_solve` then fits
+    with numpy's inf / nan semantics.
     """
     g = sums.shape[1]
     full = sums.shape[0] == NUM_SUMS
