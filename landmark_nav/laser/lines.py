@@ -954,7 +954,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     np.maximum(e[:, None] - steps, s[:, None], out=win[:, reach:])
     z = _z(scan, nx, ny, rho, win, params)
     # leading (head) and trailing (tail) runs of outlying points
-    lead, trail = np.cumprod((z > gate).reshape(s.size, 2, reach), axis=2).sum(axis=2).T
+    lead, trail = (z > gate).reshape(s.size, 2, reach).cumprod(axis=2).sum(axis=2).T
     ns, ne = s + lead, e - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
     shared = ((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:])).nonzero()[0]
@@ -976,8 +976,9 @@ def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.nda
     ``rho`` is relative to the scan origin.
     """
     x, y, rng, cp, sp = scan.cols[:_TOL].take(pts, axis=1)
-    nx, ny = nx[:, None], ny[:, None]
-    d = x * nx + y * ny - rho[:, None]
+    # the lines' parameters once per point (no broadcasting below)
+    nx, ny, rho = np.array((nx, ny, rho)).repeat(pts.shape[1], axis=1).reshape((3,) + pts.shape)
+    d = x * nx + y * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
     var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
