@@ -905,7 +905,10 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     if not adj.size:
         return s, e
     s, e = s.copy(), e.copy()
-    lo, b, hi, oo = s[adj, None], e[adj, None], e[adj + 1, None], o[adj, None]
+    width = 2 * reach + 1
+    # (lo, b, hi, o) of every pair, once per candidate break (no broadcasting below)
+    lo, b, hi, oo = np.array((s[adj], e[adj], e[adj + 1], o[adj])).repeat(
+        width, axis=1).reshape(4, adj.size, width)
     cand = b + np.arange(-reach, reach + 1)
     ok = (cand - lo >= 2) & (hi - cand - oo >= 2)
     cand = np.where(ok, cand, b)
@@ -918,9 +921,9 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     last[1] = hi
     sse = _sse(pre, first, last)
     cost = np.where(ok, sse[0] + sse[1], np.inf)
-    best = cand[np.arange(adj.size), np.argmin(cost, axis=1)]
+    best = cand.ravel()[cost.argmin(axis=1) + np.arange(0, cost.size, width)]
     e[adj] = best
-    s[adj + 1] = best + oo[:, 0]
+    s[adj + 1] = best + o[adj]
     good = e - s >= 2  # breaks of a chain moved past each other: drop the squeezed piece
     if np.count_nonzero(good) == good.size:
         return s, e
