@@ -393,6 +393,11 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     n.c`` by ``(t.c) d alpha + e_i / N``; ``C = sum_i J_i J_i^T s_i^2``, ``s_i^2 = n^T Q_i n``.
     The RMSE (eq. 21) is left out unless ``rmse``.
     """
+    if sums.shape[1] <= (_SMALL if sums.shape[0] == NUM_SUMS else _SMALL_NO_COV):
+        try:
+            return _solve_small(sums, origin, rmse)
+        except (ZeroDivisionError, ValueError):  # degenerate fits: numpy's inf / nan below
+            pass
     n = sums[0]
     cx, cy, sxx, syy, sxy = _scatter(sums)
     out = np.empty((4, n.size))
@@ -403,7 +408,8 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     flip = rho < 0.0
     if np.count_nonzero(flip):
         np.abs(rho, out=rho)
-        alpha = _wrap(np.where(flip, alpha + math.pi, alpha))
+        alpha[flip] += math.pi
+        alpha = _wrap(alpha)
         np.negative(out[2:], out=out[2:], where=flip)
     out[1] = alpha
     half = 0.5 * (sxx - syy)
@@ -413,6 +419,96 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     if sums.shape[0] == NUM_SUMS:
         cov = _covariance(sums, n, cx, cy, ax, ay, nx, ny, root)
     return _Fit(out, err, n, cov)
+
+
+# Fits per call up to which _solve_small is faster than the array operations (measured).
+_SMALL = 10
+_SMALL_NO_COV = 14
+
+
+def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
+    """Return :func:`_solve` for a few fits, computed on Python floats.
+
+    The same operations in the same order, hence the same results (numpy's arctan2, cos
+    and sin, one call each, as the array version). Raises ZeroDivisionError or ValueError
+    on degenerate sums (e.g. a zero count or scatter), which :func:`_solve` then fits
+    with numpy's inf / nan semantics.
+    """
+    g = sums.shape[1]
+    full = sums.shape[0] == NUM_SUMS
+    sl = sums.tolist()
+    s0, s1, s2, s3, s4, s5 = sl[:6]
+    cxs, cys, sxxs, syys, sxys, a_in, b_in = [], [], [], [], [], [], []
+    for j in range(g):  # _scatter
+        n = s0[j]
+        cx = s1[j] / n
+        cy = s2[j] / n
+        ncx = n * cx
+        sxx = s3[j] - ncx * cx
+        syy = s4[j] - n * cy * cy
+        sxy = s5[j] - ncx * cy
+        cxs.append(cx)
+        cys.append(cy)
+        sxxs.append(sxx)
+        syys.append(syy)
+        sxys.append(sxy)
+        a_in.append(-2.0 * sxy)
+        b_in.append(syy - sxx)
+    alpha_a = 0.5 * np.arctan2(a_in, b_in)  # eq. 8
+    nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
+    alpha_l = alpha_a.tolist()
+    ox, oy = float(origin[0]), float(origin[1])
+    rho_l, axs, ays = [], [], []
+    flip = False
+    for j in range(g):
+        ax = cxs[j] + ox  # centroid in the laser frame (eq. 10)
+        ay = cys[j] + oy
+        rho = ax * nx_l[j] + ay * ny_l[j]  # eq. 9
+        if rho < 0.0:
+            flip = True
+            alpha_l[j] += math.pi
+            nx_l[j] = -nx_l[j]
+            ny_l[j] = -ny_l[j]
+        rho_l.append(rho)
+        axs.append(ax)
+        ays.append(ay)
+    if flip:
+        rho_l = [abs(r) for r in rho_l]
+        alpha_l = [(a + math.pi) % TWO_PI - math.pi for a in alpha_l]  # _wrap
+    err_l, roots = [], []
+    for j in range(g):
+        half = 0.5 * (sxxs[j] - syys[j])
+        root = math.sqrt(half * half + sxys[j] * sxys[j])
+        roots.append(root)
+        if rmse:
+            v = 0.5 * (sxxs[j] + syys[j]) - root
+            err_l.append(math.sqrt(max(v, 0.0) / s0[j]))  # eq. 21
+    cov = None
+    if full:
+        cov_l = []
+        for j in range(g):  # _covariance, term by term
+            n, nx, ny, cx, cy = s0[j], nx_l[j], ny_l[j], cxs[j], cys[j]
+            a2, b2, ab = nx * nx, ny * ny, 2.0 * nx * ny
+            w0, w1, w2, w3, w4, w5 = [a2 * sl[6 + k][j] + b2 * sl[12 + k][j]
+                                      + ab * sl[18 + k][j] for k in range(6)]
+            tx, ty = -ny, nx
+            tcl = tx * cx + ty * cy
+            tw = tx * w1 + ty * w2
+            t1 = tw - tcl * w0
+            t2 = (b2 * w3 - ab * w5 + a2 * w4 - 2.0 * tcl * tw + tcl * tcl * w0)
+            lever = tx * axs[j] + ty * ays[j]
+            big_l = 2.0 * roots[j]
+            caa = t2 / (big_l * big_l)
+            nl = n * big_l
+            cra = lever * caa - t1 / nl
+            crr = lever * lever * caa - 2.0 * lever * t1 / nl + w0 / (n * n)
+            if not (math.isfinite(crr) and math.isfinite(cra) and math.isfinite(caa)
+                    and roots[j] > 0.0):
+                crr = cra = caa = math.inf
+            cov_l.append(((crr, cra), (cra, caa)))
+        cov = np.array(cov_l)
+    out = np.array((rho_l, alpha_l, nx_l, ny_l))
+    return _Fit(out, np.array(err_l) if rmse else None, sums[0], cov)
 
 
 def _covariance(sums: np.ndarray, n: np.ndarray, cx: np.ndarray, cy: np.ndarray,
@@ -500,7 +596,7 @@ def _gather(starts: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarra
     """Return the concatenated inclusive index ranges ``[starts[i], ends[i]]`` and offsets."""
     cnt = ends - starts + 1
     offs = np.zeros(cnt.size + 1, dtype=np.int64)
-    np.cumsum(cnt, out=offs[1:])
+    cnt.cumsum(out=offs[1:])
     idx = np.arange(offs[-1], dtype=np.int64) - (offs[:-1] - starts).repeat(cnt)
     return idx, offs
 
@@ -541,50 +637,68 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     laid out as a (pieces, longest interior) array whose rows are padded with copies of
     their last interior point, so that a row's first maximum is its first farthest point
     (padding repeats a value, never precedes it); when the padding would outweigh the
-    points (one long piece among many short ones) the rows are concatenated instead.
+    points (one long piece among many short ones) the rows are concatenated instead. A
+    piece without interior points is padded with its first point, whose cross product is
+    0: it is not split. The small per-level reductions run on Python lists (a numpy
+    reduction costs more than the list on a few pieces).
     """
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
-    steps = np.arange(1, max(int(e.max(initial=0) - s.min(initial=0)), 1) + 1)
+    lone = e <= s  # runs of one point: no chord
+    if np.count_nonzero(lone):
+        done_s.append(s[lone])
+        done_e.append(e[lone])
+        s, e = s[~lone], e[~lone]
+    if s.size:
+        steps = np.arange(1, max(e.tolist()) - min(s.tolist()) + 1)
     while s.size:
-        cnt = e - s - 1  # interior points of every piece
-        inner = cnt > 0
-        if np.count_nonzero(inner) < inner.size:
-            done_s.append(s[~inner])
-            done_e.append(e[~inner])
-            s, e, cnt = s[inner], e[inner], cnt[inner]
-            if not s.size:
-                break
+        cnt = e - s
+        cnt -= 1  # interior points of every piece, >= 0
+        cl = cnt.tolist()
+        width = max(cl)
+        if width == 0:
+            done_s.append(s)
+            done_e.append(e)
+            break
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
         cy = py[e] - y0
-        width = int(np.maximum.reduce(cnt))
-        if s.size * width <= 2 * int(np.add.reduce(cnt)) + 64:
+        if s.size * width <= 2 * sum(cl) + 64:
             idx = s[:, None] + steps[:width]
             np.minimum(idx, (e - 1)[:, None], out=idx)  # pad with the last interior point
             cross = (px[idx] - x0[:, None]) * cy[:, None]
             cross -= (py[idx] - y0[:, None]) * cx[:, None]
             np.abs(cross, out=cross)  # eq. 4 distance times the chord length
             at = cross.argmax(axis=1)  # the first farthest point
-            cmax = cross.ravel()[at + width * np.arange(s.size)]
-            k = s + 1 + at
+            cmax = cross.ravel()[at + steps[:s.size] * width - width]
+            at += s
+            k = at + 1
         else:
+            inner = cnt.nonzero()[0]
+            cmax = np.zeros(s.size)
+            k = s.copy()
+            cnt = cnt[inner]
             offs = cnt.cumsum()
             total = int(offs[-1])
             offs -= cnt
-            idx = (s + 1 - offs).repeat(cnt)
+            idx = (s[inner] + 1 - offs).repeat(cnt)
             idx += np.arange(total)
-            cross = (px[idx] - x0.repeat(cnt)) * cy.repeat(cnt)
-            cross -= (py[idx] - y0.repeat(cnt)) * cx.repeat(cnt)
+            cross = (px[idx] - x0[inner].repeat(cnt)) * cy[inner].repeat(cnt)
+            cross -= (py[idx] - y0[inner].repeat(cnt)) * cx[inner].repeat(cnt)
             np.abs(cross, out=cross)
-            cmax = np.maximum.reduceat(cross, offs)
-            at = (cross == cmax.repeat(cnt)).nonzero()[0]
-            k = idx[at[at.searchsorted(offs)]]  # the first farthest point
+            cm = np.maximum.reduceat(cross, offs)
+            at = (cross == cm.repeat(cnt)).nonzero()[0]
+            cmax[inner] = cm
+            k[inner] = idx[at[at.searchsorted(offs)]]  # the first farthest point
         split = cmax > tol[k] * np.hypot(cx, cy)
-        if np.count_nonzero(split) < split.size:
-            done_s.append(s[~split])
-            done_e.append(e[~split])
-            s, e, k = s[split], e[split], k[split]
+        go = split.nonzero()[0]
+        if go.size < split.size:
+            stop = ~split
+            done_s.append(s[stop])
+            done_e.append(e[stop])
+            if not go.size:
+                break
+            s, e, k = s[go], e[go], k[go]
         s = np.concatenate((s, k))
         e = np.concatenate((k, e))
     if not done_s:
@@ -592,8 +706,8 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     s, e = np.concatenate(done_s), np.concatenate(done_e)
     order = np.lexsort((e, s))
     out = np.empty((2, s.size), dtype=np.int64)
-    np.take(s, order, out=out[0])
-    np.take(e, order, out=out[1])
+    out[0] = s[order]
+    out[1] = e[order]
     return out
 
 
@@ -699,6 +813,7 @@ class _Scan:
     beam: np.ndarray
     cluster: np.ndarray  # (N,) cluster number of each point
     offsets: np.ndarray
+    nbeam: int  # largest beam index + 1
     whole: Optional[ScanArrays] = None  # the whole scan, when the clusters share it
 
     def beams(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -711,7 +826,7 @@ class _Scan:
         w = self.whole
         if w is not None:
             return w.ranges, w.cos, w.sin, w.valid
-        size = int(self.beam.max()) + 1
+        size = self.nbeam
         out = np.zeros((3, size))
         out[:, self.beam] = self.cols[_RNG:_TOL]
         valid = np.zeros(size, dtype=bool)
@@ -731,7 +846,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
         return None
     sizes = np.array([c.indices.size for c in cl], dtype=np.int64)
     offsets = np.zeros(sizes.size + 1, dtype=np.int64)
-    np.cumsum(sizes, out=offsets[1:])
+    sizes.cumsum(out=offsets[1:])
     n = int(offsets[-1])
     cols = np.empty((7, n))
     whole = cl[0].scan
@@ -739,11 +854,11 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
                                  for c in cl):
         # Clusters of one segment_scan call: gather from its whole-scan arrays.
         beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
-        xy = np.take(whole.points, beam, axis=0)
-        np.take(whole.ranges, beam, out=cols[_RNG])
-        np.take(whole.cos, beam, out=cols[_COS])
-        np.take(whole.sin, beam, out=cols[_SIN])
-        np.take(whole.angles, beam, out=cols[_PHI])
+        xy = whole.points.take(beam, axis=0)
+        whole.ranges.take(beam, out=cols[_RNG])
+        whole.cos.take(beam, out=cols[_COS])
+        whole.sin.take(beam, out=cols[_SIN])
+        whole.angles.take(beam, out=cols[_PHI])
     else:
         beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
         xy = np.concatenate([c.points for c in cl], dtype=float).reshape(-1, 2)
@@ -751,7 +866,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
         cols[_PHI] = np.concatenate([c.angles for c in cl], dtype=float)
         np.cos(cols[_PHI], out=cols[_COS])
         np.sin(cols[_PHI], out=cols[_SIN])
-    ox, oy = (np.cumsum(xy, axis=0)[-1] / n).tolist()  # the mean (summed in point order)
+    ox, oy = (xy.cumsum(axis=0)[-1] / n).tolist()  # the mean (summed in point order)
     np.subtract(xy[:, 0], ox, out=cols[_X])
     np.subtract(xy[:, 1], oy, out=cols[_Y])
     np.multiply(cols[_RNG], 3.0 * params.sigma_phi, out=cols[_TOL])  # split tolerance
@@ -759,13 +874,13 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     shared = (whole if whole is not None and whole.valid is not None
               and all(c.scan is whole for c in cl) else None)
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.arange(sizes.size).repeat(sizes), offsets, shared)
+                 np.arange(sizes.size).repeat(sizes), offsets, int(beam.max()) + 1, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
     n = (hi - lo + 1).astype(float)
-    s = pre[:, hi + 1] - pre[:, lo]
+    s = pre.take(hi + 1, axis=1) - pre.take(lo, axis=1)
     mx, my = s[0] / n, s[1] / n
     cxx = s[2] - n * mx * mx
     cyy = s[3] - n * my * my
@@ -790,7 +905,10 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     if not adj.size:
         return s, e
     s, e = s.copy(), e.copy()
-    lo, b, hi, oo = s[adj, None], e[adj, None], e[adj + 1, None], o[adj, None]
+    width = 2 * reach + 1
+    # (lo, b, hi, o) of every pair, once per candidate break (no broadcasting below)
+    lo, b, hi, oo = np.array((s[adj], e[adj], e[adj + 1], o[adj])).repeat(
+        width, axis=1).reshape(4, adj.size, width)
     cand = b + np.arange(-reach, reach + 1)
     ok = (cand - lo >= 2) & (hi - cand - oo >= 2)
     cand = np.where(ok, cand, b)
@@ -803,9 +921,9 @@ def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, r
     last[1] = hi
     sse = _sse(pre, first, last)
     cost = np.where(ok, sse[0] + sse[1], np.inf)
-    best = cand[np.arange(adj.size), np.argmin(cost, axis=1)]
+    best = cand.ravel()[cost.argmin(axis=1) + np.arange(0, cost.size, width)]
     e[adj] = best
-    s[adj + 1] = best + oo[:, 0]
+    s[adj + 1] = best + o[adj]
     good = e - s >= 2  # breaks of a chain moved past each other: drop the squeezed piece
     if np.count_nonzero(good) == good.size:
         return s, e
@@ -822,7 +940,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         return s, e
     sums = np.empty((6, s.size))
     sums[0] = e - s + 1
-    np.subtract(pre[:, e + 1], pre[:, s], out=sums[1:])
+    np.subtract(pre.take(e + 1, axis=1), pre.take(s, axis=1), out=sums[1:])
     cx, cy, sxx, syy, sxy = _scatter(sums)
     nrm = np.empty((2, s.size))
     _normal(sxx, syy, sxy, nrm)
@@ -839,7 +957,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     np.maximum(e[:, None] - steps, s[:, None], out=win[:, reach:])
     z = _z(scan, nx, ny, rho, win, params)
     # leading (head) and trailing (tail) runs of outlying points
-    lead, trail = np.cumprod((z > gate).reshape(s.size, 2, reach), axis=2).sum(axis=2).T
+    lead, trail = (z > gate).reshape(s.size, 2, reach).cumprod(axis=2).sum(axis=2).T
     ns, ne = s + lead, e - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
     shared = ((e[:-1] >= s[1:]) & (ne[:-1] >= ns[1:])).nonzero()[0]
@@ -860,9 +978,10 @@ def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.nda
 
     ``rho`` is relative to the scan origin.
     """
-    x, y, rng, cp, sp = scan.cols[:_TOL, pts]
-    nx, ny = nx[:, None], ny[:, None]
-    d = x * nx + y * ny - rho[:, None]
+    x, y, rng, cp, sp = scan.cols[:_TOL].take(pts, axis=1)
+    # the lines' parameters once per point (no broadcasting below)
+    nx, ny, rho = np.array((nx, ny, rho)).repeat(pts.shape[1], axis=1).reshape((3,) + pts.shape)
+    d = x * nx + y * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
     var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
@@ -936,7 +1055,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     if s.size == 1:
         return sums, s, e, f, np.zeros(1, dtype=np.int64)
     f = _Fit(f.params, f.rmse, f.count, f.cov * _variance_factor(sums, f)[:, None, None])
-    gap = scan.cols[:, s[1:]] - scan.cols[:, e[:-1]]
+    gap = scan.cols.take(s[1:], axis=1) - scan.cols.take(e[:-1], axis=1)
     near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
             | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
             | (np.abs(gap[_PHI]) <= params.merge_gap_angle))
@@ -948,7 +1067,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
-    x, y, _, _, _, tol = scan.cols[:_PHI, ends]
+    x, y, _, _, _, tol = scan.cols[:_PHI].take(ends, axis=1)
     ox, oy = scan.origin
     while np.count_nonzero(join):
         new = np.empty(s.size, dtype=bool)
@@ -964,7 +1083,7 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         # Every member must agree with its merged line: chi-square (the merged line taken
         # as exact) and both of its end points within the split tolerance. badness > 1
         # fails either test.
-        rho_g, alpha_g, nx, ny = g.params[:, label]
+        rho_g, alpha_g, nx, ny = g.params.take(label, axis=1)
         badness = _chi2(f.rho, f.alpha, f.cov, rho_g, alpha_g, None) / gate
         dist = np.abs(x * nx + y * ny - (rho_g - nx * ox - ny * oy)) / tol
         np.fmax(badness, dist.max(axis=0), out=badness)
@@ -1016,8 +1135,8 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     owner[1] = gaps
     has = (owner >= 0) & (owner < n_lines)
     clipped = np.minimum(np.maximum(owner, 0), n_lines - 1)
-    rho, _, nx, ny = f.params[:, clipped.repeat(size_g, axis=1)]
-    x, y, rng, cp, sp, tol = scan.cols[:_PHI, idx]
+    rho, _, nx, ny = f.params.take(clipped.repeat(size_g, axis=1), axis=1)
+    x, y, rng, cp, sp, tol = scan.cols[:_PHI].take(idx, axis=1)
     ox, oy = scan.origin
     d = (x + ox) * nx + (y + oy) * ny - rho
     n_u = nx * cp + ny * sp
@@ -1077,7 +1196,7 @@ def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
     line = np.arange(first.size).repeat(hi - lo + 1)
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
-    rho, _, nx, ny = f.params[:, line]
+    rho, _, nx, ny = f.params.take(line, axis=1)
     out = idx, line, rho, wr[idx], wc[idx] * nx + ws[idx] * ny
     f.extent = (first, last, out)
     return out
@@ -1131,19 +1250,20 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         return sums, first, last, f
     s, e, label, first0, last0 = pieces
     owner = np.full(scan.x.size, -1, dtype=np.int64)
-    idx, _ = _gather(s, e)
-    owner[idx] = label.repeat(e - s + 1)
-    for lo, hi in ((first, first0 - 1), (last0 + 1, last)):
-        idx, _ = _gather(lo, hi)
-        owner[idx] = np.arange(first.size).repeat(np.maximum(hi - lo + 1, 0))
+    # a line's support: its pieces and the runs grown before and after (disjoint, so one
+    # gather of all of them)
+    lines = np.arange(first.size)
+    idx, offs = _gather(np.concatenate((s, first, last0 + 1)),
+                        np.concatenate((e, first0 - 1, last)))
+    owner[idx] = np.concatenate((label, lines, lines)).repeat(offs[1:] - offs[:-1])
     rounds = 0
-    two, runs = _splits_in_two(scan, owner, line, beam, params)
+    two, runs = _splits_in_two(scan, owner, line, beam, first, params)
     opening |= two
     while np.count_nonzero(opening):
         if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
             ok = np.ones(first.size, dtype=bool)
             ok[line[opening]] = False
-            relabel = np.cumsum(ok) - 1
+            relabel = ok.cumsum() - 1
             owner = np.where((owner >= 0) & ok[np.maximum(owner, 0)],
                              relabel[np.maximum(owner, 0)], -1)
             sums, first, last = sums[:, ok], first[ok], last[ok]
@@ -1159,15 +1279,15 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         big = size >= params.min_points
         owner[:] = -1
         kept = big[run]
-        owner[pos[kept]] = (np.cumsum(big) - 1)[run[kept]]
+        owner[pos[kept]] = (big.cumsum() - 1)[run[kept]]
         starts, size = starts[big], size[big]
         if not starts.size:
             return sums[:, :0], first[:0], last[:0], f
         first, last = pos[starts], pos[starts + size - 1]
-        sums = np.add.reduceat(feats[:, pos[kept]], np.cumsum(size) - size, axis=1)
+        sums = np.add.reduceat(feats.take(pos[kept], axis=1), size.cumsum() - size, axis=1)
         f = _solve(sums, scan.origin)
         line, beam, opening = _seen_through(scan, f, first, last, params)
-        two, runs = _splits_in_two(scan, owner, line, beam, params)
+        two, runs = _splits_in_two(scan, owner, line, beam, first, params)
         opening |= two
     if line.size:  # only noise: each line's extent becomes its largest run between them
         pos, run, starts, size = (runs if runs is not None
@@ -1184,8 +1304,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
-                   params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
+                   first: np.ndarray, params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
     """Mark the hidden beams (all of a line's) that cut it into two or more lines.
+
+    ``owner`` gives the line of each point (-1: none), ``first`` the lines' first points.
 
     A piece between hidden beams counts as a line when it has ``min_points`` supporting
     points and spans ``min_length``. Also returns the :func:`_support_runs` at all the
@@ -1198,7 +1320,7 @@ def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.nd
     a, b = pos[starts], pos[starts + size - 1]
     span = np.hypot(scan.x[b] - scan.x[a], scan.y[b] - scan.y[a])
     good = (size >= params.min_points) & (span >= params.min_length)
-    n_good = np.bincount(owner[a][good], minlength=int(owner.max()) + 1)
+    n_good = np.bincount(owner[a][good], minlength=first.size)
     return n_good[line] >= 2, runs
 
 
@@ -1212,8 +1334,7 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     """
     pos = (owner >= 0).nonzero()[0]
     bpos = scan.beam[pos]
-    mark = np.zeros(max(int(bpos.max(initial=0)), int(hidden.max(initial=0))) + 1,
-                    dtype=np.int8)
+    mark = np.zeros(scan.nbeam, dtype=np.int8)  # hidden beams lie within the lines' extents
     mark[hidden] = 1
     keep = mark[bpos] == 0
     pos, bpos = pos[keep], bpos[keep]
@@ -1224,8 +1345,10 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     np.not_equal(own[1:], own[:-1], out=new[1:])
     new[1:] |= cut[1:] != cut[:-1]
     starts = new.nonzero()[0]
-    size = np.diff(np.append(starts, pos.size))
-    return pos, new.cumsum() - 1, starts, size
+    bounds = np.empty(starts.size + 1, dtype=np.int64)
+    bounds[:-1] = starts
+    bounds[-1] = pos.size
+    return pos, new.cumsum() - 1, starts, bounds[1:] - bounds[:-1]
 
 
 def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
@@ -1241,7 +1364,6 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     """
     same = np.arange(first.size), first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
-    b1 = scan.beam[last]
     front = rho / cos_in - r  # how far the return lies in front of the line
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
@@ -1256,7 +1378,7 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     occ = np.zeros(hit.size, dtype=bool)
     occ[1:] |= pair
     occ[:-1] |= pair
-    size = int(max(b1.max(), scan.beam.max())) + 1
+    size = scan.nbeam
     key_occ = fl[occ] * size + fb[occ]  # sorted (line-major, beams increasing)
     pts, offs = _gather(first, last)
     own = np.arange(first.size).repeat(offs[1:] - offs[:-1])
@@ -1268,7 +1390,10 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     new[:1] = True
     new[1:] = (own[1:] != own[:-1]) | (cut[1:] != cut[:-1])
     starts = new.nonzero()[0]
-    count = np.diff(np.append(starts, pts.size))
+    bounds = np.empty(starts.size + 1, dtype=np.int64)
+    bounds[:-1] = starts
+    bounds[-1] = pts.size
+    count = bounds[1:] - bounds[:-1]
     big = count >= params.min_points
     starts, count = starts[big], count[big]
     return own[starts], pts[starts], pts[starts + count - 1]
@@ -1285,11 +1410,13 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     ends = np.empty((2, first.size), dtype=np.int64)
     ends[0] = first
     ends[1] = last
-    x, y = scan.cols[:_RNG, ends]
+    x, y, _, cp, sp = scan.cols[:_TOL].take(ends, axis=1)
     x += ox
     y += oy
-    rho, alpha, nx, ny = f.params
-    d = x * nx + y * ny - rho
+    rho, alpha = f.params[:2]
+    # the line parameters once per end point (2, G): no broadcasting in the steps below
+    rho2, _, nx, ny = np.concatenate((f.params, f.params), axis=1).reshape(4, 2, first.size)
+    d = x * nx + y * ny - rho2
     proj = np.empty((2, first.size, 2))  # end point (first, last), line, (x, y)
     np.subtract(x, d * nx, out=proj[..., 0])
     np.subtract(y, d * ny, out=proj[..., 1])
@@ -1297,8 +1424,7 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     # supporting beams, the end beam's ray meets the line (the segment then covers no beam
     # outside its support). Inside, the projection stays (it does not depend on the range
     # noise along a grazing ray).
-    cp, sp = scan.cols[_COS:_TOL, ends]
-    t = rho / (cp * nx + sp * ny)
+    t = rho2 / (cp * nx + sp * ny)
     along = proj[..., 1] * nx - proj[..., 0] * ny  # position along the line (tangent)
     along_ray = t * (sp * nx - cp * ny)
     inward = np.where(along[1] >= along[0], 1.0, -1.0) * (along_ray - along) * _INWARD
@@ -1314,8 +1440,8 @@ def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
           & np.isfinite(cov[:, 0, 0]) & np.isfinite(cov[:, 1, 1])).nonzero()[0]
     rho, alpha, rmse = rho[ok].tolist(), alpha[ok].tolist(), f.rmse[ok].tolist()
     count = f.count[ok].astype(np.int64).tolist()
-    b0, b1 = scan.beam[ends[:, ok]].tolist()
-    proj, cov = proj[:, ok], cov[ok]
+    b0, b1 = scan.beam[ends.take(ok, axis=1)].tolist()
+    proj, cov = proj.take(ok, axis=1), cov.take(ok, axis=0)
     return [LineSegment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
                         b0[j], b1[j]) for j in range(len(rho))]
 
@@ -1360,7 +1486,7 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     feats = _features(scan.x, scan.y, cols[_RNG], cols[_COS], cols[_SIN], params.sigma_r,
                       params.sigma_phi, pad=1)
     pre = np.zeros((5, n + 1))  # prefix sums of x, y, x^2, y^2, xy (= _prefix5(x, y))
-    np.cumsum(feats[1:6, :n], axis=1, out=pre[:, 1:])
+    feats[1:6, :n].cumsum(axis=1, out=pre[:, 1:])
     if params.method == 'split_merge':
         s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL])
         keep = e - s >= 2
@@ -1368,9 +1494,9 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     else:
         # Smooth each cluster's ranges over the bearing (eqs. 8-10), polar -> Cartesian.
         sub, sub_offs = _gather(offsets[big], offsets[big + 1] - 1)
-        r_s = lowess_groups(cols[_PHI, sub], cols[_RNG, sub], sub_offs, params.lowess_span,
+        r_s = lowess_groups(cols[_PHI][sub], cols[_RNG][sub], sub_offs, params.lowess_span,
                             params.lowess_iterations)
-        pieces = alfa_pieces(np.stack([r_s * cols[_COS, sub], r_s * cols[_SIN, sub]], axis=1),
+        pieces = alfa_pieces(np.stack([r_s * cols[_COS][sub], r_s * cols[_SIN][sub]], axis=1),
                              sub_offs, params)
         pieces = sub[pieces] if pieces.size else pieces
         s, e = pieces[:, 0], pieces[:, 1]
@@ -1388,7 +1514,8 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
         return []
     col, first, last = _occluded_extents(scan, fit, first, last, params)
     if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
-        fit = _Fit(fit.params[:, col], fit.rmse[col], fit.count[col], fit.cov[col])
+        fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
+                   fit.cov.take(col, axis=0))
     return _build(scan, params, fit, first, last)
 
 

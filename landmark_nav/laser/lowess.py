@@ -27,26 +27,31 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray) -> np.nda
     ``k`` windows containing ``i`` the one with the smallest largest distance wins.
     """
     n = x.shape[0]
-    group = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
+    sizes = offsets[1:] - offsets[:-1]
+    group = np.arange(sizes.size).repeat(sizes)
     lo_g = offsets[group]
     k = span[group]
-    kmax = int(span.max())
+    kmax = max(span.tolist())
     i = np.arange(n)
+    steps = np.arange(kmax)
     # Candidate window starts i-k+1 .. i, clipped to the group.
-    cand = i[:, None] - np.arange(kmax)[None, :]
+    cand = i[:, None] - steps
     hi_start = offsets[group + 1] - k
-    ok = (np.arange(kmax)[None, :] < k[:, None])
-    cand = np.clip(cand, lo_g[:, None], hi_start[:, None])
-    left = x[i, None] - x[cand]
-    right = x[np.minimum(cand + k[:, None] - 1, n - 1)] - x[i, None]
+    k_col = k[:, None]
+    ok = steps < k_col
+    np.maximum(cand, lo_g[:, None], out=cand)  # np.clip
+    np.minimum(cand, hi_start[:, None], out=cand)
+    x_col = x[:, None]
+    left = x_col - x[cand]
+    right = x[np.minimum(cand + k_col - 1, n - 1)] - x_col
     reach = np.where(ok, np.maximum(left, right), np.inf)
-    return cand[i, np.argmin(reach, axis=1)]
+    return cand.ravel()[reach.argmin(axis=1) + i * kmax]
 
 
 def _group_median(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Return the median of each group ``values[offsets[g]:offsets[g + 1]]`` (vectorised)."""
-    sizes = np.diff(offsets)
-    group = np.repeat(np.arange(len(sizes)), sizes)
+    sizes = offsets[1:] - offsets[:-1]
+    group = np.arange(sizes.size).repeat(sizes)
     order = np.lexsort((values, group))
     s = values[order]
     lo = offsets[:-1] + (sizes - 1) // 2
@@ -77,25 +82,25 @@ def lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int =
     n = x.shape[0]
     if n == 0:
         return np.zeros(0)
-    sizes = np.diff(offsets)
+    sizes = offsets[1:] - offsets[:-1]
     k_g = np.minimum(sizes, int(span))
     starts = _knn_windows(x, offsets, k_g)
-    group = np.repeat(np.arange(len(sizes)), sizes)
+    group = np.arange(sizes.size).repeat(sizes)
     k = k_g[group]
-    kmax = int(k_g.max())
+    kmax = max(k_g.tolist())
     cols = np.arange(kmax)[None, :]
     in_win = cols < k[:, None]
     idx = np.minimum(starts[:, None] + cols, n - 1)
     u = x[idx] - x[:, None]  # predictor relative to x_i, so the fit at x_i is the intercept
     u = np.where(in_win, u, 0.0)
     yw = y[idx]
-    dist = np.where(in_win, np.abs(u), 0.0)
+    dist = np.abs(u)  # 0 outside the window
     d = dist.max(axis=1, keepdims=True)  # d(x): distance to the most distant neighbour
     with np.errstate(divide='ignore', invalid='ignore'):
         ratio = np.where(d > 0.0, dist / d, 0.0)
     w1 = np.where(in_win, (1.0 - ratio ** 3) ** 3, 0.0)  # eq. 8, tricube
     fit = _weighted_linear(u, yw, w1, y)
-    scale = float(np.max(np.abs(y))) + 1.0
+    scale = float(np.abs(y).max()) + 1.0
     for _ in range(int(iterations)):
         res = y - fit
         mad = _group_median(np.abs(res), offsets)  # M of eq. 9
