@@ -239,6 +239,29 @@ def test_minus_cosine_finds_each_corner_once(kind, dist):
             assert e @ np.linalg.solve(corners[0].covariance, e) < 18.4, label  # chi2(2) 1e-4
 
 
+def test_two_corners_of_a_pilaster_are_both_found():
+    # A 0.3 m x 0.3 m pilaster on a wall, seen obliquely: its concave foot (5, 0) and its
+    # convex edge (5, 0.3) are 0.3 m apart on one cluster, so the firing windows of both
+    # form one run. Every local minimum of f is refined: both are found (measured 88 of 90;
+    # one per run, the former suppression, found 44).
+    w = World('pilaster')
+    w.add_room([(0.0, 0.0), (5.0, 0.0), (5.0, 0.3), (5.3, 0.3), (5.3, 0.0), (30.0, 0.0),
+                (30.0, 30.0), (0.0, 30.0)])
+    truth = np.array([[5.0, 0.0], [5.0, 0.3]])
+    rng = np.random.default_rng(0)
+    found = 0
+    for px in (3.8, 4.0, 4.2):
+        for py in (1.2, 1.5, 2.0):
+            pose = np.array([px, py, math.atan2(0.15 - py, 5.15 - px)])
+            for _ in range(5):
+                corners = extract_corners(*sim_scan(w, pose, quiet(0.01), rng),
+                                          CornerParams(sigma_r=0.01))
+                pos = np.array([c.position for c in corners]).reshape(-1, 2)
+                d = np.hypot(*(to_laser(truth, pose)[:, None] - pos[None]).transpose(2, 0, 1))
+                found += int((d.min(axis=1, initial=np.inf) < 0.03).sum())
+    assert found >= 86
+
+
 @given(x=st.floats(0.8, 5.0), y=st.floats(-3.0, 3.0), off=st.floats(0.36, math.pi / 2 - 0.36),
        facing=st.booleans())
 @settings(max_examples=60, deadline=None)

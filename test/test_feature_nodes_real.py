@@ -39,25 +39,26 @@ def replayed(tmp_path_factory):
         ros.add_node(CornerExtractor(context=ros.context))
         ros.add_node(LineExtractor(context=ros.context))
         corners = ros.collect('corners', PoseArray)
+        features = ros.collect('corners/features', PointCloud2)
         lines = ros.collect('lines', PointCloud2)
         player = subprocess.run(
             [sys.executable, '-m', 'landmark_nav.nodes.bag_player', str(bag), '--topics',
              '/scan', '--rate', '3', '--wait-for-subscribers', '30'],
             env=os.environ, cwd=REPO, capture_output=True, text=True, timeout=120)
         assert player.returncode == 0, player.stderr
-        ros.wait_until(lambda: len(corners) >= SCANS and len(lines) >= SCANS, 10.0)
-        return bag, list(corners), list(lines)
+        ros.wait_until(lambda: min(len(corners), len(features), len(lines)) >= SCANS, 10.0)
+        return bag, list(corners), list(lines), list(features)
 
 
 @pytest.mark.dds
 def test_no_scan_is_lost_at_three_times_real_time(replayed):
-    bag, corners, lines = replayed
-    assert (len(corners), len(lines)) == (SCANS, SCANS)
+    bag, corners, lines, features = replayed
+    assert (len(corners), len(lines), len(features)) == (SCANS, SCANS, SCANS)
 
 
 @pytest.mark.dds
 def test_node_figures_equal_the_offline_figures(replayed):
-    bag, corner_msgs, line_msgs = replayed
+    bag, corner_msgs, line_msgs, feature_msgs = replayed
     offline, _ = evaluate_truth_free(bag, scans=SCANS)
     mount, sigma_r, _ = sensor_facts(bag)
     scans, _ = bag_metric_scans(bag, mount)
@@ -65,19 +66,22 @@ def test_node_figures_equal_the_offline_figures(replayed):
     f, rmse, false_beams = [], [], 0
     line_rep, corner_rep = Repeatability(), Repeatability()
     prev = None
-    for scan, pose_msg, cloud in zip(scans, corner_msgs, line_msgs):
+    for scan, pose_msg, cloud, feats in zip(scans, corner_msgs, line_msgs, feature_msgs):
         fields = feature_cloud_to_arrays(cloud)
         segs = np.stack([np.column_stack([fields['x1'], fields['y1']]),
                          np.column_stack([fields['x2'], fields['y2']])], axis=1)
         pts = np.array([[p.position.x, p.position.y] for p in pose_msg.poses]).reshape(-1, 2)
+        cf = feature_cloud_to_arrays(feats)  # the arms' directions: bisector +- opening / 2
+        np.testing.assert_array_equal(np.column_stack([cf['x'], cf['y']]).reshape(-1, 2), pts)
+        wedges = np.column_stack([cf['bisector'], cf['opening']]).reshape(-1, 2)
         m = ray_metrics(scan.ranges, scan.angles, scan.valid, segs, sigma_r, scan.no_return)
         f.append(m.f)
         rmse.append(m.rmse)
         false_beams += int(m.false_surface.size)
         if prev is not None:
             line_repeatability(line_rep, prev[1], prev[0].pose, segs, scan)
-            corner_repeatability(corner_rep, prev[2], prev[0].pose, pts, scan)
-        prev = (scan, segs, pts)
+            corner_repeatability(corner_rep, prev[2], prev[0].pose, pts, scan, wedges_k=prev[3])
+        prev = (scan, segs, pts, wedges)
     lines, corners = offline['lines']['split_merge'], offline['corners']['minus_cosine']
     # The line cloud carries float32 end points (measured: f equal, RMSE 8e-9 relative).
     assert np.mean(f) == pytest.approx(lines['f'], abs=1e-9)

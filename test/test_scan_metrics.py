@@ -2,8 +2,9 @@
 
 import math
 
-from landmark_nav.evaluation.scan_metrics import (approx_poly_segments, corner_repeatability,
-                                                  in_view, line_repeatability, MetricScan,
+from landmark_nav.evaluation.scan_metrics import (approx_poly_segments, corner_observable,
+                                                  corner_repeatability, in_view,
+                                                  line_repeatability, MetricScan,
                                                   ray_metrics, ray_ranges, Repeatability)
 from landmark_nav.geometry import inverse_transform_points
 from landmark_nav.laser.segmentation import Cluster, segment_scan
@@ -236,3 +237,69 @@ def test_short_lines_are_no_opportunity_and_occluded_places_are_not_in_view():
     # Out of range.
     near = MetricScan(view_b.ranges, FOV, view_b.valid, view_b.no_return, 0.1, 3.0, B)
     assert not in_view(near, ROOM_CORNERS).any()
+
+
+# The room's corners as a detector reports them: [bisector, opening] in the map frame
+# (concave, opening 90 deg, the bisector toward the room's centre).
+ROOM_WEDGES = np.array([[math.atan2(1, 1), math.pi / 2], [math.atan2(1, -1), math.pi / 2],
+                        [math.atan2(-1, -1), math.pi / 2], [math.atan2(-1, 1), math.pi / 2]])
+
+
+def wedges_in(pose, wedges):
+    """Return the map-frame wedges as scan ``pose`` reports them (bisector in its frame)."""
+    return wedges - np.array([pose[2], 0.0])
+
+
+def test_a_corner_whose_arm_leaves_the_field_of_view_is_no_opportunity():
+    # From B the corner (6, 4) is at bearing 29.4 deg; its arm along y = 4 runs to larger
+    # bearings (15 cm along it: 31.0 deg), the arm along x = 6 to smaller ones (27.2 deg).
+    fov = np.radians(np.arange(-120.0, 30.01, 1.0))  # the last beam at 30 deg
+    segs = inverse_transform_points(B, ROOM.reshape(-1, 2)).reshape(-1, 2, 2)
+    r = ray_ranges(fov, segs).min(axis=1)
+    view = MetricScan(r, fov, np.isfinite(r), np.isinf(r), 0.1, 30.0, B)
+    arms = ROOM_WEDGES[:, :1] + 0.25 * np.pi * np.array([1.0, -1.0])
+    np.testing.assert_array_equal(in_view(view, ROOM_CORNERS), [False, True, True, False])
+    np.testing.assert_array_equal(corner_observable(view, ROOM_CORNERS),
+                                  [False, True, True, False])
+    np.testing.assert_array_equal(corner_observable(view, ROOM_CORNERS, arms),
+                                  [False, True, False, False])
+    # Counted: one opportunity, re-detected; the corner that left is counted apart.
+    score = Repeatability()
+    corner_repeatability(score, to_laser(A, ROOM_CORNERS), A, to_laser(B, ROOM_CORNERS[1:2]),
+                         view, wedges_k=wedges_in(A, ROOM_WEDGES))
+    assert (score.opportunities, score.redetected) == (1, 1)
+    assert (score.unobserved, score.unobserved_redetected) == (1, 0)
+    assert score.fraction == 1.0 and score.fraction_with_unobserved == 0.5
+    # With the whole field of view both are opportunities.
+    full = Repeatability()
+    corner_repeatability(full, to_laser(A, ROOM_CORNERS), A, to_laser(B, ROOM_CORNERS[1:2]),
+                         view_of(B, ROOM), wedges_k=wedges_in(A, ROOM_WEDGES))
+    assert (full.opportunities, full.redetected, full.unobserved) == (2, 1, 0)
+
+
+def test_a_corner_the_next_scan_sees_past_is_no_opportunity():
+    # The corner (6, 4) is gone in the next scan (a door opened there, the laser sees 8 m
+    # further through it): the beam toward it is not occluded, so the line rule keeps it
+    # in view, but nothing was returned at its place.
+    opened = np.array([[[0, 0], [6, 0]], [[6, 0], [6, 3.5]], [[5.5, 4], [0, 4]],
+                       [[0, 4], [0, 0]], [[14, -5], [14, 12]]], dtype=float)
+    view = view_of(B, opened)
+    np.testing.assert_array_equal(in_view(view, ROOM_CORNERS), [False, True, True, False])
+    np.testing.assert_array_equal(in_view(view, ROOM_CORNERS, surface=True),
+                                  [False, True, False, False])
+    score = Repeatability()
+    corner_repeatability(score, to_laser(A, ROOM_CORNERS), A, to_laser(B, ROOM_CORNERS[1:2]),
+                         view)
+    assert (score.opportunities, score.redetected, score.unobserved) == (1, 1, 1)
+    # No return at all there (the room's far side open to the sky) is not seen either.
+    blind = MetricScan(np.where(view.ranges > 7.0, np.inf, view.ranges), FOV,
+                       view.ranges <= 7.0, view.ranges > 7.0, 0.1, 30.0, B)
+    np.testing.assert_array_equal(in_view(blind, ROOM_CORNERS, surface=True),
+                                  [False, True, False, False])
+    # A corner 5 cm short of its beam's return is still seen (margin 10 cm), 20 cm short is
+    # not (its beam hits the wall a few cm from the corner: not exactly 0 cm).
+    c = ROOM_CORNERS[1:2]
+    near = view_of(B, ROOM)
+    toward = (c - B[:2]) / np.hypot(*(c - B[:2]).T)
+    assert in_view(near, c - 0.05 * toward, surface=True).all()
+    assert not in_view(near, c - 0.2 * toward, surface=True).any()

@@ -18,7 +18,9 @@ reference pose of each scan (e.g. the corrected pose of a Carmen log).
 * **Fit residual**: perpendicular distance of each beam's point to the line of the first
   segment its ray hits, over the beams within 20 cm of it. :func:`ray_metrics`.
 * **Repeatability** between consecutive scans through the reference poses:
-  :func:`line_repeatability`, :func:`corner_repeatability`.
+  :func:`line_repeatability`, :func:`corner_repeatability`. An opportunity is a feature
+  the next scan could re-detect: a line's midpoint in view (:func:`in_view`), a corner's
+  place and a point 15 cm along each arm seen (:func:`corner_observable`).
 * **Baseline** line extractor: iterative end-point fit (Douglas-Peucker) per breakpoint
   cluster, OpenCV ``approxPolyDP``: :func:`approx_poly_segments`.
 
@@ -263,7 +265,8 @@ class MetricScan:
         return float(self.angles[1] - self.angles[0]) if len(self.angles) > 1 else 0.0
 
 
-def in_view(view: MetricScan, points_map: np.ndarray, margin: float = 0.1) -> np.ndarray:
+def in_view(view: MetricScan, points_map: np.ndarray, margin: float = 0.1,
+            surface: bool = False) -> np.ndarray:
     """Return (M,) True for map points that the scan ``view`` could see.
 
     A point is in view when its bearing lies inside the scan's field of view (half a beam
@@ -271,6 +274,13 @@ def in_view(view: MetricScan, points_map: np.ndarray, margin: float = 0.1) -> np
     beam nearest to its bearing is not occluded in front of it: that beam returned at least
     ``distance - margin`` away, or returned nothing (no return: nothing in the way). Beams
     with an error reading decide nothing (not in view).
+
+    With ``surface`` the point must also be on a surface the scan saw: the beam nearest to
+    its bearing returned within ``margin`` of its distance (not beyond it, not nothing).
+    This is the rule for corners, which are points on surfaces: a beam that passes the
+    corner's place and returns metres further, or returns nothing, shows that the scan
+    did not see a surface there, so the corner could not be re-detected in it. Lines keep
+    the rule without ``surface`` (their midpoint's beam may pass a line's end).
 
     Raises:
         ValueError: ``view`` has no pose.
@@ -291,6 +301,8 @@ def in_view(view: MetricScan, points_map: np.ndarray, margin: float = 0.1) -> np
     seen = np.where(view.valid, view.ranges, np.where(view.no_return, np.inf, np.nan))
     with np.errstate(invalid='ignore'):
         clear = seen[k] >= dist - margin
+        if surface:
+            clear &= seen[k] <= dist + margin
     return inside & clear
 
 
@@ -300,11 +312,19 @@ class Repeatability:
 
     opportunities: int = 0
     redetected: int = 0
+    unobserved: int = 0
+    unobserved_redetected: int = 0
 
     @property
     def fraction(self) -> float:
         """Re-detected / opportunities (NaN without opportunities)."""
         return self.redetected / self.opportunities if self.opportunities else float('nan')
+
+    @property
+    def fraction_with_unobserved(self) -> float:
+        """Re-detected / opportunities, the unobserved ones counted too (the former rule)."""
+        n = self.opportunities + self.unobserved
+        return (self.redetected + self.unobserved_redetected) / n if n else float('nan')
 
 
 def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.ndarray,
@@ -349,27 +369,72 @@ def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.
     score.redetected += int((close & overlap).any(axis=1).sum())
 
 
+ARM_PROBE = 0.15  # m: arm points probed for corner observability (detector's arm_length)
+
+
+def corner_observable(view: MetricScan, corners_map: np.ndarray,
+                      arm_angles_map: Optional[np.ndarray] = None, margin: float = 0.1,
+                      arm_probe: float = ARM_PROBE) -> np.ndarray:
+    """Return (C,) True for corners (map frame) that the scan ``view`` could re-detect.
+
+    The corner's place must be seen (:func:`in_view` with ``surface``: inside the field of
+    view and range, not occluded, its beam returning within ``margin`` of its distance),
+    and with ``arm_angles_map`` ((C, 2) directions of the two arms from the corner, map
+    frame [rad]) also the point ``arm_probe`` (the detector's smallest arm) along each arm.
+    A corner is two surfaces meeting; when one of them left the field of view, is hidden
+    or returned nothing in the next scan, no detector can find the corner there.
+    """
+    c = np.asarray(corners_map, dtype=float).reshape(-1, 2)
+    ok = in_view(view, c, margin, surface=True)
+    if arm_angles_map is None or not len(c):
+        return ok
+    ang = np.asarray(arm_angles_map, dtype=float).reshape(-1, 2)
+    probe = c[:, None] + arm_probe * np.stack([np.cos(ang), np.sin(ang)], axis=-1)
+    seen = in_view(view, probe.reshape(-1, 2), margin, surface=True).reshape(-1, 2)
+    return ok & seen.all(axis=1)
+
+
 def corner_repeatability(score: Repeatability, corners_k: np.ndarray, pose_k: np.ndarray,
                          corners_next: np.ndarray, view_next: MetricScan,
-                         max_distance: float = 0.1, margin: float = 0.1) -> None:
+                         max_distance: float = 0.1, margin: float = 0.1,
+                         wedges_k: Optional[np.ndarray] = None) -> None:
     """Add the corner re-detections from scan k to scan k+1 to ``score``.
 
-    Every corner of scan k ((C, 2) laser frame; laser pose ``pose_k``) in view of scan
-    k+1 (:func:`in_view`) is an opportunity; it is re-detected when a corner of scan k+1
-    lies within ``max_distance`` of it in the map frame.
+    Every corner of scan k ((C, 2) laser frame; laser pose ``pose_k``) that scan k+1 could
+    observe (:func:`corner_observable`: its place seen, its beam returning within
+    ``margin`` of its distance; with ``wedges_k`` also both arms near it) is an
+    opportunity. ``wedges_k`` (C, 2) holds each corner's ``[bisector, opening]`` (laser
+    frame of scan k, as :class:`~landmark_nav.laser.corners.Corner` and the
+    ``corners/features`` cloud carry them): the arms run along ``bisector +- opening / 2``.
+    An opportunity is re-detected when a corner of scan k+1 lies within ``max_distance``
+    of it in the map frame. Corners in view by the line rule (:func:`in_view`: the beam
+    toward them not occluded) that are not observable are counted apart in
+    ``score.unobserved`` (their re-detections in ``score.unobserved_redetected``);
+    :attr:`Repeatability.fraction_with_unobserved` is the figure of the former rule,
+    which counted them.
     """
     c_k = np.asarray(corners_k, dtype=float).reshape(-1, 2)
     if not len(c_k):
         return
     world = transform_points(pose_k, c_k).reshape(-1, 2)
-    look = in_view(view_next, world, margin)
+    arm_angles = None
+    if wedges_k is not None:
+        wedge = np.asarray(wedges_k, dtype=float).reshape(-1, 2)
+        half = 0.5 * wedge[:, 1:2] * np.array([1.0, -1.0])
+        arm_angles = float(pose_k[2]) + wedge[:, :1] + half
+    look_any = in_view(view_next, world, margin)
+    look = look_any & corner_observable(view_next, world, arm_angles, margin)
+    unseen = look_any & ~look
     score.opportunities += int(look.sum())
+    score.unobserved += int(unseen.sum())
     c_n = np.asarray(corners_next, dtype=float).reshape(-1, 2)
-    if not look.any() or not len(c_n):
+    if not look_any.any() or not len(c_n):
         return
     other = transform_points(view_next.pose, c_n).reshape(-1, 2)
-    dist = np.hypot(*(world[look][:, None, :] - other[None]).transpose(2, 0, 1))
-    score.redetected += int((dist.min(axis=1) <= max_distance).sum())
+    dist = np.hypot(*(world[:, None, :] - other[None]).transpose(2, 0, 1)).min(axis=1)
+    near = dist <= max_distance
+    score.redetected += int((near & look).sum())
+    score.unobserved_redetected += int((near & unseen).sum())
 
 
 # ---------------------------------------------------------------------------- runner
@@ -520,12 +585,13 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         size_ok = ((idx[:, 1] - idx[:, 0] + 1 >= min_points)
                    & (np.hypot(*(base[:, 1] - base[:, 0]).T) >= min_length))
         segs[BASELINE_MIN] = base[size_ok]
-        corners: Dict[str, np.ndarray] = {}
+        corners: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
         for m, params in corner_params.items():
             t0 = time.perf_counter()
             found = detect_corners(clusters, params)
             c_times[m].append(t_seg + time.perf_counter() - t0)
-            corners[m] = np.array([c.position for c in found]).reshape(-1, 2)
+            corners[m] = (np.array([c.position for c in found]).reshape(-1, 2),
+                          np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2))
             c_count[m] += len(found)
         for m, tally in tallies.items():
             tally.count += len(segs[m])
@@ -536,7 +602,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             for m, tally in tallies.items():
                 line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], scan)
             for m in corner_methods:
-                corner_repeatability(c_repeat[m], prev[2][m], prev[0].pose, corners[m], scan)
+                corner_repeatability(c_repeat[m], prev[2][m][0], prev[0].pose, corners[m][0],
+                                     scan, wedges_k=prev[2][m][1])
         prev = (scan, segs, corners)
     n = len(scans)
     lines = {m: t.figures(n) for m, t in tallies.items()}
@@ -552,6 +619,10 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             'corner_opportunities': c_repeat[m].opportunities,
             'corner_redetected': c_repeat[m].redetected,
             'corner_repeatability': c_repeat[m].fraction if pairs else None,
+            'corner_unobserved': c_repeat[m].unobserved,
+            'corner_unobserved_redetected': c_repeat[m].unobserved_redetected,
+            'corner_repeatability_with_unobserved': (
+                c_repeat[m].fraction_with_unobserved if pairs else None),
             'corners_per_scan': c_count[m] / n if n else float('nan'),
             'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None,
             'mean_ms_per_scan': 1e3 * float(np.mean(c_times[m])) if c_times[m] else None}
@@ -589,9 +660,14 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
             f'{100 * f["fit_rms_m"]:.2f} cm '
             f'({f["fit_beams"]}) | {_repeat_text(f, "line")} | '
             f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
-    out += ['', '| corner method | corners re-detected within 10 cm | corners/scan | '
-            'ms/scan median |', '| --- | --- | --- | --- |']
+    out += ['', '| corner method | corners re-detected within 10 cm | counting the '
+            'unobserved | corners/scan | ms/scan median |', '| --- | --- | --- | --- | --- |']
     for m, f in result['corners'].items():
-        out.append(f'| {m} | {_repeat_text(f, "corner")} | {f["corners_per_scan"]:.2f} | '
-                   f'{f["median_ms_per_scan"]:.2f} |')
+        former = 'n/a'
+        if f['corner_repeatability_with_unobserved'] is not None:
+            former = (f'{f["corner_repeatability_with_unobserved"]:.3f} '
+                      f'({f["corner_redetected"] + f["corner_unobserved_redetected"]}/'
+                      f'{f["corner_opportunities"] + f["corner_unobserved"]})')
+        out.append(f'| {m} | {_repeat_text(f, "corner")} | {former} | '
+                   f'{f["corners_per_scan"]:.2f} | {f["median_ms_per_scan"]:.2f} |')
     return '\n'.join(out)

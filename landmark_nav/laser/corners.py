@@ -42,9 +42,15 @@ Design decisions where the chapter is silent (all documented on :class:`CornerPa
   close to 1 and is rejected.
 * Non-maximum suppression (both window methods). Consecutive firing windows of one cluster
   form a run; a gap of up to ``h`` samples (half window) between firing windows does not
-  break the run. Each run gives ONE detection, its sharpest window (smallest angle, i.e.
-  smallest ``f``): near a corner the angle at the midpoint is smallest when the midpoint is
-  on the vertex and opens toward 180 deg along either arm.
+  break the run. Without refinement each run gives ONE detection, its sharpest window
+  (smallest angle, i.e. smallest ``f``): near a corner the angle at the midpoint is
+  smallest when the midpoint is on the vertex and opens toward 180 deg along either arm.
+  With refinement every local minimum of ``f`` over the firing windows (no neighbouring
+  window sharper) is refined: two corners closer than a window (a door frame, a pilaster:
+  0.2-0.5 m apart) share one run, and one detection per run kept one of them, which one
+  changing from scan to scan (on the six Carmen logs this raised the share of corners
+  re-detected in the next scan by 3-5 points); the refinement's checks reject the minima
+  that are noise on a straight arm and merge those that refine to the same corner.
 * Refinement (``minus_cosine`` with ``refine=True``). (1) Inside the detection window the
   vertex is re-located as the sample that splits the window into the two best TLS lines
   (smallest sum of squared residuals, from moment prefix sums); the sharpest window alone
@@ -89,6 +95,7 @@ from typing import List, Optional, Sequence, Tuple
 
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 
 METHODS = ('minus_cosine', 'sliding_window', 'split_merge')
 _TWO_PI = 2.0 * math.pi
@@ -375,6 +382,19 @@ def _runs_best(pos: np.ndarray, score: np.ndarray, gap: np.ndarray,
     return np.sort(order[first])
 
 
+def _local_minima(pos: np.ndarray, score: np.ndarray, size: int) -> np.ndarray:
+    """Return the positions (into ``pos``) of the local minima of ``score``.
+
+    ``pos`` are sorted sample indices (of ``size`` samples) of firing windows; a window is
+    a local minimum when neither firing window next to it has a smaller score (equal ones
+    are all kept; the refinement merges what coincides). Windows of different clusters
+    are at least ``2 * (window // 2)`` samples apart, so they never compare.
+    """
+    dense = np.full(size, np.inf)
+    dense[pos] = score
+    return np.flatnonzero(minimum_filter1d(dense, 3, mode='nearest')[pos] >= score)
+
+
 def _free_side(cx: np.ndarray, cy: np.ndarray, u1x: np.ndarray, u1y: np.ndarray,
                u2x: np.ndarray, u2y: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return (bisector angle, opening, cos theta) of corners ``(cx, cy)`` (vectorised).
@@ -618,12 +638,14 @@ def _minus_cosine(st: _Stack, p: CornerParams) -> List[Corner]:
         if sel.size == 0:
             return []
         mid, lo, hi, f = mid[sel], lo[sel], hi[sel], f[sel]
+    if p.refine:
+        # Every local minimum of f is refined (two corners in one run: a door frame, a
+        # pilaster); the refinement decides, and merges refined corners that coincide.
+        sel = _local_minima(mid, f, st.x.size)
+        return _refine(st, mid[sel], lo[sel], hi[sel], f[sel], p)
     # NMS: one detection per run of candidate windows, the sharpest (smallest f).
     sel = _runs_best(mid, f, h[mid], st.start[mid])
-    g, lo, hi, f = mid[sel], lo[sel], hi[sel], f[sel]
-    if p.refine:
-        return _refine(st, g, lo, hi, f, p)
-    return _raw_corners(st, g, lo, hi, f, p)
+    return _raw_corners(st, mid[sel], lo[sel], hi[sel], f[sel], p)
 
 
 def _two_line_split(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, gap: int,
