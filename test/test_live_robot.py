@@ -4,7 +4,8 @@
 true path) and ``landmark_nav pipeline slam`` (scans thinned to 10 Hz with
 ``laser_driver.skip=3``) run as processes; this test drives the robot
 by ``cmd_vel`` (``landmark_nav.tools.drive``, closed on ekf_slam's ``/odometry``) along the
-first leg of the ``short`` route (2 m, to its end) and scores ekf_slam's poses against the emulator's truth.
+first leg of the ``short`` route (2 m, to its end) and scores ekf_slam's poses against the
+emulator's truth.
 The two-minute office run of the README is ``benchmarks/bench_live_slam.py``.
 """
 
