@@ -19,6 +19,12 @@ extractor's last ``/diagnostics`` input status (processed, dropped, latency perc
 and every node's RSS after one minute and at the end. ``--loop --seconds 600 --skip 0``
 is a soak through the live drivers (40 scans/s, 10 Hz odometry).
 
+Start-up: corner sets stamped before the first odometry sample are not drops (no odometry
+pose exists for them): ekf_slam counts them as ``before_odometry`` on ``/diagnostics`` and
+states them in one info line, printed here. Load: the load average (``/proc/loadavg``, every
+5 s) and each node's CPU time over the run (``/proc/<pid>/stat``), to tell drops from CPU
+starvation on a shared machine.
+
 Drops: each node's ``/diagnostics`` counts by reason (``dropped.<reason>``) and its drop
 rate, the drop warnings the nodes logged (throttled; each states the drop rate,
 :class:`~landmark_nav.nodes.common.InputStats`) with the first and the last, the laser
@@ -70,6 +76,20 @@ def node_rss(log: Path) -> dict:
                 if line.startswith('VmRSS:'):
                     out[node] = int(line.split()[1]) / 1024.0
         except OSError:
+            pass
+    return out
+
+
+def node_cpu_s(log: Path) -> dict:
+    """Return {node: user + system CPU time [s]} of the pipeline's processes."""
+    import re
+    tick = os.sysconf('SC_CLK_TCK')
+    out = {}
+    for node, pid in re.findall(r'\| (\w+) started \(pid=(\d+)\)', log.read_text()):
+        try:
+            fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+            out[node] = (int(fields[11]) + int(fields[12])) / tick
+        except (OSError, IndexError, ValueError):
             pass
     return out
 
@@ -135,14 +155,21 @@ def main() -> int:
                            '--record', str(out / 'slam.tum')] + (['--loop'] if args.loop
                                                                  else []),
                     env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-                rss = {}
+                rss, loads, next_load = {}, [], 0.0
+                print(f'load average at start: {os.getloadavg()[0]:.2f} '
+                      f'({os.cpu_count()} CPUs)', flush=True)
                 while drive.poll() is None:
                     time.sleep(1.0)
+                    if time.monotonic() >= next_load:
+                        next_load = time.monotonic() + 5.0
+                        loads.append(os.getloadavg()[0])
                     if not rss and time.monotonic() - started > 60.0:
                         rss = node_rss(out / 'pipeline.log')
                 text, _ = drive.communicate()
                 print(text.strip().splitlines()[-1] if text.strip() else 'drive: no output')
                 rss_end = node_rss(out / 'pipeline.log')
+                cpu = node_cpu_s(out / 'pipeline.log')
+                run_s = time.monotonic() - started
                 time.sleep(1.0)
                 odom_msgs, diag_msgs = list(odom), list(diags)
         finally:
@@ -182,18 +209,28 @@ def main() -> int:
         if node in rss:
             print(f'{node}: RSS {rss[node]:.1f} MB at 1 min, {rss_end[node]:.1f} MB at the end '
                   f'({rss_end[node] - rss[node]:+.1f} MB)')
+    if loads:
+        print(f'load average (1 min, every 5 s): min {min(loads):.2f}, mean '
+              f'{sum(loads) / len(loads):.2f}, max {max(loads):.2f} on {os.cpu_count()} CPUs')
+    print('CPU time over the run: ' + ', '.join(
+        f'{n} {c:.1f} s ({100 * c / run_s:.1f} % of one CPU)' for n, c in sorted(cpu.items())))
+    for line in log_lines:
+        if 'before_odometry' in line and '[INFO]' in line:
+            print('start-up: ' + line.split(']: ', 1)[-1])
     for name, values in sorted(last.items()):
-        keys = ('processed', 'dropped', 'drop_rate_percent', 'latency_p50_ms',
-                'latency_p95_ms', 'latency_max_ms')
+        keys = ('processed', 'dropped', 'drop_rate_percent', 'before_odometry',
+                'latency_p50_ms', 'latency_p95_ms', 'latency_max_ms')
         reasons = ', '.join(f'{k[8:]} {v}' for k, v in sorted(values.items())
                             if k.startswith('dropped.'))
-        print(f'{name}: ' + ', '.join(f'{k} {values.get(k)}' for k in keys)
+        print(f'{name}: ' + ', '.join(f'{k} {values[k]}' for k in keys if k in values)
               + f' (reasons: {reasons or "none"})')
     report_warnings(log_lines)
     growth = {n: rss_end[n] - rss[n] for n in rss_end if n in rss}
     dropped = {n.split(':')[0]: int(v.get('dropped', 0)) for n, v in last.items()}
     p95 = float(last.get('ekf_slam: input', {}).get('latency_p95_ms', 'nan'))
-    print(f'soak targets (issue 16, at 1x): dropped {sum(dropped.values())} (target 0), '
+    before = last.get('ekf_slam: input', {}).get('before_odometry', 'n/a')
+    print(f'soak targets (issue 16, at 1x): dropped {sum(dropped.values())} (target 0; '
+          f'ekf_slam: {before} sets stamped before the first odometry, not drops), '
           f'ekf_slam latency p95 {p95:.1f} ms (target <= 100), largest RSS growth '
           + (f'{max(growth.values()):+.1f} MB (target <= 5)' if growth else 'n/a (< 1 min)'))
     emulator = [line for line in (out / 'emulator.log').read_text().splitlines()

@@ -12,6 +12,7 @@ from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import run_slam
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_feature_cloud
 from landmark_nav.laser.corners import CornerParams
+from landmark_nav.nodes import ekf_slam as ekf_slam_module
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
@@ -268,18 +269,19 @@ def test_bad_input():
         pub_c.publish(corner_cloud(t0 - 10_000_000, [good]))  # waits for the first odometry
         assert ros.wait_until(lambda: slam.corner_count == 1, 5)
         assert slam.warner.count == 0 and len(slam.pending) == 1
-        odom(t0, 0.0)  # ... which comes later: the set is older, skipped
+        odom(t0, 0.0)  # ... which comes later: the set is older, no pose for it (not a drop)
         odom(t0 + 100_000_000, 0.01)
         assert ros.wait_until(lambda: slam.odom_count == 2, 5)
-        assert slam.warner.count == 1 and not slam.pending
+        assert slam.warner.count == 0 and not slam.pending
+        assert slam.stats.before_odometry == 1 and slam.stats.dropped_count == 0
         pub_c.publish(corner_cloud(t0 + 50_000_000, [good, [np.nan] * 8]))  # NaN row dropped
         assert ros.wait_until(lambda: len(poses) == 1, 5)
-        assert slam.warner.count == 2
+        assert slam.warner.count == 1
         assert abs(poses[0].pose.pose.position.x - 0.005) < 1e-9
         odom(t0 + 50_000_000, 0.02)  # back in time (by 50 ms): dropped, no reset
         assert ros.wait_until(lambda: slam.odom_count == 3, 5)
         assert slam.resets == 0 and slam.frontend.events['backward'] == 1
-        assert slam.warner.count == 3
+        assert slam.warner.count == 2
         odom(t0 + 200_000_000, 2.0)  # 1.99 m in 0.1 s: a frame jump, bridged (map kept)
         assert ros.wait_until(lambda: slam.odom_count == 4, 5)
         pub_c.publish(corner_cloud(t0 + 200_000_000, [good]))
@@ -311,50 +313,66 @@ def test_out_of_order_corner_sets_are_processed_in_stamp_order():
         slam.destroy_node()
 
 
-def test_corner_sets_stamped_before_the_first_odometry_are_not_lost_at_start():
-    """The live soak lost the first corner sets at every start (all 6 of its drops).
+def test_corner_sets_stamped_before_the_first_odometry_are_counted_apart_not_dropped():
+    """The live soak's start: sets stamped 126..1 ms before the first odometry came after it.
 
-    Stamped before the first odometry (the laser path is slower than /odom), they arrived
-    after it and were dropped.
+    No odometry pose exists for them: not processed, counted as ``before_odometry`` on
+    /diagnostics and stated in one info line, not as drops.
     """
     t0, good = T0, GOOD_CORNER
     with RosHarness() as ros:
         slam, stamps = recording_node(ros)
+        infos = []
+        slam.get_logger = lambda: SimpleNamespace(info=infos.append)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         for dt in (-126_000_000, -101_000_000, -1_000_000, 24_000_000):
             slam.on_corners(corner_cloud(t0 + dt, [good]))
-        assert stamps == [] and len(slam.pending) == 4
+        assert stamps == [] and len(slam.pending) == 1
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
-        assert stamps == [t0 - 126_000_000, t0 - 101_000_000, t0 - 1_000_000, t0 + 24_000_000]
-        assert slam.stats.dropped_count == 0 and slam.stats.processed_count == 4
-        assert slam.frontend.events['start_held'] == 3
+        assert stamps == [t0 + 24_000_000] and slam.stats.dropped_count == 0
+        assert slam.stats.before_odometry == 3 and slam.warner.count == 0
+        (line,) = [text for text in infos if 'before_odometry' in text]
+        assert '3 corner set(s) stamped before it' in line and 'came 0.13 s before' in line
+        values = {v.key: v.value for v in slam.stats.status().values}
+        assert (values['before_odometry'], values['dropped'], values['processed']) == (
+            '3', '0', '1')
         slam.destroy_node()
 
 
-def test_a_base_that_starts_seconds_after_the_laser_loses_no_corner_set():
-    """The 10-minute live soak dropped 21 sets at its start: odometry came 3 s after the laser.
+def test_a_base_that_starts_seconds_after_the_laser_loses_no_set_it_covers(monkeypatch):
+    """The 10-minute live soak: the first odometry came 3.1 s after the first corner set.
 
-    Before any odometry the node dropped all but MAX_PENDING (100) waiting sets, 2.5 s at
-    40 Hz, although the front end holds sets for start_hold_s (3 s) before the first sample.
+    Before the first step the node dropped the sets more than start_hold_s (3 s) older than
+    the newest as no_odometry, although the odometry, delivered late, covered them. Now the
+    wait is bounded by memory only (MAX_START_BYTES).
     """
     t0, good = T0, GOOD_CORNER
     with RosHarness() as ros:
         slam, stamps = recording_node(ros)
-        sets = [t0 - 2_950_000_000 + k * 25_000_000 for k in range(120)]  # 2.975 s at 40 Hz
+        sets = [t0 - 3_100_000_000 + k * 25_000_000 for k in range(284)]  # 3.1 s + 4 s
         for t in sets:
             slam.on_corners(corner_cloud(t, [good]))
-        assert len(slam.pending) == 120 and slam.stats.dropped_count == 0
-        slam.on_corners(corner_cloud(t0 + 100_000_000, [good]))  # 3.05 s after the first
-        assert slam.stats.dropped['no_odometry'] == 2 and len(slam.pending) == 119
-        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
-        # No step before the second sample: still bounded by start_hold_s, not MAX_PENDING.
-        slam.on_corners(corner_cloud(t0 + 125_000_000, [good]))
-        assert len(slam.pending) == 119 and slam.stats.dropped['no_odometry'] == 3
-        slam.on_odom(make_odometry(t0 + 200_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
-        assert stamps == sets[3:] + [t0 + 100_000_000, t0 + 125_000_000]
-        assert slam.stats.dropped_count == 3  # the 118 sets before t0, less 3: held
-        assert slam.frontend.events['start_held'] == 115
+        assert len(slam.pending) == 284 and slam.stats.dropped_count == 0
+        for k in range(42):  # odometry from t0 to 4.1 s, delivered after the sets
+            slam.on_odom(make_odometry(t0 + k * 100_000_000, 'odom', 'base_link',
+                                       [0.0, 0.0, 0.0]))
+        assert stamps == [t for t in sets if t >= t0] and len(stamps) == 160
+        assert slam.stats.dropped_count == 0 and slam.stats.before_odometry == 124
+        assert not slam.pending and slam.frontend.pending_bytes == 0
         slam.destroy_node()
+    monkeypatch.setattr(ekf_slam_module, 'MAX_START_BYTES', 10.5 * corner_set_bytes())
+    with RosHarness() as ros:
+        slam, stamps = recording_node(ros)
+        for t in sets[:12]:  # no odometry: the memory bound drops the oldest two
+            slam.on_corners(corner_cloud(t, [good]))
+        assert slam.stats.dropped['no_odometry'] == 2 and len(slam.pending) == 10
+        assert [p[0] for p in slam.pending] == sets[2:12]
+        slam.destroy_node()
+
+
+def corner_set_bytes() -> int:
+    """Return the memory of a one-corner feature set without a scan (Corners.nbytes)."""
+    return 5 * 8 + 4 * 8 + 1024  # position, covariance, bisector, opening, beam time
 
 
 def test_a_scan_before_its_corners_makes_one_step_not_two():

@@ -155,79 +155,85 @@ def test_a_set_waits_until_the_odometry_covers_its_last_beam_then_flush_holds():
     np.testing.assert_allclose(step.odometry, [0.08, 0, 0], atol=1e-12)
 
 
-def test_corners_before_the_first_odometry_wait_then_are_held_when_the_robot_stands():
-    """A set older than the first odometry waits for the second sample, which decides."""
-    for second, kind in (([0, 0, 0], 'start_held'), ([0.01, 0, 0], 'before_odometry')):
+def test_corners_stamped_before_the_first_odometry_have_no_pose_and_are_not_processed():
+    """As a tf message filter (slam_toolbox, AMCL): no odometry at the stamp, no step.
+
+    Whether the robot stands or moves at the start does not matter, nor how long before.
+    """
+    for second in ([0, 0, 0], [0.01, 0, 0]):
         fe = SlamFrontend()
+        fe.add_features(corners(T0 - 4000 * MS))
         fe.add_features(corners(T0 - 10 * MS))
         fe.add_features(corners(T0))
-        assert fe.add_odometry(T0, [0, 0, 0]) == ('accepted', [])  # undecided: both wait
-        assert [t for t, _ in fe.pending] == [T0 - 10 * MS, T0]
-        kind_odo, steps = fe.add_odometry(T0 + 100 * MS, second)
-        expected = [T0 - 10 * MS, T0] if kind == 'start_held' else [T0]
-        assert kind_odo == 'accepted' and [s.stamp_ns for s in steps] == expected
-        assert fe.events[kind] == 1 and sum(fe.events[k] for k in (
-            'start_held', 'before_odometry', 'out_of_order')) == 1
+        kind, steps = fe.add_odometry(T0, [0, 0, 0])
+        assert kind == 'accepted' and [s.stamp_ns for s in steps] == [T0]
+        assert fe.events['before_odometry'] == 2 and not fe.pending
         np.testing.assert_array_equal(steps[0].odometry, [0, 0, 0])
+        fe.add_odometry(T0 + 100 * MS, second)
+        assert fe.add_features(corners(T0 - 5 * MS)) == []  # came late: no pose either
+        assert fe.events['before_odometry'] == 3 and fe.events['out_of_order'] == 0
+        (step,) = fe.add_features(corners(T0 + 50 * MS))
+        np.testing.assert_allclose(step.odometry, np.array(second) / 2, atol=1e-12)
+        assert fe.events['processed'] == 2
 
 
-def test_start_race_of_the_live_pipeline_loses_no_set():
-    """The live soak's start, where its 6 drops came from.
+def test_start_race_of_the_live_pipeline():
+    """The live soak's start: the laser path is slower than /odom.
 
-    The first six sets came after the first odometry, stamped 126..1 ms before it (the
-    laser path is slower than /odom), and were all dropped.
+    The first six sets came after the first odometry, stamped 126..1 ms before it: not
+    processed (before_odometry), and the later ones give the same filter as if the six had
+    never come.
     """
     prm = SlamParams(confirm_hits=1, confirm_window=1)
     first = T0 + 439 * MS
     stamps = [T0 + 313 * MS + k * 25 * MS for k in range(8)]  # 313 .. 488 ms, 40 Hz
-    ref = SlamFrontend(prm)  # the same sets with the odometry from before the first scan
-    ref.add_odometry(T0, [0, 0, 0])
+    ref = SlamFrontend(prm)  # only the sets the odometry covers
+    ref.add_odometry(first, [0, 0, 0])
     fe = SlamFrontend(prm)
     fe.add_odometry(first, [0, 0, 0])
     steps = []
     for t in stamps:
         steps += fe.add_features(corners(t, beam_time=[0.0125]))
-        ref.add_features(corners(t, beam_time=[0.0125]))
-    assert steps == [] and len(fe.pending) == 8  # the second sample decides
+        if t >= first:
+            ref.add_features(corners(t, beam_time=[0.0125]))
+    assert steps == [] and fe.events['before_odometry'] == 6 and len(fe.pending) == 2
     steps += fe.add_odometry(first + 100 * MS, [0, 0, 0])[1]
     ref.add_odometry(first + 100 * MS, [0, 0, 0])
-    assert [s.stamp_ns for s in steps] == stamps and fe.events['start_held'] == 6
-    assert fe.events['before_odometry'] == fe.events['out_of_order'] == 0
+    assert [s.stamp_ns for s in steps] == stamps[6:] and fe.events['out_of_order'] == 0
     np.testing.assert_array_equal(fe.slam.landmarks, ref.slam.landmarks)
     np.testing.assert_array_equal(fe.slam.pose, ref.slam.pose)
 
 
-def test_corners_before_a_moving_start_or_too_old_are_skipped():
-    fe = SlamFrontend(frontend=FrontendParams(start_hold_s=0.5))
-    fe.add_odometry(T0, [0, 0, 0])
-    assert fe.add_features(corners(T0 - 600 * MS)) == []  # older than start_hold_s
-    assert fe.events['before_odometry'] == 1 and not fe.pending
-    fe.add_features(corners(T0 - 20 * MS))
-    fe.add_odometry(T0 + 100 * MS, [0.05, 0, 0])  # moving: the set cannot be held
-    assert fe.events['before_odometry'] == 2 and not fe.pending
-    assert fe.add_features(corners(T0 - 10 * MS)) == []  # later ones neither
-    assert fe.events['before_odometry'] == 3 and fe.events['start_held'] == 0
-    (step,) = fe.add_features(corners(T0 + 50 * MS))
-    np.testing.assert_allclose(step.odometry, [0.025, 0, 0], atol=1e-12)
+def test_sets_wait_for_odometry_that_starts_seconds_after_the_laser():
+    """The 10-minute soak: the base's first odometry came 3.1 s after the first scan.
 
-
-def test_default_hold_covers_sets_that_came_1_2_s_before_the_odometry():
-    """The loaded soak: /odom matched 1.2 s after corners/features; 6 sets were dropped."""
+    The front end has no time bound on the wait (the node bounds it by memory): every set
+    the odometry covers is processed, however late the odometry comes, even when its
+    first sample is older than sets already waiting (delivered late).
+    """
     fe = SlamFrontend()
-    for t in (T0 - 3100 * MS, T0 - 1177 * MS, T0 - 1152 * MS):
-        fe.add_features(corners(t))
-    fe.add_odometry(T0, [0, 0, 0])
-    fe.add_odometry(T0 + 100 * MS, [0, 0, 0])
-    assert fe.events['start_held'] == 2 and fe.events['before_odometry'] == 1
+    sets = [T0 - 3100 * MS + k * 25 * MS for k in range(204)]  # 3.1 s before to 2 s after
+    for t in sets:
+        assert fe.add_features(corners(t)) == []
+    size = corners(T0).nbytes
+    assert len(fe.pending) == 204 and fe.pending_bytes == 204 * size
+    steps = []
+    for k in range(22):  # 0 .. 2.1 s, all delivered now
+        steps += fe.add_odometry(T0 + k * 100 * MS, [0.01 * k, 0, 0])[1]
+    after = [t for t in sets if t >= T0]
+    assert [s.stamp_ns for s in steps] == after and len(after) == 80
+    assert fe.events['before_odometry'] == 124 and fe.events['processed'] == 80
+    assert not fe.pending and fe.pending_bytes == 0
 
 
-def test_flush_with_one_odometry_sample_drops_the_undecided_older_sets():
-    fe = SlamFrontend()
-    fe.add_odometry(T0, [0, 0, 0])
-    fe.add_features(corners(T0 - 10 * MS))
-    fe.add_features(corners(T0))
-    assert [s.stamp_ns for s in fe.flush()] == [T0]
-    assert fe.events['before_odometry'] == 1 and not fe.pending
+def test_corners_nbytes_counts_the_arrays_and_the_scan():
+    c = corners(T0, [(2.0, 1.0), (3.0, 0.5)])
+    arrays = 2 * 2 * 8 + 2 * 4 * 8 + 3 * 2 * 8  # positions, covariances, 3 vectors
+    assert c.nbytes == arrays + 1024
+    scan = SimpleNamespace(ranges=np.zeros(1081))
+    with_scan = Corners(T0, c.positions, c.covariances, c.bisector, c.opening, c.beam_time,
+                        scan=scan)
+    assert with_scan.nbytes == arrays + 1081 * 8 + 1024
 
 
 def test_frontend_params_are_validated():

@@ -64,13 +64,16 @@ the gains ``'k_d=.. k_theta=.. k_dtheta=..'`` an imported bag states.
 Bad input is reported with a warning throttled per kind of problem and counted on
 ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry that is not
 finite, repeated, older than the last sample or a jump (front-end events); corners with NaN
-or with a covariance that is not positive semi-definite are dropped; corner sets before any
-odometry (by more than ``start_hold_s``, or the robot moved at the start) or older than the
-last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING`` wait
-for odometry (before the first odometry sample: when it is more than ``start_hold_s`` older
-than the newest, the span the front end would hold it for). The scan is received best effort
-with a queue of ``SCAN_DEPTH`` (sensor-data QoS keeps 5: at start-up, while the first steps
-run, that lost scans at 40 Hz).
+or with a covariance that is not positive semi-definite are dropped; corner sets older than
+the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
+wait for odometry (before the first step: when the waiting sets take more than
+``MAX_START_BYTES``; the odometry may start seconds after the laser). Corner sets stamped
+before the first odometry sample are not drops: no odometry pose exists for them (the front
+end's ``before_odometry``; slam_toolbox and AMCL discard such scans in their tf message
+filter); they are counted as ``before_odometry`` on ``/diagnostics`` and stated in one info
+line when the first step is made. The scan is received best effort with a queue of
+``SCAN_DEPTH`` (sensor-data QoS keeps 5: at start-up, while the first steps run, that lost
+scans at 40 Hz).
 """
 
 from collections import deque
@@ -78,6 +81,7 @@ from dataclasses import replace
 import itertools
 import time
 
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, make_odometry,
                                       make_pose_with_covariance_stamped,
@@ -158,15 +162,14 @@ FRONTEND_PARAMETERS = {
     'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
                        (1e-3, 1e6), None),
     'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
-    'start_hold_s': ('corner sets up to this much older than the first odometry are '
-                     'processed at its pose if the robot stands still at the start [s]',
-                     (1e-3, 60.0), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
 MAX_PENDING = 100
-MAX_PENDING_START = 1000  # before any odometry: start_hold_s binds first
+#: Before the first step the waiting sets are bounded by their memory (Corners.nbytes): 32 MiB
+#: hold about 90 s of a 40 Hz laser with 1081 beams, however late the odometry starts.
+MAX_START_BYTES = 32 * 2 ** 20
 #: Most feature sets waiting for their other part (corner cloud or scan).
 MAX_JOIN = 50
 DISCOVERY_S = 10.0  # a part without a publisher is waited for this long (discovery)
@@ -175,7 +178,26 @@ SCAN_QOS = QoSProfile(depth=SCAN_DEPTH, reliability=ReliabilityPolicy.BEST_EFFOR
                       history=HistoryPolicy.KEEP_LAST)
 CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
 #: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
-_FEATURE_DROPS = {'out_of_order': 'out_of_order', 'before_odometry': 'no_odometry'}
+_FEATURE_DROPS = {'out_of_order': 'out_of_order'}
+
+
+class SlamInputStats(InputStats):
+    """:class:`InputStats` plus the count ``before_odometry``.
+
+    The corner sets stamped before the first odometry sample: not processed, and not drops
+    (no odometry pose exists for them).
+    """
+
+    def __init__(self, node: Node, warner: ProblemWarner) -> None:
+        """Start with no set before the odometry."""
+        super().__init__(node, warner)
+        self.before_odometry = 0
+
+    def status(self) -> DiagnosticStatus:
+        """Return the input status with the ``before_odometry`` count."""
+        status = super().status()
+        status.values.append(KeyValue(key='before_odometry', value=str(self.before_odometry)))
+        return status
 
 
 def _declare_odometry_noise(node: Node) -> OdometryNoise:
@@ -249,7 +271,7 @@ class EkfSlamNode(Node):
             'corner sets the odometry reaches are processed (last pose held) [s]',
             (0.01, 3600.0))
         self.warner = ProblemWarner(self)
-        self.stats = InputStats(self, self.warner)
+        self.stats = SlamInputStats(self, self.warner)
         # Outputs without rclpy's default QoS-event handlers (two waitables each, which its
         # executor scans at every wait: a third of the node's CPU per step went there); an
         # incompatible subscriber still reports it on its side.
@@ -291,11 +313,12 @@ class EkfSlamNode(Node):
         self.corner_count = 0
         self.scan_count = 0
         self.resets = 0
+        self._before_logged = 0  # before_odometry sets already stated in the log
         self.last_odom_wall = time.monotonic()
         self.frontend = SlamFrontend(self.params, self.laser_pose, self.frontend_params,
                                      self._on_event, slam_map=self.slam_map,
                                      map_pose_covariance=np.diag(pose_sigma ** 2))
-        self._clear()
+        self._clear()  # also _first_set_ns: stamp of the first feature set (info line)
         self.get_logger().info(f'ekf_slam: landmarks {self.landmarks}, visibility '
                                f'{self.visibility}, association {self.params.association}, '
                                f'odometry noise {self.params.odometry}')
@@ -313,6 +336,7 @@ class EkfSlamNode(Node):
     def _clear(self) -> None:
         """Forget the filter, odometry buffer, pending corner sets and path."""
         self.frontend.clear()
+        self._first_set_ns = None
         self.join.clear()
         self._clear_path()
         self.display_stamp = None
@@ -327,9 +351,13 @@ class EkfSlamNode(Node):
         if kind in _FEATURE_DROPS:
             self.stats.drop(_FEATURE_DROPS[kind], f'Skipping corners: {message}')
             return
+        if kind == 'before_odometry':  # not a drop (module docstring); logged at a step
+            self.stats.before_odometry += 1
+            return
         if kind == 'restart':
             self.resets += 1
             self._clear_path()
+            self._first_set_ns = None
         self.warner.warn(f'Odometry ({kind}): {message}')
 
     def on_odom(self, msg: Odometry) -> None:
@@ -444,19 +472,16 @@ class EkfSlamNode(Node):
         """Give one feature set to the front end; publish the steps it completes."""
         t = corners.stamp_ns
         steps = self.frontend.add_features(corners, self.stats.received_ns)
+        if self._first_set_ns is None:
+            self._first_set_ns = t
         if not self.frontend.events['processed']:
-            # No step yet (the base starts after the laser; the second odometry sample
-            # decides whether the robot stood still): the front end holds sets up to
-            # start_hold_s before its first sample, so that span, not MAX_PENDING, bounds
-            # the wait; a bound on the count too for a fast laser.
-            hold_s = self.frontend.frontend.start_hold_s
-            while self.frontend.pending and (
-                    self.frontend.pending[0][0] < t - int(hold_s * 1e9)
-                    or len(self.frontend.pending) > MAX_PENDING_START):
+            # No step yet: the odometry may start seconds after the laser (a base driver or
+            # a DDS match that comes late), so the wait is bounded by memory, not by a time.
+            while self.frontend.pending_bytes > MAX_START_BYTES:
                 old = self.frontend.drop_oldest_pending()
-                self.stats.drop('no_odometry', f'Dropping corners at {old[0]} ns: no step '
-                                f'yet, and more than start_hold_s = {hold_s:g} s or '
-                                f'{MAX_PENDING_START} sets before the newest ({t} ns)')
+                self.stats.drop('no_odometry', f'Dropping corners at {old[0]} ns: no step yet, '
+                                'and the sets waiting for odometry take more than '
+                                f'{MAX_START_BYTES / 2 ** 20:g} MiB (newest {t} ns)')
         elif len(self.frontend.pending) > MAX_PENDING:
             old = self.frontend.drop_oldest_pending()
             span = self.frontend.odometry_span
@@ -508,10 +533,24 @@ class EkfSlamNode(Node):
 
     def _publish_steps(self, steps: list, odometry_received_ns: int = 0) -> None:
         """Publish each step's pose and count it."""
+        if steps and self.stats.before_odometry > self._before_logged:
+            self._log_before_odometry()
         for st in steps:
             st: Step
             self._publish(st.stamp_ns, st.pose, st.covariance)
             self.stats.processed(max(int(st.tag or 0), odometry_received_ns))
+
+    def _log_before_odometry(self) -> None:
+        """State the sets stamped before the first odometry (one line at the first step)."""
+        n = self.stats.before_odometry - self._before_logged
+        self._before_logged = self.stats.before_odometry
+        t0 = self.frontend.t0
+        span = ('' if self._first_set_ns is None or t0 is None else
+                f'; the first corner set came {(t0 - self._first_set_ns) * 1e-9:.2f} s before it')
+        self.get_logger().info(
+            f'Odometry starts at {t0} ns: {n} corner set(s) stamped before it were not processed '
+            f'(no odometry pose for them; counted as before_odometry on /diagnostics, not as '
+            f'drops){span}')
 
     def _publish(self, t: int, pose: np.ndarray, cov: np.ndarray) -> None:
         """Publish the pose of one step and remember it for the path."""

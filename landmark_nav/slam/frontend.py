@@ -44,18 +44,20 @@ older than the last processed step is dropped (``'out_of_order'``).
 the last odometry pose for beams after it (end of a recording; the node calls it when
 odometry stops coming).
 
-Start-up: the filter starts at the first odometry sample, but the laser's path to the front
-end (the sweep, the transfer, the extractor) is slower than the odometry's, so the first
-sets to arrive after the first odometry sample are usually stamped before it (measured on
-the live pipeline: 1 to 6 sets, up to 126 ms before it, at every start; under load corner
-sets also came for up to 1.2 s before the first odometry, the subscriptions matching
-apart). Such a set, or one that came before any odometry and is older than the first
-sample, is processed at the first odometry pose (held back in time, ``'start_held'``) when
-the robot stands still: the first two accepted odometry samples differ by no more than the
-noise model's floors (``sigma_xy_floor``, ``sigma_yaw_floor``), and the set is at most
-``start_hold_s`` older than the first sample (default 3 s: the node's queue of 100 waiting
-sets spans 2.5 s at 40 Hz). It waits for the second sample to decide; otherwise (the robot
-moves at the start, or the set is older) it is dropped (``'before_odometry'``).
+Start-up: the filter starts at the first accepted odometry sample. A step needs the
+odometry at its stamp, so a set stamped at or after the first sample waits, however long the
+odometry takes to come (the node bounds the waiting sets by their memory, not by a time: when
+the base's driver or its DDS match comes seconds after the laser, no set stamped after the
+first odometry sample is lost), and a
+set stamped before it has no odometry pose and is not processed (``'before_odometry'``,
+when the first sample comes for the sets waiting, on arrival for later ones). This is what a
+ROS user knows from slam_toolbox and AMCL: their scans go through a tf message filter that
+holds each scan until the odom -> base_link transform at its stamp exists and discards
+those stamped before the transform's first sample. Such sets are not drops: no step exists
+for them (the node counts them apart on ``/diagnostics``). On the live pipeline they are the
+sets of the laser's first seconds while ``/odom`` is not yet matched, plus 1 to 6 sets (up to
+126 ms) stamped before the first sample that arrive after it (the laser's path to the front
+end is slower than the odometry's).
 
 Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
 (:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
@@ -114,7 +116,7 @@ ODOMETRY_NOISE_MODELS: Dict[str, OdometryNoise] = {
 ODOMETRY_EVENTS = ('accepted', 'invalid', 'repeated', 'conflicting', 'backward', 'restart',
                    'jump')
 #: Feature-set events counted by :attr:`SlamFrontend.events`.
-FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held', 'start_held')
+FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held')
 _GAIN = re.compile(r'^(k_d|k_theta|k_dtheta)=(\S+)$')
 _GAIN_FIELD = {'k_d': 'sigma_xy_per_sqrt_m', 'k_theta': 'sigma_yaw_per_sqrt_m',
                'k_dtheta': 'sigma_yaw_per_sqrt_rad'}
@@ -168,9 +170,6 @@ class FrontendParams:
         max_backward_s: A stamp further back than this restarts the front end [s].
         buffer_s: Odometry kept behind the newest sample [s] (bounded memory when no
             feature sets come; a set older than the buffer is dropped as out of order).
-        start_hold_s: A set stamped up to this long before the first odometry sample is
-            processed at that sample's pose when the robot stands still at the start
-            (module docstring) [s].
     """
 
     deskew: bool = True
@@ -181,12 +180,11 @@ class FrontendParams:
     min_step_s: float = 0.02
     max_backward_s: float = 1.0
     buffer_s: float = 60.0
-    start_hold_s: float = 3.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
         for name in ('max_speed', 'max_turn_rate', 'jump_sigmas', 'min_step_s',
-                     'max_backward_s', 'buffer_s', 'start_hold_s'):
+                     'max_backward_s', 'buffer_s'):
             v = getattr(self, name)
             if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
                     or v <= 0.0):
@@ -271,6 +269,17 @@ class Corners:
     def __len__(self) -> int:
         """Return the number of corners."""
         return self.positions.shape[0]
+
+    @property
+    def nbytes(self) -> int:
+        """Approximate memory of the set [bytes].
+
+        Its arrays, the scan's ranges, 1 KiB per line and 1 KiB for the Python objects.
+        """
+        arrays = (self.positions, self.covariances, self.bisector, self.opening,
+                  self.beam_time, self.line_beam_time)
+        scan = 0 if self.scan is None else np.asarray(self.scan.ranges).nbytes
+        return sum(a.nbytes for a in arrays) + scan + 1024 * (1 + len(self.lines))
 
     def items(self) -> List['_Corner']:
         """Per-corner records for :func:`.observations.corners_to_observations`."""
@@ -386,15 +395,20 @@ class SlamFrontend:
         self.t0: Optional[int] = None
         self._buf = _Buffer()
         self._pending: List[_Pending] = []
+        self._pending_bytes = 0
         self.last_step: Optional[Tuple[int, np.ndarray]] = None
         self._stepped = False  # a set was processed since the start
-        self._at_rest: Optional[bool] = None  # the first two samples: robot still (None: one)
         self._extra_since = np.zeros(3)  # bridged variance already predicted with
 
     @property
     def pending(self) -> List[Tuple[int, object]]:
         """Feature sets waiting for odometry as ``(stamp_ns, tag)``, stamp order."""
         return [(p.stamp_ns, p.tag) for p in self._pending]
+
+    @property
+    def pending_bytes(self) -> int:
+        """Approximate memory of the waiting feature sets [bytes] (:attr:`Corners.nbytes`)."""
+        return self._pending_bytes
 
     @property
     def odometry_span(self) -> Optional[Tuple[int, int]]:
@@ -436,9 +450,8 @@ class SlamFrontend:
                     self.slam.load_map(self.slam_map, pose, self.map_pose_covariance)
                 self.t0 = stamp_ns
                 self.last_step = (stamp_ns, pose.copy())
-                hold = stamp_ns - int(self.frontend.start_hold_s * 1e9)
-                while self._pending and self._pending[0].stamp_ns < hold:
-                    self._before_odometry(self._pending.pop(0).stamp_ns)
+                while self._pending and self._pending[0].stamp_ns < stamp_ns:
+                    self._before_odometry(self._pop_pending().stamp_ns)
             return self._event('accepted'), self.process()
         last = b.t[-1]
         if stamp_ns == last:
@@ -460,10 +473,6 @@ class SlamFrontend:
         dt = (stamp_ns - last) * 1e-9
         u = relative(b.raw_last, pose)  # eq. 13
         why = self._implausible(u, dt, cov)
-        if self._at_rest is None:  # the second sample: did the robot stand still?
-            n = self.params.odometry
-            self._at_rest = why is None and bool(math.hypot(u[0], u[1]) <= n.sigma_xy_floor
-                                                 and abs(u[2]) <= n.sigma_yaw_floor)
         if why is None:
             bridged = pose if b.offset is None else compose(b.offset, pose)
             self._accept(stamp_ns, pose, bridged, cov, np.zeros(3))
@@ -525,18 +534,18 @@ class SlamFrontend:
         t = int(corners.stamp_ns)
         if self.slam is not None:
             first = self._buf.t[0]
+            if t < self.t0:  # no odometry pose for it (module docstring), even after steps
+                self._before_odometry(t)
+                return []
             if self._stepped and t < self.last_step[0] or first != self.t0 and t < first:
                 self._event('out_of_order', f'corners at {t} ns are older than the last step '
                             f'({self.last_step[0]} ns) or the buffered odometry: skipped')
-                return []
-            if t < self.t0 and (self._at_rest is False or t < self.t0 - int(
-                    self.frontend.start_hold_s * 1e9)):
-                self._before_odometry(t)
                 return []
         bt = np.concatenate([corners.beam_time, corners.line_beam_time])
         need = t + (int(math.ceil(float(np.max(bt)) * 1e9))
                     if self.frontend.deskew and bt.size and np.max(bt) > 0 else 0)
         self._seq += 1
+        self._pending_bytes += corners.nbytes
         bisect.insort(self._pending, _Pending(t, need, corners, tag, self._seq),
                       key=lambda p: (p.stamp_ns, p.seq))
         return self.process()
@@ -545,45 +554,33 @@ class SlamFrontend:
         """Remove and return the oldest waiting set ``(stamp_ns, tag)`` (queue bound)."""
         if not self._pending:
             return None
-        p = self._pending.pop(0)
+        p = self._pop_pending()
         return p.stamp_ns, p.tag
 
+    def _pop_pending(self) -> _Pending:
+        """Remove and return the oldest waiting set."""
+        p = self._pending.pop(0)
+        self._pending_bytes -= p.corners.nbytes
+        return p
+
     def _before_odometry(self, t: int) -> None:
-        """Report a set older than the first odometry sample that cannot be held."""
-        why = ('the robot moved between the first two samples' if self._at_rest is False else
-               f'more than start_hold_s = {self.frontend.start_hold_s:g} s')
-        self._event('before_odometry', f'corners at {t} ns are older than the first odometry '
-                    f'({self.t0} ns) and {why}: skipped')
-
-    def _start_decided(self, final: bool = False) -> bool:
-        """Drop the waiting sets before the first odometry that cannot be held.
-
-        Returns:
-            False while the oldest waiting set is before it and the second sample, which
-            decides, has not come (``final``: it will not come; they are dropped).
-        """
-        while self._pending and self.t0 is not None and self._pending[0].stamp_ns < self.t0:
-            if self._at_rest is None and not final:
-                return False
-            if self._at_rest:
-                return True
-            self._before_odometry(self._pending.pop(0).stamp_ns)
-        return True
+        """Report a set stamped before the first odometry sample (no pose for it)."""
+        self._event('before_odometry', f'corners at {t} ns are {(self.t0 - t) * 1e-6:.1f} ms '
+                    f'older than the first odometry ({self.t0} ns): no odometry pose for '
+                    'them, not processed')
 
     def process(self) -> List[Step]:
         """Process waiting feature sets the odometry covers, in stamp order."""
         steps = []
-        while (self._start_decided() and self._pending and self._buf.t
-               and self._pending[0].need_ns <= self._buf.t[-1]):
-            steps.append(self._step(self._pending.pop(0)))
+        while self._pending and self._buf.t and self._pending[0].need_ns <= self._buf.t[-1]:
+            steps.append(self._step(self._pop_pending()))
         return steps
 
     def flush(self) -> List[Step]:
         """Process the waiting sets whose stamp the odometry covers (beams after: held)."""
         steps = self.process()
-        self._start_decided(final=True)
         while self._pending and self._buf.t and self._pending[0].stamp_ns <= self._buf.t[-1]:
-            p = self._pending.pop(0)
+            p = self._pop_pending()
             self._event('held', f'corners at {p.stamp_ns} ns: odometry ends before the last '
                         f'beam, holding its last pose for the de-skew')
             steps.append(self._step(p))
@@ -597,10 +594,7 @@ class SlamFrontend:
         hi = min(bisect.bisect_left(b.t, p.need_ns) + 1, len(b.t))
         ts = (np.asarray(b.t[lo:hi], dtype=np.int64) - self.t0) * 1e-9
         ps = np.array(b.pose[lo:hi])
-        if t < self.t0:  # before the first sample, robot still: its pose held (docstring)
-            self._event('start_held', f'corners at {t} ns, {(self.t0 - t) * 1e-6:.1f} ms before '
-                        'the first odometry, robot still: processed at its pose')
-        odo = np.asarray(interpolate_pose((max(t, self.t0) - self.t0) * 1e-9, ts, ps),
+        odo = np.asarray(interpolate_pose((t - self.t0) * 1e-9, ts, ps),
                          dtype=float).reshape(3)
         prev_t, prev_odo = self.last_step
         # Bridged variance of the jumps in (prev_t, t].
