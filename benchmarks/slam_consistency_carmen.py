@@ -3,7 +3,7 @@
 Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
-        [--seed 0] [--line-floor M] [--line-residual-factor K]
+        [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
         [--jacobians standard|observability]
         [--joint-probability P] [LOG ...]
 
