@@ -88,10 +88,11 @@ Noise models
   poses, the median squared Mahalanobis error over the six logs pooled is 5.0 at ``k = 1``,
   1.47 at ``k = 2`` and 0.96 at ``k = 2.5`` (chi-square median 1.39), per log 0.80-2.00 at
   ``k = 2``, against 0.78-4.57 for the fixed floor of 2 cm, which matches the pooled median
-  as well. Run with ``k = 2``: line error 1.3-2.4 (2 expected; the reference poses' own
-  error is in it), updates with a joint NIS above the 95 % bound 1.2-4.7 % (was 8-30 %),
+  as well. Run with ``k = 2`` (drift seed 0; seed 1 in brackets): line error 1.3-2.4
+  [1.2-3.1] (2 expected; the reference poses' own error is in it), updates with a joint NIS
+  above the 95 % bound 1.2-4.7 % [1.0-6.5 %] (was 8-30 % [9-28 %]),
   SE(2) ATE ratio to odometry median 0.25 (was 0.34) over drift seeds 0-1, reference inside
-  the 95 % ellipse on a median 14 % of the steps (was 5 %), but RPE over 1 m median 2.8x
+  the 95 % ellipse on a median 13 % of the steps (was 5 %), but RPE over 1 m median 2.8x
   the odometry's (was 2.1x; worst 5.0x, was 8.0x). The robot NEES stays far above 3 (the
   heading inconsistency of "Consistency" below), so ``k`` is 0 (off) by default.
 
