@@ -3,7 +3,8 @@
 Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
-        [--seed 0] [--line-floor M] [--jacobians standard|observability]
+        [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
+        [--jacobians standard|observability]
         [--joint-probability P] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
@@ -16,8 +17,9 @@ odometry noise model. Printed per log:
 * ``line_m2``: median squared Mahalanobis distance (2 expected) of each line observation
   put in the map with the reference pose, from the mean of the observations the filter
   associated with the same landmark (landmarks seen at least 5 times), under the stated
-  covariance moved to the map (the extractor's, through the mount, as the filter gets it,
-  without ``line_floor``; the sweep motion is left out). The reference poses are
+  covariance moved to the map (the extractor's through the mount plus the segment-wide
+  terms of ``line_floor`` and ``line_residual_factor``, as the filter gets it; the sweep
+  motion is left out). The reference poses are
   scan-matched, a few cm, so this overstates the error a little.
 * ``nis95``: share of updates whose joint NIS exceeds its chi-square 95 % bound (0.05
   expected) and ``d2``: mean individual d2 of the accepted pairs (1.6 for a 95 % gate).
@@ -47,8 +49,8 @@ from landmark_nav.laser.lines import LineParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
 from landmark_nav.slam.ekf_slam import LINE, odometry_noise, SlamParams  # noqa: E402
-from landmark_nav.slam.line_landmarks import (line_initialization,  # noqa: E402
-                                              lines_to_observations)
+from landmark_nav.slam.line_landmarks import (line_end_covariance,  # noqa: E402
+                                              line_initialization, lines_to_observations)
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -109,7 +111,9 @@ def diagnose(bag: Path, landmarks: str, extra: dict) -> dict:
         obs = lines_to_observations(lines, mount, None, lp.sigma_r)
         ref = scenario.truth_at(np.array([scans[k].stamp_ns]))[0]
         g, _, gz = line_initialization(ref, obs.z)
-        cov = gz @ obs.r @ np.transpose(gz, (0, 2, 1))
+        var = prm.line_floor ** 2 + (prm.line_residual_factor * obs.residual_std) ** 2
+        r_eff = obs.r + var[:, None, None] * line_end_covariance(obs.z, obs.ends, 1.0)
+        cov = gz @ r_eff @ np.transpose(gz, (0, 2, 1))
         ids = res.landmark_id[len(corners):]
         for q in np.flatnonzero((res.status[len(corners):] == 'matched')
                                 & (res.kind[len(corners):] == LINE)):
@@ -152,6 +156,8 @@ def main() -> int:
     ap.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--line-floor', type=float, default=None)
+    ap.add_argument('--line-residual-factor', type=float, default=None)
+    ap.add_argument('--reject-ambiguous', action='store_true', default=None)
     ap.add_argument('--jacobians', default=None, choices=['standard', 'observability'])
     ap.add_argument('--joint-probability', type=float, default=None)
     args = ap.parse_args()
@@ -159,7 +165,9 @@ def main() -> int:
     if not carmen.is_dir():
         print(f'missing {carmen}', file=sys.stderr)
         return 1
-    given = {'line_floor': args.line_floor, 'jacobians': args.jacobians,
+    given = {'line_floor': args.line_floor,
+             'line_residual_factor': args.line_residual_factor,
+             'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
              'joint_probability': args.joint_probability}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'line_m2', 'nis95', 'd2', 'nees_med', 'psi_err', 'psi_sd',

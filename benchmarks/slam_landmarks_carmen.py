@@ -4,7 +4,8 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_landmarks_carmen.py [--landmarks corners
         lines both] [--association icnn] [--prune-misses N] [--seed S ...]
-        [--line-floor M] [--jacobians standard|observability] [--joint-probability P]
+        [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
+        [--position-floor M] [--jacobians standard|observability] [--joint-probability P]
         [--out DIR] [LOG ...]
 
 Each log is imported with ``landmark_nav import`` defaults (synthetic ``pioneer`` drift,
@@ -15,8 +16,9 @@ evaluated as ``landmark_nav evaluate BAG`` does
 absolute jump limit) and the filter's odometry noise model taken from the bag's stated
 drift model (the importer's ``pioneer`` gains ``k_d = 0.05 m/sqrt(m)``, ``k_theta = 0.05
 rad/sqrt(m)``, ``k_dtheta = 0.1 rad/sqrt(rad)``); ``--prune-misses``, ``--line-floor``,
-``--jacobians`` and ``--joint-probability`` set those :class:`SlamParams` fields on top of
-the same noise model (the consistency options of :mod:`landmark_nav.slam.ekf_slam`).
+``--line-residual-factor``, ``--reject-ambiguous``, ``--position-floor``, ``--jacobians``
+and ``--joint-probability`` set those :class:`SlamParams` fields on top of the same noise
+model (the consistency options of :mod:`landmark_nav.slam.ekf_slam`).
 
 Printed per log and landmark type: filter resets, corner and line landmarks at the end,
 the SE(2)-aligned ATE RMSE of EKF-SLAM and of the odometry and their ratio (issue 14 asks
@@ -52,6 +54,9 @@ def main() -> int:
     ap.add_argument('--seed', type=int, nargs='+', default=[0],
                     help='drift seeds of the import (default 0, the importer default)')
     ap.add_argument('--line-floor', type=float, default=None)
+    ap.add_argument('--line-residual-factor', type=float, default=None)
+    ap.add_argument('--reject-ambiguous', action='store_true', default=None)
+    ap.add_argument('--position-floor', type=float, default=None)
     ap.add_argument('--jacobians', default=None, choices=['standard', 'observability'])
     ap.add_argument('--joint-probability', type=float, default=None)
     ap.add_argument('--out', default=None, help='keep slam.json and the PNGs here')
@@ -62,6 +67,9 @@ def main() -> int:
         return 1
     prm = None  # evaluate_bag: SlamParams with the bag's stated noise model
     given = {'prune_misses': args.prune_misses, 'line_floor': args.line_floor,
+             'line_residual_factor': args.line_residual_factor,
+             'reject_ambiguous': args.reject_ambiguous,
+             'position_floor': args.position_floor,
              'jacobians': args.jacobians, 'joint_probability': args.joint_probability}
     extra = {k: v for k, v in given.items() if v is not None}
     if extra:  # the importer's default drift model is 'pioneer'

@@ -4,6 +4,7 @@ import math
 
 from landmark_nav.slam import (chi2_gate, EkfSlam, icnn, jcbb, joint_mahalanobis,
                                mahalanobis_table, SlamParams)
+from landmark_nav.slam.ekf_slam import reject_ambiguous_pairs
 import numpy as np
 import pytest
 
@@ -122,3 +123,42 @@ def test_icnn_joint_check_repairs_the_swap():
     assert res.landmark_id.tolist() == [0, 1]
     assert res.jcbb_nodes > 0 and res.nis < chi2_gate(4, 0.95)
     assert slam.pose[2] == pytest.approx(SIG_PSI, abs=0.005)
+
+
+def test_reject_ambiguous_pairs_mutual_exclusion():
+    """A pair survives only when its row and its column hold one gated entry each."""
+    d2 = np.array([[0.5, 3.0, 9.0, np.inf],   # obs 0: two landmarks in the gate
+                   [9.0, 9.0, 1.0, np.inf],   # obs 1: alone with landmark 2
+                   [9.0, 9.0, 9.0, 0.2],      # obs 2: landmark 3, which obs 3 also gates
+                   [9.0, 9.0, 9.0, 4.0]])
+    hyp = icnn(d2, GATE)
+    assert hyp.tolist() == [0, 2, 3, -1]
+    assert reject_ambiguous_pairs(hyp, d2, GATE).tolist() == [-1, 2, -1, -1]
+    assert hyp.tolist() == [0, 2, 3, -1]  # the input is not changed
+    assert reject_ambiguous_pairs(np.full(2, -1), np.zeros((2, 0)), GATE).tolist() == [-1, -1]
+
+
+def test_filter_rejects_an_ambiguous_corner_without_mapping_it():
+    """An observation inside the gates of two corners is rejected with reject_ambiguous.
+
+    Two mapped corners 0.5 m apart along y, robot y std 0.5 m: the observation of one is
+    inside both gates. By default ICNN takes the nearest (it moves the robot); with
+    reject_ambiguous it is rejected as 'ambiguous', no landmark is added and P is the
+    predicted one.
+    """
+    base = {'confirm_hits': 1, 'confirm_window': 1, 'min_view_margin': 0.0,
+            'position_floor': 0.0}
+    r = np.repeat(np.diag([1e-4, 1e-6])[None], 2, axis=0)
+    out = {}
+    for flag in (False, True):
+        slam = EkfSlam(SlamParams(reject_ambiguous=flag, **base))
+        slam.update(np.array([[3.0, 0.0], [math.hypot(3.0, 0.5), math.atan2(0.5, 3.0)]]), r)
+        slam.predict(np.zeros(3), np.diag([1e-4, 0.25, 1e-8]))
+        p_pred = slam.covariance.copy()
+        res = slam.update(np.array([[math.hypot(3.0, 0.25), math.atan2(0.25, 3.0)]]), r[:1])
+        out[flag] = (res, slam, p_pred)
+    res, slam, _ = out[False]
+    assert res.status[0] == 'matched'
+    res, slam, p_pred = out[True]
+    assert (res.status[0], res.reason[0]) == ('rejected', 'ambiguous')
+    assert slam.num_landmarks == 2 and np.array_equal(slam.covariance, p_pred)

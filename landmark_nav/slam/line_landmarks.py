@@ -63,12 +63,16 @@ class LineObservations:
         r: (L, 2, 2) covariance of each.
         ends: (L, 2, 2) segment endpoints ``[start, end]`` in base_link [m].
         beams: (L,) middle beam index of each segment (for the sweep motion), or None.
+        residual_std: (L,) std of each segment's beams about its fitted line, ``rmse
+            sqrt(n / (n - 2))`` [m] (the fit's unbiased residual std; what
+            ``SlamParams.line_residual_factor`` scales), or None (unknown: no such term).
     """
 
     z: np.ndarray
     r: np.ndarray
     ends: np.ndarray
     beams: Optional[np.ndarray] = None
+    residual_std: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         """Check the shapes agree."""
@@ -77,6 +81,9 @@ class LineObservations:
             raise ValueError(f'LineObservations: z has {n} rows but r has shape '
                              f'{np.asarray(self.r).shape} and ends {np.asarray(self.ends).shape}'
                              ' (expected (L, 2, 2) each)')
+        if self.residual_std is not None and np.asarray(self.residual_std).shape != (n,):
+            raise ValueError(f'LineObservations: z has {n} rows but residual_std has shape '
+                             f'{np.asarray(self.residual_std).shape} (expected ({n},))')
 
     def __len__(self) -> int:
         """Return the number of lines."""
@@ -145,7 +152,7 @@ def lines_to_observations(lines: Sequence, mount: Sequence[float] = (0.0, 0.0, 0
             model says, e.g. a wall that is not quite straight).
 
     Returns:
-        The observations (empty for no lines).
+        The observations (empty for no lines), with each segment's residual std.
     """
     if len(lines) == 0:
         return LineObservations.empty()
@@ -154,9 +161,11 @@ def lines_to_observations(lines: Sequence, mount: Sequence[float] = (0.0, 0.0, 0
     cov = np.array([ln.covariance for ln in lines], dtype=float).reshape(-1, 2, 2)
     ends = np.array([[ln.start, ln.end] for ln in lines], dtype=float).reshape(-1, 2, 2)
     beams = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
+    n = np.array([ln.num_points for ln in lines], dtype=float)
+    rmse = np.array([ln.rmse for ln in lines], dtype=float)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        residual_std = np.where(n > 2, rmse * np.sqrt(n / np.maximum(n - 2.0, 1.0)), np.nan)
     if sigma_r is not None and sigma_r > 0.0:
-        n = np.array([ln.num_points for ln in lines], dtype=float)
-        rmse = np.array([ln.rmse for ln in lines], dtype=float)
         with np.errstate(divide='ignore', invalid='ignore'):
             factor = rmse ** 2 * n / ((n - 2.0) * sigma_r ** 2)
         factor = np.where(np.isfinite(factor) & (n > 2), np.maximum(factor, 1.0), 1.0)
@@ -168,7 +177,7 @@ def lines_to_observations(lines: Sequence, mount: Sequence[float] = (0.0, 0.0, 0
         motion = np.asarray(beam_motion, dtype=float).reshape(-1, 3)
         rho, alpha, cov = transform_lines(motion, rho, alpha, cov)
         ends = _transform_points(motion, ends)
-    return LineObservations(np.column_stack([rho, alpha]), cov, ends, beams)
+    return LineObservations(np.column_stack([rho, alpha]), cov, ends, beams, residual_std)
 
 
 def _transform_points(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
