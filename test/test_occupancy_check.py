@@ -2,9 +2,11 @@
 
 import gzip
 import math
+from types import SimpleNamespace
 
-from landmark_nav.evaluation.occupancy_check import (load_occupancy_grid, occupancy_check,
-                                                     OccupancyGrid, scan_end_points)
+from landmark_nav.evaluation.occupancy_check import (landmark_diagnosis, load_occupancy_grid,
+                                                     occupancy_check, OccupancyGrid,
+                                                     scan_end_points)
 import numpy as np
 import pytest
 
@@ -61,3 +63,27 @@ def test_load_errors_name_file_and_line(tmp_path):
     bad.write_text('global_map[0]: 1 1\n0\n')
     with pytest.raises(ValueError, match='resolution'):
         load_occupancy_grid(bad)
+
+
+def test_landmark_diagnosis_categories():
+    """One corner per category, in the grid frame (identity transform)."""
+    grid = _room_grid()
+    # 0 on the wall x = 5.05; 1 off (x = 5.5) but observed on the wall (moved);
+    # 2 off, detected twice (few views); 3 off and observed off (off grid).
+    lm = np.array([[5.05, 6.0], [5.5, 8.0], [12.0, 10.0], [15.0, 12.0]])
+    obs = [(0, [5.05, 6.02], 'confirmed'), (0, [5.06, 6.0], 'matched'),
+           (1, [5.07, 8.0], 'confirmed'), (1, [5.1, 8.0], 'matched'),
+           (1, [5.3, 8.0], 'matched'), (2, [12.0, 10.0], 'confirmed'),
+           (2, [12.0, 10.1], 'matched'), (3, [15.0, 12.0], 'confirmed'),
+           (3, [15.0, 12.0], 'matched'), (3, [15.0, 12.1], 'matched'),
+           (3, [15.1, 12.0], 'matched'), (-1, [5.05, 7.0], 'new')]
+    run = SimpleNamespace(landmark_ids=np.array([10, 11, 12, 13]), landmarks=lm,
+                          obs_landmark=np.array([10 + o[0] if o[0] >= 0 else -1 for o in obs]),
+                          obs_world=np.array([o[1] for o in obs]),
+                          obs_status=np.array([o[2] for o in obs]))
+    d = landmark_diagnosis(grid, run, np.zeros(3), confirm_hits=3)
+    assert d['category'].tolist() == ['on_wall', 'moved', 'few_views', 'off_grid']
+    assert d['detections'].tolist() == [2, 3, 2, 4]
+    assert d['distance'][0] == 0.0 and d['distance'][1] == pytest.approx(0.4, abs=1e-9)
+    assert d['obs_distance'][1] == pytest.approx(0.0, abs=1e-9)  # median of 0, 0, 0.2
+    assert d['neighbour'][0] == pytest.approx(math.hypot(0.45, 2.0))

@@ -109,6 +109,10 @@ class SlamRun:
     lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (L, 2) rho, alpha
     line_ends: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     final_map: Optional[SlamMap] = None  # the filter's map at the end (save_map)
+    #: (O, 2) each corner observation placed in the map with the filter's pose after its
+    #: step (through the laser mount, not de-skewed): where the filter put it then, to
+    #: compare with where the final map has its landmark.
+    obs_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass(frozen=True)
@@ -216,7 +220,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     sigma_laser = float(getattr(result.laser, 'sigma_range', fe.params.sigma_range))
     seconds = record_s = 0.0
     scan_k = 0
-    o_scan, o_world, o_status, o_lm = [], [], [], []
+    o_scan, o_world, o_status, o_lm, o_est = [], [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
 
     def record(st: Step) -> None:  # right after the step (several may come at once)
@@ -240,6 +244,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             beam_ns = np.minimum(beam_ns, result.end_ns)
             o_world.append(transform_points(
                 sensor_pose(result.truth_at(beam_ns), tuple(mount)), lp))
+            o_est.append(transform_points(sensor_pose(st.pose, tuple(mount)), lp))
             o_scan.append(np.full(len(corners), len(stamps) - 1))
             o_status.append(st.result.status[:len(corners)])  # corners first, then lines
             o_lm.append(st.result.landmark_id[:len(corners)])
@@ -288,7 +293,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    reset_reasons={'odometry restart': fe.restarts} if fe.restarts else {},
                    events=events, scan_index=np.array(index, dtype=np.int64),
                    line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
-                   line_ends=slam.line_ends[ln], final_map=slam.export_map())
+                   line_ends=slam.line_ends[ln], final_map=slam.export_map(),
+                   obs_world=cat(o_est, (0, 2)))
 
 
 def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
