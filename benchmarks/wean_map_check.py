@@ -15,6 +15,9 @@ corner landmarks, the share within 10 cm of a wall cell (issue 14 asks >= 0.9), 
 wall / unknown cells (asks 0), the share of scan end points near a wall with the filter's
 and with the odometry's poses, and the count per category (``on_wall``, ``moved``,
 ``few_views``, ``off_grid``). ``--establish-hits`` sets ``SlamParams.establish_hits``.
+A log whose odometry the front end had to bridge (``robotdata5``: two runs) gets one more
+line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_segments`:
+each part aligned on its own).
 """
 
 import argparse
@@ -27,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnosis,  # noqa: E402
-                                                     load_occupancy_grid)
+                                                     load_occupancy_grid, run_segments)
 from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.corners import CornerParams  # noqa: E402
@@ -62,16 +65,23 @@ def main() -> int:
             run = run_slam(sc, prm, CornerParams(sigma_r=sc.laser.sigma_range,
                                                  sigma_phi=sc.laser.sigma_angle),
                            landmarks=args.landmarks)
-            fit = check_run(grid, sc, run)
-            s = fit['slam']
-            diag = landmark_diagnosis(grid, run, s['transform'],
-                                      confirm_hits=prm.confirm_hits)
-            count = Counter(diag['category'].tolist())
-            print(f'{name} {s["landmarks"]} {s["landmark_share"]:.3f} {s["poses_in_wall"]} '
-                  f'{s["poses_unknown"]} {s["point_share"]:.3f} '
-                  f'{fit["odometry"]["point_share"]:.3f} '
-                  + ' '.join(str(count.get(c, 0)) for c in CATEGORIES)
-                  + f' {run.stats.get("retired", 0)}', flush=True)
+            parts = run_segments(run)
+            named = [(name, run)] + ([(f'{name}#{k}', p) for k, p in enumerate(parts)]
+                                     if len(parts) > 1 else [])
+            for label, part in named:
+                if part.landmarks.shape[0] == 0:
+                    print(f'{label}: no corner landmark')
+                    continue
+                fit = check_run(grid, sc, part)
+                s = fit['slam']
+                diag = landmark_diagnosis(grid, part, s['transform'],
+                                          confirm_hits=prm.confirm_hits)
+                count = Counter(diag['category'].tolist())
+                print(f'{label} {s["landmarks"]} {s["landmark_share"]:.3f} '
+                      f'{s["poses_in_wall"]} {s["poses_unknown"]} {s["point_share"]:.3f} '
+                      f'{fit["odometry"]["point_share"]:.3f} '
+                      + ' '.join(str(count.get(c, 0)) for c in CATEGORIES)
+                      + f' {run.stats.get("retired", 0)}', flush=True)
     return 0
 
 

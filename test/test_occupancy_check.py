@@ -6,7 +6,8 @@ from types import SimpleNamespace
 
 from landmark_nav.evaluation.occupancy_check import (landmark_diagnosis, load_occupancy_grid,
                                                      occupancy_check, OccupancyGrid,
-                                                     scan_end_points)
+                                                     run_segments, scan_end_points)
+from landmark_nav.evaluation.slam import SlamRun
 import numpy as np
 import pytest
 
@@ -87,3 +88,32 @@ def test_landmark_diagnosis_categories():
     assert d['distance'][0] == 0.0 and d['distance'][1] == pytest.approx(0.4, abs=1e-9)
     assert d['obs_distance'][1] == pytest.approx(0.0, abs=1e-9)  # median of 0, 0, 0.2
     assert d['neighbour'][0] == pytest.approx(math.hypot(0.45, 2.0))
+
+
+def test_run_segments_split_at_bridged_jumps():
+    """Steps 0-3, a bridged jump before step 4, steps 4-5: two parts and their corners."""
+    n = 6
+    z = np.zeros((n, 3))
+    run = SlamRun(stamps=np.arange(n), poses=np.arange(3 * n, dtype=float).reshape(n, 3),
+                  covariances=np.zeros((n, 3, 3)), truth=z, odometry=z + 1.0,
+                  obs_scan=np.array([0, 1, 2, 4, 5, 5]),
+                  obs_world_true=np.zeros((6, 2)),
+                  obs_status=np.array(['confirmed', 'matched', 'confirmed', 'confirmed',
+                                       'matched', 'matched']),
+                  obs_landmark=np.array([7, 7, 8, 9, 9, 7]), nis=np.zeros(n),
+                  nis_dof=np.zeros(n), landmark_ids=np.array([7, 8, 9]),
+                  landmarks=np.array([[1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]),
+                  landmark_covariances=np.zeros((3, 2, 2)), stats={}, resets=0, seconds=0.0,
+                  scan_index=np.arange(10, 10 + n),
+                  obs_world=np.arange(12, dtype=float).reshape(6, 2),
+                  bridged=np.array([False, False, False, False, True, False]))
+    a, b = run_segments(run)
+    assert a.scan_index.tolist() == [10, 11, 12, 13] and b.scan_index.tolist() == [14, 15]
+    assert a.landmark_ids.tolist() == [7, 8] and b.landmark_ids.tolist() == [9]
+    assert b.poses[0].tolist() == [12.0, 13.0, 14.0]
+    assert b.obs_scan.tolist() == [0, 1, 1] and b.obs_landmark.tolist() == [9, 9, 7]
+    assert b.obs_world[0].tolist() == [6.0, 7.0]
+    # Nothing bridged (or no record): the run itself.
+    from dataclasses import replace
+    whole = replace(run, bridged=np.zeros(n, dtype=bool))
+    assert run_segments(whole) == [whole]

@@ -273,6 +273,52 @@ def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarra
             'transform': [float(x) for x in t]}
 
 
+def run_segments(run) -> list:
+    """Split a run at the odometry jumps its front end bridged (``run.bridged``).
+
+    After such a jump the odometry continues in another frame (the CMU Wean
+    ``robotdata5`` holds two runs; its clock and odometry restart 11 m away): the front
+    end bridges it as no motion, so the filter puts the next run where the previous one
+    ended, and no single rigid transform fits both parts of the map to the building. Each
+    part is a run of its own for :func:`check_run`: its steps, and the corners confirmed
+    in them.
+
+    Args:
+        run: :func:`landmark_nav.evaluation.slam.run_slam`.
+
+    Returns:
+        One :class:`~landmark_nav.evaluation.slam.SlamRun` per part (the run itself when
+        nothing was bridged); ``poses``, ``odometry``, ``scan_index``, ``stamps``,
+        ``landmarks``, ``landmark_ids`` and the observations restricted to the part.
+    """
+    from dataclasses import replace
+    b = np.asarray(getattr(run, 'bridged', np.zeros(0, dtype=bool)), dtype=bool)
+    cuts = np.flatnonzero(b[1:]) + 1 if b.size else np.zeros(0, dtype=np.int64)
+    if cuts.size == 0:
+        return [run]
+    edges = np.concatenate([[0], cuts, [b.size]])
+    conf = np.asarray(run.obs_status) == 'confirmed'
+    first = dict(zip(np.asarray(run.obs_landmark)[conf].tolist(),
+                     np.asarray(run.obs_scan)[conf].tolist()))
+    born = np.array([first.get(int(j), -1) for j in run.landmark_ids], dtype=np.int64)
+    out = []
+    for a, e in zip(edges[:-1], edges[1:]):
+        lm = (born >= a) & (born < e)
+        ob = (np.asarray(run.obs_scan) >= a) & (np.asarray(run.obs_scan) < e)
+        ow = np.asarray(run.obs_world)
+        out.append(replace(
+            run, stamps=run.stamps[a:e], poses=run.poses[a:e], odometry=run.odometry[a:e],
+            covariances=run.covariances[a:e], truth=run.truth[a:e], nis=run.nis[a:e],
+            nis_dof=run.nis_dof[a:e],
+            scan_index=np.asarray(run.scan_index)[a:e], bridged=b[a:e],
+            landmark_ids=run.landmark_ids[lm], landmarks=run.landmarks[lm],
+            landmark_covariances=run.landmark_covariances[lm],
+            obs_scan=run.obs_scan[ob] - a, obs_status=run.obs_status[ob],
+            obs_landmark=run.obs_landmark[ob], obs_world_true=run.obs_world_true[ob],
+            obs_world=ow[ob] if ow.shape[0] == ob.size else ow))
+    return out
+
+
 def landmark_diagnosis(grid: OccupancyGrid, run, transform: np.ndarray,
                        tolerance: float = 0.1, wall_max: float = 0.1,
                        confirm_hits: int = 3) -> Dict[str, np.ndarray]:
@@ -412,6 +458,6 @@ def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: flo
 
 
 __all__ = ['check_run', 'landmark_diagnosis', 'load_occupancy_grid', 'occupancy_check',
-           'occupancy_check_files',
+           'occupancy_check_files', 'run_segments',
            'OccupancyGrid',
            'scan_end_points']

@@ -113,6 +113,9 @@ class SlamRun:
     #: step (through the laser mount, not de-skewed): where the filter put it then, to
     #: compare with where the final map has its landmark.
     obs_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    #: (S,) whether the front end bridged an odometry jump before the step (``'jump'``:
+    #: the odometry frame broke, e.g. two runs in one log).
+    bridged: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 @dataclass(frozen=True)
@@ -222,6 +225,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     scan_k = 0
     o_scan, o_world, o_status, o_lm, o_est = [], [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
+    bridged = []
 
     def record(st: Step) -> None:  # right after the step (several may come at once)
         nonlocal record_s
@@ -234,6 +238,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         poses.append(st.pose)
         covs.append(st.covariance)
         odo_at.append(st.odometry)
+        bridged.append(bool(np.any(np.asarray(st.bridged_variance) > 0.0)))
         nis_v.append(st.result.nis)
         nis_d.append(st.result.nis_dof)
         scan, corners = pending.pop(k)
@@ -294,7 +299,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    events=events, scan_index=np.array(index, dtype=np.int64),
                    line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
                    line_ends=slam.line_ends[ln], final_map=slam.export_map(),
-                   obs_world=cat(o_est, (0, 2)))
+                   obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool))
 
 
 def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
