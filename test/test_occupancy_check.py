@@ -2,9 +2,12 @@
 
 import gzip
 import math
+from types import SimpleNamespace
 
-from landmark_nav.evaluation.occupancy_check import (load_occupancy_grid, occupancy_check,
-                                                     OccupancyGrid, scan_end_points)
+from landmark_nav.evaluation.occupancy_check import (landmark_diagnosis, load_occupancy_grid,
+                                                     occupancy_check, OccupancyGrid,
+                                                     run_segments, scan_end_points)
+from landmark_nav.evaluation.slam import SlamRun
 import numpy as np
 import pytest
 
@@ -61,3 +64,56 @@ def test_load_errors_name_file_and_line(tmp_path):
     bad.write_text('global_map[0]: 1 1\n0\n')
     with pytest.raises(ValueError, match='resolution'):
         load_occupancy_grid(bad)
+
+
+def test_landmark_diagnosis_categories():
+    """One corner per category, in the grid frame (identity transform)."""
+    grid = _room_grid()
+    # 0 on the wall x = 5.05; 1 off (x = 5.5) but observed on the wall (moved);
+    # 2 off, detected twice (few views); 3 off and observed off (off grid).
+    lm = np.array([[5.05, 6.0], [5.5, 8.0], [12.0, 10.0], [15.0, 12.0]])
+    obs = [(0, [5.05, 6.02], 'confirmed'), (0, [5.06, 6.0], 'matched'),
+           (1, [5.07, 8.0], 'confirmed'), (1, [5.1, 8.0], 'matched'),
+           (1, [5.3, 8.0], 'matched'), (2, [12.0, 10.0], 'confirmed'),
+           (2, [12.0, 10.1], 'matched'), (3, [15.0, 12.0], 'confirmed'),
+           (3, [15.0, 12.0], 'matched'), (3, [15.0, 12.1], 'matched'),
+           (3, [15.1, 12.0], 'matched'), (-1, [5.05, 7.0], 'new')]
+    run = SimpleNamespace(landmark_ids=np.array([10, 11, 12, 13]), landmarks=lm,
+                          obs_landmark=np.array([10 + o[0] if o[0] >= 0 else -1 for o in obs]),
+                          obs_world=np.array([o[1] for o in obs]),
+                          obs_status=np.array([o[2] for o in obs]))
+    d = landmark_diagnosis(grid, run, np.zeros(3), confirm_hits=3)
+    assert d['category'].tolist() == ['on_wall', 'moved', 'few_views', 'off_grid']
+    assert d['detections'].tolist() == [2, 3, 2, 4]
+    assert d['distance'][0] == 0.0 and d['distance'][1] == pytest.approx(0.4, abs=1e-9)
+    assert d['obs_distance'][1] == pytest.approx(0.0, abs=1e-9)  # median of 0, 0, 0.2
+    assert d['neighbour'][0] == pytest.approx(math.hypot(0.45, 2.0))
+
+
+def test_run_segments_split_at_bridged_jumps():
+    """Steps 0-3, a bridged jump before step 4, steps 4-5: two parts and their corners."""
+    n = 6
+    z = np.zeros((n, 3))
+    run = SlamRun(stamps=np.arange(n), poses=np.arange(3 * n, dtype=float).reshape(n, 3),
+                  covariances=np.zeros((n, 3, 3)), truth=z, odometry=z + 1.0,
+                  obs_scan=np.array([0, 1, 2, 4, 5, 5]),
+                  obs_world_true=np.zeros((6, 2)),
+                  obs_status=np.array(['confirmed', 'matched', 'confirmed', 'confirmed',
+                                       'matched', 'matched']),
+                  obs_landmark=np.array([7, 7, 8, 9, 9, 7]), nis=np.zeros(n),
+                  nis_dof=np.zeros(n), landmark_ids=np.array([7, 8, 9]),
+                  landmarks=np.array([[1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]),
+                  landmark_covariances=np.zeros((3, 2, 2)), stats={}, resets=0, seconds=0.0,
+                  scan_index=np.arange(10, 10 + n),
+                  obs_world=np.arange(12, dtype=float).reshape(6, 2),
+                  bridged=np.array([False, False, False, False, True, False]))
+    a, b = run_segments(run)
+    assert a.scan_index.tolist() == [10, 11, 12, 13] and b.scan_index.tolist() == [14, 15]
+    assert a.landmark_ids.tolist() == [7, 8] and b.landmark_ids.tolist() == [9]
+    assert b.poses[0].tolist() == [12.0, 13.0, 14.0]
+    assert b.obs_scan.tolist() == [0, 1, 1] and b.obs_landmark.tolist() == [9, 9, 7]
+    assert b.obs_world[0].tolist() == [6.0, 7.0]
+    # Nothing bridged (or no record): the run itself.
+    from dataclasses import replace
+    whole = replace(run, bridged=np.zeros(n, dtype=bool))
+    assert run_segments(whole) == [whole]

@@ -5,7 +5,8 @@ import math
 from landmark_nav.geometry import compose, inverse_transform_points
 from landmark_nav.slam import EkfSlam, SlamParams
 from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
-from landmark_nav.slam.visibility import corners_missed, lines_missed, ScanGeometry
+from landmark_nav.slam.visibility import (corners_in_view, corners_missed, lines_missed,
+                                          ScanGeometry)
 import numpy as np
 import pytest
 
@@ -92,7 +93,12 @@ def test_line_missed_when_its_beams_see_through():
 
 # ---------------------------------------------------------------------------- pruning
 def test_moved_object_is_pruned_after_prune_misses_scans_and_a_real_corner_is_kept():
-    """A corner on an object that leaves is removed once N scans see through its place."""
+    """A corner on an object that leaves is removed once N scans see through its place.
+
+    Pruning alone (``establish_hits`` 0, the default): with establishment on, the corner at
+    (2, 2) would be a provisional corner that had a chance and was not detected
+    (:func:`test_provisional_corner_not_detected_again_is_retired`).
+    """
     prm = SlamParams(confirm_hits=1, confirm_window=1, prune_misses=3)
     slam = EkfSlam(prm)
     pts = np.array([[3.0, 0.0], [2.0, 2.0]])
@@ -116,6 +122,95 @@ def test_moved_object_is_pruned_after_prune_misses_scans_and_a_real_corner_is_ke
     for _ in range(5):
         slam2.update(np.zeros((0, 2)))
     assert slam2.num_landmarks == 2
+
+
+# ----------------------------------------------------------------------- establishment
+def test_corner_in_view_when_its_place_returns_at_or_beyond_it():
+    xy = np.array([[3.0, 0.0]])
+    sig = np.array([[0.01, math.radians(0.3)]])
+    args = (np.zeros(3), xy, np.zeros((1, 2)), np.array([np.nan]), sig, np.array([4.0]))
+    assert corners_in_view(*args, scan_with(wall_at(3.0)), 1.96, math.radians(8))[0]
+    assert corners_in_view(*args, scan_with(wall_at(6.0)), 1.96, math.radians(8))[0]
+    # Something in front of it (occluded), no return, errors: no chance.
+    assert not corners_in_view(*args, scan_with(wall_at(1.5)), 1.96, math.radians(8))[0]
+    assert not corners_in_view(*args, scan_with(lambda a: np.full(a.shape, np.inf)), 1.96,
+                               math.radians(8))[0]
+    assert not corners_in_view(*args, scan_with(lambda a: np.full(a.shape, np.nan)), 1.96,
+                               math.radians(8))[0]
+    # Farther than it was ever detected: no chance.
+    far = args[:5] + (np.array([2.5]),)
+    assert not corners_in_view(*far, scan_with(wall_at(3.0)), 1.96, math.radians(8))[0]
+    # Its free-space wedge faces away from the robot: no chance.
+    bis = np.array([[1.0, 0.0]])
+    back = (np.zeros(3), xy, bis, np.array([math.pi / 2]), sig, np.array([4.0]))
+    assert not corners_in_view(*back, scan_with(wall_at(3.0)), 1.96, math.radians(8))[0]
+
+
+def establishing_filter(**kw):
+    """Two corners confirmed in one scan (3 hits in 3 scans), then the chances."""
+    prm = SlamParams(confirm_hits=3, confirm_window=3, prune_misses=0,
+                     **{'establish_hits': 3, **kw})
+    slam = EkfSlam(prm)
+    pts = np.array([[3.0, 0.0], [2.0, 2.0]])
+    back = scan_with(wall_at(6.0))
+    for _ in range(3):
+        slam.update(observe(np.zeros(3), pts), rs(2), scan=back)
+    assert slam.num_landmarks == 2 and slam.stats['confirmed'] == 2
+    return slam, pts
+
+
+def in_view_ranges(a):
+    """Beams toward (2, 2) return at it, the others reach a wall at 6 m beyond (3, 0)."""
+    r = wall_at(6.0)(a)
+    return np.where(np.abs(a - math.pi / 4) < math.radians(3), math.hypot(2, 2), r)
+
+
+def test_provisional_corner_not_detected_again_is_retired():
+    """3 detections in 3 chances to stay: (3, 0) is seen each time, (2, 2) never."""
+    slam, pts = establishing_filter()
+    for k in range(3):
+        slam.update(observe(np.zeros(3), pts[:1]), rs(1), scan=scan_with(in_view_ranges))
+        assert slam.num_landmarks == (2 if k < 2 else 1)
+    assert slam.landmarks[0] == pytest.approx([3.0, 0.0], abs=1e-9)
+    assert slam.stats['retired'] == 1
+    # Established: further scans without it do not remove (3, 0) (no pruning here).
+    for _ in range(5):
+        slam.update(np.zeros((0, 2)), scan=scan_with(in_view_ranges))
+    assert slam.num_landmarks == 1
+
+
+def test_provisional_corner_out_of_view_waits_for_its_chances():
+    """Scans that cannot show (2, 2) (occluded, no return) do not count against it."""
+    slam, pts = establishing_filter()
+    blocked = scan_with(lambda a: np.where(np.abs(a - math.pi / 4) < math.radians(3), 1.0,
+                                           wall_at(6.0)(a)))
+    for _ in range(10):
+        slam.update(observe(np.zeros(3), pts[:1]), rs(1), scan=blocked)
+    assert slam.num_landmarks == 2 and slam.stats['retired'] == 0
+    # Two detections in its next chances are not enough, the third establishes it.
+    for k in range(3):
+        z = pts if k < 2 else pts[:1]
+        slam.update(observe(np.zeros(3), z), rs(len(z)), scan=scan_with(in_view_ranges))
+    assert slam.num_landmarks == 1
+    slam2, pts = establishing_filter()
+    for _ in range(3):
+        slam2.update(observe(np.zeros(3), pts), rs(2), scan=scan_with(in_view_ranges))
+    for _ in range(10):
+        slam2.update(observe(np.zeros(3), pts[:1]), rs(1), scan=scan_with(in_view_ranges))
+    assert slam2.num_landmarks == 2 and slam2.stats['retired'] == 0
+
+
+def test_establishment_off_and_parameter_checks():
+    slam, pts = establishing_filter(establish_hits=0)
+    for _ in range(5):
+        slam.update(observe(np.zeros(3), pts[:1]), rs(1), scan=scan_with(in_view_ranges))
+    assert slam.num_landmarks == 2
+    assert SlamParams(confirm_hits=4, confirm_window=6).establish_hits == 0
+    assert SlamParams(confirm_hits=4, confirm_window=6).establish_chances == 6
+    with pytest.raises(ValueError, match='establish_chances'):
+        SlamParams(establish_hits=3, establish_chances=2)
+    with pytest.raises(ValueError, match='establish_hits'):
+        SlamParams(establish_hits=-1)
 
 
 def test_a_sighting_resets_the_miss_count():

@@ -15,6 +15,17 @@ grid has its own origin):
   successive scans on top of each other and on the building's walls; comparing that
   share for the filter's poses and for the odometry's tells whether SLAM helped.
 
+Why a landmark is off the walls (:func:`landmark_diagnosis`, per corner of the final map,
+under the alignment of the check): ``'on_wall'`` within ``tolerance``; ``'moved'``: its
+observations placed with the filter's pose of their step lie on a wall (median within
+``tolerance``) but the final estimate does not: later updates moved the map against the
+trajectory that placed it (an inconsistent map, a drift corrected late); ``'few_views'``:
+detected in the state at most ``confirm_hits`` times (the confirming scan included), i.e.
+never re-observed after its candidate stage (clutter seen from one place);
+``'off_grid'``: seen often and off the walls already where the filter placed it: a
+structure the grid does not hold (an open door, furniture, a partition) or a local misfit
+of the trajectory.
+
 The alignment ``T = (t_x, t_y, theta)`` (map frame -> grid frame) maximises
 ``share of landmarks near a wall + share of poses in known non-wall cells``: for each
 ``theta`` of a 1 deg grid the score of every translation on the grid's cells is one
@@ -262,6 +273,109 @@ def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarra
             'transform': [float(x) for x in t]}
 
 
+def run_segments(run) -> list:
+    """Split a run at the odometry jumps its front end bridged (``run.bridged``).
+
+    After such a jump the odometry continues in another frame (the CMU Wean
+    ``robotdata5`` holds two runs; its clock and odometry restart 11 m away): the front
+    end bridges it as no motion, so the filter puts the next run where the previous one
+    ended, and no single rigid transform fits both parts of the map to the building. Each
+    part is a run of its own for :func:`check_run`: its steps, and the corners confirmed
+    in them.
+
+    Args:
+        run: :func:`landmark_nav.evaluation.slam.run_slam`.
+
+    Returns:
+        One :class:`~landmark_nav.evaluation.slam.SlamRun` per part (the run itself when
+        nothing was bridged); ``poses``, ``odometry``, ``scan_index``, ``stamps``,
+        ``landmarks``, ``landmark_ids`` and the observations restricted to the part.
+    """
+    from dataclasses import replace
+    b = np.asarray(getattr(run, 'bridged', np.zeros(0, dtype=bool)), dtype=bool)
+    cuts = np.flatnonzero(b[1:]) + 1 if b.size else np.zeros(0, dtype=np.int64)
+    if cuts.size == 0:
+        return [run]
+    edges = np.concatenate([[0], cuts, [b.size]])
+    conf = np.asarray(run.obs_status) == 'confirmed'
+    first = dict(zip(np.asarray(run.obs_landmark)[conf].tolist(),
+                     np.asarray(run.obs_scan)[conf].tolist()))
+    born = np.array([first.get(int(j), -1) for j in run.landmark_ids], dtype=np.int64)
+    out = []
+    for a, e in zip(edges[:-1], edges[1:]):
+        lm = (born >= a) & (born < e)
+        ob = (np.asarray(run.obs_scan) >= a) & (np.asarray(run.obs_scan) < e)
+        ow = np.asarray(run.obs_world)
+        out.append(replace(
+            run, stamps=run.stamps[a:e], poses=run.poses[a:e], odometry=run.odometry[a:e],
+            covariances=run.covariances[a:e], truth=run.truth[a:e], nis=run.nis[a:e],
+            nis_dof=run.nis_dof[a:e],
+            scan_index=np.asarray(run.scan_index)[a:e], bridged=b[a:e],
+            landmark_ids=run.landmark_ids[lm], landmarks=run.landmarks[lm],
+            landmark_covariances=run.landmark_covariances[lm],
+            obs_scan=run.obs_scan[ob] - a, obs_status=run.obs_status[ob],
+            obs_landmark=run.obs_landmark[ob], obs_world_true=run.obs_world_true[ob],
+            obs_world=ow[ob] if ow.shape[0] == ob.size else ow))
+    return out
+
+
+def landmark_diagnosis(grid: OccupancyGrid, run, transform: np.ndarray,
+                       tolerance: float = 0.1, wall_max: float = 0.1,
+                       confirm_hits: int = 3) -> Dict[str, np.ndarray]:
+    """Say for each corner landmark of a run why it is (not) on a wall (module docstring).
+
+    Args:
+        grid: The building's grid.
+        run: :func:`landmark_nav.evaluation.slam.run_slam` (its ``obs_world``: observations
+            placed with the filter's poses).
+        transform: ``[t_x, t_y, theta]`` map frame -> grid frame (an :func:`occupancy_check`
+            result's ``'transform'``).
+        tolerance: See :func:`occupancy_check`.
+        wall_max: See :func:`occupancy_check`.
+        confirm_hits: The filter's ``SlamParams.confirm_hits``.
+
+    Returns:
+        Per corner landmark (the run's ``landmark_ids`` order): ``ids``, ``distance`` of
+        the final estimate to a wall [m], ``obs_distance`` median distance of its
+        observations placed with the filter's poses [m] (nan: none recorded),
+        ``detections`` in the state, ``neighbour`` distance to the nearest other corner
+        landmark [m], ``category`` (``'on_wall'``, ``'moved'``, ``'few_views'``,
+        ``'off_grid'``).
+    """
+    t = np.asarray(transform, dtype=float).reshape(3)
+    v, res = grid.values, grid.resolution
+    wall = (v >= 0.0) & (v <= wall_max)
+    walls = cKDTree((np.argwhere(wall) + 0.5) * res)
+    reach = 100.0 * tolerance  # distances beyond are reported as inf
+    ids = np.asarray(run.landmark_ids, dtype=np.int64)
+    lm = np.asarray(run.landmarks, dtype=float).reshape(-1, 2)
+    dist = _square_distance(_transform(lm, t), walls, res, reach)
+    assoc = np.isin(run.obs_status, ('matched', 'confirmed'))
+    obs_id = np.asarray(run.obs_landmark)[assoc]
+    obs_xy = np.asarray(run.obs_world, dtype=float).reshape(-1, 2)
+    obs_xy = obs_xy[assoc] if obs_xy.shape[0] == assoc.size else np.zeros((0, 2))
+    obs_d = (_square_distance(_transform(obs_xy, t), walls, res, reach) if obs_xy.size
+             else np.zeros(0))
+    n = ids.size
+    obs_med = np.full(n, np.nan)
+    det = np.zeros(n, dtype=np.int64)
+    for k, j in enumerate(ids):
+        sel = obs_id == j
+        det[k] = int(np.count_nonzero(sel))
+        if obs_d.size and np.any(sel):
+            obs_med[k] = float(np.median(obs_d[sel[:obs_d.size]]))
+    nb = np.full(n, np.inf)
+    if n > 1:
+        nb = cKDTree(lm).query(lm, 2)[0][:, 1]
+    cat = np.full(n, 'off_grid', dtype='<U9')
+    cat[det <= confirm_hits] = 'few_views'
+    with np.errstate(invalid='ignore'):
+        cat[obs_med <= tolerance] = 'moved'
+    cat[dist <= tolerance] = 'on_wall'
+    return {'ids': ids, 'distance': dist, 'obs_distance': obs_med, 'detections': det,
+            'neighbour': nb, 'category': cat}
+
+
 def scan_end_points(poses: np.ndarray, mount: np.ndarray, ranges: np.ndarray,
                     angles: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Scan end points in the map frame: each scan's valid returns through its pose.
@@ -343,6 +457,7 @@ def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: flo
     return out
 
 
-__all__ = ['check_run', 'load_occupancy_grid', 'occupancy_check', 'occupancy_check_files',
+__all__ = ['check_run', 'landmark_diagnosis', 'load_occupancy_grid', 'occupancy_check',
+           'occupancy_check_files', 'run_segments',
            'OccupancyGrid',
            'scan_end_points']

@@ -109,6 +109,13 @@ class SlamRun:
     lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (L, 2) rho, alpha
     line_ends: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     final_map: Optional[SlamMap] = None  # the filter's map at the end (save_map)
+    #: (O, 2) each corner observation placed in the map with the filter's pose after its
+    #: step (through the laser mount, not de-skewed): where the filter put it then, to
+    #: compare with where the final map has its landmark.
+    obs_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    #: (S,) whether the front end bridged an odometry jump before the step (``'jump'``:
+    #: the odometry frame broke, e.g. two runs in one log).
+    bridged: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 @dataclass(frozen=True)
@@ -216,8 +223,9 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     sigma_laser = float(getattr(result.laser, 'sigma_range', fe.params.sigma_range))
     seconds = record_s = 0.0
     scan_k = 0
-    o_scan, o_world, o_status, o_lm = [], [], [], []
+    o_scan, o_world, o_status, o_lm, o_est = [], [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
+    bridged = []
 
     def record(st: Step) -> None:  # right after the step (several may come at once)
         nonlocal record_s
@@ -230,6 +238,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         poses.append(st.pose)
         covs.append(st.covariance)
         odo_at.append(st.odometry)
+        bridged.append(bool(np.any(np.asarray(st.bridged_variance) > 0.0)))
         nis_v.append(st.result.nis)
         nis_d.append(st.result.nis_dof)
         scan, corners = pending.pop(k)
@@ -240,6 +249,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             beam_ns = np.minimum(beam_ns, result.end_ns)
             o_world.append(transform_points(
                 sensor_pose(result.truth_at(beam_ns), tuple(mount)), lp))
+            o_est.append(transform_points(sensor_pose(st.pose, tuple(mount)), lp))
             o_scan.append(np.full(len(corners), len(stamps) - 1))
             o_status.append(st.result.status[:len(corners)])  # corners first, then lines
             o_lm.append(st.result.landmark_id[:len(corners)])
@@ -288,7 +298,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    reset_reasons={'odometry restart': fe.restarts} if fe.restarts else {},
                    events=events, scan_index=np.array(index, dtype=np.int64),
                    line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
-                   line_ends=slam.line_ends[ln], final_map=slam.export_map())
+                   line_ends=slam.line_ends[ln], final_map=slam.export_map(),
+                   obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool))
 
 
 def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:

@@ -76,6 +76,39 @@ def _laser_pose(pose: np.ndarray, mount: np.ndarray) -> np.ndarray:
                      + c * mount[1], pose[2] + mount[2]])
 
 
+def _corner_windows(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
+                    opening: np.ndarray, sigma: np.ndarray, scan: ScanGeometry, gate: float,
+                    min_view_margin: float):
+    """Range, eligibility, range tolerance and beam window of each corner (module docstring).
+
+    Returns:
+        ``(r (K,), ok (K,) in the field of view and range and facing, tol (K,), k_lo (K,),
+        k_hi (K,))``; ``tol`` and the window are those of the "seen through" test.
+    """
+    lp = _laser_pose(pose, np.asarray(scan.mount, dtype=float))
+    d = xy - lp[:2]
+    r = np.hypot(d[:, 0], d[:, 1])
+    b = _wrap(np.arctan2(d[:, 1], d[:, 0]) - lp[2])
+    ok = (r > scan.range_min) & (r < scan.range_max)
+    known = np.any(bisector != 0.0, axis=1) & np.isfinite(opening)
+    if np.any(known):
+        view = np.abs(_wrap(np.arctan2(-d[:, 1], -d[:, 0])
+                            - np.arctan2(bisector[:, 1], bisector[:, 0])))
+        half = 0.5 * np.minimum(opening, _TWO_PI - opening)
+        with np.errstate(invalid='ignore'):
+            ok &= ~known | (half - view >= min_view_margin)
+    inc = abs(scan.angle_increment)
+    half_window = gate * sigma[:, 1] + inc
+    tol = gate * np.sqrt(sigma[:, 0] ** 2 + scan.sigma_range ** 2) + r * inc / np.sin(
+        min(max(min_view_margin, 1e-9), 0.5 * np.pi))
+    k_lo = np.ceil((b - half_window - scan.angle_min) / scan.angle_increment)
+    k_hi = np.floor((b + half_window - scan.angle_min) / scan.angle_increment)
+    if scan.angle_increment < 0:
+        k_lo, k_hi = k_hi, k_lo
+    ok &= (k_lo >= 0) & (k_hi < np.asarray(scan.ranges).size) & (k_hi >= k_lo)
+    return r, ok, tol, k_lo, k_hi
+
+
 def corners_missed(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
                    opening: np.ndarray, sigma: np.ndarray, scan: ScanGeometry, gate: float,
                    min_view_margin: float) -> np.ndarray:
@@ -92,34 +125,56 @@ def corners_missed(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
         min_view_margin: The filter's grazing margin [rad].
     """
     k = xy.shape[0]
-    lp = _laser_pose(pose, np.asarray(scan.mount, dtype=float))
-    d = xy - lp[:2]
-    r = np.hypot(d[:, 0], d[:, 1])
-    b = _wrap(np.arctan2(d[:, 1], d[:, 0]) - lp[2])
-    ok = (r > scan.range_min) & (r < scan.range_max)
-    known = np.any(bisector != 0.0, axis=1) & np.isfinite(opening)
-    if np.any(known):
-        view = np.abs(_wrap(np.arctan2(-d[:, 1], -d[:, 0])
-                            - np.arctan2(bisector[:, 1], bisector[:, 0])))
-        half = 0.5 * np.minimum(opening, _TWO_PI - opening)
-        with np.errstate(invalid='ignore'):
-            ok &= ~known | (half - view >= min_view_margin)
-    ranges = np.asarray(scan.ranges, dtype=float)
-    inc = abs(scan.angle_increment)
-    half_window = gate * sigma[:, 1] + inc
     if min_view_margin <= 0.0:
         return np.zeros(k, dtype=bool)  # no grazing limit: an arm return may be anywhere
-    tol = gate * np.sqrt(sigma[:, 0] ** 2 + scan.sigma_range ** 2) + r * inc / np.sin(
-        min(min_view_margin, 0.5 * np.pi))
-    k_lo = np.ceil((b - half_window - scan.angle_min) / scan.angle_increment)
-    k_hi = np.floor((b + half_window - scan.angle_min) / scan.angle_increment)
-    if scan.angle_increment < 0:
-        k_lo, k_hi = k_hi, k_lo
+    r, ok, tol, k_lo, k_hi = _corner_windows(pose, xy, bisector, opening, sigma, scan, gate,
+                                             min_view_margin)
+    ranges = np.asarray(scan.ranges, dtype=float)
     out = np.zeros(k, dtype=bool)
-    for i in np.flatnonzero(ok & (k_lo >= 0) & (k_hi < ranges.size) & (k_hi >= k_lo)):
+    for i in np.flatnonzero(ok):
         meas = ranges[int(k_lo[i]):int(k_hi[i]) + 1]
         with np.errstate(invalid='ignore'):
             out[i] = bool(np.all(np.isfinite(meas) & (meas > r[i] + tol[i])))
+    return out
+
+
+def corners_in_view(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
+                    opening: np.ndarray, sigma: np.ndarray, max_seen: np.ndarray,
+                    scan: ScanGeometry, gate: float, min_view_margin: float) -> np.ndarray:
+    """Return (K,) whether the scan had a chance to detect each corner (establishment).
+
+    A chance (:class:`~.ekf_slam.SlamParams` ``establish_hits``) needs what a miss needs
+    (:func:`corners_missed`: field of view and range, facing the robot, the same beam
+    window) except that the beams may return at the corner as well as beyond it: every
+    beam of the window returns no closer than the predicted range minus the same tolerance
+    (nothing in front of the corner), and the corner lies no farther than it was ever
+    detected (``max_seen``: the extractor needs enough returns on both arms, which it has
+    shown to get up to that distance). A detection is a chance; a return in front of the
+    corner (occlusion), no return or an error is none.
+
+    Args:
+        pose: (3,) robot pose in the map.
+        xy: (K, 2) corner positions (map).
+        bisector: (K, 2) sum of world bisector unit vectors (zeros: unknown).
+        opening: (K,) mean free-space opening (nan: unknown) [rad].
+        sigma: (K, 2) predicted std of the corner's range [m] and bearing [rad].
+        max_seen: (K,) largest distance each corner was detected at [m].
+        scan: The scan.
+        gate: ``sqrt(chi2_1(p))``.
+        min_view_margin: The filter's grazing margin [rad] (> 0).
+    """
+    k = xy.shape[0]
+    if min_view_margin <= 0.0 or k == 0:
+        return np.zeros(k, dtype=bool)
+    r, ok, tol, k_lo, k_hi = _corner_windows(pose, xy, bisector, opening, sigma, scan, gate,
+                                             min_view_margin)
+    ok &= r <= max_seen
+    ranges = np.asarray(scan.ranges, dtype=float)
+    out = np.zeros(k, dtype=bool)
+    for i in np.flatnonzero(ok):
+        meas = ranges[int(k_lo[i]):int(k_hi[i]) + 1]
+        with np.errstate(invalid='ignore'):
+            out[i] = bool(np.all(np.isfinite(meas) & (meas >= r[i] - tol[i])))
     return out
 
 
@@ -191,4 +246,4 @@ def landmarks_missed(pose: np.ndarray, kind: np.ndarray, params: np.ndarray,
     return out
 
 
-__all__ = ['corners_missed', 'landmarks_missed', 'lines_missed', 'ScanGeometry']
+__all__ = ['corners_in_view', 'corners_missed', 'landmarks_missed', 'lines_missed', 'ScanGeometry']

@@ -1,0 +1,89 @@
+"""EKF-SLAM on the CMU Wean logs judged on the building's grid, with why landmarks miss.
+
+Run from the repository root (needs ``../shared/data/wean``)::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/wean_map_check.py [--landmarks both]
+        [--establish-hits N] [LOG ...]
+
+Each log (default ``robotdata1 robotdata2 robotdata5``) is imported with ``landmark_nav
+import`` defaults (raw odometry) into a temporary directory and run as the test
+``test_evaluate_imported_wean_log_without_reference`` does (the bag's stated odometry
+noise, the laser's stated noise); :func:`landmark_nav.evaluation.occupancy_check.check_run`
+aligns the result to ``wean.dat`` and :func:`~landmark_nav.evaluation.occupancy_check.
+landmark_diagnosis` says why each corner landmark is off the walls. Printed per log:
+corner landmarks, the share within 10 cm of a wall cell (issue 14 asks >= 0.9), poses in
+wall / unknown cells (asks 0), the share of scan end points near a wall with the filter's
+and with the odometry's poses, and the count per category (``on_wall``, ``moved``,
+``few_views``, ``off_grid``). ``--establish-hits`` sets ``SlamParams.establish_hits``.
+A log whose odometry the front end had to bridge (``robotdata5``: two runs) gets one more
+line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_segments`:
+each part aligned on its own).
+"""
+
+import argparse
+from collections import Counter
+from pathlib import Path
+import sys
+import tempfile
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from landmark_nav.evaluation.bags import load_bag  # noqa: E402
+from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnosis,  # noqa: E402
+                                                     load_occupancy_grid, run_segments)
+from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
+from landmark_nav.importers.writer import import_log  # noqa: E402
+from landmark_nav.laser.corners import CornerParams  # noqa: E402
+from landmark_nav.slam.ekf_slam import SlamParams  # noqa: E402
+from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
+
+LOGS = ('robotdata1', 'robotdata2', 'robotdata5')
+CATEGORIES = ('on_wall', 'moved', 'few_views', 'off_grid')
+
+
+def main() -> int:
+    """Import, run, check, print one line per log."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('logs', nargs='*', default=list(LOGS))
+    ap.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
+    ap.add_argument('--establish-hits', type=int, default=0)
+    args = ap.parse_args()
+    wean = SHARED_DATA / 'wean'
+    if not wean.is_dir():
+        print(f'missing {wean}', file=sys.stderr)
+        return 1
+    grid = load_occupancy_grid(wean / 'wean.dat.gz')
+    print('log corners share_10cm poses_in_wall poses_unknown points_slam points_odom '
+          + ' '.join(CATEGORIES) + ' retired')
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.logs:
+            bag = Path(tmp) / name
+            import_log(wean / f'{name}.log.gz', bag)
+            sc = load_bag(bag, require_reference=False)
+            prm = SlamParams(odometry=bag_odometry_noise(sc)[0],
+                             establish_hits=args.establish_hits)
+            run = run_slam(sc, prm, CornerParams(sigma_r=sc.laser.sigma_range,
+                                                 sigma_phi=sc.laser.sigma_angle),
+                           landmarks=args.landmarks)
+            parts = run_segments(run)
+            named = [(name, run)] + ([(f'{name}#{k}', p) for k, p in enumerate(parts)]
+                                     if len(parts) > 1 else [])
+            for label, part in named:
+                if part.landmarks.shape[0] == 0:
+                    print(f'{label}: no corner landmark')
+                    continue
+                fit = check_run(grid, sc, part)
+                s = fit['slam']
+                diag = landmark_diagnosis(grid, part, s['transform'],
+                                          confirm_hits=prm.confirm_hits)
+                count = Counter(diag['category'].tolist())
+                print(f'{label} {s["landmarks"]} {s["landmark_share"]:.3f} '
+                      f'{s["poses_in_wall"]} {s["poses_unknown"]} {s["point_share"]:.3f} '
+                      f'{fit["odometry"]["point_share"]:.3f} '
+                      + ' '.join(str(count.get(c, 0)) for c in CATEGORIES)
+                      + f' {run.stats.get("retired", 0)}', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
