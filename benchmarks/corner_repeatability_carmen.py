@@ -29,7 +29,7 @@ import time
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from feature_metrics_carmen import CARMEN, carmen_metric_scans, LOGS  # noqa: E402
+from feature_metrics_carmen import carmen_logs, LOGS  # noqa: E402
 from landmark_nav.evaluation.scan_metrics import (corner_observable,  # noqa: E402
                                                   corner_repeatability, Repeatability)
 from landmark_nav.geometry import transform_points  # noqa: E402
@@ -48,12 +48,7 @@ def main() -> None:
     print('| log | place + arms | place | former | '
           'misses: next 10-50 cm / none within 50 cm | corners/scan | ms/scan |')
     print('| --- | --- | --- | --- | --- | --- | --- |')
-    for name in args.logs:
-        path = CARMEN / f'{name}-corrected.log.gz'
-        if not path.exists():
-            print(f'{path}: not present')
-            continue
-        scans = carmen_metric_scans(path)
+    for name, scans in carmen_logs(args.logs):
         corners, arms, times = [], [], []
         for s in scans:
             t0 = time.perf_counter()

@@ -54,6 +54,19 @@ def carmen_metric_scans(path: Path) -> list:
     return out
 
 
+def carmen_logs(names):
+    """Yield ``(name, scans)`` of each named log read by :func:`carmen_metric_scans`.
+
+    A log not in ``../shared/data/carmen`` is reported (one line) and skipped.
+    """
+    for name in names:
+        path = CARMEN / f'{name}-corrected.log.gz'
+        if not path.exists():
+            print(f'{path}: not present')
+            continue
+        yield name, carmen_metric_scans(path)
+
+
 DETAILED = {'min_points': 3, 'min_length': 0.05}  # config/line_extractor_detailed.yaml
 DETAILED_SEGMENTATION_MIN_POINTS = 1
 

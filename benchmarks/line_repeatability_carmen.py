@@ -51,7 +51,7 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from feature_metrics_carmen import CARMEN, carmen_metric_scans, LOGS  # noqa: E402
+from feature_metrics_carmen import carmen_logs, LOGS  # noqa: E402
 from landmark_nav.evaluation.features import normal_form  # noqa: E402
 from landmark_nav.evaluation.scan_metrics import (corner_repeatability, in_view,  # noqa: E402
                                                   Repeatability, segments_of)
@@ -226,12 +226,7 @@ def main() -> None:
     print('| log | method | reference | midpoint | ICP | ICP + midpoint | failures (reference):'
           ' none / rho only / alpha |')
     print('| --- | --- | --- | --- | --- | --- | --- |')
-    for name in args.logs:
-        path = CARMEN / f'{name}-corrected.log.gz'
-        if not path.exists():
-            print(f'{path}: not present')
-            continue
-        scans = carmen_metric_scans(path)
+    for name, scans in carmen_logs(args.logs):
         corr = np.array([icp_correction(a, b) for a, b in zip(scans[:-1], scans[1:])])
         refined = [compose(b.pose, compose(c, relative(b.pose, a.pose)))
                    for a, b, c in zip(scans[:-1], scans[1:], corr)]

@@ -109,6 +109,22 @@ def _corner_windows(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
     return r, ok, tol, k_lo, k_hi
 
 
+def _windows_all(scan: ScanGeometry, ok: np.ndarray, k_lo: np.ndarray, k_hi: np.ndarray,
+                 bound: np.ndarray, strict: bool) -> np.ndarray:
+    """Return (K,) whether each eligible corner's beam window lies wholly beyond ``bound``.
+
+    Every beam finite and ``> bound`` (``strict``) or ``>= bound``; False where not ``ok``.
+    """
+    ranges = np.asarray(scan.ranges, dtype=float)
+    out = np.zeros(ok.shape[0], dtype=bool)
+    for i in np.flatnonzero(ok):
+        meas = ranges[int(k_lo[i]):int(k_hi[i]) + 1]
+        with np.errstate(invalid='ignore'):
+            beyond = meas > bound[i] if strict else meas >= bound[i]
+            out[i] = bool(np.all(np.isfinite(meas) & beyond))
+    return out
+
+
 def corners_missed(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
                    opening: np.ndarray, sigma: np.ndarray, scan: ScanGeometry, gate: float,
                    min_view_margin: float) -> np.ndarray:
@@ -129,13 +145,7 @@ def corners_missed(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
         return np.zeros(k, dtype=bool)  # no grazing limit: an arm return may be anywhere
     r, ok, tol, k_lo, k_hi = _corner_windows(pose, xy, bisector, opening, sigma, scan, gate,
                                              min_view_margin)
-    ranges = np.asarray(scan.ranges, dtype=float)
-    out = np.zeros(k, dtype=bool)
-    for i in np.flatnonzero(ok):
-        meas = ranges[int(k_lo[i]):int(k_hi[i]) + 1]
-        with np.errstate(invalid='ignore'):
-            out[i] = bool(np.all(np.isfinite(meas) & (meas > r[i] + tol[i])))
-    return out
+    return _windows_all(scan, ok, k_lo, k_hi, r + tol, strict=True)
 
 
 def corners_in_view(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
@@ -169,13 +179,7 @@ def corners_in_view(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
     r, ok, tol, k_lo, k_hi = _corner_windows(pose, xy, bisector, opening, sigma, scan, gate,
                                              min_view_margin)
     ok &= r <= max_seen
-    ranges = np.asarray(scan.ranges, dtype=float)
-    out = np.zeros(k, dtype=bool)
-    for i in np.flatnonzero(ok):
-        meas = ranges[int(k_lo[i]):int(k_hi[i]) + 1]
-        with np.errstate(invalid='ignore'):
-            out[i] = bool(np.all(np.isfinite(meas) & (meas >= r[i] - tol[i])))
-    return out
+    return _windows_all(scan, ok, k_lo, k_hi, r - tol, strict=False)
 
 
 def lines_missed(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray, rho_sigma: np.ndarray,
