@@ -285,6 +285,40 @@ def _percentile_ms(values: Sequence[float], q: float) -> float:
     return 1e3 * ordered[min(len(ordered) - 1, int(math.ceil(q / 100.0 * len(ordered))) - 1)]
 
 
+class LatencyHistogram:
+    """Latency percentiles over a whole run in constant memory (log-spaced bins).
+
+    Bin edges grow by ``ratio`` from ``low`` to ``high`` seconds (1 % wide by default:
+    about 1400 bins from 10 µs to 1000 s); a percentile is the upper edge of the bin that
+    holds it, so it is never below the exact value and at most ``ratio`` above it.
+    Latencies below ``low`` fall in the first bin, above ``high`` in the last.
+    """
+
+    def __init__(self, low: float = 1e-5, high: float = 1e3, ratio: float = 1.01) -> None:
+        """Start empty."""
+        self._log_low = math.log(low)
+        self._log_ratio = math.log(ratio)
+        self._nbins = int(math.ceil((math.log(high) - self._log_low) / self._log_ratio))
+        self.counts = np.zeros(self._nbins, dtype=np.int64)
+        self.count = 0
+        self.max = 0.0
+
+    def add(self, seconds: float) -> None:
+        """Count one latency [s]."""
+        i = 0 if seconds <= 0.0 else int((math.log(seconds) - self._log_low) / self._log_ratio)
+        self.counts[min(max(i, 0), self._nbins - 1)] += 1
+        self.count += 1
+        self.max = max(self.max, seconds)
+
+    def percentile_ms(self, q: float) -> float:
+        """Return the q-th percentile [ms] (0 when empty; at most the largest latency)."""
+        if not self.count:
+            return 0.0
+        rank = max(1, int(math.ceil(q / 100.0 * self.count)))
+        i = int(np.searchsorted(np.cumsum(self.counts), rank))
+        return 1e3 * min(self.max, math.exp(self._log_low + (i + 1) * self._log_ratio))
+
+
 def _percent(dropped: int, processed: int) -> float:
     """Return ``dropped`` in percent of ``dropped + processed`` (0 when both are 0)."""
     total = dropped + processed
@@ -302,9 +336,15 @@ class InputStats:
     ``period_s`` a diagnostic_msgs/DiagnosticArray goes out on ``/diagnostics`` with one
     DiagnosticStatus ``<node>: input``: the counts ``processed``, ``dropped`` and
     ``dropped.<reason>`` since start, ``drop_rate_percent`` (dropped of processed plus
-    dropped since start), and ``latency_p50_ms`` / ``latency_p95_ms`` / ``latency_max_ms``
-    over the last ``window`` processed inputs (from the reception of the input, or of the
-    later message it waited for, to the end of its processing). Level WARN while inputs were
+    dropped since start), ``latency_p50_ms`` / ``latency_p95_ms`` / ``latency_max_ms`` over
+    the last ``window`` processed inputs (from the reception of the input, or of the later
+    message it waited for, to the end of its processing), the same over the whole run
+    (``latency_run_p50_ms`` / ``latency_run_p95_ms`` / ``latency_run_max_ms``, from a
+    :class:`LatencyHistogram`: at most 1 % above the exact percentile), and
+    ``before_match.<topic>``: messages its publisher sent before this subscription matched
+    it (the first received sequence number minus one; DDS does not deliver them to a
+    volatile subscription, so they were never received: reported once in an info line, not
+    counted as drops). Level WARN while inputs were
     dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
     by the node's :class:`ProblemWarner`) ends with the drop rate, of the current period and
     since start with the reasons: a node that cannot keep up says how much it loses.
@@ -319,6 +359,8 @@ class InputStats:
         self.processed_count = 0
         self.dropped = Counter()
         self.latencies = deque(maxlen=window)
+        self.run_latency = LatencyHistogram()
+        self.before_match = Counter()
         self.received_ns = 0
         self._last_seq = {}
         self._reported_drops = 0
@@ -353,6 +395,12 @@ class InputStats:
             return
         last = self._last_seq.get(topic)
         self._last_seq[topic] = seq
+        if last is None and seq > 1 and self._node.count_publishers(topic) == 1:
+            self.before_match[topic] += seq - 1
+            self._node.get_logger().info(
+                f'{seq - 1} messages on {topic} were published before the subscription of '
+                'this node matched their publisher (DDS does not deliver them): never '
+                'received, not counted as drops')
         if last is None or seq <= last + 1:
             return
         lost = seq - last - 1
@@ -365,7 +413,9 @@ class InputStats:
         self.processed_count += 1
         start = self.received_ns if received_ns is None else received_ns
         if start:
-            self.latencies.append(max(0.0, (time.time_ns() - start) * 1e-9))
+            latency = max(0.0, (time.time_ns() - start) * 1e-9)
+            self.latencies.append(latency)
+            self.run_latency.add(latency)
 
     def drop(self, reason: str, message: str, count: int = 1) -> None:
         """Count ``count`` dropped inputs for ``reason``; warn with the drop rate (throttled)."""
@@ -382,7 +432,11 @@ class InputStats:
         values.update({f'dropped.{k}': v for k, v in sorted(self.dropped.items())})
         values.update({'latency_p50_ms': f'{_percentile_ms(lat, 50):.2f}',
                        'latency_p95_ms': f'{_percentile_ms(lat, 95):.2f}',
-                       'latency_max_ms': f'{1e3 * max(lat, default=0.0):.2f}'})
+                       'latency_max_ms': f'{1e3 * max(lat, default=0.0):.2f}',
+                       'latency_run_p50_ms': f'{self.run_latency.percentile_ms(50):.2f}',
+                       'latency_run_p95_ms': f'{self.run_latency.percentile_ms(95):.2f}',
+                       'latency_run_max_ms': f'{1e3 * self.run_latency.max:.2f}'})
+        values.update({f'before_match.{k}': v for k, v in sorted(self.before_match.items())})
         level = DiagnosticStatus.WARN if recent else DiagnosticStatus.OK
         message = (f'{recent} inputs dropped in the last period' if recent else
                    f'{self.processed_count} inputs processed, {dropped} dropped')

@@ -23,8 +23,9 @@ Subscribes:
 The corner cloud and the scan of one stamp make one feature set
 (:class:`~landmark_nav.nodes.stamp_join.StampJoin`); a set whose scan (or corner cloud)
 is lost (a later one came) goes on without it, with a warning (no pruning evidence, no
-lines; or no corners); while a topic has no publisher the sets go on without its part
-(noted once in the log: e.g. ``visibility`` on but no ``scan``).
+lines; or no corners); while a topic has no publisher (none since start, or since its
+last one left, for ``DISCOVERY_S`` = 10 s: discovery may still match it) the sets go on
+without its part (noted once in the log: e.g. ``visibility`` on but no ``scan``).
 
 Everything between the messages and the filter is :class:`~landmark_nav.slam.frontend.
 SlamFrontend`, the same code :func:`landmark_nav.evaluation.slam.run_slam` runs offline: the
@@ -430,12 +431,16 @@ class EkfSlamNode(Node):
     def _has_publisher(self, part: str) -> bool:
         """Whether the part may still come (graph queried at most once a second).
 
-        It may when its topic has a publisher, or, for the corners (the landmarks), had one
-        or the node started less than ``DISCOVERY_S`` ago.
+        It may when its topic has a publisher, or had one or the node started less than
+        ``DISCOVERY_S`` ago (discovery may still match it).
 
         Without the grace, sets went on without their corners while discovery had not yet
         matched the corner extractor (the live soak's first 35 steps; the corners then came
-        for sets already processed).
+        for sets already processed), and, with the grace for the corners only, without their
+        scans while the laser driver was not yet matched (the soak's 7-11 scans dropped as
+        ``late`` at start-up: steps without visibility evidence). A set waits at most until
+        ``MAX_JOIN`` sets wait (1.25 s at 40 Hz), so a node without a ``scan`` publisher
+        lags that much in its first ``DISCOVERY_S``.
         """
         now = time.monotonic()
         known = self._publisher_counts.get(part)
@@ -444,8 +449,8 @@ class EkfSlamNode(Node):
             self._publisher_counts[part] = known
             if known[1] > 0:
                 self._publisher_seen[part] = now
-        if known[1] > 0 or part != 'corners':
-            return known[1] > 0
+        if known[1] > 0:
+            return True
         return now - self._publisher_seen.get(part, self._started) < DISCOVERY_S
 
     def _feature_set(self, t: int, cols, scan) -> Corners:
