@@ -17,8 +17,8 @@ odom and map frame) of ekf_slam and of the odometry, RMSE and max, over the driv
 the SE(2)-aligned ATE (evo's metric); the distance driven; and ekf_slam's and the corner
 extractor's last ``/diagnostics`` input status (processed, dropped, latency percentiles
 over the last 1000 inputs and over the whole run, messages published before a
-subscription matched) and every node's RSS after one minute and at the end. ``--loop --seconds 600 --skip 0``
-is a soak through the live drivers (40 scans/s, 10 Hz odometry).
+subscription matched) and every node's RSS after one minute and at the end. ``--loop
+--seconds 600 --skip 0`` is a soak through the live drivers (40 scans/s, 10 Hz odometry).
 
 Start-up: corner sets stamped before the first odometry sample are not drops (no odometry
 pose exists for them): ekf_slam counts them as ``before_odometry`` on ``/diagnostics`` and
