@@ -405,26 +405,6 @@ def test_a_scan_before_its_corners_makes_one_step_not_two():
         slam.destroy_node()
 
 
-def test_corners_before_their_scan_wait_for_it_during_discovery():
-    """The idle live soak dropped 7-11 scans as late at start-up.
-
-    Discovery had matched the corner extractor but not yet the laser driver, so the first
-    corner sets went on without their scans (no visibility evidence), and the scans that
-    came after them were dropped as late. Now the scan, too, is waited for during discovery.
-    """
-    t0, good = T0, GOOD_CORNER
-    with RosHarness() as ros:
-        slam, stamps = recording_node(ros)
-        slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
-        slam.on_odom(make_odometry(t0 + 200_000_000, 'odom', 'base_link', [0.02, 0.0, 0.0]))
-        slam.on_corners(corner_cloud(t0 + 50_000_000, [good]))  # no scan publisher yet
-        assert stamps == []
-        slam.on_scan(make_scan(t0 + 50_000_000, 'laser', -1.5, 0.01, [4.0] * 301, 0.1, 30.0))
-        assert stamps == [t0 + 50_000_000]
-        assert slam.stats.dropped_count == 0 and not slam.warner.count
-        slam.destroy_node()
-
-
 @pytest.mark.dds
 def test_path_is_bounded_and_published_at_the_display_rate():
     """The path was republished whole at every step and never trimmed (cost grew per scan)."""

@@ -23,9 +23,8 @@ Subscribes:
 The corner cloud and the scan of one stamp make one feature set
 (:class:`~landmark_nav.nodes.stamp_join.StampJoin`); a set whose scan (or corner cloud)
 is lost (a later one came) goes on without it, with a warning (no pruning evidence, no
-lines; or no corners); while a topic has no publisher (none since start, or since its
-last one left, for ``DISCOVERY_S`` = 10 s: discovery may still match it) the sets go on
-without its part (noted once in the log: e.g. ``visibility`` on but no ``scan``).
+lines; or no corners); while a topic has no publisher the sets go on without its part
+(noted once in the log: e.g. ``visibility`` on but no ``scan``).
 
 Everything between the messages and the filter is :class:`~landmark_nav.slam.frontend.
 SlamFrontend`, the same code :func:`landmark_nav.evaluation.slam.run_slam` runs offline: the
@@ -73,8 +72,9 @@ before the first odometry sample are not drops: no odometry pose exists for them
 end's ``before_odometry``; slam_toolbox and AMCL discard such scans in their tf message
 filter); they are counted as ``before_odometry`` on ``/diagnostics`` and stated in one info
 line when the first step is made. The scan is received best effort with a queue of
-``SCAN_DEPTH`` (sensor-data QoS keeps 5: at start-up, while the first steps run, that lost
-scans at 40 Hz).
+``SCAN_DEPTH`` = 20 (:data:`landmark_nav.nodes.common.SCAN_QOS`; the sensor-data QoS keeps
+5: at start-up, while the first steps run, that lost scans at 40 Hz); the corner cloud is
+reliable with depth 10.
 """
 
 from collections import deque
@@ -91,7 +91,8 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.laser.lines import LineParams
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
-                                       output_path, ParameterError, ProblemWarner, run_node)
+                                       output_path, ParameterError, ProblemWarner, run_node,
+                                       SCAN_QOS)
 from landmark_nav.nodes.line_extractor import LINE_PARAMETERS
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.ekf_slam import CORNER, LINE, OdometryNoise, SlamParams
@@ -174,9 +175,6 @@ MAX_START_BYTES = 32 * 2 ** 20
 #: Most feature sets waiting for their other part (corner cloud or scan).
 MAX_JOIN = 50
 DISCOVERY_S = 10.0  # a part without a publisher is waited for this long (discovery)
-SCAN_DEPTH = 20  # 0.5 s of a 40 Hz laser (the corner cloud: reliable, depth 10)
-SCAN_QOS = QoSProfile(depth=SCAN_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT,
-                      history=HistoryPolicy.KEEP_LAST)
 CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
 #: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
 _FEATURE_DROPS = {'out_of_order': 'out_of_order'}
@@ -431,16 +429,12 @@ class EkfSlamNode(Node):
     def _has_publisher(self, part: str) -> bool:
         """Whether the part may still come (graph queried at most once a second).
 
-        It may when its topic has a publisher, or had one or the node started less than
-        ``DISCOVERY_S`` ago (discovery may still match it).
+        It may when its topic has a publisher, or, for the corners (the landmarks), had one
+        or the node started less than ``DISCOVERY_S`` ago.
 
         Without the grace, sets went on without their corners while discovery had not yet
         matched the corner extractor (the live soak's first 35 steps; the corners then came
-        for sets already processed), and, with the grace for the corners only, without their
-        scans while the laser driver was not yet matched (the soak's 7-11 scans dropped as
-        ``late`` at start-up: steps without visibility evidence). A set waits at most until
-        ``MAX_JOIN`` sets wait (1.25 s at 40 Hz), so a node without a ``scan`` publisher
-        lags that much in its first ``DISCOVERY_S``.
+        for sets already processed).
         """
         now = time.monotonic()
         known = self._publisher_counts.get(part)
@@ -449,8 +443,8 @@ class EkfSlamNode(Node):
             self._publisher_counts[part] = known
             if known[1] > 0:
                 self._publisher_seen[part] = now
-        if known[1] > 0:
-            return True
+        if known[1] > 0 or part != 'corners':
+            return known[1] > 0
         return now - self._publisher_seen.get(part, self._started) < DISCOVERY_S
 
     def _feature_set(self, t: int, cols, scan) -> Corners:

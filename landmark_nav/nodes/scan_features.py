@@ -1,6 +1,7 @@
 """Shared base of the laser feature nodes: validated scan in, clusters out.
 
-Subscribes ``scan`` (sensor_msgs/LaserScan) with the sensor-data QoS, converts it
+Subscribes ``scan`` (sensor_msgs/LaserScan) best effort with a queue of 20 (0.5 s of a
+40 Hz laser: :data:`~landmark_nav.nodes.common.SCAN_QOS`), converts it
 (REP 117 aware), drops malformed scans and scans of more than ``max_beams`` beams with a
 warning naming the value (throttled per kind of problem), and segments the rest
 (parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``) before handing
@@ -14,7 +15,7 @@ import math
 
 from landmark_nav.conversions import ConversionError, scan_to_data, ScanData
 from landmark_nav.laser.segmentation import segment_scan
-from landmark_nav.nodes.common import declare, InputStats, ProblemWarner, SENSOR_QOS
+from landmark_nav.nodes.common import declare, InputStats, ProblemWarner, SCAN_QOS
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
@@ -42,7 +43,7 @@ class ScanFeatureNode(Node):
     def subscribe_scans(self, sigma_r: float) -> None:
         """Start receiving scans; ``sigma_r`` is the range noise used by the segmentation."""
         self.sigma_r = sigma_r
-        self.stats.subscribe(LaserScan, 'scan', self.on_scan, SENSOR_QOS)
+        self.stats.subscribe(LaserScan, 'scan', self.on_scan, SCAN_QOS)
 
     def on_scan(self, msg: LaserScan) -> None:
         """Validate and segment one scan, then process it."""
