@@ -2,7 +2,9 @@
 
 Run from the repository root::
 
-    python benchmarks/golden_seed_spread.py office [--seeds 1-6] [--write]
+    python benchmarks/golden_seed_spread.py NAME [--seeds 1-6] [--write]
+
+NAME: office, hallway, calibration or corridor.
 
 Reads ``bags/<name>/expected.yaml`` (its runs and figures, see
 :mod:`landmark_nav.testing.golden`), runs every run on the committed bag (seed 1) twice --
@@ -56,7 +58,7 @@ def _round(v: float) -> float:
 def main() -> int:
     """Run the seeds and print (and optionally store) the figures."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('name', choices=['office', 'hallway', 'calibration'])
+    ap.add_argument('name', choices=['office', 'hallway', 'calibration', 'corridor'])
     ap.add_argument('--seeds', default='1-6', help='seeds, e.g. 1-6 or 1,3,5 (1 = the bag)')
     ap.add_argument('--write', action='store_true', help='store values and spread')
     args = ap.parse_args()

@@ -28,6 +28,14 @@ def test_missing_bag(tmp_path):
     assert_one_line_error(run_cli('demo', '--bag', tmp_path / 'nope', '--out', tmp_path / 'o'))
 
 
+def test_evaluate_corridor_bad_bag(tmp_path):
+    assert_one_line_error(run_cli('evaluate-corridor', tmp_path / 'nope'), 'nope')
+    bag = tmp_path / 'b'
+    write_small_bag(bag)
+    assert_one_line_error(run_cli('evaluate-corridor', bag, '--out', tmp_path / 'o'),
+                          'ground_truth.yaml')
+
+
 def test_corrupt_mcap(tmp_path):
     bag = tmp_path / 'b'
     write_small_bag(bag)

@@ -179,8 +179,9 @@ def replay(bag, **params):
     """Replay a corridor bag into the node in lock step; return it, lateral and heading errors.
 
     Errors of every published pose (after images and after each odometry step) against
-    ``/ground_truth/odom`` at its stamp, from the second second on; images are those of
-    ``ground_truth.yaml``'s ``image_topic`` (raw by default).
+    ``/ground_truth/odom`` at its stamp, after the first 20 poses (the filter's first
+    0.8 s); images are those of ``ground_truth.yaml``'s ``image_topic`` (raw by default).
+    The node's attribute ``published`` holds every pose as (stamp_ns, x, y, yaw).
     """
     from landmark_nav.bag import BagReader
     from landmark_nav.conversions import odometry_to_pose, stamp_to_ns
@@ -215,13 +216,27 @@ def replay(bag, **params):
         # one pose per frame and per odometry message after the first frame (the filter
         # starts on the first frame, the first odometry message only sets the origin)
         assert ros.wait_until(lambda: len(poses) >= meta['frames'] + n_odom - 1, 10)
-        err_y, err_th = [], []
+        err_y, err_th, published = [], [], []
         for msg in poses:
             t = stamp_to_ns(msg.header.stamp)
             q = msg.pose.pose.orientation
+            yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
+            published.append((t, msg.pose.pose.position.x, msg.pose.pose.position.y, yaw))
             err_y.append(msg.pose.pose.position.y - truth[t][1])
-            err_th.append(math.degrees(quaternion_to_yaw(q.x, q.y, q.z, q.w) - truth[t][2]))
-    return node, np.array(err_y[20:]), np.array(err_th[20:])    # after the first second
+            err_th.append(math.degrees(yaw - truth[t][2]))
+    node.published = published
+    return node, np.array(err_y[20:]), np.array(err_th[20:])    # after the first 0.8 s
+
+
+def assert_node_equals_offline(node, bag):
+    """Check that the node published the poses of ``landmark_nav evaluate-corridor``."""
+    from landmark_nav.evaluation.corridor_bag import replay_corridor_bag
+    ref = replay_corridor_bag(bag)
+    got = np.array(node.published)
+    assert got.shape == (len(ref.stamps), 4)
+    assert [int(t) for t in got[:, 0]] == [int(t) for t in ref.stamps]
+    assert np.abs(got[:, 1:3] - ref.poses[:, :2]).max() <= 1e-12
+    assert np.abs(wrap_angle(got[:, 3] - ref.poses[:, 2])).max() <= 1e-12
 
 
 @pytest.mark.dds
@@ -229,6 +244,7 @@ def replay(bag, **params):
 def test_bag_replay_against_ground_truth(drive_bag):
     node, err_y, err_th = replay(drive_bag)
     assert node.frames == 60
+    assert_node_equals_offline(node, drive_bag)
     # measured over every pose (after images and after each odometry step): lateral
     # 1.2 mm RMS (worst 2.6 mm), heading 0.27 deg RMS (worst 0.86 deg: the 1 % wheel
     # scale error turns the odometry heading by 0.17 deg between two frames)
@@ -244,9 +260,14 @@ COMMITTED = REPO / 'bags' / 'corridor'
 @pytest.mark.dds
 @pytest.mark.slow
 def test_committed_bag_replay_compressed():
-    """bags/corridor: 320 x 240 JPEG frames on camera/image_raw/compressed."""
+    """bags/corridor: 320 x 240 JPEG frames on camera/image_raw/compressed.
+
+    The node publishes the poses of ``landmark_nav evaluate-corridor bags/corridor``, whose
+    figures ``bags/corridor/expected.yaml`` guards (test_golden.py).
+    """
     node, err_y, err_th = replay(COMMITTED, compressed=True)
     assert node.frames == 30 and node.warner.count == 0
+    assert_node_equals_offline(node, COMMITTED)
     # measured (deterministic in lock step): lateral 2.06 mm RMS (worst 3.34 mm), heading
     # 0.254 deg RMS (worst 0.886 deg, the odometry heading drift between two frames)
     assert np.sqrt(np.mean(err_y ** 2)) < 0.0025

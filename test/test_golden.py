@@ -14,7 +14,7 @@ from landmark_nav.testing.golden import (figure_value, load_expected, ROOT, run_
                                          within_tolerance)
 import pytest
 
-BAGS = ('office', 'hallway', 'calibration')
+BAGS = ('office', 'hallway', 'calibration', 'corridor')
 EXPECTED = {name: load_expected(ROOT / 'bags' / name) for name in BAGS}
 CASES = [(name, fid) for name in BAGS for fid in EXPECTED[name]['figures']]
 README = (ROOT / 'README.md').read_text()

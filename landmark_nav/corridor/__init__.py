@@ -11,4 +11,6 @@ Pure numpy/OpenCV; no rclpy (the node is :mod:`landmark_nav.nodes.corridor_follo
   dead reckoning (§3.2, eq. 24).
 * :mod:`.frame` -- the per-frame pipeline (image -> heading and lateral position).
 * :mod:`.controller` -- speed ramp and steering law for ``cmd_vel``.
+* :mod:`.follower` -- the follower's estimation loop (frames and odometry -> fused pose),
+  run by the node and the offline evaluation.
 """

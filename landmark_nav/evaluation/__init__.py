@@ -17,6 +17,8 @@ Modules:
 * :mod:`.localization` -- sonar EKF / UKF runs and errors, the hallway study
   (``python -m landmark_nav.evaluation.localization``).
 * :mod:`.localization_bags` -- the same on a bag (``landmark_nav evaluate-localization``).
+* :mod:`.corridor_bag` -- the corridor follower's estimation loop on a bag against its
+  ground truth (``landmark_nav evaluate-corridor``).
 * :mod:`.vision` -- landmark detection and pose statistics on rendered frames
   (``python -m landmark_nav.evaluation.vision``).
 """

@@ -28,11 +28,7 @@ from landmark_nav.conversions import (array_to_image, camera_info_to_model, Conv
                                       make_pose_with_covariance_stamped, odometry_to_pose,
                                       stamp_to_ns)
 from landmark_nav.corridor.controller import ControllerParams, CorridorController
-from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame
-from landmark_nav.corridor.fusion import CorridorEKF, DeadReckoningNoise
-from landmark_nav.corridor.lateral import CorridorModel
-from landmark_nav.corridor.vanishing_point import VPParams
-from landmark_nav.geometry import relative, wrap_angle
+from landmark_nav.corridor.follower import CorridorTracker, FollowerConfig
 from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
 from landmark_nav.nodes.common import declare, ParameterError, ProblemWarner, run_node, \
     SENSOR_QOS
@@ -43,8 +39,15 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_srvs.srv import SetBool
 
 
+#: The node's parameter defaults for the estimation (shared with the offline evaluation).
+DEFAULTS = FollowerConfig()
+
+
 class CorridorFollower(Node):
-    """Thin node: image -> measure_frame -> EKF update; odom -> EKF predict -> cmd_vel."""
+    """Thin node around :class:`~landmark_nav.corridor.follower.CorridorTracker`.
+
+    image -> measure_frame -> EKF update; odom -> EKF predict -> cmd_vel.
+    """
 
     def __init__(self, **kwargs) -> None:
         """Declare and validate parameters and create the interfaces."""
@@ -53,27 +56,30 @@ class CorridorFollower(Node):
         def d(*args, **kwargs):
             return declare(self, *args, **kwargs)
 
-        width = d('corridor_width', 2.0, 'wall-to-wall width [m]', (0.3, 20.0))
-        height = d('corridor_height', 2.6, 'floor-to-ceiling height [m]; 0: ceiling edges '
-                   'not used', (0.0, 20.0))
-        centre = d('centre_line', False, 'the floor has a line along the corridor centre')
-        mount = d('camera_mount', [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], 'camera_link pose in '
-                  'base_link: x, y, z [m] (z = height above the floor), roll, pitch, yaw [rad]')
-        method = d('line_method', 'segmented_hough', 'image lines: segmented_hough (the '
-                   'chapter), hough_p or lsd', choices=['segmented_hough', 'hough_p', 'lsd'])
-        sigma = d('sigma_px', 0.6, 'end-point noise of image line segments [px]', (0.05, 5.0))
-        h_floor = d('heading_std_floor_deg', 0.3, 'added to the visual heading std [deg]',
+        def e(name, *args, **kwargs):               # an estimation parameter
+            default = getattr(DEFAULTS, name)
+            default = list(default) if isinstance(default, tuple) else default
+            return declare(self, name, default, *args, **kwargs)
+
+        width = e('corridor_width', 'wall-to-wall width [m]', (0.3, 20.0))
+        height = e('corridor_height', 'floor-to-ceiling height [m]; 0: ceiling edges not used',
+                   (0.0, 20.0))
+        centre = e('centre_line', 'the floor has a line along the corridor centre')
+        mount = e('camera_mount', 'camera_link pose in base_link: x, y, z [m] (z = height '
+                  'above the floor), roll, pitch, yaw [rad]')
+        method = e('line_method', 'image lines: segmented_hough (the chapter), hough_p or lsd',
+                   choices=['segmented_hough', 'hough_p', 'lsd'])
+        sigma = e('sigma_px', 'end-point noise of image line segments [px]', (0.05, 5.0))
+        h_floor = e('heading_std_floor_deg', 'added to the visual heading std [deg]',
                     (0.0, 20.0))
-        y_floor = d('lateral_std_floor', 0.02, 'added to the visual lateral std [m]',
-                    (0.0, 2.0))
-        max_axis = d('max_axis_angle_deg', 45.0, 'the corridor VP must lie within this angle '
-                     'of the optical axis [deg]', (1.0, 89.0))
-        b = d('wheel_separation', 0.33, 'effective wheel separation [m]', (0.01, 5.0))
-        k_l = d('k_left', 1e-4, 'left wheel distance variance per metre [m^2/m]', (0.0, 1.0))
-        k_r = d('k_right', 1e-4, 'right wheel distance variance per metre [m^2/m]', (0.0, 1.0))
-        sb = d('sigma_separation', 0.001, 'std of the wheel separation per step [m]',
-               (0.0, 1.0))
-        gate = d('gate_chi2', 13.8, 'NIS outlier gate (chi-square 2 dof; 13.8 = 99.9 %)',
+        y_floor = e('lateral_std_floor', 'added to the visual lateral std [m]', (0.0, 2.0))
+        max_axis = e('max_axis_angle_deg', 'the corridor VP must lie within this angle of the '
+                     'optical axis [deg]', (1.0, 89.0))
+        b = e('wheel_separation', 'effective wheel separation [m]', (0.01, 5.0))
+        k_l = e('k_left', 'left wheel distance variance per metre [m^2/m]', (0.0, 1.0))
+        k_r = e('k_right', 'right wheel distance variance per metre [m^2/m]', (0.0, 1.0))
+        sb = e('sigma_separation', 'std of the wheel separation per step [m]', (0.0, 1.0))
+        gate = e('gate_chi2', 'NIS outlier gate (chi-square 2 dof; 13.8 = 99.9 %)',
                  (1.0, 1000.0))
         self.stale = d('stale_timeout', 1.0, 'stop when no visual update was accepted for '
                        'this long [s]', (0.05, 60.0))
@@ -99,22 +105,16 @@ class CorridorFollower(Node):
                                  f'between floor and ceiling ({height} m)')
         if abs(ctrl['lateral_offset']) >= width / 2:
             raise ParameterError('parameter lateral_offset must lie inside the corridor')
-        self.model = CorridorModel(width, height or None, centre)
-        self.mount = mount
-        self.params = FrameParams(line_method=method, vp=VPParams(sigma_px=sigma),
-                                  max_axis_angle_deg=max_axis,
-                                  heading_std_floor=math.radians(h_floor),
-                                  lateral_std_floor=y_floor)
-        self.noise = DeadReckoningNoise(b, k_l, k_r, sb)
-        self.gate = gate
+        self.tracker = CorridorTracker(FollowerConfig(
+            corridor_width=width, corridor_height=height, centre_line=centre,
+            camera_mount=tuple(mount), line_method=method, sigma_px=sigma,
+            heading_std_floor_deg=h_floor, lateral_std_floor=y_floor,
+            max_axis_angle_deg=max_axis, wheel_separation=b, k_left=k_l, k_right=k_r,
+            sigma_separation=sb, gate_chi2=gate))
         self.controller = CorridorController(ControllerParams(**ctrl))
         self.enabled = enabled
         self.warner = ProblemWarner(self)
         self.camera = None
-        self.ekf = None
-        self.last_odom = None            # (stamp_ns, pose)
-        self.last_fix_ns = None
-        self.frames = 0
         self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'corridor/pose', 10)
         self.pub_vp = self.create_publisher(PointStamped, 'corridor/vanishing_point', 10)
         self.pub_debug = self.create_publisher(Image, 'corridor/debug_image', 2) \
@@ -129,6 +129,21 @@ class CorridorFollower(Node):
                                      self.on_compressed, SENSOR_QOS)
         else:
             self.create_subscription(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+
+    @property
+    def ekf(self):
+        """Return the tracker's EKF (None before the first measurement)."""
+        return self.tracker.ekf
+
+    @property
+    def last_odom(self):
+        """Return ``(stamp_ns, pose)`` of the last odometry message (None before)."""
+        return self.tracker.last_odom
+
+    @property
+    def frames(self) -> int:
+        """Return the number of frames that gave a measurement."""
+        return self.tracker.frames
 
     # ------------------------------------------------------------------ inputs
     def on_enable(self, request, response):
@@ -163,34 +178,18 @@ class CorridorFollower(Node):
 
     def process(self, header, gray: np.ndarray) -> None:
         """Measure heading and lateral position in one frame and update the filter."""
-        cam = self.camera
-        if cam is None:
-            self.warner.warn('Dropping image: no valid CameraInfo received yet')
-            return
-        if gray.shape != (cam.height, cam.width):
-            self.warner.warn(f'Dropping image: size {gray.shape[1]}x{gray.shape[0]} disagrees '
-                             f'with CameraInfo {cam.width}x{cam.height}')
-            return
         stamp = stamp_to_ns(header.stamp)
-        prior = None if self.ekf is None else self.ekf.visual_prior()
-        try:
-            m = measure_frame(gray, cam, self.model, self.mount, prior, self.params)
-        except CorridorLost as err:
-            self.warner.warn(f'Corridor lost: {err}')
+        step = self.tracker.frame(gray, self.camera, stamp)
+        if step.status == 'dropped':
+            self.warner.warn(f'Dropping image: {step.message}')
+            return
+        if step.status == 'lost':
+            self.warner.warn(f'Corridor lost: {step.message}')
             self._debug(gray, None, stamp, header.frame_id)
             return
-        if self.ekf is None:
-            self.ekf = CorridorEKF([m.heading, 0.0, m.y], np.diag(
-                [m.heading_std ** 2, 0.0, m.y_std ** 2]), self.noise, self.gate)
-            accepted = True
-        else:
-            res = self.ekf.update(m.heading, m.y, m.covariance)
-            accepted = res.accepted
-            if not accepted:
-                self.warner.warn(f'Visual estimate rejected by the gate (NIS {res.nis:.1f})')
-        if accepted:
-            self.last_fix_ns = stamp
-        self.frames += 1
+        if step.status == 'rejected':
+            self.warner.warn(f'Visual estimate rejected by the gate (NIS {step.nis:.1f})')
+        m = step.measurement
         px = m.vp.pixel
         if px is not None:
             vp = PointStamped()
@@ -208,38 +207,25 @@ class CorridorFollower(Node):
             self.warner.warn(f'Dropping odometry: {err}')
             return
         stamp = pose.stamp_ns
-        last = self.last_odom
-        dt = 0.0
-        if last is not None and stamp < last[0]:
+        status, dt = self.tracker.odometry(stamp, pose.pose)
+        if status == 'back_in_time':
             self.warner.warn('Odometry went back in time; restarting the increments')
-        elif last is not None and self.ekf is not None:
-            inc = relative(last[1], pose.pose)
-            self.ekf.predict(float(inc[0]), float(inc[2]))
-            dt = (stamp - last[0]) * 1e-9
+        elif status == 'predicted':
             self._publish_pose(stamp)
-        self.last_odom = (stamp, pose.pose)
         if not self.enabled:
             return
-        usable = (self.ekf is not None and self.last_fix_ns is not None
-                  and (stamp - self.last_fix_ns) * 1e-9 <= self.stale)
+        usable = self.tracker.fresh(stamp, self.stale)
         if not usable:
             self.warner.warn('Stopping: corridor estimate lost or stale')
-        th, y = 0.0, 0.0
-        if self.ekf is not None:               # relative to the direction of travel
-            th, y = float(self.ekf.s[0]), self.ekf.visual_prior()[0]
-            if self.ekf.facing_back:
-                th = wrap_angle(th - math.pi)
+        th, y = self.tracker.steering_errors()       # relative to the direction of travel
         v, w = self.controller.step(th, y, dt, usable)
         self._publish_cmd(v, w, msg.header.stamp)
 
     # ------------------------------------------------------------------ outputs
     def _publish_pose(self, stamp: int) -> None:
-        th, x, y = self.ekf.state
-        p = self.ekf.p
-        order = [1, 2, 0]                                   # (x, y, yaw) from (theta, x, y)
-        cov = p[np.ix_(order, order)]
-        self.pub_pose.publish(make_pose_with_covariance_stamped(stamp, self.frame_id,
-                                                                [x, y, th], cov))
+        pose, cov = self.tracker.estimate()
+        self.pub_pose.publish(make_pose_with_covariance_stamped(stamp, self.frame_id, pose,
+                                                                cov))
 
     def _publish_cmd(self, v: float, w: float, stamp) -> None:
         msg = self.twist_type()

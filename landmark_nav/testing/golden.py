@@ -88,6 +88,12 @@ def _calibrate(bag: Path, out: Path) -> Outputs:
     return {'factors': dict(factors), 'report': parse_calibration_report(report)}
 
 
+def _evaluate_corridor(bag: Path, out: Path) -> Outputs:
+    from landmark_nav.evaluation.corridor_bag import evaluate_corridor_bag
+    evaluate_corridor_bag(bag, out)
+    return {'corridor.json': json.loads((out / 'corridor.json').read_text())}
+
+
 #: Run name (as used in expected.yaml) -> ``f(bag, out_dir) -> outputs``.
 RUNS: Dict[str, Callable[[Path, Path], Outputs]] = {
     'demo': _demo,
@@ -97,6 +103,7 @@ RUNS: Dict[str, Callable[[Path, Path], Outputs]] = {
     'localization': _localization,
     'sonar_map_localization': _sonar_map_localization,
     'calibrate': _calibrate,
+    'evaluate_corridor': _evaluate_corridor,
 }
 
 

@@ -188,6 +188,13 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_evaluate_corridor(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.corridor_bag import (evaluate_corridor_bag,
+                                                      format_corridor_evaluation)
+    print(format_corridor_evaluation(evaluate_corridor_bag(args.bag, args.out)))
+    return 0
+
+
 def _cmd_evaluate_localization(args: argparse.Namespace) -> int:
     import math
     from landmark_nav.evaluation.localization_bags import (evaluate_localization,
@@ -409,6 +416,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--bag', default='bags/office', help='bag to evaluate')
     p.add_argument('--out', default='out', help='output directory')
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser('evaluate-corridor',
+                       help="run the corridor follower offline on a corridor bag (the node's "
+                            'estimation loop) against its ground truth; writes corridor.json')
+    p.add_argument('bag', help='rosbag2 directory recorded by `simulate corridor` (e.g. '
+                               'bags/corridor)')
+    p.add_argument('--out', default='out/corridor', help='output directory')
+    p.set_defaults(func=_cmd_evaluate_corridor)
 
     p = sub.add_parser('evaluate-localization',
                        help='run the sonar EKF / UKF offline on a simulator bag against its '
