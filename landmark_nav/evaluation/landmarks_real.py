@@ -60,6 +60,7 @@ from pathlib import Path
 import sys
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
+import weakref
 
 import cv2
 from landmark_nav.vision.camera import CameraModel, OPTICAL_FROM_BODY
@@ -317,6 +318,34 @@ class Found:
     translation: Optional[np.ndarray] = None
 
 
+def release_apriltags(detectors: Sequence[object]) -> None:
+    """Free ``pupil_apriltags.Detector`` objects in the order the C library needs.
+
+    ``pupil_apriltags`` 1.0.4's ``Detector.__del__`` frees the tag families first and then
+    calls ``apriltag_detector_destroy``, whose ``apriltag_detector_clear_families`` reads
+    each family's ``impl`` (``quick_decode_uninit``) from the freed memory: a use after
+    free that corrupts the heap or segfaults, now or later (pupil-labs/apriltags issues 34
+    and 46; the same wrapper code was fixed in duckietown/lib-dt-apriltags PR 26). This
+    destroys the detector first, then its families, and clears ``tag_detector_ptr`` so that
+    ``__del__`` does nothing. Reproduced: with glibc's caches off and freed memory filled
+    (``GLIBC_TUNABLES=glibc.malloc.tcache_count=0:glibc.malloc.mxfast=0
+    MALLOC_PERTURB_=165``) deleting a bare ``Detector`` segfaults in
+    ``quick_decode_uninit`` every time (test_landmarks_real).
+    """
+    for det in detectors:
+        ptr = getattr(det, 'tag_detector_ptr', None)
+        if ptr is None:
+            continue
+        det.tag_detector_ptr = None
+        det.libc.apriltag_detector_destroy.restype = None
+        det.libc.apriltag_detector_destroy(ptr)
+        for family, fam in det.tag_families.items():
+            destroy = getattr(det.libc, f'{family}_destroy')
+            destroy.restype = None
+            destroy(fam)
+        det.tag_families = {}
+
+
 class Detectors:
     """The detectors of the comparison, created once (AprilTag and ArUco objects)."""
 
@@ -342,11 +371,26 @@ class Detectors:
                 from pupil_apriltags import Detector
                 self._april[name] = Detector(families='tag36h11', nthreads=1,
                                              quad_decimate=float(name[-1]))
+        # released in the right order when this object goes or at interpreter exit
+        self._release = weakref.finalize(self, release_apriltags, list(self._april.values()))
         if 'aruco' in self.names:
             p = cv2.aruco.DetectorParameters()
             p.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
             self._aruco = cv2.aruco.ArucoDetector(
                 cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250), p)
+
+    def close(self) -> None:
+        """Release the AprilTag detectors now (:func:`release_apriltags`); idempotent."""
+        self._release()
+        self._april = {}
+
+    def __enter__(self) -> 'Detectors':
+        """Return self; :meth:`close` on leaving the block."""
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Release the AprilTag detectors."""
+        self.close()
 
     def detect(self, name: str, gray: np.ndarray, pose: bool = False) -> List[Found]:
         """Run one detector on a frame; with ``pose`` each detection carries its pose."""
@@ -902,6 +946,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             items = sorted(row.items(), key=lambda kv: -kv[1])
             print(f'  {size}: ' + '; '.join(f'{k} {v}' for k, v in items))
         print()
+    dets.close()
     if args.json:
         args.json.write_text(json.dumps([asdict(o) for o in everything], indent=0))
     return 0
