@@ -6,13 +6,14 @@ geometry of the composites against the detectors and the scoring on a few trials
 
 import math
 
-from landmark_nav.evaluation.landmarks_real import (CAMERA, composite, default_backgrounds,
-                                                    detection_trials, Detectors, draw_pose,
-                                                    false_frames, Found, landmark_stage,
-                                                    marker_corners, marker_texture, MODULE,
-                                                    Photometrics, pose_trials,
-                                                    render_trial, run_trials, score,
-                                                    summarise)
+import cv2
+from landmark_nav.evaluation.landmarks_real import (CAMERA, chessboard_photos, composite,
+                                                    default_backgrounds, detection_trials,
+                                                    Detectors, draw_pose, false_frames, Found,
+                                                    landmark_stage, marker_corners,
+                                                    marker_texture, MODULE, Photometrics,
+                                                    pose_trials, render_trial, run_trials,
+                                                    score, summarise)
 from landmark_nav.vision.detector import detect_landmarks, DetectorParams
 import numpy as np
 import pytest
@@ -177,6 +178,31 @@ def test_stage_counter_names_the_lost_stage(backgrounds):
 def test_landmark_free_real_frames_give_no_detection(backgrounds):
     res = false_frames(backgrounds, count=40, seed=9)
     assert sum(res.frames.values()) == 40 and res.frames.get('york+checkerboard', 0) >= 5
+    assert sum(res.detections.values()) == 0
+
+
+@pytest.fixture(scope='module')
+def chessboards():
+    """Load the 26 real chessboard photographs (fetched once into the cache)."""
+    try:
+        return chessboard_photos()
+    except FileNotFoundError as err:
+        pytest.skip(str(err))
+
+
+@pytest.mark.parametrize('decimate', [1, 2])
+def test_real_chessboard_photos_give_no_detection(backgrounds, chessboards, decimate):
+    # OpenCV's left/right calibration photographs: a real printed 9 x 6-corner chessboard
+    # (squares about 20-30 px) held at many angles; as they are and as random views
+    # (scaled 0.6-2, rotated, flipped, cropped, blurred, noised, JPEG 70) in default and
+    # fast mode: no landmark at all (the benchmark's 1020 frames include about 300 more)
+    assert len(chessboards) == 26
+    assert all(cv2.findChessboardCorners(c, (9, 6))[0] for c in chessboards)
+    params = DetectorParams(decimate=decimate)
+    assert sum(len(detect_landmarks(c, params)) for c in chessboards) == 0
+    res = false_frames(backgrounds, count=52, seed=21, chessboards=chessboards,
+                       chessboard_share=1.0, params=params)
+    assert res.frames == {'chessboard photo': 52}
     assert sum(res.detections.values()) == 0
 
 
