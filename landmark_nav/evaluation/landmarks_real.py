@@ -60,6 +60,7 @@ from pathlib import Path
 import sys
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
+import weakref
 
 import cv2
 from landmark_nav.vision.camera import CameraModel, OPTICAL_FROM_BODY
@@ -317,6 +318,34 @@ class Found:
     translation: Optional[np.ndarray] = None
 
 
+def release_apriltags(detectors: Sequence[object]) -> None:
+    """Free ``pupil_apriltags.Detector`` objects in the order the C library needs.
+
+    ``pupil_apriltags`` 1.0.4's ``Detector.__del__`` frees the tag families first and then
+    calls ``apriltag_detector_destroy``, whose ``apriltag_detector_clear_families`` reads
+    each family's ``impl`` (``quick_decode_uninit``) from the freed memory: a use after
+    free that corrupts the heap or segfaults, now or later (pupil-labs/apriltags issues 34
+    and 46; the same wrapper code was fixed in duckietown/lib-dt-apriltags PR 26). This
+    destroys the detector first, then its families, and clears ``tag_detector_ptr`` so that
+    ``__del__`` does nothing. Reproduced: with glibc's caches off and freed memory filled
+    (``GLIBC_TUNABLES=glibc.malloc.tcache_count=0:glibc.malloc.mxfast=0
+    MALLOC_PERTURB_=165``) deleting a bare ``Detector`` segfaults in
+    ``quick_decode_uninit`` every time (test_landmarks_real).
+    """
+    for det in detectors:
+        ptr = getattr(det, 'tag_detector_ptr', None)
+        if ptr is None:
+            continue
+        det.tag_detector_ptr = None
+        det.libc.apriltag_detector_destroy.restype = None
+        det.libc.apriltag_detector_destroy(ptr)
+        for family, fam in det.tag_families.items():
+            destroy = getattr(det.libc, f'{family}_destroy')
+            destroy.restype = None
+            destroy(fam)
+        det.tag_families = {}
+
+
 class Detectors:
     """The detectors of the comparison, created once (AprilTag and ArUco objects)."""
 
@@ -342,11 +371,26 @@ class Detectors:
                 from pupil_apriltags import Detector
                 self._april[name] = Detector(families='tag36h11', nthreads=1,
                                              quad_decimate=float(name[-1]))
+        # released in the right order when this object goes or at interpreter exit
+        self._release = weakref.finalize(self, release_apriltags, list(self._april.values()))
         if 'aruco' in self.names:
             p = cv2.aruco.DetectorParameters()
             p.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
             self._aruco = cv2.aruco.ArucoDetector(
                 cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250), p)
+
+    def close(self) -> None:
+        """Release the AprilTag detectors now (:func:`release_apriltags`); idempotent."""
+        self._release()
+        self._april = {}
+
+    def __enter__(self) -> 'Detectors':
+        """Return self; :meth:`close` on leaving the block."""
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Release the AprilTag detectors."""
+        self.close()
 
     def detect(self, name: str, gray: np.ndarray, pose: bool = False) -> List[Found]:
         """Run one detector on a frame; with ``pose`` each detection carries its pose."""
@@ -580,30 +624,38 @@ class FalseResult:
 
 def false_frames(photos: Sequence[np.ndarray], count: int = 1020, seed: int = 3,
                  extra: Sequence[np.ndarray] = (), checkerboards: float = 0.3,
-                 params: DetectorParams = DetectorParams()) -> FalseResult:
+                 params: DetectorParams = DetectorParams(),
+                 chessboards: Sequence[np.ndarray] = (),
+                 chessboard_share: float = 0.3) -> FalseResult:
     """Run the landmark detector on ``count`` real frames without a landmark.
 
-    Each frame is a random view (:func:`transformed_photo`) of one of ``photos`` or (40 %
-    of the frames) of ``extra`` (other real photographs, e.g. the CamVid road frames),
-    degraded like the
-    composites; a fraction ``checkerboards`` of them also shows a rendered checkerboard of
-    4-10 squares (the printed pattern closest to a landmark frame) at 4-12 px per square and
-    0-60 deg tilt, composited like the markers.
+    Each frame is a random view (:func:`transformed_photo`) of one of ``photos``, of
+    ``chessboards`` (real photographs of chessboards, :func:`chessboard_photos`; a
+    fraction ``chessboard_share`` of the frames when given) or (40 % of the other frames)
+    of ``extra`` (other real photographs, e.g. the CamVid road frames), degraded like the
+    composites; a fraction ``checkerboards`` of the frames that are not chessboard photos
+    also shows a rendered checkerboard of 4-10 squares (the printed pattern closest to a
+    landmark frame) at 4-12 px per square and 0-60 deg tilt, composited like the markers.
+    Without ``chessboards`` the draws are those of the version before them.
     """
     rng = np.random.default_rng(seed)
-    pool = list(photos) + list(extra)
     frames: Dict[str, int] = {}
     dets: Dict[str, int] = {}
     spent = 0.0
     cv2.setNumThreads(1)
     for _ in range(count):
-        use_extra = len(extra) and rng.random() < 0.4
-        k = len(photos) + int(rng.integers(len(extra))) if use_extra else \
-            int(rng.integers(len(photos)))
-        kind = 'extra' if use_extra else 'york'
-        img = transformed_photo(pool[k], rng).astype(np.float32)
+        if len(chessboards) and rng.random() < chessboard_share:
+            kind = 'chessboard photo'
+            src = chessboards[int(rng.integers(len(chessboards)))]
+        elif len(extra) and rng.random() < 0.4:
+            kind = 'extra'
+            src = extra[int(rng.integers(len(extra)))]
+        else:
+            kind = 'york'
+            src = photos[int(rng.integers(len(photos)))]
+        img = transformed_photo(src, rng).astype(np.float32)
         photo = draw_photometrics(rng)
-        if rng.random() < checkerboards:
+        if kind != 'chessboard photo' and rng.random() < checkerboards:
             kind += '+checkerboard'
             squares = int(rng.integers(4, 11))
             v = draw_pose(rng, float(rng.uniform(4.0, 12.0)), float(rng.uniform(0.0, 60.0)),
@@ -618,6 +670,109 @@ def false_frames(photos: Sequence[np.ndarray], count: int = 1020, seed: int = 3,
         frames[kind] = frames.get(kind, 0) + 1
         dets[kind] = dets.get(kind, 0) + len(found)
     return FalseResult(frames, dets, 1000.0 * spent / max(count, 1))
+
+
+#: OpenCV's stereo calibration photographs (``samples/data``, shipped by Debian's
+#: ``opencv-doc`` package; Apache-2.0 / BSD-3-Clause as OpenCV): 26 real 640 x 480 grey
+#: photographs of a hand-held printed chessboard (9 x 6 inner corners) in an office.
+CHESSBOARD_PHOTOS = tuple(f'{side}{i:02d}.jpg' for side in ('left', 'right')
+                          for i in (1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14))
+#: Where ``opencv-doc`` installs them.
+OPENCV_DOC_DATA = Path('/usr/share/doc/opencv-doc/examples/data')
+
+
+def chessboard_cache() -> Path:
+    """Return the cache folder of the fetched photographs (outside the repository).
+
+    ``$LANDMARK_NAV_CACHE/opencv_chessboards``, else ``$XDG_CACHE_HOME`` or ``~/.cache``
+    followed by ``landmark_nav/opencv_chessboards``.
+    """
+    import os
+    root = os.environ.get('LANDMARK_NAV_CACHE')
+    if root:
+        return Path(root) / 'opencv_chessboards'
+    base = os.environ.get('XDG_CACHE_HOME') or str(Path.home() / '.cache')
+    return Path(base) / 'landmark_nav' / 'opencv_chessboards'
+
+
+def fetch_chessboard_photos(dest: Path) -> Path:
+    """Fetch :data:`CHESSBOARD_PHOTOS` from Debian's ``opencv-doc`` package into ``dest``.
+
+    Runs ``apt-get download opencv-doc`` (about 96 MB, in a temporary folder beside
+    ``dest``) and extracts only the 26 photographs and the package's copyright file with
+    ``dpkg-deb --fsys-tarfile | tar``; the package file is deleted afterwards.
+
+    Raises:
+        FileNotFoundError: the download or extraction failed (the message says why and
+            how to get the files by hand).
+    """
+    import shutil
+    import subprocess
+    import tempfile
+    dest.mkdir(parents=True, exist_ok=True)
+    members = [f'./usr/share/doc/opencv-doc/examples/data/{n}' for n in CHESSBOARD_PHOTOS]
+    members.append('./usr/share/doc/opencv-doc/copyright')
+    with tempfile.TemporaryDirectory(dir=dest.parent) as tmp:
+        try:
+            got = subprocess.run(['apt-get', 'download', 'opencv-doc'], cwd=tmp,
+                                 capture_output=True, text=True, timeout=600)
+            debs = sorted(Path(tmp).glob('opencv-doc_*.deb'))
+            if got.returncode or not debs:
+                raise OSError(f'apt-get download opencv-doc: exit {got.returncode}: '
+                              f'{got.stderr.strip()[-500:]}')
+            tar = subprocess.run(
+                f'dpkg-deb --fsys-tarfile {debs[0].name} | tar -x -f - {" ".join(members)}',
+                shell=True, cwd=tmp, capture_output=True, text=True, timeout=600)
+            if tar.returncode:
+                raise OSError(f'dpkg-deb | tar: {tar.stderr.strip()[-500:]}')
+        except (OSError, subprocess.SubprocessError) as err:
+            raise FileNotFoundError(
+                f'real chessboard photographs not found and not fetched ({err}); get them '
+                f'with `apt-get install opencv-doc` (files in {OPENCV_DOC_DATA}) or '
+                f'`apt-get download opencv-doc` and extract {", ".join(CHESSBOARD_PHOTOS)} '
+                f'into {dest}') from err
+        data = Path(tmp) / 'usr/share/doc/opencv-doc/examples/data'
+        for n in CHESSBOARD_PHOTOS:
+            shutil.move(str(data / n), str(dest / n))
+        shutil.move(str(Path(tmp) / 'usr/share/doc/opencv-doc/copyright'),
+                    str(dest / 'COPYRIGHT.opencv-doc'))
+    return dest
+
+
+def chessboard_photo_dir(fetch: bool = True) -> Path:
+    """Return a folder holding all :data:`CHESSBOARD_PHOTOS`, fetching them if needed.
+
+    Looked for in ``$LANDMARK_NAV_CHESSBOARDS``, :data:`OPENCV_DOC_DATA` (``opencv-doc``
+    installed) and :func:`chessboard_cache`; with ``fetch`` they are fetched into the
+    cache (:func:`fetch_chessboard_photos`) when found nowhere.
+
+    Raises:
+        FileNotFoundError: not found (and not fetched); the message names what is missing.
+    """
+    import os
+    places = [Path(p) for p in (os.environ.get('LANDMARK_NAV_CHESSBOARDS'),) if p]
+    places += [OPENCV_DOC_DATA, chessboard_cache()]
+    for place in places:
+        if all((place / n).is_file() for n in CHESSBOARD_PHOTOS):
+            return place
+    if not fetch:
+        raise FileNotFoundError(
+            f'real chessboard photographs {CHESSBOARD_PHOTOS[0]} ... {CHESSBOARD_PHOTOS[-1]} '
+            f'(OpenCV samples/data, Debian package opencv-doc) not found in '
+            f'{", ".join(map(str, places))}')
+    return fetch_chessboard_photos(chessboard_cache())
+
+
+def chessboard_photos(fetch: bool = True) -> List[np.ndarray]:
+    """Load the 26 real chessboard photographs (:func:`chessboard_photo_dir`), grey."""
+    folder = chessboard_photo_dir(fetch)
+    out = []
+    for n in CHESSBOARD_PHOTOS:
+        img = cv2.imread(str(folder / n), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise ValueError(f'{folder / n}: not an image OpenCV can read')
+        out.append(img)
+    return out
 
 
 def default_extra_photos() -> List[np.ndarray]:
@@ -830,6 +985,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument('--distances', type=float, nargs='+', default=[1.0, 2.2])
     ap.add_argument('--false-frames', type=int, default=1020,
                     help='real frames without landmarks (false)')
+    ap.add_argument('--no-chessboard-photos', action='store_true',
+                    help='false: without the 26 real chessboard photographs (OpenCV '
+                    'samples, fetched with apt-get download opencv-doc into the cache)')
+    ap.add_argument('--chessboard-share', type=float, default=0.3,
+                    help='false: fraction of the frames that are views of the real '
+                    'chessboard photographs')
     ap.add_argument('--seed', type=int, default=1)
     ap.add_argument('--detectors', nargs='+', default=list(DETECTORS), choices=DETECTORS)
     ap.add_argument('--backgrounds', type=Path, default=None,
@@ -885,9 +1046,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                            'worst angle', pose=True))
         print()
     if args.what in ('false', 'all'):
+        boards: List[np.ndarray] = []
+        if not args.no_chessboard_photos:
+            try:
+                boards = chessboard_photos()
+            except (FileNotFoundError, ValueError) as err:
+                print(f'{err}\n(or run without them: --no-chessboard-photos)',
+                      file=sys.stderr)
+                return 2
         res = false_frames(bgs, args.false_frames, args.seed + 2000,
                            default_extra_photos() if args.backgrounds is None else (),
-                           params=lm_params)
+                           params=lm_params, chessboards=boards,
+                           chessboard_share=args.chessboard_share)
         print(f'Landmark-free real frames: {sum(res.frames.values())} '
               f'({", ".join(f"{k} {v}" for k, v in sorted(res.frames.items()))}); '
               f'detections (all false): {sum(res.detections.values())} '
@@ -902,6 +1072,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             items = sorted(row.items(), key=lambda kv: -kv[1])
             print(f'  {size}: ' + '; '.join(f'{k} {v}' for k, v in items))
         print()
+    dets.close()
     if args.json:
         args.json.write_text(json.dumps([asdict(o) for o in everything], indent=0))
     return 0
