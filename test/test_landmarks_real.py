@@ -150,7 +150,7 @@ def test_apriltag_detectors_are_released_without_a_use_after_free():
     bare = child('bare')
     if bare.returncode == 0:
         pytest.skip('pupil_apriltags now frees its detector in the right order')
-    assert bare.returncode == -11, bare.stderr[-2000:]          # SIGSEGV
+    assert bare.returncode < 0, bare.stderr[-2000:]  # killed by a signal (SIGSEGV, seen)
 
 
 def test_scoring_counts_wrong_codes_and_false_detections(backgrounds):
