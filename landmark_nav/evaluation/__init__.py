@@ -10,6 +10,8 @@ Modules:
 * :mod:`.bags` -- a bag with ``/scan``, ``/odom`` and a reference seen as a scenario
   (laser facts from ``custom_data``, ``ground_truth.yaml`` or options); an Odometry
   topic as arrays (``read_track``).
+* :mod:`.odometry_drift` -- odometry against the ground truth of a bag (``landmark_nav
+  demo``'s drift table).
 * :mod:`.slam` -- EKF-SLAM runner and scores on simulated runs and bags
   (``landmark_nav evaluate``).
 * :mod:`.features` -- corner and line extractor scores against the simulator's truth.
