@@ -47,26 +47,6 @@ import time
 REPO = Path(__file__).resolve().parents[1]
 
 
-def planar(traj):
-    """Return (stamps_ns, (N, 3) x, y, yaw) of a TUM trajectory."""
-    import numpy as np
-    q = traj.quaternions
-    return traj.stamps_ns, np.column_stack([traj.positions[:, :2],
-                                            2.0 * np.arctan2(q[:, 2], q[:, 3])])
-
-
-def position_errors(truth_file, stamps, poses):
-    """Return (stamps kept, errors [m], truth at them) of poses against the truth file."""
-    import numpy as np
-    from landmark_nav.evaluation.trajectory import read_tum
-    from landmark_nav.geometry import interpolate_pose
-    tt, tp = planar(read_tum(truth_file))
-    keep = (stamps >= tt[0]) & (stamps <= tt[-1])
-    ref = interpolate_pose((stamps[keep] - tt[0]) * 1e-9, (tt - tt[0]) * 1e-9, tp)
-    err = np.hypot(*(poses[keep, :2] - ref[:, :2]).T)
-    return stamps[keep], err, ref
-
-
 def node_rss(log: Path) -> dict:
     """Return {node: RSS [MB]} of the pipeline's processes (pids from honcho's log)."""
     import re
@@ -117,7 +97,7 @@ def main() -> int:
 
     import numpy as np
     from landmark_nav.conversions import odometry_to_pose
-    from landmark_nav.evaluation.trajectory import ate, read_tum, Trajectory
+    from landmark_nav.evaluation.trajectory import ate, position_errors_at, read_tum, Trajectory
     from landmark_nav.testing import isolate_dds, RosHarness
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
@@ -179,14 +159,14 @@ def main() -> int:
             procs[0].send_signal(signal.SIGTERM)
             procs[0].wait(timeout=30)
 
-    est = read_tum(out / 'slam.tum')
-    ts, ps = planar(est)
-    t_slam, e_slam, ref = position_errors(out / 'truth.tum', ts, ps)
+    est, truth = read_tum(out / 'slam.tum'), read_tum(out / 'truth.tum')
+    ts, ps = est.stamps_ns, est.planar()
+    t_slam, e_slam, ref = position_errors_at(truth, ts, ps)
     od = [odometry_to_pose(m) for m in odom_msgs]
     to = np.array([d.stamp_ns for d in od], dtype=np.int64)
     po = np.array([d.pose for d in od])
     keep = (to >= t_slam[0]) & (to <= t_slam[-1])
-    t_odom, e_odom, _ = position_errors(out / 'truth.tum', to[keep], po[keep])
+    t_odom, e_odom, _ = position_errors_at(truth, to[keep], po[keep])
     dist = float(np.sum(np.hypot(*np.diff(ref[:, :2], axis=0).T)))
     span = (t_slam[-1] - t_slam[0]) * 1e-9
     print(f'files in {out}; {len(t_slam)} SLAM poses over {span:.1f} s, {dist:.2f} m driven')

@@ -26,6 +26,8 @@ import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from landmark_nav.evaluation.feature_bags import (bag_metric_scans,  # noqa: E402
+                                                  evaluate_truth_free, sensor_facts)
 from landmark_nav.evaluation.scan_metrics import (evaluate_scans,  # noqa: E402
                                                   format_scan_metrics, MetricScan,
                                                   ray_metrics, segments_of)
@@ -34,8 +36,6 @@ from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
-from landmark_nav.tools.evaluate_features import (bag_metric_scans,  # noqa: E402
-                                                  evaluate_truth_free, sensor_facts)
 import numpy as np  # noqa: E402
 
 CARMEN = SHARED_DATA / 'carmen'

@@ -6,9 +6,11 @@ from pathlib import Path
 
 from landmark_nav.bag import BagWriter
 from landmark_nav.conversions import make_odometry, make_scan
+from landmark_nav.evaluation.feature_bags import evaluate_truth_free
+from landmark_nav.evaluation.trajectory import read_tum
 from landmark_nav.geometry import compose
 from landmark_nav.sim import World
-from landmark_nav.tools.evaluate_features import evaluate_truth_free, read_tum, run
+from landmark_nav.tools.evaluate_features import run
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -106,17 +108,18 @@ def test_tum_reference_and_bag_without_reference(tmp_path):
     res, _ = evaluate_truth_free(tmp_path / 'b', reference=str(tmp_path / 'ref.tum'), scans=4)
     assert res['repeat_pairs'] == 5
     assert res['lines']['split_merge']['line_repeatability'] == 1.0
-    stamps, read = read_tum(tmp_path / 'ref.tum')
-    np.testing.assert_allclose(read, poses, atol=1e-12)
+    np.testing.assert_allclose(read_tum(tmp_path / 'ref.tum').planar(), poses, atol=1e-12)
 
 
 def test_bad_reference_and_custom_data_name_the_source(tmp_path):
+    # The reference goes through evaluation.trajectory.read_tum (its own tests: test_trajectory).
+    write_room_bag(tmp_path / 'room')
     (tmp_path / 'bad.tum').write_text('# header\n1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 1\n')
-    with pytest.raises(ValueError, match=r'bad\.tum:3: malformed TUM line'):
-        read_tum(tmp_path / 'bad.tum')
+    with pytest.raises(ValueError, match=r'bad\.tum:3: expected 8 fields'):
+        evaluate_truth_free(tmp_path / 'room', reference=str(tmp_path / 'bad.tum'))
     (tmp_path / 'back.tum').write_text('2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n')
-    with pytest.raises(ValueError, match=r'back\.tum:2: stamp 1.0 does not increase'):
-        read_tum(tmp_path / 'back.tum')
+    with pytest.raises(ValueError, match=r'back\.tum:2: stamp 1.0 is not after the previous'):
+        evaluate_truth_free(tmp_path / 'room', reference=str(tmp_path / 'back.tum'))
     with BagWriter(tmp_path / 'b') as bag:
         bag.add_topic('/scan', LaserScan)
         bag.write('/scan', T0, make_scan(T0, 'laser', -1.0, 0.01, np.ones(201), 0.05, 20.0))

@@ -13,6 +13,8 @@ import subprocess
 import sys
 
 from geometry_msgs.msg import PoseArray
+from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_truth_free,
+                                                  sensor_facts)
 from landmark_nav.evaluation.scan_metrics import (corner_repeatability, line_repeatability,
                                                   ray_metrics, Repeatability)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays
@@ -20,8 +22,6 @@ from landmark_nav.importers.writer import import_log
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.line_extractor import LineExtractor
 from landmark_nav.testing import RosHarness, shared_data
-from landmark_nav.tools.evaluate_features import (bag_metric_scans, evaluate_truth_free,
-                                                  sensor_facts)
 import numpy as np
 import pytest
 from sensor_msgs.msg import PointCloud2

@@ -1,13 +1,23 @@
-"""Layering of the package (DESIGN.md "Layers"): imports point down, checked on the sources.
+"""Layering of the package: imports point down, checked on the sources.
 
-Every ``import`` / ``from ... import`` of a module, at any depth (module level, inside
-functions, under ``if``/``try``), is read with :mod:`ast` and resolved to an absolute
-module name (relative imports included). Rules:
+The package is layered so that the algorithms run on the robot without the simulator or
+the scoring code: at the bottom the algorithm cores (computation on arrays, the device
+protocols, the bag file), above them the importers (logs -> bags), the simulator, the
+evaluation, the tools and the ROS nodes, which use the cores; the rules below keep the
+cores (and the importers) from importing upwards. Every ``import`` / ``from ... import``
+of a module, at any depth (module level, inside functions, under ``if``/``try``), is read
+with :mod:`ast` and resolved to an absolute module name (relative imports included).
+Rules:
 
 * the algorithm cores (``geometry``, ``hardware``, ``laser``, ``slam``, ``localization``,
-  ``vision``, ``drivers``, ``bag``) never import ``landmark_nav.sim``,
-  ``landmark_nav.evaluation``, ``landmark_nav.tools``, ``landmark_nav.nodes``; and, except
-  ``bag`` (which (de)serializes messages with ``rclpy.serialization``), never rclpy;
+  ``vision``, ``monocular``, ``corridor``, ``road``, ``drivers``, ``bag``) never import
+  ``landmark_nav.sim``, ``landmark_nav.evaluation``, ``landmark_nav.tools``,
+  ``landmark_nav.nodes``; and, except ``bag`` (which (de)serializes messages with
+  ``rclpy.serialization``), never rclpy;
+* the importers are not a core (they build ROS messages through ``conversions`` and show
+  a progress bar) but an imported bag must not depend on the simulator or the scorers:
+  they never import ``landmark_nav.sim``, ``landmark_nav.evaluation``,
+  ``landmark_nav.tools``, ``landmark_nav.nodes``;
 * the nodes never import ``landmark_nav.sim`` (a node runs on the real robot);
 * the scorers live in ``landmark_nav.evaluation``: no core keeps an ``evaluate`` module.
 """
@@ -19,8 +29,8 @@ from typing import Iterator, List, Tuple
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1] / 'landmark_nav'
-CORES = ('geometry', 'hardware', 'laser', 'slam', 'localization', 'vision', 'corridor', 'road',
-         'drivers', 'bag')
+CORES = ('geometry', 'hardware', 'laser', 'slam', 'localization', 'vision', 'monocular',
+         'corridor', 'road', 'drivers', 'bag')
 ABOVE_CORES = ('landmark_nav.sim', 'landmark_nav.evaluation', 'landmark_nav.tools',
                'landmark_nav.nodes')
 RCLPY_ALLOWED = ('bag',)
@@ -60,9 +70,11 @@ def _forbidden(mod: str, prefixes: Tuple[str, ...]) -> bool:
 
 
 def violations(path: Path, core: str, root: Path = ROOT) -> List[str]:
-    """Forbidden imports of one source file of the layer ``core`` (``'nodes'`` or a core)."""
+    """Forbidden imports of one source file of the layer ``core`` (a core or a layer above)."""
     if core == 'nodes':
         banned: Tuple[str, ...] = ('landmark_nav.sim',)
+    elif core == 'importers':
+        banned = ABOVE_CORES
     else:
         banned = ABOVE_CORES + (() if core in RCLPY_ALLOWED else ('rclpy',))
     return [f'{path.relative_to(root.parent)}:{line}: imports {mod}'
@@ -75,7 +87,7 @@ def layer_files(core: str, root: Path = ROOT) -> List[Path]:
     return [single] if single.is_file() else sorted((root / core).rglob('*.py'))
 
 
-@pytest.mark.parametrize('core', CORES + ('nodes',))
+@pytest.mark.parametrize('core', CORES + ('importers', 'nodes'))
 def test_layer_imports_point_down(core):
     files = layer_files(core)
     assert files, f'no sources for {core}'
@@ -111,6 +123,9 @@ def test_relative_import_resolution(tmp_path):
     ('drivers', 'import rclpy.node\n', True),
     ('geometry', 'from landmark_nav.nodes.common import declare\n', True),
     ('nodes', 'def g():\n    from landmark_nav.sim.sonar import SONAR_MOUNTS\n', True),
+    ('monocular', 'from landmark_nav.sim.camera import render\n', True),
+    ('importers', 'def h():\n    from landmark_nav.evaluation.bags import load_bag\n', True),
+    ('importers', 'from landmark_nav.conversions import make_scan\n', False),
     ('bag', 'from rclpy.serialization import serialize_message\n', False),
     ('nodes', 'import rclpy\nfrom landmark_nav.hardware import SONAR_MOUNTS\n', False),
     ('slam', 'from landmark_nav.simulation_helpers import x\nfrom .consistency import nees\n',

@@ -1,4 +1,4 @@
-"""The standard ament pep257 lint test (Google docstring convention, see STYLE).
+"""The standard ament pep257 lint test (Google docstring convention).
 
 Run in a fresh interpreter, like the flake8 test, so that no state of earlier tests in the
 test process can disturb it.
@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-# Google-style docstrings (STYLE.md); like ament's own convention, missing docstrings
+# The repository writes Google-style docstrings (a one-line summary, then Args / Returns /
+# Raises sections where they apply); like ament's own convention, missing docstrings
 # (D100-D107) are not errors.
 _LINT = ('import sys\n'
          'from ament_pep257.main import main\n'

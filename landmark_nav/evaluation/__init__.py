@@ -8,12 +8,18 @@ Modules:
 
 * :mod:`.trajectory` -- ATE / RPE through ``evo``'s metrics, stamp association, TUM files.
 * :mod:`.bags` -- a bag with ``/scan``, ``/odom`` and a reference seen as a scenario
-  (laser facts from ``custom_data``, ``ground_truth.yaml`` or options).
+  (laser facts from ``custom_data``, ``ground_truth.yaml`` or options); an Odometry
+  topic as arrays (``read_track``).
+* :mod:`.odometry_drift` -- odometry against the ground truth of a bag (``landmark_nav
+  demo``'s drift table).
 * :mod:`.slam` -- EKF-SLAM runner and scores on simulated runs and bags
   (``landmark_nav evaluate``).
 * :mod:`.features` -- corner and line extractor scores against the simulator's truth.
 * :mod:`.scan_metrics` -- truth-free feature metrics for real scans (PLE ray metric,
   false-surface beams, repeatability).
+* :mod:`.feature_bags` -- the feature runners on a bag (``landmark_nav evaluate-features``):
+  simulator bags against their ground truth, any bag with ``/scan`` by the truth-free
+  metrics.
 * :mod:`.localization` -- sonar EKF / UKF runs and errors, the hallway study
   (``python -m landmark_nav.evaluation.localization``).
 * :mod:`.localization_bags` -- the same on a bag (``landmark_nav evaluate-localization``).

@@ -31,7 +31,7 @@ common start.
 
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import odometry_to_pose, scan_to_data
@@ -133,6 +133,16 @@ class _Stamped:
     stamp_ns: int
     pose: np.ndarray
     covariance: Optional[np.ndarray] = None
+
+
+def read_track(reader: BagReader, topic: str) -> Tuple[np.ndarray, np.ndarray]:
+    """Header stamps (N,) and poses (N, 3) of an Odometry topic."""
+    stamps, poses = [], []
+    for _, _, msg in reader.decoded([topic]):
+        d = odometry_to_pose(msg)
+        stamps.append(d.stamp_ns)
+        poses.append(d.pose)
+    return np.asarray(stamps, dtype=np.int64), np.asarray(poses, dtype=float).reshape(-1, 3)
 
 
 def _parse_floats(text: str, n: int, what: str) -> np.ndarray:
@@ -354,4 +364,4 @@ def load_bag(bag, max_seconds: Optional[float] = None, reference=None,
                        ref_name, notes, period, custom, meta is not None)
 
 
-__all__ = ['BagScenario', 'laser_config', 'load_bag', 'REFERENCE_TOPIC']
+__all__ = ['BagScenario', 'laser_config', 'load_bag', 'read_track', 'REFERENCE_TOPIC']

@@ -8,9 +8,9 @@
   first stamp at which the robot moves to the end; odometry alone from the true start,
   calibrated (the bag's true k1, k2, k3) and uncalibrated. Writes a JSON and two PNGs
   (trajectory with the map, heading vs time; the chapter's Figs. 16-17).
-* :func:`load_bag_input`, :func:`sonar_topics`, :func:`read_track` -- a bag's odometry,
-  sonar and poses as arrays (also used by the map tools of
-  :mod:`landmark_nav.tools.localization_tools`).
+* :func:`load_bag_input`, :func:`sonar_topics` -- a bag's odometry, sonar and poses as
+  arrays (the poses by :func:`landmark_nav.evaluation.bags.read_track`; also used by the
+  map tools of :mod:`landmark_nav.tools.localization_tools`).
 
 Bad input (missing bag, bag without sonar or ground truth, unknown filter or scenario)
 raises :class:`~landmark_nav.bag.BagError` or ``ValueError`` with a one-line message.
@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any, Dict, Optional, Sequence, Tuple
 
 from landmark_nav.bag import BagReader
-from landmark_nav.conversions import odometry_to_pose, stamp_to_ns
+from landmark_nav.conversions import stamp_to_ns
+from landmark_nav.evaluation.bags import read_track
 from landmark_nav.evaluation.localization import (draw_initial_pose, first_motion_index,
                                                   localization_errors, LocalizationInput,
                                                   LocalizationRun, localize,
@@ -58,16 +59,6 @@ def sonar_topics(bag: Path, available: Sequence[str], meta: Optional[dict]) -> l
     if not topics:
         raise ValueError(f'{bag} has no sonar topics (/sonar/range_0..15)')
     return topics
-
-
-def read_track(reader: BagReader, topic: str) -> Tuple[np.ndarray, np.ndarray]:
-    """Header stamps (N,) and poses (N, 3) of an Odometry topic."""
-    stamps, poses = [], []
-    for _, _, msg in reader.decoded([topic]):
-        d = odometry_to_pose(msg)
-        stamps.append(d.stamp_ns)
-        poses.append(d.pose)
-    return np.asarray(stamps, dtype=np.int64), np.asarray(poses, dtype=float).reshape(-1, 3)
 
 
 def _wheel_velocities(reader: BagReader, bag: Path, joints: Sequence[str]

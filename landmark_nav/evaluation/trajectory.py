@@ -34,6 +34,7 @@ from evo.core import metrics, sync
 from evo.core.filters import FilterException
 from evo.core.geometry import GeometryException
 from evo.core.trajectory import Plane, PoseTrajectory3D
+from landmark_nav.geometry import interpolate_pose
 import numpy as np
 
 ALIGNMENTS = ('none', 'se2', 'se3', 'sim3')
@@ -301,11 +302,32 @@ def position_errors(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return np.hypot(*(est[:, :2] - ref[:, :2]).T)
 
 
+def position_errors_at(ref: Trajectory, stamps_ns: np.ndarray, poses: np.ndarray
+                       ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Planar position errors of poses against the reference interpolated at their stamps.
+
+    Args:
+        ref: Reference.
+        stamps_ns: (N,) stamps of the estimate [ns].
+        poses: (N, 3) estimated ``[x, y, yaw]``.
+
+    Returns:
+        ``(stamps, errors, ref_poses)`` of the estimates inside the reference's time span:
+        their stamps [ns], ``|p_est - p_ref|`` [m] and the reference ``[x, y, yaw]``
+        (linear in time, the heading along the shorter arc).
+    """
+    tt, tp = ref.stamps_ns, ref.planar()
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    keep = (stamps >= tt[0]) & (stamps <= tt[-1])
+    at = interpolate_pose((stamps[keep] - tt[0]) * 1e-9, (tt - tt[0]) * 1e-9, tp)
+    return stamps[keep], position_errors(np.asarray(poses, dtype=float)[keep], at), at
+
+
 def summary(stats: Dict[str, float], keys: Sequence[str] = ('rmse', 'max')) -> str:
     """``rmse 1.23 cm, max 4.56 cm`` for the given statistics [m]."""
     return ', '.join(f'{k} {100 * stats[k]:.2f} cm' for k in keys)
 
 
 __all__ = ['ALIGNMENTS', 'aligned', 'associate', 'ate', 'MAX_DIFF_S', 'position_errors',
-           'read_tum', 'rpe', 'RPE_REL_TOL', 'STATISTICS', 'summary', 'Trajectory',
-           'write_tum']
+           'position_errors_at', 'read_tum', 'rpe', 'RPE_REL_TOL', 'STATISTICS', 'summary',
+           'Trajectory', 'write_tum']

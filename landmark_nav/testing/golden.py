@@ -39,9 +39,9 @@ def _evaluate_jcbb(bag: Path, out: Path) -> Outputs:
 
 def _features(every: int) -> Callable[[Path, Path], Outputs]:
     def run(bag: Path, out: Path) -> Outputs:
-        from landmark_nav.tools.evaluate_features import run as evaluate_features
+        from landmark_nav.evaluation.feature_bags import evaluate_bag_features
         out.mkdir(parents=True, exist_ok=True)
-        evaluate_features(bag, every=every, json_out=out / 'features.json')
+        evaluate_bag_features(bag, every=every, json_out=out / 'features.json')
         return {'features.json': json.loads((out / 'features.json').read_text())}
     return run
 

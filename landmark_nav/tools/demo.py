@@ -1,8 +1,9 @@
 """The main job: EKF-SLAM on a recorded bag against ground truth, and the odometry drift.
 
 Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png``,
-``summary.txt`` and ``drift.json`` (odometry drift against ``/ground_truth/odom``) and the
-EKF-SLAM evaluation of :func:`landmark_nav.evaluation.slam.evaluate_bag`
+``summary.txt`` and ``drift.json`` (odometry drift against ``/ground_truth/odom``, scored by
+:func:`landmark_nav.evaluation.odometry_drift.bag_odometry_drift`) and the EKF-SLAM
+evaluation of :func:`landmark_nav.evaluation.slam.evaluate_bag`
 (``slam_map.png``, ``slam_errors.png``, ``slam.json``, TUM trajectories) and the viewer file
 ``view/view.mcap`` (:func:`landmark_nav.evaluation.viewer.write_slam_view`: inputs and
 outputs in standard message types for Foxglove / Lichtblick); returns both summaries.
@@ -12,54 +13,10 @@ import json
 from pathlib import Path
 import sys
 
-from landmark_nav.bag import BagReader
-from landmark_nav.conversions import odometry_to_pose
-from landmark_nav.geometry import wrap_angle
+from landmark_nav.evaluation.odometry_drift import bag_odometry_drift
 from landmark_nav.sim.record import load_ground_truth
 from landmark_nav.sim.world import World
 import numpy as np
-
-
-def read_poses(bag_dir, topic: str):
-    """Return (stamps_ns (N,), poses (N, 3)) of an Odometry topic."""
-    stamps, poses = [], []
-    with BagReader(bag_dir) as reader:
-        for _, _, msg in reader.decoded([topic]):
-            data = odometry_to_pose(msg)
-            stamps.append(data.stamp_ns)
-            poses.append(data.pose)
-    if not stamps:
-        raise ValueError(f'{bag_dir} has no messages on {topic}')
-    return np.asarray(stamps, dtype=np.int64), np.asarray(poses)
-
-
-def odometry_drift(truth: np.ndarray, odom: np.ndarray) -> dict:
-    """Drift figures of odometry vs truth sampled at the same stamps (both (N, 3)).
-
-    The odometry frame coincides with the world at the first sample, so errors are plain
-    differences; heading errors are wrapped.
-    """
-    steps = np.linalg.norm(np.diff(truth[:, :2], axis=0), axis=1)
-    travelled = np.concatenate([[0.0], np.cumsum(steps)])
-    pos_err = np.linalg.norm(odom[:, :2] - truth[:, :2], axis=1)
-    yaw_err = np.abs(wrap_angle(odom[:, 2] - truth[:, 2]))
-    at = {}
-    for frac in (0.25, 0.5, 0.75, 1.0):
-        i = int(np.searchsorted(travelled, frac * travelled[-1]))
-        i = min(i, len(travelled) - 1)
-        at[f'{int(frac * 100)}%'] = {'distance_m': float(travelled[i]),
-                                     'position_error_m': float(pos_err[i]),
-                                     'heading_error_deg': float(np.degrees(yaw_err[i]))}
-    return {
-        'path_length_m': float(travelled[-1]),
-        'final_position_error_m': float(pos_err[-1]),
-        'final_heading_error_deg': float(np.degrees(yaw_err[-1])),
-        'max_position_error_m': float(pos_err.max()),
-        'max_heading_error_deg': float(np.degrees(yaw_err.max())),
-        'final_error_percent_of_distance': float(100.0 * pos_err[-1] / max(travelled[-1], 1e-9)),
-        'along_path': at,
-        'position_error_m': pos_err,
-    }
 
 
 def plot_world_paths(world: World, truth: np.ndarray, odom: np.ndarray, path: Path,
@@ -96,13 +53,7 @@ def run_demo(bag, out) -> str:
     """Write world_paths.png, summary.txt, drift.json and the SLAM files; return the summary."""
     bag, out = Path(bag), Path(out)
     truth_meta = load_ground_truth(bag)
-    t_truth, truth = read_poses(bag, '/ground_truth/odom')
-    t_odom, odom = read_poses(bag, '/odom')
-    common, i_truth, i_odom = np.intersect1d(t_truth, t_odom, return_indices=True)
-    if len(common) < 2:
-        raise ValueError(f'{bag}: /odom and /ground_truth/odom share fewer than 2 stamps')
-    truth, odom = truth[i_truth], odom[i_odom]
-    drift = odometry_drift(truth, odom)
+    common, truth, odom, drift = bag_odometry_drift(bag)
     out.mkdir(parents=True, exist_ok=True)
     name = truth_meta.get('scenario', bag.name)
     plot_world_paths(World.from_dict(truth_meta['world']), truth, odom, out / 'world_paths.png',

@@ -15,7 +15,8 @@ from typing import Any, Dict, Optional
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import stamp_to_ns
-from landmark_nav.evaluation.localization_bags import read_track, sonar_topics
+from landmark_nav.evaluation.bags import read_track
+from landmark_nav.evaluation.localization_bags import sonar_topics
 from landmark_nav.geometry import interpolate_pose
 from landmark_nav.hardware import SONAR_MOUNTS
 from landmark_nav.localization.grid import GridMap, rasterize_world, save_map_yaml
