@@ -26,11 +26,12 @@ F_w width}``:
    likelihood gain with the Bayesian information criterion's penalty, then neighbours
    are rejoined, least significant boundary first (per reading), unless they differ
    physically -- roughness by ``rough_ratio`` (F-test at ``rough_alpha``) or profile by a
-   kink of more than ``split_rms`` -- and the rougher of two pieces beside a road-wide
-   smooth piece is a verge. So the edge is the reading where the profile bends or the
-   roughness changes: the kink between a crowned road and its flat shoulder, which
-   roughness alone does not separate on gravel (the chapter's +0.7 m), or smooth asphalt
-   next to a rough verge;
+   kink of more than ``split_rms`` -- each remaining boundary is re-placed by a continuous
+   fit of the two neighbours (the wider quadratic, the narrower straight, meeting without
+   a step), and the rougher of two pieces beside a road-wide smooth piece is a verge. So
+   the edge is the reading where the profile bends or the roughness changes: the kink
+   between a crowned road and its flat shoulder, which roughness alone does not separate
+   on gravel (the chapter's +0.7 m), or smooth asphalt next to a rough verge;
    each piece is then filtered by its quadratic height profile ``z = a + b s + c s^2``
    across the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|``
    below ``curvature_max``, median roughness ``F_sigma`` below ``roughness_max``, width
@@ -443,6 +444,11 @@ def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> lis
     return out
 
 
+_BINOMIAL = np.array([[math.comb(p, j) for j in range(5)] for p in range(5)], dtype=float)
+_POWER_INDEX = np.maximum(np.subtract.outer(np.arange(5), np.arange(5)), 0)
+_LOWER = np.tri(5)
+
+
 def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: float,
                 table: np.ndarray, min_points: int) -> int:
     """Return the reading that starts the right piece of the best continuous two-piece fit.
@@ -464,16 +470,15 @@ def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: 
     left = cum[:, k]
     right = cum[:, -1:] - left
     w_l, w_r = 1.0 / v_left, 1.0 / v_right
-
-    def shifted(m: np.ndarray, p: int, zrow: bool) -> np.ndarray:
-        """Return sum of (t - tau)^p (times z if ``zrow``) from the moment sums ``m``."""
-        base = 5 if zrow else 0
-        return sum(math.comb(p, j) * (-tau) ** (p - j) * m[base + j] for j in range(p + 1))
-
+    # Sums of u^p = (t - tau)^p (p <= 4) and z u^p (p <= 2) each side, by the binomial
+    # expansion of the sums of t^j: shift[p, j] = C(p, j) (-tau)^(p - j).
+    powers = (-tau)[None, :] ** np.arange(5)[:, None]
+    shift = _BINOMIAL[:, :, None] * powers[_POWER_INDEX] * _LOWER[:, :, None]
+    both = np.stack([left, right])
+    su = np.einsum('pjk,sjk->spk', shift, both[:, :5])
+    sz = np.einsum('pjk,sjk->spk', shift[:3, :3], both[:, 5:8])
     # Columns: 1, u on the left, u on the right, u^2 on the quadratic side (u = t - tau).
     q_w = w_l if quad_left else w_r
-    su = [[shifted(m, p, False) for p in range(5)] for m in (left, right)]
-    sz = [[shifted(m, p, True) for p in range(3)] for m in (left, right)]
     sq = su[0] if quad_left else su[1]
     zq = sz[0] if quad_left else sz[1]
     g = np.zeros((k.size, 4, 4))
