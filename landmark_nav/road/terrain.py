@@ -26,11 +26,12 @@ F_w width}``:
    likelihood gain with the Bayesian information criterion's penalty, then neighbours
    are rejoined, least significant boundary first (per reading), unless they differ
    physically -- roughness by ``rough_ratio`` (F-test at ``rough_alpha``) or profile by a
-   kink of more than ``split_rms`` -- and the rougher of two pieces beside a road-wide
-   smooth piece is a verge. So the edge is the reading where the profile bends or the
-   roughness changes: the kink between a crowned road and its flat shoulder, which
-   roughness alone does not separate on gravel (the chapter's +0.7 m), or smooth asphalt
-   next to a rough verge;
+   kink of more than ``split_rms`` -- each remaining boundary is re-placed by a continuous
+   fit of the two neighbours (the wider quadratic, the narrower straight, meeting without
+   a step), and the rougher of two pieces beside a road-wide smooth piece is a verge. So
+   the edge is the reading where the profile bends or the roughness changes: the kink
+   between a crowned road and its flat shoulder, which roughness alone does not separate
+   on gravel (the chapter's +0.7 m), or smooth asphalt next to a rough verge;
    each piece is then filtered by its quadratic height profile ``z = a + b s + c s^2``
    across the scan: slope ``F_t = |b|`` below ``slope_max``, curvature ``F_c = |2 c|``
    below ``curvature_max``, median roughness ``F_sigma`` below ``roughness_max``, width
@@ -443,6 +444,86 @@ def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> lis
     return out
 
 
+_BINOMIAL = np.array([[math.comb(p, j) for j in range(5)] for p in range(5)], dtype=float)
+_POWER_INDEX = np.maximum(np.subtract.outer(np.arange(5), np.arange(5)), 0)
+_LOWER = np.tri(5)
+
+
+def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: float,
+                table: np.ndarray, min_points: int) -> int:
+    """Return the reading that starts the right piece of the best continuous two-piece fit.
+
+    The stretch ``first`` .. ``last`` of :func:`_moment_table` is split at every reading
+    ``k`` (``min_points`` each side) into a quadratic and a straight profile (the quadratic
+    on the left if ``quad_left``) that meet at the lateral position ``tau`` between
+    readings ``k - 1`` and ``k`` (no step: a road and its verge are one surface, only the
+    slope changes), each side weighted by its own height variance (``v_left``,
+    ``v_right``). The split of least negative log-likelihood is the edge.
+    """
+    n = last - first + 1
+    if n < 2 * min_points:
+        return first + n // 2
+    cum = table[:, first:last + 2] - table[:, first:first + 1]        # sums over [0, k)
+    t = np.diff(table[1, first:last + 2])                              # t of each reading
+    k = np.arange(min_points, n - min_points + 1)
+    tau = 0.5 * (t[k - 1] + t[k])
+    left = cum[:, k]
+    right = cum[:, -1:] - left
+    w_l, w_r = 1.0 / v_left, 1.0 / v_right
+    # Sums of u^p = (t - tau)^p (p <= 4) and z u^p (p <= 2) each side, by the binomial
+    # expansion of the sums of t^j: shift[p, j] = C(p, j) (-tau)^(p - j).
+    powers = (-tau)[None, :] ** np.arange(5)[:, None]
+    shift = _BINOMIAL[:, :, None] * powers[_POWER_INDEX] * _LOWER[:, :, None]
+    both = np.stack([left, right])
+    su = np.einsum('pjk,sjk->spk', shift, both[:, :5])
+    sz = np.einsum('pjk,sjk->spk', shift[:3, :3], both[:, 5:8])
+    # Columns: 1, u on the left, u on the right, u^2 on the quadratic side (u = t - tau).
+    q_w = w_l if quad_left else w_r
+    sq = su[0] if quad_left else su[1]
+    zq = sz[0] if quad_left else sz[1]
+    g = np.zeros((k.size, 4, 4))
+    b = np.zeros((k.size, 4))
+    g[:, 0, 0] = w_l * su[0][0] + w_r * su[1][0]
+    g[:, 0, 1] = g[:, 1, 0] = w_l * su[0][1]
+    g[:, 0, 2] = g[:, 2, 0] = w_r * su[1][1]
+    g[:, 1, 1] = w_l * su[0][2]
+    g[:, 2, 2] = w_r * su[1][2]
+    g[:, 0, 3] = g[:, 3, 0] = q_w * sq[2]
+    g[:, 1 if quad_left else 2, 3] = g[:, 3, 1 if quad_left else 2] = q_w * sq[3]
+    g[:, 3, 3] = q_w * sq[4]
+    b[:, 0] = w_l * sz[0][0] + w_r * sz[1][0]
+    b[:, 1] = w_l * sz[0][1]
+    b[:, 2] = w_r * sz[1][1]
+    b[:, 3] = q_w * zq[2]
+    g += np.eye(4) * 1e-12 * np.trace(g, axis1=1, axis2=2)[:, None, None]
+    fit = np.einsum('ki,ki->k', b, np.linalg.solve(g, b[..., None])[..., 0])
+    wss = w_l * left[8] + w_r * right[8] - fit
+    nll = 0.5 * (wss + k * math.log(v_left) + (n - k) * math.log(v_right))
+    return first + int(k[int(np.argmin(nll))])
+
+
+def _refine_edges(pieces: list, table: np.ndarray, params: TerrainParams) -> list:
+    """Re-place each boundary between neighbouring pieces by a continuous two-piece fit.
+
+    The binary segmentation fits each piece on its own: the short piece beside the road (a
+    shoulder 0.6 m wide), free to curve and to start at any height, takes the last few
+    tenths of a metre of the crowned road's falling edge with it. Here the wider piece
+    keeps its quadratic profile, the narrower one is straight, and the two meet without a
+    step (:func:`_hinge_edge`); each side's height variance is its piece's (floored by the
+    laser's height noise).
+    """
+    out = list(pieces)
+    for j in range(len(out) - 1):
+        (fa, la), (fb, lb) = out[j], out[j + 1]
+        if la + 1 != fb:
+            continue
+        v_a = _fit_piece(fa, la, table)[1]
+        v_b = _fit_piece(fb, lb, table)[1]
+        k = _hinge_edge(fa, lb, la - fa >= lb - fb, v_a, v_b, table, params.min_points)
+        out[j], out[j + 1] = (fa, k - 1), (k, lb)
+    return out
+
+
 def _verges(pieces: list, s: np.ndarray, table: np.ndarray, params: TerrainParams) -> list:
     """Flag the rougher of two neighbours whose roughness differs by ``rough_ratio``.
 
@@ -566,7 +647,7 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
                               var0[first:last + 1])
         found = []
         _segment_profile(0, last - first, table, params, found)
-        merged = _merge_pieces(found, table, params)
+        merged = _refine_edges(_merge_pieces(found, table, params), table, params)
         verge = _verges(merged, lateral[first:last + 1], table, params)
         pieces += [(a + first, b + first) for (a, b), v in zip(merged, verge) if not v]
     segments = []
