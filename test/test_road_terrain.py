@@ -124,3 +124,26 @@ def test_road_edges_fall_on_the_reading_where_the_surface_changes():
         errors.append((ys[0] + 2.45, ys[1] - 2.45))
     med = np.median(np.abs(errors), axis=0)
     assert np.all(med < 0.05)
+
+
+def test_batched_profile_segmentation_matches_the_recursive_one():
+    # _segment_profiles splits every stretch level by level in one pass of array
+    # operations; it must give exactly the pieces of the recursive reference.
+    from landmark_nav.road.terrain import _moment_table, _segment_profile, _segment_profiles
+    rng = np.random.default_rng(3)
+    params = TerrainParams()
+    tables = []
+    for n in (4, 9, 10, 25, 80, 160, 240, 361):
+        y = np.sort(rng.uniform(-3.0, 3.0, n))
+        edge = rng.uniform(-2.0, 2.0)
+        z = np.where(y < edge, 0.1 - 0.05 * y * y, 0.02 * (y - edge) + 0.1 - 0.05 * edge ** 2)
+        z = z + rng.normal(0.0, np.where(y < edge, 0.003, 0.02))
+        tables.append(_moment_table(y, z, np.full(n, (0.005 * 0.25) ** 2)))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        batched = _segment_profiles(tables, params)
+        for table, got in zip(tables, batched):
+            ref = []
+            _segment_profile(0, table.shape[1] - 2, table, params, ref)
+            assert got == ref
+    assert any(len(pieces) > 1 for pieces in batched)
+    assert _segment_profiles([], params) == []            # a scan without a smooth stretch

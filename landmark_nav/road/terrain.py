@@ -49,7 +49,9 @@ Pure numpy (and scipy.special for the F-test); the node is
 :mod:`landmark_nav.nodes.road_classifier`.
 """
 
+import bisect
 from dataclasses import dataclass, field
+import functools
 import math
 from typing import Optional, Sequence
 
@@ -321,6 +323,9 @@ def _segment_profile(first: int, last: int, table: np.ndarray, params: TerrainPa
     Bayesian information criterion's penalty for the extra piece (3 coefficients, a
     variance and the split point: ``5/2 ln n``). :func:`_merge_pieces` then rejoins the
     neighbours that do not differ physically.
+
+    :func:`classify_scan` uses :func:`_segment_profiles`, the same pieces from fewer numpy
+    calls; this one-split-at-a-time form is its reference (and the tests' oracle).
     """
     best, gain = _best_split(first, last, table, params)
     if best is None or gain <= 2.5 * math.log(last - first + 1):
@@ -371,12 +376,95 @@ def _best_split(first: int, last: int, table: np.ndarray,
     return first + best, float(gain[best])
 
 
-def _fit_piece(first: int, last: int, table: np.ndarray) -> tuple[float, float, float, int]:
+def _segment_profiles(tables: list, params: TerrainParams) -> list:
+    """Return :func:`_segment_profile`'s pieces of every table, split level by level.
+
+    The same binary segmentation, element for element the same arithmetic as
+    :func:`_best_split` (:func:`_poly_sse`, :func:`_piece_nll`), but every stretch still
+    to split, of every table, is tried in one pass of array operations per level of the
+    recursion (the numpy calls, not the readings, are the cost of a scan). Returns one
+    list of ``(first, last)`` per table, in reading order. The caller silences numpy's
+    floating-point warnings (empty and degenerate pieces divide by zero).
+    """
+    if not tables:
+        return []
+    mp = params.min_points
+    found = [[] for _ in tables]
+    # All tables side by side: a stretch is a range of columns of one of them.
+    big = np.concatenate(tables, axis=1)
+    offsets = np.cumsum([0] + [t.shape[1] for t in tables]).tolist()
+    todo = []                                   # (table, first, last) still to split
+    for i, table in enumerate(tables):
+        n = table.shape[1] - 1
+        if n >= 2 * mp:
+            todo.append((i, 0, n - 1))
+        else:
+            found[i].append((0, n - 1))
+    while todo:
+        firsts = np.array([offsets[i] + first for i, first, _ in todo])
+        lasts = np.array([offsets[i] + last for i, _, last in todo])
+        sizes = lasts - firsts + 2 - 2 * mp                 # allowed splits k per stretch
+        halves = [0.5 * math.log(last - first + 1) for _, first, last in todo]
+        reps = np.repeat(np.arange(len(todo)), sizes)
+        seg = np.cumsum(sizes) - sizes                      # each stretch's first split
+        total = int(seg[-1] + sizes[-1])
+        cols = np.arange(total) + (firsts + mp - seg)[reps]
+        left = big[:, cols] - big[:, firsts[reps]]          # [0, k), the allowed k
+        whole = big[:, lasts + 1] - big[:, firsts]
+        # Columns: the left pieces, the whole stretches, the right pieces [k, n).
+        m = np.concatenate([left, whole, whole[:, reps] - left], axis=1)
+        s0, s1, s2, s3, s4, b0, b1, b2, zz, f = m
+        # Each piece is a quadratic (a crowned road) or a line (a flat shoulder, a verge:
+        # one parameter fewer, 1/2 ln n less penalty), which locates a kink sharply.
+        b00, b11 = b0 * b0, b1 * b1
+        c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+        c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
+        det = s0 * c00 + s1 * c01 + s2 * c02
+        fit2 = (b00 * c00 + b11 * c11 + b2 * b2 * c22
+                + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det
+        fit1 = (b00 * s2 - 2.0 * b0 * b1 * s1 + b11 * s0) / c22
+        sse2 = np.where(s0 > 3.5, np.maximum(zz - fit2, 0.0), 0.0)
+        sse1 = np.where(s0 > 2.5, np.maximum(zz - fit1, 0.0), 0.0)
+        floor = f / s0
+        cnt1 = np.maximum(s0, 1)
+        v2 = np.maximum(sse2 / cnt1, floor)
+        v1 = np.maximum(sse1 / cnt1, floor)
+        half = np.array(halves)
+        half_rep = half[reps]
+        nll2 = 0.5 * (s0 * np.log(v2) + sse2 / v2) + np.concatenate([half_rep, half, half_rep])
+        nll = np.minimum(nll2, 0.5 * (s0 * np.log(v1) + sse1 / v1))
+        gain = nll[total + reps] - nll[:total] - nll[total + len(todo):]
+        # np.argmax per stretch: the first maximum, or the first NaN if there is one.
+        top = np.maximum.reduceat(gain, seg)
+        hits = np.flatnonzero((gain == top[reps]) | np.isnan(gain))
+        at = hits[np.searchsorted(hits, seg)]
+        nxt = []
+        for (i, first, last), best, value in zip(todo, (at - seg).tolist(), gain[at].tolist()):
+            if not math.isfinite(value) or value <= 2.5 * math.log(last - first + 1):
+                found[i].append((first, last))
+                continue
+            for a, b in ((first, first + mp + best - 1), (first + mp + best, last)):
+                if b - a + 1 >= 2 * mp:
+                    nxt.append((i, a, b))
+                else:
+                    found[i].append((a, b))
+        todo = nxt
+    return [sorted(pieces) for pieces in found]
+
+
+def _fit_piece(first: int, last: int, table: np.ndarray,
+               fits: Optional[dict] = None) -> tuple[float, float, float, int]:
     """Return a piece's quadratic-profile SSE, unbiased variance (floored), floor and size.
 
     ``first`` and ``last`` index the stretch of :func:`_moment_table` (as :func:`_poly_sse`,
-    on floats).
+    on floats). ``fits`` (one dict per table) keeps the results by ``(first, last)``: the
+    merging, the edge refinement and the verge test ask for the same pieces again.
     """
+    if fits is not None:
+        got = fits.get((first, last))
+        if got is None:
+            got = fits[first, last] = _fit_piece(first, last, table)
+        return got
     s0, s1, s2, s3, s4, b0, b1, b2, zz, f = (table[:, last + 1] - table[:, first]).tolist()
     n = last - first + 1
     c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
@@ -397,11 +485,18 @@ def _rougher(v_a: float, n_a: int, v_b: float, n_b: int, params: TerrainParams) 
     plain ratio (a smooth stretch of a few readings in a gravel road).
     """
     (v_hi, n_hi), (v_lo, n_lo) = sorted(((v_a, n_a), (v_b, n_b)), reverse=True)
-    crit = float(fdtri(max(n_hi - 3, 1), max(n_lo - 3, 1), 1.0 - params.rough_alpha))
+    crit = _f_quantile(max(n_hi - 3, 1), max(n_lo - 3, 1), 1.0 - params.rough_alpha)
     return v_hi >= params.rough_ratio ** 2 * crit * v_lo
 
 
-def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> list:
+@functools.lru_cache(maxsize=4096)
+def _f_quantile(dfn: int, dfd: int, q: float) -> float:
+    """Return the F distribution's ``q`` quantile (cached: the piece sizes repeat)."""
+    return float(fdtri(dfn, dfd, q))
+
+
+def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams,
+                  fits: Optional[dict] = None) -> list:
     """Rejoin neighbouring pieces whose boundary is not a physical change.
 
     A boundary stays when the two pieces' roughness differs by ``rough_ratio`` (e.g. smooth
@@ -420,9 +515,9 @@ def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> lis
         (pf, pl), (first, last) = out[j], out[j + 1]
         if pl + 1 != first:
             return math.inf
-        sse_a, v_a, f_a, n_a = _fit_piece(pf, pl, table)
-        sse_b, v_b, f_b, n_b = _fit_piece(first, last, table)
-        sse_ab, _, f_ab, n = _fit_piece(pf, last, table)
+        sse_a, v_a, f_a, n_a = _fit_piece(pf, pl, table, fits)
+        sse_b, v_b, f_b, n_b = _fit_piece(first, last, table, fits)
+        sse_ab, _, f_ab, n = _fit_piece(pf, last, table, fits)
         gain = nll(sse_ab, n, f_ab) - nll(sse_a, n_a, f_a) - nll(sse_b, n_b, f_b) \
             - 2.5 * math.log(n)
         kink = math.sqrt(max(sse_ab - sse_a - sse_b, 0.0) / min(n_a, n_b)) > params.split_rms
@@ -447,6 +542,7 @@ def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams) -> lis
 _BINOMIAL = np.array([[math.comb(p, j) for j in range(5)] for p in range(5)], dtype=float)
 _POWER_INDEX = np.maximum(np.subtract.outer(np.arange(5), np.arange(5)), 0)
 _LOWER = np.tri(5)
+_EXP234 = np.array([2, 3, 4])[:, None]
 
 
 def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: float,
@@ -463,16 +559,30 @@ def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: 
     n = last - first + 1
     if n < 2 * min_points:
         return first + n // 2
-    cum = table[:, first:last + 2] - table[:, first:first + 1]        # sums over [0, k)
+    k, nll = _hinge_nll(first, last, quad_left, v_left, v_right, table, min_points)
+    return first + int(k[int(np.argmin(nll))])
+
+
+def _hinge_nll(first: int, last: int, quad_left: bool, v_left: float, v_right: float,
+               table: np.ndarray, min_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the splits ``k`` of :func:`_hinge_edge` and their negative log-likelihoods."""
+    n = last - first + 1
+    mp = min_points
+    base = table[:, first:first + 1]
+    left = table[:, first + mp:last + 2 - mp] - base                   # sums over [0, k)
+    right = (table[:, last + 1:last + 2] - base) - left
     t = np.diff(table[1, first:last + 2])                              # t of each reading
-    k = np.arange(min_points, n - min_points + 1)
-    tau = 0.5 * (t[k - 1] + t[k])
-    left = cum[:, k]
-    right = cum[:, -1:] - left
+    k = np.arange(mp, n - mp + 1)
+    tau = 0.5 * (t[mp - 1:n - mp] + t[mp:n - mp + 1])
     w_l, w_r = 1.0 / v_left, 1.0 / v_right
     # Sums of u^p = (t - tau)^p (p <= 4) and z u^p (p <= 2) each side, by the binomial
-    # expansion of the sums of t^j: shift[p, j] = C(p, j) (-tau)^(p - j).
-    powers = (-tau)[None, :] ** np.arange(5)[:, None]
+    # expansion of the sums of t^j: shift[p, j] = C(p, j) (-tau)^(p - j) (``(-tau) ** p``,
+    # computed by ``power`` only for p >= 2: x^0 = 1 and x^1 = x exactly).
+    neg = -tau
+    powers = np.empty((5, k.size))
+    powers[0] = 1.0
+    powers[1] = neg
+    powers[2:] = neg[None, :] ** _EXP234
     shift = _BINOMIAL[:, :, None] * powers[_POWER_INDEX] * _LOWER[:, :, None]
     both = np.stack([left, right])
     su = np.einsum('pjk,sjk->spk', shift, both[:, :5])
@@ -482,27 +592,27 @@ def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: 
     sq = su[0] if quad_left else su[1]
     zq = sz[0] if quad_left else sz[1]
     g = np.zeros((k.size, 4, 4))
-    b = np.zeros((k.size, 4))
-    g[:, 0, 0] = w_l * su[0][0] + w_r * su[1][0]
+    b = np.empty((k.size, 4))
+    diag = (w_l * su[0][0] + w_r * su[1][0], w_l * su[0][2], w_r * su[1][2], q_w * sq[4])
     g[:, 0, 1] = g[:, 1, 0] = w_l * su[0][1]
     g[:, 0, 2] = g[:, 2, 0] = w_r * su[1][1]
-    g[:, 1, 1] = w_l * su[0][2]
-    g[:, 2, 2] = w_r * su[1][2]
     g[:, 0, 3] = g[:, 3, 0] = q_w * sq[2]
     g[:, 1 if quad_left else 2, 3] = g[:, 3, 1 if quad_left else 2] = q_w * sq[3]
-    g[:, 3, 3] = q_w * sq[4]
+    # A relative 1e-12 of the trace on the diagonal (a guard against singular systems).
+    reg = 1e-12 * (diag[0] + diag[1] + diag[2] + diag[3])
+    for i in range(4):
+        g[:, i, i] = diag[i] + reg
     b[:, 0] = w_l * sz[0][0] + w_r * sz[1][0]
     b[:, 1] = w_l * sz[0][1]
     b[:, 2] = w_r * sz[1][1]
     b[:, 3] = q_w * zq[2]
-    g += np.eye(4) * 1e-12 * np.trace(g, axis1=1, axis2=2)[:, None, None]
     fit = np.einsum('ki,ki->k', b, np.linalg.solve(g, b[..., None])[..., 0])
     wss = w_l * left[8] + w_r * right[8] - fit
-    nll = 0.5 * (wss + k * math.log(v_left) + (n - k) * math.log(v_right))
-    return first + int(k[int(np.argmin(nll))])
+    return k, 0.5 * (wss + k * math.log(v_left) + (n - k) * math.log(v_right))
 
 
-def _refine_edges(pieces: list, table: np.ndarray, params: TerrainParams) -> list:
+def _refine_edges(pieces: list, table: np.ndarray, params: TerrainParams,
+                  fits: Optional[dict] = None) -> list:
     """Re-place each boundary between neighbouring pieces by a continuous two-piece fit.
 
     The binary segmentation fits each piece on its own: the short piece beside the road (a
@@ -517,21 +627,22 @@ def _refine_edges(pieces: list, table: np.ndarray, params: TerrainParams) -> lis
         (fa, la), (fb, lb) = out[j], out[j + 1]
         if la + 1 != fb:
             continue
-        v_a = _fit_piece(fa, la, table)[1]
-        v_b = _fit_piece(fb, lb, table)[1]
+        v_a = _fit_piece(fa, la, table, fits)[1]
+        v_b = _fit_piece(fb, lb, table, fits)[1]
         k = _hinge_edge(fa, lb, la - fa >= lb - fb, v_a, v_b, table, params.min_points)
         out[j], out[j + 1] = (fa, k - 1), (k, lb)
     return out
 
 
-def _verges(pieces: list, s: np.ndarray, table: np.ndarray, params: TerrainParams) -> list:
+def _verges(pieces: list, s: np.ndarray, table: np.ndarray, params: TerrainParams,
+            fits: Optional[dict] = None) -> list:
     """Flag the rougher of two neighbours whose roughness differs by ``rough_ratio``.
 
     The rougher piece is a verge (shoulder, grass) beside a smoother and wider piece, at
     least ``min_width`` wide (the road, whose roughness is well estimated): not
     traversable. A smooth patch of a gravel road does not make the road a verge.
     """
-    rough = [_fit_piece(first, last, table)[1::2] for first, last in pieces]
+    rough = [_fit_piece(first, last, table, fits)[1::2] for first, last in pieces]
     width = [abs(s[last] - s[first]) for first, last in pieces]
     verge = [False] * len(pieces)
     for j in range(len(pieces) - 1):
@@ -609,12 +720,12 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     cut = np.zeros(idx.size, dtype=bool)
     cut[1:] = (dz > params.step_max) | (gaps > params.gap_max)
     groups = []
+    cuts = np.flatnonzero(cut).tolist()
     for first, last in _runs(smooth):
         start = first
-        for k in range(first + 1, last + 1):
-            if cut[k]:
-                groups.append((start, k - 1))
-                start = k
+        for k in cuts[bisect.bisect_right(cuts, first):bisect.bisect_right(cuts, last)]:
+            groups.append((start, k - 1))
+            start = k
         groups.append((start, last))
     groups = _combine(groups, s, z, cut, params)
     # Height profiles across the scan are functions of the lateral position (base_link y,
@@ -629,27 +740,31 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     # the profile segmentation puts the edge on the reading where the profile or its
     # roughness changes.
     stretches = []
+    s_l, cut_l, ground_l = s.tolist(), cut.tolist(), ground.tolist()
     for g, (first, last) in enumerate(groups):
         taken = stretches[-1][1] if stretches else -1
         nxt = groups[g + 1][0] if g + 1 < len(groups) else idx.size
-        while first - 1 > taken and not cut[first] and \
-                s[first - 1] >= s[first] - 0.5 * params.window and ground[first - 1]:
+        while first - 1 > taken and not cut_l[first] and \
+                s_l[first - 1] >= s_l[first] - 0.5 * params.window and ground_l[first - 1]:
             first -= 1
-        while last + 1 < nxt and not cut[last + 1] and \
-                s[last + 1] <= s[last] + 0.5 * params.window and ground[last + 1]:
+        while last + 1 < nxt and not cut_l[last + 1] and \
+                s_l[last + 1] <= s_l[last] + 0.5 * params.window and ground_l[last + 1]:
             last += 1
-        if stretches and stretches[-1][1] + 1 == first and not cut[first]:
+        if stretches and stretches[-1][1] + 1 == first and not cut_l[first]:
             first = stretches.pop()[0]         # a rough gap shorter than the window
         stretches.append((first, last))
     pieces = []
-    for first, last in stretches:
-        table = _moment_table(lateral[first:last + 1], z[first:last + 1],
-                              var0[first:last + 1])
-        found = []
-        _segment_profile(0, last - first, table, params, found)
-        merged = _refine_edges(_merge_pieces(found, table, params), table, params)
-        verge = _verges(merged, lateral[first:last + 1], table, params)
-        pieces += [(a + first, b + first) for (a, b), v in zip(merged, verge) if not v]
+    # Empty and degenerate pieces divide by zero in the closed-form fits: silenced once.
+    with np.errstate(divide='ignore', invalid='ignore'):
+        tables = [_moment_table(lateral[first:last + 1], z[first:last + 1],
+                                var0[first:last + 1]) for first, last in stretches]
+        for (first, last), table, found in zip(stretches, tables,
+                                               _segment_profiles(tables, params)):
+            fits = {}
+            merged = _refine_edges(_merge_pieces(found, table, params, fits), table, params,
+                                   fits)
+            verge = _verges(merged, lateral[first:last + 1], table, params, fits)
+            pieces += [(a + first, b + first) for (a, b), v in zip(merged, verge) if not v]
     segments = []
     for g, (first, last) in enumerate(pieces):
         groups_all[idx[first:last + 1]] = g
@@ -711,6 +826,28 @@ def _combine(groups: list, s: np.ndarray, z: np.ndarray, cut: np.ndarray,
     return out
 
 
+def _quadratic_slope_curvature(t: np.ndarray, z: np.ndarray) -> tuple[float, float]:
+    """Return ``(b, 2 c)`` of the least-squares ``z = a + b t + c t^2`` (``t`` about 0).
+
+    The normal equations of ``t`` scaled to [-1, 1] (well conditioned), solved in closed
+    form: ``np.polyfit(t, z, 2)`` to rounding, without its per-call overhead.
+    """
+    h = float(np.max(np.abs(t)))
+    if not h > 0.0:
+        return 0.0, 0.0
+    u = t / h
+    u2 = u * u
+    s0, s1, s2, s3, s4 = float(u.size), float(u.sum()), float(u2.sum()), \
+        float(np.dot(u2, u)), float(np.dot(u2, u2))
+    b0, b1, b2 = float(z.sum()), float(np.dot(z, u)), float(np.dot(z, u2))
+    c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+    c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
+    det = s0 * c00 + s1 * c01 + s2 * c02
+    b = (b0 * c01 + b1 * c11 + b2 * c12) / det
+    c = (b0 * c02 + b1 * c12 + b2 * c22) / det
+    return b / h, 2.0 * c / (h * h)
+
+
 def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndarray,
              idx: np.ndarray, params: TerrainParams) -> Optional[Segment]:
     """Filter one roughness group by width, slope and curvature; return its segment."""
@@ -721,8 +858,7 @@ def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndar
         return None
     t = s[first:last + 1] - 0.5 * (s[first] + s[last])
     zz = p[first:last + 1, 2]
-    coef = np.polyfit(t, zz, 2)
-    slope, curvature = float(coef[1]), float(2.0 * coef[0])          # F_t, F_c
+    slope, curvature = _quadratic_slope_curvature(t, zz)              # F_t, F_c
     if abs(slope) > params.slope_max or abs(curvature) > params.curvature_max:
         return None
     if np.median(rough[first:last + 1]) > params.roughness_max:      # F_sigma of the piece
