@@ -147,3 +147,28 @@ def test_batched_profile_segmentation_matches_the_recursive_one():
             assert got == ref
     assert any(len(pieces) > 1 for pieces in batched)
     assert _segment_profiles([], params) == []            # a scan without a smooth stretch
+
+
+def test_closed_form_fits_hold_far_from_the_stretch_centre():
+    # The prefix sums are of t about the stretch's middle: a short piece at its end (a
+    # verge 2.5 m out, 5 readings 3 cm apart) has t^4 sums of ~10^2 around a spread of
+    # ~10^-6. The fits must still match a least-squares fit on the piece's own centred
+    # readings (the cofactor form on the raw sums was off by up to 9 times the SSE and
+    # misplaced two edges in 800 scans).
+    from landmark_nav.road.terrain import _fit_piece, _moment_table, _poly_sse
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for _ in range(200):
+        y = np.sort(rng.uniform(-3.0, 3.0, 200))
+        z = rng.normal(0.0, 0.005, 200)
+        table = _moment_table(y, z, np.full(200, 1e-6))
+        for a, b in ((0, 4), (0, 6), (195, 199), (100, 104)):
+            t = y[a:b + 1] - y[a:b + 1].mean()
+            for degree in (1, 2):
+                fit = np.polyfit(t, z[a:b + 1], degree)
+                exact = float(np.sum((np.polyval(fit, t) - z[a:b + 1]) ** 2))
+                got = float(_poly_sse((table[:, b + 1] - table[:, a])[:, None], degree)[0])
+                worst = max(worst, abs(got - exact) / exact)
+            exact2 = exact
+            assert abs(_fit_piece(a, b, table)[0] - exact2) <= 2e-3 * exact2
+    assert worst <= 2e-3

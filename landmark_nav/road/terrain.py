@@ -241,20 +241,12 @@ def _window_bounds(s: np.ndarray, lo_off: float, hi_off: float) -> tuple[np.ndar
     return lo, hi
 
 
-def _window_sums(cs: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Return the sums over [lo, hi) from a cumulative sum with a leading zero."""
-    return cs[hi] - cs[lo]
-
-
 def _moments(u: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     """Windowed count, means and central second moments of (u, v)."""
-    z = np.zeros(1)
+    cs = np.zeros((5, u.size + 1))
+    np.cumsum(np.vstack([u, v, u * u, v * v, u * v]), axis=1, out=cs[:, 1:])
+    su, sv, suu, svv, suv = cs[:, hi] - cs[:, lo]
     n = (hi - lo).astype(float)
-    su = _window_sums(np.concatenate([z, np.cumsum(u)]), lo, hi)
-    sv = _window_sums(np.concatenate([z, np.cumsum(v)]), lo, hi)
-    suu = _window_sums(np.concatenate([z, np.cumsum(u * u)]), lo, hi)
-    svv = _window_sums(np.concatenate([z, np.cumsum(v * v)]), lo, hi)
-    suv = _window_sums(np.concatenate([z, np.cumsum(u * v)]), lo, hi)
     with np.errstate(invalid='ignore', divide='ignore'):
         mu, mv = su / n, sv / n
         cuu = suu / n - mu * mu
@@ -278,25 +270,37 @@ def _roughness(plane: np.ndarray, s: np.ndarray, window: float, min_points: int)
     return out
 
 
+def _explained(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Explained sums of squares of least-squares lines and quadratics z(t) from sums.
+
+    ``m`` rows: sums of t^0..t^4, z, z t, z t^2 (one column per piece). The basis 1, t, t^2
+    is orthogonalised (Gram-Schmidt on the sums): the line explains
+    ``(sum z)^2 / n + Sxz^2 / Sxx`` (centred sums), the quadratic that plus the share of
+    the part of t^2 that the line does not explain, ``Rz^2 / Rt``. The SSE of a piece is
+    ``sum z^2`` minus this. Degenerate pieces (fewer readings than coefficients) give
+    inf or NaN: the caller masks them.
+    """
+    s0, s1, s2, s3, s4, b0, b1, b2 = m[:8]
+    mt, mz, m2 = s1 / s0, b0 / s0, s2 / s0
+    sxx = s2 - s1 * mt
+    sxz = b1 - s1 * mz
+    line = b0 * mz + sxz * sxz / sxx
+    beta = (s3 - s2 * mt) / sxx                       # t^2 on t, centred
+    rt = s4 - s2 * m2 - beta * (s3 - s2 * mt)
+    rz = b2 - s2 * mz - beta * sxz
+    return line, line + rz * rz / rt
+
+
 def _poly_sse(m: np.ndarray, degree: int) -> np.ndarray:
     """SSE of least-squares lines (1) or quadratics (2) z(t) from their sums (closed form).
 
     ``m`` rows: sums of t^0..t^4, z, z t, z t^2, z^2 (one column per piece); pieces with
     no more readings than coefficients get 0.
     """
-    s0, s1, s2, s3, s4, b0, b1, b2, zz = m[:9]
     with np.errstate(divide='ignore', invalid='ignore'):
-        if degree == 1:
-            det = s0 * s2 - s1 * s1
-            fit = (b0 * b0 * s2 - 2.0 * b0 * b1 * s1 + b1 * b1 * s0) / det
-        else:
-            c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
-            c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
-            det = s0 * c00 + s1 * c01 + s2 * c02
-            fit = (b0 * b0 * c00 + b1 * b1 * c11 + b2 * b2 * c22
-                   + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det
-    sse = np.maximum(zz - fit, 0.0)
-    return np.where(s0 > degree + 1.5, sse, 0.0)
+        fit = _explained(m)[degree - 1]
+    sse = np.maximum(m[8] - fit, 0.0)
+    return np.where(m[0] > degree + 1.5, sse, 0.0)
 
 
 def _piece_nll(sse: np.ndarray, n: np.ndarray, floor: np.ndarray) -> np.ndarray:
@@ -379,8 +383,8 @@ def _best_split(first: int, last: int, table: np.ndarray,
 def _segment_profiles(tables: list, params: TerrainParams) -> list:
     """Return :func:`_segment_profile`'s pieces of every table, split level by level.
 
-    The same binary segmentation, element for element the same arithmetic as
-    :func:`_best_split` (:func:`_poly_sse`, :func:`_piece_nll`), but every stretch still
+    The same binary segmentation, with the same fits (:func:`_explained`) and likelihoods
+    as :func:`_best_split` (:func:`_poly_sse`, :func:`_piece_nll`), but every stretch still
     to split, of every table, is tried in one pass of array operations per level of the
     recursion (the numpy calls, not the readings, are the cost of a scan). Returns one
     list of ``(first, last)`` per table, in reading order. The caller silences numpy's
@@ -404,7 +408,6 @@ def _segment_profiles(tables: list, params: TerrainParams) -> list:
         firsts = np.array([offsets[i] + first for i, first, _ in todo])
         lasts = np.array([offsets[i] + last for i, _, last in todo])
         sizes = lasts - firsts + 2 - 2 * mp                 # allowed splits k per stretch
-        halves = [0.5 * math.log(last - first + 1) for _, first, last in todo]
         reps = np.repeat(np.arange(len(todo)), sizes)
         seg = np.cumsum(sizes) - sizes                      # each stretch's first split
         total = int(seg[-1] + sizes[-1])
@@ -413,33 +416,26 @@ def _segment_profiles(tables: list, params: TerrainParams) -> list:
         whole = big[:, lasts + 1] - big[:, firsts]
         # Columns: the left pieces, the whole stretches, the right pieces [k, n).
         m = np.concatenate([left, whole, whole[:, reps] - left], axis=1)
-        s0, s1, s2, s3, s4, b0, b1, b2, zz, f = m
+        s0 = m[0]
         # Each piece is a quadratic (a crowned road) or a line (a flat shoulder, a verge:
-        # one parameter fewer, 1/2 ln n less penalty), which locates a kink sharply.
-        b00, b11 = b0 * b0, b1 * b1
-        c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
-        c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
-        det = s0 * c00 + s1 * c01 + s2 * c02
-        fit2 = (b00 * c00 + b11 * c11 + b2 * b2 * c22
-                + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det
-        fit1 = (b00 * s2 - 2.0 * b0 * b1 * s1 + b11 * s0) / c22
-        sse2 = np.where(s0 > 3.5, np.maximum(zz - fit2, 0.0), 0.0)
-        sse1 = np.where(s0 > 2.5, np.maximum(zz - fit1, 0.0), 0.0)
-        floor = f / s0
-        cnt1 = np.maximum(s0, 1)
-        v2 = np.maximum(sse2 / cnt1, floor)
-        v1 = np.maximum(sse1 / cnt1, floor)
-        half = np.array(halves)
-        half_rep = half[reps]
-        nll2 = 0.5 * (s0 * np.log(v2) + sse2 / v2) + np.concatenate([half_rep, half, half_rep])
-        nll = np.minimum(nll2, 0.5 * (s0 * np.log(v1) + sse1 / v1))
+        # one parameter fewer, 1/2 ln n less penalty), which locates a kink sharply; rows
+        # of ``sse``: the quadratic, the line. Every piece has >= min_points >= 3 readings:
+        # the line is never degenerate, the quadratic only with 3 (its SSE is 0).
+        sse = np.maximum(m[8] - np.stack(_explained(m)[::-1]), 0.0)
+        if mp < 4:
+            sse[0, s0 < 3.5] = 0.0
+        v = np.maximum(sse / s0, m[9] / s0)
+        nll = 0.5 * (s0 * np.log(v) + sse / v)
+        half = np.log(lasts - firsts + 1.0) * 0.5
+        nll[0] += half[np.concatenate([reps, np.arange(len(todo)), reps])]
+        nll = nll.min(axis=0)
         gain = nll[total + reps] - nll[:total] - nll[total + len(todo):]
         # np.argmax per stretch: the first maximum, or the first NaN if there is one.
-        top = np.maximum.reduceat(gain, seg)
-        hits = np.flatnonzero((gain == top[reps]) | np.isnan(gain))
-        at = hits[np.searchsorted(hits, seg)]
+        ends = (seg + sizes).tolist()
+        at = [int(np.argmax(gain[a:b])) for a, b in zip(seg.tolist(), ends)]
         nxt = []
-        for (i, first, last), best, value in zip(todo, (at - seg).tolist(), gain[at].tolist()):
+        for (i, first, last), best, start in zip(todo, at, seg.tolist()):
+            value = float(gain[start + best])
             if not math.isfinite(value) or value <= 2.5 * math.log(last - first + 1):
                 found[i].append((first, last))
                 continue
@@ -465,15 +461,17 @@ def _fit_piece(first: int, last: int, table: np.ndarray,
         if got is None:
             got = fits[first, last] = _fit_piece(first, last, table)
         return got
-    s0, s1, s2, s3, s4, b0, b1, b2, zz, f = (table[:, last + 1] - table[:, first]).tolist()
+    sums = (table[:, last + 1] - table[:, first]).tolist()
+    zz, f = sums[8], sums[9]
     n = last - first + 1
-    c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
-    c11, c12, c22 = s0 * s4 - s2 * s2, s1 * s2 - s0 * s3, s0 * s2 - s1 * s1
-    det = s0 * c00 + s1 * c01 + s2 * c02
     sse = 0.0
-    if n > 3 and det > 0.0:
-        sse = max(zz - (b0 * b0 * c00 + b1 * b1 * c11 + b2 * b2 * c22 + 2.0 * (
-            b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12)) / det, 0.0)
+    if n > 3:
+        try:
+            line, quad = _explained(sums)
+            # quad < line only when rounding leaves no room for a curvature (t^2 on t).
+            sse = max(zz - max(line, quad), 0.0)
+        except ZeroDivisionError:           # readings at one lateral position: no profile
+            pass
     return sse, max(sse / max(n - 3, 1), f / n), f / n, n
 
 
@@ -565,48 +563,63 @@ def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: 
 
 def _hinge_nll(first: int, last: int, quad_left: bool, v_left: float, v_right: float,
                table: np.ndarray, min_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return the splits ``k`` of :func:`_hinge_edge` and their negative log-likelihoods."""
+    """Return the splits ``k`` of :func:`_hinge_edge` and their negative log-likelihoods.
+
+    The weighted least-squares fit of the four coefficients (common height at ``tau``, the
+    two slopes, the quadratic term) is solved in closed form: the straight side's slope
+    couples only to the common height, so it is eliminated first (a Schur complement) and
+    the remaining 3 x 3 system is inverted by its cofactors, all as array arithmetic over
+    the splits (no per-split matrix).
+    """
     n = last - first + 1
     mp = min_points
     base = table[:, first:first + 1]
     left = table[:, first + mp:last + 2 - mp] - base                   # sums over [0, k)
     right = (table[:, last + 1:last + 2] - base) - left
-    t = np.diff(table[1, first:last + 2])                              # t of each reading
+    t = table[1, first + 1:last + 2] - table[1, first:last + 1]        # t of each reading
     k = np.arange(mp, n - mp + 1)
-    tau = 0.5 * (t[mp - 1:n - mp] + t[mp:n - mp + 1])
+    c = -0.5 * (t[mp - 1:n - mp] + t[mp:n - mp + 1])                   # -tau
+    c2 = c * c
     w_l, w_r = 1.0 / v_left, 1.0 / v_right
-    # Sums of u^p = (t - tau)^p (p <= 4) and z u^p (p <= 2) each side, by the binomial
-    # expansion of the sums of t^j: shift[p, j] = C(p, j) (-tau)^(p - j) (``(-tau) ** p``,
-    # computed by ``power`` only for p >= 2: x^0 = 1 and x^1 = x exactly).
-    neg = -tau
-    powers = np.empty((5, k.size))
-    powers[0] = 1.0
-    powers[1] = neg
-    powers[2:] = neg[None, :] ** _EXP234
-    shift = _BINOMIAL[:, :, None] * powers[_POWER_INDEX] * _LOWER[:, :, None]
-    both = np.stack([left, right])
-    su = np.einsum('pjk,sjk->spk', shift, both[:, :5])
-    sz = np.einsum('pjk,sjk->spk', shift[:3, :3], both[:, 5:8])
-    # Columns: 1, u on the left, u on the right, u^2 on the quadratic side (u = t - tau).
-    q_w = w_l if quad_left else w_r
-    sq = su[0] if quad_left else su[1]
-    zq = sz[0] if quad_left else sz[1]
-    g = np.zeros((k.size, 4, 4))
-    b = np.empty((k.size, 4))
-    diag = (w_l * su[0][0] + w_r * su[1][0], w_l * su[0][2], w_r * su[1][2], q_w * sq[4])
-    g[:, 0, 1] = g[:, 1, 0] = w_l * su[0][1]
-    g[:, 0, 2] = g[:, 2, 0] = w_r * su[1][1]
-    g[:, 0, 3] = g[:, 3, 0] = q_w * sq[2]
-    g[:, 1 if quad_left else 2, 3] = g[:, 3, 1 if quad_left else 2] = q_w * sq[3]
+    # Sums of u^p = (t - tau)^p and z u^p each side, by the binomial expansion of the sums
+    # of t^j and z t^j: the quadratic side needs p <= 4 (z: p <= 2), the straight side
+    # p <= 2 (z: p <= 1).
+    quad, line = (left, right) if quad_left else (right, left)
+    w_q, w_o = (w_l, w_r) if quad_left else (w_r, w_l)
+    s0, s1, s2, s3, s4, z0, z1, z2 = quad[:8]
+    q1 = s1 + c * s0
+    q2 = s2 + 2.0 * c * s1 + c2 * s0
+    q3 = s3 + c * (3.0 * s2 + c * (3.0 * s1 + c * s0))
+    q4 = s4 + c * (4.0 * s3 + c * (6.0 * s2 + c * (4.0 * s1 + c * s0)))
+    y1 = z1 + c * z0
+    y2 = z2 + c * (2.0 * z1 + c * z0)
+    o0, o1, o2, oz0, oz1 = line[0], line[1], line[2], line[5], line[6]
+    p1 = o1 + c * o0
+    p2 = o2 + 2.0 * c * o1 + c2 * o0
+    # Normal equations: unknowns (height at tau, quadratic side's slope, its u^2 term,
+    # straight side's slope); the straight slope meets only the height.
+    g00 = w_q * s0 + w_o * o0
+    g0q, g03, g0o = w_q * q1, w_q * q2, w_o * p1
+    gqq, gq3, g33, goo = w_q * q2, w_q * q3, w_q * q4, w_o * p2
     # A relative 1e-12 of the trace on the diagonal (a guard against singular systems).
-    reg = 1e-12 * (diag[0] + diag[1] + diag[2] + diag[3])
-    for i in range(4):
-        g[:, i, i] = diag[i] + reg
-    b[:, 0] = w_l * sz[0][0] + w_r * sz[1][0]
-    b[:, 1] = w_l * sz[0][1]
-    b[:, 2] = w_r * sz[1][1]
-    b[:, 3] = q_w * zq[2]
-    fit = np.einsum('ki,ki->k', b, np.linalg.solve(g, b[..., None])[..., 0])
+    reg = 1e-12 * (g00 + gqq + goo + g33)
+    g00, gqq, g33, goo = g00 + reg, gqq + reg, g33 + reg, goo + reg
+    b0 = w_q * z0 + w_o * oz0
+    bq, b3, bo = w_q * y1, w_q * y2, w_o * (oz1 + c * oz0)
+    # Eliminate the straight slope: b' G^-1 b = bo^2 / goo + b~' S^-1 b~ over the rest.
+    r = g0o / goo
+    a = g00 - r * g0o
+    x0 = b0 - r * bo
+    # The 3 x 3 (a, g0q, g03; ., gqq, gq3; ., ., g33) by its cofactors.
+    ca = gqq * g33 - gq3 * gq3
+    cb = a * g33 - g03 * g03
+    cc = a * gqq - g0q * g0q
+    cd = g03 * gq3 - g33 * g0q
+    ce = g0q * gq3 - gqq * g03
+    cf = g0q * g03 - a * gq3
+    det = a * ca + g0q * cd + g03 * ce
+    fit = bo * bo / goo + (ca * x0 * x0 + cb * bq * bq + cc * b3 * b3
+                           + 2.0 * (cd * x0 * bq + ce * x0 * b3 + cf * bq * b3)) / det
     wss = w_l * left[8] + w_r * right[8] - fit
     return k, 0.5 * (wss + k * math.log(v_left) + (n - k) * math.log(v_right))
 
@@ -700,11 +713,16 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     idx = np.flatnonzero(valid)
     if idx.size == 0:
         return TerrainScan(pts, classes, rough_all, step_all, groups_all, (), (), 0)
-    p = scan_points(r[idx], a[idx], mount)
+    # scan_points, with the beams' cosines and sines computed once for the other uses.
+    ri, ca, sa = r[idx], np.cos(a[idx]), np.sin(a[idx])
+    local = np.vstack([ri * ca, ri * sa])
+    rot = mount.rotation()[:, :2]                 # the laser frame's z column meets z = 0
+    p = (rot @ local).T + mount.translation()
     pts[idx] = p
     classes[idx] = NOT_TRAVERSABLE
-    plane = np.column_stack([r[idx] * np.cos(a[idx]), r[idx] * np.sin(a[idx])])
-    gaps = np.linalg.norm(np.diff(plane, axis=0), axis=1)
+    plane = local.T
+    d_plane = np.diff(local, axis=1)
+    gaps = np.sqrt(d_plane[0] * d_plane[0] + d_plane[1] * d_plane[1])
     # Path length along the scan; a jump longer than the window is capped at it so that
     # no window spans both sides of a range discontinuity.
     s = np.concatenate([[0.0], np.cumsum(np.minimum(gaps, params.window))])
@@ -732,8 +750,8 @@ def classify_scan(ranges: np.ndarray, angles: np.ndarray, mount: LaserMount,
     # increasing along the scan), which a crowned road's profile is a quadratic of.
     lateral = p[:, 1]
     # The sensor's height noise per reading: the range noise along the beam's z component.
-    beam = mount.rotation() @ np.vstack([np.cos(a[idx]), np.sin(a[idx]), np.zeros(idx.size)])
-    var0 = (params.range_sigma * beam[2]) ** 2
+    beam_z = rot[2, 0] * ca + rot[2, 1] * sa
+    var0 = (params.range_sigma * beam_z) ** 2
     # The windowed roughness of the readings within half a window of a rougher neighbour is
     # raised by it, which trims every group by up to window / 2 at each end: each group is
     # widened by half a window (not across a step or a gap, nor into the next group) and
