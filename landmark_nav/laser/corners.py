@@ -24,6 +24,10 @@ Three detectors work on the clusters of :func:`~landmark_nav.laser.segmentation.
   (Figs. 11-12) if ``f`` recomputed with the midpoint moved ``midpoint_shift`` samples
   forward AND backward (same terminal points) is still inside the bounds; a single outlier
   midpoint then lands on the straight wall and gives ``f`` close to 1 (a ghost).
+  Optionally (``gate_sigmas``, ``fit_sigmas``, off by default) the bounds are tested with
+  the uncertainty of ``f`` propagated from eq. 7 (a confidence test instead of the hard
+  cut); on the Carmen logs this moved corners across the widened bounds instead of
+  steadying them (README, "Real logs").
 
 Design decisions where the chapter is silent (all documented on :class:`CornerParams`):
 
@@ -182,6 +186,15 @@ class CornerParams:
             the arm's extent
             (``Corner.arms``) before its own noisy samples at grazing incidence. None means
             ``max(3 sigma_r, 0.05)``.
+        gate_sigmas: ``minus_cosine`` candidate gate made statistical: a window is a
+            candidate when its ``f`` (eq. 11) lies within ``gate_sigmas`` standard
+            deviations of ``[f_min, f_max]`` (``f``'s deviation propagated from the three
+            points' noise ``Q_i``, eq. 7; the midpoint-shift bounds widen as much). 0 (the
+            default) is the chapter's hard cut. Measured on the six Carmen logs and not
+            made the default (README, "Real logs").
+        fit_sigmas: the same for the refined corner's angle: the fitted arms' ``f`` may lie
+            ``fit_sigmas`` standard deviations (propagated through the TLS fits, eqs. 7-8)
+            outside the bounds. 0 (the default) is the hard cut.
     """
 
     method: str = 'minus_cosine'
@@ -205,6 +218,8 @@ class CornerParams:
     arm_rmse: Optional[float] = None
     min_arm_inliers: float = 0.8
     see_through: Optional[float] = None
+    gate_sigmas: float = 0.0
+    fit_sigmas: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -265,6 +280,10 @@ class CornerParams:
                 raise bad(name, 'None or a number > 0')
         if not (is_num(self.min_arm_inliers) and 0.0 <= self.min_arm_inliers <= 1.0):
             raise bad('min_arm_inliers', 'a number in [0, 1]')
+        for name in ('gate_sigmas', 'fit_sigmas'):
+            v = getattr(self, name)
+            if not is_num(v) or v < 0.0:
+                raise bad(name, 'a finite number >= 0')
 
     @property
     def split_tolerance(self) -> float:
@@ -535,6 +554,48 @@ def _corner_covariance(x: np.ndarray, y: np.ndarray, w: np.ndarray, ln: _Lines,
     return cov
 
 
+def _line_angle_variance(x: np.ndarray, y: np.ndarray, w: np.ndarray, ln: _Lines,
+                         sigma_r: float, sigma_phi: float) -> np.ndarray:
+    """Return (K, 2) first-order variances of the TLS lines' angles ``alpha`` (eq. 8).
+
+    The analytic Jacobian of eq. 8 (as :func:`_corner_covariance`) with the point noise
+    ``Q_i`` of eq. 7.
+    """
+    q = ln.num * ln.num + ln.den * ln.den
+    q = np.where(q > 0.0, q, np.inf)[..., None]
+    dx = x - ln.xm[..., None]
+    dy = y - ln.ym[..., None]
+    num, den = ln.num[..., None], ln.den[..., None]
+    gx = w * (num * dx - den * dy) / q
+    gy = -w * (den * dx + num * dy) / q
+    tang = gy * x - gx * y
+    rad = (gx * x + gy * y) / np.maximum(np.sqrt(x * x + y * y), 1e-12)
+    return ((sigma_phi * sigma_phi) * (tang * tang)
+            + (sigma_r * sigma_r) * (rad * rad)).sum(axis=-1)
+
+
+def _window_f_sd(st: _Stack, lo: np.ndarray, mid: np.ndarray, hi: np.ndarray,
+                 p: CornerParams) -> np.ndarray:
+    """Return the first-order standard deviation of ``f`` (eq. 11) of windows (lo, mid, hi).
+
+    ``theta = atan2(u x v, u . v)`` with ``u``, ``v`` from the midpoint to the terminal
+    points; its gradient is ``-perp(u) / |u|^2`` for the first terminal point,
+    ``perp(v) / |v|^2`` for the second and minus their sum for the midpoint, each point
+    with its noise ``Q_i`` of eq. 7; ``df = sin(theta) d theta``.
+    """
+    ux, uy = st.x[lo] - st.x[mid], st.y[lo] - st.y[mid]
+    vx, vy = st.x[hi] - st.x[mid], st.y[hi] - st.y[mid]
+    u2, v2 = ux * ux + uy * uy, vx * vx + vy * vy
+    ga = np.stack([uy / u2, -ux / u2], axis=-1)  # -perp(u) / |u|^2, perp(u) = (-uy, ux)
+    gb = np.stack([-vy / v2, vx / v2], axis=-1)
+    var = np.zeros(mid.size)
+    for i, gr in ((lo, ga), (hi, gb), (mid, -(ga + gb))):
+        q = point_covariance(st.r[i], st.phi[i], p.sigma_r, p.sigma_phi)
+        var += np.einsum('ki,kij,kj->k', gr, q, gr)
+    cos_t = (ux * vx + uy * vy) / np.sqrt(u2 * v2)
+    return np.sqrt(np.fmax(1.0 - cos_t * cos_t, 0.0) * var)
+
+
 def _gather_arms(st: _Stack, first: np.ndarray, count: np.ndarray, fallback: np.ndarray
                  ) -> Tuple[np.ndarray, np.ndarray]:
     """Return padded sample indices (K, 2, M) of two arms and their validity mask.
@@ -616,12 +677,17 @@ def _minus_cosine(st: _Stack, p: CornerParams) -> List[Corner]:
     x, y = st.x, st.y
     xl, yl, xm, ym, xh, yh = x[lo], y[lo], x[mid], y[mid], x[hi], y[hi]
     f, a2, b2 = _minus_cos(xl, yl, xm, ym, xh, yh)  # eq. 11
+    widen = 0.0
+    if p.gate_sigmas > 0.0:  # confidence test of eq. 11 with the points' noise (eq. 7)
+        widen = p.gate_sigmas * _window_f_sd(st, lo, mid, hi, p)
     # Arms clipped by a cluster end or by max_half_window must still span half the length.
-    cand = np.flatnonzero((f >= p.f_min) & (f <= p.f_max)
+    cand = np.flatnonzero((f >= p.f_min - widen) & (f <= p.f_max + widen)
                           & (np.minimum(a2, b2) >= 0.25 * p.arm_length * p.arm_length))
     if cand.size == 0:
         return []
     mid, lo, hi, f = mid[cand], lo[cand], hi[cand], f[cand]
+    if p.gate_sigmas > 0.0:
+        widen = widen[cand]
     if p.midpoint_shift:
         xl, yl, xm, ym, xh, yh = xl[cand], yl[cand], xm[cand], ym[cand], xh[cand], yh[cand]
         a, b = np.sqrt(a2[cand]), np.sqrt(b2[cand])
@@ -629,7 +695,7 @@ def _minus_cosine(st: _Stack, p: CornerParams) -> List[Corner]:
         # the shift times the mean sample step of the arms (not the shifted point's actual
         # displacement, which for an outlier midpoint is the outlier's offset).
         step = np.maximum(a / (mid - lo), b / (hi - mid))
-        tol = p.midpoint_shift * step / np.minimum(a, b)
+        tol = p.midpoint_shift * step / np.minimum(a, b) + widen
         good = np.ones(mid.size, dtype=bool)
         for s in (p.midpoint_shift, -p.midpoint_shift):  # Figs. 11-12: shifted midpoint
             fs = _minus_cos(xl, yl, x[mid + s], y[mid + s], xh, yh)[0]
@@ -638,6 +704,8 @@ def _minus_cosine(st: _Stack, p: CornerParams) -> List[Corner]:
         if sel.size == 0:
             return []
         mid, lo, hi, f = mid[sel], lo[sel], hi[sel], f[sel]
+        if p.gate_sigmas > 0.0:
+            widen = widen[sel]
     if p.refine:
         # Every local minimum of f is refined (two corners in one run: a door frame, a
         # pilaster); the refinement decides, and merges refined corners that coincide.
@@ -728,13 +796,17 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     ux, uy = _arm_directions(lines, cx, cy)
     bis, opening, cos_t = _free_side(cx, cy, ux[:, 0], uy[:, 0], ux[:, 1], uy[:, 1])
     f_fit = -cos_t  # eq. 11 for the fitted arms
+    fit_widen = 0.0
+    if p.fit_sigmas > 0.0:  # theta = alpha_0 - alpha_1 (+ const), df = sin(theta) d theta
+        var_a = _line_angle_variance(x, y, w, lines, p.sigma_r, p.sigma_phi)
+        fit_widen = p.fit_sigmas * np.sqrt((1.0 - cos_t * cos_t) * var_a.sum(axis=1))
     px, py = st.x[g], st.y[g]
     reach2 = np.minimum((st.x[lo] - px) ** 2 + (st.y[lo] - py) ** 2,
                         (st.x[hi] - px) ** 2 + (st.y[hi] - py) ** 2)
     shift2 = (cx - px) ** 2 + (cy - py) ** 2
     arms, real = _arm_support(x, y, r, valid, w, lines, p)
-    good = (found & real & (f_fit >= p.f_min)
-            & (f_fit <= p.f_max) & (shift2 <= reach2))  # nan fails every comparison
+    good = (found & real & (f_fit >= p.f_min - fit_widen)
+            & (f_fit <= p.f_max + fit_widen) & (shift2 <= reach2))  # nan fails every comparison
     sel = np.flatnonzero(good)
     if sel.size == 0:
         return []
