@@ -11,7 +11,8 @@ evaluate_features`) and prints per seed and method sigma d rho, its floor (each 
 wall's error drawn from its Cramer-Rao bound, :func:`landmark_nav.evaluation.features.
 line_crlb`) and their ratio; then the same over all seeds, split by how far the laser
 turned during the scan's sweep (the extractors fit the beams of one sweep as if taken
-from one pose; the floor assumes that too).
+from one pose; the floor assumes that too), and the errors over each matched line's own
+sigma rho (its eq.-7 covariance) against over the wall's bound (all its beams).
 """
 
 import argparse
@@ -39,7 +40,11 @@ def seed_range(text: str) -> list:
 
 
 def score_seed(bag: Path, every: int) -> dict:
-    """Return {method: (d_rho, floor variance, turn during the sweep [deg]) arrays}."""
+    """Return {method: records} of the matched walls.
+
+    A record: d rho, floor variance, turn during the sweep [deg], the matched line's own
+    var(rho) and the wall's uncut bound.
+    """
     records = {}
     turn = {}
     score_scan, score_lines = feature_bags.score_scan, features.score_lines
@@ -55,7 +60,9 @@ def score_seed(bag: Path, every: int) -> dict:
         k = len(score.d_rho)
         score_lines(score, lines, truth, **kw)
         rows = records.setdefault(id(score), [])
-        rows += [(d, v, turn['deg']) for d, v in zip(score.d_rho[k:], score.floor_rho[k:])]
+        turns = [turn['deg']] * (len(score.d_rho) - k)
+        rows += list(zip(score.d_rho[k:], score.floor_rho[k:], turns, score.own_rho[k:],
+                         score.bound_rho[k:]))
 
     feature_bags.score_scan, features.score_lines = scan_hook, lines_hook
     try:
@@ -71,6 +78,15 @@ def ratio_row(rows: np.ndarray) -> str:
     sigma = float(np.std(rows[:, 0]))
     floor = math.sqrt(float(np.mean(rows[:, 1])))
     return f'{100 * sigma:.3f} / {100 * floor:.3f} cm = {sigma / floor:.3f} ({len(rows)})'
+
+
+def normalised_row(rows: np.ndarray) -> str:
+    """Std of d rho over the matched line's own sigma and over the wall's bound."""
+    own = float(np.std(rows[:, 0] / np.sqrt(rows[:, 3])))
+    bound = float(np.std(rows[:, 0] / np.sqrt(rows[:, 4])))
+    share = float(np.mean(rows[:, 3] >= 1.5 * rows[:, 4]))
+    return (f"d rho / own sigma: std {own:.3f}; / the wall's bound: std {bound:.3f}; "
+            f'own variance >= 1.5 x the bound: {100 * share:.1f} %')
 
 
 def main() -> None:
@@ -90,6 +106,7 @@ def main() -> None:
                 cli_main(['simulate', 'office', '--seed', str(seed), '--out', str(bag)])
             for m, rows in score_seed(bag, args.every).items():
                 print(f'seed {seed} {m:12s} sigma d rho / floor: {ratio_row(rows)}')
+                print(f'    {normalised_row(rows)}')
                 pooled.setdefault(m, []).append(rows)
                 ratios.setdefault(m, []).append(
                     float(np.std(rows[:, 0])) / math.sqrt(float(np.mean(rows[:, 1]))))

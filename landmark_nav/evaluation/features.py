@@ -284,6 +284,8 @@ class LineScore:
     d_alpha: List[float] = field(default_factory=list)
     floor_rho: List[float] = field(default_factory=list)    # see floor_sigma_rho
     floor_alpha: List[float] = field(default_factory=list)
+    own_rho: List[float] = field(default_factory=list)      # matched line's own var(rho)
+    bound_rho: List[float] = field(default_factory=list)    # wall's var(rho) bound, uncut
 
     @property
     def true_pos(self) -> float:
@@ -384,8 +386,11 @@ def score_lines(score: LineScore, lines: Sequence, truth: WallTruth,
             score.found += 1
             score.d_rho.append(float(err[best, j, 0]))
             score.d_alpha.append(float(err[best, j, 1]))
+            cov = getattr(lines[best], 'covariance', None)
+            score.own_rho.append(float(cov[0, 0]) if cov is not None else float('nan'))
             if truth.crlb is not None:
                 score.floor_rho.append(_cut_variance(float(truth.crlb[j, 0, 0]), max_drho))
+                score.bound_rho.append(float(truth.crlb[j, 0, 0]))
                 score.floor_alpha.append(_cut_variance(float(truth.crlb[j, 1, 1]),
                                                        max_dalpha))
 
