@@ -80,6 +80,7 @@ Choices where the chapters are silent, or misprinted:
 """
 
 from dataclasses import dataclass, field
+from itertools import accumulate
 import math
 from typing import List, Optional, Sequence, Tuple
 
@@ -422,8 +423,8 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
 
 
 # Fits per call up to which _solve_small is faster than the array operations (measured).
-_SMALL = 10
-_SMALL_NO_COV = 14
+_SMALL = 14
+_SMALL_NO_COV = 20
 
 
 def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
@@ -785,13 +786,27 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     lo_thr, hi_thr = params.rmse_bounds
     gmax = params.max_gradient
     out: List[Tuple[int, int]] = []
-    for c in range(len(offsets) - 1):
-        c0, c1 = int(offsets[c]), int(offsets[c + 1])
-        n_pts = c1 - c0
+    xy = np.asarray(xy, dtype=float)
+    bounds = np.asarray(offsets).tolist()
+    sizes = [b - a for a, b in zip(bounds[:-1], bounds[1:])]
+    # Each run's points relative to its mean (np.mean's sum and division), and their
+    # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run are
+    # accumulated in order on Python floats (as np.cumsum in _prefix5).
+    means = np.zeros((len(sizes), 2))
+    for c, (c0, n_pts) in enumerate(zip(bounds, sizes)):
+        if n_pts >= least:
+            means[c] = np.add.reduce(xy[c0:c0 + n_pts], axis=0) / n_pts
+    mono = np.empty((5, xy.shape[0]))
+    np.subtract(xy, means.repeat(sizes, axis=0), out=mono[:2].T)
+    np.multiply(mono[0], mono[0], out=mono[2])
+    np.multiply(mono[1], mono[1], out=mono[3])
+    np.multiply(mono[0], mono[1], out=mono[4])
+    rows = mono.tolist()
+    for c0, n_pts in zip(bounds, sizes):
         if n_pts < least:
             continue
-        p = xy[c0:c1] - xy[c0:c1].mean(axis=0)
-        sx, sy, sxx, syy, sxy = _prefix5(p[:, 0], p[:, 1]).tolist()
+        c1 = c0 + n_pts
+        sx, sy, sxx, syy, sxy = [list(accumulate(r[c0:c1], initial=0.0)) for r in rows]
 
         def rmse(i: int, j: int) -> float:
             """Return the RMSE (eq. 21) of the TLS line through points i..j."""

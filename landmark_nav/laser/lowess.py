@@ -32,8 +32,19 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray) -> np.nda
     group = np.arange(sizes.size).repeat(sizes)
     lo_g = offsets[group]
     k = span[group]
-    kmax = max(span.tolist())
     i = np.arange(n)
+    if n > 1 and span.size and (span % 2 == 1).all():
+        # Equally spaced x (beams of a scan): the window centred on x_i, clipped to its
+        # group, is the only one whose reach is below (h + 1) steps, h = (k - 1) // 2,
+        # when the steps differ by less than 1 / (2 h) of the smallest (a window shifted
+        # by one reaches h + 1 steps on one side). Then no candidates are needed.
+        step = x[1:] - x[:-1]
+        inner = step[(group[1:] == group[:-1]).nonzero()[0]]
+        h = (max(span.tolist()) - 1) // 2
+        if not inner.size or (inner.min() > 0.0
+                              and (inner.max() - inner.min()) * (2 * h) < inner.min()):
+            return np.minimum(np.maximum(i - (k - 1) // 2, lo_g), offsets[group + 1] - k)
+    kmax = max(span.tolist())
     steps = np.arange(kmax)[:, None]
     # Candidate window starts i-k+1 .. i, clipped to the group.
     cand = i - steps
