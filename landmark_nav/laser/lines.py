@@ -79,6 +79,7 @@ Choices where the chapters are silent, or misprinted:
   through first-order derivatives of the total-least-squares solution (:func:`fit_line`).
 """
 
+from bisect import bisect_left
 from dataclasses import dataclass, field
 from itertools import accumulate
 import math
@@ -1592,6 +1593,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
     if not line.size:
         return sums, first, last, f
     s, e, label, first0, last0 = pieces
+    if line.size <= _NOISE_PY and not np.count_nonzero(opening):
+        ends = _noise_only_py(scan, pieces, first, last, line, beam, params)
+        if ends is not None:
+            return sums, ends[0], ends[1], f
     owner = np.full(scan.x.size, -1, dtype=np.int64)
     # a line's support: its pieces and the runs grown before and after (disjoint, so one
     # gather of all of them)
@@ -1644,6 +1649,64 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         first[own[best]] = pos[starts[best]]
         last[own[best]] = pos[starts[best] + size[best] - 1]
     return sums, first, last, f
+
+
+# Hidden beams up to which _noise_only_py is tried first (a few per scan are typical).
+_NOISE_PY = 24
+
+
+def _noise_only_py(scan: _Scan, pieces: Tuple[np.ndarray, ...], first: np.ndarray,
+                   last: np.ndarray, line: np.ndarray, beam: np.ndarray, params: LineParams
+                   ) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """Return the lines' first and last points when they hide only their noise, else None.
+
+    Step 2 of :func:`_cut_seen_through` for hidden beams that are no opening, on Python
+    objects and looking only at the lines that hide beams: a line's support (its pieces
+    and grown runs) is cut into runs at its hidden beams (which leave), as by
+    :func:`_support_runs`. Returns None when a line has two runs of ``min_points`` points
+    and ``min_length`` (:func:`_splits_in_two`: the line is cut, in the array version);
+    otherwise each hiding line's extent becomes its run of most points (the first of
+    equal ones).
+    """
+    s, e, label, first0, last0 = pieces
+    hidden: dict = {}
+    for j, b in zip(line.tolist(), beam.tolist()):  # beams increasing per line
+        hidden.setdefault(j, []).append(b)
+    s_l, e_l, lab = s.tolist(), e.tolist(), label.tolist()
+    f_l, l_l, f0, l0 = first.tolist(), last.tolist(), first0.tolist(), last0.tolist()
+    xs, ys = scan.rows()[_X], scan.rows()[_Y]
+    new_first, new_last = f_l[:], l_l[:]
+    for j, hb in hidden.items():
+        ranges = [(f_l[j], f0[j] - 1)]
+        ranges += [(a, b) for a, b, k in zip(s_l, e_l, lab) if k == j]
+        ranges.append((l0[j] + 1, l_l[j]))
+        pts = [i for a, b in ranges for i in range(a, b + 1)]
+        hs = set(hb)
+        runs: List[List[int]] = []  # [points, first point, last point]
+        cut = -1
+        for p, b in zip(pts, scan.beam.take(pts).tolist()):
+            if b in hs:  # a hidden supporting point leaves
+                continue
+            c = bisect_left(hb, b)  # hidden beams before it
+            if c != cut:
+                runs.append([0, p, p])
+                cut = c
+            run = runs[-1]
+            run[0] += 1
+            run[2] = p
+        good = 0
+        for n, a, b in runs:
+            if n >= params.min_points and abs(
+                    complex(xs[b] - xs[a], ys[b] - ys[a])) >= params.min_length:
+                good += 1
+        if good >= 2:
+            return None
+        if runs:
+            best = max(runs, key=lambda r: r[0])  # the first run of most points
+            new_first[j], new_last[j] = best[1], best[2]
+    if new_first == f_l and new_last == l_l:  # the same extents (their beams are cached)
+        return first, last
+    return np.array(new_first, dtype=np.int64), np.array(new_last, dtype=np.int64)
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
