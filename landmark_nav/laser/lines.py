@@ -1680,20 +1680,19 @@ def _noise_only_py(scan: _Scan, pieces: Tuple[np.ndarray, ...], first: np.ndarra
         ranges = [(f_l[j], f0[j] - 1)]
         ranges += [(a, b) for a, b, k in zip(s_l, e_l, lab) if k == j]
         ranges.append((l0[j] + 1, l_l[j]))
-        pts = [i for a, b in ranges for i in range(a, b + 1)]
-        hs = set(hb)
-        runs: List[List[int]] = []  # [points, first point, last point]
-        cut = -1
-        for p, b in zip(pts, scan.beam.take(pts).tolist()):
-            if b in hs:  # a hidden supporting point leaves
-                continue
-            c = bisect_left(hb, b)  # hidden beams before it
-            if c != cut:
-                runs.append([0, p, p])
-                cut = c
-            run = runs[-1]
-            run[0] += 1
-            run[2] = p
+        pts: List[int] = []
+        for a, b in ranges:
+            pts.extend(range(a, b + 1))
+        bps = scan.beam.take(pts).tolist()  # increasing
+        runs: List[Tuple[int, int, int]] = []  # (points, first point, last point)
+        start = 0
+        for h in hb:  # the support between hidden beams; a hidden supporting point leaves
+            pos = bisect_left(bps, h, start)
+            if pos > start:
+                runs.append((pos - start, pts[start], pts[pos - 1]))
+            start = pos + 1 if pos < len(bps) and bps[pos] == h else pos
+        if start < len(bps):
+            runs.append((len(bps) - start, pts[start], pts[-1]))
         good = 0
         for n, a, b in runs:
             if n >= params.min_points and abs(
