@@ -79,7 +79,9 @@ Choices where the chapters are silent, or misprinted:
   through first-order derivatives of the total-least-squares solution (:func:`fit_line`).
 """
 
-from dataclasses import dataclass
+from bisect import bisect_left
+from dataclasses import dataclass, field
+from itertools import accumulate
 import math
 from typing import List, Optional, Sequence, Tuple
 
@@ -422,8 +424,8 @@ def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
 
 
 # Fits per call up to which _solve_small is faster than the array operations (measured).
-_SMALL = 10
-_SMALL_NO_COV = 14
+_SMALL = 14
+_SMALL_NO_COV = 20
 
 
 def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
@@ -434,79 +436,71 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     on degenerate sums (e.g. a zero count or scatter), which :func:`_solve` then fits
     with numpy's inf / nan semantics.
     """
-    g = sums.shape[1]
     full = sums.shape[0] == NUM_SUMS
     sl = sums.tolist()
-    s0, s1, s2, s3, s4, s5 = sl[:6]
-    cxs, cys, sxxs, syys, sxys, a_in, b_in = [], [], [], [], [], [], []
-    for j in range(g):  # _scatter
-        n = s0[j]
-        cx = s1[j] / n
-        cy = s2[j] / n
+    scat, a_in, b_in = [], [], []
+    for n, s1, s2, s3, s4, s5 in zip(*sl[:6]):  # _scatter
+        cx = s1 / n
+        cy = s2 / n
         ncx = n * cx
-        sxx = s3[j] - ncx * cx
-        syy = s4[j] - n * cy * cy
-        sxy = s5[j] - ncx * cy
-        cxs.append(cx)
-        cys.append(cy)
-        sxxs.append(sxx)
-        syys.append(syy)
-        sxys.append(sxy)
+        sxx = s3 - ncx * cx
+        syy = s4 - n * cy * cy
+        sxy = s5 - ncx * cy
+        scat.append((n, cx, cy, sxx, syy, sxy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
     alpha_a = 0.5 * np.arctan2(a_in, b_in)  # eq. 8
     nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
     alpha_l = alpha_a.tolist()
     ox, oy = float(origin[0]), float(origin[1])
-    rho_l, axs, ays = [], [], []
+    rho_l, err_l, cov_l = [], [], []
     flip = False
-    for j in range(g):
-        ax = cxs[j] + ox  # centroid in the laser frame (eq. 10)
-        ay = cys[j] + oy
-        rho = ax * nx_l[j] + ay * ny_l[j]  # eq. 9
+    cols = list(zip(*sl)) if full else None
+    pi = math.pi
+    isfinite = math.isfinite
+    for j, (n, cx, cy, sxx, syy, sxy) in enumerate(scat):
+        nx, ny = nx_l[j], ny_l[j]
+        ax = cx + ox  # centroid in the laser frame (eq. 10)
+        ay = cy + oy
+        rho = ax * nx + ay * ny  # eq. 9
         if rho < 0.0:
             flip = True
-            alpha_l[j] += math.pi
-            nx_l[j] = -nx_l[j]
-            ny_l[j] = -ny_l[j]
+            rho = -rho
+            alpha_l[j] += pi
+            nx = nx_l[j] = -nx
+            ny = ny_l[j] = -ny
         rho_l.append(rho)
-        axs.append(ax)
-        ays.append(ay)
-    if flip:
-        rho_l = [abs(r) for r in rho_l]
-        alpha_l = [(a + math.pi) % TWO_PI - math.pi for a in alpha_l]  # _wrap
-    err_l, roots = [], []
-    for j in range(g):
-        half = 0.5 * (sxxs[j] - syys[j])
-        root = math.sqrt(half * half + sxys[j] * sxys[j])
-        roots.append(root)
+        half = 0.5 * (sxx - syy)
+        root = math.sqrt(half * half + sxy * sxy)
         if rmse:
-            v = 0.5 * (sxxs[j] + syys[j]) - root
-            err_l.append(math.sqrt(max(v, 0.0) / s0[j]))  # eq. 21
-    cov = None
-    if full:
-        cov_l = []
-        for j in range(g):  # _covariance, term by term
-            n, nx, ny, cx, cy = s0[j], nx_l[j], ny_l[j], cxs[j], cys[j]
+            v = 0.5 * (sxx + syy) - root
+            err_l.append(math.sqrt(max(v, 0.0) / n))  # eq. 21
+        if full:  # _covariance, term by term
+            c = cols[j]
             a2, b2, ab = nx * nx, ny * ny, 2.0 * nx * ny
-            w0, w1, w2, w3, w4, w5 = [a2 * sl[6 + k][j] + b2 * sl[12 + k][j]
-                                      + ab * sl[18 + k][j] for k in range(6)]
+            w0 = a2 * c[6] + b2 * c[12] + ab * c[18]
+            w1 = a2 * c[7] + b2 * c[13] + ab * c[19]
+            w2 = a2 * c[8] + b2 * c[14] + ab * c[20]
+            w3 = a2 * c[9] + b2 * c[15] + ab * c[21]
+            w4 = a2 * c[10] + b2 * c[16] + ab * c[22]
+            w5 = a2 * c[11] + b2 * c[17] + ab * c[23]
             tx, ty = -ny, nx
             tcl = tx * cx + ty * cy
             tw = tx * w1 + ty * w2
             t1 = tw - tcl * w0
             t2 = (b2 * w3 - ab * w5 + a2 * w4 - 2.0 * tcl * tw + tcl * tcl * w0)
-            lever = tx * axs[j] + ty * ays[j]
-            big_l = 2.0 * roots[j]
+            lever = tx * ax + ty * ay
+            big_l = 2.0 * root
             caa = t2 / (big_l * big_l)
             nl = n * big_l
             cra = lever * caa - t1 / nl
             crr = lever * lever * caa - 2.0 * lever * t1 / nl + w0 / (n * n)
-            if not (math.isfinite(crr) and math.isfinite(cra) and math.isfinite(caa)
-                    and roots[j] > 0.0):
+            if not (isfinite(crr) and isfinite(cra) and isfinite(caa) and root > 0.0):
                 crr = cra = caa = math.inf
-            cov_l.append(((crr, cra), (cra, caa)))
-        cov = np.array(cov_l)
+            cov_l += (crr, cra, cra, caa)
+    if flip:
+        alpha_l = [(a + pi) % TWO_PI - pi for a in alpha_l]  # _wrap
+    cov = np.array(cov_l).reshape(-1, 2, 2) if full else None
     out = np.array((rho_l, alpha_l, nx_l, ny_l))
     return _Fit(out, np.array(err_l) if rmse else None, sums[0], cov)
 
@@ -660,6 +654,13 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             done_s.append(s)
             done_e.append(e)
             break
+        if sum(cl) <= _SPLIT_PY:  # few points left: finish on Python floats
+            idx, offs = _gather(s, e)  # the pieces' points (a shared split point twice)
+            ps, pe = _split_py(px[idx].tolist(), py[idx].tolist(), tol[idx].tolist(),
+                               offs[:-1].tolist(), (offs[1:] - 1).tolist())
+            done_s.append(idx[ps])
+            done_e.append(idx[pe])
+            break
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
         cy = py[e] - y0
@@ -711,6 +712,43 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     return out
 
 
+# Interior points of a recursion level up to which _split_py is faster than a numpy level
+# (measured on 180- to 1081-beam scans).
+_SPLIT_PY = 150
+
+
+def _split_py(xs: List[float], ys: List[float], tol: List[float], s: List[int],
+              e: List[int]) -> Tuple[List[int], List[int]]:
+    """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, on Python floats.
+
+    The same cross products in the same order (eq. 4 distance times the chord length, the
+    first farthest point); depth first, left piece first. Returns the final pieces' first
+    and last points.
+    """
+    out_s: List[int] = []
+    out_e: List[int] = []
+    stack = list(zip(s, e))
+    stack.reverse()
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:  # no interior point: no split
+            out_s.append(a)
+            out_e.append(b)
+            continue
+        x0, y0 = xs[a], ys[a]
+        cx, cy = xs[b] - x0, ys[b] - y0
+        cross = [abs((x - x0) * cy - (y - y0) * cx) for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
+        cmax = max(cross)
+        k = a + 1 + cross.index(cmax)
+        if cmax > tol[k] * abs(complex(cx, cy)):  # C hypot, as np.hypot
+            stack.append((k, b))
+            stack.append((a, k))
+        else:
+            out_s.append(a)
+            out_e.append(b)
+    return out_s, out_e
+
+
 # ---------------------------------------------------------------------- ALFA
 def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.ndarray:
     """Find line pieces by ALFA's split and merge with binary search (line chapter).
@@ -749,13 +787,27 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     lo_thr, hi_thr = params.rmse_bounds
     gmax = params.max_gradient
     out: List[Tuple[int, int]] = []
-    for c in range(len(offsets) - 1):
-        c0, c1 = int(offsets[c]), int(offsets[c + 1])
-        n_pts = c1 - c0
+    xy = np.asarray(xy, dtype=float)
+    bounds = np.asarray(offsets).tolist()
+    sizes = [b - a for a, b in zip(bounds[:-1], bounds[1:])]
+    # Each run's points relative to its mean (np.mean's sum and division), and their
+    # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run are
+    # accumulated in order on Python floats (as np.cumsum in _prefix5).
+    means = np.zeros((len(sizes), 2))
+    for c, (c0, n_pts) in enumerate(zip(bounds, sizes)):
+        if n_pts >= least:
+            means[c] = np.add.reduce(xy[c0:c0 + n_pts], axis=0) / n_pts
+    mono = np.empty((5, xy.shape[0]))
+    np.subtract(xy, means.repeat(sizes, axis=0), out=mono[:2].T)
+    np.multiply(mono[0], mono[0], out=mono[2])
+    np.multiply(mono[1], mono[1], out=mono[3])
+    np.multiply(mono[0], mono[1], out=mono[4])
+    rows = mono.tolist()
+    for c0, n_pts in zip(bounds, sizes):
         if n_pts < least:
             continue
-        p = xy[c0:c1] - xy[c0:c1].mean(axis=0)
-        sx, sy, sxx, syy, sxy = _prefix5(p[:, 0], p[:, 1]).tolist()
+        c1 = c0 + n_pts
+        sx, sy, sxx, syy, sxy = [list(accumulate(r[c0:c1], initial=0.0)) for r in rows]
 
         def rmse(i: int, j: int) -> float:
             """Return the RMSE (eq. 21) of the TLS line through points i..j."""
@@ -815,6 +867,13 @@ class _Scan:
     offsets: np.ndarray
     nbeam: int  # largest beam index + 1
     whole: Optional[ScanArrays] = None  # the whole scan, when the clusters share it
+    _rows: list = field(default_factory=list, repr=False)  # cache of rows()
+
+    def rows(self) -> List[List[float]]:
+        """Return ``cols`` as Python lists (computed once; for the Python-float paths)."""
+        if not self._rows:
+            self._rows.extend(self.cols.tolist())
+        return self._rows
 
     def beams(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Return range, cos, sin and validity of every beam, by beam index.
@@ -938,6 +997,8 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     """
     if not s.size:
         return s, e
+    if s.size <= _CLEAN_PY:
+        return _clean_pieces_py(scan, pre, s, e, params)
     sums = np.empty((6, s.size))
     sums[0] = e - s + 1
     np.subtract(pre.take(e + 1, axis=1), pre.take(s, axis=1), out=sums[1:])
@@ -970,6 +1031,83 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     # the lines to grow.
     keep = ne - ns + 1 >= params.min_points
     return ns[keep], ne[keep]
+
+
+# Pieces up to which _clean_pieces_py is faster than the array operations (measured).
+_CLEAN_PY = 40
+
+
+def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
+                     params: LineParams) -> Tuple[np.ndarray, np.ndarray]:
+    """Return :func:`_clean_pieces` computed on Python floats.
+
+    The same operations in the same order (the fits of eqs. 8-9 from the prefix sums,
+    the point tests of :func:`_z`), but only the points up to the first one within the
+    gate are tested at each end (the array version tests ``min_points`` at each end).
+    """
+    s_l, e_l = s.tolist(), e.tolist()
+    d1, d2, d3, d4, d5 = (pre.take(e + 1, axis=1) - pre.take(s, axis=1)).tolist()
+    scat, a_in, b_in = [], [], []
+    for j, (a, b) in enumerate(zip(s_l, e_l)):  # _scatter
+        n = float(b - a + 1)
+        cx = d1[j] / n
+        cy = d2[j] / n
+        ncx = n * cx
+        sxx = d3[j] - ncx * cx
+        syy = d4[j] - n * cy * cy
+        sxy = d5[j] - ncx * cy
+        scat.append((cx, cy))
+        a_in.append(-2.0 * sxy)
+        b_in.append(syy - sxx)
+    alpha = 0.5 * np.arctan2(a_in, b_in)  # eq. 8 (_normal)
+    nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
+    xs, ys, rng, cps, sps = scan.rows()[:_TOL]
+    ox, oy = scan.origin
+    sr, sp_ = params.sigma_r, params.sigma_phi
+    gate = params.trim_sigma
+    reach = params.min_points
+
+    def z(i: int, nx: float, ny: float, rho: float) -> float:
+        """Return :func:`_z` of point i to one line."""
+        d = xs[i] * nx + ys[i] * ny - rho
+        cp, sp = cps[i], sps[i]
+        a = sr * (nx * cp + ny * sp)
+        b = rng[i] * sp_ * (ny * cp - nx * sp)
+        return abs(d) / math.sqrt(max(a * a + b * b, 1e-24))
+
+    ns, ne, z_first, z_last = [], [], [], []
+    for j, (a, b) in enumerate(zip(s_l, e_l)):
+        nx, ny = nxs[j], nys[j]
+        cx, cy = scat[j]
+        # rho of the line relative to the scan origin (see _clean_pieces)
+        rho = (cx + ox) * nx + (cy + oy) * ny - nx * ox - ny * oy
+        za, zb = z(a, nx, ny, rho), z(b, nx, ny, rho)
+        z_first.append(za)
+        z_last.append(zb)
+        lead = 0  # leading outliers among the first `reach` points (clipped at b)
+        while lead < reach and (za if lead == 0 else zb if a + lead >= b
+                                else z(a + lead, nx, ny, rho)) > gate:
+            lead += 1
+        trail = 0
+        while trail < reach and (zb if trail == 0 else za if b - trail <= a
+                                 else z(b - trail, nx, ny, rho)) > gate:
+            trail += 1
+        ns.append(a + lead)
+        ne.append(b - trail)
+    # A split point shared by consecutive pieces goes to the piece it fits better.
+    shared = [j for j in range(len(s_l) - 1) if e_l[j] >= s_l[j + 1] and ne[j] >= ns[j + 1]]
+    if shared:
+        ne0 = ne[:]
+        to_prev = [z_last[j] <= z_first[j + 1] for j in shared]
+        for j, prev in zip(shared, to_prev):
+            if prev:
+                ns[j + 1] = ne0[j] + 1
+        for j, prev in zip(shared, to_prev):
+            if not prev:
+                ne[j] = ns[j + 1] - 1
+    keep = [j for j in range(len(ns)) if ne[j] - ns[j] + 1 >= params.min_points]
+    return (np.array([ns[j] for j in keep], dtype=np.int64),
+            np.array([ne[j] for j in keep], dtype=np.int64))
 
 
 def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.ndarray,
@@ -1038,6 +1176,68 @@ def _variance_factor(sums: np.ndarray, f: _Fit) -> np.ndarray:
     return np.where(stat > q95, stat / dof, 1.0)
 
 
+# Pieces up to which _pairs_py is faster than the array operations (measured).
+_PAIRS_PY = 40
+
+
+def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarray,
+              params: LineParams) -> Tuple[_Fit, np.ndarray]:
+    """Return the fits with scaled covariances and the merge test of consecutive pieces.
+
+    :func:`_variance_factor` and the first merge test of :func:`_merge` (neighbours whose
+    :func:`_chi2` passes the gate) on Python floats, the same operations in the same
+    order. Raises ZeroDivisionError on degenerate fits (the array versions then give
+    numpy's inf / nan).
+    """
+    n_l, r_l = f.count.tolist(), f.rmse.tolist()
+    rho_l, alpha_l, nx_l, ny_l = f.params.tolist()
+    s6, s12, s18 = sums[6].tolist(), sums[12].tolist(), sums[18].tolist()
+    stats, dofs, bases = [], [], []
+    for n, r, nx, ny, a, b, c in zip(n_l, r_l, nx_l, ny_l, s6, s12, s18):
+        var = (nx * nx * a + ny * ny * b + 2.0 * nx * ny * c) / n
+        dof = max(n - 2.0, 1.0)
+        stats.append(n * r * r / var)  # RSS / sigma^2
+        h = 2.0 / (9.0 * dof)
+        dofs.append(dof)
+        bases.append(1.0 - h + _Z95 * math.sqrt(h))
+    cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
+    factor = [stat / dof if stat > dof * cube else 1.0
+              for stat, dof, cube in zip(stats, dofs, cubes)]
+    cov = f.cov * np.array(factor)[:, None, None]
+    f = _Fit(f.params, f.rmse, f.count, cov)
+    c00, c01, _, c11 = cov.reshape(-1, 4).T.tolist()
+    ends = np.empty((2, s.size - 1), dtype=np.int64)
+    ends[0] = e[:-1]
+    ends[1] = s[1:]
+    (x0, x1), (y0, y1), (p0, p1) = scan.cols[[_X, _Y, _PHI]].take(ends, axis=1).tolist()
+    k0, k1 = scan.cluster.take(ends).tolist()
+    gap2, gap_angle, gate = params.merge_gap ** 2, params.merge_gap_angle, params.merge_chi2
+    pi = math.pi
+    join = []
+    for j in range(s.size - 1):
+        gx, gy = x1[j] - x0[j], y1[j] - y0[j]
+        if not (k0[j] == k1[j] or gx * gx + gy * gy <= gap2 or abs(p1[j] - p0[j]) <= gap_angle):
+            join.append(False)
+            continue
+        # _chi2 of the pair
+        da = (alpha_l[j] - alpha_l[j + 1] + pi) % TWO_PI - pi
+        a00, a11 = c00[j] + c00[j + 1], c11[j] + c11[j + 1]
+        if abs(da) > 0.5 * pi:  # opposite normals: compare (-rho, alpha + pi)
+            dr = rho_l[j] + rho_l[j + 1]
+            da = (da + pi + pi) % TWO_PI - pi
+            a01 = c01[j] + -1.0 * c01[j + 1]
+        else:
+            dr = rho_l[j] - rho_l[j + 1]
+            a01 = c01[j] + c01[j + 1]
+        det = a00 * a11 - a01 * a01
+        if not det > 0.0:
+            join.append(False)
+            continue
+        d2 = (a11 * dr * dr - 2.0 * a01 * dr * da + a00 * da * da) / det
+        join.append(-math.inf < d2 <= gate)
+    return f, np.array(join, dtype=bool)
+
+
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit, np.ndarray]:
     """Merge collinear neighbours (step 3); return sums (24, L), first, last, fits, labels.
@@ -1054,16 +1254,27 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     f = _solve(sums, scan.origin)
     if s.size == 1:
         return sums, s, e, f, np.zeros(1, dtype=np.int64)
-    f = _Fit(f.params, f.rmse, f.count, f.cov * _variance_factor(sums, f)[:, None, None])
-    gap = scan.cols.take(s[1:], axis=1) - scan.cols.take(e[:-1], axis=1)
-    near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
-            | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
-            | (np.abs(gap[_PHI]) <= params.merge_gap_angle))
     gate = params.merge_chi2
-    join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
-                         f.cov[1:]) <= gate)
+    pairs = None
+    if s.size <= _PAIRS_PY:
+        try:
+            pairs = _pairs_py(scan, sums, f, s, e, params)
+        except ZeroDivisionError:  # degenerate fits: numpy's inf / nan below
+            pass
+    if pairs is None:
+        f = _Fit(f.params, f.rmse, f.count, f.cov * _variance_factor(sums, f)[:, None, None])
+        gap = scan.cols.take(s[1:], axis=1) - scan.cols.take(e[:-1], axis=1)
+        near = ((scan.cluster[s[1:]] == scan.cluster[e[:-1]])
+                | (gap[_X] * gap[_X] + gap[_Y] * gap[_Y] <= params.merge_gap ** 2)
+                | (np.abs(gap[_PHI]) <= params.merge_gap_angle))
+        join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
+                             f.cov[1:]) <= gate)
+    else:
+        f, join = pairs
     if not np.count_nonzero(join):
         return sums, s, e, f, np.arange(s.size)
+    if pairs is not None:
+        return _merge_chains_py(scan, sums, s, e, f, join.tolist(), gate)
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
@@ -1100,6 +1311,79 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
     return sums, s, e, f, np.arange(s.size)
 
 
+def _merge_chains_py(scan: _Scan, sums: np.ndarray, s: np.ndarray, e: np.ndarray, f: _Fit,
+                     join: List[bool], gate: float
+                     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit, np.ndarray]:
+    """Return :func:`_merge`'s result from the passing pairs ``join``, on Python floats.
+
+    The chain loop of :func:`_merge` (members tested against their merged line with
+    :func:`_chi2` and the split tolerance at their end points, the worst member of a
+    failing chain leaving it), the same operations in the same order; the merged lines
+    are fitted by :func:`_solve`.
+    """
+    size = s.size
+    xs, ys, tols = scan.rows()[_X], scan.rows()[_Y], scan.rows()[_TOL]
+    s_l, e_l = s.tolist(), e.tolist()
+    rho_l, alpha_l = f.params[:2].tolist()
+    c00, c01, _, c11 = f.cov.reshape(-1, 4).T.tolist()
+    ox, oy = scan.origin
+    pi, inf = math.pi, math.inf
+    while any(join):
+        starts = [0] + [i + 1 for i in range(size - 1) if not join[i]]
+        ends = [i - 1 for i in starts[1:]] + [size - 1]
+        label = []
+        for k, (a, b) in enumerate(zip(starts, ends)):
+            label += [k] * (b - a + 1)
+        g_sums = np.add.reduceat(sums, starts, axis=1)
+        g = _solve(g_sums[:6], scan.origin, rmse=False)
+        rho_g, alpha_g, nx_g, ny_g = g.params.tolist()
+        badness = []
+        for i, k in enumerate(label):
+            if starts[k] == ends[k]:  # single pieces are not merged
+                badness.append(0.0)
+                continue
+            # _chi2 against the merged line taken as exact
+            rg = rho_g[k]
+            da = (alpha_l[i] - alpha_g[k] + pi) % TWO_PI - pi
+            if abs(da) > 0.5 * pi:
+                dr = rho_l[i] + rg
+                da = (da + pi + pi) % TWO_PI - pi
+            else:
+                dr = rho_l[i] - rg
+            a00, a01, a11 = c00[i], c01[i], c11[i]
+            det = a00 * a11 - a01 * a01
+            d2 = inf
+            if det > 0.0:
+                d2 = (a11 * dr * dr - 2.0 * a01 * dr * da + a00 * da * da) / det
+                if d2 != d2 or d2 == -inf:
+                    d2 = inf
+            bad = d2 / gate
+            nx, ny = nx_g[k], ny_g[k]
+            rel = rg - nx * ox - ny * oy
+            pa, pb = s_l[i], e_l[i]
+            d0 = abs(xs[pa] * nx + ys[pa] * ny - rel) / tols[pa]
+            d1 = abs(xs[pb] * nx + ys[pb] * ny - rel) / tols[pb]
+            dist = d0 if d0 >= d1 else d1
+            if d0 != d0 or d1 != d1:
+                dist = math.nan
+            if dist > bad:  # np.fmax
+                bad = dist
+            badness.append(bad)
+        worst = [max(badness[a:b + 1]) for a, b in zip(starts, ends)]
+        if not any(w > 1.0 for w in worst):
+            return (g_sums, np.array([s_l[a] for a in starts], dtype=np.int64),
+                    np.array([e_l[b] for b in ends], dtype=np.int64), g,
+                    np.array(label, dtype=np.int64))
+        # The worst member of a failing chain leaves it (see _merge).
+        for i, k in enumerate(label):
+            if worst[k] > 1.0 and badness[i] == worst[k]:
+                if i < size - 1:
+                    join[i] = False
+                if i > 0:
+                    join[i - 1] = False
+    return sums, s, e, f, np.arange(size)
+
+
 def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
           last: np.ndarray, f: _Fit, params: LineParams
           ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
@@ -1124,6 +1408,12 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     gaps = (size > 0).nonzero()[0]
     if not gaps.size or not math.isfinite(gate):
         return sums, first, last, False
+    if n_lines <= _GROW_PY:
+        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
+        if not (any(run_f) or any(run_b)):
+            return sums, first, last, False
+        grow = np.array((run_f, run_b), dtype=np.int64)
+        return _grown(feats, sums, first, last, lo, grow)
     size_g = size[gaps]
     starts = size_g.cumsum() - size_g
     pos = np.arange(starts[-1] + size_g[-1])
@@ -1158,6 +1448,60 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     grow = np.zeros((2, n_lines + 1), dtype=np.int64)  # by gap: forward, backward
     grow[0, gaps] = run_f
     grow[1, gaps] = run_b
+    return _grown(feats, sums, first, last, lo, grow)
+
+
+# Lines up to which _grow_runs_py is faster than the array operations (measured).
+_GROW_PY = 40
+
+
+def _grow_runs_py(scan: _Scan, f: _Fit, first: List[int], last: List[int],
+                  params: LineParams) -> Tuple[List[int], List[int]]:
+    """Return the runs of free points each gap gives to its lines (see :func:`_grow`).
+
+    Per gap (before line 0, between consecutive lines, after the last line) the number of
+    points the line before it takes forward and the line after it takes backward, found by
+    walking from the gap's ends to the first point that fails (the same tests, the same
+    operations as the array version of :func:`_grow`, on Python floats).
+    """
+    xs, ys, rng, cps, sps, tols, phi = scan.rows()
+    rhos, _, nxs, nys = f.params.tolist()
+    ox, oy = scan.origin
+    gg = params.trim_sigma * params.trim_sigma
+    sr, sp_ = params.sigma_r, params.sigma_phi
+    angle = params.merge_gap_angle
+    n_pts, n_lines = len(xs), len(first)
+
+    def fits(i: int, j: int) -> bool:
+        """Return whether point i is within the gates of line j (eq. 7 on the normal)."""
+        nx, ny = nxs[j], nys[j]
+        d = (xs[i] + ox) * nx + (ys[i] + oy) * ny - rhos[j]
+        cp, sp = cps[i], sps[i]
+        a = sr * (nx * cp + ny * sp)
+        b = rng[i] * sp_ * (ny * cp - nx * sp)
+        return d * d <= gg * (a * a + b * b) and abs(d) <= tols[i]
+
+    run_f, run_b = [0] * (n_lines + 1), [0] * (n_lines + 1)
+    for k in range(n_lines + 1):
+        lo = last[k - 1] + 1 if k else 0
+        hi = first[k] if k < n_lines else n_pts
+        i = lo
+        if k:  # the line before the gap, forward
+            while i < hi and (i == 0 or abs(phi[i] - phi[i - 1]) <= angle) and fits(i, k - 1):
+                i += 1
+        run_f[k] = i - lo
+        if k < n_lines:  # the line after it, backward (after the forward run)
+            m = hi - 1
+            while m >= i and (m + 1 == n_pts or abs(phi[m + 1] - phi[m]) <= angle) and fits(m, k):
+                m -= 1
+            run_b[k] = hi - 1 - m
+    return run_f, run_b
+
+
+def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndarray,
+           lo: np.ndarray, grow: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Return :func:`_grow`'s sums, first, last, True for the runs ``grow`` (2, gaps)."""
+    n_lines = first.size
     new_first, new_last = first - grow[1, :-1], last + grow[0, 1:]
     # Sums of the added ranges (disjoint, in order): [new_first, first) and (last, new_last].
     add_lo = np.empty(2 * n_lines, dtype=np.int64)
@@ -1249,6 +1593,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
     if not line.size:
         return sums, first, last, f
     s, e, label, first0, last0 = pieces
+    if line.size <= _NOISE_PY and not np.count_nonzero(opening):
+        ends = _noise_only_py(scan, pieces, first, last, line, beam, params)
+        if ends is not None:
+            return sums, ends[0], ends[1], f
     owner = np.full(scan.x.size, -1, dtype=np.int64)
     # a line's support: its pieces and the runs grown before and after (disjoint, so one
     # gather of all of them)
@@ -1301,6 +1649,63 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         first[own[best]] = pos[starts[best]]
         last[own[best]] = pos[starts[best] + size[best] - 1]
     return sums, first, last, f
+
+
+# Hidden beams up to which _noise_only_py is tried first (a few per scan are typical).
+_NOISE_PY = 24
+
+
+def _noise_only_py(scan: _Scan, pieces: Tuple[np.ndarray, ...], first: np.ndarray,
+                   last: np.ndarray, line: np.ndarray, beam: np.ndarray, params: LineParams
+                   ) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """Return the lines' first and last points when they hide only their noise, else None.
+
+    Step 2 of :func:`_cut_seen_through` for hidden beams that are no opening, on Python
+    objects and looking only at the lines that hide beams: a line's support (its pieces
+    and grown runs) is cut into runs at its hidden beams (which leave), as by
+    :func:`_support_runs`. Returns None when a line has two runs of ``min_points`` points
+    and ``min_length`` (:func:`_splits_in_two`: the line is cut, in the array version);
+    otherwise each hiding line's extent becomes its run of most points (the first of
+    equal ones).
+    """
+    s, e, label, first0, last0 = pieces
+    hidden: dict = {}
+    for j, b in zip(line.tolist(), beam.tolist()):  # beams increasing per line
+        hidden.setdefault(j, []).append(b)
+    s_l, e_l, lab = s.tolist(), e.tolist(), label.tolist()
+    f_l, l_l, f0, l0 = first.tolist(), last.tolist(), first0.tolist(), last0.tolist()
+    xs, ys = scan.rows()[_X], scan.rows()[_Y]
+    new_first, new_last = f_l[:], l_l[:]
+    for j, hb in hidden.items():
+        ranges = [(f_l[j], f0[j] - 1)]
+        ranges += [(a, b) for a, b, k in zip(s_l, e_l, lab) if k == j]
+        ranges.append((l0[j] + 1, l_l[j]))
+        pts: List[int] = []
+        for a, b in ranges:
+            pts.extend(range(a, b + 1))
+        bps = scan.beam.take(pts).tolist()  # increasing
+        runs: List[Tuple[int, int, int]] = []  # (points, first point, last point)
+        start = 0
+        for h in hb:  # the support between hidden beams; a hidden supporting point leaves
+            pos = bisect_left(bps, h, start)
+            if pos > start:
+                runs.append((pos - start, pts[start], pts[pos - 1]))
+            start = pos + 1 if pos < len(bps) and bps[pos] == h else pos
+        if start < len(bps):
+            runs.append((len(bps) - start, pts[start], pts[-1]))
+        good = 0
+        for n, a, b in runs:
+            if n >= params.min_points and abs(
+                    complex(xs[b] - xs[a], ys[b] - ys[a])) >= params.min_length:
+                good += 1
+        if good >= 2:
+            return None
+        if runs:
+            best = max(runs, key=lambda r: r[0])  # the first run of most points
+            new_first[j], new_last[j] = best[1], best[2]
+    if new_first == f_l and new_last == l_l:  # the same extents (their beams are cached)
+        return first, last
+    return np.array(new_first, dtype=np.int64), np.array(new_last, dtype=np.int64)
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
@@ -1406,6 +1811,75 @@ _INWARD = np.array([[1.0], [-1.0]])  # start moves forward along the line, end b
 def _build(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
            last: np.ndarray) -> List[LineSegment]:
     """Drop small or short fits and build the LineSegments (first/last: point indices)."""
+    if first.size <= _BUILD_PY:
+        try:
+            return _build_py(scan, params, f, first, last)
+        except (ZeroDivisionError, OverflowError):  # a ray along a line: numpy inf / nan
+            pass
+    return _build_arrays(scan, params, f, first, last)
+
+
+# Lines up to which _build_py is faster than _build_arrays (measured).
+_BUILD_PY = 40
+
+
+def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
+              last: np.ndarray) -> List[LineSegment]:
+    """Return :func:`_build_arrays` computed on Python floats (the same operations).
+
+    Raises ZeroDivisionError where a ray runs along its line (the arrays version then
+    gives numpy's inf / nan).
+    """
+    ox, oy = scan.origin
+    ends = np.empty((2, first.size), dtype=np.int64)
+    ends[0] = first
+    ends[1] = last
+    (x0s, x1s), (y0s, y1s), _, (c0s, c1s), (s0s, s1s) = scan.cols[:_TOL].take(
+        ends, axis=1).tolist()
+    b0s, b1s = scan.beam.take(ends).tolist()
+    rhos, alphas, nxs, nys = f.params.tolist()
+    rmses, counts = f.rmse.tolist(), f.count.tolist()
+    covs = f.cov.reshape(-1, 4).tolist()
+    min_points, min_length, thr = params.min_points, params.min_length, params.threshold
+    isfinite = math.isfinite
+    keep, flat = [], []
+    for j, (rho, nx, ny) in enumerate(zip(rhos, nxs, nys)):
+        cov = covs[j]
+        if not (counts[j] >= min_points and rmses[j] <= thr and isfinite(cov[0])
+                and isfinite(cov[3])):
+            continue
+        ends_j = []
+        for x, y, cp, sp in ((x0s[j] + ox, y0s[j] + oy, c0s[j], s0s[j]),
+                             (x1s[j] + ox, y1s[j] + oy, c1s[j], s1s[j])):
+            d = x * nx + y * ny - rho
+            px, py = x - d * nx, y - d * ny
+            t = rho / (cp * nx + sp * ny)
+            ends_j.append((px, py, t, cp, sp, py * nx - px * ny, t * (sp * nx - cp * ny)))
+        (px0, py0, t0, cp0, sp0, al0, ar0), (px1, py1, t1, cp1, sp1, al1, ar1) = ends_j
+        # End points at the end beams (see _build_arrays)
+        sign = 1.0 if al1 >= al0 else -1.0
+        span = abs(al1 - al0)
+        inward = sign * (ar0 - al0)
+        if t0 > 0.0 and inward > 0.0 and inward < span:
+            px0, py0 = t0 * cp0, t0 * sp0
+        inward = sign * (ar1 - al1) * -1.0
+        if t1 > 0.0 and inward > 0.0 and inward < span:
+            px1, py1 = t1 * cp1, t1 * sp1
+        if not abs(complex(px1 - px0, py1 - py0)) >= min_length:  # C hypot, as np.hypot
+            continue
+        keep.append(j)
+        flat += (px0, py0, px1, py1)
+    if not keep:
+        return []
+    pts = np.array(flat).reshape(-1, 2, 2)
+    cov = f.cov.take(keep, axis=0)
+    return [LineSegment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
+                        cov[i], b0s[j], b1s[j]) for i, j in enumerate(keep)]
+
+
+def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
+                  last: np.ndarray) -> List[LineSegment]:
+    """Return :func:`_build` on arrays (all lines of the scan at once)."""
     ox, oy = scan.origin
     ends = np.empty((2, first.size), dtype=np.int64)
     ends[0] = first

@@ -24,28 +24,38 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray) -> np.nda
     """Return (N,) the first index of the ``span`` nearest neighbours of every x (sorted x).
 
     For sorted x the k nearest neighbours of ``x_i`` are a contiguous window; of the
-    ``k`` windows containing ``i`` the one with the smallest largest distance wins.
+    ``k`` windows containing ``i`` the one with the smallest largest distance wins (the
+    first one on ties). Candidates are laid out (k, N), one row per candidate start.
     """
     n = x.shape[0]
     sizes = offsets[1:] - offsets[:-1]
     group = np.arange(sizes.size).repeat(sizes)
     lo_g = offsets[group]
     k = span[group]
-    kmax = max(span.tolist())
     i = np.arange(n)
-    steps = np.arange(kmax)
+    if n > 1 and span.size and (span % 2 == 1).all():
+        # Equally spaced x (beams of a scan): the window centred on x_i, clipped to its
+        # group, is the only one whose reach is below (h + 1) steps, h = (k - 1) // 2,
+        # when the steps differ by less than 1 / (2 h) of the smallest (a window shifted
+        # by one reaches h + 1 steps on one side). Then no candidates are needed.
+        step = x[1:] - x[:-1]
+        inner = step[(group[1:] == group[:-1]).nonzero()[0]]
+        h = (max(span.tolist()) - 1) // 2
+        if not inner.size or (inner.min() > 0.0
+                              and (inner.max() - inner.min()) * (2 * h) < inner.min()):
+            return np.minimum(np.maximum(i - (k - 1) // 2, lo_g), offsets[group + 1] - k)
+    kmax = max(span.tolist())
+    steps = np.arange(kmax)[:, None]
     # Candidate window starts i-k+1 .. i, clipped to the group.
-    cand = i[:, None] - steps
+    cand = i - steps
     hi_start = offsets[group + 1] - k
-    k_col = k[:, None]
-    ok = steps < k_col
-    np.maximum(cand, lo_g[:, None], out=cand)  # np.clip
-    np.minimum(cand, hi_start[:, None], out=cand)
-    x_col = x[:, None]
-    left = x_col - x[cand]
-    right = x[np.minimum(cand + k_col - 1, n - 1)] - x_col
+    ok = steps < k
+    np.maximum(cand, lo_g, out=cand)  # np.clip
+    np.minimum(cand, hi_start, out=cand)
+    left = x - x[cand]
+    right = x[np.minimum(cand + k - 1, n - 1)] - x
     reach = np.where(ok, np.maximum(left, right), np.inf)
-    return cand.ravel()[reach.argmin(axis=1) + i * kmax]
+    return cand[reach.argmin(axis=0), i]
 
 
 def _group_median(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -82,22 +92,31 @@ def lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int =
     n = x.shape[0]
     if n == 0:
         return np.zeros(0)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _lowess_groups(x, y, offsets, span, iterations)
+
+
+def _lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int,
+                   iterations: int) -> np.ndarray:
+    """Return :func:`lowess_groups` (arrays checked, floating-point errors ignored)."""
+    n = x.shape[0]
     sizes = offsets[1:] - offsets[:-1]
     k_g = np.minimum(sizes, int(span))
     starts = _knn_windows(x, offsets, k_g)
     group = np.arange(sizes.size).repeat(sizes)
     k = k_g[group]
     kmax = max(k_g.tolist())
-    cols = np.arange(kmax)[None, :]
-    in_win = cols < k[:, None]
-    idx = np.minimum(starts[:, None] + cols, n - 1)
-    u = x[idx] - x[:, None]  # predictor relative to x_i, so the fit at x_i is the intercept
+    # The windows are laid out (kmax, N): column i holds the neighbours of x_i, and the
+    # reductions over a window run over rows (fast on a few rows; see _window_sums).
+    cols = np.arange(kmax)[:, None]
+    in_win = cols < k
+    idx = np.minimum(starts + cols, n - 1)
+    u = x[idx] - x  # predictor relative to x_i, so the fit at x_i is the intercept
     u = np.where(in_win, u, 0.0)
     yw = y[idx]
     dist = np.abs(u)  # 0 outside the window
-    d = dist.max(axis=1, keepdims=True)  # d(x): distance to the most distant neighbour
-    with np.errstate(divide='ignore', invalid='ignore'):
-        ratio = np.where(d > 0.0, dist / d, 0.0)
+    d = dist.max(axis=0)  # d(x): distance to the most distant neighbour
+    ratio = np.where(d > 0.0, dist / d, 0.0)
     w1 = np.where(in_win, (1.0 - ratio ** 3) ** 3, 0.0)  # eq. 8, tricube
     fit = _weighted_linear(u, yw, w1, y)
     scale = float(np.abs(y).max()) + 1.0
@@ -113,19 +132,51 @@ def lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int =
 
 def _weighted_linear(u: np.ndarray, yw: np.ndarray, w: np.ndarray,
                      fallback: np.ndarray) -> np.ndarray:
-    """Return the intercepts of row-wise weighted linear fits ``y = a + b u``."""
-    sw = w.sum(axis=1)
-    su = (w * u).sum(axis=1)
-    sy = (w * yw).sum(axis=1)
-    suu = (w * u * u).sum(axis=1)
-    suy = (w * u * yw).sum(axis=1)
+    """Return the intercepts of column-wise weighted linear fits ``y = a + b u`` (K, N).
+
+    Call under ``np.errstate(divide='ignore', invalid='ignore')``.
+    """
+    terms = np.empty((w.shape[0], 5, w.shape[1]))  # w, w u, w y, w u u, w u y per row
+    terms[:, 0] = w
+    wu = np.multiply(w, u, out=terms[:, 1])
+    np.multiply(w, yw, out=terms[:, 2])
+    np.multiply(wu, u, out=terms[:, 3])
+    np.multiply(wu, yw, out=terms[:, 4])
+    sw, su, sy, suu, suy = _window_sums(terms)
     det = sw * suu - su * su
-    with np.errstate(divide='ignore', invalid='ignore'):
-        lin = (sy * suu - su * suy) / det
-        mean = sy / sw
+    lin = (sy * suu - su * suy) / det
+    mean = sy / sw
     good_lin = det > 1e-12 * np.maximum(sw * suu, 1e-300)
     out = np.where(good_lin, lin, mean)
     return np.where(np.isfinite(out) & (sw > 0.0), out, fallback)
+
+
+def _window_sums(t: np.ndarray) -> np.ndarray:
+    """Return ``t.sum(axis=0)`` of (K, ...) ``t``, added as numpy adds a row of K values.
+
+    numpy sums a contiguous row by pairwise summation (sequentially below 8 values, else
+    in 8 partial sums, for rows up to 128 values); repeating its order over the K rows
+    gives the sums of the (N, K) layout bit for bit, without a reduction call per row.
+    """
+    k = t.shape[0]
+    if k > 128:
+        return np.moveaxis(t, 0, -1).copy().sum(axis=-1)
+    if k < 8:
+        if k == 1:
+            return t[0].copy()
+        s = t[0] + t[1]
+        for i in range(2, k):
+            s += t[i]
+        return s
+    r = t[:8].copy()
+    i = 8
+    while i < k - k % 8:
+        r += t[i:i + 8]
+        i += 8
+    s = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for j in range(i, k):
+        s += t[j]
+    return s
 
 
 def lowess(x: np.ndarray, y: np.ndarray, span: int = 9, iterations: int = 2,
