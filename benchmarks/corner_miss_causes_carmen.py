@@ -99,41 +99,9 @@ def trace(s, p: cm.CornerParams) -> dict:
 
 
 def refine_trace(st, g, lo, hi, fg, p: cm.CornerParams) -> dict:
-    """Return every refinement check of windows ``g`` (a copy of ``corners._refine``)."""
-    gap = p.corner_gap
+    """Return every refinement check of windows ``g`` (the checks of ``corners._refine``)."""
     g0 = g
-    g, sums, gain = cm._two_line_split(st, g, lo, hi, gap, 2)
-    sig = np.sqrt(p.sigma_r ** 2 + (p.sigma_phi * st.r[g]) ** 2)
-    found = gain >= p.min_significance * sig * sig
-    lines = cm._lines(sums)
-    cx, cy = cm._intersect(lines)
-    spacing = np.maximum(st.r[g] * st.dphi[g], 1e-9)
-    n_fit = np.minimum(np.ceil(p.fit_length / spacing), 4 * p.max_half_window)
-    count = np.empty((g.size, 2), dtype=np.int64)
-    count[:, 0] = np.maximum(n_fit, g - gap - lo)
-    count[:, 1] = np.maximum(n_fit, hi - g - gap)
-    first = np.empty((g.size, 2), dtype=np.int64)
-    first[:, 0], first[:, 1] = g - gap - 1, g + gap + 1
-    idx, valid = cm._gather_arms(st, first, count, g)
-    x, y = st.x[idx], st.y[idx]
-    sig = sig[:, None, None]
-    near = np.maximum(sig, 0.5 * spacing[:, None, None])
-    two = np.zeros(x.shape, dtype=bool)
-    r = np.hypot(x, y)
-    for _ in range(2):
-        c, s, rho = lines.c[..., None], lines.s[..., None], lines.rho[..., None]
-        d = x * c + y * s - rho
-        d_own = np.abs(d)
-        d_other = np.abs(x * c[:, ::-1] + y * s[:, ::-1] - rho[:, ::-1])
-        far = d_own > 4.0 * sig + 0.01
-        np.logical_and(far[..., :-1], far[..., 1:], out=two[..., :-1])
-        cut = np.logical_or.accumulate(two, axis=-1)
-        cut |= np.logical_or.accumulate(far & cm._behind(d, r, valid, rho, p)[1], axis=-1)
-        ux, uy = cm._arm_directions(lines, cx, cy)
-        along = (x - cx[:, None, None]) * ux[..., None] + (y - cy[:, None, None]) * uy[..., None]
-        w = (valid & ~cut & ~far & (d_own <= d_other) & (along > near)).astype(float)
-        lines = cm._lines(cm._weighted_moments(w, x, y))
-        cx, cy = cm._intersect(lines)
+    g, found, lines, cx, cy, x, y, r, valid, w = cm._fit_arms(st, g, lo, hi, p)
     ux, uy = cm._arm_directions(lines, cx, cy)
     _, _, cos_t = cm._free_side(cx, cy, ux[:, 0], uy[:, 0], ux[:, 1], uy[:, 1])
     f_fit = -cos_t

@@ -754,9 +754,15 @@ def _two_line_split(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, g
     return np.where(found, lo + best, g), sums, gain
 
 
-def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.ndarray,
-            p: CornerParams) -> List[Corner]:
-    """Refine detections (window ``[lo, hi]`` around ``g``) by intersecting two TLS lines."""
+def _fit_arms(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              p: CornerParams) -> tuple:
+    """Split each window ``[lo, hi]`` around ``g`` in two TLS lines and refit the arms.
+
+    Returns ``(g, found, lines, cx, cy, x, y, r, valid, w)``: the split sample, whether the
+    split is a significant bend, the refitted lines, their intersection, the arm samples
+    (K, 2, M) with ranges, validity and the weights of the final fit. The checks on them
+    are :func:`_refine`'s.
+    """
     gap = p.corner_gap
     g, sums, gain = _two_line_split(st, g, lo, hi, gap, 2)
     sig = np.sqrt(p.sigma_r ** 2 + (p.sigma_phi * st.r[g]) ** 2)
@@ -793,6 +799,13 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
         w = (valid & ~cut & ~far & (d_own <= d_other) & (along > near)).astype(float)
         lines = _lines(_weighted_moments(w, x, y))  # eqs. 8-10 on the kept arm samples
         cx, cy = _intersect(lines)
+    return g, found, lines, cx, cy, x, y, r, valid, w
+
+
+def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.ndarray,
+            p: CornerParams) -> List[Corner]:
+    """Refine detections (window ``[lo, hi]`` around ``g``) by intersecting two TLS lines."""
+    g, found, lines, cx, cy, x, y, r, valid, w = _fit_arms(st, g, lo, hi, p)
     ux, uy = _arm_directions(lines, cx, cy)
     bis, opening, cos_t = _free_side(cx, cy, ux[:, 0], uy[:, 0], ux[:, 1], uy[:, 1])
     f_fit = -cos_t  # eq. 11 for the fitted arms
