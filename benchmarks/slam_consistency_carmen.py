@@ -5,15 +5,21 @@ Run from the repository root (needs ``../shared/data/carmen``)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
         [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
         [--jacobians standard|observability]
-        [--joint-probability P] [LOG ...]
+        [--joint-probability P] [--drift MODEL] [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
 seed) and run through :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated
-odometry noise model. Printed per log:
+odometry noise model. Isolation of the update side: ``--drift none`` imports the reference's
+own increments as odometry (no drift) and ``--filter-noise pioneer`` (any model of
+:func:`landmark_nav.slam.frontend.odometry_noise_model`) tells the filter that noise
+instead of the bag's; with both, every error of the run comes from the updates. Printed per
+log:
 
-* ``odo_nees``: mean (and share above the chi-square 95 % bound) of the odometry's 3-dof
-  NEES over windows of 1 m of reference path: the reference's relative motion against the
-  odometry's, with the filter's noise model ``U`` propagated along the window (3 expected).
+* ``odo_nees`` / ``odo_out``: mean and share above the chi-square 95 % bound of the
+  odometry's 3-dof NEES over windows of 1 m of reference path, ``odo_nees10`` its mean over
+  10 m (:func:`landmark_nav.evaluation.odometry_drift.odometry_window_nees`: the
+  odometry's relative motion against the reference's, in the window's start frame, with the
+  filter's ``U`` propagated along the window; 3 expected).
 * ``line_m2``: median squared Mahalanobis distance (2 expected) of each line observation
   put in the map with the reference pose, from the mean of the observations the filter
   associated with the same landmark (landmarks seen at least 5 times), under the stated
@@ -26,6 +32,10 @@ odometry noise model. Printed per log:
 * ``nees_med``: median robot NEES (3 dof, unaligned), ``psi_err`` / ``psi_sd``: RMS heading
   error and median heading std of the filter [deg], ``ellipse95``: share of steps with the
   reference inside the 95 % position ellipse.
+* ``rot_deg`` / ``ate_se2``: the rotation [deg] of the SE(2) fit of the filter's positions
+  onto the reference (:func:`landmark_nav.evaluation.trajectory.planar_alignment`: map and
+  path turned together, the unobservable global heading) and the position RMSE after it
+  [m], against ``ate_none``, the RMSE without alignment.
 * ``jump5``: share of the squared per-step translation error (relative motion against the
   reference's) that the worst 5 % of steps carry (what the RPE over 1 m is made of).
 """
@@ -40,15 +50,18 @@ import tempfile
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
+from landmark_nav.evaluation.odometry_drift import odometry_window_nees  # noqa: E402
 from landmark_nav.evaluation.slam import (bag_odometry_noise,  # noqa: E402
                                           ellipse_share, run_slam, scan_features)
-from landmark_nav.geometry import compose, compose_jacobians, relative  # noqa: E402
+from landmark_nav.evaluation.trajectory import planar_alignment  # noqa: E402
+from landmark_nav.geometry import relative  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.laser.lines import LineParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
 from landmark_nav.slam.ekf_slam import LINE, odometry_noise, SlamParams  # noqa: E402
+from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
 from landmark_nav.slam.line_landmarks import (line_end_covariance,  # noqa: E402
                                               line_initialization, lines_to_observations)
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
@@ -61,36 +74,19 @@ def _wrap(a):
     return np.mod(np.asarray(a) + math.pi, 2.0 * math.pi) - math.pi
 
 
-def odometry_nees(scenario, noise) -> np.ndarray:
-    """3-dof NEES of the odometry over 1 m windows of reference path (module docstring)."""
+def odometry_nees(scenario, noise, horizon: float = 1.0) -> np.ndarray:
+    """3-dof NEES of the odometry over windows of ``horizon`` m of reference path."""
     odo = [e for e in scenario.events if isinstance(e, OdometrySample)]
     t = np.array([e.stamp_ns for e in odo], dtype=np.int64)
     pose = np.array([e.pose for e in odo])
-    ref = scenario.truth_at(t)
-    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref[:, :2], axis=0).T))])
-    out = []
-    i = 0
-    while True:
-        j = int(np.searchsorted(s, s[i] + 1.0))
-        if j >= len(t):
-            break
-        cov, x = np.zeros((3, 3)), np.zeros(3)
-        for k in range(i, j):
-            u = relative(pose[k], pose[k + 1])
-            j1, j2 = compose_jacobians(x, u)
-            cov = j1 @ cov @ j1.T + j2 @ odometry_noise(u, noise) @ j2.T
-            x = compose(x, u)
-        e = relative(relative(ref[i], ref[j]), relative(pose[i], pose[j]))
-        e[2] = _wrap(e[2])
-        out.append(e @ np.linalg.solve(cov, e))
-        i = j
-    return np.array(out)
+    return odometry_window_nees(scenario.truth_at(t), pose,
+                                lambda u: odometry_noise(u, noise), horizon)
 
 
-def diagnose(bag: Path, landmarks: str, extra: dict) -> dict:
+def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
     """Run the filter on one bag and return the figures of the module docstring."""
     scenario = load_bag(bag, require_reference=False)
-    noise = bag_odometry_noise(scenario)[0]
+    noise = filter_noise or bag_odometry_noise(scenario)[0]
     prm = replace(SlamParams(**extra), odometry=noise)
     cp = CornerParams(sigma_r=float(scenario.laser.sigma_range),
                       sigma_phi=float(scenario.laser.sigma_angle))
@@ -138,7 +134,10 @@ def diagnose(bag: Path, landmarks: str, extra: dict) -> dict:
                                 - relative(run.truth[k], run.truth[k + 1])[:2]))
                      for k in range(len(run.poses) - 1)])
     sq = np.sort(step ** 2)[::-1]
+    odo10 = odometry_nees(scenario, noise, 10.0)
+    rot, _, ate_se2 = planar_alignment(run.poses, run.truth)
     return {'odo_nees': float(odo.mean()), 'odo_out': float(np.mean(odo > chi2_gate(3, 0.95))),
+            'odo_nees10': float(odo10.mean()) if odo10.size else math.nan,
             'line_m2': float(np.median(m2)) if m2 else math.nan,
             'nis95': float(np.mean(nis)) if nis else math.nan,
             'd2': float(np.mean(d2)) if d2 else math.nan,
@@ -146,6 +145,8 @@ def diagnose(bag: Path, landmarks: str, extra: dict) -> dict:
             'psi_err': float(np.degrees(np.sqrt(np.mean(err[:, 2] ** 2)))),
             'psi_sd': float(np.degrees(np.median(np.sqrt(run.covariances[:, 2, 2])))),
             'ellipse95': ellipse_share(run),
+            'rot_deg': math.degrees(rot), 'ate_se2': ate_se2,
+            'ate_none': float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
             'jump5': float(sq[:max(1, len(sq) // 20)].sum() / sq.sum())}
 
 
@@ -160,7 +161,12 @@ def main() -> int:
     ap.add_argument('--reject-ambiguous', action='store_true', default=None)
     ap.add_argument('--jacobians', default=None, choices=['standard', 'observability'])
     ap.add_argument('--joint-probability', type=float, default=None)
+    ap.add_argument('--drift', default=None,
+                    help='import drift model (default pioneer; none: the reference increments)')
+    ap.add_argument('--filter-noise', default=None,
+                    help="the filter's odometry noise model instead of the bag's")
     args = ap.parse_args()
+    filter_noise = None if args.filter_noise is None else odometry_noise_model(args.filter_noise)
     carmen = SHARED_DATA / 'carmen'
     if not carmen.is_dir():
         print(f'missing {carmen}', file=sys.stderr)
@@ -170,14 +176,15 @@ def main() -> int:
              'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
              'joint_probability': args.joint_probability}
     extra = {k: v for k, v in given.items() if v is not None}
-    keys = ('odo_nees', 'odo_out', 'line_m2', 'nis95', 'd2', 'nees_med', 'psi_err', 'psi_sd',
-            'ellipse95', 'jump5')
+    keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
+            'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5')
     print('log ' + ' '.join(keys))
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.logs:
             bag = Path(tmp) / name
-            import_log(carmen / f'{name}-corrected.log.gz', bag, seed=args.seed)
-            r = diagnose(bag, args.landmarks, extra)
+            import_log(carmen / f'{name}-corrected.log.gz', bag, seed=args.seed,
+                       drift=args.drift)
+            r = diagnose(bag, args.landmarks, extra, filter_noise)
             print(name + ' ' + ' '.join(f'{r[k]:.3g}' for k in keys), flush=True)
     return 0
 

@@ -11,7 +11,7 @@ Modules:
   (laser facts from ``custom_data``, ``ground_truth.yaml`` or options); an Odometry
   topic as arrays (``read_track``).
 * :mod:`.odometry_drift` -- odometry against the ground truth of a bag (``landmark_nav
-  demo``'s drift table).
+  demo``'s drift table); the NEES of an odometry noise model over path windows.
 * :mod:`.slam` -- EKF-SLAM runner and scores on simulated runs and bags
   (``landmark_nav evaluate``).
 * :mod:`.features` -- corner and line extractor scores against the simulator's truth.

@@ -323,11 +323,34 @@ def position_errors_at(ref: Trajectory, stamps_ns: np.ndarray, poses: np.ndarray
     return stamps[keep], position_errors(np.asarray(poses, dtype=float)[keep], at), at
 
 
+def planar_alignment(est: np.ndarray, ref: np.ndarray) -> Tuple[float, np.ndarray, float]:
+    """Umeyama SE(2) fit of planar positions at the same stamps (the ``'se2'`` alignment).
+
+    Args:
+        est: (N, >=2) estimated positions (first two columns used).
+        ref: (N, >=2) reference positions.
+
+    Returns:
+        ``(rotation [rad], translation (2,), rmse [m])``: ``ref ~ R(rotation) est + t``. The
+        rotation is the estimate's global heading error as a whole (map and path turned
+        together, which no relative observation sees).
+    """
+    a = np.asarray(est, dtype=float)[:, :2]
+    b = np.asarray(ref, dtype=float)[:, :2]
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((b - mb).T @ (a - ma))
+    rot = u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    t = mb - rot @ ma
+    err = (a @ rot.T + t) - b
+    return (math.atan2(rot[1, 0], rot[0, 0]), t,
+            float(np.sqrt(np.mean(np.sum(err ** 2, axis=1)))))
+
+
 def summary(stats: Dict[str, float], keys: Sequence[str] = ('rmse', 'max')) -> str:
     """``rmse 1.23 cm, max 4.56 cm`` for the given statistics [m]."""
     return ', '.join(f'{k} {100 * stats[k]:.2f} cm' for k in keys)
 
 
-__all__ = ['ALIGNMENTS', 'aligned', 'associate', 'ate', 'MAX_DIFF_S', 'position_errors',
-           'position_errors_at', 'read_tum', 'rpe', 'RPE_REL_TOL', 'STATISTICS', 'summary',
-           'Trajectory', 'write_tum']
+__all__ = ['ALIGNMENTS', 'aligned', 'associate', 'ate', 'MAX_DIFF_S', 'planar_alignment',
+           'position_errors', 'position_errors_at', 'read_tum', 'rpe', 'RPE_REL_TOL',
+           'STATISTICS', 'summary', 'Trajectory', 'write_tum']
