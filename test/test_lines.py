@@ -432,3 +432,40 @@ def test_carmen_logs(name):
         }[name, method]
         got = (explained.mean(), explained.min(), rmse.mean(), rmse.max(), explained.size)
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=0)
+
+
+PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_CLEAN_PY', '_PAIRS_PY', '_GROW_PY',
+            '_NOISE_PY', '_BUILD_PY')
+
+
+def _line_tuples(lines):
+    return [(ln.rho, ln.alpha, *ln.start, *ln.end, ln.num_points, ln.rmse,
+             *ln.covariance.ravel(), ln.first_index, ln.last_index) for ln in lines]
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_python_float_paths_give_the_array_paths_lines(monkeypatch, method):
+    # lines.py runs small batches on Python floats and large ones as arrays, the same
+    # operations in the same order; the size switches are speed choices only. Every step
+    # forced onto one path, then onto the other, must give the same lines bit for bit
+    # (office bag: 361 beams, clutter, occlusions).
+    from landmark_nav.bag import BagReader
+    from landmark_nav.conversions import scan_to_data
+    import landmark_nav.laser.lines as lines_mod
+    params = LineParams(method=method)
+    inputs = []
+    with BagReader(Path(__file__).resolve().parents[1] / 'bags' / 'office') as reader:
+        for k, (_, _, msg) in enumerate(reader.decoded(['/scan'])):
+            if k % 40 == 0:
+                scan = scan_to_data(msg)
+                r = np.asarray(scan.ranges, dtype=float)
+                angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
+                valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+                inputs.append(segment_scan(r, angles, valid, scan.angle_increment))
+    runs = []
+    for size in (10 ** 9, -1):            # every batch on Python floats; every batch as arrays
+        for name in PY_PATHS:
+            monkeypatch.setattr(lines_mod, name, size)
+        runs.append([_line_tuples(extract_lines(c, params)) for c in inputs])
+    assert sum(map(len, runs[0])) >= 3 * len(inputs)
+    assert runs[0] == runs[1]
