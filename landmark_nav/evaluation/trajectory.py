@@ -32,7 +32,7 @@ from typing import Dict, Sequence, Tuple, Union
 
 from evo.core import metrics, sync
 from evo.core.filters import FilterException
-from evo.core.geometry import GeometryException
+from evo.core.geometry import GeometryException, umeyama_alignment
 from evo.core.trajectory import Plane, PoseTrajectory3D
 from landmark_nav.geometry import interpolate_pose
 import numpy as np
@@ -337,10 +337,7 @@ def planar_alignment(est: np.ndarray, ref: np.ndarray) -> Tuple[float, np.ndarra
     """
     a = np.asarray(est, dtype=float)[:, :2]
     b = np.asarray(ref, dtype=float)[:, :2]
-    ma, mb = a.mean(axis=0), b.mean(axis=0)
-    u, _, vt = np.linalg.svd((b - mb).T @ (a - ma))
-    rot = u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
-    t = mb - rot @ ma
+    rot, t, _ = umeyama_alignment(a.T, b.T, False)           # evo's, as e.align
     err = (a @ rot.T + t) - b
     return (math.atan2(rot[1, 0], rot[0, 0]), t,
             float(np.sqrt(np.mean(np.sum(err ** 2, axis=1)))))
