@@ -405,6 +405,44 @@ def test_a_scan_before_its_corners_makes_one_step_not_two():
         slam.destroy_node()
 
 
+def test_a_looping_bag_replays_the_stamps_of_incomplete_sets_without_late_drops():
+    """The soak in CI dropped 100 parts as late: the office bag, looping, replayed the stamps.
+
+    The sets at the first 50 stamps had gone on without their corners (discovery); when the
+    bag looped, its scans and corners at those stamps came again and were taken for late
+    parts of the sets handed on (50 scans + 50 corner sets). A part more than
+    ``max_backward_s`` older than the newest is from a restarted source: a new set.
+    """
+    t0, good = T0, GOOD_CORNER
+
+    def scan(t):
+        return make_scan(t, 'laser', -1.5, 0.01, [4.0] * 301, 0.1, 30.0)
+
+    with RosHarness() as ros:
+        slam, stamps = recording_node(ros)
+        slam._started -= 60.0  # no corner publisher, long after start: sets go on without
+        for k in range(3):
+            slam.on_odom(make_odometry(t0 + k * 100_000_000, 'odom', 'base_link',
+                                       [0.01 * k, 0.0, 0.0]))
+        slam.on_scan(scan(t0 + 50_000_000))
+        assert stamps == [t0 + 50_000_000]
+        later = t0 + 5_000_000_000
+        slam.on_odom(make_odometry(later, 'odom', 'base_link', [0.5, 0.0, 0.0]))
+        slam.on_scan(scan(later - 50_000_000))
+        assert stamps == [t0 + 50_000_000, later - 50_000_000]
+        slam.on_corners(corner_cloud(later - 50_000_000, [good]))  # the same run: late
+        assert slam.stats.dropped['late'] == 1
+        # The source restarts (the bag loops): the same stamps again, a new step.
+        for k in range(3):
+            slam.on_odom(make_odometry(t0 + k * 100_000_000, 'odom', 'base_link',
+                                       [0.01 * k, 0.0, 0.0]))
+        assert slam.resets == 1
+        slam.on_scan(scan(t0 + 50_000_000))  # was taken as late
+        assert stamps[2:] == [t0 + 50_000_000]
+        assert slam.stats.dropped_count == 1 and slam.stats.dropped['late'] == 1
+        slam.destroy_node()
+
+
 @pytest.mark.dds
 def test_path_is_bounded_and_published_at_the_display_rate():
     """The path was republished whole at every step and never trimmed (cost grew per scan)."""

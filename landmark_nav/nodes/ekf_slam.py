@@ -299,6 +299,7 @@ class EkfSlamNode(Node):
         self._publisher_seen = {}  # part -> monotonic time it last had a publisher
         self._handed = set()  # stamps of the last incomplete sets handed on
         self._handed_order = deque()
+        self._newest_part_ns = None  # newest stamp offered since the source (re)started
         self._started = time.monotonic()
         # Reused per step (publish serialises at once); only stamp, pose, covariance change.
         self._pose_msg = make_pose_with_covariance_stamped(0, self.map_frame, [0.0] * 3)
@@ -338,8 +339,14 @@ class EkfSlamNode(Node):
         self.frontend.clear()
         self._first_set_ns = None
         self.join.clear()
+        self._forget_handed()
         self._clear_path()
         self.display_stamp = None
+
+    def _forget_handed(self) -> None:
+        self._handed.clear()
+        self._handed_order.clear()
+        self._newest_part_ns = None
 
     def _clear_path(self) -> None:
         self.path_steps = deque(maxlen=self.path_max_poses)  # (stamp_ns, pose) per step
@@ -404,8 +411,16 @@ class EkfSlamNode(Node):
         """Join one part of a feature set; give the sets it completes to the front end.
 
         A part whose set already went on without it is dropped (``'late'``): processing it
-        again would make a second step at the same stamp.
+        again would make a second step at the same stamp. A part more than
+        ``max_backward_s`` older than the newest one comes from a restarted source (a bag
+        replayed in a loop gives the same stamps again): the stamps handed before it are
+        forgotten, else its sets would be taken for late parts of the last run's.
         """
+        newest = self._newest_part_ns
+        if newest is not None and newest - t > self.frontend_params.max_backward_s * 1e9:
+            self._forget_handed()
+            newest = None
+        self._newest_part_ns = t if newest is None else max(newest, t)
         if t in self._handed:
             self.stats.drop('late', f'Dropping {self._topics[part]} at {t} ns: its feature '
                             'set was processed without it (it came after the set went on)')
