@@ -172,3 +172,41 @@ def test_closed_form_fits_hold_far_from_the_stretch_centre():
             exact2 = exact
             assert abs(_fit_piece(a, b, table)[0] - exact2) <= 2e-3 * exact2
     assert worst <= 2e-3
+
+
+@pytest.mark.parametrize('quad_left', [True, False])
+def test_hinge_fit_matches_the_constrained_least_squares_fit(quad_left):
+    # _hinge_nll gets each split's continuous two-piece fit in closed form (the two free
+    # fits corrected for the meeting constraint); it must match the four-coefficient
+    # weighted least-squares fit solved directly, at every split, far from the stretch
+    # centre too. (The former normal-equation form on moments shifted to tau was off by
+    # up to 3e-3 of the NLL.)
+    from landmark_nav.road.terrain import _hinge_edge, _hinge_nll, _moment_table
+    rng = np.random.default_rng(4)
+    worst = 0.0
+    for _ in range(30):
+        n = int(rng.integers(12, 120))
+        y = np.sort(rng.uniform(-3.0, 3.0, n)) + rng.uniform(-4.0, 4.0)
+        knee = float(np.median(y))
+        z = 0.05 * np.cos(y) + np.where(y > knee, 0.1 * (y - knee), 0.0)
+        z = z + rng.normal(0.0, 0.01, n)
+        table = _moment_table(y, z, np.full(n, 1e-4))
+        t = y - 0.5 * (y[0] + y[-1])
+        v_left, v_right = rng.uniform(1e-5, 1e-3, 2)
+        ks, nll = _hinge_nll(0, n - 1, quad_left, v_left, v_right, table, 5)
+        exact = []
+        for k in ks:
+            u = t - 0.5 * (t[k - 1] + t[k])
+            left = np.arange(n) < k
+            quad = left if quad_left else ~left
+            x = np.column_stack([np.ones(n), np.where(quad, u, 0.0), np.where(quad, u * u, 0.0),
+                                 np.where(quad, 0.0, u)])
+            w = np.where(left, 1.0 / v_left, 1.0 / v_right)
+            coef = np.linalg.lstsq(x * np.sqrt(w)[:, None], z * np.sqrt(w), rcond=None)[0]
+            wss = float(np.sum(w * (z - x @ coef) ** 2))
+            exact.append(0.5 * (wss + k * math.log(v_left) + (n - k) * math.log(v_right)))
+        exact = np.array(exact)
+        worst = max(worst, float(np.max(np.abs(nll - exact) / np.maximum(np.abs(exact), 1.0))))
+        assert _hinge_edge(0, n - 1, quad_left, v_left, v_right, table, 5) == \
+            int(ks[np.argmin(exact)])
+    assert worst <= 1e-5

@@ -285,8 +285,9 @@ def _explained(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     sxx = s2 - s1 * mt
     sxz = b1 - s1 * mz
     line = b0 * mz + sxz * sxz / sxx
-    beta = (s3 - s2 * mt) / sxx                       # t^2 on t, centred
-    rt = s4 - s2 * m2 - beta * (s3 - s2 * mt)
+    sxq = s3 - s2 * mt                                # t^2 against t, centred
+    beta = sxq / sxx
+    rt = s4 - s2 * m2 - beta * sxq
     rz = b2 - s2 * mz - beta * sxz
     return line, line + rz * rz / rt
 
@@ -537,12 +538,6 @@ def _merge_pieces(pieces: list, table: np.ndarray, params: TerrainParams,
     return out
 
 
-_BINOMIAL = np.array([[math.comb(p, j) for j in range(5)] for p in range(5)], dtype=float)
-_POWER_INDEX = np.maximum(np.subtract.outer(np.arange(5), np.arange(5)), 0)
-_LOWER = np.tri(5)
-_EXP234 = np.array([2, 3, 4])[:, None]
-
-
 def _hinge_edge(first: int, last: int, quad_left: bool, v_left: float, v_right: float,
                 table: np.ndarray, min_points: int) -> int:
     """Return the reading that starts the right piece of the best continuous two-piece fit.
@@ -565,62 +560,52 @@ def _hinge_nll(first: int, last: int, quad_left: bool, v_left: float, v_right: f
                table: np.ndarray, min_points: int) -> tuple[np.ndarray, np.ndarray]:
     """Return the splits ``k`` of :func:`_hinge_edge` and their negative log-likelihoods.
 
-    The weighted least-squares fit of the four coefficients (common height at ``tau``, the
-    two slopes, the quadratic term) is solved in closed form: the straight side's slope
-    couples only to the common height, so it is eliminated first (a Schur complement) and
-    the remaining 3 x 3 system is inverted by its cofactors, all as array arithmetic over
-    the splits (no per-split matrix).
+    The continuous fit is the two sides' own least-squares fits (:func:`_explained`: the
+    quadratic on one side, the line on the other) corrected for the one constraint that
+    they meet at ``tau``. For an equality-constrained least-squares problem the weighted
+    residual sum grows by ``d^2 / (l_q / w_q + l_o / w_o)``: ``d`` is the step between the
+    two free fits at ``tau``, ``l`` each fit's leverage at ``tau`` (its value's variance
+    over the noise variance: ``1 / n + (tau - mean t)^2 / Sxx`` for the line, plus
+    ``phi2(tau)^2 / Rt`` for the quadratic's orthogonalised ``t^2`` term), ``w`` the side's
+    weight (Lagrange multiplier of the constraint; e.g. Seber and Lee, Linear Regression
+    Analysis, 2nd ed., §3.8.1). All as array arithmetic over the splits.
     """
     n = last - first + 1
     mp = min_points
-    base = table[:, first:first + 1]
-    left = table[:, first + mp:last + 2 - mp] - base                   # sums over [0, k)
-    right = (table[:, last + 1:last + 2] - base) - left
+    base = table[:9, first:first + 1]
+    left = table[:9, first + mp:last + 2 - mp] - base                  # sums over [0, k)
+    right = (table[:9, last + 1:last + 2] - base) - left
     t = table[1, first + 1:last + 2] - table[1, first:last + 1]        # t of each reading
     k = np.arange(mp, n - mp + 1)
-    c = -0.5 * (t[mp - 1:n - mp] + t[mp:n - mp + 1])                   # -tau
-    c2 = c * c
-    w_l, w_r = 1.0 / v_left, 1.0 / v_right
-    # Sums of u^p = (t - tau)^p and z u^p each side, by the binomial expansion of the sums
-    # of t^j and z t^j: the quadratic side needs p <= 4 (z: p <= 2), the straight side
-    # p <= 2 (z: p <= 1).
+    tau = 0.5 * (t[mp - 1:n - mp] + t[mp:n - mp + 1])
     quad, line = (left, right) if quad_left else (right, left)
-    w_q, w_o = (w_l, w_r) if quad_left else (w_r, w_l)
-    s0, s1, s2, s3, s4, z0, z1, z2 = quad[:8]
-    q1 = s1 + c * s0
-    q2 = s2 + 2.0 * c * s1 + c2 * s0
-    q3 = s3 + c * (3.0 * s2 + c * (3.0 * s1 + c * s0))
-    q4 = s4 + c * (4.0 * s3 + c * (6.0 * s2 + c * (4.0 * s1 + c * s0)))
-    y1 = z1 + c * z0
-    y2 = z2 + c * (2.0 * z1 + c * z0)
-    o0, o1, o2, oz0, oz1 = line[0], line[1], line[2], line[5], line[6]
-    p1 = o1 + c * o0
-    p2 = o2 + 2.0 * c * o1 + c2 * o0
-    # Normal equations: unknowns (height at tau, quadratic side's slope, its u^2 term,
-    # straight side's slope); the straight slope meets only the height.
-    g00 = w_q * s0 + w_o * o0
-    g0q, g03, g0o = w_q * q1, w_q * q2, w_o * p1
-    gqq, gq3, g33, goo = w_q * q2, w_q * q3, w_q * q4, w_o * p2
-    # A relative 1e-12 of the trace on the diagonal (a guard against singular systems).
-    reg = 1e-12 * (g00 + gqq + goo + g33)
-    g00, gqq, g33, goo = g00 + reg, gqq + reg, g33 + reg, goo + reg
-    b0 = w_q * z0 + w_o * oz0
-    bq, b3, bo = w_q * y1, w_q * y2, w_o * (oz1 + c * oz0)
-    # Eliminate the straight slope: b' G^-1 b = bo^2 / goo + b~' S^-1 b~ over the rest.
-    r = g0o / goo
-    a = g00 - r * g0o
-    x0 = b0 - r * bo
-    # The 3 x 3 (a, g0q, g03; ., gqq, gq3; ., ., g33) by its cofactors.
-    ca = gqq * g33 - gq3 * gq3
-    cb = a * g33 - g03 * g03
-    cc = a * gqq - g0q * g0q
-    cd = g03 * gq3 - g33 * g0q
-    ce = g0q * gq3 - gqq * g03
-    cf = g0q * g03 - a * gq3
-    det = a * ca + g0q * cd + g03 * ce
-    fit = bo * bo / goo + (ca * x0 * x0 + cb * bq * bq + cc * b3 * b3
-                           + 2.0 * (cd * x0 * bq + ce * x0 * b3 + cf * bq * b3)) / det
-    wss = w_l * left[8] + w_r * right[8] - fit
+    w_q, w_o = (1.0 / v_left, 1.0 / v_right) if quad_left else (1.0 / v_right, 1.0 / v_left)
+    # The quadratic side (Gram-Schmidt on its sums, as in _explained).
+    s0, s1, s2, s3, s4, b0, b1, b2, zz = quad
+    mt, mz, m2 = s1 / s0, b0 / s0, s2 / s0
+    sxx = s2 - s1 * mt
+    sxz = b1 - s1 * mz
+    sxq = s3 - s2 * mt
+    beta = sxq / sxx
+    rt = s4 - s2 * m2 - beta * sxq
+    rz = b2 - s2 * mz - beta * sxz
+    du = tau - mt
+    phi = tau * tau - m2 - beta * du                  # the orthogonalised t^2 at tau
+    a1, a2 = sxz / sxx, rz / rt
+    value_q = mz + a1 * du + a2 * phi
+    lever_q = 1.0 / s0 + du * du / sxx + phi * phi / rt
+    wss_q = zz - b0 * mz - a1 * sxz - a2 * rz
+    # The straight side.
+    o0, o1, o2, c0, c1, oz = line[[0, 1, 2, 5, 6, 8]]
+    mt, mz = o1 / o0, c0 / o0
+    sxx = o2 - o1 * mt
+    a1 = (c1 - o1 * mz) / sxx
+    du = tau - mt
+    value_o = mz + a1 * du
+    lever_o = 1.0 / o0 + du * du / sxx
+    wss_o = oz - c0 * mz - a1 * a1 * sxx
+    d = value_q - value_o
+    wss = w_q * wss_q + w_o * wss_o + d * d / (lever_q / w_q + lever_o / w_o)
     return k, 0.5 * (wss + k * math.log(v_left) + (n - k) * math.log(v_right))
 
 
@@ -871,7 +856,8 @@ def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndar
     """Filter one roughness group by width, slope and curvature; return its segment."""
     if last - first + 1 < params.min_points:
         return None
-    width = float(np.linalg.norm(p[last, :2] - p[first, :2]))          # F_w
+    (x0, y0), (x1, y1) = p[first, :2].tolist(), p[last, :2].tolist()
+    width = math.hypot(x1 - x0, y1 - y0)                               # F_w
     if width < params.min_width:
         return None
     t = s[first:last + 1] - 0.5 * (s[first] + s[last])
@@ -879,8 +865,18 @@ def _segment(first: int, last: int, p: np.ndarray, s: np.ndarray, rough: np.ndar
     slope, curvature = _quadratic_slope_curvature(t, zz)              # F_t, F_c
     if abs(slope) > params.slope_max or abs(curvature) > params.curvature_max:
         return None
-    if np.median(rough[first:last + 1]) > params.roughness_max:      # F_sigma of the piece
+    piece = rough[first:last + 1]
+    if _median(piece) > params.roughness_max:                         # F_sigma of the piece
         return None
-    return Segment(int(idx[first]), int(idx[last]), tuple(map(float, p[first, :2])),
-                   tuple(map(float, p[last, :2])), width, float(zz.mean()),
-                   float(np.mean(rough[first:last + 1])), slope, curvature)
+    n = last - first + 1
+    return Segment(int(idx[first]), int(idx[last]), (x0, y0), (x1, y1), width,
+                   float(zz.sum()) / n, float(piece.sum()) / n, slope, curvature)
+
+
+def _median(x: np.ndarray) -> float:
+    """Return ``np.median(x)`` of a non-empty array without NaN, by one partition."""
+    k = x.size // 2
+    if x.size % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return float((part[k - 1] + part[k]) / 2)
