@@ -81,7 +81,6 @@ Choices where the chapters are silent, or misprinted:
 
 from bisect import bisect_left
 from dataclasses import dataclass, field
-from itertools import accumulate
 import math
 from typing import List, Optional, Sequence, Tuple
 
@@ -791,8 +790,8 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     bounds = np.asarray(offsets).tolist()
     sizes = [b - a for a, b in zip(bounds[:-1], bounds[1:])]
     # Each run's points relative to its mean (np.mean's sum and division), and their
-    # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run are
-    # accumulated in order on Python floats (as np.cumsum in _prefix5).
+    # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run as in
+    # _prefix5, read through memory views (the search reads a few of them).
     means = np.zeros((len(sizes), 2))
     for c, (c0, n_pts) in enumerate(zip(bounds, sizes)):
         if n_pts >= least:
@@ -802,12 +801,12 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     np.multiply(mono[0], mono[0], out=mono[2])
     np.multiply(mono[1], mono[1], out=mono[3])
     np.multiply(mono[0], mono[1], out=mono[4])
-    rows = mono.tolist()
     for c0, n_pts in zip(bounds, sizes):
         if n_pts < least:
             continue
-        c1 = c0 + n_pts
-        sx, sy, sxx, syy, sxy = [list(accumulate(r[c0:c1], initial=0.0)) for r in rows]
+        pre = np.zeros((5, n_pts + 1))
+        np.cumsum(mono[:, c0:c0 + n_pts], axis=1, out=pre[:, 1:])
+        sx, sy, sxx, syy, sxy = [memoryview(r) for r in pre]
 
         def rmse(i: int, j: int) -> float:
             """Return the RMSE (eq. 21) of the TLS line through points i..j."""
@@ -869,10 +868,14 @@ class _Scan:
     whole: Optional[ScanArrays] = None  # the whole scan, when the clusters share it
     _rows: list = field(default_factory=list, repr=False)  # cache of rows()
 
-    def rows(self) -> List[List[float]]:
-        """Return ``cols`` as Python lists (computed once; for the Python-float paths)."""
+    def rows(self) -> List[memoryview]:
+        """Return the rows of ``cols`` for the Python-float paths (indexing gives floats).
+
+        Memory views, not lists: those paths read a few points of a row, and a list would
+        make a Python float of every point.
+        """
         if not self._rows:
-            self._rows.extend(self.cols.tolist())
+            self._rows.extend(memoryview(row) for row in self.cols)
         return self._rows
 
     def beams(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
