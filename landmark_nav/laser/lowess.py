@@ -165,10 +165,11 @@ def _weighted_linear(u: np.ndarray, yw: np.ndarray, w: np.ndarray,
     np.multiply(wu, u, out=terms[:, 3])
     np.multiply(wu, yw, out=terms[:, 4])
     sw, su, sy, suu, suy = _window_sums(terms)
-    det = sw * suu - su * su
+    sw_suu = sw * suu
+    det = sw_suu - su * su
     lin = (sy * suu - su * suy) / det
     mean = sy / sw
-    good_lin = det > 1e-12 * np.maximum(sw * suu, 1e-300)
+    good_lin = det > 1e-12 * np.maximum(sw_suu, 1e-300)
     out = np.where(good_lin, lin, mean)
     return np.where(np.isfinite(out) & (sw > 0.0), out, fallback)
 
