@@ -791,7 +791,7 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     sizes = [b - a for a, b in zip(bounds[:-1], bounds[1:])]
     # Each run's points relative to its mean (np.mean's sum and division), and their
     # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run as in
-    # _prefix5, read through memory views (the search reads a few of them).
+    # _prefix5, as Python floats for the search.
     means = np.zeros((len(sizes), 2))
     for c, (c0, n_pts) in enumerate(zip(bounds, sizes)):
         if n_pts >= least:
@@ -806,7 +806,7 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
             continue
         pre = np.zeros((5, n_pts + 1))
         np.cumsum(mono[:, c0:c0 + n_pts], axis=1, out=pre[:, 1:])
-        sx, sy, sxx, syy, sxy = [memoryview(r) for r in pre]
+        sx, sy, sxx, syy, sxy = pre.tolist()
 
         def rmse(i: int, j: int) -> float:
             """Return the RMSE (eq. 21) of the TLS line through points i..j."""
