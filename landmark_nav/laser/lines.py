@@ -637,6 +637,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     """
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
+    mixed = False  # pieces out of order
     lone = e <= s  # runs of one point: no chord
     if np.count_nonzero(lone):
         done_s.append(s[lone])
@@ -653,10 +654,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             done_s.append(s)
             done_e.append(e)
             break
-        if sum(cl) <= _SPLIT_PY:  # few points left: finish on Python floats
+        if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
             idx, offs = _gather(s, e)  # the pieces' points (a shared split point twice)
-            ps, pe = _split_py(px[idx].tolist(), py[idx].tolist(), tol[idx].tolist(),
-                               offs[:-1].tolist(), (offs[1:] - 1).tolist())
+            ps, pe = _split_py(px[idx], py[idx], memoryview(tol[idx]), offs[:-1].tolist(),
+                               (offs[1:] - 1).tolist())
             done_s.append(idx[ps])
             done_e.append(idx[pe])
             break
@@ -699,10 +700,13 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             if not go.size:
                 break
             s, e, k = s[go], e[go], k[go]
-        s = np.concatenate((s, k))
+        s = np.concatenate((s, k))  # pieces out of order from here on
         e = np.concatenate((k, e))
+        mixed = True
     if not done_s:
         return np.zeros((2, 0), dtype=np.int64)
+    if len(done_s) == 1 and not mixed:  # the runs' pieces, in order
+        return np.array((done_s[0], done_e[0]))
     s, e = np.concatenate(done_s), np.concatenate(done_e)
     order = np.lexsort((e, s))
     out = np.empty((2, s.size), dtype=np.int64)
@@ -714,16 +718,21 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
 # Interior points of a recursion level up to which _split_py is faster than a numpy level
 # (measured on 180- to 1081-beam scans).
 _SPLIT_PY = 150
+# Interior points of a piece up to which _split_py finds its farthest point on Python
+# floats rather than with array operations (measured).
+_SPLIT_PIECE_PY = 48
 
 
-def _split_py(xs: List[float], ys: List[float], tol: List[float], s: List[int],
+def _split_py(px: np.ndarray, py: np.ndarray, tol: Sequence[float], s: List[int],
               e: List[int]) -> Tuple[List[int], List[int]]:
-    """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, on Python floats.
+    """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, one piece at a time.
 
     The same cross products in the same order (eq. 4 distance times the chord length, the
-    first farthest point); depth first, left piece first. Returns the final pieces' first
-    and last points.
+    first farthest point), on Python floats for small pieces and as arrays for large ones;
+    depth first, left piece first. Returns the final pieces' first and last points, in
+    order.
     """
+    xs, ys = px.tolist(), py.tolist()
     out_s: List[int] = []
     out_e: List[int] = []
     stack = list(zip(s, e))
@@ -736,9 +745,21 @@ def _split_py(xs: List[float], ys: List[float], tol: List[float], s: List[int],
             continue
         x0, y0 = xs[a], ys[a]
         cx, cy = xs[b] - x0, ys[b] - y0
-        cross = [abs((x - x0) * cy - (y - y0) * cx) for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
-        cmax = max(cross)
-        k = a + 1 + cross.index(cmax)
+        if b - a - 1 <= _SPLIT_PIECE_PY:
+            cross = [abs((x - x0) * cy - (y - y0) * cx)
+                     for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
+            cmax = max(cross)
+            k = a + 1 + cross.index(cmax)
+        else:
+            cross = px[a + 1:b] - x0
+            cross *= cy
+            dy = py[a + 1:b] - y0
+            dy *= cx
+            cross -= dy
+            np.abs(cross, out=cross)
+            k = int(cross.argmax())  # the first farthest point
+            cmax = cross[k].item()
+            k += a + 1
         if cmax > tol[k] * abs(complex(cx, cy)):  # C hypot, as np.hypot
             stack.append((k, b))
             stack.append((a, k))
