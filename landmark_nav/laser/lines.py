@@ -1067,13 +1067,22 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
 
     The same operations in the same order (the fits of eqs. 8-9 from the prefix sums,
     the point tests of :func:`_z`), but only the points up to the first one within the
-    gate are tested at each end (the array version tests ``min_points`` at each end).
+    gate are tested at each end (the array version tests ``min_points`` at each end), and
+    a piece of fewer than ``min_points`` points (dropped in any case: the clean-up only
+    shortens pieces) is fitted only when it shares its split point with a longer piece,
+    whose end it may take or give; the others keep their ends, which touch no kept piece.
     """
     s_l, e_l = s.tolist(), e.tolist()
+    least = params.min_points
+    size = len(s_l)
+    big = [b - a >= least - 1 for a, b in zip(s_l, e_l)]
+    touch = [e_l[j] >= s_l[j + 1] for j in range(size - 1)]  # piece j shares its last point
+    fitted = [j for j in range(size) if big[j] or (j and touch[j - 1] and big[j - 1])
+              or (j < size - 1 and touch[j] and big[j + 1])]
     d1, d2, d3, d4, d5 = (pre.take(e + 1, axis=1) - pre.take(s, axis=1)).tolist()
     scat, a_in, b_in = [], [], []
-    for j, (a, b) in enumerate(zip(s_l, e_l)):  # _scatter
-        n = float(b - a + 1)
+    for j in fitted:  # _scatter
+        n = float(e_l[j] - s_l[j] + 1)
         cx = d1[j] / n
         cy = d2[j] / n
         ncx = n * cx
@@ -1099,15 +1108,17 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         b = rng[i] * sp_ * (ny * cp - nx * sp)
         return abs(d) / math.sqrt(max(a * a + b * b, 1e-24))
 
-    ns, ne, z_first, z_last = [], [], [], []
-    for j, (a, b) in enumerate(zip(s_l, e_l)):
-        nx, ny = nxs[j], nys[j]
-        cx, cy = scat[j]
+    ns, ne = s_l[:], e_l[:]
+    z_first, z_last = [math.inf] * size, [math.inf] * size
+    for i, j in enumerate(fitted):
+        a, b = s_l[j], e_l[j]
+        nx, ny = nxs[i], nys[i]
+        cx, cy = scat[i]
         # rho of the line relative to the scan origin (see _clean_pieces)
         rho = (cx + ox) * nx + (cy + oy) * ny - nx * ox - ny * oy
         za, zb = z(a, nx, ny, rho), z(b, nx, ny, rho)
-        z_first.append(za)
-        z_last.append(zb)
+        z_first[j] = za
+        z_last[j] = zb
         lead = 0  # leading outliers among the first `reach` points (clipped at b)
         while lead < reach and (za if lead == 0 else zb if a + lead >= b
                                 else z(a + lead, nx, ny, rho)) > gate:
@@ -1116,10 +1127,10 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         while trail < reach and (zb if trail == 0 else za if b - trail <= a
                                  else z(b - trail, nx, ny, rho)) > gate:
             trail += 1
-        ns.append(a + lead)
-        ne.append(b - trail)
+        ns[j] = a + lead
+        ne[j] = b - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
-    shared = [j for j in range(len(s_l) - 1) if e_l[j] >= s_l[j + 1] and ne[j] >= ns[j + 1]]
+    shared = [j for j in range(size - 1) if touch[j] and ne[j] >= ns[j + 1]]
     if shared:
         ne0 = ne[:]
         to_prev = [z_last[j] <= z_first[j + 1] for j in shared]
@@ -1129,7 +1140,7 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         for j, prev in zip(shared, to_prev):
             if not prev:
                 ne[j] = ns[j + 1] - 1
-    keep = [j for j in range(len(ns)) if ne[j] - ns[j] + 1 >= params.min_points]
+    keep = [j for j in range(size) if ne[j] - ns[j] + 1 >= least]
     return (np.array([ns[j] for j in keep], dtype=np.int64),
             np.array([ne[j] for j in keep], dtype=np.int64))
 
