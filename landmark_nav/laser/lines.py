@@ -853,14 +853,16 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
             a = max((k_min + k_max + 1) // 2, b1 + 1)  # the middle of the data
             while b2 > b1:
                 err = rmse(k_min, a)
-                grad = (err - rmse(k_min, max(a - step, k_min + 1))) / (step * max_err)
-                if err > max_err or grad > gmax:  # bad fit: split the recent data
-                    b2 = a - 1
-                    if grad > gmax:
+                if err > max_err:  # bad fit: split the recent data
+                    b2 = a - 1  # (the gradient would not change Max_ERR: not computed)
+                else:
+                    grad = (err - rmse(k_min, max(a - step, k_min + 1))) / (step * max_err)
+                    if grad > gmax:  # bad fit by the gradient: split, lower the threshold
+                        b2 = a - 1
                         max_err = max(min(err, max_err), lo_thr)
-                else:  # satisfied: add a split of the remainder
-                    b1 = a
-                    max_err = min(max(0.5 * (err + max_err), lo_thr), hi_thr)
+                    else:  # satisfied: add a split of the remainder
+                        b1 = a
+                        max_err = min(max(0.5 * (err + max_err), lo_thr), hi_thr)
                 a = (b1 + b2 + 1) // 2
             out.append((c0 + k_min, c0 + b1))
             k_min = b1 + 1
