@@ -1807,10 +1807,14 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     same = np.arange(first.size), first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     front = rho / cos_in - r  # how far the return lies in front of the line
+    # Only a beam in front by more than the tolerance can be in front by the margin.
+    hit = ((cos_in > 1e-9) & (front > params.see_through_tolerance)).nonzero()[0]
+    if hit.size < 2:
+        return same
+    r, cos_in = r[hit], cos_in[hit]
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
-    hit = ((cos_in > 1e-9)
-           & (front > params.see_through_tolerance + 3.0 * np.sqrt(var))).nonzero()[0]
+    hit = hit[front[hit] > params.see_through_tolerance + 3.0 * np.sqrt(var)]
     if hit.size < 2:
         return same
     fl, fb = line[hit], idx[hit]
