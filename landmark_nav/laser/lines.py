@@ -1243,17 +1243,15 @@ def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarr
     cov = f.cov * np.array(factor)[:, None, None]
     f = _Fit(f.params, f.rmse, f.count, cov)
     c00, c01, _, c11 = cov.reshape(-1, 4).T.tolist()
-    ends = np.empty((2, s.size - 1), dtype=np.int64)
-    ends[0] = e[:-1]
-    ends[1] = s[1:]
-    (x0, x1), (y0, y1), (p0, p1) = scan.cols[[_X, _Y, _PHI]].take(ends, axis=1).tolist()
-    k0, k1 = scan.cluster.take(ends).tolist()
+    xs, ys, phi = scan.rows()[_X], scan.rows()[_Y], scan.rows()[_PHI]
+    cluster = memoryview(scan.cluster)
     gap2, gap_angle, gate = params.merge_gap ** 2, params.merge_gap_angle, params.merge_chi2
     pi = math.pi
     join = []
-    for j in range(s.size - 1):
-        gx, gy = x1[j] - x0[j], y1[j] - y0[j]
-        if not (k0[j] == k1[j] or gx * gx + gy * gy <= gap2 or abs(p1[j] - p0[j]) <= gap_angle):
+    for j, (p0, p1) in enumerate(zip(e[:-1].tolist(), s[1:].tolist())):  # facing ends
+        gx, gy = xs[p1] - xs[p0], ys[p1] - ys[p0]
+        if not (cluster[p0] == cluster[p1] or gx * gx + gy * gy <= gap2
+                or abs(phi[p1] - phi[p0]) <= gap_angle):
             join.append(False)
             continue
         # _chi2 of the pair

@@ -41,8 +41,9 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray, group: np
         step = x[1:] - x[:-1]
         inner = step[(group[1:] == group[:-1]).nonzero()[0]]
         h = (max(span.tolist()) - 1) // 2
-        if not inner.size or (inner.min() > 0.0
-                              and (inner.max() - inner.min()) * (2 * h) < inner.min()):
+        smallest = inner.min() if inner.size else 0.0
+        if not inner.size or (smallest > 0.0
+                              and (inner.max() - smallest) * (2 * h) < smallest):
             return np.minimum(np.maximum(i - (k - 1) // 2, lo_g), offsets[group + 1] - k)
     kmax = max(span.tolist())
     steps = np.arange(kmax)[:, None]
