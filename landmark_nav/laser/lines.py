@@ -1081,16 +1081,17 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     touch = [e_l[j] >= s_l[j + 1] for j in range(size - 1)]  # piece j shares its last point
     fitted = [j for j in range(size) if big[j] or (j and touch[j - 1] and big[j - 1])
               or (j < size - 1 and touch[j] and big[j + 1])]
-    d1, d2, d3, d4, d5 = (pre.take(e + 1, axis=1) - pre.take(s, axis=1)).tolist()
+    p1, p2, p3, p4, p5 = [memoryview(row) for row in pre]
     scat, a_in, b_in = [], [], []
-    for j in fitted:  # _scatter
-        n = float(e_l[j] - s_l[j] + 1)
-        cx = d1[j] / n
-        cy = d2[j] / n
+    for j in fitted:  # _scatter of the sums from the prefix sums
+        a, b = s_l[j], e_l[j] + 1
+        n = float(b - a)
+        cx = (p1[b] - p1[a]) / n
+        cy = (p2[b] - p2[a]) / n
         ncx = n * cx
-        sxx = d3[j] - ncx * cx
-        syy = d4[j] - n * cy * cy
-        sxy = d5[j] - ncx * cy
+        sxx = (p3[b] - p3[a]) - ncx * cx
+        syy = (p4[b] - p4[a]) - n * cy * cy
+        sxy = (p5[b] - p5[a]) - ncx * cy
         scat.append((cx, cy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
@@ -1870,12 +1871,9 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     gives numpy's inf / nan).
     """
     ox, oy = scan.origin
-    ends = np.empty((2, first.size), dtype=np.int64)
-    ends[0] = first
-    ends[1] = last
-    (x0s, x1s), (y0s, y1s), _, (c0s, c1s), (s0s, s1s) = scan.cols[:_TOL].take(
-        ends, axis=1).tolist()
-    b0s, b1s = scan.beam.take(ends).tolist()
+    xs, ys, _, cps, sps = scan.rows()[:_TOL]
+    beam = memoryview(scan.beam)
+    firsts, lasts = first.tolist(), last.tolist()
     rhos, alphas, nxs, nys = f.params.tolist()
     rmses, counts = f.rmse.tolist(), f.count.tolist()
     covs = f.cov.reshape(-1, 4).tolist()
@@ -1888,8 +1886,9 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
                 and isfinite(cov[3])):
             continue
         ends_j = []
-        for x, y, cp, sp in ((x0s[j] + ox, y0s[j] + oy, c0s[j], s0s[j]),
-                             (x1s[j] + ox, y1s[j] + oy, c1s[j], s1s[j])):
+        i0, i1 = firsts[j], lasts[j]
+        for x, y, cp, sp in ((xs[i0] + ox, ys[i0] + oy, cps[i0], sps[i0]),
+                             (xs[i1] + ox, ys[i1] + oy, cps[i1], sps[i1])):
             d = x * nx + y * ny - rho
             px, py = x - d * nx, y - d * ny
             t = rho / (cp * nx + sp * ny)
@@ -1913,7 +1912,7 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     pts = np.array(flat).reshape(-1, 2, 2)
     cov = f.cov.take(keep, axis=0)
     return [LineSegment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
-                        cov[i], b0s[j], b1s[j]) for i, j in enumerate(keep)]
+                        cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
 
 
 def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
