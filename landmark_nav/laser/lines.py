@@ -1432,8 +1432,15 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     first to the line before it. Returns the new sums, first, last and whether any grew.
     """
     gate = params.trim_sigma
+    if not math.isfinite(gate):
+        return sums, first, last, False
     n_pts = scan.x.size
     n_lines = first.size
+    if n_lines <= _GROW_PY:  # (an empty gap gives no run)
+        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
+        if not (any(run_f) or any(run_b)):
+            return sums, first, last, False
+        return _grown(feats, sums, first, last, np.array((run_f, run_b), dtype=np.int64))
     lo = np.empty(n_lines + 1, dtype=np.int64)  # gap k: points lo[k] .. hi[k] - 1, between
     hi = np.empty(n_lines + 1, dtype=np.int64)  # line k - 1 and line k
     lo[0] = 0
@@ -1442,14 +1449,8 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     hi[-1] = n_pts
     size = hi - lo
     gaps = (size > 0).nonzero()[0]
-    if not gaps.size or not math.isfinite(gate):
+    if not gaps.size:
         return sums, first, last, False
-    if n_lines <= _GROW_PY:
-        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
-        if not (any(run_f) or any(run_b)):
-            return sums, first, last, False
-        grow = np.array((run_f, run_b), dtype=np.int64)
-        return _grown(feats, sums, first, last, lo, grow)
     size_g = size[gaps]
     starts = size_g.cumsum() - size_g
     pos = np.arange(starts[-1] + size_g[-1])
@@ -1484,7 +1485,7 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     grow = np.zeros((2, n_lines + 1), dtype=np.int64)  # by gap: forward, backward
     grow[0, gaps] = run_f
     grow[1, gaps] = run_b
-    return _grown(feats, sums, first, last, lo, grow)
+    return _grown(feats, sums, first, last, grow)
 
 
 # Lines up to which _grow_runs_py is faster than the array operations (measured).
@@ -1535,7 +1536,7 @@ def _grow_runs_py(scan: _Scan, f: _Fit, first: List[int], last: List[int],
 
 
 def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndarray,
-           lo: np.ndarray, grow: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+           grow: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Return :func:`_grow`'s sums, first, last, True for the runs ``grow`` (2, gaps)."""
     n_lines = first.size
     new_first, new_last = first - grow[1, :-1], last + grow[0, 1:]
@@ -1543,7 +1544,7 @@ def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndar
     add_lo = np.empty(2 * n_lines, dtype=np.int64)
     add_hi = np.empty(2 * n_lines, dtype=np.int64)  # exclusive
     add_lo[0::2] = new_first
-    add_lo[1::2] = lo[1:]
+    np.add(last, 1, out=add_lo[1::2])
     add_hi[0::2] = first
     np.add(new_last, 1, out=add_hi[1::2])
     nonempty = add_hi > add_lo
