@@ -434,8 +434,8 @@ def test_carmen_logs(name):
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=0)
 
 
-PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_CLEAN_PY', '_PAIRS_PY', '_GROW_PY',
-            '_NOISE_PY', '_BUILD_PY')
+PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_SPLIT_PIECE_PY', '_CLEAN_PY', '_PAIRS_PY',
+            '_GROW_PY', '_NOISE_PY', '_BUILD_PY')
 
 
 def _line_tuples(lines):

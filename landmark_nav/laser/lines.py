@@ -81,7 +81,6 @@ Choices where the chapters are silent, or misprinted:
 
 from bisect import bisect_left
 from dataclasses import dataclass, field
-from itertools import accumulate
 import math
 from typing import List, Optional, Sequence, Tuple
 
@@ -638,6 +637,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     """
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
+    mixed = False  # pieces out of order
     lone = e <= s  # runs of one point: no chord
     if np.count_nonzero(lone):
         done_s.append(s[lone])
@@ -654,10 +654,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             done_s.append(s)
             done_e.append(e)
             break
-        if sum(cl) <= _SPLIT_PY:  # few points left: finish on Python floats
+        if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
             idx, offs = _gather(s, e)  # the pieces' points (a shared split point twice)
-            ps, pe = _split_py(px[idx].tolist(), py[idx].tolist(), tol[idx].tolist(),
-                               offs[:-1].tolist(), (offs[1:] - 1).tolist())
+            ps, pe = _split_py(px[idx], py[idx], memoryview(tol[idx]), offs[:-1].tolist(),
+                               (offs[1:] - 1).tolist())
             done_s.append(idx[ps])
             done_e.append(idx[pe])
             break
@@ -700,10 +700,13 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             if not go.size:
                 break
             s, e, k = s[go], e[go], k[go]
-        s = np.concatenate((s, k))
+        s = np.concatenate((s, k))  # pieces out of order from here on
         e = np.concatenate((k, e))
+        mixed = True
     if not done_s:
         return np.zeros((2, 0), dtype=np.int64)
+    if len(done_s) == 1 and not mixed:  # the runs' pieces, in order
+        return np.array((done_s[0], done_e[0]))
     s, e = np.concatenate(done_s), np.concatenate(done_e)
     order = np.lexsort((e, s))
     out = np.empty((2, s.size), dtype=np.int64)
@@ -715,16 +718,21 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
 # Interior points of a recursion level up to which _split_py is faster than a numpy level
 # (measured on 180- to 1081-beam scans).
 _SPLIT_PY = 150
+# Interior points of a piece up to which _split_py finds its farthest point on Python
+# floats rather than with array operations (measured).
+_SPLIT_PIECE_PY = 48
 
 
-def _split_py(xs: List[float], ys: List[float], tol: List[float], s: List[int],
+def _split_py(px: np.ndarray, py: np.ndarray, tol: Sequence[float], s: List[int],
               e: List[int]) -> Tuple[List[int], List[int]]:
-    """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, on Python floats.
+    """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, one piece at a time.
 
     The same cross products in the same order (eq. 4 distance times the chord length, the
-    first farthest point); depth first, left piece first. Returns the final pieces' first
-    and last points.
+    first farthest point), on Python floats for small pieces and as arrays for large ones;
+    depth first, left piece first. Returns the final pieces' first and last points, in
+    order.
     """
+    xs, ys = px.tolist(), py.tolist()
     out_s: List[int] = []
     out_e: List[int] = []
     stack = list(zip(s, e))
@@ -737,9 +745,21 @@ def _split_py(xs: List[float], ys: List[float], tol: List[float], s: List[int],
             continue
         x0, y0 = xs[a], ys[a]
         cx, cy = xs[b] - x0, ys[b] - y0
-        cross = [abs((x - x0) * cy - (y - y0) * cx) for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
-        cmax = max(cross)
-        k = a + 1 + cross.index(cmax)
+        if b - a - 1 <= _SPLIT_PIECE_PY:
+            cross = [abs((x - x0) * cy - (y - y0) * cx)
+                     for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
+            cmax = max(cross)
+            k = a + 1 + cross.index(cmax)
+        else:
+            cross = px[a + 1:b] - x0
+            cross *= cy
+            dy = py[a + 1:b] - y0
+            dy *= cx
+            cross -= dy
+            np.abs(cross, out=cross)
+            k = int(cross.argmax())  # the first farthest point
+            cmax = cross[k].item()
+            k += a + 1
         if cmax > tol[k] * abs(complex(cx, cy)):  # C hypot, as np.hypot
             stack.append((k, b))
             stack.append((a, k))
@@ -791,8 +811,8 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     bounds = np.asarray(offsets).tolist()
     sizes = [b - a for a, b in zip(bounds[:-1], bounds[1:])]
     # Each run's points relative to its mean (np.mean's sum and division), and their
-    # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run are
-    # accumulated in order on Python floats (as np.cumsum in _prefix5).
+    # monomials x, y, x^2, y^2, xy, all runs in one pass; the prefix sums of a run as in
+    # _prefix5, as Python floats for the search.
     means = np.zeros((len(sizes), 2))
     for c, (c0, n_pts) in enumerate(zip(bounds, sizes)):
         if n_pts >= least:
@@ -802,12 +822,12 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
     np.multiply(mono[0], mono[0], out=mono[2])
     np.multiply(mono[1], mono[1], out=mono[3])
     np.multiply(mono[0], mono[1], out=mono[4])
-    rows = mono.tolist()
     for c0, n_pts in zip(bounds, sizes):
         if n_pts < least:
             continue
-        c1 = c0 + n_pts
-        sx, sy, sxx, syy, sxy = [list(accumulate(r[c0:c1], initial=0.0)) for r in rows]
+        pre = np.zeros((5, n_pts + 1))
+        np.cumsum(mono[:, c0:c0 + n_pts], axis=1, out=pre[:, 1:])
+        sx, sy, sxx, syy, sxy = pre.tolist()
 
         def rmse(i: int, j: int) -> float:
             """Return the RMSE (eq. 21) of the TLS line through points i..j."""
@@ -833,14 +853,16 @@ def alfa_pieces(xy: np.ndarray, offsets: np.ndarray, params: LineParams) -> np.n
             a = max((k_min + k_max + 1) // 2, b1 + 1)  # the middle of the data
             while b2 > b1:
                 err = rmse(k_min, a)
-                grad = (err - rmse(k_min, max(a - step, k_min + 1))) / (step * max_err)
-                if err > max_err or grad > gmax:  # bad fit: split the recent data
-                    b2 = a - 1
-                    if grad > gmax:
+                if err > max_err:  # bad fit: split the recent data
+                    b2 = a - 1  # (the gradient would not change Max_ERR: not computed)
+                else:
+                    grad = (err - rmse(k_min, max(a - step, k_min + 1))) / (step * max_err)
+                    if grad > gmax:  # bad fit by the gradient: split, lower the threshold
+                        b2 = a - 1
                         max_err = max(min(err, max_err), lo_thr)
-                else:  # satisfied: add a split of the remainder
-                    b1 = a
-                    max_err = min(max(0.5 * (err + max_err), lo_thr), hi_thr)
+                    else:  # satisfied: add a split of the remainder
+                        b1 = a
+                        max_err = min(max(0.5 * (err + max_err), lo_thr), hi_thr)
                 a = (b1 + b2 + 1) // 2
             out.append((c0 + k_min, c0 + b1))
             k_min = b1 + 1
@@ -869,10 +891,14 @@ class _Scan:
     whole: Optional[ScanArrays] = None  # the whole scan, when the clusters share it
     _rows: list = field(default_factory=list, repr=False)  # cache of rows()
 
-    def rows(self) -> List[List[float]]:
-        """Return ``cols`` as Python lists (computed once; for the Python-float paths)."""
+    def rows(self) -> List[memoryview]:
+        """Return the rows of ``cols`` for the Python-float paths (indexing gives floats).
+
+        Memory views, not lists: those paths read a few points of a row, and a list would
+        make a Python float of every point.
+        """
         if not self._rows:
-            self._rows.extend(self.cols.tolist())
+            self._rows.extend(memoryview(row) for row in self.cols)
         return self._rows
 
     def beams(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -1043,19 +1069,29 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
 
     The same operations in the same order (the fits of eqs. 8-9 from the prefix sums,
     the point tests of :func:`_z`), but only the points up to the first one within the
-    gate are tested at each end (the array version tests ``min_points`` at each end).
+    gate are tested at each end (the array version tests ``min_points`` at each end), and
+    a piece of fewer than ``min_points`` points (dropped in any case: the clean-up only
+    shortens pieces) is fitted only when it shares its split point with a longer piece,
+    whose end it may take or give; the others keep their ends, which touch no kept piece.
     """
     s_l, e_l = s.tolist(), e.tolist()
-    d1, d2, d3, d4, d5 = (pre.take(e + 1, axis=1) - pre.take(s, axis=1)).tolist()
+    least = params.min_points
+    size = len(s_l)
+    big = [b - a >= least - 1 for a, b in zip(s_l, e_l)]
+    touch = [e_l[j] >= s_l[j + 1] for j in range(size - 1)]  # piece j shares its last point
+    fitted = [j for j in range(size) if big[j] or (j and touch[j - 1] and big[j - 1])
+              or (j < size - 1 and touch[j] and big[j + 1])]
+    p1, p2, p3, p4, p5 = [memoryview(row) for row in pre]
     scat, a_in, b_in = [], [], []
-    for j, (a, b) in enumerate(zip(s_l, e_l)):  # _scatter
-        n = float(b - a + 1)
-        cx = d1[j] / n
-        cy = d2[j] / n
+    for j in fitted:  # _scatter of the sums from the prefix sums
+        a, b = s_l[j], e_l[j] + 1
+        n = float(b - a)
+        cx = (p1[b] - p1[a]) / n
+        cy = (p2[b] - p2[a]) / n
         ncx = n * cx
-        sxx = d3[j] - ncx * cx
-        syy = d4[j] - n * cy * cy
-        sxy = d5[j] - ncx * cy
+        sxx = (p3[b] - p3[a]) - ncx * cx
+        syy = (p4[b] - p4[a]) - n * cy * cy
+        sxy = (p5[b] - p5[a]) - ncx * cy
         scat.append((cx, cy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
@@ -1075,15 +1111,17 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         b = rng[i] * sp_ * (ny * cp - nx * sp)
         return abs(d) / math.sqrt(max(a * a + b * b, 1e-24))
 
-    ns, ne, z_first, z_last = [], [], [], []
-    for j, (a, b) in enumerate(zip(s_l, e_l)):
-        nx, ny = nxs[j], nys[j]
-        cx, cy = scat[j]
+    ns, ne = s_l[:], e_l[:]
+    z_first, z_last = [math.inf] * size, [math.inf] * size
+    for i, j in enumerate(fitted):
+        a, b = s_l[j], e_l[j]
+        nx, ny = nxs[i], nys[i]
+        cx, cy = scat[i]
         # rho of the line relative to the scan origin (see _clean_pieces)
         rho = (cx + ox) * nx + (cy + oy) * ny - nx * ox - ny * oy
         za, zb = z(a, nx, ny, rho), z(b, nx, ny, rho)
-        z_first.append(za)
-        z_last.append(zb)
+        z_first[j] = za
+        z_last[j] = zb
         lead = 0  # leading outliers among the first `reach` points (clipped at b)
         while lead < reach and (za if lead == 0 else zb if a + lead >= b
                                 else z(a + lead, nx, ny, rho)) > gate:
@@ -1092,10 +1130,10 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         while trail < reach and (zb if trail == 0 else za if b - trail <= a
                                  else z(b - trail, nx, ny, rho)) > gate:
             trail += 1
-        ns.append(a + lead)
-        ne.append(b - trail)
+        ns[j] = a + lead
+        ne[j] = b - trail
     # A split point shared by consecutive pieces goes to the piece it fits better.
-    shared = [j for j in range(len(s_l) - 1) if e_l[j] >= s_l[j + 1] and ne[j] >= ns[j + 1]]
+    shared = [j for j in range(size - 1) if touch[j] and ne[j] >= ns[j + 1]]
     if shared:
         ne0 = ne[:]
         to_prev = [z_last[j] <= z_first[j + 1] for j in shared]
@@ -1105,7 +1143,7 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         for j, prev in zip(shared, to_prev):
             if not prev:
                 ne[j] = ns[j + 1] - 1
-    keep = [j for j in range(len(ns)) if ne[j] - ns[j] + 1 >= params.min_points]
+    keep = [j for j in range(size) if ne[j] - ns[j] + 1 >= least]
     return (np.array([ns[j] for j in keep], dtype=np.int64),
             np.array([ne[j] for j in keep], dtype=np.int64))
 
@@ -1206,17 +1244,15 @@ def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarr
     cov = f.cov * np.array(factor)[:, None, None]
     f = _Fit(f.params, f.rmse, f.count, cov)
     c00, c01, _, c11 = cov.reshape(-1, 4).T.tolist()
-    ends = np.empty((2, s.size - 1), dtype=np.int64)
-    ends[0] = e[:-1]
-    ends[1] = s[1:]
-    (x0, x1), (y0, y1), (p0, p1) = scan.cols[[_X, _Y, _PHI]].take(ends, axis=1).tolist()
-    k0, k1 = scan.cluster.take(ends).tolist()
+    xs, ys, phi = scan.rows()[_X], scan.rows()[_Y], scan.rows()[_PHI]
+    cluster = memoryview(scan.cluster)
     gap2, gap_angle, gate = params.merge_gap ** 2, params.merge_gap_angle, params.merge_chi2
     pi = math.pi
     join = []
-    for j in range(s.size - 1):
-        gx, gy = x1[j] - x0[j], y1[j] - y0[j]
-        if not (k0[j] == k1[j] or gx * gx + gy * gy <= gap2 or abs(p1[j] - p0[j]) <= gap_angle):
+    for j, (p0, p1) in enumerate(zip(e[:-1].tolist(), s[1:].tolist())):  # facing ends
+        gx, gy = xs[p1] - xs[p0], ys[p1] - ys[p0]
+        if not (cluster[p0] == cluster[p1] or gx * gx + gy * gy <= gap2
+                or abs(phi[p1] - phi[p0]) <= gap_angle):
             join.append(False)
             continue
         # _chi2 of the pair
@@ -1396,8 +1432,15 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     first to the line before it. Returns the new sums, first, last and whether any grew.
     """
     gate = params.trim_sigma
+    if not math.isfinite(gate):
+        return sums, first, last, False
     n_pts = scan.x.size
     n_lines = first.size
+    if n_lines <= _GROW_PY:  # (an empty gap gives no run)
+        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
+        if not (any(run_f) or any(run_b)):
+            return sums, first, last, False
+        return _grown(feats, sums, first, last, np.array((run_f, run_b), dtype=np.int64))
     lo = np.empty(n_lines + 1, dtype=np.int64)  # gap k: points lo[k] .. hi[k] - 1, between
     hi = np.empty(n_lines + 1, dtype=np.int64)  # line k - 1 and line k
     lo[0] = 0
@@ -1406,14 +1449,8 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     hi[-1] = n_pts
     size = hi - lo
     gaps = (size > 0).nonzero()[0]
-    if not gaps.size or not math.isfinite(gate):
+    if not gaps.size:
         return sums, first, last, False
-    if n_lines <= _GROW_PY:
-        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
-        if not (any(run_f) or any(run_b)):
-            return sums, first, last, False
-        grow = np.array((run_f, run_b), dtype=np.int64)
-        return _grown(feats, sums, first, last, lo, grow)
     size_g = size[gaps]
     starts = size_g.cumsum() - size_g
     pos = np.arange(starts[-1] + size_g[-1])
@@ -1448,7 +1485,7 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     grow = np.zeros((2, n_lines + 1), dtype=np.int64)  # by gap: forward, backward
     grow[0, gaps] = run_f
     grow[1, gaps] = run_b
-    return _grown(feats, sums, first, last, lo, grow)
+    return _grown(feats, sums, first, last, grow)
 
 
 # Lines up to which _grow_runs_py is faster than the array operations (measured).
@@ -1499,7 +1536,7 @@ def _grow_runs_py(scan: _Scan, f: _Fit, first: List[int], last: List[int],
 
 
 def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndarray,
-           lo: np.ndarray, grow: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+           grow: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Return :func:`_grow`'s sums, first, last, True for the runs ``grow`` (2, gaps)."""
     n_lines = first.size
     new_first, new_last = first - grow[1, :-1], last + grow[0, 1:]
@@ -1507,7 +1544,7 @@ def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndar
     add_lo = np.empty(2 * n_lines, dtype=np.int64)
     add_hi = np.empty(2 * n_lines, dtype=np.int64)  # exclusive
     add_lo[0::2] = new_first
-    add_lo[1::2] = lo[1:]
+    np.add(last, 1, out=add_lo[1::2])
     add_hi[0::2] = first
     np.add(new_last, 1, out=add_hi[1::2])
     nonempty = add_hi > add_lo
@@ -1770,10 +1807,14 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     same = np.arange(first.size), first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     front = rho / cos_in - r  # how far the return lies in front of the line
+    # Only a beam in front by more than the tolerance can be in front by the margin.
+    hit = ((cos_in > 1e-9) & (front > params.see_through_tolerance)).nonzero()[0]
+    if hit.size < 2:
+        return same
+    r, cos_in = r[hit], cos_in[hit]
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
-    hit = ((cos_in > 1e-9)
-           & (front > params.see_through_tolerance + 3.0 * np.sqrt(var))).nonzero()[0]
+    hit = hit[front[hit] > params.see_through_tolerance + 3.0 * np.sqrt(var)]
     if hit.size < 2:
         return same
     fl, fb = line[hit], idx[hit]
@@ -1831,12 +1872,9 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     gives numpy's inf / nan).
     """
     ox, oy = scan.origin
-    ends = np.empty((2, first.size), dtype=np.int64)
-    ends[0] = first
-    ends[1] = last
-    (x0s, x1s), (y0s, y1s), _, (c0s, c1s), (s0s, s1s) = scan.cols[:_TOL].take(
-        ends, axis=1).tolist()
-    b0s, b1s = scan.beam.take(ends).tolist()
+    xs, ys, _, cps, sps = scan.rows()[:_TOL]
+    beam = memoryview(scan.beam)
+    firsts, lasts = first.tolist(), last.tolist()
     rhos, alphas, nxs, nys = f.params.tolist()
     rmses, counts = f.rmse.tolist(), f.count.tolist()
     covs = f.cov.reshape(-1, 4).tolist()
@@ -1849,8 +1887,9 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
                 and isfinite(cov[3])):
             continue
         ends_j = []
-        for x, y, cp, sp in ((x0s[j] + ox, y0s[j] + oy, c0s[j], s0s[j]),
-                             (x1s[j] + ox, y1s[j] + oy, c1s[j], s1s[j])):
+        i0, i1 = firsts[j], lasts[j]
+        for x, y, cp, sp in ((xs[i0] + ox, ys[i0] + oy, cps[i0], sps[i0]),
+                             (xs[i1] + ox, ys[i1] + oy, cps[i1], sps[i1])):
             d = x * nx + y * ny - rho
             px, py = x - d * nx, y - d * ny
             t = rho / (cp * nx + sp * ny)
@@ -1874,7 +1913,7 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     pts = np.array(flat).reshape(-1, 2, 2)
     cov = f.cov.take(keep, axis=0)
     return [LineSegment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
-                        cov[i], b0s[j], b1s[j]) for i, j in enumerate(keep)]
+                        cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
 
 
 def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,

@@ -20,16 +20,16 @@ from typing import Optional
 import numpy as np
 
 
-def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray) -> np.ndarray:
+def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray, group: np.ndarray
+                 ) -> np.ndarray:
     """Return (N,) the first index of the ``span`` nearest neighbours of every x (sorted x).
 
-    For sorted x the k nearest neighbours of ``x_i`` are a contiguous window; of the
-    ``k`` windows containing ``i`` the one with the smallest largest distance wins (the
-    first one on ties). Candidates are laid out (k, N), one row per candidate start.
+    ``group`` (N,) is the group of every x. For sorted x the k nearest neighbours of
+    ``x_i`` are a contiguous window; of the ``k`` windows containing ``i`` the one with the
+    smallest largest distance wins (the first one on ties). Candidates are laid out (k, N),
+    one row per candidate start.
     """
     n = x.shape[0]
-    sizes = offsets[1:] - offsets[:-1]
-    group = np.arange(sizes.size).repeat(sizes)
     lo_g = offsets[group]
     k = span[group]
     i = np.arange(n)
@@ -41,8 +41,9 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray) -> np.nda
         step = x[1:] - x[:-1]
         inner = step[(group[1:] == group[:-1]).nonzero()[0]]
         h = (max(span.tolist()) - 1) // 2
-        if not inner.size or (inner.min() > 0.0
-                              and (inner.max() - inner.min()) * (2 * h) < inner.min()):
+        smallest = inner.min() if inner.size else 0.0
+        if not inner.size or (smallest > 0.0
+                              and (inner.max() - smallest) * (2 * h) < smallest):
             return np.minimum(np.maximum(i - (k - 1) // 2, lo_g), offsets[group + 1] - k)
     kmax = max(span.tolist())
     steps = np.arange(kmax)[:, None]
@@ -58,15 +59,33 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray) -> np.nda
     return cand[reach.argmin(axis=0), i]
 
 
-def _group_median(values: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Return the median of each group ``values[offsets[g]:offsets[g + 1]]`` (vectorised)."""
-    sizes = offsets[1:] - offsets[:-1]
-    group = np.arange(sizes.size).repeat(sizes)
-    order = np.lexsort((values, group))
-    s = values[order]
-    lo = offsets[:-1] + (sizes - 1) // 2
-    hi = offsets[:-1] + sizes // 2
-    return 0.5 * (s[lo] + s[hi])
+class _Groups:
+    """Where the values of the groups go in a (groups, largest group) array (internal).
+
+    ``cell`` (N,) is the flat position of every value, ``lo`` and ``hi`` (G,) are the flat
+    positions of each group's middle values once its row is sorted (equal for odd sizes).
+    """
+
+    __slots__ = ('shape', 'cell', 'lo', 'hi')
+
+    def __init__(self, offsets: np.ndarray, group: np.ndarray) -> None:
+        """Lay out the groups ``offsets`` (G + 1,); ``group`` (N,) is the group of each value."""
+        sizes = offsets[1:] - offsets[:-1]
+        width = max(sizes.tolist())
+        self.shape = (sizes.size, width)
+        row = np.arange(0, sizes.size * width, width)
+        self.cell = np.arange(group.size) + (row - offsets[:-1])[group]
+        self.lo = row + (sizes - 1) // 2
+        self.hi = row + sizes // 2
+
+
+def _group_median(values: np.ndarray, groups: _Groups) -> np.ndarray:
+    """Return the median of each group of ``values`` (all groups sorted in one call)."""
+    rows = np.full(groups.shape, np.nan)  # padding sorts last (after any nan value)
+    rows.ravel()[groups.cell] = values
+    rows.sort(axis=1)
+    flat = rows.ravel()
+    return 0.5 * (flat[groups.lo] + flat[groups.hi])
 
 
 def lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int = 9,
@@ -102,27 +121,31 @@ def _lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int,
     n = x.shape[0]
     sizes = offsets[1:] - offsets[:-1]
     k_g = np.minimum(sizes, int(span))
-    starts = _knn_windows(x, offsets, k_g)
     group = np.arange(sizes.size).repeat(sizes)
+    starts = _knn_windows(x, offsets, k_g, group)
     k = k_g[group]
-    kmax = max(k_g.tolist())
+    kmin, kmax = min(k_g.tolist()), max(k_g.tolist())
     # The windows are laid out (kmax, N): column i holds the neighbours of x_i, and the
     # reductions over a window run over rows (fast on a few rows; see _window_sums).
     cols = np.arange(kmax)[:, None]
-    in_win = cols < k
+    in_win = cols < k if kmin < kmax else None  # None: every window has kmax points
     idx = np.minimum(starts + cols, n - 1)
     u = x[idx] - x  # predictor relative to x_i, so the fit at x_i is the intercept
-    u = np.where(in_win, u, 0.0)
+    if in_win is not None:
+        u = np.where(in_win, u, 0.0)
     yw = y[idx]
     dist = np.abs(u)  # 0 outside the window
     d = dist.max(axis=0)  # d(x): distance to the most distant neighbour
     ratio = np.where(d > 0.0, dist / d, 0.0)
-    w1 = np.where(in_win, (1.0 - ratio ** 3) ** 3, 0.0)  # eq. 8, tricube
+    w1 = (1.0 - ratio ** 3) ** 3  # eq. 8, tricube
+    if in_win is not None:
+        w1 = np.where(in_win, w1, 0.0)
     fit = _weighted_linear(u, yw, w1, y)
     scale = float(np.abs(y).max()) + 1.0
+    groups = _Groups(offsets, group) if iterations else None
     for _ in range(int(iterations)):
         res = y - fit
-        mad = _group_median(np.abs(res), offsets)  # M of eq. 9
+        mad = _group_median(np.abs(res), groups)  # M of eq. 9
         six_m = 6.0 * np.maximum(mad, 1e-12 * scale)[group]
         q = res / six_m
         w2 = np.where(np.abs(q) < 1.0, (1.0 - q * q) ** 2, 0.0)  # eq. 9, bisquare
@@ -143,10 +166,11 @@ def _weighted_linear(u: np.ndarray, yw: np.ndarray, w: np.ndarray,
     np.multiply(wu, u, out=terms[:, 3])
     np.multiply(wu, yw, out=terms[:, 4])
     sw, su, sy, suu, suy = _window_sums(terms)
-    det = sw * suu - su * su
+    sw_suu = sw * suu
+    det = sw_suu - su * su
     lin = (sy * suu - su * suy) / det
     mean = sy / sw
-    good_lin = det > 1e-12 * np.maximum(sw * suu, 1e-300)
+    good_lin = det > 1e-12 * np.maximum(sw_suu, 1e-300)
     out = np.where(good_lin, lin, mean)
     return np.where(np.isfinite(out) & (sw > 0.0), out, fallback)
 
