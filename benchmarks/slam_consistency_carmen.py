@@ -4,7 +4,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
         [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
-        [--jacobians standard|observability]
+        [--jacobians standard|observability|observability_gain|first_estimates]
         [--joint-probability P] [--drift MODEL] [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
@@ -38,6 +38,9 @@ log:
   [m], against ``ate_none``, the RMSE without alignment.
 * ``jump5``: share of the squared per-step translation error (relative motion against the
   reference's) that the worst 5 % of steps carry (what the RPE over 1 m is made of).
+* ``rpe`` / ``odo_rpe``: RPE over 1 m (translation RMSE [m]) of the filter and of the
+  odometry, and ``odo_se2``: the odometry's SE(2)-aligned ATE RMSE [m], as
+  ``benchmarks/slam_landmarks_carmen.py`` computes them (``evaluate_bag``'s evo metrics).
 """
 
 import argparse
@@ -53,14 +56,16 @@ from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.odometry_drift import odometry_window_nees  # noqa: E402
 from landmark_nav.evaluation.slam import (bag_odometry_noise,  # noqa: E402
                                           ellipse_share, run_slam, scan_features)
-from landmark_nav.evaluation.trajectory import planar_alignment  # noqa: E402
+from landmark_nav.evaluation.trajectory import (ate, planar_alignment, rpe,  # noqa: E402
+                                                Trajectory)
 from landmark_nav.geometry import relative  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.laser.lines import LineParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
-from landmark_nav.slam.ekf_slam import LINE, odometry_noise, SlamParams  # noqa: E402
+from landmark_nav.slam.ekf_slam import (JACOBIANS, LINE, odometry_noise,  # noqa: E402
+                                        SlamParams)
 from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
 from landmark_nav.slam.line_landmarks import (line_end_covariance,  # noqa: E402
                                               line_initialization, lines_to_observations)
@@ -136,6 +141,9 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
     sq = np.sort(step ** 2)[::-1]
     odo10 = odometry_nees(scenario, noise, 10.0)
     rot, _, ate_se2 = planar_alignment(run.poses, run.truth)
+    ref = Trajectory.from_planar(run.stamps, run.truth)
+    est = Trajectory.from_planar(run.stamps, run.poses)
+    odo_traj = Trajectory.from_planar(run.stamps, run.odometry)
     return {'odo_nees': float(odo.mean()), 'odo_out': float(np.mean(odo > chi2_gate(3, 0.95))),
             'odo_nees10': float(odo10.mean()) if odo10.size else math.nan,
             'line_m2': float(np.median(m2)) if m2 else math.nan,
@@ -147,7 +155,9 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
             'ellipse95': ellipse_share(run),
             'rot_deg': math.degrees(rot), 'ate_se2': ate_se2,
             'ate_none': float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
-            'jump5': float(sq[:max(1, len(sq) // 20)].sum() / sq.sum())}
+            'jump5': float(sq[:max(1, len(sq) // 20)].sum() / sq.sum()),
+            'rpe': rpe(est, ref, 1.0)['rmse'], 'odo_rpe': rpe(odo_traj, ref, 1.0)['rmse'],
+            'odo_se2': ate(odo_traj, ref, 'se2')['rmse']}
 
 
 def main() -> int:
@@ -159,7 +169,7 @@ def main() -> int:
     ap.add_argument('--line-floor', type=float, default=None)
     ap.add_argument('--line-residual-factor', type=float, default=None)
     ap.add_argument('--reject-ambiguous', action='store_true', default=None)
-    ap.add_argument('--jacobians', default=None, choices=['standard', 'observability'])
+    ap.add_argument('--jacobians', default=None, choices=JACOBIANS)
     ap.add_argument('--joint-probability', type=float, default=None)
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
@@ -177,7 +187,8 @@ def main() -> int:
              'joint_probability': args.joint_probability}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
-            'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5')
+            'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5',
+            'rpe', 'odo_rpe', 'odo_se2')
     print('log ' + ' '.join(keys))
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.logs:

@@ -5,7 +5,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_landmarks_carmen.py [--landmarks corners
         lines both] [--association icnn] [--prune-misses N] [--seed S ...]
         [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
-        [--position-floor M] [--jacobians standard|observability] [--joint-probability P]
+        [--position-floor M] [--jacobians J] [--joint-probability P]
         [--out DIR] [LOG ...]
 
 Each log is imported with ``landmark_nav import`` defaults (synthetic ``pioneer`` drift,
@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.slam import evaluate_bag  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
-from landmark_nav.slam.ekf_slam import SlamParams  # noqa: E402
+from landmark_nav.slam.ekf_slam import JACOBIANS, SlamParams  # noqa: E402
 from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 
@@ -57,7 +57,7 @@ def main() -> int:
     ap.add_argument('--line-residual-factor', type=float, default=None)
     ap.add_argument('--reject-ambiguous', action='store_true', default=None)
     ap.add_argument('--position-floor', type=float, default=None)
-    ap.add_argument('--jacobians', default=None, choices=['standard', 'observability'])
+    ap.add_argument('--jacobians', default=None, choices=JACOBIANS)
     ap.add_argument('--joint-probability', type=float, default=None)
     ap.add_argument('--out', default=None, help='keep slam.json and the PNGs here')
     args = ap.parse_args()

@@ -106,13 +106,14 @@ Gauss-Newton on the prior and the observations) while an observed landmark moves
 to the robot, by more than ``relinearize_ratio`` (2 %) of its range, at most
 ``max_update_iterations`` times. The association is decided once, at the prediction. In
 ordinary tracking the moves stay below the ratio (office seeds 0-9: at most 1.8 %), so the
-update is the plain EKF there. With ``jacobians='observability'`` the covariance takes the
-first linearisation instead (at the prior, constrained Jacobians, see "Consistency"):
-Jacobians taken at the iterate, which moved in the unobservable directions too, would add
-information there.
+update is the plain EKF there. With any ``jacobians`` but ``'standard'`` the covariance
+takes the first linearisation instead (at the prior, see "Consistency"): Jacobians taken at
+the iterate, which moved in the unobservable directions too, would add information there;
+``'first_estimates'`` and ``'observability_gain'`` do not iterate at all (their gain is not
+the Jacobian at the iterate, and Gauss-Newton steps with it diverged).
 
-Consistency (observability-constrained Jacobians)
--------------------------------------------------
+Consistency (unobservable directions)
+-------------------------------------
 Moving the robot and the whole map together, or turning them together about the map
 origin, changes no observation: the global position and heading are unobservable. The EKF's
 Jacobians, taken at estimates that change between the prediction and the update, do not
@@ -121,26 +122,48 @@ observations (Huang, Mourikis and Roumeliotis, "Observability-based rules for de
 consistent EKF SLAM estimators", IJRR 2010). With the drift of real odometry (a few degrees
 of heading per metre) and corrections of decimetres per scan the effect is large: on the
 Carmen logs the filter's heading std fell to 0.5 deg with errors of 3-5 deg (seattle).
-With ``jacobians='observability'``: the prediction's ``J1`` takes its lever arm from
-the previous prior position (so the unobservable directions propagate exactly), and the
-covariance update uses ``H* = H (I - N (N^T N)^-1 N^T)``, the Jacobians closest to ``H``
-that map the unobservable directions ``N`` (:func:`unobservable_directions`, taken at the
-robot's prior and at each landmark's estimate when it entered the map) to zero
-(:func:`constrain_jacobians`). The mean update keeps the gain of ``H`` (the most accurate
-linearisation; the constrained gain, with landmarks' first estimates metres off after a
-long drift, made the updates diverge on the Carmen logs). It keeps the map's heading
-uncertainty (seattle, drift seed 0, with ``line_floor = 0.01``: median robot NEES 8.8
-instead of 219, reference inside the 95 % ellipse on 46 % of steps instead of 23 %), but
-the wider covariance lets more distant and ambiguous pairs into the gates and the RPE over
-1 m got worse on the held-out drift seeds (median ratio to odometry 5.3 instead of 2.1), so
-``jacobians='standard'`` (the chapter's filter) stays the default.
-Measured cause on the Carmen logs (README, EKF-SLAM; benchmarks/slam_consistency_carmen.py
-``--drift none --filter-noise pioneer``): with the reference's own increments as odometry
-the updates alone turn the whole run by 0.5-16 deg while the reported heading std is
-0.4-5 deg; the map's heading was fixed at scan 2 with 4.8-6 deg of heading std and no
-observation can reduce that, so the filter gained information in the unobservable
-direction; the odometry model (its NEES over 1 m: 1.6-2.3) and the line noise with
-``line_residual_factor = 2`` fit.
+``jacobians`` chooses the linearisation (``'standard'``, the chapter's, is the default):
+
+* ``'observability'``: the prediction's ``J1`` takes its lever arm from the previous prior
+  position (so the unobservable directions propagate exactly), a new landmark's ``G_r``
+  from the current prior position (so it maps the robot's directions onto the landmark's at
+  its first estimate, :func:`augment_map` ``lever_from``), and the covariance update uses
+  ``H* = H (I - N (N^T N)^-1 N^T)``, the Jacobians closest to ``H`` that map the
+  unobservable directions ``N`` (:func:`unobservable_directions`, taken at the robot's prior
+  and at each landmark's estimate when it entered the map) to zero
+  (:func:`constrain_jacobians`). The mean update keeps the gain of ``H``. Until the
+  augmentation's lever arm was added, each new landmark brought heading information with
+  it (``N^T P^-1 N`` grew 2e5-fold over 150 scans of seattle), so the figures measured
+  with this option before then were of a filter still overconfident in heading.
+* ``'observability_gain'``: the same with the mean update's gain from ``H*`` too (Huang et
+  al.'s OC-EKF; the correction is then ``P^-1``-orthogonal to ``N``).
+* ``'first_estimates'``: gain and covariance from ``H`` taken at the robot's prior position
+  and each landmark's first estimate (Huang et al.'s FEJ-EKF), lever arms as above.
+* ``'invariant'``: the chapter's Jacobians with the right-invariant EKF's update (Barrau and
+  Bonnabel, arXiv:1510.06263): the correction applied on SE(2)
+  (:func:`invariant_retraction`) and the covariance carried to the updated estimate
+  (:func:`invariant_transport`); its unobservable directions follow the current estimate,
+  no first estimates.
+
+All four keep ``N^T P^-1 N`` unchanged through updates and new landmarks
+(``test/test_slam_consistency.py``). On the Carmen logs (benchmarks/slam_consistency_carmen.py,
+six logs, drift seeds 0-1, ``line_residual_factor = 2``; medians over the 12 runs of the
+share of steps with the reference inside the 95 % ellipse, the robot NEES median, the
+SE(2) ATE and the RPE over 1 m as ratios to the odometry's): standard 10 %, 206, 0.26,
+3.2; ``'observability'`` 22 %, 75, 0.81, 17.8 and ``'invariant'`` 20 %, 137, 0.73, 13.0
+(the covariance keeps the heading uncertainty, but the mean, corrected with the gain of
+``H``, turns along it: whole-run turns of 11-16 deg median); ``'first_estimates'`` 69 %,
+6.8, 0.18, 1.8 and ``'observability_gain'`` 74 %, 6.0, 0.18, 1.5 (ellipse >= 80 % on 5
+and 6 runs, all three issue targets on 2), better than the standard filter in ellipse
+share on all 12 runs and in RPE on 8, but on aces and acapulco far worse (ATE 9-31 m, worse
+than the odometry's except on aces seed 1; RPE 0.47-1.4 m), so the default stays
+``'standard'``. Measured cause
+(README, EKF-SLAM; ``--drift none --filter-noise pioneer``): with the reference's own
+increments as odometry the updates alone turn the whole run by 0.5-16 deg while the
+reported heading std is 0.4-5 deg; the map's heading was fixed at scan 2 with 4.8-6 deg of
+heading std and no observation can reduce that, so the filter gained information in the
+unobservable direction; the odometry model (its NEES over 1 m: 1.6-2.3) and the line noise
+with ``line_residual_factor = 2`` fit.
 
 Ambiguous pairs
 ---------------
@@ -302,7 +325,11 @@ STATUSES = ('matched', 'confirmed', 'tentative', 'new', 'rejected')
 #: Filter modes: ``'slam'`` maps and localizes, ``'localization'`` only tracks on the map.
 MODES = ('slam', 'localization')
 #: Jacobian choices (``SlamParams.jacobians``).
-JACOBIANS = ('observability', 'standard')
+JACOBIANS = ('first_estimates', 'invariant', 'observability', 'observability_gain',
+             'standard')
+#: The choices that keep the unobservable directions at the robot's prior and the
+#: landmarks' first estimates (lever arms of the prediction and of augmentation too).
+_FIRST_ESTIMATE_RULES = ('first_estimates', 'observability', 'observability_gain')
 #: What to do when a confirmed landmark finds the map at ``max_landmarks``.
 MAP_FULL_POLICIES = ('evict', 'reject')
 #: Landmark kinds (values of :attr:`EkfSlam.landmark_kinds`).
@@ -408,7 +435,12 @@ class SlamParams:
             EKF; see "Iterated update" in the module docstring).
         jacobians: ``'standard'`` (default): the chapter's, at the latest estimates;
             ``'observability'``: the covariance update uses observability-constrained
-            Jacobians (module docstring, "Consistency").
+            Jacobians, the mean update the chapter's; ``'observability_gain'``: both use the
+            constrained ones (Huang et al.'s OC-EKF); ``'first_estimates'``: both use
+            Jacobians at the robot's prior and each landmark's first estimate (FEJ-EKF);
+            ``'invariant'``: the chapter's Jacobians, with the right-invariant EKF's update
+            (the correction applied on SE(2) and the covariance carried to the updated
+            estimate); module docstring, "Consistency".
         relinearize_ratio: Linearise again when an observed landmark moved, relative to the
             robot, by more than this fraction of its range during the update.
     """
@@ -870,7 +902,9 @@ def reject_ambiguous_pairs(hyp: np.ndarray, d2: np.ndarray, gate: float) -> np.n
 def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
                index: np.ndarray, max_iterations: int = 1,
                relinearize_ratio: float = 0.02, kind: Optional[np.ndarray] = None,
-               nullspace: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
+               nullspace: Optional[np.ndarray] = None, constrained_gain: bool = False,
+               jacobian_state: Optional[np.ndarray] = None,
+               invariant_kinds: Optional[np.ndarray] = None) -> Tuple[np.ndarray, float]:
     """Batch EKF update with observations of map landmarks (eqs. 32-37), in place.
 
     ``nu = z - h(x)`` (eqs. 36-37, bearings wrapped), ``S = H P H^T + R`` (eq. 33),
@@ -896,7 +930,18 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         kind: Optional (K,) kind of each observed landmark (None: corners).
         nullspace: Optional (K, 5, 3) unobservable directions of ``[robot, landmark]`` per
             observation (:func:`unobservable_directions`); each ``[H_r, H_F]`` is replaced
-            by the closest matrix that maps them to zero (observability-constrained EKF).
+            by the closest matrix that maps them to zero (observability-constrained EKF) in
+            the covariance update (taken at the first linearisation), and with
+            ``constrained_gain`` in the mean update too (at every linearisation).
+        constrained_gain: With ``nullspace``: the mean update's gain from the constrained
+            Jacobians as well (Huang et al.'s OC-EKF); one linearisation (no iteration).
+        jacobian_state: Optional state the Jacobians (not ``h``) are taken at, for the gain
+            and the covariance (first-estimates Jacobians: the robot's prior and each
+            landmark's first estimate; module docstring, "Consistency"); the innovation
+            stays ``z - h(x)``; one linearisation (no iteration).
+        invariant_kinds: Optional kinds of every landmark in the state: right-invariant
+            update (:func:`invariant_retraction`, :func:`invariant_transport`; the
+            covariance from the first linearisation).
 
     Returns:
         ``(P, NIS)``: the symmetrised covariance (a new array) and ``nu^T S^-1 nu`` (eq. 60)
@@ -909,12 +954,25 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         return p, 0.0
     cols = _landmark_cols(index)
     x0 = x
+    x_prior = x.copy() if invariant_kinds is not None else x
     x_lin = x
     nis_value = 0.0
+    if jacobian_state is not None or constrained_gain:
+        # Gauss-Newton steps need the Jacobian at the iterate; with first-estimate or
+        # constrained ones they are not (iterated, each ran the state off, to 1e12 m on
+        # aces, on 11 of 24 Carmen runs), so these take one linearisation.
+        max_iterations = 1
     for it in range(max(1, int(max_iterations))):
         zhat, hr, hf = observation_model(x_lin, index, kind)  # eq. 37
         nu = z - zhat  # eq. 36
         nu[:, 1] = _wrap(nu[:, 1])
+        # FEJ-EKF (Huang, Mourikis, Roumeliotis, IJRR 2010, the FEJ-EKF section): H_k at
+        # p_R(k|k-1) and each landmark's first estimate p_Li; OC-EKF (same paper): H* the
+        # closest to H with H* N = 0 (:func:`constrain_jacobians`).
+        if jacobian_state is not None:
+            hr, hf = observation_model(jacobian_state, index, kind)[1:]
+        elif nullspace is not None and constrained_gain:
+            hr, hf = constrain_jacobians(hr, hf, nullspace)
         if it > 0:  # iterated EKF: nu_i = z - h(x_i) - H_i (x_0 - x_i)
             dx = x0 - x_lin
             dx[2] = _wrap(dx[2])
@@ -923,7 +981,9 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         y = solve_lower(low, nu.reshape(-1))
         if it == 0:
             nis_value = float(y @ y)
-            if nullspace is not None:  # covariance: constrained Jacobians at the prior
+            if jacobian_state is not None or constrained_gain or invariant_kinds is not None:
+                w1_cov = w1
+            elif nullspace is not None:  # covariance: constrained Jacobians at the prior
                 w1_cov = _gain_factor(p, *constrain_jacobians(hr, hf, nullspace), r, cols)[0]
         x_new = x0 + w1 @ y  # eqs. 32, 34
         x_new[2] = _wrap(x_new[2])
@@ -935,11 +995,95 @@ def ekf_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
                   <= relinearize_ratio * np.hypot(rel_old[:, 0], rel_old[:, 1])):
             break
         x_lin = x_new
+    if invariant_kinds is not None:
+        dx = x_new - x_prior
+        dx[2] = _wrap(dx[2])
+        x_new = invariant_retraction(x_prior, dx, invariant_kinds)
     x[:] = x_new
-    if nullspace is None:
+    if nullspace is None and jacobian_state is None and invariant_kinds is None:
         w1_cov = w1  # the last linearisation (the iterated EKF's covariance)
     p -= w1_cov @ w1_cov.T  # eq. 35 (in place: no fresh n x n allocation)
+    if invariant_kinds is not None:
+        p = invariant_transport(p, x_prior, x, invariant_kinds)
     return 0.5 * (p + p.T), nis_value
+
+
+def _position_slots(kinds: np.ndarray) -> np.ndarray:
+    """State indices of the x coordinates of the robot and of every corner."""
+    corner = np.flatnonzero(np.asarray(kinds) != LINE)
+    return np.concatenate([[0], 3 + 2 * corner]).astype(np.int64)
+
+
+def invariant_retraction(x: np.ndarray, dx: np.ndarray, kinds: np.ndarray) -> np.ndarray:
+    """Apply an EKF correction the right-invariant way: ``exp(xi) X`` on SE_K(2).
+
+    Right-invariant EKF-SLAM (Barrau and Bonnabel, "An EKF-SLAM algorithm with consistency
+    properties", arXiv:1510.06263, 2015): the robot's heading and the positions of the
+    robot and of every corner form one group element (one rotation, K translations). The
+    correction ``dx`` (in the state's own coordinates) is read as ``xi``: the heading part
+    ``a = dx_psi`` and ``xi_p = dx_p - a J p`` for each position ``p`` (``J`` the
+    90-degree turn), then ``p+ = R(a) p + V(a) xi_p`` with the SE(2) ``V(a) =
+    [[sin a, cos a - 1], [1 - cos a, sin a]] / a``: everything turns by ``a`` about the
+    map origin, so the correction's rotation is exact. To first order this is ``x + dx``.
+    A line ``(rho, alpha)`` is turned by the same rotation, ``rho`` unchanged: additive.
+
+    Args:
+        x: (3 + 2N,) state before the correction.
+        dx: (3 + 2N,) correction (heading wrapped).
+        kinds: (N,) landmark kinds.
+
+    Returns:
+        The corrected state (a new array).
+    """
+    out = x + dx
+    a = float(dx[2])
+    out[2] = _wrap(x[2] + a)
+    if a == 0.0:
+        return out
+    i = _position_slots(kinds)
+    px, py = x[i], x[i + 1]
+    xi_x = dx[i] + a * py  # xi_p = dx_p - a J p, J p = (-p_y, p_x)
+    xi_y = dx[i + 1] - a * px
+    c, s = math.cos(a), math.sin(a)
+    if abs(a) > 1e-9:
+        v0, v1 = s / a, (1.0 - c) / a
+    else:
+        v0, v1 = 1.0, 0.5 * a
+    out[i] = c * px - s * py + v0 * xi_x - v1 * xi_y
+    out[i + 1] = s * px + c * py + v1 * xi_x + v0 * xi_y
+    return out
+
+
+def invariant_transport(p: np.ndarray, x_old: np.ndarray, x_new: np.ndarray,
+                        kinds: np.ndarray) -> np.ndarray:
+    """Carry the covariance from ``x_old`` to ``x_new`` in the right-invariant error.
+
+    The right-invariant error ``xi`` (:func:`invariant_retraction`) relates to the state's
+    error by ``dx = T(x) xi``: the robot's heading error turns every position ``p`` by
+    ``J p``. Its unobservable directions are constant in ``xi`` (a turn of the world is
+    ``xi_psi`` alone, a shift is the same ``xi_p`` for all positions), and the update's
+    Jacobians at ``x_old`` annihilate them there, so the update gains no information on
+    them; keeping ``P_xi`` after the estimate moved to ``x_new`` means
+    ``P <- M P M^T`` with ``M = T(x_new) T(x_old)^-1 = I + c e_psi^T``,
+    ``c = J (p_new - p_old)`` at every position (zero for lines and the heading). The
+    standard EKF leaves ``P`` at ``x_old``'s directions while the prediction and later
+    updates linearise at ``x_new``: the information it gains on the global heading.
+
+    Args:
+        p: (n, n) covariance at ``x_old`` (after the update's ``P - W S W^T``).
+        x_old: State the update linearised at.
+        x_new: Updated state.
+        kinds: (N,) landmark kinds.
+
+    Returns:
+        The carried covariance (a new array).
+    """
+    i = _position_slots(kinds)
+    c = np.zeros(p.shape[0])
+    c[i] = -(x_new[i + 1] - x_old[i + 1])
+    c[i + 1] = x_new[i] - x_old[i]
+    row = p[2].copy()
+    return p + np.outer(c, row) + np.outer(row, c) + p[2, 2] * np.outer(c, c)
 
 
 def _gain_factor(p: np.ndarray, hr: np.ndarray, hf: np.ndarray, r: np.ndarray,
@@ -1058,7 +1202,8 @@ def feature_initialization(pose: np.ndarray, z: np.ndarray, kind: Optional[np.nd
 
 
 def augment_map(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
-                kind: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+                kind: Optional[np.ndarray] = None, lever_from: Optional[np.ndarray] = None
+                ) -> Tuple[np.ndarray, np.ndarray]:
     """Append landmarks initialised from observations to the state (eqs. 38-48).
 
     ``P* = Y [[P, 0], [0, R]] Y^T`` (eq. 43) with ``Y`` of eq. 44 evaluated block-wise: the
@@ -1070,12 +1215,23 @@ def augment_map(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
         z: (L, 2) observations of the new landmarks.
         r: (L, 2, 2) their covariances.
         kind: Optional (L,) kinds (None: corners).
+        lever_from: Optional (2,) robot position the heading column of ``G_r`` takes its
+            lever arm from (observability-constrained: the robot's prior position, so
+            that ``G_r`` maps the robot's unobservable directions onto the new landmark's
+            at its first estimate, module docstring "Consistency"); None: the current
+            estimate (eq. 46).
 
     Returns:
         ``(x*, P*)`` new arrays of size ``n + 2L``.
     """
     n, nl = x.size, z.shape[0]
     g, gr, gz = feature_initialization(x[:3], z, kind)
+    if lever_from is not None:  # G_r N_r(prior) = N_new(g): no information on them
+        line = np.zeros(nl, dtype=bool) if kind is None else np.asarray(kind) == LINE
+        gr[~line, 0, 2] = -(g[~line, 1] - lever_from[1])
+        gr[~line, 1, 2] = g[~line, 0] - lever_from[0]
+        a = g[line, 1]
+        gr[line, 0, 2] = -lever_from[0] * np.sin(a) + lever_from[1] * np.cos(a)
     gr2 = gr.reshape(2 * nl, 3)
     x_new = np.concatenate([x, g.reshape(-1)])  # eqs. 38-39, 41
     p_new = np.empty((n + 2 * nl, n + 2 * nl))
@@ -1371,7 +1527,7 @@ class EkfSlam:
             u_cov = np.asarray(u_cov, dtype=float)
             if u_cov.shape != (3, 3) or not np.all(np.isfinite(u_cov)):
                 raise ValueError('predict: U must be a finite (3, 3) matrix')
-        oc = self.params.jacobians == 'observability'
+        oc = self.params.jacobians in _FIRST_ESTIMATE_RULES
         ekf_predict(self._x, self._p, u, u_cov, self._prior_xy if oc else None)
         self._prior_xy = self._x[:2].copy()
         self.stats['predictions'] += 1
@@ -1491,13 +1647,18 @@ class EkfSlam:
         ok = hyp >= 0
         nis, dof = 0.0, 0
         if np.any(ok):
-            null = None
-            if prm.jacobians == 'observability':
+            null, jac_x = None, None
+            if prm.jacobians in ('observability', 'observability_gain'):
                 null = unobservable_directions(self._prior_xy, self._first[hyp[ok]],
                                                self._kind[hyp[ok]])
+            elif prm.jacobians == 'first_estimates':
+                jac_x = np.concatenate([self._prior_xy, self._x[2:3],
+                                        self._first.reshape(-1)])
             self._p, nis = ekf_update(self._x, self._p, zu[ok], ru[ok], hyp[ok],
                                       prm.max_update_iterations, prm.relinearize_ratio,
-                                      self._kind[hyp[ok]] if mixed else None, null)
+                                      self._kind[hyp[ok]] if mixed else None, null,
+                                      prm.jacobians == 'observability_gain', jac_x,
+                                      self._kind if prm.jacobians == 'invariant' else None)
             dof = 2 * int(ok.sum())
             sel = use[ok]
             status[sel] = 'matched'
@@ -1774,8 +1935,9 @@ class EkfSlam:
             reason[obs[k]] = 'cap'
         if take.size == 0:
             return
-        self._x, self._p = augment_map(self._x, self._p, z[take], r[take],
-                                       kind[take])  # eqs. 38-48
+        oc = prm.jacobians in _FIRST_ESTIMATE_RULES
+        self._x, self._p = augment_map(self._x, self._p, z[take], r[take], kind[take],
+                                       self._prior_xy if oc else None)  # eqs. 38-48
         new_ids = self._next_id + np.arange(take.size, dtype=np.int64)
         self._next_id += take.size
         self._ids = np.concatenate([self._ids, new_ids])
@@ -1815,7 +1977,8 @@ class EkfSlam:
 
 
 __all__ = ['ASSOCIATION_METHODS', 'augment_map', 'CORNER', 'do_data_association', 'EkfSlam',
-           'constrain_jacobians', 'JACOBIANS', 'LINE', 'MAP_FULL_POLICIES', 'MODES',
+           'constrain_jacobians', 'invariant_retraction', 'invariant_transport', 'JACOBIANS',
+           'LINE', 'MAP_FULL_POLICIES', 'MODES',
            'ekf_predict', 'ekf_update', 'feature_initialization', 'is_psd',
            'joint_observation_covariance', 'map_initialization', 'nearest_psd',
            'observation_model', 'odometry_check', 'odometry_increment', 'odometry_noise',
