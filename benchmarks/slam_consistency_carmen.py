@@ -5,7 +5,8 @@ Run from the repository root (needs ``../shared/data/carmen``)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
         [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
         [--jacobians standard|observability|observability_gain|first_estimates]
-        [--joint-probability P] [--drift MODEL] [--filter-noise MODEL] [LOG ...]
+        [--joint-probability P] [--association icnn|jcbb] [--drift MODEL]
+        [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
 seed) and run through :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated
@@ -64,8 +65,8 @@ from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.laser.lines import LineParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
-from landmark_nav.slam.ekf_slam import (JACOBIANS, LINE, odometry_noise,  # noqa: E402
-                                        SlamParams)
+from landmark_nav.slam.ekf_slam import (ASSOCIATION_METHODS, JACOBIANS,  # noqa: E402
+                                        LINE, odometry_noise, SlamParams)
 from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
 from landmark_nav.slam.line_landmarks import (line_end_covariance,  # noqa: E402
                                               line_initialization, lines_to_observations)
@@ -170,6 +171,7 @@ def main() -> int:
     ap.add_argument('--line-residual-factor', type=float, default=None)
     ap.add_argument('--reject-ambiguous', action='store_true', default=None)
     ap.add_argument('--jacobians', default=None, choices=JACOBIANS)
+    ap.add_argument('--association', default=None, choices=ASSOCIATION_METHODS)
     ap.add_argument('--joint-probability', type=float, default=None)
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
@@ -184,6 +186,7 @@ def main() -> int:
     given = {'line_floor': args.line_floor,
              'line_residual_factor': args.line_residual_factor,
              'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
+             'association': args.association,
              'joint_probability': args.joint_probability}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',

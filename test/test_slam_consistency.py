@@ -10,8 +10,9 @@ from landmark_nav.laser.corners import CornerParams
 from landmark_nav.laser.lines import LineSegment
 from landmark_nav.slam import EkfSlam, SlamParams
 from landmark_nav.slam.consistency import chi2_gate
-from landmark_nav.slam.ekf_slam import (augment_map, constrain_jacobians, ekf_predict,
-                                        ekf_update, invariant_retraction, observation_model,
+from landmark_nav.slam.ekf_slam import (augment_map, constrain_jacobians,
+                                        do_data_association, ekf_predict, ekf_update,
+                                        invariant_retraction, observation_model,
                                         OdometryNoise, unobservable_directions)
 from landmark_nav.slam.line_landmarks import (line_end_covariance, LineObservations,
                                               lines_to_observations)
@@ -429,6 +430,55 @@ def test_first_estimate_and_constrained_gains_take_one_linearisation():
                            relinearize_ratio=1e-9, **kw)
         assert np.array_equal(x1, x5) == bool(kw)
         assert np.array_equal(p1, p5) == bool(kw)
+
+
+def test_gate_tests_the_innovation_with_the_gains_jacobians():
+    """OC / FEJ gates use the covariance of the update they admit to (``S*``, not ``S``).
+
+    The filter keeps its global-heading uncertainty along ``N`` taken at the landmarks'
+    first estimates; the chapter's ``H`` at the current estimates does not annihilate those
+    directions once a landmark moved from its first estimate, so ``H P H^T`` carries that
+    uncertainty into the gate. A pair it admits here (``d2`` 0.3) has ``d2`` 135 under the
+    update's own ``S*`` (on aces / acapulco such pairs entered with update NIS of 90-1700 for
+    2-4 dof and turned the map by up to 41 deg). With ``nullspace`` / ``jacobian_state``
+    the gate's ``d2`` is the NIS of the update of that single pair.
+    """
+    x = np.array([0.0, 0.0, 0.1, 3.0, 1.0])
+    first = np.array([[1.5, 3.5]])  # the landmark moved since it entered the map
+    n_first = _directions(x[:2], first, np.array([0]))[:, 2]
+    p = 1e-3 * np.eye(5) + 0.5 ** 2 * np.outer(n_first, n_first)
+    zhat, hr, hf = observation_model(x, np.array([0]))
+    hn = np.concatenate([hr[0], hf[0]], axis=1) @ n_first
+    z = zhat + 0.5 * 0.5 * hn  # half a std along the global turn
+    r = np.diag([0.02 ** 2, math.radians(1.0) ** 2])[None]
+    null = unobservable_directions(x[:2], first)
+    fej = np.concatenate([x[:3], first.reshape(-1)])
+    hyp, d2_std, _ = do_data_association(x, p, z, r)
+    assert hyp[0] == 0 and d2_std[0, 0] < 0.5
+    for kw, gain in (({'nullspace': null}, {'nullspace': null, 'constrained_gain': True}),
+                     ({'jacobian_state': fej}, {'jacobian_state': fej})):
+        hyp, d2, _ = do_data_association(x, p, z, r, **kw)
+        _, nis = ekf_update(x.copy(), p.copy(), z, r, np.array([0]), **gain)
+        assert d2[0, 0] == pytest.approx(nis, rel=1e-9)
+        assert d2[0, 0] > 100.0 and hyp[0] == -1
+    # Through EkfSlam: a lone matched pair's d2 is the update's NIS.
+    for jac in ('observability_gain', 'first_estimates'):
+        rng = np.random.default_rng(5)
+        slam = EkfSlam(SlamParams(odometry=OdometryNoise(0.05, 0.05, 0.1), confirm_hits=1,
+                                  confirm_window=1, jacobians=jac, min_view_margin=0.0))
+        truth, corner = np.zeros(3), np.array([[4.0, 1.0]])
+        checked = 0
+        for _ in range(8):
+            u = np.array([0.3, 0.0, 0.1])
+            truth = compose(truth, u)
+            slam.predict(u + rng.normal(0.0, [0.01, 0.01, 0.02]))
+            zc = observation_model(np.concatenate([truth, corner[0]]), np.array([0]))[0]
+            res = slam.update(zc + rng.normal(0.0, [0.02, 0.01], zc.shape),
+                              np.repeat(r, 1, axis=0))
+            if res.status[0] == 'matched':
+                assert res.d2[0] == pytest.approx(res.nis, rel=1e-9), jac
+                checked += 1
+        assert checked == 7
 
 
 def test_line_residual_factor_makes_the_nis_consistent_on_a_carmen_log(tmp_path):

@@ -797,7 +797,9 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
                         max_nodes: int = 5000, allowed: Optional[np.ndarray] = None,
                         obs_kind: Optional[np.ndarray] = None,
                         lm_kind: Optional[np.ndarray] = None, joint_check: bool = False,
-                        joint_probability: float = 0.99999
+                        joint_probability: float = 0.99999,
+                        nullspace: Optional[np.ndarray] = None,
+                        jacobian_state: Optional[np.ndarray] = None
                         ) -> Tuple[np.ndarray, np.ndarray, int]:
     """Associate observations with map landmarks (eqs. 49-55), ICNN or JCBB.
 
@@ -824,6 +826,15 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
             the robot by metres.
         joint_probability: Confidence of that check; high (a gross-error test) so that a
             correct ICNN hypothesis is almost never sent to JCBB.
+        nullspace: Optional (N, 5, 3) unobservable directions per landmark
+            (:func:`unobservable_directions`): the innovation covariance of the gate, the
+            joint check and JCBB takes the constrained Jacobians (:func:`constrain_jacobians`),
+            the ones the OC-EKF's gain uses (``SlamParams.jacobians='observability_gain'``).
+        jacobian_state: Optional state the Jacobians of that covariance are taken at (the
+            FEJ-EKF's first estimates, ``'first_estimates'``); the prediction ``h(x)`` stays
+            at ``x``. Module docstring, "Consistency": a gate must test the innovation with
+            the covariance the update will use, or the global uncertainty the filter keeps
+            along the unobservable directions widens it.
 
     Returns:
         ``(hypothesis (M,) landmark index or -1 (eq. 49), d2 (M, N) eq. 54, jcbb nodes)``.
@@ -834,6 +845,10 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
         return np.full(m, -1, dtype=np.int64), np.full((m, n_lm), np.inf), 0
     index = np.arange(n_lm)
     zhat, hr, hf = observation_model(x, index, lm_kind)  # eq. 50
+    if jacobian_state is not None:  # the Jacobians the update's gain will use
+        hr, hf = observation_model(jacobian_state, index, lm_kind)[1:]
+    elif nullspace is not None:
+        hr, hf = constrain_jacobians(hr, hf, nullspace)
     c = predicted_observation_covariance(p, index, hr, hf)
     nu = z[:, None, :] - zhat[None, :, :]  # eq. 51
     nu[..., 1] = _wrap(nu[..., 1])
@@ -1638,10 +1653,15 @@ class EkfSlam:
         allowed = self._descriptor_gate(bvec, desc[:, 1], self._bis, self._open)
         allowed = self._extent_gate(allowed, ku, ends_w)
         mixed = bool(np.any(ku == LINE) or np.any(self._kind == LINE))
+        gate_null, gate_x = None, None  # the gate uses the gain's Jacobians ("Consistency")
+        if prm.jacobians == 'observability_gain' and self.num_landmarks:
+            gate_null = unobservable_directions(self._prior_xy, self._first, self._kind)
+        elif prm.jacobians == 'first_estimates' and self.num_landmarks:
+            gate_x = np.concatenate([self._prior_xy, self._x[2:3], self._first.reshape(-1)])
         hyp, d2, nodes = do_data_association(
             self._x, self._p, zu, ru, prm.association, prm.gate_probability,
             prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
-            prm.joint_check, prm.joint_probability)
+            prm.joint_check, prm.joint_probability, gate_null, gate_x)
         if prm.reject_ambiguous:
             hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(2, prm.gate_probability))
         ok = hyp >= 0
