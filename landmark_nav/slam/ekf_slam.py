@@ -1661,30 +1661,27 @@ class EkfSlam:
         allowed = self._descriptor_gate(bvec, desc[:, 1], self._bis, self._open)
         allowed = self._extent_gate(allowed, ku, ends_w)
         mixed = bool(np.any(ku == LINE) or np.any(self._kind == LINE))
-        gate_null, gate_x = None, None  # the gate uses the gain's Jacobians ("Consistency")
-        if prm.jacobians == 'observability_gain' and self.num_landmarks:
-            gate_null = unobservable_directions(self._prior_xy, self._first, self._kind)
+        # The linearisation of the consistent options ("Consistency"), for the gate (with
+        # the gain's Jacobians) and the update alike.
+        null, jac_x = None, None
+        if prm.jacobians in ('observability', 'observability_gain') and self.num_landmarks:
+            null = unobservable_directions(self._prior_xy, self._first, self._kind)
         elif prm.jacobians == 'first_estimates' and self.num_landmarks:
-            gate_x = np.concatenate([self._prior_xy, self._x[2:3], self._first.reshape(-1)])
+            jac_x = np.concatenate([self._prior_xy, self._x[2:3], self._first.reshape(-1)])
         hyp, d2, nodes = do_data_association(
             self._x, self._p, zu, ru, prm.association, prm.gate_probability,
             prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
-            prm.joint_check, prm.joint_probability, gate_null, gate_x)
+            prm.joint_check, prm.joint_probability,
+            null if prm.jacobians == 'observability_gain' else None, jac_x)
         if prm.reject_ambiguous:
             hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(2, prm.gate_probability))
         ok = hyp >= 0
         nis, dof = 0.0, 0
         if np.any(ok):
-            null, jac_x = None, None
-            if prm.jacobians in ('observability', 'observability_gain'):
-                null = unobservable_directions(self._prior_xy, self._first[hyp[ok]],
-                                               self._kind[hyp[ok]])
-            elif prm.jacobians == 'first_estimates':
-                jac_x = np.concatenate([self._prior_xy, self._x[2:3],
-                                        self._first.reshape(-1)])
             self._p, nis = ekf_update(self._x, self._p, zu[ok], ru[ok], hyp[ok],
                                       prm.max_update_iterations, prm.relinearize_ratio,
-                                      self._kind[hyp[ok]] if mixed else None, null,
+                                      self._kind[hyp[ok]] if mixed else None,
+                                      None if null is None else null[hyp[ok]],
                                       prm.jacobians == 'observability_gain', jac_x,
                                       self._kind if prm.jacobians == 'invariant' else None)
             dof = 2 * int(ok.sum())
