@@ -270,25 +270,38 @@ def _roughness(plane: np.ndarray, s: np.ndarray, window: float, min_points: int)
     return out
 
 
-def _explained(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Explained sums of squares of least-squares lines and quadratics z(t) from sums.
+def _orthogonal_sums(m) -> tuple:
+    """Centred sums of the basis 1, t, t^2 orthogonalised by Gram-Schmidt, from raw sums.
 
-    ``m`` rows: sums of t^0..t^4, z, z t, z t^2 (one column per piece). The basis 1, t, t^2
-    is orthogonalised (Gram-Schmidt on the sums): the line explains
-    ``(sum z)^2 / n + Sxz^2 / Sxx`` (centred sums), the quadratic that plus the share of
-    the part of t^2 that the line does not explain, ``Rz^2 / Rt``. The SSE of a piece is
-    ``sum z^2`` minus this. Degenerate pieces (fewer readings than coefficients) give
-    inf or NaN: the caller masks them.
+    ``m`` rows: sums of t^0..t^4, z, z t, z t^2 (one column per piece; arrays or floats).
+    Returns ``(mean t, mean z, mean t^2, Sxx, Sxz, beta, Rt, Rz)``: ``Sxx``, ``Sxz`` the
+    centred sums of t t and t z; ``beta = Sxt2 / Sxx`` the share of t^2 along t;
+    ``phi2 = t^2 - mean t^2 - beta (t - mean t)`` the part of t^2 orthogonal to 1 and t,
+    ``Rt`` its sum of squares and ``Rz`` its sum against z.
     """
     s0, s1, s2, s3, s4, b0, b1, b2 = m[:8]
     mt, mz, m2 = s1 / s0, b0 / s0, s2 / s0
     sxx = s2 - s1 * mt
     sxz = b1 - s1 * mz
-    line = b0 * mz + sxz * sxz / sxx
     sxq = s3 - s2 * mt                                # t^2 against t, centred
     beta = sxq / sxx
     rt = s4 - s2 * m2 - beta * sxq
     rz = b2 - s2 * mz - beta * sxz
+    return mt, mz, m2, sxx, sxz, beta, rt, rz
+
+
+def _explained(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Explained sums of squares of least-squares lines and quadratics z(t) from sums.
+
+    ``m`` rows: sums of t^0..t^4, z, z t, z t^2 (one column per piece). The basis 1, t, t^2
+    is orthogonalised (:func:`_orthogonal_sums`): the line explains
+    ``(sum z)^2 / n + Sxz^2 / Sxx`` (centred sums), the quadratic that plus the share of
+    the part of t^2 that the line does not explain, ``Rz^2 / Rt``. The SSE of a piece is
+    ``sum z^2`` minus this. Degenerate pieces (fewer readings than coefficients) give
+    inf or NaN: the caller masks them.
+    """
+    _, mz, _, sxx, sxz, _, rt, rz = _orthogonal_sums(m)
+    line = m[5] * mz + sxz * sxz / sxx
     return line, line + rz * rz / rt
 
 
@@ -581,14 +594,8 @@ def _hinge_nll(first: int, last: int, quad_left: bool, v_left: float, v_right: f
     quad, line = (left, right) if quad_left else (right, left)
     w_q, w_o = (1.0 / v_left, 1.0 / v_right) if quad_left else (1.0 / v_right, 1.0 / v_left)
     # The quadratic side (Gram-Schmidt on its sums, as in _explained).
-    s0, s1, s2, s3, s4, b0, b1, b2, zz = quad
-    mt, mz, m2 = s1 / s0, b0 / s0, s2 / s0
-    sxx = s2 - s1 * mt
-    sxz = b1 - s1 * mz
-    sxq = s3 - s2 * mt
-    beta = sxq / sxx
-    rt = s4 - s2 * m2 - beta * sxq
-    rz = b2 - s2 * mz - beta * sxz
+    mt, mz, m2, sxx, sxz, beta, rt, rz = _orthogonal_sums(quad)
+    s0, b0, zz = quad[0], quad[5], quad[8]
     du = tau - mt
     phi = tau * tau - m2 - beta * du                  # the orthogonalised t^2 at tau
     a1, a2 = sxz / sxx, rz / rt
