@@ -5,7 +5,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
         [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
         [--jacobians standard|observability|observability_gain|first_estimates]
-        [--joint-probability P] [--association icnn|jcbb] [--drift MODEL]
+        [--joint-probability P] [--association icnn|jcbb] [--cartesian-gate F] [--drift MODEL]
         [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
@@ -173,6 +173,8 @@ def main() -> int:
     ap.add_argument('--jacobians', default=None, choices=JACOBIANS)
     ap.add_argument('--association', default=None, choices=ASSOCIATION_METHODS)
     ap.add_argument('--joint-probability', type=float, default=None)
+    ap.add_argument('--cartesian-gate', type=float, default=None,
+                    help='SlamParams.cartesian_gate (relative range std; 0: every pair)')
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
     ap.add_argument('--filter-noise', default=None,
@@ -187,7 +189,8 @@ def main() -> int:
              'line_residual_factor': args.line_residual_factor,
              'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
              'association': args.association,
-             'joint_probability': args.joint_probability}
+             'joint_probability': args.joint_probability,
+             'cartesian_gate': args.cartesian_gate}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
             'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5',

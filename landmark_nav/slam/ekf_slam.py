@@ -451,6 +451,13 @@ class SlamParams:
             estimate); module docstring, "Consistency".
         relinearize_ratio: Linearise again when an observed landmark moved, relative to the
             robot, by more than this fraction of its range during the update.
+        cartesian_gate: None (default): off. Otherwise a corner pair that the range-bearing
+            gate admits and whose predicted range std is at least this fraction of the
+            predicted range is also tested in the map frame (the observation put in the
+            map, against the landmark), where it is linear in the robot position and the
+            landmark, and gated with the larger of the two ``d2``
+            (:func:`cartesian_pair_d2`; module docstring, "Cartesian gate"); 0 tests every
+            admitted corner pair.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
@@ -490,6 +497,7 @@ class SlamParams:
     max_update_iterations: int = 5
     relinearize_ratio: float = 0.02
     jacobians: str = 'standard'
+    cartesian_gate: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -513,6 +521,8 @@ class SlamParams:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 < v < 1.0):
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
+        if self.cartesian_gate is not None:
+            _check_number('SlamParams.cartesian_gate', self.cartesian_gate, minimum=0.0)
         if self.jacobians not in JACOBIANS:
             raise ValueError(f'SlamParams.jacobians must be one of {JACOBIANS}, '
                              f'got {self.jacobians!r}')
@@ -807,7 +817,8 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
                         lm_kind: Optional[np.ndarray] = None, joint_check: bool = False,
                         joint_probability: float = 0.99999,
                         nullspace: Optional[np.ndarray] = None,
-                        jacobian_state: Optional[np.ndarray] = None
+                        jacobian_state: Optional[np.ndarray] = None,
+                        cartesian_ratio: Optional[float] = None
                         ) -> Tuple[np.ndarray, np.ndarray, int]:
     """Associate observations with map landmarks (eqs. 49-55), ICNN or JCBB.
 
@@ -843,6 +854,10 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
             at ``x``. Module docstring, "Consistency": a gate must test the innovation with
             the covariance the update will use, or the global uncertainty the filter keeps
             along the unobservable directions widens it.
+        cartesian_ratio: Optional: corner pairs inside the gate whose predicted range std
+            ``sqrt(S_rr)`` is at least this fraction of the predicted range get
+            ``d2 = max(d2, d2_map)`` with ``d2_map`` the pair tested in the map frame
+            (:func:`cartesian_pair_d2`, ``SlamParams.cartesian_gate``); None: off.
 
     Returns:
         ``(hypothesis (M,) landmark index or -1 (eq. 49), d2 (M, N) eq. 54, jcbb nodes)``.
@@ -870,6 +885,17 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
             ok &= ~((lm_kind == LINE) & ~(zhat[:, 0] > 0.0))[None, :]  # front side only
         d2 = np.where(ok, d2, np.inf)
     gate = chi2_gate(2, probability)
+    if cartesian_ratio is not None:
+        corner = np.ones((m, n_lm), dtype=bool)
+        if obs_kind is not None:
+            corner &= (obs_kind == CORNER)[:, None]
+        if lm_kind is not None:
+            corner &= (lm_kind == CORNER)[None, :]
+        s_rr = c[None, :, 0, 0] + r[:, None, 0, 0]
+        test = corner & (d2 < gate) & (s_rr >= (cartesian_ratio * zhat[None, :, 0]) ** 2)
+        oi, lj = np.nonzero(test)
+        if oi.size:
+            d2[oi, lj] = np.maximum(d2[oi, lj], cartesian_pair_d2(x, p, z[oi], r[oi], lj))
     if method == 'icnn':
         hyp = icnn(d2, gate)  # eq. 55 + nearest neighbour
         if not joint_check or np.count_nonzero(hyp >= 0) < 2:
@@ -890,6 +916,47 @@ def do_data_association(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarr
     ok = h_sub >= 0
     hyp[ok] = sub[h_sub[ok]]
     return hyp, d2, nodes
+
+
+def cartesian_pair_d2(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray,
+                      index: np.ndarray) -> np.ndarray:
+    """Squared Mahalanobis distance of corner pairs tested in the map frame.
+
+    The observation ``z`` is put in the map with the robot pose, ``g(x_r, psi_r, z)``
+    (eq. 40), and compared with landmark ``index``: ``e = g - x_i`` with covariance
+    ``A P_5 A^T + G_z R G_z^T``, ``A = [G_r, -I]`` (eqs. 46, 48) and ``P_5`` the joint
+    covariance of the robot pose and that landmark (the whole ``P``, unobservable
+    directions included). ``e`` is linear in the robot position and the landmark and
+    depends on the heading only through the observed range, so its first-order
+    distribution stays accurate where the range-bearing one does not: a predicted range
+    whose std is a sizeable fraction of the range (the bearing's Jacobian ``1 / r`` then
+    holds only near the prediction, while a far prediction can meet a near observation).
+    This is the measurement-conversion argument of Bar-Shalom, Li and Kirubarajan,
+    "Estimation with Applications to Tracking and Navigation" (Wiley 2001), sections
+    10.3-10.4: test where the model is (near) linear; and, for the EKF-SLAM gate,
+    Neira and Tardos, "Data association in stochastic mapping using the joint
+    compatibility test" (IEEE T-RA 17(6), 2001), whose individual compatibility is the
+    same chi-square test on any implicit measurement function ``f(x, z) = 0`` linearised
+    at the observation; module docstring, "Cartesian gate".
+
+    Args:
+        x: State.
+        p: Covariance.
+        z: (K, 2) corner observations [r, theta] in base_link.
+        r: (K, 2, 2) their covariances.
+        index: (K,) landmark index of each pair.
+
+    Returns:
+        (K,) ``e^T (A P_5 A^T + G_z R G_z^T)^-1 e``.
+    """
+    g, gr, gz = feature_initialization(x[:3], z)  # eqs. 40, 46, 48
+    e = g - x[3:].reshape(-1, 2)[index]
+    cols = np.concatenate([np.broadcast_to(np.arange(3), (index.size, 3)),
+                           _landmark_cols(index)], axis=1)  # (K, 5)
+    p5 = p[cols[:, :, None], cols[:, None, :]]
+    a = np.concatenate([gr, np.broadcast_to(-np.eye(2), (index.size, 2, 2))], axis=2)
+    cov = a @ p5 @ np.transpose(a, (0, 2, 1)) + gz @ r @ np.transpose(gz, (0, 2, 1))
+    return np.einsum('ki,ki->k', e, np.linalg.solve(cov, e[:, :, None])[:, :, 0])
 
 
 def reject_ambiguous_pairs(hyp: np.ndarray, d2: np.ndarray, gate: float) -> np.ndarray:
@@ -1672,7 +1739,8 @@ class EkfSlam:
             self._x, self._p, zu, ru, prm.association, prm.gate_probability,
             prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
             prm.joint_check, prm.joint_probability,
-            null if prm.jacobians == 'observability_gain' else None, jac_x)
+            null if prm.jacobians == 'observability_gain' else None, jac_x,
+            prm.cartesian_gate)
         if prm.reject_ambiguous:
             hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(2, prm.gate_probability))
         ok = hyp >= 0
