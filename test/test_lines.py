@@ -280,6 +280,70 @@ def test_a_piece_off_the_wall_leaves_the_chain_and_the_rest_merges(method):
     assert [round(ln.rho, 4) for ln in lines] == [1.0, 1.005, 1.0]
 
 
+def wall_behind_object(behind: str, seed: int = 5):
+    """Wall y = 3 m seen from the origin with an object 0.6 m wide at y = 1.5 m in front.
+
+    ``behind`` 'wall': the object occludes the wall; 'opening': the wall has a doorway
+    where the object would be, through which the beams reach y = 5 m (no object).
+    Returns ranges, bearings, the beams of the middle part.
+    """
+    rng = np.random.default_rng(seed)
+    phi = np.radians(np.arange(30.0, 150.01, 0.5))
+    x_at = 1.5 / np.tan(phi)  # where the beam crosses y = 1.5
+    middle = np.abs(x_at) <= 0.3
+    depth = np.where(middle, 1.5 if behind == 'wall' else 5.0, 3.0)
+    true_phi = phi + rng.normal(0.0, SIGMA_PHI, phi.size)
+    r = depth / np.sin(true_phi) + rng.normal(0.0, 0.01, phi.size)
+    return r, phi, middle
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_wall_behind_an_occluder_is_one_fit(method):
+    """A wall seen on both sides of an object in front of it is one line (one fit).
+
+    The object cuts the wall into two clusters whose facing ends are 1.2 m / 22 deg apart
+    (beyond ``merge_gap`` and ``merge_gap_angle``), with the object's line between them:
+    each half used to be a line of its own, with the covariance of half the wall's beams.
+    The beams between are occluded from the front, so the halves are joined: one fit of
+    both halves' points, reported as one segment per side of the object.
+    """
+    r, phi, middle = wall_behind_object('wall')
+    clusters = segment_scan(r, phi, np.ones(phi.size, bool), math.radians(0.5))
+    assert len(clusters) == 3
+    lines = extract_lines(clusters, LineParams(method=method))
+    wall = [ln for ln in lines if abs(ln.rho - 3.0) < 0.05]
+    assert len(wall) == 2
+    left, right = sorted(wall, key=lambda ln: ln.first_index)
+    assert (left.rho, left.alpha, left.num_points) == (right.rho, right.alpha,
+                                                       right.num_points)
+    np.testing.assert_array_equal(left.covariance, right.covariance)
+    # the fit holds (nearly) every wall beam; its extents stop at the object
+    assert left.num_points >= np.count_nonzero(~middle) - 6
+    first_mid, last_mid = np.flatnonzero(middle)[[0, -1]]
+    assert left.last_index < first_mid and right.first_index > last_mid
+    truth = line_crlb(3.0 / np.sin(phi[~middle]), phi[~middle], 3.0, math.pi / 2, 0.01,
+                      SIGMA_PHI)
+    assert left.covariance[0, 0] < 1.1 * truth[0, 0]
+    assert any(abs(ln.rho - 1.5) < 0.05 for ln in lines)  # the object's line stays
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_wall_with_an_opening_is_not_joined(method):
+    """The same wall with a doorway instead of the object: the halves stay two lines.
+
+    The beams between them saw further (no false surface), so no join bridges them.
+    """
+    r, phi, middle = wall_behind_object('opening')
+    clusters = segment_scan(r, phi, np.ones(phi.size, bool), math.radians(0.5))
+    lines = extract_lines(clusters, LineParams(method=method))
+    wall = sorted((ln for ln in lines if abs(ln.rho - 3.0) < 0.05),
+                  key=lambda ln: ln.first_index)
+    assert len(wall) == 2
+    assert wall[0].rho != wall[1].rho
+    first_mid, last_mid = np.flatnonzero(middle)[[0, -1]]
+    assert wall[0].last_index < first_mid and wall[1].first_index > last_mid
+
+
 def test_split_pieces_eq4():
     pts = np.array([[0, 0], [1, 0.01], [2, 0], [2.01, 1], [2, 2]], float)
     assert split_pieces(pts, [0, 5], 0.05).tolist() == [[0, 2], [2, 4]]
