@@ -1970,13 +1970,22 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
                     return None
         return joint, g
 
+    # Consecutive lines whose facing ends are neighbours were the merge's to join (it
+    # also tests each piece against the merged line of the whole chain, which a pair
+    # cannot): they are left as they are.
+    cluster, phis = memoryview(scan.cluster), scan.rows()[_PHI]
+    merged_ok = [cluster[p0] == cluster[p1] or (xs[p1] - xs[p0]) ** 2
+                 + (ys[p1] - ys[p0]) ** 2 <= gap2
+                 or abs(phis[p1] - phis[p0]) <= params.merge_gap_angle
+                 for p0, p1 in zip(last_l[:-1], first_l[1:])]
     changed = False
     for j in range(n - 1):  # each line takes the later lines that join it, in order
         if owner[j] != j:
             continue
         grown = False
         for k in range(j + 1, n):
-            if owner[k] != k or not (grown or (j, k) in tried):
+            if owner[k] != k or not (grown or (j, k) in tried) or (
+                    k == j + 1 and merged_ok[j]):
                 continue
             out = joinable(j, k)
             if out is None:
