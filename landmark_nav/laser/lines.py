@@ -63,7 +63,10 @@ vectorised batch (fits from prefix sums of point moments):
    since a segment along the occluder's rays would claim a surface where the laser saw
    something else (the PLE ray metric scores such beams with their full distance to the
    line). A lone beam in front (one return cannot tell an object from a spurious return)
-   stays inside. See :func:`_occluded_extents`.
+   stays inside. See :func:`_occluded_extents`. Lines of one surface on both sides of
+   an occluder (or of a gap the merge did not test) then get one fit when they pass the
+   merge's chi-square test and no beam between them saw further than the joint line
+   (:func:`_join_occluded`); their extents stay as they were.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -1846,7 +1849,8 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
 
 
 def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.ndarray,
-                   f: _Fit, params: LineParams) -> _Fit:
+                   f: _Fit, pieces: Tuple[np.ndarray, np.ndarray], params: LineParams
+                   ) -> _Fit:
     """Fit lines of one surface split by an occluder or a gap as one line (step 5).
 
     The merge (step 3) tests consecutive pieces only, and neighbouring clusters only
@@ -1866,6 +1870,10 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
     * every run of missing beams between them is within ``merge_gap`` or
       ``merge_gap_angle`` of the joint line (the merge's rule for dropouts).
 
+    Consecutive lines whose facing pieces (``pieces``: the first and last points of the
+    pieces the merge saw) were consecutive neighbours there are not joined: the merge
+    tested them, also against the merged line of the whole chain, which a pair cannot (a
+    panel 5 mm proud of a wall must not take one wall piece and keep it from the other).
     A line takes the later lines that pass, in order. The extents stay as they were (the
     joined lines are reported as one segment per extent, each with the joint fit: no
     segment spans the beams between). Returns the fits of the extents ``first``, ``last``
@@ -1970,14 +1978,24 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
                     return None
         return joint, g
 
-    # Consecutive lines whose facing ends are neighbours were the merge's to join (it
-    # also tests each piece against the merged line of the whole chain, which a pair
-    # cannot): they are left as they are.
+    # Consecutive lines whose facing pieces were consecutive neighbours in the merge were
+    # the merge's to join (it also tests each piece against the merged line of the whole
+    # chain, which a pair cannot): they are left as they are.
+    ps, pe = pieces
     cluster, phis = memoryview(scan.cluster), scan.rows()[_PHI]
-    merged_ok = [cluster[p0] == cluster[p1] or (xs[p1] - xs[p0]) ** 2
-                 + (ys[p1] - ys[p0]) ** 2 <= gap2
-                 or abs(phis[p1] - phis[p0]) <= params.merge_gap_angle
-                 for p0, p1 in zip(last_l[:-1], first_l[1:])]
+    ps_l, pe_l = ps.tolist(), pe.tolist()
+    merged_ok = []
+    for j in range(n - 1):
+        a = bisect_left(pe_l, last_l[j] + 1) - 1  # j's last piece, j + 1's first
+        b = bisect_left(ps_l, first_l[j + 1])
+        ok = a >= 0 and b == a + 1 and b < len(ps_l) and ps_l[a] >= first_l[j] and (
+            pe_l[b] <= last_l[j + 1])
+        if ok:
+            p0, p1 = pe_l[a], ps_l[b]
+            ok = (cluster[p0] == cluster[p1]
+                  or (xs[p1] - xs[p0]) ** 2 + (ys[p1] - ys[p0]) ** 2 <= gap2
+                  or abs(phis[p1] - phis[p0]) <= params.merge_gap_angle)
+        merged_ok.append(ok)
     changed = False
     for j in range(n - 1):  # each line takes the later lines that join it, in order
         if owner[j] != j:
@@ -2187,7 +2205,7 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
                                                (s, e, label, first0, last0), params)
     if not first.size:
         return []
-    fit = _join_occluded(scan, sums, first, last, fit, params)
+    fit = _join_occluded(scan, sums, first, last, fit, (s, e), params)
     col, first, last = _occluded_extents(scan, fit, first, last, params)
     if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
         fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
