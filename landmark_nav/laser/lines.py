@@ -1883,8 +1883,6 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
     if n < 2:
         return f
     factor = _variance_factor(sums, f)
-    cov = (f.cov * factor[:, None, None]).reshape(-1, 4).tolist()
-    rho_l, alpha_l = f.params[:2].tolist()
     gate = params.merge_chi2
     tol = params.see_through_tolerance
 
@@ -1906,10 +1904,15 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         return d2 if d2 == d2 else math.inf
 
     # cheap first test on every pair j < k: the two fits agree (a grown line retests all)
-    tried = {(j, k) for j in range(n - 1) for k in range(j + 1, n)
-             if chi2(rho_l[j], alpha_l[j], cov[j], rho_l[k], alpha_l[k], cov[k]) <= gate}
-    if not tried:
+    jj, kk = np.triu_indices(n, 1)
+    scaled = f.cov * factor[:, None, None]
+    agree = (_chi2(f.rho[jj], f.alpha[jj], scaled[jj], f.rho[kk], f.alpha[kk], scaled[kk])
+             <= gate).nonzero()[0]
+    if not agree.size:
         return f
+    tried = set(zip(jj[agree].tolist(), kk[agree].tolist()))
+    cov = scaled.reshape(-1, 4).tolist()
+    rho_l, alpha_l = f.params[:2].tolist()
     wr, wc, ws, wv = scan.beams()
     phi = scan.whole.angles if scan.whole is not None else None
     beam = scan.beam
@@ -1929,7 +1932,7 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         if chi2(r1, a1, c1, r2, a2, c2) > gate:
             return None
         joint = line_sums[j] + line_sums[k]
-        g = _solve(joint[:, None], scan.origin)
+        g = _solve(joint[:6, None], scan.origin, rmse=False)  # the tests need the line only
         rg, ag, nx, ny = g.params[:, 0].tolist()
         if not (chi2(r1, a1, c1, rg, ag, None) <= gate and chi2(r2, a2, c2, rg, ag, None)
                 <= gate):
@@ -1976,7 +1979,7 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
                 if not (dx * dx + dy * dy <= gap2 or (
                         phi is not None and abs(phi[pb] - phi[pa]) <= params.merge_gap_angle)):
                     return None
-        return joint, g
+        return joint, _solve(joint[:, None], scan.origin)
 
     # Consecutive lines whose facing pieces were consecutive neighbours in the merge were
     # the merge's to join (it also tests each piece against the merged line of the whole
