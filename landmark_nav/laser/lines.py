@@ -63,7 +63,10 @@ vectorised batch (fits from prefix sums of point moments):
    since a segment along the occluder's rays would claim a surface where the laser saw
    something else (the PLE ray metric scores such beams with their full distance to the
    line). A lone beam in front (one return cannot tell an object from a spurious return)
-   stays inside. See :func:`_occluded_extents`.
+   stays inside. See :func:`_occluded_extents`. Lines of one surface on both sides of
+   an occluder (or of a gap the merge did not test) then get one fit when they pass the
+   merge's chi-square test and no beam between them saw further than the joint line
+   (:func:`_join_occluded`); their extents stay as they were.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -1845,6 +1848,186 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     return own[starts], pts[starts], pts[starts + count - 1]
 
 
+def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.ndarray,
+                   f: _Fit, pieces: Tuple[np.ndarray, np.ndarray], params: LineParams
+                   ) -> _Fit:
+    """Fit lines of one surface split by an occluder or a gap as one line (step 5).
+
+    The merge (step 3) tests consecutive pieces only, and neighbouring clusters only
+    when their facing ends are within ``merge_gap`` / ``merge_gap_angle``: a wall seen
+    on both sides of a table leg or a pillar in front of it (whose pieces lie between
+    the wall's) stays two lines, each with the covariance of half the wall's beams. Here
+    a line j and a later line k (in beam order) get one fit, on the points of both, when
+
+    * their (rho, alpha) pass the merge test (chi-square with the a-posteriori variance
+      factors of :func:`_variance_factor`) and each passes it against the joint fit
+      (taken as exact), with its end points within the split tolerance of it;
+    * no valid beam from j's first to k's last beam lies beyond the joint line by more
+      than ``see_through_tolerance``: the beams between them are occluded from the front
+      (or the wall's own returns that no line took), never beams that saw further;
+    * no beam between them within that tolerance of the joint line belongs to the
+      extent of another line (a line between on the same surface that failed the test);
+    * every run of missing beams between them is within ``merge_gap`` or
+      ``merge_gap_angle`` of the joint line (the merge's rule for dropouts).
+
+    Consecutive lines whose facing pieces (``pieces``: the first and last points of the
+    pieces the merge saw) were consecutive neighbours there are not joined: the merge
+    tested them, also against the merged line of the whole chain, which a pair cannot (a
+    panel 5 mm proud of a wall must not take one wall piece and keep it from the other).
+    A line takes the later lines that pass, in order. The extents stay as they were (the
+    joined lines are reported as one segment per extent, each with the joint fit: no
+    segment spans the beams between). Returns the fits of the extents ``first``, ``last``
+    (the input fits where nothing was joined).
+    """
+    n = first.size
+    if n < 2:
+        return f
+    factor = _variance_factor(sums, f)
+    gate = params.merge_chi2
+    tol = params.see_through_tolerance
+
+    def chi2(r1, a1, c1, r2, a2, c2) -> float:
+        """Return :func:`_chi2` of one pair (``c2`` None: line 2 exact)."""
+        da = _wrap(a1 - a2)
+        sign = 1.0
+        if abs(da) > 0.5 * math.pi:
+            dr, da, sign = r1 + r2, _wrap(da + math.pi), -1.0
+        else:
+            dr = r1 - r2
+        a00, a01, a11 = c1[0], c1[1], c1[3]
+        if c2 is not None:
+            a00, a01, a11 = a00 + c2[0], a01 + sign * c2[1], a11 + c2[3]
+        det = a00 * a11 - a01 * a01
+        if not det > 0.0:
+            return math.inf
+        d2 = (a11 * dr * dr - 2.0 * a01 * dr * da + a00 * da * da) / det
+        return d2 if d2 == d2 else math.inf
+
+    # cheap first test on every pair j < k: the two fits agree (a grown line retests all)
+    jj, kk = np.triu_indices(n, 1)
+    scaled = f.cov * factor[:, None, None]
+    agree = (_chi2(f.rho[jj], f.alpha[jj], scaled[jj], f.rho[kk], f.alpha[kk], scaled[kk])
+             <= gate).nonzero()[0]
+    if not agree.size:
+        return f
+    tried = set(zip(jj[agree].tolist(), kk[agree].tolist()))
+    cov = scaled.reshape(-1, 4).tolist()
+    rho_l, alpha_l = f.params[:2].tolist()
+    wr, wc, ws, wv = scan.beams()
+    phi = scan.whole.angles if scan.whole is not None else None
+    beam = scan.beam
+    xs, ys, tols = scan.rows()[_X], scan.rows()[_Y], scan.rows()[_TOL]
+    ox, oy = scan.origin
+    first_l, last_l = first.tolist(), last.tolist()
+    fits = {j: (rho_l[j], alpha_l[j], cov[j]) for j in range(n)}
+    line_sums = {j: sums[:, j] for j in range(n)}
+    owner = list(range(n))  # the line whose fit each extent takes
+    ends = {j: (first_l[j], last_l[j]) for j in range(n)}  # outermost points of a fit
+    gap2 = params.merge_gap ** 2
+
+    def joinable(j: int, k: int) -> Optional[Tuple[np.ndarray, _Fit]]:
+        """Return the joint sums and fit of lines j < k if they may be joined, else None."""
+        r1, a1, c1 = fits[j]
+        r2, a2, c2 = fits[k]
+        if chi2(r1, a1, c1, r2, a2, c2) > gate:
+            return None
+        joint = line_sums[j] + line_sums[k]
+        g = _solve(joint[:6, None], scan.origin, rmse=False)  # the tests need the line only
+        rg, ag, nx, ny = g.params[:, 0].tolist()
+        if not (chi2(r1, a1, c1, rg, ag, None) <= gate and chi2(r2, a2, c2, rg, ag, None)
+                <= gate):
+            return None
+        rel = rg - nx * ox - ny * oy
+        for p in ends[j] + (first_l[k], last_l[k]):
+            if not abs(xs[p] * nx + ys[p] * ny - rel) <= tols[p]:
+                return None
+        b0, b1 = int(beam[ends[j][0]]), int(beam[last_l[k]])
+        e0, s1 = int(beam[ends[j][1]]), int(beam[first_l[k]])
+        if not b0 <= e0 < s1 <= b1:
+            return None
+        idx = np.arange(b0, b1 + 1)
+        cos_in = wc[idx] * nx + ws[idx] * ny
+        if np.count_nonzero(cos_in <= 1e-9):
+            return None
+        beyond = wr[idx] - rg / cos_in
+        ok = wv[idx]
+        if np.count_nonzero(ok & (beyond > tol)):  # a beam seen through the joint line
+            return None
+        gap = slice(e0 + 1 - b0, s1 - b0)  # the beams between the two lines
+        gv = ok[gap]
+        on = gv & (np.abs(beyond[gap]) <= tol)
+        if np.count_nonzero(on):  # the wall's free returns, but no other line's beams
+            taken = np.zeros(s1 - e0 - 1, dtype=bool)
+            for m in range(n):
+                if owner[m] != j:
+                    lo = max(int(beam[first_l[m]]), e0 + 1)
+                    hi = min(int(beam[last_l[m]]), s1 - 1)
+                    if lo <= hi:
+                        taken[lo - e0 - 1:hi - e0] = True
+            if np.count_nonzero(on & taken):
+                return None
+        if not gv.all():  # runs of missing beams: the merge's rule for dropouts
+            miss = np.flatnonzero(~gv) + e0 + 1
+            starts = np.flatnonzero(np.diff(miss, prepend=-2) > 1)
+            stops = np.append(starts[1:], miss.size) - 1
+            for a, b in zip(miss[starts].tolist(), miss[stops].tolist()):
+                # the joint line's points on the rays of the beams around the run
+                pa, pb = a - 1, b + 1
+                ta = rg / (wc[pa] * nx + ws[pa] * ny)
+                tb = rg / (wc[pb] * nx + ws[pb] * ny)
+                dx, dy = tb * wc[pb] - ta * wc[pa], tb * ws[pb] - ta * ws[pa]
+                if not (dx * dx + dy * dy <= gap2 or (
+                        phi is not None and abs(phi[pb] - phi[pa]) <= params.merge_gap_angle)):
+                    return None
+        return joint, _solve(joint[:, None], scan.origin)
+
+    # Consecutive lines whose facing pieces were consecutive neighbours in the merge were
+    # the merge's to join (it also tests each piece against the merged line of the whole
+    # chain, which a pair cannot): they are left as they are.
+    ps, pe = pieces
+    cluster, phis = memoryview(scan.cluster), scan.rows()[_PHI]
+    ps_l, pe_l = ps.tolist(), pe.tolist()
+    merged_ok = []
+    for j in range(n - 1):
+        a = bisect_left(pe_l, last_l[j] + 1) - 1  # j's last piece, j + 1's first
+        b = bisect_left(ps_l, first_l[j + 1])
+        ok = a >= 0 and b == a + 1 and b < len(ps_l) and ps_l[a] >= first_l[j] and (
+            pe_l[b] <= last_l[j + 1])
+        if ok:
+            p0, p1 = pe_l[a], ps_l[b]
+            ok = (cluster[p0] == cluster[p1]
+                  or (xs[p1] - xs[p0]) ** 2 + (ys[p1] - ys[p0]) ** 2 <= gap2
+                  or abs(phis[p1] - phis[p0]) <= params.merge_gap_angle)
+        merged_ok.append(ok)
+    changed = False
+    for j in range(n - 1):  # each line takes the later lines that join it, in order
+        if owner[j] != j:
+            continue
+        grown = False
+        for k in range(j + 1, n):
+            if owner[k] != k or not (grown or (j, k) in tried) or (
+                    k == j + 1 and merged_ok[j]):
+                continue
+            out = joinable(j, k)
+            if out is None:
+                continue
+            joint, g = out
+            line_sums[j] = joint
+            fits[j] = (float(g.rho[0]), float(g.alpha[0]),
+                       (g.cov[0] * _variance_factor(joint[:, None], g)[0]).reshape(4).tolist())
+            ends[j] = (ends[j][0], last_l[k])
+            for m in range(k, n):
+                if owner[m] == k:
+                    owner[m] = j
+            changed = grown = True
+    if not changed:
+        return f
+    heads = sorted(set(owner))
+    g = _solve(np.stack([line_sums[j] for j in heads], axis=1), scan.origin)
+    col = np.searchsorted(np.array(heads), np.array(owner))
+    return _Fit(g.params.take(col, axis=1), g.rmse[col], g.count[col], g.cov.take(col, axis=0))
+
+
 _MAX_CUTS = 8
 _INWARD = np.array([[1.0], [-1.0]])  # start moves forward along the line, end backward
 
@@ -2025,6 +2208,7 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
                                                (s, e, label, first0, last0), params)
     if not first.size:
         return []
+    fit = _join_occluded(scan, sums, first, last, fit, (s, e), params)
     col, first, last = _occluded_extents(scan, fit, first, last, params)
     if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
         fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
