@@ -11,6 +11,7 @@ from landmark_nav.laser.lines import (explained_points, extract_lines, fit_line,
                                       lowess, METHODS, point_covariances, split_pieces)
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 from landmark_nav.sim import run_scenario, ScanSample, World
+from landmark_nav.slam.features import extract_scan_features
 from landmark_nav.testing import shared_data
 import numpy as np
 import pytest
@@ -325,6 +326,33 @@ def test_wall_behind_an_occluder_is_one_fit(method):
                       SIGMA_PHI)
     assert left.covariance[0, 0] < 1.1 * truth[0, 0]
     assert any(abs(ln.rho - 1.5) < 0.05 for ln in lines)  # the object's line stays
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_slam_features_fit_each_side_of_an_occluder_on_its_own(method):
+    """EKF-SLAM gets the two sides of the wall behind the object as independent fits.
+
+    The joint fit shared by two segments would be one measurement counted twice by the
+    filter (each segment matched to its own panel landmark); ``join_occluded=False`` fits
+    each side on its own beams, as before the join, and leaves the other lines alike.
+    """
+    r, phi, middle = wall_behind_object('wall')
+    valid = np.ones(phi.size, bool)
+    _, slam_lines = extract_scan_features(r, phi, valid, math.radians(0.5), 'lines',
+                                          line_params=LineParams(method=method))
+    clusters = segment_scan(r, phi, valid, math.radians(0.5), min_points=1)
+    alone = extract_lines(clusters, LineParams(method=method, join_occluded=False))
+    joined = extract_lines(clusters, LineParams(method=method))
+    assert [(ln.rho, ln.alpha, ln.first_index) for ln in slam_lines] == [
+        (ln.rho, ln.alpha, ln.first_index) for ln in alone]
+    wall = sorted((ln for ln in slam_lines if abs(ln.rho - 3.0) < 0.05),
+                  key=lambda ln: ln.first_index)
+    assert len(wall) == 2 and wall[0].rho != wall[1].rho
+    assert sum(ln.num_points for ln in wall) == sorted(
+        (ln for ln in joined if abs(ln.rho - 3.0) < 0.05),
+        key=lambda ln: ln.first_index)[0].num_points
+    with pytest.raises(ValueError, match='join_occluded'):
+        LineParams(join_occluded=1)
 
 
 @pytest.mark.parametrize('method', METHODS)

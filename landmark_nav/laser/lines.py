@@ -123,6 +123,9 @@ class LineSegment:
         first_index: Beam index of the first supporting point of the extent.
         last_index: Beam index of the last supporting point of the extent.
 
+    Segments of one surface on both sides of an occluder share one fit (step 5): equal
+    ``rho``, ``alpha``, ``covariance``, ``num_points`` and ``rmse``, one extent each: one
+    measurement, not two (``LineParams.join_occluded``).
     """
 
     rho: float
@@ -180,6 +183,10 @@ class LineParams:
             and growing) when their facing ends are at most this bearing apart [rad].
         see_through: Largest distance a valid beam inside a line's extent may lie beyond
             the line along its ray [m] (step 5); None means ``max(3 sigma_r, 0.05)``.
+        join_occluded: Give the lines of one surface on both sides of an occluder one fit
+            (step 5, :func:`_join_occluded`); their segments then share it. False: each
+            side is fitted on its own beams (independent measurements, as a filter that
+            maps each segment as a landmark with its extent needs).
 
     """
 
@@ -199,6 +206,7 @@ class LineParams:
     trim_sigma: float = 3.0
     merge_gap_angle: float = math.radians(5.0)
     see_through: Optional[float] = None
+    join_occluded: bool = True
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad parameter."""
@@ -252,6 +260,8 @@ class LineParams:
             raise bad('merge_gap_angle', 'an angle in [0, pi]')
         if not positive(self.see_through, allow_none=True):
             raise bad('see_through', 'None or a number > 0')
+        if not isinstance(self.join_occluded, (bool, np.bool_)):
+            raise bad('join_occluded', 'a bool')
         if not (number(self.trim_sigma) and self.trim_sigma > 0):
             raise bad('trim_sigma', 'a number > 0 (inf disables the clean-up)')
 
@@ -2208,7 +2218,8 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
                                                (s, e, label, first0, last0), params)
     if not first.size:
         return []
-    fit = _join_occluded(scan, sums, first, last, fit, (s, e), params)
+    if params.join_occluded:
+        fit = _join_occluded(scan, sums, first, last, fit, (s, e), params)
     col, first, last = _occluded_extents(scan, fit, first, last, params)
     if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
         fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],

@@ -232,7 +232,10 @@ class EkfSlamNode(Node):
         self.laser_sigma_range = declare(self, 'laser_sigma_range', 0.01, "the laser's stated "
                                          '1-sigma range noise [m] (visibility tolerance)',
                                          (0.0, 10.0))
-        self.line_params = declare_dataclass(self, LineParams, LINE_PARAMETERS, 'lines.')
+        # Each side of an occluder is its own line observation (extract_scan_features).
+        self.line_params = declare_dataclass(
+            self, LineParams, {k: v for k, v in LINE_PARAMETERS.items() if k != 'join_occluded'},
+            'lines.')
         self.laser_pose = np.array(declare(
             self, 'laser_pose', [0.0, 0.0, 0.0], 'laser pose [x, y, yaw] in base_link'))
         if self.laser_pose.shape != (3,) or not np.all(np.isfinite(self.laser_pose)):

@@ -43,6 +43,8 @@ LINE_PARAMETERS = {
                      (0.0001, 100.0), None),
     'see_through': ('a line never covers a beam more than this beyond it along the ray [m]; '
                     '0 = automatic, max(3 sigma_r, 0.05)', (0.0, 10.0), None, 0.0),
+    'join_occluded': ('one fit for the lines of a surface on both sides of an occluder '
+                      '(their segments share it)', None, None),
 }
 
 

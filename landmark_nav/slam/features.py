@@ -9,6 +9,7 @@ grow over isolated returns of their wall). The node and the offline evaluation c
 :func:`.line_landmarks.lines_to_observations`.
 """
 
+from dataclasses import replace
 from typing import List, Optional, Tuple
 
 from landmark_nav.laser.corners import CornerParams, extract_corners
@@ -43,7 +44,7 @@ def extract_scan_features(ranges: np.ndarray, angles: np.ndarray, valid: np.ndar
         landmarks: ``'corners'``, ``'lines'`` or ``'both'``.
         corner_params: Corner detector parameters.
         line_params: Line extractor parameters (its ``sigma_r`` also drives the
-            segmentation of the lines' clusters).
+            segmentation of the lines' clusters); ``join_occluded`` is always off here.
 
     Returns:
         ``(corners, lines)``: lists of :class:`~landmark_nav.laser.corners.Corner` and
@@ -55,7 +56,11 @@ def extract_scan_features(ranges: np.ndarray, angles: np.ndarray, valid: np.ndar
     if landmarks in ('corners', 'both'):
         corners = extract_corners(ranges, angles, valid, angle_increment, corner_params)
     if landmarks in ('lines', 'both'):
-        line_params = line_params or LineParams()
+        # Each side of an occluder is its own observation, fitted on its own beams: a
+        # joint fit shared by the two segments would be counted twice by the filter, and
+        # one segment across both would leave the two panel landmarks mapped before, from
+        # places that saw one side, as one wall mapped twice (the office's y = 0 wall).
+        line_params = replace(line_params or LineParams(), join_occluded=False)
         clusters = segment_scan(ranges, angles, valid, angle_increment,
                                 sigma_r=line_params.sigma_r, min_points=1)
         lines = extract_lines(clusters, line_params)
