@@ -3,7 +3,8 @@
 Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_consistency_carmen.py [--landmarks both]
-        [--seed 0] [--line-floor M] [--line-residual-factor K] [--reject-ambiguous]
+        [--seed 0] [--line-floor M] [--line-residual-factor K] [--line-beam-width RAD]
+        [--reject-ambiguous]
         [--jacobians standard|observability|observability_gain|first_estimates]
         [--joint-probability P] [--association icnn|jcbb] [--cartesian-gate F] [--drift MODEL]
         [--filter-noise MODEL] [LOG ...]
@@ -25,7 +26,8 @@ log:
   put in the map with the reference pose, from the mean of the observations the filter
   associated with the same landmark (landmarks seen at least 5 times), under the stated
   covariance moved to the map (the extractor's through the mount plus the segment-wide
-  terms of ``line_floor`` and ``line_residual_factor``, as the filter gets it; the sweep
+  terms of ``line_floor``, ``line_residual_factor`` and ``line_beam_width``, as the filter
+  gets it, :func:`landmark_nav.slam.ekf_slam.line_noise_covariance`; the sweep
   motion is left out). The reference poses are
   scan-matched, a few cm, so this overstates the error a little.
 * ``nis95``: share of updates whose joint NIS exceeds its chi-square 95 % bound (0.05
@@ -66,10 +68,11 @@ from landmark_nav.laser.lines import LineParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
 from landmark_nav.slam.ekf_slam import (ASSOCIATION_METHODS, JACOBIANS,  # noqa: E402
-                                        LINE, odometry_noise, SlamParams)
+                                        LINE, line_noise_covariance, odometry_noise,
+                                        SlamParams)
 from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
-from landmark_nav.slam.line_landmarks import (line_end_covariance,  # noqa: E402
-                                              line_initialization, lines_to_observations)
+from landmark_nav.slam.line_landmarks import (line_initialization,  # noqa: E402
+                                              lines_to_observations)
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -113,8 +116,7 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
         obs = lines_to_observations(lines, mount, None, lp.sigma_r)
         ref = scenario.truth_at(np.array([scans[k].stamp_ns]))[0]
         g, _, gz = line_initialization(ref, obs.z)
-        var = prm.line_floor ** 2 + (prm.line_residual_factor * obs.residual_std) ** 2
-        r_eff = obs.r + var[:, None, None] * line_end_covariance(obs.z, obs.ends, 1.0)
+        r_eff = obs.r + line_noise_covariance(prm, obs.z, obs.ends, obs.residual_std)
         cov = gz @ r_eff @ np.transpose(gz, (0, 2, 1))
         ids = res.landmark_id[len(corners):]
         for q in np.flatnonzero((res.status[len(corners):] == 'matched')
@@ -169,6 +171,8 @@ def main() -> int:
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--line-floor', type=float, default=None)
     ap.add_argument('--line-residual-factor', type=float, default=None)
+    ap.add_argument('--line-beam-width', type=float, default=None,
+                    help="SlamParams.line_beam_width: the beam's 1-sigma angular spread [rad]")
     ap.add_argument('--reject-ambiguous', action='store_true', default=None)
     ap.add_argument('--jacobians', default=None, choices=JACOBIANS)
     ap.add_argument('--association', default=None, choices=ASSOCIATION_METHODS)
@@ -187,6 +191,7 @@ def main() -> int:
         return 1
     given = {'line_floor': args.line_floor,
              'line_residual_factor': args.line_residual_factor,
+             'line_beam_width': args.line_beam_width,
              'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
              'association': args.association,
              'joint_probability': args.joint_probability,

@@ -12,9 +12,11 @@ from landmark_nav.slam import EkfSlam, SlamParams
 from landmark_nav.slam.consistency import chi2_gate
 from landmark_nav.slam.ekf_slam import (augment_map, constrain_jacobians,
                                         do_data_association, ekf_predict, ekf_update,
-                                        invariant_retraction, observation_model,
-                                        OdometryNoise, unobservable_directions)
-from landmark_nav.slam.line_landmarks import (line_end_covariance, LineObservations,
+                                        invariant_retraction, line_noise_covariance,
+                                        observation_model, OdometryNoise,
+                                        unobservable_directions)
+from landmark_nav.slam.line_landmarks import (line_end_covariance,
+                                              line_footprint_covariance, LineObservations,
                                               lines_to_observations)
 from landmark_nav.testing import shared_data
 import numpy as np
@@ -50,6 +52,65 @@ def test_line_end_covariance_is_the_propagated_end_offsets(ends):
     # sqrt(2) sigma / L.
     length = np.linalg.norm(ends[1] - ends[0])
     assert math.sqrt(c[1, 1]) == pytest.approx(math.sqrt(2) * 0.02 / length, rel=1e-9)
+
+
+@pytest.mark.parametrize('ends', [[[2.0, -1.0], [2.5, 3.0]], [[-1.0, 4.0], [3.0, 2.0]],
+                                  [[5.0, 1.0], [5.0, 1.6]], [[0.5, 1.0], [0.4, 6.0]]])
+def test_line_footprint_covariance_is_the_beam_range_noise_at_the_ends(ends):
+    """Each end's range error r delta / tan(theta) along its beam, propagated to (rho, alpha)."""
+    ends = np.array(ends)
+    z = _line_through(*ends)
+    delta = 0.004
+    wall = (ends[1] - ends[0]) / np.linalg.norm(ends[1] - ends[0])
+    cov = np.zeros((2, 2))
+    for i in range(2):
+        r = np.linalg.norm(ends[i])
+        u = ends[i] / r  # the beam
+        theta = math.acos(min(1.0, abs(float(u @ wall))))  # between beam and wall
+        sigma_eff = r * delta / math.tan(theta)
+        step = np.zeros((2, 2))
+        step[i] = 1e-6 * u
+        hi, lo = _line_through(*(ends + step)), _line_through(*(ends - step))
+        jac = np.array([(hi[0] - lo[0]) / 2e-6, wrap_angle(hi[1] - lo[1]) / 2e-6])
+        cov += sigma_eff ** 2 * np.outer(jac, jac)
+    c = line_footprint_covariance(z[None], ends[None], delta)[0]
+    assert c == pytest.approx(cov, rel=1e-5, abs=1e-14)
+
+
+def test_line_footprint_covariance_grows_at_grazing_incidence():
+    """Seen head-on (about the foot point) a wall gets little, far along it (grazing) much."""
+    delta = 0.004
+    head_on = line_footprint_covariance(np.array([[3.0, 0.0]]),
+                                        np.array([[[3.0, -0.5], [3.0, 0.5]]]), delta)[0]
+    grazing = line_footprint_covariance(np.array([[1.0, 0.0]]),
+                                        np.array([[[1.0, 4.0], [1.0, 5.0]]]), delta)[0]
+    # Head-on: end offsets 2 mm, the direction sqrt(2) * 2 mm / 1 m.
+    assert math.sqrt(head_on[1, 1]) == pytest.approx(math.sqrt(2) * delta * 0.5, rel=1e-9)
+    # Grazing (11-14 deg): ends 16 and 20 mm off, direction sqrt(16^2 + 20^2) mm / 1 m.
+    assert math.sqrt(grazing[1, 1]) == pytest.approx(delta * math.hypot(4, 5), rel=1e-9)
+    assert grazing[1, 1] > 20 * head_on[1, 1]
+    assert np.all(line_footprint_covariance(np.array([[1.0, 0.0]]),
+                                            np.array([[[1.0, 4.0], [1.0, 5.0]]]), 0.0) == 0.0)
+
+
+def test_line_noise_covariance_adds_the_footprint_term():
+    """The filter's line noise is the sum of its terms; line_beam_width is off by default."""
+    z = np.array([[1.0, 0.0], [2.0, 0.3]])
+    ends = np.array([[[1.0, 4.0], [1.0, 5.0]], [[2.0, -1.0], [1.5, 1.0]]])
+    res = np.array([0.01, np.nan])
+    prm = SlamParams(line_floor=0.01, line_residual_factor=2.0)
+    base = line_noise_covariance(prm, z, ends, res)
+    assert SlamParams().line_beam_width == 0.0
+    with_fp = line_noise_covariance(
+        SlamParams(line_floor=0.01, line_residual_factor=2.0, line_beam_width=0.004),
+        z, ends, res)
+    assert with_fp == pytest.approx(base + line_footprint_covariance(z, ends, 0.004),
+                                    rel=1e-12, abs=1e-18)
+    var = np.array([0.01 ** 2 + 0.02 ** 2, 0.01 ** 2])
+    assert base == pytest.approx(var[:, None, None] * line_end_covariance(z, ends, 1.0),
+                                 rel=1e-12, abs=1e-18)
+    with pytest.raises(ValueError, match='line_beam_width'):
+        SlamParams(line_beam_width=-0.001)
 
 
 def test_line_floor_enters_the_innovation_covariance():

@@ -213,6 +213,16 @@ def line_end_covariance(z: np.ndarray, ends: np.ndarray, sigma: float) -> np.nda
     Returns:
         (L, 2, 2) covariances (zeros where the segment has no length).
     """
+    jac, _ = _end_jacobian(z, ends)
+    return sigma ** 2 * (jac @ np.transpose(jac, (0, 2, 1)))
+
+
+def _end_jacobian(z: np.ndarray, ends: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Return ``J`` (L, 2, 2) of ``(rho, alpha)`` on the ends' normal offsets, and ``t``.
+
+    ``t`` (L, 2): the ends' positions along the line from its foot point
+    (:func:`line_end_covariance`); ``J`` is zero where the segment has no length.
+    """
     z = np.asarray(z, dtype=float).reshape(-1, 2)
     d = np.column_stack([-np.sin(z[:, 1]), np.cos(z[:, 1])])
     t = np.einsum('kij,kj->ki', np.asarray(ends, dtype=float).reshape(-1, 2, 2), d)
@@ -222,7 +232,42 @@ def line_end_covariance(z: np.ndarray, ends: np.ndarray, sigma: float) -> np.nda
     jac = np.zeros((z.shape[0], 2, 2))
     jac[:, 0, 0], jac[:, 0, 1] = t[:, 1] * inv, -t[:, 0] * inv
     jac[:, 1, 0], jac[:, 1, 1] = inv, -inv
-    return sigma ** 2 * (jac @ np.transpose(jac, (0, 2, 1)))
+    return jac, t
+
+
+def line_footprint_covariance(z: np.ndarray, ends: np.ndarray,
+                              beam_width: float) -> np.ndarray:
+    """Covariance of ``(rho, alpha)`` from the laser beam's footprint at the segment's ends.
+
+    A beam of angular spread ``delta`` (1-sigma, across the beam) at range ``r`` returns from
+    somewhere in a spot of std ``r delta`` across the beam. On a wall seen at incidence
+    ``theta`` (angle between beam and wall) the spot spans ranges: the effective range
+    noise of the beam is ``sigma_eff^2 = sigma_r^2 + (r delta / tan(theta))^2``, the
+    extractor's eq.-7 term plus a footprint term that grows without bound at grazing
+    incidence. Along the wall's normal the footprint term is
+    ``r delta / tan(theta) * sin(theta) = r delta cos(theta) = delta |t|``, with ``t`` the
+    point's position along the line from the foot point of the sensor's perpendicular
+    (``r cos(theta) = |t|``, ``r sin(theta) = rho``). The part of it that the fit's
+    independent-beam covariance does not average away is taken segment-wide, as the
+    offsets of :func:`line_end_covariance`, with the std of each end its own
+    ``delta |t_i|`` (independent between the ends): ``C = J diag(delta^2 t_1^2,
+    delta^2 t_2^2) J^T``. A segment near the foot point (seen head-on) gets almost nothing;
+    one far along its wall (grazing) about ``delta`` in direction and ``delta |t|`` in
+    offset. ``t`` is measured from the foot point of the frame of ``z`` (base_link: the
+    laser's mount offset, centimetres, is neglected).
+
+    Args:
+        z: (L, 2) lines ``(rho, alpha)`` in the frame of ``ends``.
+        ends: (L, 2, 2) endpoints of each segment.
+        beam_width: ``delta``, the 1-sigma angular spread of the return across the beam
+            [rad].
+
+    Returns:
+        (L, 2, 2) covariances (zeros where the segment has no length).
+    """
+    jac, t = _end_jacobian(z, ends)
+    var = (beam_width * np.nan_to_num(t)) ** 2
+    return np.einsum('kij,kj,klj->kil', jac, var, jac)
 
 
 def line_observation_model(pose: np.ndarray, lines: np.ndarray
@@ -330,6 +375,6 @@ def project_extent(line: np.ndarray, ends: np.ndarray) -> np.ndarray:
 
 
 __all__ = ['ends_to_map', 'extent_interval', 'extents_overlap', 'line_end_covariance',
-           'line_initialization',
+           'line_footprint_covariance', 'line_initialization',
            'line_observation_model', 'LineObservations', 'lines_to_observations',
            'merge_extent', 'project_extent', 'transform_lines']
