@@ -1858,6 +1858,10 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     return own[starts], pts[starts], pts[starts + count - 1]
 
 
+# Lines per scan up to which _join_occluded's first test runs on Python floats (measured).
+_JOIN_PAIRS_PY = 12
+
+
 def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.ndarray,
                    f: _Fit, pieces: Tuple[np.ndarray, np.ndarray], params: LineParams
                    ) -> _Fit:
@@ -1913,16 +1917,34 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         d2 = (a11 * dr * dr - 2.0 * a01 * dr * da + a00 * da * da) / det
         return d2 if d2 == d2 else math.inf
 
-    # cheap first test on every pair j < k: the two fits agree (a grown line retests all)
-    jj, kk = np.triu_indices(n, 1)
-    scaled = f.cov * factor[:, None, None]
-    agree = (_chi2(f.rho[jj], f.alpha[jj], scaled[jj], f.rho[kk], f.alpha[kk], scaled[kk])
-             <= gate).nonzero()[0]
-    if not agree.size:
-        return f
-    tried = set(zip(jj[agree].tolist(), kk[agree].tolist()))
-    cov = scaled.reshape(-1, 4).tolist()
+    # cheap first test on every pair j < k: the two fits agree (a grown line retests all);
+    # on Python floats for a few lines (the same operations as _chi2, the same results)
+    cov = (f.cov * factor[:, None, None]).reshape(-1, 4).tolist()
     rho_l, alpha_l = f.params[:2].tolist()
+    if n <= _JOIN_PAIRS_PY:
+        pi, two_pi = math.pi, TWO_PI
+        tried = set()
+        for j in range(n - 1):
+            r1, a1, c1 = rho_l[j], alpha_l[j], cov[j]
+            for k in range(j + 1, n):
+                r2, c2 = rho_l[k], cov[k]
+                da = abs((a1 - alpha_l[k] + pi) % two_pi - pi)
+                dr = r1 - r2
+                if da > 0.5 * pi:
+                    da, dr = pi - da, r1 + r2
+                # d2 is at least each part alone, da^2 / (C1 + C2)_aa and dr^2 /
+                # (C1 + C2)_rr: most pairs (lines of other walls) fail on these
+                if (da * da <= gate * (c1[3] + c2[3]) and dr * dr <= gate * (c1[0] + c2[0])
+                        and chi2(r1, a1, c1, r2, alpha_l[k], c2) <= gate):
+                    tried.add((j, k))
+    else:
+        jj, kk = np.triu_indices(n, 1)
+        scaled = f.cov * factor[:, None, None]
+        agree = (_chi2(f.rho[jj], f.alpha[jj], scaled[jj], f.rho[kk], f.alpha[kk],
+                       scaled[kk]) <= gate).nonzero()[0]
+        tried = set(zip(jj[agree].tolist(), kk[agree].tolist()))
+    if not tried:
+        return f
     wr, wc, ws, wv = scan.beams()
     phi = scan.whole.angles if scan.whole is not None else None
     beam = scan.beam
@@ -1997,8 +2019,9 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
     ps, pe = pieces
     cluster, phis = memoryview(scan.cluster), scan.rows()[_PHI]
     ps_l, pe_l = ps.tolist(), pe.tolist()
-    merged_ok = []
-    for j in range(n - 1):
+
+    def merge_tested(j: int) -> bool:
+        """Return whether lines j and j + 1 met as consecutive neighbouring pieces."""
         a = bisect_left(pe_l, last_l[j] + 1) - 1  # j's last piece, j + 1's first
         b = bisect_left(ps_l, first_l[j + 1])
         ok = a >= 0 and b == a + 1 and b < len(ps_l) and ps_l[a] >= first_l[j] and (
@@ -2008,7 +2031,8 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
             ok = (cluster[p0] == cluster[p1]
                   or (xs[p1] - xs[p0]) ** 2 + (ys[p1] - ys[p0]) ** 2 <= gap2
                   or abs(phis[p1] - phis[p0]) <= params.merge_gap_angle)
-        merged_ok.append(ok)
+        return ok
+
     changed = False
     for j in range(n - 1):  # each line takes the later lines that join it, in order
         if owner[j] != j:
@@ -2016,7 +2040,7 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         grown = False
         for k in range(j + 1, n):
             if owner[k] != k or not (grown or (j, k) in tried) or (
-                    k == j + 1 and merged_ok[j]):
+                    k == j + 1 and merge_tested(j)):
                 continue
             out = joinable(j, k)
             if out is None:
