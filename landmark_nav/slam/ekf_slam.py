@@ -343,6 +343,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 from landmark_nav.geometry import compose_jacobians, relative, wrap_angle
 import numpy as np
 from scipy.linalg.lapack import dpotrf
+from scipy.stats import binom
 
 from ._linalg import solve_lower
 from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table
@@ -484,6 +485,13 @@ class SlamParams:
             landmark, and gated with the larger of the two ``d2``
             (:func:`cartesian_pair_d2`; module docstring, "Cartesian gate"); 0 tests every
             admitted corner pair.
+        free_space_check: None (default): off. Otherwise the confidence of a
+            negative-information test of each scan's association hypothesis (module
+            docstring, "Free-space check"; :func:`free_space_contradictions`): the landmarks
+            the scan sees through (:func:`.visibility.landmarks_missed`) at the posterior
+            the hypothesis would give, and not at the prior, are counted; when so many
+            would be unlikely for a right hypothesis, pairs are dropped (reason
+            ``'free_space'``) until they are not. Needs the scan geometry.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
@@ -524,6 +532,7 @@ class SlamParams:
     relinearize_ratio: float = 0.02
     jacobians: str = 'standard'
     cartesian_gate: Optional[float] = None
+    free_space_check: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -549,6 +558,11 @@ class SlamParams:
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
         if self.cartesian_gate is not None:
             _check_number('SlamParams.cartesian_gate', self.cartesian_gate, minimum=0.0)
+        if self.free_space_check is not None and not (
+                isinstance(self.free_space_check, (int, float))
+                and 0.0 < self.free_space_check < 1.0):
+            raise ValueError(f'SlamParams.free_space_check must be in (0, 1), '
+                             f'got {self.free_space_check!r}')
         if self.jacobians not in JACOBIANS:
             raise ValueError(f'SlamParams.jacobians must be one of {JACOBIANS}, '
                              f'got {self.jacobians!r}')
@@ -981,6 +995,92 @@ def cartesian_pair_d2(x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray
     a = np.concatenate([gr, np.broadcast_to(-np.eye(2), (index.size, 2, 2))], axis=2)
     cov = a @ p5 @ np.transpose(a, (0, 2, 1)) + gz @ r @ np.transpose(gz, (0, 2, 1))
     return np.einsum('ki,ki->k', e, np.linalg.solve(cov, e[:, :, None])[:, :, 0])
+
+
+def free_space_contradictions(x: np.ndarray, p: np.ndarray, kind: np.ndarray,
+                              ends: np.ndarray, bisector: np.ndarray, opening: np.ndarray,
+                              scan: ScanGeometry, gate_probability: float,
+                              min_view_margin: float, line_min_beams: int,
+                              nullspace: Optional[np.ndarray] = None
+                              ) -> Tuple[np.ndarray, np.ndarray]:
+    """Which map landmarks a scan sees through, and which lie in its view, at a state.
+
+    The negative-information test of ``SlamParams.free_space_check`` (module docstring,
+    "Free-space check"): with the state ``x`` and covariance ``p`` that an association
+    hypothesis would give (or the prior), a landmark is *seen through* when the scan's beams
+    pass its predicted place and return from beyond it (:func:`.visibility.landmarks_missed`,
+    the test of visibility-aware pruning, with the predicted observation std from ``p``:
+    the landmark's and the robot's uncertainty propagated to the range, at the gate's
+    one-dof ``sqrt(chi2_1(gate_probability))``). A solid corner or wall cannot be seen
+    through, so each one counts against ``x``.
+
+    Args:
+        x: State.
+        p: Its covariance.
+        kind: (N,) landmark kinds.
+        ends: (N, 2, 2) line extents (map).
+        bisector: (N, 2) corner bisector sums.
+        opening: (N,) corner openings.
+        scan: The scan.
+        gate_probability: Confidence of the per-landmark test.
+        min_view_margin: Corner grazing margin [rad].
+        line_min_beams: Beams for a line.
+        nullspace: Optional (N, 5, 3) unobservable directions: the predicted std takes the
+            constrained Jacobians (those of the gate and the gain with
+            ``'observability_gain'``).
+
+    Returns:
+        ``(through (N,), in_view (N,))``: ``in_view`` a landmark whose place (a corner, or
+        a line's extent ends or middle) lies in the scan's field of view and range.
+    """
+    n = kind.size
+    if n == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
+    index = np.arange(n)
+    _, hr, hf = observation_model(x, index, kind)
+    if nullspace is not None:
+        hr, hf = constrain_jacobians(hr, hf, nullspace)
+    var = np.diagonal(predicted_observation_covariance(p, index, hr, hf), 0, 1, 2)
+    params = x[3:3 + 2 * n].reshape(-1, 2)
+    through = landmarks_missed(x[:3], kind, params, ends, bisector, opening,
+                               np.sqrt(np.maximum(var, 0.0)), scan,
+                               math.sqrt(chi2_gate(1, gate_probability)), min_view_margin,
+                               line_min_beams)
+    # In view: a corner, or a line's ends or middle, inside the beams and the range.
+    pts = np.where((kind == LINE)[:, None, None],
+                   np.nan_to_num(np.stack([ends[:, 0], ends[:, 1], ends.mean(axis=1)], 1)),
+                   params[:, None, :])  # (N, 3, 2)
+    c, s_ = math.cos(x[2]), math.sin(x[2])
+    mount = np.asarray(scan.mount, dtype=float)
+    lp = np.array([x[0] + c * mount[0] - s_ * mount[1], x[1] + s_ * mount[0]
+                   + c * mount[1], x[2] + mount[2]])
+    d = pts - lp[:2]
+    rng = np.hypot(d[..., 0], d[..., 1])
+    b = _wrap(np.arctan2(d[..., 1], d[..., 0]) - lp[2])
+    a0 = scan.angle_min
+    a1 = scan.angle_min + scan.angle_increment * (np.asarray(scan.ranges).size - 1)
+    lo, hi = min(a0, a1), max(a0, a1)
+    view = (rng > scan.range_min) & (rng < scan.range_max) & (b >= lo) & (b <= hi)
+    in_view = np.any(view, axis=1)
+    if np.any(kind == LINE):  # lines without a valid extent are not judged
+        in_view &= (kind != LINE) | np.all(np.isfinite(ends), axis=(1, 2))
+    return through, in_view
+
+
+def free_space_significant(count: int, in_view: int, gate_probability: float,
+                           probability: float) -> bool:
+    """Whether ``count`` landmarks seen through out of ``in_view`` refute a hypothesis.
+
+    A landmark that is where the hypothesis puts it is seen through only if the beams at
+    it all return beyond the one-sided gate, with probability at most
+    ``q = (1 - gate_probability) / 2``; the count under a right hypothesis is then at most
+    Binomial(``in_view``, ``q``) (independent beams), and the hypothesis is refuted when
+    ``P(X >= count) < 1 - probability``.
+    """
+    if count <= 0:
+        return False
+    q = 0.5 * (1.0 - gate_probability)
+    return bool(binom.sf(count - 1, max(int(in_view), int(count)), q) < 1.0 - probability)
 
 
 def reject_ambiguous_pairs(hyp: np.ndarray, d2: np.ndarray, gate: float) -> np.ndarray:
@@ -1492,7 +1592,7 @@ class EkfSlam:
         self.stats: Dict[str, int] = {'predictions': 0, 'updates': 0, 'psd_repairs': 0,
                                       'matched': 0, 'confirmed': 0, 'new_candidates': 0,
                                       'dropped_candidates': 0, 'rejected': 0, 'pruned': 0,
-                                      'evicted': 0, 'retired': 0}
+                                      'evicted': 0, 'retired': 0, 'free_space': 0}
         if self._loaded is not None and self.params.mode == 'localization':
             self._install_map(self._loaded[0], self._initial_pose, self._loaded[1])
 
@@ -1767,6 +1867,9 @@ class EkfSlam:
             prm.cartesian_gate)
         if prm.reject_ambiguous:
             hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(2, prm.gate_probability))
+        veto = np.zeros(0, dtype=np.int64)
+        if prm.free_space_check is not None and scan is not None and np.any(hyp >= 0):
+            hyp, veto = self._free_space_veto(hyp, zu, ru, d2, scan, mixed, null, jac_x)
         ok = hyp >= 0
         nis, dof = 0.0, 0
         if np.any(ok):
@@ -1804,6 +1907,9 @@ class EkfSlam:
             amb = np.min(d2[rest], axis=1) < chi2_gate(2, prm.new_landmark_probability)
             reason[use[rest[amb]]] = 'ambiguous'
             rest = rest[~amb]
+        if veto.size:  # inside the gate, so not a candidate either
+            reason[use[veto]] = 'free_space'
+            rest = np.setdiff1d(rest, veto)
         manage = scan is not None and prm.mode == 'slam' and lm_before > 0
         if manage and (prm.prune_misses > 0 or prm.establish_hits > 0):
             seen = np.zeros(lm_before, dtype=bool)
@@ -1887,6 +1993,65 @@ class EkfSlam:
         lm = self._x[3:].reshape(-1, 2)
         for k, j in enumerate(index[ln]):
             self._ends[j] = merge_extent(lm[j], self._ends[j], ends_w[k])
+
+    # ------------------------------------------------------------------ free-space check
+    def _free_space_veto(self, hyp: np.ndarray, zu: np.ndarray, ru: np.ndarray,
+                         d2: np.ndarray, scan: ScanGeometry, mixed: bool,
+                         null: Optional[np.ndarray], jac_x: Optional[np.ndarray]
+                         ) -> Tuple[np.ndarray, np.ndarray]:
+        """Drop pairs whose posterior the scan refutes (module docstring, "Free-space check").
+
+        Returns:
+            ``(hypothesis, dropped observation indices into zu)``.
+        """
+        prm = self.params
+        n = self.num_landmarks
+        kind = self._kind[:n]
+        gain_null = null if prm.jacobians == 'observability_gain' else None
+
+        def seen(x: np.ndarray, p: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+            return free_space_contradictions(
+                x, p, kind, self._ends[:n], self._bis[:n], self._open[:n], scan,
+                prm.gate_probability, prm.min_view_margin, prm.line_min_beams, gain_null)
+
+        through0 = seen(self._x, self._p)[0]
+        hyp = hyp.copy()
+        matched = np.zeros(n, dtype=bool)
+        matched[hyp[hyp >= 0]] = True
+
+        def new_count(pairs: np.ndarray) -> Tuple[int, int]:
+            if pairs.size == 0:
+                return 0, 0
+            x = self._x.copy()
+            j = hyp[pairs]
+            try:
+                p, _ = ekf_update(x, self._p.copy(), zu[pairs], ru[pairs], j,
+                                  prm.max_update_iterations, prm.relinearize_ratio,
+                                  kind[j] if mixed else None,
+                                  None if null is None else null[j],
+                                  prm.jacobians == 'observability_gain', jac_x,
+                                  kind if prm.jacobians == 'invariant' else None)
+            except np.linalg.LinAlgError:
+                return 0, 0
+            through, view = seen(x, p)
+            new = through & ~through0 & ~matched
+            return int(new.sum()), int((view & ~matched).sum())
+
+        pairs = np.flatnonzero(hyp >= 0)
+        count, view = new_count(pairs)
+        dropped = []
+        while pairs.size and free_space_significant(count, view, prm.gate_probability,
+                                                    prm.free_space_check):
+            trials = [new_count(np.delete(pairs, t)) for t in range(pairs.size)]
+            # The pair whose removal leaves the fewest contradictions (ties: the worst d2).
+            best = min(range(pairs.size),
+                       key=lambda t: (trials[t][0], -d2[pairs[t], hyp[pairs[t]]]))
+            dropped.append(int(pairs[best]))
+            hyp[pairs[best]] = -1
+            pairs = np.delete(pairs, best)
+            count, view = trials[best]
+        self.stats['free_space'] += len(dropped)
+        return hyp, np.array(dropped, dtype=np.int64)
 
     # ------------------------------------------------------------------ map management
     def _count_misses(self, scan: ScanGeometry, seen: np.ndarray) -> np.ndarray:
