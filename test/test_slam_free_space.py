@@ -5,8 +5,8 @@ the aces failure of the README ("What goes wrong on aces and acapulco") in minia
 corners are mapped 22 m ahead, then the robot's position becomes uncertain by 8 m along x
 and a corner 3 m ahead (not mapped) is seen: the range-bearing gate admits it as the
 mapped corner A at 22 m (the only landmark in its gate), and that pair would put the robot
-19 m ahead, 5 m from the other mapped corner B, whose beam the scan shows passing 25 m
-into free space.
+19 m ahead, 5 m from the other mapped corner B, where the scan's beams pass 25 m into free
+space (from where the robot is, the scan returns at B).
 """
 
 import math
@@ -37,12 +37,15 @@ def scan_with(ranges_fn, n=361):
 
 
 def open_room(a):
-    """A scan seeing 25 m everywhere but a near corner 3 m straight ahead."""
-    return np.where(np.abs(a) < math.radians(5.0), 3.0, 25.0)
+    """Return the scan from the origin: a corner 3 m ahead, B where it is, 25 m elsewhere."""
+    out = np.where(np.abs(a) < math.radians(5.0), 3.0, 25.0)
+    b = math.atan2(MAPPED[1, 1], MAPPED[1, 0])
+    out[np.abs(a - b) < math.radians(2.0)] = math.hypot(*MAPPED[1])
+    return out
 
 
 def mapped_filter(check, sigma_x=8.0):
-    """A and B mapped from the origin, then the robot's x made uncertain (std sigma_x)."""
+    """Map A and B from the origin, then make the robot's x uncertain (std sigma_x)."""
     prm = SlamParams(confirm_hits=1, confirm_window=1, prune_misses=0,
                      free_space_check=check)
     slam = EkfSlam(prm)

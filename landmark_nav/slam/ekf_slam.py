@@ -212,6 +212,34 @@ their linear ``d2`` (5.81, 5.03); over the whole ``P`` (``kappa = 0``) it reject
 with the projection 5.0): sigma points along the linearised global turn stretch the
 robot-landmark vector by ``sqrt(1 + s^2)``, which a range std of 2 cm does not allow.
 
+Free-space check
+----------------
+``free_space_check`` (off by default; a confidence, e.g. 0.95) weighs what the gate cannot:
+negative information. If the robot were where an association hypothesis puts it, the scan
+would have to show the mapped landmarks that would then be in its view; a solid corner or
+wall that the scan's beams pass through, returning from beyond it, refutes that pose. The
+idea is the "negative information" of Thrun, Burgard and Fox (Probabilistic Robotics, MIT
+Press 2005), who use landmarks in the perceptual range that are not seen to weigh a
+landmark's existence (FastSLAM feature management; section not re-checked here); here it
+weighs a hypothesis, with the free-space test of visibility-aware pruning
+(:func:`.visibility.landmarks_missed`; :func:`free_space_contradictions`). After ICNN /
+JCBB, the hypothesis's posterior (:func:`ekf_update` on a copy: the same Jacobians and
+gain) is computed and the landmarks not in the hypothesis that the scan sees through at
+the posterior mean (predicted std from the posterior covariance, one-dof gate
+``sqrt(chi2_1(gate_probability))``) are counted, except those that the scan already sees
+through at the prior mean with the same covariance and no gate at all (a lost landmark,
+pruning's business, or a borderline case). Out of ``V`` landmarks the scan could have seen
+through (in view and range, facing, nothing in front: :func:`.visibility.corners_in_view`,
+:func:`.visibility.lines_unoccluded`), a right hypothesis sees each through with
+probability at most ``q = (1 - gate_probability) / 2``; ``c`` of them refute it when the
+binomial tail ``P(X >= c) < 1 - free_space_check`` (:func:`free_space_significant`: at
+0.95 one of one or two, two of 3-14, three of 15-33). Then the pair whose removal leaves
+the fewest contradictions (ties: the largest ``d2``) is dropped (reason ``'free_space'``,
+counted in ``stats['free_space']``), and so on while the rest is refuted, unless no removal
+lowers the count (then the map, not a pair, is to blame). Cost: one update on a copy and
+two visibility tests of the whole map per scan with a hypothesis, more only when it is
+refuted. Measured in the README (EKF-SLAM, "Free-space check").
+
 Tentative landmarks (ghost protection)
 --------------------------------------
 An observation that no map landmark explains starts a *candidate* that lives OUTSIDE the
@@ -353,7 +381,7 @@ from .line_landmarks import (ends_to_map, extents_overlap, line_end_covariance,
                              line_observation_model, LineObservations, merge_extent,
                              project_extent)
 from .slam_map import SlamMap
-from .visibility import corners_in_view, landmarks_missed, ScanGeometry
+from .visibility import corners_in_view, landmarks_missed, lines_unoccluded, ScanGeometry
 
 ASSOCIATION_METHODS = ('icnn', 'jcbb')
 STATUSES = ('matched', 'confirmed', 'tentative', 'new', 'rejected')
@@ -369,6 +397,8 @@ _FIRST_ESTIMATE_RULES = ('first_estimates', 'observability', 'observability_gain
 MAP_FULL_POLICIES = ('evict', 'reject')
 #: Landmark kinds (values of :attr:`EkfSlam.landmark_kinds`).
 CORNER, LINE = 0, 1
+#: A confidence whose one-dof gate is ~0 (the free-space check's prior-mean test).
+_NO_GATE = 1e-12
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
@@ -1030,8 +1060,10 @@ def free_space_contradictions(x: np.ndarray, p: np.ndarray, kind: np.ndarray,
             ``'observability_gain'``).
 
     Returns:
-        ``(through (N,), in_view (N,))``: ``in_view`` a landmark whose place (a corner, or
-        a line's extent ends or middle) lies in the scan's field of view and range.
+        ``(through (N,), in_view (N,))``: ``in_view`` a landmark the scan could have seen
+        through: in view and range, facing, nothing in front of its place
+        (:func:`.visibility.corners_in_view` without a distance limit,
+        :func:`.visibility.lines_unoccluded`); the landmarks seen through are among them.
     """
     n = kind.size
     if n == 0:
@@ -1046,24 +1078,20 @@ def free_space_contradictions(x: np.ndarray, p: np.ndarray, kind: np.ndarray,
                                np.sqrt(np.maximum(var, 0.0)), scan,
                                math.sqrt(chi2_gate(1, gate_probability)), min_view_margin,
                                line_min_beams)
-    # In view: a corner, or a line's ends or middle, inside the beams and the range.
-    pts = np.where((kind == LINE)[:, None, None],
-                   np.nan_to_num(np.stack([ends[:, 0], ends[:, 1], ends.mean(axis=1)], 1)),
-                   params[:, None, :])  # (N, 3, 2)
-    c, s_ = math.cos(x[2]), math.sin(x[2])
-    mount = np.asarray(scan.mount, dtype=float)
-    lp = np.array([x[0] + c * mount[0] - s_ * mount[1], x[1] + s_ * mount[0]
-                   + c * mount[1], x[2] + mount[2]])
-    d = pts - lp[:2]
-    rng = np.hypot(d[..., 0], d[..., 1])
-    b = _wrap(np.arctan2(d[..., 1], d[..., 0]) - lp[2])
-    a0 = scan.angle_min
-    a1 = scan.angle_min + scan.angle_increment * (np.asarray(scan.ranges).size - 1)
-    lo, hi = min(a0, a1), max(a0, a1)
-    view = (rng > scan.range_min) & (rng < scan.range_max) & (b >= lo) & (b <= hi)
-    in_view = np.any(view, axis=1)
-    if np.any(kind == LINE):  # lines without a valid extent are not judged
-        in_view &= (kind != LINE) | np.all(np.isfinite(ends), axis=(1, 2))
+    # Could be seen through: nothing in front of the place (the denominator of the test).
+    in_view = np.zeros(n, dtype=bool)
+    g = math.sqrt(chi2_gate(1, gate_probability))
+    c = np.flatnonzero(kind != LINE)
+    if c.size:
+        in_view[c] = corners_in_view(x[:3], params[c], bisector[c], opening[c],
+                                     np.sqrt(np.maximum(var[c], 0.0)), np.full(c.size, np.inf),
+                                     scan, g, min_view_margin)
+    ln = np.flatnonzero((kind == LINE) & np.all(np.isfinite(ends), axis=(1, 2)))
+    if ln.size:
+        in_view[ln] = lines_unoccluded(x[:3], params[ln], ends[ln],
+                                       np.sqrt(np.maximum(var[ln, 0], 0.0)), scan, g,
+                                       line_min_beams)
+    in_view |= through
     return through, in_view
 
 
@@ -2009,12 +2037,12 @@ class EkfSlam:
         kind = self._kind[:n]
         gain_null = null if prm.jacobians == 'observability_gain' else None
 
-        def seen(x: np.ndarray, p: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        def seen(x: np.ndarray, p: np.ndarray, probability: float
+                 ) -> Tuple[np.ndarray, np.ndarray]:
             return free_space_contradictions(
                 x, p, kind, self._ends[:n], self._bis[:n], self._open[:n], scan,
-                prm.gate_probability, prm.min_view_margin, prm.line_min_beams, gain_null)
+                probability, prm.min_view_margin, prm.line_min_beams, gain_null)
 
-        through0 = seen(self._x, self._p)[0]
         hyp = hyp.copy()
         matched = np.zeros(n, dtype=bool)
         matched[hyp[hyp >= 0]] = True
@@ -2033,8 +2061,12 @@ class EkfSlam:
                                   kind if prm.jacobians == 'invariant' else None)
             except np.linalg.LinAlgError:
                 return 0, 0
-            through, view = seen(x, p)
-            new = through & ~through0 & ~matched
+            through, view = seen(x, p, prm.gate_probability)
+            # Only what the move of the mean does counts: a landmark seen through at the
+            # prior mean, judged with the same covariance and no gate (g = 0: the beams pass
+            # its predicted range at all), is a landmark the map may have lost (pruning's
+            # business) or a borderline case, not evidence against the hypothesis.
+            new = through & ~seen(self._x, p, _NO_GATE)[0] & ~matched
             return int(new.sum()), int((view & ~matched).sum())
 
         pairs = np.flatnonzero(hyp >= 0)
@@ -2046,6 +2078,8 @@ class EkfSlam:
             # The pair whose removal leaves the fewest contradictions (ties: the worst d2).
             best = min(range(pairs.size),
                        key=lambda t: (trials[t][0], -d2[pairs[t], hyp[pairs[t]]]))
+            if trials[best][0] >= count:
+                break  # no pair is to blame: the contradiction is the map's
             dropped.append(int(pairs[best]))
             hyp[pairs[best]] = -1
             pairs = np.delete(pairs, best)
