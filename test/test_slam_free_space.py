@@ -14,7 +14,7 @@ import math
 from landmark_nav.geometry import inverse_transform_points
 from landmark_nav.slam import EkfSlam, SlamParams
 from landmark_nav.slam.ekf_slam import free_space_contradictions, free_space_significant
-from landmark_nav.slam.visibility import ScanGeometry
+from landmark_nav.slam.visibility import lines_unoccluded, ScanGeometry
 import numpy as np
 import pytest
 
@@ -105,3 +105,20 @@ def test_param_default_off_and_validated():
     for bad in (0.0, 1.0, -0.5, 'x'):
         with pytest.raises(ValueError, match='free_space_check'):
             SlamParams(free_space_check=bad)
+
+
+def test_lines_unoccluded_needs_beams_reaching_the_segment():
+    """A wall x = 3 (|y| <= 1) is reachable when the beams return at or beyond it only."""
+    lines = np.array([[3.0, 0.0]])
+    ends = np.array([[[3.0, -1.0], [3.0, 1.0]]])
+    sigma = np.array([0.02])
+    g = math.sqrt(3.841)
+    for ranges, want in ((lambda a: 3.0 / np.cos(a), True),  # returns on the wall
+                         (lambda a: np.full(a.shape, 25.0), True),  # beyond it (seen through)
+                         (lambda a: np.full(a.shape, 1.0), False)):  # something in front
+        got = lines_unoccluded(np.zeros(3), lines, ends, sigma, scan_with(ranges), g, 8)
+        assert got.tolist() == [want]
+    # Seen from behind (rho < 0 in the laser frame): never.
+    back = lines_unoccluded(np.array([6.0, 0.0, 0.0]), lines, ends, sigma,
+                            scan_with(lambda a: np.full(a.shape, 25.0)), g, 8)
+    assert back.tolist() == [False]
