@@ -6,8 +6,8 @@ Run from the repository root (needs ``../shared/data/carmen``)::
         [--seed 0] [--line-floor M] [--line-residual-factor K] [--line-beam-width RAD]
         [--reject-ambiguous]
         [--jacobians standard|observability|observability_gain|first_estimates]
-        [--joint-probability P] [--association icnn|jcbb] [--cartesian-gate F] [--drift MODEL]
-        [--filter-noise MODEL] [LOG ...]
+        [--joint-probability P] [--association icnn|jcbb] [--cartesian-gate F]
+        [--free-space-check P] [--drift MODEL] [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
 seed) and run through :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated
@@ -179,6 +179,8 @@ def main() -> int:
     ap.add_argument('--joint-probability', type=float, default=None)
     ap.add_argument('--cartesian-gate', type=float, default=None,
                     help='SlamParams.cartesian_gate (relative range std; 0: every pair)')
+    ap.add_argument('--free-space-check', type=float, default=None,
+                    help='SlamParams.free_space_check (confidence; e.g. 0.95)')
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
     ap.add_argument('--filter-noise', default=None,
@@ -195,7 +197,8 @@ def main() -> int:
              'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
              'association': args.association,
              'joint_probability': args.joint_probability,
-             'cartesian_gate': args.cartesian_gate}
+             'cartesian_gate': args.cartesian_gate,
+             'free_space_check': args.free_space_check}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
             'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5',

@@ -219,6 +219,38 @@ def lines_missed(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray, rho_sigm
     return (rho_l > 0.0) & (through.sum(axis=1) >= min_beams) & (hit.sum(axis=1) < min_beams)
 
 
+def lines_unoccluded(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray,
+                     rho_sigma: np.ndarray, scan: ScanGeometry, gate: float,
+                     min_beams: int) -> np.ndarray:
+    """Return (K,) whether at least ``min_beams`` beams reach each line's segment.
+
+    The beams of :func:`lines_missed` (on the segment, seen from the front, inside the
+    range) that return no closer than the line minus the same tolerance: the line could
+    have been seen, or seen through, by this scan (nothing in front of it).
+    """
+    k = lines.shape[0]
+    if k == 0:
+        return np.zeros(0, dtype=bool)
+    lp = _laser_pose(pose, np.asarray(scan.mount, dtype=float))
+    a = lines[:, 1]
+    nrm = np.column_stack([np.cos(a), np.sin(a)])
+    rho_l = lines[:, 0] - nrm @ lp[:2]
+    alpha_l = a - lp[2]
+    e = ends - lp[:2]
+    u_end = _wrap(np.arctan2(e[..., 1], e[..., 0]) - lp[2] - alpha_l[:, None])
+    u_lo, u_hi = u_end.min(axis=1), u_end.max(axis=1)
+    u = _wrap(scan.angles[None, :] - alpha_l[:, None])
+    cos_u = np.cos(u)
+    on = (u >= u_lo[:, None]) & (u <= u_hi[:, None]) & (cos_u > 0.0)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        pred = rho_l[:, None] / cos_u
+        tol = gate * np.sqrt((rho_sigma[:, None] / cos_u) ** 2 + scan.sigma_range ** 2)
+        meas = np.broadcast_to(np.asarray(scan.ranges, dtype=float)[None, :], pred.shape)
+        on &= (pred > scan.range_min) & (pred < scan.range_max) & np.isfinite(meas)
+        reach = on & (meas >= pred - tol)
+    return (rho_l > 0.0) & (reach.sum(axis=1) >= min_beams)
+
+
 def landmarks_missed(pose: np.ndarray, kind: np.ndarray, params: np.ndarray,
                      ends: np.ndarray, bisector: np.ndarray, opening: np.ndarray,
                      sigma: np.ndarray, scan: ScanGeometry, gate: float,
@@ -250,4 +282,5 @@ def landmarks_missed(pose: np.ndarray, kind: np.ndarray, params: np.ndarray,
     return out
 
 
-__all__ = ['corners_in_view', 'corners_missed', 'landmarks_missed', 'lines_missed', 'ScanGeometry']
+__all__ = ['corners_in_view', 'corners_missed', 'landmarks_missed', 'lines_missed',
+           'lines_unoccluded', 'ScanGeometry']
