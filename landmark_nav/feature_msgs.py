@@ -13,7 +13,9 @@ Encodings (documented in the README topic table):
   ``x y z rho alpha x1 y1 x2 y2 cov_rr cov_ra cov_aa num_points rmse``: (x, y) is the
   segment midpoint (so RViz shows it), (rho, alpha) the Hessian normal form
   ``x cos(alpha) + y sin(alpha) = rho`` with rho >= 0, (x1, y1)-(x2, y2) the endpoints,
-  cov_* the covariance of (rho, alpha).
+  cov_* the covariance of (rho, alpha). Segments of one surface on both sides of an
+  occluder carry one fit (equal rho, alpha, cov_*, num_points and rmse; num_points counts
+  the points of both sides): one measurement, which a consumer must not count twice.
 * RViz: ``visualization_msgs/MarkerArray`` (a DELETEALL then the features).
 """
 

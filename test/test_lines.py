@@ -329,6 +329,23 @@ def test_wall_behind_an_occluder_is_one_fit(method):
 
 
 @pytest.mark.parametrize('method', METHODS)
+def test_wall_with_a_doorway_without_returns_is_not_joined(method):
+    """A doorway whose beams return nothing: the halves keep their own fits.
+
+    The dropout is 1.2 m / 22 deg, beyond the merge's 0.3 m / 5 deg rule for missing beams.
+    """
+    r, phi, middle = wall_behind_object('opening')
+    valid = ~middle
+    r = np.where(valid, r, np.inf)
+    clusters = segment_scan(r, phi, valid, math.radians(0.5))
+    wall = sorted((ln for ln in extract_lines(clusters, LineParams(method=method))
+                   if abs(ln.rho - 3.0) < 0.05), key=lambda ln: ln.first_index)
+    assert len(wall) == 2
+    assert wall[0].rho != wall[1].rho
+    assert wall[0].num_points + wall[1].num_points <= np.count_nonzero(valid)
+
+
+@pytest.mark.parametrize('method', METHODS)
 def test_slam_features_fit_each_side_of_an_occluder_on_its_own(method):
     """EKF-SLAM gets the two sides of the wall behind the object as independent fits.
 
@@ -458,12 +475,14 @@ def test_office_run_line_targets():
         # sigma d rho is dominated by short lines on far walls seen at grazing incidence,
         # whose rho error is their angle error times a lever arm of metres. The floor, what
         # an efficient extractor would get on the same walls (Cramer-Rao bound from all
-        # their beams), is itself 1.00 cm here (0.98-1.03 cm on seeds 1-6), so the 1 cm
+        # their beams), is itself 0.99 cm here (0.97-1.01 cm on seeds 1-6), so the 1 cm
         # target cannot be met reliably: ALFA is at 1.02 cm, split_merge at 0.95 cm on this
-        # seed (0.96-1.11 cm on seeds 2-6), reported in the README. Asserted: both stay
-        # near-efficient (ratios 0.96-1.15 on seeds 1-6).
+        # seed, reported in the README. Asserted: both near-efficient, within a few % of
+        # their ratios to the floor on this seed (split_merge 0.956, alfa 1.044; 1.002 and
+        # 1.093 without the join across occluders; 0.956-1.147 on seeds 1-6).
         assert 0.0095 <= sc.floor_sigma_rho <= 0.0105
-        assert sc.sigma_rho <= 1.25 * sc.floor_sigma_rho
+        bound = {'split_merge': 1.0, 'alfa': 1.07}[method]
+        assert sc.sigma_rho <= bound * sc.floor_sigma_rho
         if method == 'split_merge':
             assert sc.sigma_rho <= 0.010
 
@@ -509,17 +528,17 @@ def test_carmen_logs(name):
         # on every run, so the margin only covers floating-point differences.
         want = {
             ('aces-corrected.log.gz', 'split_merge'): (0.6564549041505786, 0.05027932960893855,
-                                                       0.018129650178576526,
+                                                       0.018129567332187818,
                                                        0.0266024917038544, 440),
-            ('aces-corrected.log.gz', 'alfa'): (0.6563915550425352, 0.05027932960893855,
-                                                0.017919355331304277, 0.025944137711420873,
+            ('aces-corrected.log.gz', 'alfa'): (0.6565693102482232, 0.05027932960893855,
+                                                0.01791894465557827, 0.025944137711420873,
                                                 440),
             ('seattle-corrected.log.gz', 'split_merge'): (0.843348509666264,
                                                           0.6094182825484764,
-                                                          0.009376485237530206,
+                                                          0.009378008809379943,
                                                           0.02487958366427969, 241),
             ('seattle-corrected.log.gz', 'alfa'): (0.8418632726578638, 0.6061452513966481,
-                                                   0.008090663976095048, 0.01562691175120255,
+                                                   0.00809124356949539, 0.01562691175120255,
                                                    241),
         }[name, method]
         got = (explained.mean(), explained.min(), rmse.mean(), rmse.max(), explained.size)
@@ -527,7 +546,7 @@ def test_carmen_logs(name):
 
 
 PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_SPLIT_PIECE_PY', '_CLEAN_PY', '_PAIRS_PY',
-            '_GROW_PY', '_NOISE_PY', '_BUILD_PY')
+            '_GROW_PY', '_NOISE_PY', '_BUILD_PY', '_JOIN_PAIRS_PY')
 
 
 def _line_tuples(lines):
@@ -561,3 +580,29 @@ def test_python_float_paths_give_the_array_paths_lines(monkeypatch, method):
         runs.append([_line_tuples(extract_lines(c, params)) for c in inputs])
     assert sum(map(len, runs[0])) >= 3 * len(inputs)
     assert runs[0] == runs[1]
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_the_join_across_occluders_drops_no_extent_on_a_real_log(method):
+    """belgioioso, every scan, sigma_r 2 cm: the join keeps every extent of the lines alone.
+
+    A joint fit can move an extent's end points (their projections onto the line): one
+    extent of 0.301 m came out 0.299 m and was dropped under ``min_length`` before the join
+    tested it. The join may keep a piece that is too short or rough on its own (a superset).
+    """
+    from landmark_nav.importers.carmen import read_carmen_scans
+    path = shared_data('carmen', 'belgioioso-corrected.log.gz')
+    joined = LineParams(method=method, sigma_r=CARMEN_SIGMA_R)
+    alone = LineParams(method=method, sigma_r=CARMEN_SIGMA_R, join_occluded=False)
+    shared = scans = 0
+    for scan in read_carmen_scans(path):
+        valid = np.isfinite(scan.ranges) & (scan.ranges > 0)
+        clusters = segment_scan(scan.ranges, scan.angles, valid, scan.angle_increment,
+                                sigma_r=CARMEN_SIGMA_R, min_points=1)
+        with_join = extract_lines(clusters, joined)
+        extents = {(ln.first_index, ln.last_index) for ln in with_join}
+        assert extents >= {(ln.first_index, ln.last_index)
+                           for ln in extract_lines(clusters, alone)}, scans
+        shared += len(with_join) - len({(ln.rho, ln.alpha) for ln in with_join})
+        scans += 1
+    assert scans > 300 and shared > 0  # the join did happen on this log

@@ -8,9 +8,10 @@ at a bearing of 0.5 rad.
 
 import math
 
-from landmark_nav.slam import chi2_gate, SlamParams
+from landmark_nav.slam import chi2_gate, ekf_slam, SlamParams
 from landmark_nav.slam.ekf_slam import (cartesian_pair_d2, do_data_association,
                                         feature_initialization)
+from landmark_nav.slam.line_landmarks import line_observation_model
 import numpy as np
 import pytest
 
@@ -81,16 +82,35 @@ def test_an_ordinary_pair_passes_both_gates_alike():
     assert d2_c[0, 0] >= d2[0, 0]  # the larger of the two
 
 
-def test_lines_and_outside_pairs_are_untouched():
-    """Only corner pairs inside the gate are tested; a line pair keeps its d2."""
+def test_line_pairs_inside_the_gate_are_untouched(monkeypatch):
+    """Only corner pairs are tested again: a line pair inside the gate keeps its d2.
+
+    The state holds the far corner landmark and a line landmark (the wall x = 6 m) under
+    the same wide prior; the corner seen 3 m away gets its map-frame d2, the line seen
+    near its prediction keeps its range-bearing d2 (below the gate).
+    """
     x, p = _wide_prior()
-    z = np.array([[3.0, 0.5], [30.0, 2.5]])
+    x = np.concatenate([x, [6.0, 0.0]])
+    p = np.pad(p, ((0, 2), (0, 2)))
+    p[5, 5], p[6, 6] = 0.05 ** 2, 0.01 ** 2
+    zl = line_observation_model(x[:3], x[5:][None])[0][0] + np.array([0.3, 0.05])
+    z = np.array([[3.0, 0.5], zl])
     r = np.concatenate([R, R])
-    kinds = np.array([1, 0], dtype=np.int8)  # the near corner given as a line
-    _, d2, _ = do_data_association(x, p, z, r, obs_kind=kinds, lm_kind=np.zeros(1, np.int8))
-    _, d2_c, _ = do_data_association(x, p, z, r, obs_kind=kinds,
-                                     lm_kind=np.zeros(1, np.int8), cartesian_ratio=0.0)
-    assert np.array_equal(d2, d2_c, equal_nan=True)
+    kinds = {'obs_kind': np.array([0, 1], np.int8), 'lm_kind': np.array([0, 1], np.int8)}
+    hyp, d2, _ = do_data_association(x, p, z, r, **kinds)
+    tested = []
+
+    def spy(x_, p_, z_, r_, index):
+        tested.append((z_.tolist(), index.tolist()))
+        return cartesian_pair_d2(x_, p_, z_, r_, index)
+
+    monkeypatch.setattr(ekf_slam, 'cartesian_pair_d2', spy)
+    hyp_c, d2_c, _ = do_data_association(x, p, z, r, cartesian_ratio=0.0, **kinds)
+    assert tested == [([[3.0, 0.5]], [0])]  # the corner pair only
+    assert hyp.tolist() == [0, 1] and hyp_c.tolist() == [-1, 1]
+    assert d2[1, 1] < GATE and d2_c[1, 1] == d2[1, 1]
+    assert d2_c[0, 0] > GATE > d2[0, 0]  # the corner pair was tested again
+    assert np.isinf(d2[0, 1]) and np.isinf(d2[1, 0])  # kinds never pair across
 
 
 def test_param_default_off_and_validated():

@@ -66,7 +66,8 @@ vectorised batch (fits from prefix sums of point moments):
    stays inside. See :func:`_occluded_extents`. Lines of one surface on both sides of
    an occluder (or of a gap the merge did not test) then get one fit when they pass the
    merge's chi-square test and no beam between them saw further than the joint line
-   (:func:`_join_occluded`); their extents stay as they were.
+   (:func:`_join_occluded`); their extents stay as they were (none dropped), and the
+   segments of each side carry the same fit: one measurement, not two.
 6. Lines with fewer than ``min_points`` points, shorter than ``min_length`` or with an
    RMSE above the split tolerance are dropped. End points are the projections of the
    first and last supporting points, moved onto the ray of that beam when the projection
@@ -1882,12 +1883,15 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
     * no beam between them within that tolerance of the joint line belongs to the
       extent of another line (a line between on the same surface that failed the test);
     * every run of missing beams between them is within ``merge_gap`` or
-      ``merge_gap_angle`` of the joint line (the merge's rule for dropouts).
+      ``merge_gap_angle`` of the joint line (the merge's rule for dropouts);
+    * every extent that would carry the joint fit still passes step 6 with it (a join
+      never drops a segment).
 
     Consecutive lines whose facing pieces (``pieces``: the first and last points of the
     pieces the merge saw) were consecutive neighbours there are not joined: the merge
     tested them, also against the merged line of the whole chain, which a pair cannot (a
     panel 5 mm proud of a wall must not take one wall piece and keep it from the other).
+
     A line takes the later lines that pass, in order. The extents stay as they were (the
     joined lines are reported as one segment per extent, each with the joint fit: no
     segment spans the beams between). Returns the fits of the extents ``first``, ``last``
@@ -2011,7 +2015,18 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
                 if not (dx * dx + dy * dy <= gap2 or (
                         phi is not None and abs(phi[pb] - phi[pa]) <= params.merge_gap_angle)):
                     return None
-        return joint, _solve(joint[:, None], scan.origin)
+        g = _solve(joint[:, None], scan.origin)
+        # every extent that would carry the joint fit must still be a line with it (step
+        # 6: its end points on the joint line at least min_length apart, the joint RMSE
+        # within the split tolerance), else the join would drop a segment
+        owned = [m for m in range(n) if owner[m] == j] + [k]
+        col = np.zeros(len(owned), dtype=np.intp)
+        shared = _Fit(g.params.take(col, axis=1), g.rmse[col], g.count[col],
+                      g.cov.take(col, axis=0))
+        if len(_build(scan, params, shared, np.array([first_l[m] for m in owned]),
+                      np.array([last_l[m] for m in owned]))) != len(owned):
+            return None
+        return joint, g
 
     # Consecutive lines whose facing pieces were consecutive neighbours in the merge were
     # the merge's to join (it also tests each piece against the merged line of the whole

@@ -6,7 +6,9 @@ the RMSE criterion). Subscribes ``scan`` (sensor_msgs/LaserScan, sensor-data QoS
 Publishes, with the scan's stamp and frame:
 
 * ``lines`` (sensor_msgs/PointCloud2): one point per line with (rho, alpha), endpoints,
-  the (rho, alpha) covariance, point count and RMSE (see :mod:`landmark_nav.feature_msgs`);
+  the (rho, alpha) covariance, point count and RMSE (see :mod:`landmark_nav.feature_msgs`;
+  the segments of a surface on both sides of an occluder share one fit, one measurement:
+  parameter ``join_occluded``);
 * ``lines/markers`` (visualization_msgs/MarkerArray) for RViz.
 
 A malformed scan is dropped with a warning naming the problem (throttled per kind).

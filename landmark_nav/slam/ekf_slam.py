@@ -365,7 +365,8 @@ non-positive-definite ``R``), ``'range'`` (beyond ``max_range``), ``'grazing'`` 
 nearly edge-on, see above), ``'ambiguous'`` (not associated but inside the
 ``new_landmark_probability`` gate of a landmark: neither matched nor allowed to create a
 duplicate), ``'cap'`` (the map holds ``max_landmarks`` and nothing can be evicted, or
-``map_full='reject'``), ``'localization'`` (unexplained in localization mode).
+``map_full='reject'``), ``'localization'`` (unexplained in localization mode),
+``'free_space'`` (a pair dropped by the free-space check, ``free_space_check``).
 
 Numerics
 --------
@@ -615,7 +616,8 @@ class SlamParams:
         if self.cartesian_gate is not None:
             _check_number('SlamParams.cartesian_gate', self.cartesian_gate, minimum=0.0)
         if self.free_space_check is not None and not (
-                isinstance(self.free_space_check, (int, float))
+                isinstance(self.free_space_check, (int, float, np.integer, np.floating))
+                and not isinstance(self.free_space_check, bool)
                 and 0.0 < self.free_space_check < 1.0):
             raise ValueError(f'SlamParams.free_space_check must be in (0, 1), '
                              f'got {self.free_space_check!r}')
