@@ -546,6 +546,11 @@ class SlamParams:
             the hypothesis would give, and not at the prior, are counted; when so many
             would be unlikely for a right hypothesis, pairs are dropped (reason
             ``'free_space'``) until they are not. Needs the scan geometry.
+        line_extent_sigmas: None (default): off. Otherwise ``k``: the extent-overlap test
+            of line pairs widens each landmark's extent at both ends by ``k`` times the
+            robot's position std along the landmark's direction (the observed segment is
+            put in the map with the predicted pose, whose error along the line the plain
+            test ignores); ``sqrt(chi2_1(0.95)) = 1.96`` when on. Lines only.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
@@ -588,6 +593,7 @@ class SlamParams:
     jacobians: str = 'standard'
     cartesian_gate: Optional[float] = None
     free_space_check: Optional[float] = None
+    line_extent_sigmas: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -614,6 +620,9 @@ class SlamParams:
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
         if self.cartesian_gate is not None:
             _check_number('SlamParams.cartesian_gate', self.cartesian_gate, minimum=0.0)
+        if self.line_extent_sigmas is not None:
+            _check_number('SlamParams.line_extent_sigmas', self.line_extent_sigmas,
+                          minimum=0.0)
         if self.free_space_check is not None and not (
                 isinstance(self.free_space_check, (int, float))
                 and 0.0 < self.free_space_check < 1.0):
@@ -2062,8 +2071,14 @@ class EkfSlam:
             return allowed
         if allowed is None:
             allowed = np.ones((kind.size, self.num_landmarks), dtype=bool)
-        ov = extents_overlap(self._x[3:].reshape(-1, 2)[lm_line], self._ends[lm_line],
-                             ends_w[ob_line])
+        lines = self._x[3:].reshape(-1, 2)[lm_line]
+        margin = None
+        if self.params.line_extent_sigmas is not None:
+            # The robot's position std along each landmark's direction (SlamParams).
+            d = np.column_stack([-np.sin(lines[:, 1]), np.cos(lines[:, 1])])
+            var = np.einsum('ki,ij,kj->k', d, self._p[:2, :2], d)
+            margin = self.params.line_extent_sigmas * np.sqrt(np.maximum(var, 0.0))
+        ov = extents_overlap(lines, self._ends[lm_line], ends_w[ob_line], margin)
         allowed[np.ix_(ob_line, lm_line)] &= ov
         return allowed
 
