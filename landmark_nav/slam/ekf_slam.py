@@ -301,7 +301,9 @@ association only). :func:`observation_model`, :func:`feature_initialization` and
 mount transform of the extractor's covariance). Association: an observation pairs only
 with a landmark of its kind; a line only with a line seen from its front (predicted
 ``rho_b > 0``) whose extent overlaps the observed segment (endpoints put in the map with
-the predicted pose), then the same chi-square gate (eq. 55) decides; JCBB tests the joint
+the predicted pose; ``line_extent_sigmas = k``, off by default, widens the landmark's
+extent at both ends by ``k`` times the robot's position std along the line), then the same
+chi-square gate (eq. 55) decides; JCBB tests the joint
 compatibility of the mixed hypothesis. A matched line's extent grows by the observed
 segment; candidates of lines work as those of corners (with the extent test). The corner
 floors of ``R_eff`` do not apply to lines. ``landmarks: corners|lines|both`` is chosen by
