@@ -7,7 +7,8 @@ Run from the repository root (needs ``../shared/data/carmen``)::
         [--reject-ambiguous]
         [--jacobians standard|observability|observability_gain|first_estimates]
         [--joint-probability P] [--association icnn|jcbb] [--cartesian-gate F]
-        [--free-space-check P] [--drift MODEL] [--filter-noise MODEL] [LOG ...]
+        [--free-space-check P] [--line-extent-sigmas K] [--drift MODEL]
+        [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
 seed) and run through :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated
@@ -181,6 +182,8 @@ def main() -> int:
                     help='SlamParams.cartesian_gate (relative range std; 0: every pair)')
     ap.add_argument('--free-space-check', type=float, default=None,
                     help='SlamParams.free_space_check (confidence; e.g. 0.95)')
+    ap.add_argument('--line-extent-sigmas', type=float, default=None,
+                    help='SlamParams.line_extent_sigmas (e.g. 1.96)')
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
     ap.add_argument('--filter-noise', default=None,
@@ -198,7 +201,8 @@ def main() -> int:
              'association': args.association,
              'joint_probability': args.joint_probability,
              'cartesian_gate': args.cartesian_gate,
-             'free_space_check': args.free_space_check}
+             'free_space_check': args.free_space_check,
+             'line_extent_sigmas': args.line_extent_sigmas}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
             'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5',

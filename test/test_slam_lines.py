@@ -129,6 +129,55 @@ def test_extents_overlap():
     lm = np.array([[[0.0, 1.5], [3.0, 1.5]]])
     obs = np.array([[[2.5, 1.5], [5.0, 1.5]], [[3.5, 1.5], [6.0, 1.5]], [[-1.0, 1.5], [0.0, 1.5]]])
     assert extents_overlap(lines, lm, obs)[:, 0].tolist() == [True, False, True]
+    # A margin widens the landmark's interval at both ends.
+    got = extents_overlap(lines, lm, obs, margin=np.array([0.6]))[:, 0]
+    assert got.tolist() == [True, True, True]
+    far = np.array([[[4.0, 1.5], [6.0, 1.5]], [[-3.0, 1.5], [-1.5, 1.5]]])
+    got = extents_overlap(lines, lm, far, margin=np.array([0.6]))[:, 0]
+    assert got.tolist() == [False, False]
+
+
+def extent_filter(sigmas, sigma_x):
+    """Map the wall y = 1.5 over x 0..2, then make the robot's x uncertain (std sigma_x)."""
+    slam = EkfSlam(SlamParams(confirm_hits=1, confirm_window=1, line_extent_sigmas=sigmas))
+    obs = LineObservations(np.array([[1.5, math.pi / 2]]), R_LINE[None],
+                           np.array([[[0.0, 1.5], [2.0, 1.5]]]))
+    assert slam.update(np.zeros((0, 2)), None, None, obs).status.tolist() == ['confirmed']
+    slam.predict(np.zeros(3), np.diag([sigma_x ** 2, 1e-8, 1e-8]))
+    return slam
+
+
+@pytest.mark.parametrize('sigmas, sigma_x, status', [
+    (None, 1.0, 'confirmed'),   # off: the piece at x 3..5 does not overlap, a new landmark
+    (1.96, 1.0, 'matched'),     # margin 1.96 m: it does
+    (1.96, 0.4, 'confirmed'),   # margin 0.78 m: still 1 m short
+    (0.0, 1.0, 'confirmed'),    # k = 0: the plain test
+])
+def test_line_extent_sigmas_widens_the_overlap_by_the_position_std(sigmas, sigma_x, status):
+    """The observed piece is 1 m past the mapped extent along the wall."""
+    slam = extent_filter(sigmas, sigma_x)
+    obs = LineObservations(np.array([[1.5, math.pi / 2]]), R_LINE[None],
+                           np.array([[[3.0, 1.5], [5.0, 1.5]]]))
+    res = slam.update(np.zeros((0, 2)), None, None, obs)
+    assert res.status.tolist() == [status]
+    assert slam.num_landmarks == (1 if status == 'matched' else 2)
+
+
+def test_line_extent_sigmas_margin_is_along_the_line_only():
+    """A position std across the wall (y) does not widen the extent test."""
+    slam = EkfSlam(SlamParams(confirm_hits=1, confirm_window=1, line_extent_sigmas=1.96))
+    obs = LineObservations(np.array([[1.5, math.pi / 2]]), R_LINE[None],
+                           np.array([[[0.0, 1.5], [2.0, 1.5]]]))
+    slam.update(np.zeros((0, 2)), None, None, obs)
+    slam.predict(np.zeros(3), np.diag([1e-8, 1.0, 1e-8]))
+    piece = LineObservations(obs.z, obs.r, np.array([[[3.0, 1.5], [5.0, 1.5]]]))
+    assert slam.update(np.zeros((0, 2)), None, None, piece).status.tolist() == ['confirmed']
+
+
+@pytest.mark.parametrize('bad', [-1.0, math.nan, math.inf, 'x', True])
+def test_line_extent_sigmas_validation(bad):
+    with pytest.raises(ValueError, match='line_extent_sigmas'):
+        SlamParams(line_extent_sigmas=bad)
 
 
 def test_corridor_lines_only_maps_three_walls_and_stays_consistent():

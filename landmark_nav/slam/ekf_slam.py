@@ -301,7 +301,9 @@ association only). :func:`observation_model`, :func:`feature_initialization` and
 mount transform of the extractor's covariance). Association: an observation pairs only
 with a landmark of its kind; a line only with a line seen from its front (predicted
 ``rho_b > 0``) whose extent overlaps the observed segment (endpoints put in the map with
-the predicted pose), then the same chi-square gate (eq. 55) decides; JCBB tests the joint
+the predicted pose; ``line_extent_sigmas = k``, off by default, widens the landmark's
+extent at both ends by ``k`` times the robot's position std along the line), then the same
+chi-square gate (eq. 55) decides; JCBB tests the joint
 compatibility of the mixed hypothesis. A matched line's extent grows by the observed
 segment; candidates of lines work as those of corners (with the extent test). The corner
 floors of ``R_eff`` do not apply to lines. ``landmarks: corners|lines|both`` is chosen by
@@ -547,6 +549,11 @@ class SlamParams:
             the hypothesis would give, and not at the prior, are counted; when so many
             would be unlikely for a right hypothesis, pairs are dropped (reason
             ``'free_space'``) until they are not. Needs the scan geometry.
+        line_extent_sigmas: None (default): off. Otherwise ``k``: the extent-overlap test
+            of line pairs widens each landmark's extent at both ends by ``k`` times the
+            robot's position std along the landmark's direction (the observed segment is
+            put in the map with the predicted pose, whose error along the line the plain
+            test ignores); ``sqrt(chi2_1(0.95)) = 1.96`` when on. Lines only.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
@@ -589,6 +596,7 @@ class SlamParams:
     jacobians: str = 'standard'
     cartesian_gate: Optional[float] = None
     free_space_check: Optional[float] = None
+    line_extent_sigmas: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -615,6 +623,9 @@ class SlamParams:
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
         if self.cartesian_gate is not None:
             _check_number('SlamParams.cartesian_gate', self.cartesian_gate, minimum=0.0)
+        if self.line_extent_sigmas is not None:
+            _check_number('SlamParams.line_extent_sigmas', self.line_extent_sigmas,
+                          minimum=0.0)
         if self.free_space_check is not None and not (
                 isinstance(self.free_space_check, (int, float, np.integer, np.floating))
                 and not isinstance(self.free_space_check, bool)
@@ -2064,8 +2075,14 @@ class EkfSlam:
             return allowed
         if allowed is None:
             allowed = np.ones((kind.size, self.num_landmarks), dtype=bool)
-        ov = extents_overlap(self._x[3:].reshape(-1, 2)[lm_line], self._ends[lm_line],
-                             ends_w[ob_line])
+        lines = self._x[3:].reshape(-1, 2)[lm_line]
+        margin = None
+        if self.params.line_extent_sigmas is not None:
+            # The robot's position std along each landmark's direction (SlamParams).
+            d = np.column_stack([-np.sin(lines[:, 1]), np.cos(lines[:, 1])])
+            var = np.einsum('ki,ij,kj->k', d, self._p[:2, :2], d)
+            margin = self.params.line_extent_sigmas * np.sqrt(np.maximum(var, 0.0))
+        ov = extents_overlap(lines, self._ends[lm_line], ends_w[ob_line], margin)
         allowed[np.ix_(ob_line, lm_line)] &= ov
         return allowed
 

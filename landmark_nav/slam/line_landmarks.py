@@ -339,23 +339,27 @@ def extent_interval(lines: np.ndarray, ends: np.ndarray) -> np.ndarray:
     return np.sort(t, axis=1)
 
 
-def extents_overlap(lines: np.ndarray, lm_ends: np.ndarray, obs_ends: np.ndarray
-                    ) -> np.ndarray:
+def extents_overlap(lines: np.ndarray, lm_ends: np.ndarray, obs_ends: np.ndarray,
+                    margin: Optional[np.ndarray] = None) -> np.ndarray:
     """(M, K) whether observed segments overlap landmark segments along the landmark lines.
 
     Args:
         lines: (K, 2) landmark lines (map frame).
         lm_ends: (K, 2, 2) landmark endpoints (map frame).
         obs_ends: (M, 2, 2) observed endpoints (map frame).
+        margin: None (none) or (K,) lengths [m] by which landmark k's interval is widened
+            at both ends (``SlamParams.line_extent_sigmas``).
 
     Returns:
         (M, K) bool: the intervals of the observed endpoints projected on landmark k's
-        direction and of k's own endpoints intersect.
+        direction and of k's own endpoints (widened by ``margin``) intersect.
     """
     d = np.column_stack([-np.sin(lines[:, 1]), np.cos(lines[:, 1])])  # (K, 2)
     lm_t = np.sort(np.einsum('kij,kj->ki', lm_ends, d), axis=1)  # (K, 2)
     ob_t = np.einsum('mij,kj->mki', obs_ends, d)  # (M, K, 2)
     lo, hi = ob_t.min(axis=2), ob_t.max(axis=2)
+    if margin is not None:
+        lm_t = lm_t + np.asarray(margin, dtype=float)[:, None] * np.array([-1.0, 1.0])
     return (hi >= lm_t[None, :, 0]) & (lo <= lm_t[None, :, 1])
 
 
