@@ -31,6 +31,7 @@ angle constant of its own:
 """
 
 from dataclasses import dataclass
+from typing import Tuple
 
 import numpy as np
 
@@ -182,22 +183,17 @@ def corners_in_view(pose: np.ndarray, xy: np.ndarray, bisector: np.ndarray,
     return _windows_all(scan, ok, k_lo, k_hi, r - tol, strict=False)
 
 
-def lines_missed(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray, rho_sigma: np.ndarray,
-                 scan: ScanGeometry, gate: float, min_beams: int) -> np.ndarray:
-    """Return (K,) whether the scan sees through each line landmark's segment.
+def _line_beams(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray, rho_sigma: np.ndarray,
+                scan: ScanGeometry, gate: float
+                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return the beams toward line segments: ``rho_l, on, pred, tol, meas``.
 
-    Args:
-        pose: (3,) robot pose in the map.
-        lines: (K, 2) ``(rho, alpha)`` in the map.
-        ends: (K, 2, 2) endpoints in the map.
-        rho_sigma: (K,) predicted std of ``rho_b`` [m].
-        scan: The scan.
-        gate: ``sqrt(chi2_1(p))``.
-        min_beams: Beams through (and fewest beams on) the line for a miss.
+    ``rho_l`` (K,): each line's distance from the laser (> 0: seen from the front);
+    ``on`` (K, B): the beams that cross the segment inside the scan's range with a return;
+    ``pred``: the segment's range along each beam; ``tol``: ``gate`` stds of the return
+    about it (the line's ``rho`` std through the incidence, and the range noise);
+    ``meas``: the measured ranges.
     """
-    k = lines.shape[0]
-    if k == 0:
-        return np.zeros(0, dtype=bool)
     lp = _laser_pose(pose, np.asarray(scan.mount, dtype=float))
     a = lines[:, 1]
     nrm = np.column_stack([np.cos(a), np.sin(a)])
@@ -214,6 +210,26 @@ def lines_missed(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray, rho_sigm
         tol = gate * np.sqrt((rho_sigma[:, None] / cos_u) ** 2 + scan.sigma_range ** 2)
         meas = np.broadcast_to(np.asarray(scan.ranges, dtype=float)[None, :], pred.shape)
         on &= (pred > scan.range_min) & (pred < scan.range_max) & np.isfinite(meas)
+    return rho_l, on, pred, tol, meas
+
+
+def lines_missed(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray, rho_sigma: np.ndarray,
+                 scan: ScanGeometry, gate: float, min_beams: int) -> np.ndarray:
+    """Return (K,) whether the scan sees through each line landmark's segment.
+
+    Args:
+        pose: (3,) robot pose in the map.
+        lines: (K, 2) ``(rho, alpha)`` in the map.
+        ends: (K, 2, 2) endpoints in the map.
+        rho_sigma: (K,) predicted std of ``rho_b`` [m].
+        scan: The scan.
+        gate: ``sqrt(chi2_1(p))``.
+        min_beams: Beams through (and fewest beams on) the line for a miss.
+    """
+    if lines.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    rho_l, on, pred, tol, meas = _line_beams(pose, lines, ends, rho_sigma, scan, gate)
+    with np.errstate(invalid='ignore'):
         through = on & (meas > pred + tol)
         hit = on & (np.abs(meas - pred) <= tol)
     return (rho_l > 0.0) & (through.sum(axis=1) >= min_beams) & (hit.sum(axis=1) < min_beams)
@@ -228,25 +244,10 @@ def lines_unoccluded(pose: np.ndarray, lines: np.ndarray, ends: np.ndarray,
     range) that return no closer than the line minus the same tolerance: the line could
     have been seen, or seen through, by this scan (nothing in front of it).
     """
-    k = lines.shape[0]
-    if k == 0:
+    if lines.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    lp = _laser_pose(pose, np.asarray(scan.mount, dtype=float))
-    a = lines[:, 1]
-    nrm = np.column_stack([np.cos(a), np.sin(a)])
-    rho_l = lines[:, 0] - nrm @ lp[:2]
-    alpha_l = a - lp[2]
-    e = ends - lp[:2]
-    u_end = _wrap(np.arctan2(e[..., 1], e[..., 0]) - lp[2] - alpha_l[:, None])
-    u_lo, u_hi = u_end.min(axis=1), u_end.max(axis=1)
-    u = _wrap(scan.angles[None, :] - alpha_l[:, None])
-    cos_u = np.cos(u)
-    on = (u >= u_lo[:, None]) & (u <= u_hi[:, None]) & (cos_u > 0.0)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        pred = rho_l[:, None] / cos_u
-        tol = gate * np.sqrt((rho_sigma[:, None] / cos_u) ** 2 + scan.sigma_range ** 2)
-        meas = np.broadcast_to(np.asarray(scan.ranges, dtype=float)[None, :], pred.shape)
-        on &= (pred > scan.range_min) & (pred < scan.range_max) & np.isfinite(meas)
+    rho_l, on, pred, tol, meas = _line_beams(pose, lines, ends, rho_sigma, scan, gate)
+    with np.errstate(invalid='ignore'):
         reach = on & (meas >= pred - tol)
     return (rho_l > 0.0) & (reach.sum(axis=1) >= min_beams)
 
