@@ -6,7 +6,8 @@ Run from the repository root (needs ``../shared/data/carmen``)::
         [--seed 0] [--line-floor M] [--line-residual-factor K] [--line-beam-width RAD]
         [--reject-ambiguous]
         [--jacobians standard|observability|observability_gain|first_estimates]
-        [--joint-probability P] [--association icnn|jcbb] [--cartesian-gate F]
+        [--gate-probability P] [--joint-probability P] [--association icnn|jcbb]
+        [--cartesian-gate F]
         [--free-space-check P] [--line-extent-sigmas K] [--drift MODEL]
         [--filter-noise MODEL] [LOG ...]
 
@@ -177,6 +178,8 @@ def main() -> int:
     ap.add_argument('--reject-ambiguous', action='store_true', default=None)
     ap.add_argument('--jacobians', default=None, choices=JACOBIANS)
     ap.add_argument('--association', default=None, choices=ASSOCIATION_METHODS)
+    ap.add_argument('--gate-probability', type=float, default=None,
+                    help="SlamParams.gate_probability: the individual gate's confidence")
     ap.add_argument('--joint-probability', type=float, default=None)
     ap.add_argument('--cartesian-gate', type=float, default=None,
                     help='SlamParams.cartesian_gate (relative range std; 0: every pair)')
@@ -199,6 +202,7 @@ def main() -> int:
              'line_beam_width': args.line_beam_width,
              'reject_ambiguous': args.reject_ambiguous, 'jacobians': args.jacobians,
              'association': args.association,
+             'gate_probability': args.gate_probability,
              'joint_probability': args.joint_probability,
              'cartesian_gate': args.cartesian_gate,
              'free_space_check': args.free_space_check,
