@@ -450,25 +450,26 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     with numpy's inf / nan semantics.
     """
     full = sums.shape[0] == NUM_SUMS
-    sl = sums.tolist()
+    cols = sums.T.tolist()  # one list of sums per fit
     scat, a_in, b_in = [], [], []
-    for n, s1, s2, s3, s4, s5 in zip(*sl[:6]):  # _scatter
-        cx = s1 / n
-        cy = s2 / n
+    for c in cols:  # _scatter
+        n = c[0]
+        cx = c[1] / n
+        cy = c[2] / n
         ncx = n * cx
-        sxx = s3 - ncx * cx
-        syy = s4 - n * cy * cy
-        sxy = s5 - ncx * cy
+        sxx = c[3] - ncx * cx
+        syy = c[4] - n * cy * cy
+        sxy = c[5] - ncx * cy
         scat.append((n, cx, cy, sxx, syy, sxy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
-    alpha_a = 0.5 * np.arctan2(a_in, b_in)  # eq. 8
+    alpha_a = np.arctan2(a_in, b_in)
+    alpha_a *= 0.5  # eq. 8
     nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
     alpha_l = alpha_a.tolist()
     ox, oy = float(origin[0]), float(origin[1])
     rho_l, err_l, cov_l = [], [], []
     flip = False
-    cols = list(zip(*sl)) if full else None
     pi = math.pi
     isfinite = math.isfinite
     for j, (n, cx, cy, sxx, syy, sxy) in enumerate(scat):
@@ -669,11 +670,9 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             done_e.append(e)
             break
         if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
-            idx, offs = _gather(s, e)  # the pieces' points (a shared split point twice)
-            ps, pe = _split_py(px[idx], py[idx], memoryview(tol[idx]), offs[:-1].tolist(),
-                               (offs[1:] - 1).tolist())
-            done_s.append(idx[ps])
-            done_e.append(idx[pe])
+            ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist())
+            done_s.append(np.array(ps, dtype=np.int64))
+            done_e.append(np.array(pe, dtype=np.int64))
             break
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
@@ -737,16 +736,16 @@ _SPLIT_PY = 150
 _SPLIT_PIECE_PY = 48
 
 
-def _split_py(px: np.ndarray, py: np.ndarray, tol: Sequence[float], s: List[int],
+def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
               e: List[int]) -> Tuple[List[int], List[int]]:
     """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, one piece at a time.
 
     The same cross products in the same order (eq. 4 distance times the chord length, the
     first farthest point), on Python floats for small pieces and as arrays for large ones;
     depth first, left piece first. Returns the final pieces' first and last points, in
-    order.
+    order. The pieces index ``px``, ``py`` and ``tol`` directly (no copy of their points).
     """
-    xs, ys = px.tolist(), py.tolist()
+    xs, ys, tol = px.tolist(), py.tolist(), memoryview(tol)
     out_s: List[int] = []
     out_e: List[int] = []
     stack = list(zip(s, e))
@@ -979,13 +978,15 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
     n = (hi - lo + 1).astype(float)
-    s = pre.take(hi + 1, axis=1) - pre.take(lo, axis=1)
-    mx, my = s[0] / n, s[1] / n
-    cxx = s[2] - n * mx * mx
-    cyy = s[3] - n * my * my
-    cxy = s[4] - n * mx * my
-    half = 0.5 * (cxx - cyy)
-    return np.maximum(0.5 * (cxx + cyy) - np.sqrt(half * half + cxy * cxy), 0.0)
+    s = pre.take(hi + 1, axis=1)
+    s -= pre.take(lo, axis=1)
+    m = s[:2] / n  # mx, my
+    nm = n * m
+    c = s[2:4] - nm * m  # cxx = sxx - n mx mx, cyy likewise
+    cxy = s[4] - nm[0] * m[1]
+    half = 0.5 * (c[0] - c[1])
+    out = 0.5 * (c[0] + c[1]) - np.sqrt(half * half + cxy * cxy)
+    return np.maximum(out, 0.0, out=out)
 
 
 def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, reach: int
@@ -1228,6 +1229,28 @@ def _variance_factor(sums: np.ndarray, f: _Fit) -> np.ndarray:
     return np.where(stat > q95, stat / dof, 1.0)
 
 
+def _variance_factor_py(sums: np.ndarray, f: _Fit, nx_l: List[float], ny_l: List[float]
+                        ) -> List[float]:
+    """Return :func:`_variance_factor` on Python floats (the same operations).
+
+    ``nx_l``, ``ny_l`` are the fits' normals as lists. Raises ZeroDivisionError on
+    degenerate fits (the array version then gives numpy's inf / nan).
+    """
+    s6, s12, s18 = sums[6].tolist(), sums[12].tolist(), sums[18].tolist()
+    stats, dofs, bases = [], [], []
+    for n, r, nx, ny, a, b, c in zip(f.count.tolist(), f.rmse.tolist(), nx_l, ny_l, s6, s12,
+                                     s18):
+        var = (nx * nx * a + ny * ny * b + 2.0 * nx * ny * c) / n
+        dof = max(n - 2.0, 1.0)
+        stats.append(n * r * r / var)  # RSS / sigma^2
+        h = 2.0 / (9.0 * dof)
+        dofs.append(dof)
+        bases.append(1.0 - h + _Z95 * math.sqrt(h))
+    cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
+    return [stat / dof if stat > dof * cube else 1.0
+            for stat, dof, cube in zip(stats, dofs, cubes)]
+
+
 # Pieces up to which _pairs_py is faster than the array operations (measured).
 _PAIRS_PY = 40
 
@@ -1241,21 +1264,8 @@ def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarr
     order. Raises ZeroDivisionError on degenerate fits (the array versions then give
     numpy's inf / nan).
     """
-    n_l, r_l = f.count.tolist(), f.rmse.tolist()
     rho_l, alpha_l, nx_l, ny_l = f.params.tolist()
-    s6, s12, s18 = sums[6].tolist(), sums[12].tolist(), sums[18].tolist()
-    stats, dofs, bases = [], [], []
-    for n, r, nx, ny, a, b, c in zip(n_l, r_l, nx_l, ny_l, s6, s12, s18):
-        var = (nx * nx * a + ny * ny * b + 2.0 * nx * ny * c) / n
-        dof = max(n - 2.0, 1.0)
-        stats.append(n * r * r / var)  # RSS / sigma^2
-        h = 2.0 / (9.0 * dof)
-        dofs.append(dof)
-        bases.append(1.0 - h + _Z95 * math.sqrt(h))
-    cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
-    factor = [stat / dof if stat > dof * cube else 1.0
-              for stat, dof, cube in zip(stats, dofs, cubes)]
-    cov = f.cov * np.array(factor)[:, None, None]
+    cov = f.cov * np.array(_variance_factor_py(sums, f, nx_l, ny_l))[:, None, None]
     f = _Fit(f.params, f.rmse, f.count, cov)
     c00, c01, _, c11 = cov.reshape(-1, 4).T.tolist()
     xs, ys, phi = scan.rows()[_X], scan.rows()[_Y], scan.rows()[_PHI]
@@ -1900,7 +1910,6 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
     n = first.size
     if n < 2:
         return f
-    factor = _variance_factor(sums, f)
     gate = params.merge_chi2
     tol = params.see_through_tolerance
 
@@ -1923,8 +1932,18 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
 
     # cheap first test on every pair j < k: the two fits agree (a grown line retests all);
     # on Python floats for a few lines (the same operations as _chi2, the same results)
-    cov = (f.cov * factor[:, None, None]).reshape(-1, 4).tolist()
-    rho_l, alpha_l = f.params[:2].tolist()
+    rho_l, alpha_l, nx_l, ny_l = f.params.tolist()
+    factor = None
+    if n <= _JOIN_PAIRS_PY:
+        try:
+            factor = _variance_factor_py(sums, f, nx_l, ny_l)
+        except ZeroDivisionError:  # degenerate fits: numpy's inf / nan below
+            pass
+    if factor is None:
+        factor = _variance_factor(sums, f)
+        cov = (f.cov * factor[:, None, None]).reshape(-1, 4).tolist()
+    else:
+        cov = [[c * k for c in row] for row, k in zip(f.cov.reshape(-1, 4).tolist(), factor)]
     if n <= _JOIN_PAIRS_PY:
         pi, two_pi = math.pi, TWO_PI
         tried = set()
@@ -1943,7 +1962,7 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
                     tried.add((j, k))
     else:
         jj, kk = np.triu_indices(n, 1)
-        scaled = f.cov * factor[:, None, None]
+        scaled = f.cov * np.asarray(factor)[:, None, None]
         agree = (_chi2(f.rho[jj], f.alpha[jj], scaled[jj], f.rho[kk], f.alpha[kk],
                        scaled[kk]) <= gate).nonzero()[0]
         tried = set(zip(jj[agree].tolist(), kk[agree].tolist()))
