@@ -396,6 +396,37 @@ def test_split_pieces_eq4():
     assert split_pieces(pts, [0, 2, 5], 0.05).tolist() == [[0, 1], [2, 4]]
 
 
+@pytest.mark.parametrize('py', [10 ** 9, -1])
+def test_split_leaves_out_short_pieces_as_a_filter_would(monkeypatch, py):
+    # _extract asks _split for the pieces of 3 or more points (min_span 2): the same
+    # pieces as filtering all of them, on the Python path and on the array levels.
+    import landmark_nav.laser.lines as lines_mod
+    monkeypatch.setattr(lines_mod, '_SPLIT_PY', py)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        xy = np.cumsum(rng.normal(size=(120, 2)) * 0.05, axis=0)
+        offs = np.array([0, 1, 3, 40, 41, 90, 120])
+        x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
+        tol = np.full(120, 0.03)
+        s, e = offs[:-1], offs[1:] - 1
+        every = lines_mod._split(x, y, s, e, tol)
+        short = every[1] - every[0] < 2
+        assert short.any()
+        assert lines_mod._split(x, y, s, e, tol, 2).tolist() == every[:, ~short].tolist()
+
+
+def test_segment_builds_the_dataclass_fields():
+    from landmark_nav.laser.lines import _segment, LineSegment
+    a, b, c = np.array([1.0, 2.0]), np.array([3.0, 4.0]), np.eye(2)
+    values = (1.5, -0.5, a, b, 12, 0.01, c, 3, 14)
+    fast, slow = _segment(*values), LineSegment(*values)
+    assert type(fast) is LineSegment and list(vars(fast)) == list(vars(slow))
+    assert all(getattr(fast, k) is getattr(slow, k) for k in vars(slow))
+    with pytest.raises(AttributeError):
+        fast.rho = 2.0
+    assert fast.length == slow.length
+
+
 @pytest.mark.parametrize('kwargs,name', [({'method': 'hough'}, 'method'),
                                          ({'min_points': 2}, 'min_points'),
                                          ({'min_points': 8.0}, 'min_points'),

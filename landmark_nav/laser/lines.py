@@ -635,8 +635,10 @@ def split_pieces(xy: np.ndarray, offsets: np.ndarray, tolerance) -> np.ndarray:
 
 
 def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
-           tol: np.ndarray) -> np.ndarray:
+           tol: np.ndarray, min_span: int = 0) -> np.ndarray:
     """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points.
+
+    Pieces with ``last - first < min_span`` are left out of the result.
 
     All pieces of one recursion level in one batch. The farthest point from a chord is
     found on the unnormalised cross product ``|(q - p0) x (p1 - p0)|`` (the distance of
@@ -653,8 +655,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
     mixed = False  # pieces out of order
+    short = False  # pieces of less than min_span may be among them
     lone = e <= s  # runs of one point: no chord
     if np.count_nonzero(lone):
+        short = True
         done_s.append(s[lone])
         done_e.append(e[lone])
         s, e = s[~lone], e[~lone]
@@ -668,9 +672,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
         if width == 0:
             done_s.append(s)
             done_e.append(e)
+            short = True
             break
         if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
-            ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist())
+            ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist(), min_span)
             done_s.append(np.array(ps, dtype=np.int64))
             done_e.append(np.array(pe, dtype=np.int64))
             break
@@ -710,6 +715,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             stop = ~split
             done_s.append(s[stop])
             done_e.append(e[stop])
+            short = True
             if not go.size:
                 break
             s, e, k = s[go], e[go], k[go]
@@ -719,12 +725,15 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     if not done_s:
         return np.zeros((2, 0), dtype=np.int64)
     if len(done_s) == 1 and not mixed:  # the runs' pieces, in order
-        return np.array((done_s[0], done_e[0]))
-    s, e = np.concatenate(done_s), np.concatenate(done_e)
-    order = np.lexsort((e, s))
-    out = np.empty((2, s.size), dtype=np.int64)
-    out[0] = s[order]
-    out[1] = e[order]
+        out = np.array((done_s[0], done_e[0]))
+    else:
+        s, e = np.concatenate(done_s), np.concatenate(done_e)
+        order = np.lexsort((e, s))
+        out = np.empty((2, s.size), dtype=np.int64)
+        out[0] = s[order]
+        out[1] = e[order]
+    if short and min_span > 0:
+        out = out[:, out[1] - out[0] >= min_span]
     return out
 
 
@@ -737,13 +746,14 @@ _SPLIT_PIECE_PY = 48
 
 
 def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
-              e: List[int]) -> Tuple[List[int], List[int]]:
+              e: List[int], min_span: int = 0) -> Tuple[List[int], List[int]]:
     """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, one piece at a time.
 
     The same cross products in the same order (eq. 4 distance times the chord length, the
     first farthest point), on Python floats for small pieces and as arrays for large ones;
     depth first, left piece first. Returns the final pieces' first and last points, in
-    order. The pieces index ``px``, ``py`` and ``tol`` directly (no copy of their points).
+    order, without those of ``last - first < min_span``. The pieces index ``px``, ``py``
+    and ``tol`` directly (no copy of their points).
     """
     xs, ys, tol = px.tolist(), py.tolist(), memoryview(tol)
     out_s: List[int] = []
@@ -753,8 +763,9 @@ def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
     while stack:
         a, b = stack.pop()
         if b - a < 2:  # no interior point: no split
-            out_s.append(a)
-            out_e.append(b)
+            if b - a >= min_span:
+                out_s.append(a)
+                out_e.append(b)
             continue
         x0, y0 = xs[a], ys[a]
         cx, cy = xs[b] - x0, ys[b] - y0
@@ -776,7 +787,7 @@ def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
         if cmax > tol[k] * abs(complex(cx, cy)):  # C hypot, as np.hypot
             stack.append((k, b))
             stack.append((a, k))
-        else:
+        elif b - a >= min_span:
             out_s.append(a)
             out_e.append(b)
     return out_s, out_e
@@ -1093,7 +1104,7 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     least = params.min_points
     size = len(s_l)
     big = [b - a >= least - 1 for a, b in zip(s_l, e_l)]
-    touch = [e_l[j] >= s_l[j + 1] for j in range(size - 1)]  # piece j shares its last point
+    touch = [b >= a for b, a in zip(e_l, s_l[1:])]  # piece j shares its last point
     fitted = [j for j in range(size) if big[j] or (j and touch[j - 1] and big[j - 1])
               or (j < size - 1 and touch[j] and big[j + 1])]
     p1, p2, p3, p4, p5 = [memoryview(row) for row in pre]
@@ -1818,7 +1829,7 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
 
 
 def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
-                      params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      params: LineParams) -> Tuple[Optional[np.ndarray], np.ndarray, np.ndarray]:
     """Cut the lines' extents at occluders (step 5); return (line, first, last) per piece.
 
     An occluder of a line is a run of two or more neighbouring valid beams inside its
@@ -1826,9 +1837,10 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     :func:`_seen_through` (``see_through_tolerance`` plus 3 standard deviations of the
     distance along the ray, eq. 7). The extent's points are split at the occluders'
     beams (which leave); pieces of at least ``min_points`` points are kept, each
-    pointing to its line's fit. Without occluders every line is one piece.
+    pointing to its line's fit. Without occluders every line is one piece and the
+    result is ``(None, first, last)``.
     """
-    same = np.arange(first.size), first, last
+    same = None, first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     front = rho / cos_in - r  # how far the return lies in front of the line
     # Only a beam in front by more than the tolerance can be in front by the margin.
@@ -2163,8 +2175,29 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
         return []
     pts = np.array(flat).reshape(-1, 2, 2)
     cov = f.cov.take(keep, axis=0)
-    return [LineSegment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
-                        cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
+    return [_segment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
+                     cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
+
+
+_new = object.__new__
+
+
+def _segment(rho: float, alpha: float, start: np.ndarray, end: np.ndarray, num_points: int,
+             rmse: float, covariance: np.ndarray, first_index: int, last_index: int
+             ) -> LineSegment:
+    """Return ``LineSegment(...)`` of these values, its fields set without ``__init__``.
+
+    The frozen dataclass's ``__init__`` sets each field through ``object.__setattr__``;
+    this writes them to the instance's ``__dict__`` at once (the same object, a third of
+    the time).
+    """
+    seg = _new(LineSegment)
+    d = seg.__dict__
+    d['rho'], d['alpha'], d['start'], d['end'], d['num_points'] = (rho, alpha, start, end,
+                                                                   num_points)
+    d['rmse'], d['covariance'], d['first_index'], d['last_index'] = (rmse, covariance,
+                                                                     first_index, last_index)
+    return seg
 
 
 def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
@@ -2206,8 +2239,8 @@ def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     count = f.count[ok].astype(np.int64).tolist()
     b0, b1 = scan.beam[ends.take(ok, axis=1)].tolist()
     proj, cov = proj.take(ok, axis=1), cov.take(ok, axis=0)
-    return [LineSegment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
-                        b0[j], b1[j]) for j in range(len(rho))]
+    return [_segment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
+                     b0[j], b1[j]) for j in range(len(rho))]
 
 
 def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = None
@@ -2252,16 +2285,13 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     pre = np.zeros((5, n + 1))  # prefix sums of x, y, x^2, y^2, xy (= _prefix5(x, y))
     feats[1:6, :n].cumsum(axis=1, out=pre[:, 1:])
     if params.method == 'split_merge':
-        s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL])
-        keep = e - s >= 2
-        s, e = s[keep], e[keep]
+        s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL], 2)
     else:
         # Smooth each cluster's ranges over the bearing (eqs. 8-10), polar -> Cartesian.
         sub, sub_offs = _gather(offsets[big], offsets[big + 1] - 1)
-        r_s = lowess_groups(cols[_PHI][sub], cols[_RNG][sub], sub_offs, params.lowess_span,
-                            params.lowess_iterations)
-        pieces = alfa_pieces(np.stack([r_s * cols[_COS][sub], r_s * cols[_SIN][sub]], axis=1),
-                             sub_offs, params)
+        rng, cos, sin, _, phi = cols[_RNG:].take(sub, axis=1)
+        r_s = lowess_groups(phi, rng, sub_offs, params.lowess_span, params.lowess_iterations)
+        pieces = alfa_pieces(np.stack([r_s * cos, r_s * sin], axis=1), sub_offs, params)
         pieces = sub[pieces] if pieces.size else pieces
         s, e = pieces[:, 0], pieces[:, 1]
     s, e = _refine_breaks(scan, pre, s, e, params.min_points)
@@ -2279,7 +2309,7 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     if params.join_occluded:
         fit = _join_occluded(scan, sums, first, last, fit, (s, e), params)
     col, first, last = _occluded_extents(scan, fit, first, last, params)
-    if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
+    if col is not None:
         fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
                    fit.cov.take(col, axis=0))
     return _build(scan, params, fit, first, last)
