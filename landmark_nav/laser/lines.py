@@ -1267,7 +1267,7 @@ _PAIRS_PY = 40
 
 
 def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarray,
-              params: LineParams) -> Tuple[_Fit, np.ndarray]:
+              params: LineParams) -> Tuple[_Fit, List[bool]]:
     """Return the fits with scaled covariances and the merge test of consecutive pieces.
 
     :func:`_variance_factor` and the first merge test of :func:`_merge` (neighbours whose
@@ -1306,7 +1306,7 @@ def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarr
             continue
         d2 = (a11 * dr * dr - 2.0 * a01 * dr * da + a00 * da * da) / det
         join.append(-math.inf < d2 <= gate)
-    return f, np.array(join, dtype=bool)
+    return f, join
 
 
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
@@ -1341,11 +1341,12 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
                              f.cov[1:]) <= gate)
     else:
-        f, join = pairs
+        f, join_l = pairs
+        if not any(join_l):
+            return sums, s, e, f, np.arange(s.size)
+        return _merge_chains_py(scan, sums, s, e, f, join_l, gate)
     if not np.count_nonzero(join):
         return sums, s, e, f, np.arange(s.size)
-    if pairs is not None:
-        return _merge_chains_py(scan, sums, s, e, f, join.tolist(), gate)
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
@@ -1472,10 +1473,11 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     n_pts = scan.x.size
     n_lines = first.size
     if n_lines <= _GROW_PY:  # (an empty gap gives no run)
-        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
+        first_l, last_l = first.tolist(), last.tolist()
+        run_f, run_b = _grow_runs_py(scan, f, first_l, last_l, params)
         if not (any(run_f) or any(run_b)):
             return sums, first, last, False
-        return _grown(feats, sums, first, last, np.array((run_f, run_b), dtype=np.int64))
+        return _grown_py(feats, sums, first_l, last_l, run_f, run_b)
     lo = np.empty(n_lines + 1, dtype=np.int64)  # gap k: points lo[k] .. hi[k] - 1, between
     hi = np.empty(n_lines + 1, dtype=np.int64)  # line k - 1 and line k
     lo[0] = 0
@@ -1589,6 +1591,32 @@ def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndar
     added = np.zeros((NUM_SUMS, 2 * n_lines))
     added[:, nonempty] = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
     return sums + added[:, 0::2] + added[:, 1::2], new_first, new_last, True
+
+
+def _grown_py(feats: np.ndarray, sums: np.ndarray, first: List[int], last: List[int],
+              run_f: List[int], run_b: List[int]
+              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Return :func:`_grown` for the runs of :func:`_grow_runs_py`, laid out in Python.
+
+    The same sums (one ``reduceat`` over the same non-empty ranges, in the same order,
+    added to the lines' sums as there); only the index bookkeeping runs on lists.
+    """
+    n_lines = len(first)
+    new_first = [a - run_b[j] for j, a in enumerate(first)]
+    new_last = [b + run_f[j + 1] for j, b in enumerate(last)]
+    bounds: List[int] = []  # the added ranges [lo, hi), in order: before line j, after it
+    cols: List[int] = []
+    for j in range(n_lines):
+        if new_first[j] < first[j]:
+            bounds += (new_first[j], first[j])
+            cols.append(2 * j)
+        if new_last[j] > last[j]:
+            bounds += (last[j] + 1, new_last[j] + 1)
+            cols.append(2 * j + 1)
+    added = np.zeros((NUM_SUMS, 2 * n_lines))
+    added[:, cols] = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
+    return (sums + added[:, 0::2] + added[:, 1::2], np.array(new_first, dtype=np.int64),
+            np.array(new_last, dtype=np.int64), True)
 
 
 _NEXT = np.array([[0], [1]])
