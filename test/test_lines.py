@@ -396,12 +396,11 @@ def test_split_pieces_eq4():
     assert split_pieces(pts, [0, 2, 5], 0.05).tolist() == [[0, 1], [2, 4]]
 
 
-@pytest.mark.parametrize('py', [10 ** 9, -1])
-def test_split_leaves_out_short_pieces_as_a_filter_would(monkeypatch, py):
-    # _extract asks _split for the pieces of 3 or more points (min_span 2): the same
-    # pieces as filtering all of them, on the Python path and on the array levels.
+def test_split_paths_agree_and_leave_out_short_pieces_as_a_filter_would(monkeypatch):
+    # _split runs array levels, then _split_py on the runs themselves (none ran) or on the
+    # gathered points of the pieces left: all paths give the same pieces. _extract asks
+    # for those of 3 or more points (min_span 2): the same as filtering all of them.
     import landmark_nav.laser.lines as lines_mod
-    monkeypatch.setattr(lines_mod, '_SPLIT_PY', py)
     rng = np.random.default_rng(3)
     for _ in range(20):
         xy = np.cumsum(rng.normal(size=(120, 2)) * 0.05, axis=0)
@@ -409,10 +408,15 @@ def test_split_leaves_out_short_pieces_as_a_filter_would(monkeypatch, py):
         x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
         tol = np.full(120, 0.03)
         s, e = offs[:-1], offs[1:] - 1
-        every = lines_mod._split(x, y, s, e, tol)
-        short = every[1] - every[0] < 2
-        assert short.any()
-        assert lines_mod._split(x, y, s, e, tol, 2).tolist() == every[:, ~short].tolist()
+        runs = []
+        for py in (10 ** 9, 60, -1):  # Python only; array levels, then Python; arrays only
+            monkeypatch.setattr(lines_mod, '_SPLIT_PY', py)
+            every = lines_mod._split(x, y, s, e, tol)
+            short = every[1] - every[0] < 2
+            assert short.any()
+            assert lines_mod._split(x, y, s, e, tol, 2).tolist() == every[:, ~short].tolist()
+            runs.append(every.tolist())
+        assert runs[0] == runs[1] == runs[2]
 
 
 def test_segment_builds_the_dataclass_fields():

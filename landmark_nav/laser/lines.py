@@ -675,9 +675,16 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             short = True
             break
         if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
-            ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist(), min_span)
-            done_s.append(np.array(ps, dtype=np.int64))
-            done_e.append(np.array(pe, dtype=np.int64))
+            if not mixed:  # the runs themselves: index the points in place
+                ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist(), min_span)
+                done_s.append(np.array(ps, dtype=np.int64))
+                done_e.append(np.array(pe, dtype=np.int64))
+                break
+            idx, offs = _gather(s, e)  # the pieces' points (a shared split point twice)
+            ps, pe = _split_py(px[idx], py[idx], tol[idx], offs[:-1].tolist(),
+                               (offs[1:] - 1).tolist(), min_span)
+            done_s.append(idx[ps])
+            done_e.append(idx[pe])
             break
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
@@ -738,8 +745,8 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
 
 
 # Interior points of a recursion level up to which _split_py is faster than a numpy level
-# (measured on 180- to 1081-beam scans).
-_SPLIT_PY = 150
+# (measured on 180- and 361-beam Carmen scans: the whole scan of one).
+_SPLIT_PY = 400
 # Interior points of a piece up to which _split_py finds its farthest point on Python
 # floats rather than with array operations (measured).
 _SPLIT_PIECE_PY = 48
@@ -753,9 +760,12 @@ def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
     first farthest point), on Python floats for small pieces and as arrays for large ones;
     depth first, left piece first. Returns the final pieces' first and last points, in
     order, without those of ``last - first < min_span``. The pieces index ``px``, ``py``
-    and ``tol`` directly (no copy of their points).
+    and ``tol``, whose points are all listed (:func:`_split` passes the runs themselves,
+    or the points of the pieces left after array levels).
     """
-    xs, ys, tol = px.tolist(), py.tolist(), memoryview(tol)
+    pts = list(zip(px.tolist(), py.tolist()))  # (x, y) of every point: one slice a piece
+    tol = memoryview(tol)
+    small = _SPLIT_PIECE_PY
     out_s: List[int] = []
     out_e: List[int] = []
     stack = list(zip(s, e))
@@ -767,11 +777,11 @@ def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
                 out_s.append(a)
                 out_e.append(b)
             continue
-        x0, y0 = xs[a], ys[a]
-        cx, cy = xs[b] - x0, ys[b] - y0
-        if b - a - 1 <= _SPLIT_PIECE_PY:
-            cross = [abs((x - x0) * cy - (y - y0) * cx)
-                     for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
+        x0, y0 = pts[a]
+        x1, y1 = pts[b]
+        cx, cy = x1 - x0, y1 - y0
+        if b - a - 1 <= small:
+            cross = [abs((x - x0) * cy - (y - y0) * cx) for x, y in pts[a + 1:b]]
             cmax = max(cross)
             k = a + 1 + cross.index(cmax)
         else:
