@@ -187,6 +187,16 @@ def test_lowess_reproduces_lines_and_smooths_noise():
         lowess(x, y, 1)
 
 
+def test_window_sums_are_numpys_row_sums_bit_for_bit():
+    # lowess sums each window over the first axis of a (K, ..., N) array; the sums must be
+    # numpy's sums of the (N, K) layout (pairwise from 8 values on) to the last bit.
+    from landmark_nav.laser.lowess import _window_sums
+    rng = np.random.default_rng(5)
+    for k in (1, 2, 3, 7, 8, 9, 15, 16, 17, 40, 128, 130):
+        t = rng.normal(size=(k, 5, 37)) * 10.0 ** rng.uniform(-6, 6, size=(k, 5, 37))
+        assert np.array_equal(_window_sums(t), np.moveaxis(t, 0, -1).copy().sum(axis=-1))
+
+
 # ------------------------------------------------------------------------- extraction
 def room_scan(sigma_r=0.01, seed=0):
     world = World('room')

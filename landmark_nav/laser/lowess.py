@@ -180,17 +180,13 @@ def _window_sums(t: np.ndarray) -> np.ndarray:
     numpy sums a contiguous row by pairwise summation (sequentially below 8 values, else
     in 8 partial sums, for rows up to 128 values); repeating its order over the K rows
     gives the sums of the (N, K) layout bit for bit, without a reduction call per row.
+    Below 8 rows that order is a reduction over the first axis (row by row, in order).
     """
     k = t.shape[0]
     if k > 128:
         return np.moveaxis(t, 0, -1).copy().sum(axis=-1)
     if k < 8:
-        if k == 1:
-            return t[0].copy()
-        s = t[0] + t[1]
-        for i in range(2, k):
-            s += t[i]
-        return s
+        return np.add.reduce(t, axis=0)
     r = t[:8].copy()
     i = 8
     while i < k - k % 8:
