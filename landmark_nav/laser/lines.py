@@ -960,17 +960,19 @@ _X, _Y, _RNG, _COS, _SIN, _TOL, _PHI = range(7)
 
 def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     """Stack the non-empty clusters; None if there are none."""
-    cl = [c for c in clusters if c.indices.size]
+    cl, bounds = [], [0]
+    for c in clusters:
+        if c.indices.size:
+            cl.append(c)
+            bounds.append(bounds[-1] + c.indices.size)
     if not cl:
         return None
-    sizes = np.array([c.indices.size for c in cl], dtype=np.int64)
-    offsets = np.zeros(sizes.size + 1, dtype=np.int64)
-    sizes.cumsum(out=offsets[1:])
-    n = int(offsets[-1])
+    offsets = np.array(bounds, dtype=np.int64)
+    n = bounds[-1]
     cols = np.empty((7, n))
     whole = cl[0].scan
-    if whole is not None and all(c.scan is whole and c.points.base is whole.points
-                                 for c in cl):
+    one = whole is not None and all(c.scan is whole for c in cl)  # of one segment_scan call
+    if one and all(c.points.base is whole.points for c in cl):
         # Clusters of one segment_scan call: gather from its whole-scan arrays.
         beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
         xy = whole.points.take(beam, axis=0)
@@ -990,10 +992,10 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     np.subtract(xy[:, 1], oy, out=cols[_Y])
     np.multiply(cols[_RNG], 3.0 * params.sigma_phi, out=cols[_TOL])  # split tolerance
     cols[_TOL] += params.threshold
-    shared = (whole if whole is not None and whole.valid is not None
-              and all(c.scan is whole for c in cl) else None)
+    shared = whole if one and whole.valid is not None else None
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.arange(sizes.size).repeat(sizes), offsets, int(beam.max()) + 1, shared)
+                 np.arange(len(cl)).repeat(offsets[1:] - offsets[:-1]), offsets,
+                 int(beam.max()) + 1, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
