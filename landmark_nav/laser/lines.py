@@ -1673,13 +1673,26 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     """
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     beyond = r - rho / cos_in
-    bad = (cos_in > 1e-9) & (beyond > params.see_through_tolerance)
-    if not np.count_nonzero(bad):
-        return line[:0], idx[:0], bad[:0]
-    line, idx, beyond, r, cos_in = line[bad], idx[bad], beyond[bad], r[bad], cos_in[bad]
+    tol = params.see_through_tolerance
+    bad = ((cos_in > 1e-9) & (beyond > tol)).nonzero()[0]
+    if not bad.size:
+        return line[:0], idx[:0], np.zeros(0, dtype=bool)
+    line, idx = line[bad], idx[bad]
+    if bad.size <= _SEEN_PY:  # the opening test on Python floats (the same operations)
+        sr2, sp = params.sigma_r ** 2, params.sigma_phi
+        opening = []
+        for b, rr, c in zip(*np.array((beyond, r, cos_in)).take(bad, axis=1).tolist()):
+            t, c2 = rr * sp, c * c
+            opening.append(b > tol + 3.0 * math.sqrt(sr2 + t * t * (1.0 - c2) / c2))
+        return line, idx, np.array(opening, dtype=bool)
+    beyond, r, cos_in = beyond[bad], r[bad], cos_in[bad]
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
-    return line, idx, beyond > params.see_through_tolerance + 3.0 * np.sqrt(var)
+    return line, idx, beyond > tol + 3.0 * np.sqrt(var)
+
+
+# Hidden beams up to which _seen_through tests them on Python floats (measured).
+_SEEN_PY = 16
 
 
 def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
