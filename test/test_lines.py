@@ -187,6 +187,16 @@ def test_lowess_reproduces_lines_and_smooths_noise():
         lowess(x, y, 1)
 
 
+def test_window_sums_are_numpys_row_sums_bit_for_bit():
+    # lowess sums each window over the first axis of a (K, ..., N) array; the sums must be
+    # numpy's sums of the (N, K) layout (pairwise from 8 values on) to the last bit.
+    from landmark_nav.laser.lowess import _window_sums
+    rng = np.random.default_rng(5)
+    for k in (1, 2, 3, 7, 8, 9, 15, 16, 17, 40, 128, 130):
+        t = rng.normal(size=(k, 5, 37)) * 10.0 ** rng.uniform(-6, 6, size=(k, 5, 37))
+        assert np.array_equal(_window_sums(t), np.moveaxis(t, 0, -1).copy().sum(axis=-1))
+
+
 # ------------------------------------------------------------------------- extraction
 def room_scan(sigma_r=0.01, seed=0):
     world = World('room')
@@ -396,6 +406,41 @@ def test_split_pieces_eq4():
     assert split_pieces(pts, [0, 2, 5], 0.05).tolist() == [[0, 1], [2, 4]]
 
 
+def test_split_paths_agree_and_leave_out_short_pieces_as_a_filter_would(monkeypatch):
+    # _split runs array levels, then _split_py on the runs themselves (none ran) or on the
+    # gathered points of the pieces left: all paths give the same pieces. _extract asks
+    # for those of 3 or more points (min_span 2): the same as filtering all of them.
+    import landmark_nav.laser.lines as lines_mod
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        xy = np.cumsum(rng.normal(size=(120, 2)) * 0.05, axis=0)
+        offs = np.array([0, 1, 3, 40, 41, 90, 120])
+        x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
+        tol = np.full(120, 0.03)
+        s, e = offs[:-1], offs[1:] - 1
+        runs = []
+        for py in (10 ** 9, 60, -1):  # Python only; array levels, then Python; arrays only
+            monkeypatch.setattr(lines_mod, '_SPLIT_PY', py)
+            every = lines_mod._split(x, y, s, e, tol)
+            short = every[1] - every[0] < 2
+            assert short.any()
+            assert lines_mod._split(x, y, s, e, tol, 2).tolist() == every[:, ~short].tolist()
+            runs.append(every.tolist())
+        assert runs[0] == runs[1] == runs[2]
+
+
+def test_segment_builds_the_dataclass_fields():
+    from landmark_nav.laser.lines import _segment, LineSegment
+    a, b, c = np.array([1.0, 2.0]), np.array([3.0, 4.0]), np.eye(2)
+    values = (1.5, -0.5, a, b, 12, 0.01, c, 3, 14)
+    fast, slow = _segment(*values), LineSegment(*values)
+    assert type(fast) is LineSegment and list(vars(fast)) == list(vars(slow))
+    assert all(getattr(fast, k) is getattr(slow, k) for k in vars(slow))
+    with pytest.raises(AttributeError):
+        fast.rho = 2.0
+    assert fast.length == slow.length
+
+
 @pytest.mark.parametrize('kwargs,name', [({'method': 'hough'}, 'method'),
                                          ({'min_points': 2}, 'min_points'),
                                          ({'min_points': 8.0}, 'min_points'),
@@ -546,7 +591,7 @@ def test_carmen_logs(name):
 
 
 PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_SPLIT_PIECE_PY', '_CLEAN_PY', '_PAIRS_PY',
-            '_GROW_PY', '_NOISE_PY', '_BUILD_PY', '_JOIN_PAIRS_PY')
+            '_GROW_PY', '_NOISE_PY', '_BUILD_PY', '_JOIN_PAIRS_PY', '_SEEN_PY')
 
 
 def _line_tuples(lines):

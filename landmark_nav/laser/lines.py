@@ -450,25 +450,26 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     with numpy's inf / nan semantics.
     """
     full = sums.shape[0] == NUM_SUMS
-    sl = sums.tolist()
+    cols = sums.T.tolist()  # one list of sums per fit
     scat, a_in, b_in = [], [], []
-    for n, s1, s2, s3, s4, s5 in zip(*sl[:6]):  # _scatter
-        cx = s1 / n
-        cy = s2 / n
+    for c in cols:  # _scatter
+        n = c[0]
+        cx = c[1] / n
+        cy = c[2] / n
         ncx = n * cx
-        sxx = s3 - ncx * cx
-        syy = s4 - n * cy * cy
-        sxy = s5 - ncx * cy
+        sxx = c[3] - ncx * cx
+        syy = c[4] - n * cy * cy
+        sxy = c[5] - ncx * cy
         scat.append((n, cx, cy, sxx, syy, sxy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
-    alpha_a = 0.5 * np.arctan2(a_in, b_in)  # eq. 8
+    alpha_a = np.arctan2(a_in, b_in)
+    alpha_a *= 0.5  # eq. 8
     nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
     alpha_l = alpha_a.tolist()
     ox, oy = float(origin[0]), float(origin[1])
     rho_l, err_l, cov_l = [], [], []
     flip = False
-    cols = list(zip(*sl)) if full else None
     pi = math.pi
     isfinite = math.isfinite
     for j, (n, cx, cy, sxx, syy, sxy) in enumerate(scat):
@@ -634,8 +635,10 @@ def split_pieces(xy: np.ndarray, offsets: np.ndarray, tolerance) -> np.ndarray:
 
 
 def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
-           tol: np.ndarray) -> np.ndarray:
+           tol: np.ndarray, min_span: int = 0) -> np.ndarray:
     """Split the runs ``s[i]..e[i]`` (inclusive); return the (2, P) first and last points.
+
+    Pieces with ``last - first < min_span`` are left out of the result.
 
     All pieces of one recursion level in one batch. The farthest point from a chord is
     found on the unnormalised cross product ``|(q - p0) x (p1 - p0)|`` (the distance of
@@ -652,8 +655,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     done_s: List[np.ndarray] = []  # final pieces
     done_e: List[np.ndarray] = []
     mixed = False  # pieces out of order
+    short = False  # pieces of less than min_span may be among them
     lone = e <= s  # runs of one point: no chord
     if np.count_nonzero(lone):
+        short = True
         done_s.append(s[lone])
         done_e.append(e[lone])
         s, e = s[~lone], e[~lone]
@@ -667,11 +672,17 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
         if width == 0:
             done_s.append(s)
             done_e.append(e)
+            short = True
             break
         if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
+            if not mixed:  # the runs themselves: index the points in place
+                ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist(), min_span)
+                done_s.append(np.array(ps, dtype=np.int64))
+                done_e.append(np.array(pe, dtype=np.int64))
+                break
             idx, offs = _gather(s, e)  # the pieces' points (a shared split point twice)
-            ps, pe = _split_py(px[idx], py[idx], memoryview(tol[idx]), offs[:-1].tolist(),
-                               (offs[1:] - 1).tolist())
+            ps, pe = _split_py(px[idx], py[idx], tol[idx], offs[:-1].tolist(),
+                               (offs[1:] - 1).tolist(), min_span)
             done_s.append(idx[ps])
             done_e.append(idx[pe])
             break
@@ -711,6 +722,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             stop = ~split
             done_s.append(s[stop])
             done_e.append(e[stop])
+            short = True
             if not go.size:
                 break
             s, e, k = s[go], e[go], k[go]
@@ -720,33 +732,40 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
     if not done_s:
         return np.zeros((2, 0), dtype=np.int64)
     if len(done_s) == 1 and not mixed:  # the runs' pieces, in order
-        return np.array((done_s[0], done_e[0]))
-    s, e = np.concatenate(done_s), np.concatenate(done_e)
-    order = np.lexsort((e, s))
-    out = np.empty((2, s.size), dtype=np.int64)
-    out[0] = s[order]
-    out[1] = e[order]
+        out = np.array((done_s[0], done_e[0]))
+    else:
+        s, e = np.concatenate(done_s), np.concatenate(done_e)
+        order = np.lexsort((e, s))
+        out = np.empty((2, s.size), dtype=np.int64)
+        out[0] = s[order]
+        out[1] = e[order]
+    if short and min_span > 0:
+        out = out[:, out[1] - out[0] >= min_span]
     return out
 
 
 # Interior points of a recursion level up to which _split_py is faster than a numpy level
-# (measured on 180- to 1081-beam scans).
-_SPLIT_PY = 150
+# (measured on 180- and 361-beam Carmen scans: the whole scan of one).
+_SPLIT_PY = 400
 # Interior points of a piece up to which _split_py finds its farthest point on Python
 # floats rather than with array operations (measured).
 _SPLIT_PIECE_PY = 48
 
 
-def _split_py(px: np.ndarray, py: np.ndarray, tol: Sequence[float], s: List[int],
-              e: List[int]) -> Tuple[List[int], List[int]]:
+def _split_py(px: np.ndarray, py: np.ndarray, tol: np.ndarray, s: List[int],
+              e: List[int], min_span: int = 0) -> Tuple[List[int], List[int]]:
     """Split the pieces ``s[i]..e[i]`` as :func:`_split` does, one piece at a time.
 
     The same cross products in the same order (eq. 4 distance times the chord length, the
     first farthest point), on Python floats for small pieces and as arrays for large ones;
     depth first, left piece first. Returns the final pieces' first and last points, in
-    order.
+    order, without those of ``last - first < min_span``. The pieces index ``px``, ``py``
+    and ``tol``, whose points are all listed (:func:`_split` passes the runs themselves,
+    or the points of the pieces left after array levels).
     """
-    xs, ys = px.tolist(), py.tolist()
+    pts = list(zip(px.tolist(), py.tolist()))  # (x, y) of every point: one slice a piece
+    tol = memoryview(tol)
+    small = _SPLIT_PIECE_PY
     out_s: List[int] = []
     out_e: List[int] = []
     stack = list(zip(s, e))
@@ -754,14 +773,15 @@ def _split_py(px: np.ndarray, py: np.ndarray, tol: Sequence[float], s: List[int]
     while stack:
         a, b = stack.pop()
         if b - a < 2:  # no interior point: no split
-            out_s.append(a)
-            out_e.append(b)
+            if b - a >= min_span:
+                out_s.append(a)
+                out_e.append(b)
             continue
-        x0, y0 = xs[a], ys[a]
-        cx, cy = xs[b] - x0, ys[b] - y0
-        if b - a - 1 <= _SPLIT_PIECE_PY:
-            cross = [abs((x - x0) * cy - (y - y0) * cx)
-                     for x, y in zip(xs[a + 1:b], ys[a + 1:b])]
+        x0, y0 = pts[a]
+        x1, y1 = pts[b]
+        cx, cy = x1 - x0, y1 - y0
+        if b - a - 1 <= small:
+            cross = [abs((x - x0) * cy - (y - y0) * cx) for x, y in pts[a + 1:b]]
             cmax = max(cross)
             k = a + 1 + cross.index(cmax)
         else:
@@ -777,7 +797,7 @@ def _split_py(px: np.ndarray, py: np.ndarray, tol: Sequence[float], s: List[int]
         if cmax > tol[k] * abs(complex(cx, cy)):  # C hypot, as np.hypot
             stack.append((k, b))
             stack.append((a, k))
-        else:
+        elif b - a >= min_span:
             out_s.append(a)
             out_e.append(b)
     return out_s, out_e
@@ -940,17 +960,19 @@ _X, _Y, _RNG, _COS, _SIN, _TOL, _PHI = range(7)
 
 def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     """Stack the non-empty clusters; None if there are none."""
-    cl = [c for c in clusters if c.indices.size]
+    cl, bounds = [], [0]
+    for c in clusters:
+        if c.indices.size:
+            cl.append(c)
+            bounds.append(bounds[-1] + c.indices.size)
     if not cl:
         return None
-    sizes = np.array([c.indices.size for c in cl], dtype=np.int64)
-    offsets = np.zeros(sizes.size + 1, dtype=np.int64)
-    sizes.cumsum(out=offsets[1:])
-    n = int(offsets[-1])
+    offsets = np.array(bounds, dtype=np.int64)
+    n = bounds[-1]
     cols = np.empty((7, n))
     whole = cl[0].scan
-    if whole is not None and all(c.scan is whole and c.points.base is whole.points
-                                 for c in cl):
+    one = whole is not None and all(c.scan is whole for c in cl)  # of one segment_scan call
+    if one and all(c.points.base is whole.points for c in cl):
         # Clusters of one segment_scan call: gather from its whole-scan arrays.
         beam = np.concatenate([c.indices for c in cl], dtype=np.int64)
         xy = whole.points.take(beam, axis=0)
@@ -970,22 +992,24 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     np.subtract(xy[:, 1], oy, out=cols[_Y])
     np.multiply(cols[_RNG], 3.0 * params.sigma_phi, out=cols[_TOL])  # split tolerance
     cols[_TOL] += params.threshold
-    shared = (whole if whole is not None and whole.valid is not None
-              and all(c.scan is whole for c in cl) else None)
+    shared = whole if one and whole.valid is not None else None
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.arange(sizes.size).repeat(sizes), offsets, int(beam.max()) + 1, shared)
+                 np.arange(len(cl)).repeat(offsets[1:] - offsets[:-1]), offsets,
+                 int(beam.max()) + 1, shared)
 
 
 def _sse(pre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Return the TLS sum of squared perpendicular residuals of points lo..hi (inclusive)."""
     n = (hi - lo + 1).astype(float)
-    s = pre.take(hi + 1, axis=1) - pre.take(lo, axis=1)
-    mx, my = s[0] / n, s[1] / n
-    cxx = s[2] - n * mx * mx
-    cyy = s[3] - n * my * my
-    cxy = s[4] - n * mx * my
-    half = 0.5 * (cxx - cyy)
-    return np.maximum(0.5 * (cxx + cyy) - np.sqrt(half * half + cxy * cxy), 0.0)
+    s = pre.take(hi + 1, axis=1)
+    s -= pre.take(lo, axis=1)
+    m = s[:2] / n  # mx, my
+    nm = n * m
+    c = s[2:4] - nm * m  # cxx = sxx - n mx mx, cyy likewise
+    cxy = s[4] - nm[0] * m[1]
+    half = 0.5 * (c[0] - c[1])
+    out = 0.5 * (c[0] + c[1]) - np.sqrt(half * half + cxy * cxy)
+    return np.maximum(out, 0.0, out=out)
 
 
 def _refine_breaks(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray, reach: int
@@ -1092,7 +1116,7 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     least = params.min_points
     size = len(s_l)
     big = [b - a >= least - 1 for a, b in zip(s_l, e_l)]
-    touch = [e_l[j] >= s_l[j + 1] for j in range(size - 1)]  # piece j shares its last point
+    touch = [b >= a for b, a in zip(e_l, s_l[1:])]  # piece j shares its last point
     fitted = [j for j in range(size) if big[j] or (j and touch[j - 1] and big[j - 1])
               or (j < size - 1 and touch[j] and big[j + 1])]
     p1, p2, p3, p4, p5 = [memoryview(row) for row in pre]
@@ -1228,24 +1252,17 @@ def _variance_factor(sums: np.ndarray, f: _Fit) -> np.ndarray:
     return np.where(stat > q95, stat / dof, 1.0)
 
 
-# Pieces up to which _pairs_py is faster than the array operations (measured).
-_PAIRS_PY = 40
+def _variance_factor_py(sums: np.ndarray, f: _Fit, nx_l: List[float], ny_l: List[float]
+                        ) -> List[float]:
+    """Return :func:`_variance_factor` on Python floats (the same operations).
 
-
-def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarray,
-              params: LineParams) -> Tuple[_Fit, np.ndarray]:
-    """Return the fits with scaled covariances and the merge test of consecutive pieces.
-
-    :func:`_variance_factor` and the first merge test of :func:`_merge` (neighbours whose
-    :func:`_chi2` passes the gate) on Python floats, the same operations in the same
-    order. Raises ZeroDivisionError on degenerate fits (the array versions then give
-    numpy's inf / nan).
+    ``nx_l``, ``ny_l`` are the fits' normals as lists. Raises ZeroDivisionError on
+    degenerate fits (the array version then gives numpy's inf / nan).
     """
-    n_l, r_l = f.count.tolist(), f.rmse.tolist()
-    rho_l, alpha_l, nx_l, ny_l = f.params.tolist()
     s6, s12, s18 = sums[6].tolist(), sums[12].tolist(), sums[18].tolist()
     stats, dofs, bases = [], [], []
-    for n, r, nx, ny, a, b, c in zip(n_l, r_l, nx_l, ny_l, s6, s12, s18):
+    for n, r, nx, ny, a, b, c in zip(f.count.tolist(), f.rmse.tolist(), nx_l, ny_l, s6, s12,
+                                     s18):
         var = (nx * nx * a + ny * ny * b + 2.0 * nx * ny * c) / n
         dof = max(n - 2.0, 1.0)
         stats.append(n * r * r / var)  # RSS / sigma^2
@@ -1253,9 +1270,25 @@ def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarr
         dofs.append(dof)
         bases.append(1.0 - h + _Z95 * math.sqrt(h))
     cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
-    factor = [stat / dof if stat > dof * cube else 1.0
-              for stat, dof, cube in zip(stats, dofs, cubes)]
-    cov = f.cov * np.array(factor)[:, None, None]
+    return [stat / dof if stat > dof * cube else 1.0
+            for stat, dof, cube in zip(stats, dofs, cubes)]
+
+
+# Pieces up to which _pairs_py is faster than the array operations (measured).
+_PAIRS_PY = 40
+
+
+def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarray,
+              params: LineParams) -> Tuple[_Fit, List[bool]]:
+    """Return the fits with scaled covariances and the merge test of consecutive pieces.
+
+    :func:`_variance_factor` and the first merge test of :func:`_merge` (neighbours whose
+    :func:`_chi2` passes the gate) on Python floats, the same operations in the same
+    order. Raises ZeroDivisionError on degenerate fits (the array versions then give
+    numpy's inf / nan).
+    """
+    rho_l, alpha_l, nx_l, ny_l = f.params.tolist()
+    cov = f.cov * np.array(_variance_factor_py(sums, f, nx_l, ny_l))[:, None, None]
     f = _Fit(f.params, f.rmse, f.count, cov)
     c00, c01, _, c11 = cov.reshape(-1, 4).T.tolist()
     xs, ys, phi = scan.rows()[_X], scan.rows()[_Y], scan.rows()[_PHI]
@@ -1285,7 +1318,7 @@ def _pairs_py(scan: _Scan, sums: np.ndarray, f: _Fit, s: np.ndarray, e: np.ndarr
             continue
         d2 = (a11 * dr * dr - 2.0 * a01 * dr * da + a00 * da * da) / det
         join.append(-math.inf < d2 <= gate)
-    return f, np.array(join, dtype=bool)
+    return f, join
 
 
 def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params: LineParams
@@ -1320,11 +1353,12 @@ def _merge(scan: _Scan, feats: np.ndarray, s: np.ndarray, e: np.ndarray, params:
         join = near & (_chi2(f.rho[:-1], f.alpha[:-1], f.cov[:-1], f.rho[1:], f.alpha[1:],
                              f.cov[1:]) <= gate)
     else:
-        f, join = pairs
+        f, join_l = pairs
+        if not any(join_l):
+            return sums, s, e, f, np.arange(s.size)
+        return _merge_chains_py(scan, sums, s, e, f, join_l, gate)
     if not np.count_nonzero(join):
         return sums, s, e, f, np.arange(s.size)
-    if pairs is not None:
-        return _merge_chains_py(scan, sums, s, e, f, join.tolist(), gate)
     ends = np.empty((2, s.size), dtype=np.int64)
     ends[0] = s
     ends[1] = e
@@ -1451,10 +1485,11 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     n_pts = scan.x.size
     n_lines = first.size
     if n_lines <= _GROW_PY:  # (an empty gap gives no run)
-        run_f, run_b = _grow_runs_py(scan, f, first.tolist(), last.tolist(), params)
+        first_l, last_l = first.tolist(), last.tolist()
+        run_f, run_b = _grow_runs_py(scan, f, first_l, last_l, params)
         if not (any(run_f) or any(run_b)):
             return sums, first, last, False
-        return _grown(feats, sums, first, last, np.array((run_f, run_b), dtype=np.int64))
+        return _grown_py(feats, sums, first_l, last_l, run_f, run_b)
     lo = np.empty(n_lines + 1, dtype=np.int64)  # gap k: points lo[k] .. hi[k] - 1, between
     hi = np.empty(n_lines + 1, dtype=np.int64)  # line k - 1 and line k
     lo[0] = 0
@@ -1570,6 +1605,32 @@ def _grown(feats: np.ndarray, sums: np.ndarray, first: np.ndarray, last: np.ndar
     return sums + added[:, 0::2] + added[:, 1::2], new_first, new_last, True
 
 
+def _grown_py(feats: np.ndarray, sums: np.ndarray, first: List[int], last: List[int],
+              run_f: List[int], run_b: List[int]
+              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Return :func:`_grown` for the runs of :func:`_grow_runs_py`, laid out in Python.
+
+    The same sums (one ``reduceat`` over the same non-empty ranges, in the same order,
+    added to the lines' sums as there); only the index bookkeeping runs on lists.
+    """
+    n_lines = len(first)
+    new_first = [a - run_b[j] for j, a in enumerate(first)]
+    new_last = [b + run_f[j + 1] for j, b in enumerate(last)]
+    bounds: List[int] = []  # the added ranges [lo, hi), in order: before line j, after it
+    cols: List[int] = []
+    for j in range(n_lines):
+        if new_first[j] < first[j]:
+            bounds += (new_first[j], first[j])
+            cols.append(2 * j)
+        if new_last[j] > last[j]:
+            bounds += (last[j] + 1, new_last[j] + 1)
+            cols.append(2 * j + 1)
+    added = np.zeros((NUM_SUMS, 2 * n_lines))
+    added[:, cols] = np.add.reduceat(feats, bounds, axis=1)[:, 0::2]
+    return (sums + added[:, 0::2] + added[:, 1::2], np.array(new_first, dtype=np.int64),
+            np.array(new_last, dtype=np.int64), True)
+
+
 _NEXT = np.array([[0], [1]])
 
 
@@ -1612,13 +1673,26 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     """
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     beyond = r - rho / cos_in
-    bad = (cos_in > 1e-9) & (beyond > params.see_through_tolerance)
-    if not np.count_nonzero(bad):
-        return line[:0], idx[:0], bad[:0]
-    line, idx, beyond, r, cos_in = line[bad], idx[bad], beyond[bad], r[bad], cos_in[bad]
+    tol = params.see_through_tolerance
+    bad = ((cos_in > 1e-9) & (beyond > tol)).nonzero()[0]
+    if not bad.size:
+        return line[:0], idx[:0], np.zeros(0, dtype=bool)
+    line, idx = line[bad], idx[bad]
+    if bad.size <= _SEEN_PY:  # the opening test on Python floats (the same operations)
+        sr2, sp = params.sigma_r ** 2, params.sigma_phi
+        opening = []
+        for b, rr, c in zip(*np.array((beyond, r, cos_in)).take(bad, axis=1).tolist()):
+            t, c2 = rr * sp, c * c
+            opening.append(b > tol + 3.0 * math.sqrt(sr2 + t * t * (1.0 - c2) / c2))
+        return line, idx, np.array(opening, dtype=bool)
+    beyond, r, cos_in = beyond[bad], r[bad], cos_in[bad]
     c2 = cos_in * cos_in
     var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
-    return line, idx, beyond > params.see_through_tolerance + 3.0 * np.sqrt(var)
+    return line, idx, beyond > tol + 3.0 * np.sqrt(var)
+
+
+# Hidden beams up to which _seen_through tests them on Python floats (measured).
+_SEEN_PY = 16
 
 
 def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
@@ -1808,7 +1882,7 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
 
 
 def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
-                      params: LineParams) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      params: LineParams) -> Tuple[Optional[np.ndarray], np.ndarray, np.ndarray]:
     """Cut the lines' extents at occluders (step 5); return (line, first, last) per piece.
 
     An occluder of a line is a run of two or more neighbouring valid beams inside its
@@ -1816,9 +1890,10 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     :func:`_seen_through` (``see_through_tolerance`` plus 3 standard deviations of the
     distance along the ray, eq. 7). The extent's points are split at the occluders'
     beams (which leave); pieces of at least ``min_points`` points are kept, each
-    pointing to its line's fit. Without occluders every line is one piece.
+    pointing to its line's fit. Without occluders every line is one piece and the
+    result is ``(None, first, last)``.
     """
-    same = np.arange(first.size), first, last
+    same = None, first, last
     idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
     front = rho / cos_in - r  # how far the return lies in front of the line
     # Only a beam in front by more than the tolerance can be in front by the margin.
@@ -1900,7 +1975,6 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
     n = first.size
     if n < 2:
         return f
-    factor = _variance_factor(sums, f)
     gate = params.merge_chi2
     tol = params.see_through_tolerance
 
@@ -1923,8 +1997,18 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
 
     # cheap first test on every pair j < k: the two fits agree (a grown line retests all);
     # on Python floats for a few lines (the same operations as _chi2, the same results)
-    cov = (f.cov * factor[:, None, None]).reshape(-1, 4).tolist()
-    rho_l, alpha_l = f.params[:2].tolist()
+    rho_l, alpha_l, nx_l, ny_l = f.params.tolist()
+    factor = None
+    if n <= _JOIN_PAIRS_PY:
+        try:
+            factor = _variance_factor_py(sums, f, nx_l, ny_l)
+        except ZeroDivisionError:  # degenerate fits: numpy's inf / nan below
+            pass
+    if factor is None:
+        factor = _variance_factor(sums, f)
+        cov = (f.cov * factor[:, None, None]).reshape(-1, 4).tolist()
+    else:
+        cov = [[c * k for c in row] for row, k in zip(f.cov.reshape(-1, 4).tolist(), factor)]
     if n <= _JOIN_PAIRS_PY:
         pi, two_pi = math.pi, TWO_PI
         tried = set()
@@ -1943,7 +2027,7 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
                     tried.add((j, k))
     else:
         jj, kk = np.triu_indices(n, 1)
-        scaled = f.cov * factor[:, None, None]
+        scaled = f.cov * np.asarray(factor)[:, None, None]
         agree = (_chi2(f.rho[jj], f.alpha[jj], scaled[jj], f.rho[kk], f.alpha[kk],
                        scaled[kk]) <= gate).nonzero()[0]
         tried = set(zip(jj[agree].tolist(), kk[agree].tolist()))
@@ -2144,8 +2228,29 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
         return []
     pts = np.array(flat).reshape(-1, 2, 2)
     cov = f.cov.take(keep, axis=0)
-    return [LineSegment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
-                        cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
+    return [_segment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
+                     cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
+
+
+_new = object.__new__
+
+
+def _segment(rho: float, alpha: float, start: np.ndarray, end: np.ndarray, num_points: int,
+             rmse: float, covariance: np.ndarray, first_index: int, last_index: int
+             ) -> LineSegment:
+    """Return ``LineSegment(...)`` of these values, its fields set without ``__init__``.
+
+    The frozen dataclass's ``__init__`` sets each field through ``object.__setattr__``;
+    this writes them to the instance's ``__dict__`` at once (the same object, a third of
+    the time).
+    """
+    seg = _new(LineSegment)
+    d = seg.__dict__
+    d['rho'], d['alpha'], d['start'], d['end'], d['num_points'] = (rho, alpha, start, end,
+                                                                   num_points)
+    d['rmse'], d['covariance'], d['first_index'], d['last_index'] = (rmse, covariance,
+                                                                     first_index, last_index)
+    return seg
 
 
 def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
@@ -2187,8 +2292,8 @@ def _build_arrays(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     count = f.count[ok].astype(np.int64).tolist()
     b0, b1 = scan.beam[ends.take(ok, axis=1)].tolist()
     proj, cov = proj.take(ok, axis=1), cov.take(ok, axis=0)
-    return [LineSegment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
-                        b0[j], b1[j]) for j in range(len(rho))]
+    return [_segment(rho[j], alpha[j], proj[0, j], proj[1, j], count[j], rmse[j], cov[j],
+                     b0[j], b1[j]) for j in range(len(rho))]
 
 
 def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = None
@@ -2233,16 +2338,13 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     pre = np.zeros((5, n + 1))  # prefix sums of x, y, x^2, y^2, xy (= _prefix5(x, y))
     feats[1:6, :n].cumsum(axis=1, out=pre[:, 1:])
     if params.method == 'split_merge':
-        s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL])
-        keep = e - s >= 2
-        s, e = s[keep], e[keep]
+        s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL], 2)
     else:
         # Smooth each cluster's ranges over the bearing (eqs. 8-10), polar -> Cartesian.
         sub, sub_offs = _gather(offsets[big], offsets[big + 1] - 1)
-        r_s = lowess_groups(cols[_PHI][sub], cols[_RNG][sub], sub_offs, params.lowess_span,
-                            params.lowess_iterations)
-        pieces = alfa_pieces(np.stack([r_s * cols[_COS][sub], r_s * cols[_SIN][sub]], axis=1),
-                             sub_offs, params)
+        rng, cos, sin, _, phi = cols[_RNG:].take(sub, axis=1)
+        r_s = lowess_groups(phi, rng, sub_offs, params.lowess_span, params.lowess_iterations)
+        pieces = alfa_pieces(np.stack([r_s * cos, r_s * sin], axis=1), sub_offs, params)
         pieces = sub[pieces] if pieces.size else pieces
         s, e = pieces[:, 0], pieces[:, 1]
     s, e = _refine_breaks(scan, pre, s, e, params.min_points)
@@ -2260,7 +2362,7 @@ def _extract(clusters: Sequence[Cluster], params: LineParams) -> List[LineSegmen
     if params.join_occluded:
         fit = _join_occluded(scan, sums, first, last, fit, (s, e), params)
     col, first, last = _occluded_extents(scan, fit, first, last, params)
-    if col.size != fit.count.size or np.count_nonzero(col != np.arange(col.size)):
+    if col is not None:
         fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
                    fit.cov.take(col, axis=0))
     return _build(scan, params, fit, first, last)

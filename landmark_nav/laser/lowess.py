@@ -33,19 +33,20 @@ def _knn_windows(x: np.ndarray, offsets: np.ndarray, span: np.ndarray, group: np
     lo_g = offsets[group]
     k = span[group]
     i = np.arange(n)
-    if n > 1 and span.size and (span % 2 == 1).all():
+    spans = span.tolist()
+    if n > 1 and spans and all(v % 2 == 1 for v in spans):
         # Equally spaced x (beams of a scan): the window centred on x_i, clipped to its
         # group, is the only one whose reach is below (h + 1) steps, h = (k - 1) // 2,
         # when the steps differ by less than 1 / (2 h) of the smallest (a window shifted
         # by one reaches h + 1 steps on one side). Then no candidates are needed.
         step = x[1:] - x[:-1]
         inner = step[(group[1:] == group[:-1]).nonzero()[0]]
-        h = (max(span.tolist()) - 1) // 2
+        h = (max(spans) - 1) // 2
         smallest = inner.min() if inner.size else 0.0
         if not inner.size or (smallest > 0.0
                               and (inner.max() - smallest) * (2 * h) < smallest):
             return np.minimum(np.maximum(i - (k - 1) // 2, lo_g), offsets[group + 1] - k)
-    kmax = max(span.tolist())
+    kmax = max(spans)
     steps = np.arange(kmax)[:, None]
     # Candidate window starts i-k+1 .. i, clipped to the group.
     cand = i - steps
@@ -68,9 +69,8 @@ class _Groups:
 
     __slots__ = ('shape', 'cell', 'lo', 'hi')
 
-    def __init__(self, offsets: np.ndarray, group: np.ndarray) -> None:
-        """Lay out the groups ``offsets`` (G + 1,); ``group`` (N,) is the group of each value."""
-        sizes = offsets[1:] - offsets[:-1]
+    def __init__(self, offsets: np.ndarray, group: np.ndarray, sizes: np.ndarray) -> None:
+        """Lay out the groups ``offsets`` (G + 1,), ``sizes`` (G,); ``group`` of each value."""
         width = max(sizes.tolist())
         self.shape = (sizes.size, width)
         row = np.arange(0, sizes.size * width, width)
@@ -123,12 +123,11 @@ def _lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int,
     k_g = np.minimum(sizes, int(span))
     group = np.arange(sizes.size).repeat(sizes)
     starts = _knn_windows(x, offsets, k_g, group)
-    k = k_g[group]
     kmin, kmax = min(k_g.tolist()), max(k_g.tolist())
     # The windows are laid out (kmax, N): column i holds the neighbours of x_i, and the
     # reductions over a window run over rows (fast on a few rows; see _window_sums).
     cols = np.arange(kmax)[:, None]
-    in_win = cols < k if kmin < kmax else None  # None: every window has kmax points
+    in_win = cols < k_g[group] if kmin < kmax else None  # None: every window has kmax points
     idx = np.minimum(starts + cols, n - 1)
     u = x[idx] - x  # predictor relative to x_i, so the fit at x_i is the intercept
     if in_win is not None:
@@ -142,7 +141,7 @@ def _lowess_groups(x: np.ndarray, y: np.ndarray, offsets: np.ndarray, span: int,
         w1 = np.where(in_win, w1, 0.0)
     fit = _weighted_linear(u, yw, w1, y)
     scale = float(np.abs(y).max()) + 1.0
-    groups = _Groups(offsets, group) if iterations else None
+    groups = _Groups(offsets, group, sizes) if iterations else None
     for _ in range(int(iterations)):
         res = y - fit
         mad = _group_median(np.abs(res), groups)  # M of eq. 9
@@ -181,17 +180,13 @@ def _window_sums(t: np.ndarray) -> np.ndarray:
     numpy sums a contiguous row by pairwise summation (sequentially below 8 values, else
     in 8 partial sums, for rows up to 128 values); repeating its order over the K rows
     gives the sums of the (N, K) layout bit for bit, without a reduction call per row.
+    Below 8 rows that order is a reduction over the first axis (row by row, in order).
     """
     k = t.shape[0]
     if k > 128:
         return np.moveaxis(t, 0, -1).copy().sum(axis=-1)
     if k < 8:
-        if k == 1:
-            return t[0].copy()
-        s = t[0] + t[1]
-        for i in range(2, k):
-            s += t[i]
-        return s
+        return np.add.reduce(t, axis=0)
     r = t[:8].copy()
     i = 8
     while i < k - k % 8:
