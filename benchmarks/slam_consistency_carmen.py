@@ -8,7 +8,8 @@ Run from the repository root (needs ``../shared/data/carmen``)::
         [--jacobians standard|observability|observability_gain|first_estimates]
         [--gate-probability P] [--joint-probability P] [--association icnn|jcbb]
         [--cartesian-gate F]
-        [--free-space-check P] [--line-extent-sigmas K] [--drift MODEL]
+        [--free-space-check P] [--line-extent-sigmas K]
+        [--recovery-probability P [--recovery-pairs N]] [--drift MODEL]
         [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
@@ -187,6 +188,10 @@ def main() -> int:
                     help='SlamParams.free_space_check (confidence; e.g. 0.95)')
     ap.add_argument('--line-extent-sigmas', type=float, default=None,
                     help='SlamParams.line_extent_sigmas (e.g. 1.96)')
+    ap.add_argument('--recovery-probability', type=float, default=None,
+                    help='SlamParams.recovery_probability (e.g. 0.99)')
+    ap.add_argument('--recovery-pairs', type=int, default=None,
+                    help='SlamParams.recovery_pairs (default 3)')
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
     ap.add_argument('--filter-noise', default=None,
@@ -206,7 +211,9 @@ def main() -> int:
              'joint_probability': args.joint_probability,
              'cartesian_gate': args.cartesian_gate,
              'free_space_check': args.free_space_check,
-             'line_extent_sigmas': args.line_extent_sigmas}
+             'line_extent_sigmas': args.line_extent_sigmas,
+             'recovery_probability': args.recovery_probability,
+             'recovery_pairs': args.recovery_pairs}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
             'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5',
