@@ -4,7 +4,8 @@ The belgioioso failure of the README ("Recovery") in miniature: corners are mapp
 origin, then the heading becomes uncertain (std 5 deg) while the robot in truth turned by
 13 deg (2.6 sigma). Seen from the true pose, every corner's bearing is off by the same
 13 deg: each pair alone lies outside the 95 % gate (d2 about 6.7 > 5.99), so nothing is
-matched; jointly, the pairs share one error and pass.
+matched; at the recovery's 99 % gate (9.21) each is admitted, and JCBB's joint test keeps
+only the pairs that one pose explains.
 """
 
 import math
@@ -71,13 +72,34 @@ def test_too_few_pairs_are_not_a_recovery():
     assert res.status.tolist() == ['matched'] * 2 and slam.stats['recovered'] == 1
 
 
+def test_joint_test_leaves_out_a_pair_of_another_pose():
+    """A fourth corner seen as from a turn of -13 deg: inside the 99 % gate alone, not jointly."""
+    z, r = seen_after_turn(3)
+    odd = observe(np.array([0.0, 0.0, -TURN]), MAPPED[3:])
+    slam = turned_filter(recovery_probability=0.99)
+    res = slam.update(np.vstack([z, odd]), np.repeat(R1[None], 4, axis=0))
+    assert res.status[:3].tolist() == ['matched'] * 3 and res.status[3] != 'matched'
+    assert slam.pose[2] == pytest.approx(TURN, abs=math.radians(0.5))
+
+
+def test_joint_hypothesis_too_small_is_not_a_recovery():
+    """Two pairs of one pose and one of another: JCBB pairs two, fewer than three."""
+    z, r = seen_after_turn(2)
+    odd = observe(np.array([0.0, 0.0, -TURN]), MAPPED[2:3])
+    slam = turned_filter(recovery_probability=0.99)
+    res = slam.update(np.vstack([z, odd]), np.repeat(R1[None], 3, axis=0))
+    assert 'matched' not in res.status.tolist() and slam.stats['recovered'] == 0
+    assert slam.pose[2] == pytest.approx(0.0, abs=1e-12)
+
+
 def test_scan_with_a_pair_in_the_gate_is_not_touched():
     """A scan where ICNN pairs anything is left as it is (same state as with it off)."""
-    obs = observe(np.array([0.0, 0.0, math.radians(2.0)]), MAPPED[:3])
+    near = observe(np.array([0.0, 0.0, math.radians(2.0)]), MAPPED[:1])
+    obs = np.vstack([near, seen_after_turn(3)[0][1:]])  # one pair in the gate, two not
     r = np.repeat(R1[None], 3, axis=0)
     off, on = turned_filter(), turned_filter(recovery_probability=0.99)
-    assert off.update(obs, r).status.tolist() == ['matched'] * 3
-    assert on.update(obs, r).status.tolist() == ['matched'] * 3
+    res_off, res_on = off.update(obs, r), on.update(obs, r)
+    assert res_off.status[0] == 'matched' and res_off.status.tolist() == res_on.status.tolist()
     assert np.array_equal(off.state, on.state) and on.stats['recovered'] == 0
 
 
@@ -86,9 +108,10 @@ def test_scan_with_a_pair_in_the_gate_is_not_touched():
                                 {'recovery_probability': 1.0},
                                 {'recovery_probability': True},
                                 {'recovery_probability': '0.99'},
+                                {'recovery_probability': 0.999999},
                                 {'recovery_pairs': 0}])
 def test_bad_recovery_parameters_are_named(kw):
-    """Recovery needs a confidence above the gate's and at least one pair."""
+    """Recovery needs a confidence between the two gates and at least one pair."""
     with pytest.raises(ValueError, match=next(iter(kw))):
         SlamParams(**kw)
 
