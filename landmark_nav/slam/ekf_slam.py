@@ -2003,16 +2003,17 @@ class EkfSlam:
             self._x, self._p, zu, ru, prm.association, prm.gate_probability,
             prm.jcbb_max_nodes, allowed, ku if mixed else None, self._kind if mixed else None,
             prm.joint_check, prm.joint_probability, gain_null, jac_x, prm.cartesian_gate)
-        gate_p = prm.gate_probability  # the gate the hypothesis was made with
+        recovered = False
         if prm.recovery_probability is not None and not np.any(hyp >= 0):
-            hyp, d2, gate_p = self._recover(hyp, d2, zu, ru, allowed, ku if mixed else None,
-                                            gain_null, jac_x)
-        if prm.reject_ambiguous:
-            hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(2, gate_p))
+            hyp, d2, recovered = self._recover(hyp, d2, zu, ru, allowed,
+                                               ku if mixed else None, gain_null, jac_x)
+        if prm.reject_ambiguous:  # at the gate the hypothesis was made with
+            hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(
+                2, prm.recovery_probability if recovered else prm.gate_probability))
         veto = np.zeros(0, dtype=np.int64)
         if prm.free_space_check is not None and scan is not None and np.any(hyp >= 0):
             hyp, veto = self._free_space_veto(hyp, zu, ru, d2, scan, mixed, null, jac_x)
-        if gate_p != prm.gate_probability:  # a recovery: still enough pairs after the checks?
+        if recovered:  # still enough pairs after the checks?
             if np.count_nonzero(hyp >= 0) < prm.recovery_pairs:
                 hyp = np.full_like(hyp, -1)
             else:
@@ -2107,28 +2108,27 @@ class EkfSlam:
     def _recover(self, hyp: np.ndarray, d2: np.ndarray, zu: np.ndarray, ru: np.ndarray,
                  allowed: Optional[np.ndarray], kind: Optional[np.ndarray],
                  null: Optional[np.ndarray], jac_x: Optional[np.ndarray]
-                 ) -> Tuple[np.ndarray, np.ndarray, float]:
+                 ) -> Tuple[np.ndarray, np.ndarray, bool]:
         """JCBB at ``recovery_probability`` when nothing was paired (module docstring).
 
         See "Recovery": the caller still checks that ``recovery_pairs`` pairs survive
         ``reject_ambiguous`` (at this gate) and the free-space check.
 
         Returns:
-            ``(hypothesis, d2, gate confidence)``: JCBB's hypothesis, its ``d2`` table and
-            ``recovery_probability`` if it pairs at least ``recovery_pairs`` observations,
-            else the arguments and ``gate_probability``.
+            ``(hypothesis, d2, True)``: JCBB's hypothesis and its ``d2`` table if it pairs
+            at least ``recovery_pairs`` observations, else ``(hyp, d2, False)``.
         """
         prm = self.params
         if d2.shape[1] == 0 or np.count_nonzero(np.any(
                 d2 < chi2_gate(2, prm.recovery_probability), axis=1)) < prm.recovery_pairs:
-            return hyp, d2, prm.gate_probability
+            return hyp, d2, False
         wide, d2_wide, _ = do_data_association(
             self._x, self._p, zu, ru, 'jcbb', prm.recovery_probability, prm.jcbb_max_nodes,
             allowed, kind, self._kind if kind is not None else None, nullspace=null,
             jacobian_state=jac_x, cartesian_ratio=prm.cartesian_gate)
         if np.count_nonzero(wide >= 0) < prm.recovery_pairs:
-            return hyp, d2, prm.gate_probability
-        return wide, d2_wide, prm.recovery_probability
+            return hyp, d2, False
+        return wide, d2_wide, True
 
     def _descriptor_gate(self, bvec: np.ndarray, opening: np.ndarray, feat_bis: np.ndarray,
                          feat_open: np.ndarray) -> Optional[np.ndarray]:
