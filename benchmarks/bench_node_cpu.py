@@ -211,7 +211,7 @@ def main() -> int:
         node_ms = 1e3 * (cpu1['ekf_slam'] - cpu0['ekf_slam']) / steps
         main_ms = 1e3 * (main1 - main0) / steps
         print(f'core (SlamFrontend + EkfSlam, offline, same bag) {core_ms:.2f} ms per step '
-              f'back to back, {paced_ms:.2f} ms at the bag\'s rate x {args.rate:g}; '
+              f'back to back, {paced_ms:.2f} ms at the bag rate x {args.rate:g}; '
               f'ekf_slam node CPU / core = {node_ms / paced_ms:.2f} at the rate '
               f'({node_ms / core_ms:.2f} back to back; main thread {main_ms:.2f} ms per step, '
               f'the other threads (DDS) {node_ms - main_ms:.2f} ms)')
