@@ -9,7 +9,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
         [--gate-probability P] [--joint-probability P] [--association icnn|jcbb]
         [--cartesian-gate F]
         [--free-space-check P] [--line-extent-sigmas K]
-        [--recovery-probability P [--recovery-pairs N]] [--drift MODEL]
+        [--recovery-probability P [--recovery-pairs N]] [--spurious-limit L] [--drift MODEL]
         [--filter-noise MODEL] [LOG ...]
 
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, the given
@@ -192,6 +192,8 @@ def main() -> int:
                     help='SlamParams.recovery_probability (e.g. 0.99)')
     ap.add_argument('--recovery-pairs', type=int, default=None,
                     help='SlamParams.recovery_pairs (default 3)')
+    ap.add_argument('--spurious-limit', type=float, default=None,
+                    help='SlamParams.spurious_limit (e.g. 0.05)')
     ap.add_argument('--drift', default=None,
                     help='import drift model (default pioneer; none: the reference increments)')
     ap.add_argument('--filter-noise', default=None,
@@ -213,7 +215,8 @@ def main() -> int:
              'free_space_check': args.free_space_check,
              'line_extent_sigmas': args.line_extent_sigmas,
              'recovery_probability': args.recovery_probability,
-             'recovery_pairs': args.recovery_pairs}
+             'recovery_pairs': args.recovery_pairs,
+             'spurious_limit': args.spurious_limit}
     extra = {k: v for k, v in given.items() if v is not None}
     keys = ('odo_nees', 'odo_out', 'odo_nees10', 'line_m2', 'nis95', 'd2', 'nees_med',
             'psi_err', 'psi_sd', 'ellipse95', 'rot_deg', 'ate_se2', 'ate_none', 'jump5',

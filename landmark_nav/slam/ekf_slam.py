@@ -277,6 +277,37 @@ Counted in ``stats['recovered']``. A scan with any pair is not touched, nor is a
 widening of the gate (``gate_probability`` 0.99 everywhere, README: it broke acapulco).
 Measured in the README (EKF-SLAM, "Recovery").
 
+Spurious pairs
+--------------
+The chi-square gate tests whether an observation *can* be a landmark, not whether it is
+more likely that landmark than another feature of the scene: when the robot's uncertainty
+relative to a landmark is large (a heading std of 20 deg after a long corridor), the
+gate covers many square metres and any corner or wall of the scene that lands in it is
+paired. On the Carmen logs with the importer's odometry replaced by the reference's own
+increments (no drift), such pairs are what breaks the filter: aces, one corner 25 m from
+the landmark it was paired with (d2 5.8, heading std 22 deg) turned the robot by 48 deg;
+acapulco, corners 1.3-4.8 m off turned it by 10-16 deg, a wall 17 m off by 35 deg (a
+per-step trace with each pair labelled through the reference poses, README). With
+``spurious_limit`` (off by default) each pair of the hypothesis is kept only when the
+expected number of features of its kind other than the observed one inside its gate,
+``lambda A`` (the clutter density times the validation volume of Bar-Shalom's
+probabilistic data association), is at most the limit (:meth:`EkfSlam._spurious_check`):
+
+* ``A``: the gate ``d2 <= chi2_2(gate_probability)`` is an ellipse of area
+  ``pi chi2 sqrt(det S)`` in the observation's coordinates, with ``S`` the innovation
+  covariance the gate used; a corner's ``(r, theta)`` maps to the plane with
+  ``dA = r dr dtheta``, so its area is that times the predicted range; a line's stays in
+  ``(rho, alpha)`` [m rad].
+* ``lambda``: the scan's own density of features, with no constant of its own: its corner
+  observations over the area its valid beams sweep, its line observations over the
+  perimeter of that region (by Cauchy-Crofton the measure ``drho dalpha`` of the lines
+  meeting a convex region is its perimeter) (:func:`.visibility.swept_region`).
+
+``0.05`` (the gate's own miss rate, ``1 - gate_probability``) makes a spurious pair as
+likely as a missed right one. A dropped pair lies inside the gate, so its observation is
+'ambiguous' (no new landmark); counted in ``stats['spurious']``. Needs the scan geometry.
+Measured in the README (EKF-SLAM, "Spurious pairs").
+
 Tentative landmarks (ghost protection)
 --------------------------------------
 An observation that no map landmark explains starts a *candidate* that lives OUTSIDE the
@@ -422,7 +453,8 @@ from .line_landmarks import (ends_to_map, extents_overlap, line_end_covariance,
                              line_observation_model, LineObservations, merge_extent,
                              project_extent)
 from .slam_map import SlamMap
-from .visibility import corners_in_view, landmarks_missed, lines_unoccluded, ScanGeometry
+from .visibility import (corners_in_view, landmarks_missed, lines_unoccluded, ScanGeometry,
+                         swept_region)
 
 ASSOCIATION_METHODS = ('icnn', 'jcbb')
 STATUSES = ('matched', 'confirmed', 'tentative', 'new', 'rejected')
@@ -584,6 +616,12 @@ class SlamParams:
             (``gate_probability``, ``new_landmark_probability``].
         recovery_pairs: Fewest pairs of such a hypothesis (default 3: six measurements for
             the three pose dof it corrects, three to test it).
+        spurious_limit: None (default): off. Otherwise the largest expected number of
+            corners of the scene other than the one observed that may lie inside a corner
+            pair's gate: ``lambda A`` with ``A`` the pair's 95 % gate region put in the
+            plane and ``lambda`` the scan's corner density (its corner observations over
+            the area its beams sweep); a pair above it is dropped (module docstring,
+            "Spurious pairs"). Needs the scan geometry. Corners only.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
@@ -629,6 +667,7 @@ class SlamParams:
     line_extent_sigmas: Optional[float] = None
     recovery_probability: Optional[float] = None
     recovery_pairs: int = 3
+    spurious_limit: Optional[float] = None
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -655,6 +694,9 @@ class SlamParams:
                 raise ValueError(f'SlamParams.{name} must be in (0, 1), got {v!r}')
         if self.cartesian_gate is not None:
             _check_number('SlamParams.cartesian_gate', self.cartesian_gate, minimum=0.0)
+        if self.spurious_limit is not None:
+            _check_number('SlamParams.spurious_limit', self.spurious_limit, minimum=0.0,
+                          strict=True)
         if self.recovery_probability is not None and not (
                 isinstance(self.recovery_probability, (int, float, np.integer, np.floating))
                 and not isinstance(self.recovery_probability, bool)
@@ -1736,7 +1778,7 @@ class EkfSlam:
                                       'matched': 0, 'confirmed': 0, 'new_candidates': 0,
                                       'dropped_candidates': 0, 'rejected': 0, 'pruned': 0,
                                       'evicted': 0, 'retired': 0, 'free_space': 0,
-                                      'recovered': 0}
+                                      'recovered': 0, 'spurious': 0}
         if self._loaded is not None and self.params.mode == 'localization':
             self._install_map(self._loaded[0], self._initial_pose, self._loaded[1])
 
@@ -2013,6 +2055,8 @@ class EkfSlam:
         veto = np.zeros(0, dtype=np.int64)
         if prm.free_space_check is not None and scan is not None and np.any(hyp >= 0):
             hyp, veto = self._free_space_veto(hyp, zu, ru, d2, scan, mixed, null, jac_x)
+        if prm.spurious_limit is not None and scan is not None and np.any(hyp >= 0):
+            hyp = self._spurious_check(hyp, ku, ru, scan, null, jac_x)
         if recovered:  # still enough pairs after the checks?
             if np.count_nonzero(hyp >= 0) < prm.recovery_pairs:
                 hyp = np.full_like(hyp, -1)
@@ -2129,6 +2173,42 @@ class EkfSlam:
         if np.count_nonzero(wide >= 0) < prm.recovery_pairs:
             return hyp, d2, False
         return wide, d2_wide, True
+
+    def _spurious_check(self, hyp: np.ndarray, ku: np.ndarray, ru: np.ndarray,
+                        scan: ScanGeometry, null: Optional[np.ndarray],
+                        jac_x: Optional[np.ndarray]) -> np.ndarray:
+        """Drop pairs whose gate may hold another feature (module docstring, "Spurious pairs").
+
+        Returns:
+            The hypothesis with those pairs set to -1.
+        """
+        obs = np.flatnonzero(hyp >= 0)
+        area, perimeter = swept_region(scan)
+        if obs.size == 0 or not (area > 0.0 and perimeter > 0.0):
+            return hyp
+        j = hyp[obs]
+        kind = self._kind[j]
+        zhat, hr, hf = observation_model(self._x, j, kind)
+        if jac_x is not None:  # the innovation covariance the gate used
+            hr, hf = observation_model(jac_x, j, kind)[1:]
+        elif null is not None:
+            hr, hf = constrain_jacobians(hr, hf, null[j])
+        s = predicted_observation_covariance(self._p, j, hr, hf) + ru[obs]
+        det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]
+        # The gate d2 <= g is an ellipse of area pi g sqrt(det S) in the observation's
+        # coordinates; (r, theta) to the plane: dA = r dr dtheta; lines stay in (rho, alpha).
+        area_gate = (math.pi * chi2_gate(2, self.params.gate_probability)
+                     * np.sqrt(np.maximum(det, 0.0)))
+        line = kind == LINE
+        area_gate[~line] *= zhat[~line, 0]
+        density = np.where(line, np.count_nonzero(ku == LINE) / perimeter,
+                           np.count_nonzero(ku == CORNER) / area)
+        crowded = ~(density * area_gate <= self.params.spurious_limit)
+        if np.any(crowded):
+            hyp = hyp.copy()
+            hyp[obs[crowded]] = -1
+            self.stats['spurious'] += int(np.count_nonzero(crowded))
+        return hyp
 
     def _descriptor_gate(self, bvec: np.ndarray, opening: np.ndarray, feat_bis: np.ndarray,
                          feat_open: np.ndarray) -> Optional[np.ndarray]:

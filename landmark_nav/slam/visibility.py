@@ -71,6 +71,29 @@ class ScanGeometry:
         return self.angle_min + self.angle_increment * np.arange(np.asarray(self.ranges).size)
 
 
+def swept_region(scan: ScanGeometry) -> Tuple[float, float]:
+    """Area [m^2] and perimeter [m] of the region the scan's beams sweep up to their returns.
+
+    The region is the fan of the valid returns (finite, within ``(range_min, range_max)``;
+    a beam with no return shows no area whose features could have been detected), closed
+    at the laser: area ``sum r^2 dphi / 2``, perimeter the polygon through the laser and the
+    return points in beam order. By Cauchy-Crofton the measure ``drho dalpha`` of the lines
+    meeting a convex region is its perimeter, so lines per perimeter is a density of lines
+    in ``(rho, alpha)`` as corners per area is one in the plane.
+    """
+    r = np.asarray(scan.ranges, dtype=float)
+    with np.errstate(invalid='ignore'):
+        valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+    if not np.any(valid):
+        return 0.0, 0.0
+    a = scan.angles[valid]
+    r = r[valid]
+    area = 0.5 * abs(scan.angle_increment) * float(np.dot(r, r))
+    x, y = r * np.cos(a), r * np.sin(a)
+    perimeter = float(r[0] + r[-1] + np.sum(np.hypot(np.diff(x), np.diff(y))))
+    return area, perimeter
+
+
 def _laser_pose(pose: np.ndarray, mount: np.ndarray) -> np.ndarray:
     c, s = np.cos(pose[2]), np.sin(pose[2])
     return np.array([pose[0] + c * mount[0] - s * mount[1], pose[1] + s * mount[0]
