@@ -3,7 +3,7 @@
 Run from the repository root (needs ``../shared/data/wean``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/wean_map_check.py [--landmarks both]
-        [--establish-hits N] [LOG ...]
+        [--establish-hits N] [--set NAME=VALUE ...] [LOG ...]
 
 Each log (default ``robotdata1 robotdata2 robotdata5``) is imported with ``landmark_nav
 import`` defaults (raw odometry) into a temporary directory and run as the test
@@ -14,13 +14,16 @@ landmark_diagnosis` says why each corner landmark is off the walls. Printed per 
 corner landmarks, the share within 10 cm of a wall cell (issue 14 asks >= 0.9), poses in
 wall / unknown cells (asks 0), the share of scan end points near a wall with the filter's
 and with the odometry's poses, and the count per category (``on_wall``, ``moved``,
-``few_views``, ``off_grid``). ``--establish-hits`` sets ``SlamParams.establish_hits``.
+``few_views``, ``off_grid``). ``--establish-hits`` sets ``SlamParams.establish_hits``;
+``--set NAME=VALUE`` (repeatable) any other field of ``SlamParams`` (the value read as a
+Python literal, e.g. ``--set jacobians="'observability_gain'" --set spurious_limit=0.05``).
 A log whose odometry the front end had to bridge (``robotdata5``: two runs) gets one more
 line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_segments`:
 each part aligned on its own).
 """
 
 import argparse
+import ast
 from collections import Counter
 from pathlib import Path
 import sys
@@ -47,7 +50,12 @@ def main() -> int:
     ap.add_argument('logs', nargs='*', default=list(LOGS))
     ap.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
     ap.add_argument('--establish-hits', type=int, default=0)
+    ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
     args = ap.parse_args()
+    extra = {}
+    for item in args.set:
+        key, _, value = item.partition('=')
+        extra[key] = ast.literal_eval(value)
     wean = SHARED_DATA / 'wean'
     if not wean.is_dir():
         print(f'missing {wean}', file=sys.stderr)
@@ -61,7 +69,7 @@ def main() -> int:
             import_log(wean / f'{name}.log.gz', bag)
             sc = load_bag(bag, require_reference=False)
             prm = SlamParams(odometry=bag_odometry_noise(sc)[0],
-                             establish_hits=args.establish_hits)
+                             establish_hits=args.establish_hits, **extra)
             run = run_slam(sc, prm, CornerParams(sigma_r=sc.laser.sigma_range,
                                                  sigma_phi=sc.laser.sigma_angle),
                            landmarks=args.landmarks)

@@ -82,12 +82,14 @@ def replay(ros, msgs, slam, odom_qos=10):
     return n_scan
 
 
-def node_and_offline(tmp_path, bag, seconds, landmarks, noise):
+def node_and_offline(tmp_path, bag, seconds, landmarks, noise, extra=None):
     """Replay a bag through corner_extractor + ekf_slam; return the node's and offline runs.
 
     Both get the bag's laser mount and noise (the node as parameters) and ``noise`` as the
     odometry model; visibility-aware pruning and de-skew on (the defaults of both).
+    ``extra``: further node parameters, the same ``SlamParams`` fields offline.
     """
+    extra = dict(extra or {})
     msgs = bag_messages(seconds, bag)
     scenario = load_bag(bag, max_seconds=seconds, require_reference=False)
     laser = scenario.laser
@@ -105,7 +107,8 @@ def node_and_offline(tmp_path, bag, seconds, landmarks, noise):
             Parameter('lines.sigma_r', value=float(laser.sigma_range)),
             Parameter('lines.sigma_phi', value=float(laser.sigma_angle)),
             # The test paces the messages; a stall of the machine is no odometry outage.
-            Parameter('odometry_timeout', value=3600.0)]))
+            Parameter('odometry_timeout', value=3600.0)]
+            + [Parameter(k, value=v) for k, v in extra.items()]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
         clouds = ros.collect('corners/features', PointCloud2)
         n_scan = replay(ros, msgs, slam)
@@ -120,7 +123,7 @@ def node_and_offline(tmp_path, bag, seconds, landmarks, noise):
             stats=dict(slam.slam.stats), markers=slam.landmark_markers(0))
         assert call(ros, 'reset', Trigger).success
         assert slam.slam is None
-    params = SlamParams(odometry=odometry_noise_model(noise))
+    params = SlamParams(odometry=odometry_noise_model(noise), **extra)
     ref = run_slam(scenario, params, CornerParams(sigma_r=laser.sigma_range,
                                                   sigma_phi=laser.sigma_angle), deskew=True,
                    landmarks=landmarks)
@@ -579,3 +582,61 @@ def test_node_equals_offline_on_an_imported_carmen_log(tmp_path):
     # The scans' geometry reached the node: visibility-aware pruning removed landmarks
     # (measured 2; none without the scans).
     assert ref.stats['pruned'] > 0 and ref.lines.shape[0] > 10
+
+
+REAL_LOGS = {'jacobians': 'observability_gain', 'line_residual_factor': 2.0,
+             'free_space_check': 0.95, 'recovery_probability': 0.99, 'spurious_limit': 0.05}
+
+
+def real_logs_profile():
+    """Return the ``ros__parameters`` of config/ekf_slam_real_logs.yaml."""
+    return yaml.safe_load((OFFICE.parents[1] / 'config' / 'ekf_slam_real_logs.yaml')
+                          .read_text())['ekf_slam']['ros__parameters']
+
+
+def test_real_logs_profile_names_the_measured_options():
+    """The profile sets landmarks both and the README's options, nothing else."""
+    profile = real_logs_profile()
+    assert profile == dict(REAL_LOGS, landmarks='both')
+    default = parameter_file(OFFICE.parents[1], 'ekf_slam')
+    assert set(profile) < set(default)
+    assert all(default[k] != v for k, v in profile.items())
+
+
+def test_the_node_takes_the_real_logs_profile():
+    """Its values reach SlamParams; 0 is off (None) for the optional checks."""
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in real_logs_profile().items()])
+        params, landmarks = node.params, node.landmarks
+        node.destroy_node()
+        node = EkfSlamNode(context=ros.context)
+        default = node.params
+        node.destroy_node()
+    assert landmarks == 'both'
+    assert params == SlamParams(odometry=params.odometry, **REAL_LOGS)
+    assert default == SlamParams(odometry=default.odometry)
+    assert (default.free_space_check, default.recovery_probability,
+            default.spurious_limit, default.jacobians) == (None, None, None, 'standard')
+
+
+@pytest.mark.parametrize('name, value', [('jacobians', 'exact'), ('free_space_check', 1.5),
+                                         ('spurious_limit', -0.1),
+                                         ('recovery_probability', 0.5)])
+def test_bad_real_logs_option_is_a_parameter_error(name, value):
+    with RosHarness() as ros:
+        with pytest.raises(ParameterError, match=name):
+            EkfSlamNode(context=ros.context, parameter_overrides=[Parameter(name, value=value)])
+
+
+@pytest.mark.dds
+def test_node_equals_offline_with_the_real_logs_profile(tmp_path):
+    """The profile's checks run in the node as offline (imported aces, 100 scans)."""
+    from landmark_nav.evaluation.slam import DRIFT_KEY
+    from landmark_nav.importers.writer import import_log
+    bag = tmp_path / 'aces'
+    import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
+    model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
+    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model, REAL_LOGS)
+    assert_node_equals_offline(node, ref)
+    assert ref.stats['spurious'] > 0  # the check acted (measured 8 pairs dropped)

@@ -12,7 +12,9 @@ import math
 from landmark_nav.geometry import inverse_transform_points
 from landmark_nav.slam import EkfSlam, SlamParams
 from landmark_nav.slam.consistency import chi2_gate
-from landmark_nav.slam.ekf_slam import LINE, observation_model, predicted_observation_covariance
+from landmark_nav.slam.ekf_slam import (constrain_jacobians, LINE, observation_model,
+                                        predicted_observation_covariance,
+                                        unobservable_directions)
 from landmark_nav.slam.line_landmarks import LineObservations
 from landmark_nav.slam.visibility import ScanGeometry, swept_region
 import numpy as np
@@ -49,21 +51,54 @@ def wall_observation(pose):
                             ends[None])
 
 
-def uncertain_filter(heading_std_deg, position_std=0.3, **kw):
-    """Map the corner and the wall from the origin, then make the pose uncertain."""
-    slam = EkfSlam(SlamParams(confirm_hits=1, confirm_window=1, prune_misses=0, **kw))
+MOVED = np.array([0.3, 0.1, 0.05])  # odometry of the first step of move=True
+TRUE_MOVED = MOVED + np.array([0.03, -0.02, 0.02])  # where the robot is: the update moves x
+
+
+def uncertain_filter(heading_std_deg, position_std=0.3, move=False, **kw):
+    """Map the corner and the wall from the origin, then make the pose uncertain.
+
+    With ``move`` the robot first drives (odometry ``MOVED``, truly to ``TRUE_MOVED``) and
+    re-observes both, so the update moves the state away from the first estimates; then
+    the pose is made uncertain there.
+    """
+    slam = EkfSlam(SlamParams(confirm_hits=1, confirm_window=1, prune_misses=0,
+                              position_floor=0.0, **kw))  # R as given, for the hand figures
     slam.update(observe(np.zeros(3), CORNER_XY), R1[None], lines=wall_observation(np.zeros(3)))
     assert slam.num_landmarks == 2
+    if move:
+        slam.predict(MOVED, np.diag([0.02 ** 2, 0.02 ** 2, math.radians(1.0) ** 2]))
+        res = slam.update(observe(TRUE_MOVED, CORNER_XY), R1[None],
+                          lines=wall_observation(TRUE_MOVED))
+        assert res.status.tolist() == ['matched'] * 2
     slam.predict(np.zeros(3), np.diag([position_std ** 2, position_std ** 2,
                                        math.radians(heading_std_deg) ** 2]))
     return slam
 
 
-def expected_others(slam, geometry, n_corners=1, n_lines=1):
-    """``lambda A`` of the corner pair and of the wall pair, by hand."""
+def gate_covariance(slam):
+    """Predicted observations and innovation covariances of both pairs, as the gate has them.
+
+    The Jacobians of the filter's ``jacobians`` option: the constrained ones for
+    ``observability_gain``, the first estimates' for ``first_estimates``.
+    """
     index = np.arange(2)
-    zhat, hr, hf = observation_model(slam.state, index, slam.landmark_kinds)
-    s = predicted_observation_covariance(slam.covariance, index, hr, hf) + np.stack([R1, R_LINE])
+    kinds = slam.landmark_kinds
+    zhat, hr, hf = observation_model(slam.state, index, kinds)
+    mode = slam.params.jacobians
+    if mode == 'observability_gain':
+        null = unobservable_directions(slam._prior_xy, slam._first, slam._kind)
+        hr, hf = constrain_jacobians(hr, hf, null)
+    elif mode == 'first_estimates':
+        at = np.concatenate([slam._prior_xy, slam.state[2:3], slam._first.reshape(-1)])
+        hr, hf = observation_model(at, index, kinds)[1:]
+    return zhat, predicted_observation_covariance(slam.covariance, index, hr, hf) + np.stack(
+        [R1, R_LINE])
+
+
+def expected_others(slam, geometry, n_corners=1, n_lines=1):
+    """Return ``lambda A`` of the corner pair and of the wall pair, by hand."""
+    zhat, s = gate_covariance(slam)
     ellipse = math.pi * chi2_gate(2, 0.95) * np.sqrt(np.linalg.det(s))
     area, perimeter = swept_region(geometry)
     return (ellipse[0] * zhat[0, 0] * n_corners / area, ellipse[1] * n_lines / perimeter)
@@ -90,16 +125,46 @@ def test_swept_region_counts_valid_returns_only():
     assert swept_region(g) == (0.0, 0.0)
 
 
+def test_swept_region_perimeter_is_the_convex_hull():
+    """A saw-tooth scan (4 m / 2 m) has the hull of its 4 m returns and the laser."""
+    n, dphi = 181, math.pi / 180
+    ranges = np.where(np.arange(n) % 2 == 0, 4.0, 2.0)
+    g = ScanGeometry(ranges, -math.pi / 2, dphi, 0.1, 30.0, np.zeros(3), 0.01)
+    outer = (n + 1) // 2  # the even beams, both ends among them
+    hull = 2 * 4.0 + (outer - 1) * 2 * 4.0 * math.sin(dphi)
+    assert swept_region(g)[1] == pytest.approx(hull, rel=1e-9)
+    # One return at the far end of its range adds its spike to the hull only.
+    ranges[90] = 20.0
+    spike = ScanGeometry(ranges, -math.pi / 2, dphi, 0.1, 30.0, np.zeros(3), 0.01)
+    assert hull < swept_region(spike)[1] < hull + 2 * 16.0
+
+
+def test_swept_region_range_limits_are_open():
+    """Returns at exactly range_min or range_max are no returns (REP 117 drivers)."""
+    ranges = np.full(181, 4.0)
+    ranges[:10] = 30.0  # range_max
+    ranges[10:20] = 0.1  # range_min
+    g = ScanGeometry(ranges, -math.pi / 2, math.pi / 180, 0.1, 30.0, np.zeros(3), 0.01)
+    assert swept_region(g)[0] == pytest.approx(0.5 * 16.0 * math.pi / 180 * 161, rel=1e-12)
+
+
+@pytest.mark.parametrize('jacobians', ['standard', 'observability_gain', 'first_estimates'])
 @pytest.mark.parametrize('which', [0, 1])
-def test_pair_kept_below_the_limit_and_dropped_above(which):
-    """The corner (which 0) or the wall (1): kept at 1.01 lambda A, dropped at 0.99."""
+def test_pair_kept_below_the_limit_and_dropped_above(which, jacobians):
+    """The corner (which 0) or the wall (1): kept at (1 + 1e-7) lambda A, dropped below.
+
+    After a first step, so that the first estimates differ from the state; ``A`` from the
+    innovation covariance of the option's Jacobians, the one its gate uses (the options
+    differ by about 1e-5 of ``A`` here: the 1e-7 margin tells them apart).
+    """
     geometry = scan()
-    both = expected_others(uncertain_filter(10.0), geometry)
+    both = expected_others(uncertain_filter(10.0, move=True, jacobians=jacobians), geometry)
     mu = both[which]
     assert 1e-3 < mu < 10.0
-    z, lines = observe(np.zeros(3), CORNER_XY), wall_observation(np.zeros(3))
-    for factor, kept in ((1.01, True), (0.99, False)):
-        slam = uncertain_filter(10.0, spurious_limit=factor * mu)
+    z, lines = observe(TRUE_MOVED, CORNER_XY), wall_observation(TRUE_MOVED)
+    for factor, kept in ((1.0 + 1e-7, True), (1.0 - 1e-7, False)):
+        slam = uncertain_filter(10.0, move=True, jacobians=jacobians,
+                                spurious_limit=factor * mu)
         res = slam.update(z, R1[None], lines=lines, scan=geometry)
         assert (res.status[which] == 'matched') == kept
         if not kept:  # inside the gate: ambiguous, never a new landmark
@@ -109,6 +174,28 @@ def test_pair_kept_below_the_limit_and_dropped_above(which):
         other_kept = both[1 - which] <= factor * mu
         assert (res.status[1 - which] == 'matched') == other_kept
         assert slam.stats['spurious'] == (not kept) + (not other_kept)
+
+
+def test_the_options_jacobians_change_the_gate_area():
+    """The three linearisations give different A here: the check follows the option's."""
+    geometry = scan()
+    mus = [expected_others(uncertain_filter(10.0, move=True, jacobians=j), geometry)[0]
+           for j in ('standard', 'observability_gain', 'first_estimates')]
+    assert min(abs(a - b) for a, b in ((mus[0], mus[1]), (mus[0], mus[2]),
+                                       (mus[1], mus[2]))) > 1e-6 * mus[0]
+
+
+def test_invalid_and_grazing_observations_before_the_pair():
+    """Observations dropped before the association do not shift the pair's index."""
+    geometry = scan()
+    mu = expected_others(uncertain_filter(10.0), geometry)[0]  # the invalid one not counted
+    z = np.vstack([[np.nan, 0.1], observe(np.zeros(3), CORNER_XY)])
+    r = np.repeat(R1[None], 2, axis=0)
+    for factor, kept in ((1.01, True), (0.99, False)):
+        slam = uncertain_filter(10.0, spurious_limit=factor * mu)
+        res = slam.update(z, r, scan=geometry)
+        assert res.reason[0] == 'invalid'
+        assert (res.status[1] == 'matched') == kept
 
 
 def test_denser_scenes_shrink_the_gate_allowed():

@@ -96,7 +96,7 @@ from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
                                        SCAN_DEPTH, SCAN_QOS)
 from landmark_nav.nodes.line_extractor import LINE_PARAMETERS
 from landmark_nav.nodes.stamp_join import StampJoin
-from landmark_nav.slam.ekf_slam import CORNER, LINE, OdometryNoise, SlamParams
+from landmark_nav.slam.ekf_slam import CORNER, JACOBIANS, LINE, OdometryNoise, SlamParams
 from landmark_nav.slam.features import extract_scan_features, LANDMARK_TYPES
 from landmark_nav.slam.frontend import (Corners, FrontendParams, line_beam_times,
                                         odometry_noise_model, ODOMETRY_NOISE_MODELS,
@@ -144,6 +144,18 @@ SLAM_PARAMETERS = {
                               None, None),
     'relinearize_ratio': ('re-linearise when a landmark moves by more than this fraction of its '
                           'range', None, None),
+    'jacobians': ("linearisation: standard (the chapter's), observability_gain (consistent "
+                  'heading), first_estimates, observability or invariant', None,
+                  list(JACOBIANS)),
+    'line_residual_factor': ('k: each line end gets an offset std of k times its fit residual '
+                             'std', None, None),
+    'free_space_check': ('confidence of the free-space check of each hypothesis (needs '
+                         'visibility); 0 = off', None, None, 0.0),
+    'recovery_probability': ('gate confidence of the second association of a scan that paired '
+                             'nothing; 0 = off', None, None, 0.0),
+    'recovery_pairs': ('fewest pairs of that recovery', None, None),
+    'spurious_limit': ('largest expected number of other features in a pair gate (needs '
+                       'visibility); 0 = off', None, None, 0.0),
 }
 ODOMETRY_PARAMETERS = {
     'sigma_xy_per_sqrt_m': 'odometry translation std per sqrt(m) [m/sqrt(m)]',

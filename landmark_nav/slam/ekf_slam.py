@@ -298,10 +298,13 @@ probabilistic data association), is at most the limit (:meth:`EkfSlam._spurious_
   covariance the gate used; a corner's ``(r, theta)`` maps to the plane with
   ``dA = r dr dtheta``, so its area is that times the predicted range; a line's stays in
   ``(rho, alpha)`` [m rad].
-* ``lambda``: the scan's own density of features, with no constant of its own: its corner
-  observations over the area its valid beams sweep, its line observations over the
-  perimeter of that region (by Cauchy-Crofton the measure ``drho dalpha`` of the lines
-  meeting a convex region is its perimeter) (:func:`.visibility.swept_region`).
+* ``lambda``: the scan's own density of features, with no constant of its own: its valid
+  corner observations over the area its valid beams sweep, its line observations over the
+  perimeter of that region's convex hull (by Cauchy-Crofton the measure ``drho dalpha`` of
+  the lines meeting a region is the perimeter of its convex hull)
+  (:func:`.visibility.swept_region`). The observed feature counts too (the
+  non-parametric PDA's estimate of the clutter density from the validated measurements).
+  A recovered hypothesis (above) is judged with the wider gate that admitted it.
 
 ``0.05`` (the gate's own miss rate, ``1 - gate_probability``) makes a spurious pair as
 likely as a missed right one. A dropped pair lies inside the gate, so its observation is
@@ -617,11 +620,13 @@ class SlamParams:
         recovery_pairs: Fewest pairs of such a hypothesis (default 3: six measurements for
             the three pose dof it corrects, three to test it).
         spurious_limit: None (default): off. Otherwise the largest expected number of
-            corners of the scene other than the one observed that may lie inside a corner
-            pair's gate: ``lambda A`` with ``A`` the pair's 95 % gate region put in the
-            plane and ``lambda`` the scan's corner density (its corner observations over
-            the area its beams sweep); a pair above it is dropped (module docstring,
-            "Spurious pairs"). Needs the scan geometry. Corners only.
+            features of the scene of a pair's kind that may lie inside its gate (the
+            scan's density counts the observed one too, as in the non-parametric PDA):
+            ``lambda A`` with ``A`` the gate region (of the confidence the hypothesis was
+            made with) put in the plane (a corner) or in ``(rho, alpha)`` (a line) and ``lambda`` the scan's
+            density of that kind (its valid corner observations over the area its beams
+            sweep, its line observations over that region's convex perimeter); a pair above
+            it is dropped (module docstring, "Spurious pairs"). Needs the scan geometry.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
@@ -2052,11 +2057,13 @@ class EkfSlam:
         if prm.reject_ambiguous:  # at the gate the hypothesis was made with
             hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(
                 2, prm.recovery_probability if recovered else prm.gate_probability))
+        if prm.spurious_limit is not None and scan is not None and np.any(hyp >= 0):
+            counts = (np.count_nonzero(valid & ~is_line), np.count_nonzero(valid & is_line))
+            hyp = self._spurious_check(hyp, ru, scan, counts, gain_null, jac_x, chi2_gate(
+                2, prm.recovery_probability if recovered else prm.gate_probability))
         veto = np.zeros(0, dtype=np.int64)
         if prm.free_space_check is not None and scan is not None and np.any(hyp >= 0):
             hyp, veto = self._free_space_veto(hyp, zu, ru, d2, scan, mixed, null, jac_x)
-        if prm.spurious_limit is not None and scan is not None and np.any(hyp >= 0):
-            hyp = self._spurious_check(hyp, ku, ru, scan, null, jac_x)
         if recovered:  # still enough pairs after the checks?
             if np.count_nonzero(hyp >= 0) < prm.recovery_pairs:
                 hyp = np.full_like(hyp, -1)
@@ -2174,10 +2181,19 @@ class EkfSlam:
             return hyp, d2, False
         return wide, d2_wide, True
 
-    def _spurious_check(self, hyp: np.ndarray, ku: np.ndarray, ru: np.ndarray,
-                        scan: ScanGeometry, null: Optional[np.ndarray],
-                        jac_x: Optional[np.ndarray]) -> np.ndarray:
+    def _spurious_check(self, hyp: np.ndarray, ru: np.ndarray, scan: ScanGeometry,
+                        counts: Tuple[int, int], null: Optional[np.ndarray],
+                        jac_x: Optional[np.ndarray], gate: float) -> np.ndarray:
         """Drop pairs whose gate may hold another feature (module docstring, "Spurious pairs").
+
+        Args:
+            hyp: (M,) hypothesis over the used observations (landmark index or -1).
+            ru: (M, 2, 2) their covariances as the gate used them.
+            scan: The scan's geometry.
+            counts: The scan's valid corner and line observations.
+            null: The constrained Jacobians' directions the gate used, or None.
+            jac_x: The state the gate's Jacobians were taken at, or None.
+            gate: The chi-square bound the hypothesis was made with.
 
         Returns:
             The hypothesis with those pairs set to -1.
@@ -2197,12 +2213,10 @@ class EkfSlam:
         det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]
         # The gate d2 <= g is an ellipse of area pi g sqrt(det S) in the observation's
         # coordinates; (r, theta) to the plane: dA = r dr dtheta; lines stay in (rho, alpha).
-        area_gate = (math.pi * chi2_gate(2, self.params.gate_probability)
-                     * np.sqrt(np.maximum(det, 0.0)))
+        area_gate = math.pi * gate * np.sqrt(np.maximum(det, 0.0))
         line = kind == LINE
         area_gate[~line] *= zhat[~line, 0]
-        density = np.where(line, np.count_nonzero(ku == LINE) / perimeter,
-                           np.count_nonzero(ku == CORNER) / area)
+        density = np.where(line, counts[1] / perimeter, counts[0] / area)
         crowded = ~(density * area_gate <= self.params.spurious_limit)
         if np.any(crowded):
             hyp = hyp.copy()

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Tuple
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 _PI = np.pi
 _TWO_PI = 2.0 * np.pi
@@ -72,26 +73,35 @@ class ScanGeometry:
 
 
 def swept_region(scan: ScanGeometry) -> Tuple[float, float]:
-    """Area [m^2] and perimeter [m] of the region the scan's beams sweep up to their returns.
+    """Area [m^2] of the region the scan's beams sweep and the perimeter [m] of its hull.
 
-    The region is the fan of the valid returns (finite, within ``(range_min, range_max)``;
-    a beam with no return shows no area whose features could have been detected), closed
-    at the laser: area ``sum r^2 dphi / 2``, perimeter the polygon through the laser and the
-    return points in beam order. By Cauchy-Crofton the measure ``drho dalpha`` of the lines
-    meeting a convex region is its perimeter, so lines per perimeter is a density of lines
-    in ``(rho, alpha)`` as corners per area is one in the plane.
+    The region is the fan of the valid returns (finite, inside ``(range_min, range_max)``:
+    a beam with no return shows no area whose features could have been detected): area
+    ``sum r^2 dphi / 2``. The perimeter is that of the convex hull of the laser and the
+    return points: by Cauchy-Crofton the measure ``drho dalpha`` of the lines meeting a
+    region is the perimeter of its convex hull, so lines per hull perimeter is a density of
+    lines in ``(rho, alpha)`` as corners per area is one in the plane.
     """
     r = np.asarray(scan.ranges, dtype=float)
     with np.errstate(invalid='ignore'):
-        valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+        valid = np.isfinite(r) & (r > scan.range_min) & (r < scan.range_max)
     if not np.any(valid):
         return 0.0, 0.0
     a = scan.angles[valid]
     r = r[valid]
     area = 0.5 * abs(scan.angle_increment) * float(np.dot(r, r))
-    x, y = r * np.cos(a), r * np.sin(a)
-    perimeter = float(r[0] + r[-1] + np.sum(np.hypot(np.diff(x), np.diff(y))))
-    return area, perimeter
+    points = np.vstack([np.zeros((1, 2)), np.column_stack([r * np.cos(a), r * np.sin(a)])])
+    return area, _hull_perimeter(points)
+
+
+def _hull_perimeter(points: np.ndarray) -> float:
+    """Perimeter of the convex hull of (N, 2) points (qhull; a segment's twice its length)."""
+    try:
+        return float(ConvexHull(points).area)  # in 2-D qhull's "area" is the perimeter
+    except QhullError:  # fewer than three points or all on one line
+        centred = points - points.mean(axis=0)
+        axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+        return 2.0 * float(np.ptp(centred @ axis))
 
 
 def _laser_pose(pose: np.ndarray, mount: np.ndarray) -> np.ndarray:
