@@ -623,10 +623,11 @@ class SlamParams:
             features of the scene of a pair's kind that may lie inside its gate (the
             scan's density counts the observed one too, as in the non-parametric PDA):
             ``lambda A`` with ``A`` the gate region (of the confidence the hypothesis was
-            made with) put in the plane (a corner) or in ``(rho, alpha)`` (a line) and ``lambda`` the scan's
-            density of that kind (its valid corner observations over the area its beams
-            sweep, its line observations over that region's convex perimeter); a pair above
-            it is dropped (module docstring, "Spurious pairs"). Needs the scan geometry.
+            made with) put in the plane (a corner) or in ``(rho, alpha)`` (a line) and
+            ``lambda`` the scan's density of that kind (its valid corner observations over
+            the area its beams sweep, its line observations over the perimeter of that
+            region's convex hull); a pair above it is dropped (module docstring, "Spurious
+            pairs"). Needs the scan geometry.
     """
 
     odometry: OdometryNoise = field(default_factory=OdometryNoise)
