@@ -290,8 +290,9 @@ acapulco, corners 1.3-4.8 m off turned it by 10-16 deg, a wall 17 m off by 35 de
 per-step trace with each pair labelled through the reference poses, README). With
 ``spurious_limit`` (off by default) each pair of the hypothesis is kept only when the
 expected number of features of its kind inside its gate (the density is estimated with
-the observed one counted), ``lambda A`` (the clutter density times the validation volume of Bar-Shalom's
-probabilistic data association), is at most the limit (:meth:`EkfSlam._spurious_check`):
+the observed one counted), ``lambda A`` (the clutter density times the validation volume
+of Bar-Shalom's probabilistic data association), is at most the limit
+(:meth:`EkfSlam._spurious_check`):
 
 * ``A``: the gate ``d2 <= chi2_2(gate_probability)`` is an ellipse of area
   ``pi chi2 sqrt(det S)`` in the observation's coordinates, with ``S`` the innovation
