@@ -2056,13 +2056,13 @@ class EkfSlam:
         if prm.recovery_probability is not None and not np.any(hyp >= 0):
             hyp, d2, recovered = self._recover(hyp, d2, zu, ru, allowed,
                                                ku if mixed else None, gain_null, jac_x)
-        if prm.reject_ambiguous:  # at the gate the hypothesis was made with
-            hyp = reject_ambiguous_pairs(hyp, d2, chi2_gate(
-                2, prm.recovery_probability if recovered else prm.gate_probability))
+        # The gate the hypothesis was made with (the recovery's when it made it).
+        pair_gate = chi2_gate(2, prm.recovery_probability if recovered else prm.gate_probability)
+        if prm.reject_ambiguous:
+            hyp = reject_ambiguous_pairs(hyp, d2, pair_gate)
         if prm.spurious_limit is not None and scan is not None and np.any(hyp >= 0):
             counts = (np.count_nonzero(valid & ~is_line), np.count_nonzero(valid & is_line))
-            hyp = self._spurious_check(hyp, ru, scan, counts, gain_null, jac_x, chi2_gate(
-                2, prm.recovery_probability if recovered else prm.gate_probability))
+            hyp = self._spurious_check(hyp, ru, scan, counts, gain_null, jac_x, pair_gate)
         veto = np.zeros(0, dtype=np.int64)
         if prm.free_space_check is not None and scan is not None and np.any(hyp >= 0):
             hyp, veto = self._free_space_veto(hyp, zu, ru, d2, scan, mixed, null, jac_x)
