@@ -456,7 +456,6 @@ from .line_landmarks import (ends_to_map, extents_overlap, line_end_covariance,
                              line_initialization,
                              line_observation_model, LineObservations, merge_extent,
                              project_extent)
-from .relocation import relocate
 from .slam_map import SlamMap
 from .visibility import (corners_in_view, landmarks_missed, lines_unoccluded, ScanGeometry,
                          swept_region)
@@ -676,7 +675,6 @@ class SlamParams:
     recovery_probability: Optional[float] = None
     recovery_pairs: int = 3
     spurious_limit: Optional[float] = None
-    relocation: bool = False
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -1787,7 +1785,7 @@ class EkfSlam:
                                       'matched': 0, 'confirmed': 0, 'new_candidates': 0,
                                       'dropped_candidates': 0, 'rejected': 0, 'pruned': 0,
                                       'evicted': 0, 'retired': 0, 'free_space': 0,
-                                      'recovered': 0, 'spurious': 0, 'relocated': 0}
+                                      'recovered': 0, 'spurious': 0}
         if self._loaded is not None and self.params.mode == 'localization':
             self._install_map(self._loaded[0], self._initial_pose, self._loaded[1])
 
@@ -2064,12 +2062,7 @@ class EkfSlam:
             hyp = reject_ambiguous_pairs(hyp, d2, pair_gate)
         if prm.spurious_limit is not None and scan is not None and np.any(hyp >= 0):
             counts = (np.count_nonzero(valid & ~is_line), np.count_nonzero(valid & is_line))
-            paired = np.count_nonzero(hyp >= 0)
             hyp = self._spurious_check(hyp, ru, scan, counts, gain_null, jac_x, pair_gate)
-            if prm.relocation and np.count_nonzero(hyp >= 0) < paired:
-                hyp = self._relocate(hyp, zu, ru, ends_all[use], ku, desc, scan, counts,
-                                     prm.recovery_probability if recovered
-                                     else prm.gate_probability, gain_null, jac_x)
         veto = np.zeros(0, dtype=np.int64)
         if prm.free_space_check is not None and scan is not None and np.any(hyp >= 0):
             hyp, veto = self._free_space_veto(hyp, zu, ru, d2, scan, mixed, null, jac_x)
@@ -2189,73 +2182,6 @@ class EkfSlam:
         if np.count_nonzero(wide >= 0) < prm.recovery_pairs:
             return hyp, d2, False
         return wide, d2_wide, True
-
-    def _relocate(self, hyp: np.ndarray, zu: np.ndarray, ru: np.ndarray,
-                  ends: np.ndarray, kind: np.ndarray, desc: np.ndarray, scan: ScanGeometry,
-                  counts: Tuple[int, int], probability: float,
-                  null: Optional[np.ndarray], jac_x: Optional[np.ndarray]) -> np.ndarray:
-        """Replace the hypothesis by the scan's unrivalled joint pairing (module docstring).
-
-        See "Relocation": the candidates are the pairs inside the gate the hypothesis was
-        made with (``d2``); the winner of :func:`.relocation.relocate` is used when it has
-        at least ``recovery_pairs`` pairs and no contradicting pairing comes within
-        ``relocation_margin`` pairs of it; else ``hyp`` is returned unchanged.
-        """
-        prm = self.params
-        # Candidates: the gate and the openings only; the bisectors and the lines' extents
-        # depend on the heading and position and are tested at each seed's pose.
-        with np.errstate(invalid='ignore'):
-            opening = ~(np.abs(desc[:, 1, None] - self._open[None, :]) > prm.opening_gate)
-        _, d2, _ = do_data_association(
-            self._x, self._p, zu, ru, 'icnn', probability, 0, opening, kind, self._kind,
-            nullspace=null, jacobian_state=jac_x, cartesian_ratio=prm.cartesian_gate)
-        cand_o, cand_l = np.nonzero(d2 < chi2_gate(2, probability))
-        area, perimeter = swept_region(scan)
-        if cand_o.size < 2 or not (area > 0.0 and perimeter > 0.0):
-            return hyp
-        density = np.where(kind == LINE, counts[1] / perimeter, counts[0] / area)
-        cols = _landmark_cols(np.arange(self.num_landmarks))
-        pairing, support, rival, chance, chance_rival = relocate(
-            self._x[:3], self._p[:3, :3], zu, ru, ends, cand_o, cand_l,
-            self._x[3:].reshape(-1, 2), self._p[cols[:, :, None], cols[:, None, :]],
-            self._kind == LINE, self._ends, chi2_gate(2, probability),
-            chi2_gate(4, probability), density, desc[:, 0], self._bis, prm.bisector_gate)
-        limit = prm.spurious_limit
-        if support < max(prm.recovery_pairs, 1) or not (chance <= limit < chance_rival):
-            return hyp
-        # The pairing must fix the pose on its own at least as well as the prior does, in
-        # every direction: parallel walls alone leave the position along them (and so
-        # which corridor) open, and their count is no evidence.
-        obs = np.flatnonzero(pairing >= 0)
-        j = pairing[obs]
-        zhat, hr, hf = observation_model(self._x, j, self._kind[j])
-        s_pair = ru[obs] + hf @ self._p[cols[j][:, :, None], cols[j][:, None, :]] @ (
-            np.transpose(hf, (0, 2, 1)))
-        info = np.einsum('kai,kab,kbj->ij', hr, np.linalg.inv(s_pair), hr)
-        low = np.linalg.cholesky(self._p[:3, :3])
-        if np.linalg.eigvalsh(low.T @ info @ low)[0] < 1.0:
-            return hyp
-        # Negative information at the relocated pose: the scan must not see through the
-        # map there (corners and lines, :func:`free_space_contradictions`).
-        x = self._x.copy()
-        n = self.num_landmarks
-        try:
-            p, _ = ekf_update(x, self._p.copy(), zu[obs], ru[obs], j,
-                              prm.max_update_iterations, prm.relinearize_ratio,
-                              self._kind[j])
-        except np.linalg.LinAlgError:
-            return hyp
-        through, view = free_space_contradictions(
-            x, p, self._kind[:n], self._ends[:n], self._bis[:n], self._open[:n], scan,
-            prm.gate_probability, prm.min_view_margin, prm.line_min_beams)
-        matched = np.zeros(n, dtype=bool)
-        matched[j] = True
-        if free_space_significant(int((through & ~matched).sum()),
-                                  int((view & ~matched).sum()), prm.gate_probability,
-                                  prm.free_space_check or prm.gate_probability):
-            return hyp
-        self.stats['relocated'] += 1
-        return pairing
 
     def _spurious_check(self, hyp: np.ndarray, ru: np.ndarray, scan: ScanGeometry,
                         counts: Tuple[int, int], null: Optional[np.ndarray],
