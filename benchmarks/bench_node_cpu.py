@@ -33,6 +33,9 @@ does); printed: ``ekf_slam``'s CPU per step over the paced core's (the issue's t
 most 2; what the node spends beyond the same work at the same rate) and over the
 back-to-back core's. ``--no-visibility`` runs both without the scan geometry (the
 node does not subscribe ``scan``; what the node before the visibility-aware pruning did).
+``--params-file YAML`` gives ``ekf_slam`` a parameter file on top of its defaults
+(e.g. ``config/ekf_slam_real_logs.yaml``, the ``real_logs`` profile) and the core the same
+``SlamParams`` (0 = off as in the node; its ``landmarks`` replaces ``--landmarks``).
 ``--map-landmarks N`` (the issue's figure is at 200): node and core start on a saved map of
 N landmarks placed 1 km and more away (never in view: no association, no pruning; the
 state and covariance the filter carries are those of an N-landmark map) and map the bag's
@@ -96,7 +99,14 @@ def main() -> int:
     parser.add_argument('--map-landmarks', type=int, default=0, metavar='N')
     parser.add_argument('--profile', metavar='FILE', default=None,
                         help='run ekf_slam under cProfile, statistics written to FILE')
+    parser.add_argument('--params-file', metavar='YAML', default=None,
+                        help="ekf_slam's parameters on top of the defaults (e.g. "
+                             'config/ekf_slam_real_logs.yaml), node and core alike')
     args = parser.parse_args()
+    slam_options = {}
+    if args.params_file:
+        slam_options = params_file_options(args.params_file)
+        args.landmarks = slam_options.pop('landmarks', args.landmarks)
     env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                PYTHONPATH=args.repo + os.pathsep + os.environ.get('PYTHONPATH', ''))
@@ -116,7 +126,9 @@ def main() -> int:
         '-p', f'landmarks:={args.landmarks}', '-p', f'visibility:={str(args.visibility).lower()}',
         '-p', f'laser_sigma_range:={float(laser.sigma_range)!r}',
         '-p', f'lines.sigma_r:={float(laser.sigma_range)!r}',
-        '-p', f'lines.sigma_phi:={float(laser.sigma_angle)!r}'],
+        '-p', f'lines.sigma_phi:={float(laser.sigma_angle)!r}']
+        + (['--params-file', str(Path(args.params_file).resolve())] if args.params_file
+           else []),
         'corner_extractor': ['--ros-args', '-p', f'sigma_r:={float(laser.sigma_range)!r}',
                              '-p', f'sigma_phi:={float(laser.sigma_angle)!r}']}
     slam_map = None
@@ -202,9 +214,9 @@ def main() -> int:
               f'{rss0[n]:.1f} -> {rss1[n]:.1f} MB; diagnostics: {last.get(n, "none")}')
     if args.soak is None and noise is not None:  # (an older --repo has no front end)
         core_ms, size = core_step_ms(scenario, noise, args.landmarks, args.visibility,
-                                     slam_map)
+                                     slam_map, options=slam_options)
         paced_ms, _ = core_step_ms(scenario, noise, args.landmarks, args.visibility,
-                                   slam_map, rate=args.rate)
+                                   slam_map, rate=args.rate, options=slam_options)
         print(f'map at the end: {size} landmarks')
         values = dict(kv.split('=') for kv in last.get('ekf_slam', '').split())
         steps = int(values.get('processed', scans)) or scans  # (steps: the sets processed)
@@ -243,8 +255,25 @@ def far_map(n: int):
                    max_seen=np.full(n, 5.0), next_id=n)
 
 
+def params_file_options(path: str) -> dict:
+    """Return the ``SlamParams`` fields (and ``landmarks``) set by an ekf_slam YAML file.
+
+    The node's convention is kept: 0 turns off an option whose default is None (off).
+    """
+    import dataclasses
+    import yaml
+    from landmark_nav.slam.ekf_slam import SlamParams
+    values = yaml.safe_load(Path(path).read_text())['ekf_slam']['ros__parameters']
+    fields = {f.name: f.default for f in dataclasses.fields(SlamParams)}
+    out = {k: (None if fields[k] is None and v == 0 else v)
+           for k, v in values.items() if k in fields}
+    if 'landmarks' in values:
+        out['landmarks'] = values['landmarks']
+    return out
+
+
 def core_step_ms(scenario, noise, landmarks: str = 'corners', visibility: bool = True,
-                 slam_map=None, rate: float = None) -> tuple:
+                 slam_map=None, rate: float = None, options: dict = None) -> tuple:
     """CPU time per step of the offline pipeline on the scenario (corners extracted first).
 
     The front end gets the bag's odometry and each scan's corners (and lines, extracted
@@ -271,7 +300,8 @@ def core_step_ms(scenario, noise, landmarks: str = 'corners', visibility: bool =
     from landmark_nav.slam.visibility import ScanGeometry
     from threadpoolctl import threadpool_limits
     import numpy as np
-    params = SlamParams() if noise is None else replace(SlamParams(), odometry=noise)
+    params = SlamParams(**(options or {}))
+    params = params if noise is None else replace(params, odometry=noise)
     laser = scenario.laser
     cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
     lp = LineParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
