@@ -21,6 +21,10 @@ return, as ``feature_metrics_carmen.py --direct``):
   pairs with fewer than 20 matches keep the reference) instead of the reference;
 * ``ICP + midpoint``: both: what is left is the extractor's own.
 
+A ``ceiling`` row per method (:func:`redetection_ceiling`) gives the share an extractor
+would reach with exact poses if each opportunity's partner were found, unbiased, with the
+same covariance as the scan-k line: what the lines' own noise allows at 5 cm / 2 deg.
+
 Each line cell also gives, in brackets, the fraction over the opportunities whose wall
 the next scan saw (:func:`seen_again`, placed by the ICP-refined pose: at least
 ``min_points`` returns of the next scan within 5 cm of the line inside its extent,
@@ -65,6 +69,44 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 MAX_DRHO, MAX_DALPHA = 0.05, math.radians(2.0)
 POINT_BINS = ((0, 15), (16, 25), (26, 40), (41, 100000))  # points of the scan-k line
+
+
+def redetection_ceiling(lines_k, pose_k, scan_n, sigma_r: float, draws: np.ndarray
+                        ) -> np.ndarray:
+    """Chance that each opportunity's line passes the gate if both scans fit it unbiased.
+
+    For the lines of scan k at least 1 m long whose midpoint is in view of scan k+1 (the
+    metric's opportunities, reference poses), ``(rho, alpha)`` and its covariance are moved
+    to scan k+1's laser frame (``rho' = rho + t . n'``: Jacobian ``[[1, lever], [0, 1]]``,
+    :mod:`landmark_nav.slam.line_landmarks`); a partner fitted on the same wall with the
+    same covariance makes the difference ``N(0, 2 C')``, and the returned chance is its
+    probability to fall inside ``|d rho| <= 5 cm``, ``|d alpha| <= 2 deg`` (Monte Carlo
+    over ``draws``, (D, 2) standard normals). Returned (A, 2): with the extractor's own
+    covariance (eq. 7, the stated ``sigma_r``), and with it scaled by the fit's a-posteriori
+    variance factor ``s^2 / sigma_r^2`` when above 1 (``s`` the residual std of the line's
+    points, ``rmse sqrt(n / (n - 2))``). Exact poses, a partner always found and extents
+    ignored: an upper bound of the re-detected share for lines of these extents.
+    """
+    out = []
+    for ln in lines_k:
+        if np.hypot(*(ln.end - ln.start)) < 1.0:
+            continue
+        mid = transform_points(pose_k, (0.5 * (ln.start + ln.end))[None, :])
+        if not in_view(scan_n, mid, 0.1)[0]:
+            continue
+        t = relative(scan_n.pose, pose_k)  # laser k in laser k+1
+        a2 = ln.alpha + t[2]
+        jac = np.array([[1.0, -t[0] * math.sin(a2) + t[1] * math.cos(a2)], [0.0, 1.0]])
+        cov = jac @ np.asarray(ln.covariance, dtype=float) @ jac.T
+        n = ln.num_points
+        factor = max(1.0, ln.rmse ** 2 * n / max(n - 2, 1) / sigma_r ** 2)
+        row = []
+        for c in (2.0 * cov, 2.0 * factor * cov):
+            w, v = np.linalg.eigh(0.5 * (c + c.T))
+            d = draws @ (v * np.sqrt(np.maximum(w, 0.0))).T
+            row.append(np.mean((np.abs(d[:, 0]) <= MAX_DRHO) & (np.abs(d[:, 1]) <= MAX_DALPHA)))
+        out.append(row)
+    return np.array(out).reshape(-1, 2)
 
 
 def icp_correction(scan_k, scan_n) -> np.ndarray:
@@ -258,6 +300,13 @@ def main() -> None:
                             f'{v[6] / max(v[5], 1):.2f} ({v[5]})')
             print(f'| {name} | {method} ICP, by points of the scan-k line | '
                   + '; '.join(bins) + ' | | | | |', flush=True)
+            draws = np.random.default_rng(0).standard_normal((4000, 2))
+            ceil = np.concatenate([redetection_ceiling(lines[k], scans[k].pose, scans[k + 1],
+                                                       params.sigma_r, draws)
+                                   for k in range(len(scans) - 1)])
+            print(f'| {name} | {method} ceiling: both fits unbiased, exact poses '
+                  f'({len(ceil)}) | eq. 7 covariance {ceil[:, 0].mean():.3f}, a-posteriori '
+                  f'variance {ceil[:, 1].mean():.3f} | | | | |', flush=True)
         params = CornerParams()
         found = [detect_corners(cl, params) for cl in clusters]
         corners = [np.array([c.position for c in cs]).reshape(-1, 2) for cs in found]
