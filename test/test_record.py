@@ -164,7 +164,7 @@ def test_metadata_comparison_allows_ulps_only():
     base = {'world': {'corners': [{'opening': 2.356194490192345, 'id': 10}]}, 'seed': 1}
     assert_same_metadata({'world': {'corners': [{'opening': 2.3561944901923457, 'id': 10}]},
                           'seed': 1}, base)
-    for bad in ({'world': {'corners': [{'opening': 2.3562, 'id': 10}]}, 'seed': 1},
+    for bad in ({'world': {'corners': [{'opening': 2.3561944902159, 'id': 10}]}, 'seed': 1},
                 {'world': {'corners': [{'opening': 2.356194490192345, 'id': 11}]}, 'seed': 1},
                 {'world': {'corners': []}, 'seed': 1},
                 {'world': {'corners': [{'opening': 2.356194490192345, 'id': 10}]},
