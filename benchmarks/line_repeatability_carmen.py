@@ -64,6 +64,7 @@ from landmark_nav.geometry import (compose, inverse_transform_points, relative, 
 from landmark_nav.laser.corners import CornerParams, detect_corners  # noqa: E402
 from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
+from landmark_nav.slam.line_landmarks import transform_lines  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
@@ -76,9 +77,9 @@ def redetection_ceiling(lines_k, pose_k, scan_n, sigma_r: float, draws: np.ndarr
     """Chance that each opportunity's line passes the gate if both scans fit it unbiased.
 
     For the lines of scan k at least 1 m long whose midpoint is in view of scan k+1 (the
-    metric's opportunities, reference poses), ``(rho, alpha)`` and its covariance are moved
-    to scan k+1's laser frame (``rho' = rho + t . n'``: Jacobian ``[[1, lever], [0, 1]]``,
-    :mod:`landmark_nav.slam.line_landmarks`); a partner fitted on the same wall with the
+    metric's opportunities, reference poses), the covariance of ``(rho, alpha)`` is moved to
+    scan k+1's laser frame (:func:`landmark_nav.slam.line_landmarks.transform_lines`: ``rho``
+    picks up the angle's error times the lever arm); a partner fitted on the same wall with the
     same covariance makes the difference ``N(0, 2 C')``, and the returned chance is its
     probability to fall inside ``|d rho| <= 5 cm``, ``|d alpha| <= 2 deg`` (Monte Carlo
     over ``draws``, (D, 2) standard normals). Returned (A, 2): with the extractor's own
@@ -94,10 +95,9 @@ def redetection_ceiling(lines_k, pose_k, scan_n, sigma_r: float, draws: np.ndarr
         mid = transform_points(pose_k, (0.5 * (ln.start + ln.end))[None, :])
         if not in_view(scan_n, mid, 0.1)[0]:
             continue
-        t = relative(scan_n.pose, pose_k)  # laser k in laser k+1
-        a2 = ln.alpha + t[2]
-        jac = np.array([[1.0, -t[0] * math.sin(a2) + t[1] * math.cos(a2)], [0.0, 1.0]])
-        cov = jac @ np.asarray(ln.covariance, dtype=float) @ jac.T
+        cov = transform_lines(relative(scan_n.pose, pose_k), np.array([ln.rho]),
+                              np.array([ln.alpha]),
+                              np.asarray(ln.covariance, dtype=float)[None])[2][0]
         n = ln.num_points
         factor = max(1.0, ln.rmse ** 2 * n / max(n - 2, 1) / sigma_r ** 2)
         row = []
