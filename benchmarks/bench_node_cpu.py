@@ -258,15 +258,17 @@ def far_map(n: int):
 def params_file_options(path: str) -> dict:
     """Return the ``SlamParams`` fields (and ``landmarks``) set by an ekf_slam YAML file.
 
-    The node's convention is kept: 0 turns off an option whose default is None (off).
+    Read as the node reads them (``SLAM_PARAMETERS``, :func:`declare_dataclass`): a
+    parameter's "auto" value (0) stands for the field's None (off).
     """
-    import dataclasses
     import yaml
-    from landmark_nav.slam.ekf_slam import SlamParams
+    from landmark_nav.nodes.ekf_slam import SLAM_PARAMETERS
     values = yaml.safe_load(Path(path).read_text())['ekf_slam']['ros__parameters']
-    fields = {f.name: f.default for f in dataclasses.fields(SlamParams)}
-    out = {k: (None if fields[k] is None and v == 0 else v)
-           for k, v in values.items() if k in fields}
+    out = {}
+    for k, v in values.items():
+        if k in SLAM_PARAMETERS:
+            auto = SLAM_PARAMETERS[k][3:]
+            out[k] = None if auto and v == auto[0] else v
     if 'landmarks' in values:
         out['landmarks'] = values['landmarks']
     return out
