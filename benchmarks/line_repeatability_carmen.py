@@ -58,7 +58,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from feature_metrics_carmen import carmen_logs, LOGS  # noqa: E402
 from landmark_nav.evaluation.features import normal_form  # noqa: E402
 from landmark_nav.evaluation.scan_metrics import (corner_repeatability, in_view,  # noqa: E402
-                                                  Repeatability, segments_of)
+                                                  line_opportunities, Repeatability,
+                                                  segments_of)
 from landmark_nav.geometry import (compose, inverse_transform_points, relative,  # noqa: E402
                                    transform_points, wrap_angle)
 from landmark_nav.laser.corners import CornerParams, detect_corners  # noqa: E402
@@ -89,12 +90,8 @@ def redetection_ceiling(lines_k, pose_k, scan_n, sigma_r: float, draws: np.ndarr
     ignored: an upper bound of the re-detected share for lines of these extents.
     """
     out = []
-    for ln in lines_k:
-        if np.hypot(*(ln.end - ln.start)) < 1.0:
-            continue
-        mid = transform_points(pose_k, (0.5 * (ln.start + ln.end))[None, :])
-        if not in_view(scan_n, mid, 0.1)[0]:
-            continue
+    for i in line_opportunities(segments_of(lines_k), pose_k, scan_n)[0]:
+        ln = lines_k[i]
         cov = transform_lines(relative(scan_n.pose, pose_k), np.array([ln.rho]),
                               np.array([ln.alpha]),
                               np.asarray(ln.covariance, dtype=float)[None])[2][0]

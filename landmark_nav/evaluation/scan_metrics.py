@@ -327,6 +327,26 @@ class Repeatability:
         return (self.redetected + self.unobserved_redetected) / n if n else float('nan')
 
 
+def line_opportunities(segments_k: np.ndarray, pose_k: np.ndarray, view_next: MetricScan,
+                       min_length: float = 1.0, margin: float = 0.1
+                       ) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the scan-k segments that are re-detection opportunities in scan k+1.
+
+    A segment (laser frame, laser pose ``pose_k`` in the map) at least ``min_length`` long
+    whose midpoint is in view of scan k+1 (:func:`in_view`).
+
+    Returns:
+        ``(index (A,) into segments_k, their endpoints in the map (A, 2, 2))``.
+    """
+    seg_k = np.asarray(segments_k, dtype=float).reshape(-1, 2, 2)
+    index = np.flatnonzero(np.hypot(*(seg_k[:, 1] - seg_k[:, 0]).T) >= min_length)
+    if not index.size:
+        return index, np.zeros((0, 2, 2))
+    world = transform_points(pose_k, seg_k[index].reshape(-1, 2)).reshape(-1, 2, 2)
+    look = in_view(view_next, world.mean(axis=1), margin)
+    return index[look], world[look]
+
+
 def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.ndarray,
                        segments_next: np.ndarray, view_next: MetricScan,
                        min_length: float = 1.0, max_drho: float = 0.05,
@@ -341,18 +361,11 @@ def line_repeatability(score: Repeatability, segments_k: np.ndarray, pose_k: np.
     the map frame moved to the sensor, so that rho carries no lever arm of a far-away map
     origin.
     """
-    seg_k = np.asarray(segments_k, dtype=float).reshape(-1, 2, 2)
-    if not len(seg_k):
+    index, world = line_opportunities(segments_k, pose_k, view_next, min_length, margin)
+    score.opportunities += int(index.size)
+    if not index.size:
         return
-    seg_k = seg_k[np.hypot(*(seg_k[:, 1] - seg_k[:, 0]).T) >= min_length]
-    if not len(seg_k):
-        return
-    world = transform_points(pose_k, seg_k.reshape(-1, 2)).reshape(-1, 2, 2)
-    look = in_view(view_next, world.mean(axis=1), margin)
-    score.opportunities += int(look.sum())
-    if not look.any():
-        return
-    mine = inverse_transform_points(view_next.pose, world[look].reshape(-1, 2)).reshape(-1, 2, 2)
+    mine = inverse_transform_points(view_next.pose, world.reshape(-1, 2)).reshape(-1, 2, 2)
     other = np.asarray(segments_next, dtype=float).reshape(-1, 2, 2)
     if not len(other):
         return
