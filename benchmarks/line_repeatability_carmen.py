@@ -57,6 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from feature_metrics_carmen import carmen_logs, LOGS  # noqa: E402
 from landmark_nav.evaluation.features import normal_form  # noqa: E402
+from landmark_nav.evaluation.scan_matching import point_to_line_icp  # noqa: E402
 from landmark_nav.evaluation.scan_metrics import (corner_repeatability, in_view,  # noqa: E402
                                                   line_opportunities, Repeatability,
                                                   segments_of)
@@ -67,7 +68,6 @@ from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
 from landmark_nav.slam.line_landmarks import transform_lines  # noqa: E402
 import numpy as np  # noqa: E402
-from scipy.spatial import cKDTree  # noqa: E402
 
 MAX_DRHO, MAX_DALPHA = 0.05, math.radians(2.0)
 POINT_BINS = ((0, 15), (16, 25), (26, 40), (41, 100000))  # points of the scan-k line
@@ -113,29 +113,8 @@ def icp_correction(scan_k, scan_n) -> np.ndarray:
         return np.column_stack([s.ranges[m] * np.cos(s.angles[m]),
                                 s.ranges[m] * np.sin(s.angles[m])])
     p = inverse_transform_points(scan_n.pose, transform_points(scan_k.pose, points(scan_k)))
-    q = points(scan_n)
-    if len(p) < 20 or len(q) < 20:
-        return np.zeros(3)
-    tree = cKDTree(q)
-    _, nb = tree.query(q, k=5)
-    nbh = q[nb] - q[nb].mean(axis=1, keepdims=True)
-    normals = np.linalg.eigh(np.einsum('kni,knj->kij', nbh, nbh))[1][:, :, 0]
-    t = np.zeros(3)
-    for _ in range(15):
-        c, s = math.cos(t[2]), math.sin(t[2])
-        pt = p @ np.array([[c, s], [-s, c]]) + t[:2]
-        dist, j = tree.query(pt)
-        m = dist < 0.15
-        if m.sum() < 20:
-            return np.zeros(3)
-        n = normals[j[m]]
-        r = np.einsum('ij,ij->i', pt[m] - q[j[m]], n)
-        jac = np.column_stack([n, -pt[m, 1] * n[:, 0] + pt[m, 0] * n[:, 1]])
-        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
-        t += step
-        if np.abs(step).max() < 1e-5:
-            break
-    return t
+    fit = point_to_line_icp(p, points(scan_n))
+    return np.zeros(3) if fit is None else fit.pose
 
 
 def seen_again(mine: np.ndarray, scan_n, params: LineParams) -> np.ndarray:

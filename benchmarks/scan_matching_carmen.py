@@ -1,0 +1,139 @@
+"""How far dead reckoning by scan matching of consecutive scans gets on the Carmen logs.
+
+Run from the repository root (needs ``../shared/data/carmen``)::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/scan_matching_carmen.py [--seeds 0 1] [LOG ...]
+
+A yardstick for EKF-SLAM on these logs (issue 14): each log is imported as ``landmark_nav
+import`` does (synthetic drift with the importer's default ``pioneer`` model, the given
+seed), and its scans are chained by point-to-line ICP
+(:func:`landmark_nav.evaluation.scan_matching.point_to_line_icp`: returns within 20 m,
+pairs within 50, 30, then 15 cm) of each scan onto the previous one, the odometry's motion
+between the two stamps (through the laser mount) as the initial guess. The ICP motion is
+used when it converged and lies inside the odometry's own 99.9 % region (its difference
+from the odometry's motion, under the bag's stated noise model ``U``, within
+chi2(3, 0.999)); otherwise the odometry's motion is. No landmark, no map, no loop closure:
+what pairwise scan matching alone removes of the odometry's drift.
+
+Printed per run: the SE(2)-aligned ATE RMSE [m] of the odometry and of the scan-matched
+chain and their ratio (issue 14's SLAM target: at most 0.2), the RPE over 1 m of both
+[cm], the share of steps that used ICP, the median per-step heading error [deg] of the
+odometry and of the ICP motions against the reference's, and the median NIS of those
+errors under the ICP's own covariance (``s^2 (J^T J)^-1``; 3 expected: larger means the
+classic covariance is optimistic, and the reference's own few-cm error adds to it).
+"""
+
+import argparse
+import math
+from pathlib import Path
+import sys
+import tempfile
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from landmark_nav.evaluation.bags import load_bag  # noqa: E402
+from landmark_nav.evaluation.scan_matching import point_to_line_icp  # noqa: E402
+from landmark_nav.evaluation.slam import bag_odometry_noise  # noqa: E402
+from landmark_nav.evaluation.trajectory import ate, rpe, Trajectory  # noqa: E402
+from landmark_nav.geometry import (compose, interpolate_pose, inverse,  # noqa: E402
+                                   relative, wrap_angle)
+from landmark_nav.importers.writer import import_log  # noqa: E402
+from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
+from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
+from landmark_nav.slam.ekf_slam import odometry_noise  # noqa: E402
+from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
+import numpy as np  # noqa: E402
+
+LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
+MAX_RANGE = 20.0   # [m] returns used by the ICP
+GATES = (0.5, 0.3, 0.15)  # [m] pairing distance per ICP stage
+ACCEPT = chi2_gate(3, 0.999)
+
+
+def scan_points(scan: ScanSample) -> np.ndarray:
+    """Return the scan's valid returns within MAX_RANGE as (N, 2) laser-frame points."""
+    r = np.asarray(scan.ranges, dtype=float)
+    a = scan.angle_min + scan.angle_increment * np.arange(r.size)
+    m = np.isfinite(r) & (r > scan.range_min) & (r < min(MAX_RANGE, scan.range_max))
+    return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
+
+
+def chain(bag: Path) -> dict:
+    """Dead-reckon one imported bag by odometry and by ICP; return the figures."""
+    scenario = load_bag(bag)
+    noise = bag_odometry_noise(scenario)[0]
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    unmount = inverse(mount)
+    scans = scenario.of_type(ScanSample)
+    odo = scenario.of_type(OdometrySample)
+    stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
+    odometry = interpolate_pose(stamps.astype(float),
+                                np.array([o.stamp_ns for o in odo], dtype=float),
+                                np.array([o.pose for o in odo]), extrapolate=True)
+    truth = scenario.truth_at(stamps)
+    poses = [odometry[0]]
+    used, yaw_odo, yaw_icp, nis = 0, [], [], []
+    previous = scan_points(scans[0])
+    for k in range(1, len(scans)):
+        u = relative(odometry[k - 1], odometry[k])
+        current = scan_points(scans[k])
+        # The laser's motion is M^-1 u M; ICP moves the new scan onto the previous one.
+        fit = point_to_line_icp(current, previous, compose(compose(unmount, u), mount),
+                                gates=GATES, iterations=10)
+        step = u
+        if fit is not None:
+            v = compose(compose(mount, fit.pose), unmount)
+            d = v - u
+            d[2] = wrap_angle(d[2])
+            if d @ np.linalg.solve(odometry_noise(u, noise), d) <= ACCEPT:
+                step, used = v, used + 1
+                ref = relative(truth[k - 1], truth[k])
+                e = compose(compose(unmount, ref), mount)  # the laser's true motion
+                e = fit.pose - e
+                e[2] = wrap_angle(e[2])
+                nis.append(e @ np.linalg.solve(fit.covariance, e))
+                yaw_icp.append(abs(wrap_angle(v[2] - ref[2])))
+                yaw_odo.append(abs(wrap_angle(u[2] - ref[2])))
+        poses.append(compose(poses[-1], step))
+        previous = current
+    ref = Trajectory.from_planar(stamps, truth)
+    out = {}
+    for name, track in (('odo', odometry), ('icp', np.array(poses))):
+        est = Trajectory.from_planar(stamps, track)
+        out[f'{name}_ate'] = ate(est, ref, 'se2')['rmse']
+        out[f'{name}_rpe'] = rpe(est, ref, 1.0)['rmse']
+    out.update(used=used / max(1, len(scans) - 1),
+               yaw_odo=math.degrees(np.median(yaw_odo)) if yaw_odo else math.nan,
+               yaw_icp=math.degrees(np.median(yaw_icp)) if yaw_icp else math.nan,
+               nis=float(np.median(nis)) if nis else math.nan)
+    return out
+
+
+def main() -> int:
+    """Import each log per seed, chain it, print one line per run."""
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('logs', nargs='*', default=list(LOGS))
+    ap.add_argument('--seeds', nargs='+', type=int, default=[0, 1])
+    args = ap.parse_args()
+    carmen = SHARED_DATA / 'carmen'
+    print('run | ATE odometry / ICP [m] (ratio) | RPE 1 m odometry / ICP [cm] | ICP used | '
+          'step yaw error odometry / ICP [deg] | ICP NIS (median)')
+    ratios = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in args.seeds:
+            for name in args.logs:
+                bag = Path(tmp) / f'{name}-{seed}'
+                import_log(carmen / f'{name}-corrected.log.gz', bag, seed=seed)
+                r = chain(bag)
+                ratios.append(r['icp_ate'] / r['odo_ate'])
+                print(f"{name}-{seed} | {r['odo_ate']:.2f} / {r['icp_ate']:.2f} "
+                      f"({ratios[-1]:.2f}) | {100 * r['odo_rpe']:.1f} / {100 * r['icp_rpe']:.1f}"
+                      f" | {100 * r['used']:.0f} % | {r['yaw_odo']:.2f} / {r['yaw_icp']:.2f} | "
+                      f"{r['nis']:.0f}", flush=True)
+    print(f'ATE ratio median {np.median(ratios):.2f}, runs <= 0.2: '
+          f'{int(np.sum(np.array(ratios) <= 0.2))} of {len(ratios)}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
