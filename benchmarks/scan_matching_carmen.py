@@ -2,7 +2,8 @@
 
 Run from the repository root (needs ``../shared/data/carmen``)::
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/scan_matching_carmen.py [--seeds 0 1] [LOG ...]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/scan_matching_carmen.py [--seeds 0 1]
+        [--slam [--params-file YAML] [--filter-noise MODEL]] [LOG ...]
 
 A yardstick for EKF-SLAM on these logs (issue 14): each log is imported as ``landmark_nav
 import`` does (synthetic drift with the importer's default ``pioneer`` model, the given
@@ -21,9 +22,18 @@ chain and their ratio (issue 14's SLAM target: at most 0.2), the RPE over 1 m of
 odometry and of the ICP motions against the reference's, and the median NIS of those
 errors under the ICP's own covariance (``s^2 (J^T J)^-1``; 3 expected: larger means the
 classic covariance is optimistic, and the reference's own few-cm error adds to it).
+
+``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
+lines, the ``ekf_slam_real_logs`` profile or ``--params-file``) twice per run: on the
+bag's odometry with its stated noise model, and on the scan-matched chain (its poses as
+the odometry samples, at the scan stamps) with ``--filter-noise`` as ``U`` (default
+``k_d=0.04 k_theta=0.015 k_dtheta=0.03``: about twice the ICP motions' per-step errors
+printed by the first part). It prints each one's ATE [m] and RPE over 1 m [cm]: whether
+the landmark updates add to, or take from, the motion they start from.
 """
 
 import argparse
+from dataclasses import replace
 import math
 from pathlib import Path
 import sys
@@ -33,14 +43,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.scan_matching import point_to_line_icp  # noqa: E402
-from landmark_nav.evaluation.slam import bag_odometry_noise  # noqa: E402
+from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
 from landmark_nav.evaluation.trajectory import ate, rpe, Trajectory  # noqa: E402
 from landmark_nav.geometry import (compose, interpolate_pose, inverse,  # noqa: E402
                                    relative, wrap_angle)
 from landmark_nav.importers.writer import import_log  # noqa: E402
+from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
-from landmark_nav.slam.ekf_slam import odometry_noise  # noqa: E402
+from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams  # noqa: E402
+from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
+from landmark_nav.tools.config_files import config_path  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -58,9 +71,8 @@ def scan_points(scan: ScanSample) -> np.ndarray:
     return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
 
 
-def chain(bag: Path) -> dict:
-    """Dead-reckon one imported bag by odometry and by ICP; return the figures."""
-    scenario = load_bag(bag)
+def chain(scenario) -> tuple:
+    """Dead-reckon an imported bag by odometry and by ICP: the figures, stamps, ICP poses."""
     noise = bag_odometry_noise(scenario)[0]
     mount = np.asarray(scenario.laser.mount, dtype=float)
     unmount = inverse(mount)
@@ -106,7 +118,30 @@ def chain(bag: Path) -> dict:
                yaw_odo=math.degrees(np.median(yaw_odo)) if yaw_odo else math.nan,
                yaw_icp=math.degrees(np.median(yaw_icp)) if yaw_icp else math.nan,
                nis=float(np.median(nis)) if nis else math.nan)
-    return out
+    return out, stamps, np.array(poses)
+
+
+def slam_figures(scenario, options: dict, noise=None) -> tuple:
+    """Run EKF-SLAM on the scenario; return its SE(2)-aligned ATE [m] and RPE over 1 m [m]."""
+    options = dict(options)
+    landmarks = options.pop('landmarks', 'both')
+    noise = noise or bag_odometry_noise(scenario)[0]
+    cp = CornerParams(sigma_r=float(scenario.laser.sigma_range),
+                      sigma_phi=float(scenario.laser.sigma_angle))
+    run = run_slam(scenario, replace(SlamParams(**options), odometry=noise), cp,
+                   landmarks=landmarks)
+    ref = Trajectory.from_planar(run.stamps, run.truth)
+    est = Trajectory.from_planar(run.stamps, run.poses)
+    return ate(est, ref, 'se2')['rmse'], rpe(est, ref, 1.0)['rmse']
+
+
+def with_odometry(scenario, stamps: np.ndarray, poses: np.ndarray):
+    """Return the scenario with ``poses`` at ``stamps`` as its only odometry samples."""
+    samples = [OdometrySample(int(t), p, np.zeros((3, 3)), np.zeros(2), np.zeros(2),
+                              np.zeros(2)) for t, p in zip(stamps, poses)]
+    events = [e for e in scenario.events if not isinstance(e, OdometrySample)]
+    scenario.events = sorted(events + samples, key=lambda e: e.stamp_ns)
+    return scenario
 
 
 def main() -> int:
@@ -114,22 +149,42 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('logs', nargs='*', default=list(LOGS))
     ap.add_argument('--seeds', nargs='+', type=int, default=[0, 1])
+    ap.add_argument('--slam', action='store_true', help='also EKF-SLAM on both motions')
+    ap.add_argument('--params-file', default=None, help='ekf_slam parameter file (default: '
+                    'the ekf_slam_real_logs profile)')
+    ap.add_argument('--filter-noise', default='k_d=0.04 k_theta=0.015 k_dtheta=0.03',
+                    help="the filter's U on the scan-matched chain")
     args = ap.parse_args()
+    if args.slam:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench_node_cpu import params_file_options
+        options = params_file_options(args.params_file
+                                      or str(config_path('ekf_slam_real_logs')))
+        chain_noise = odometry_noise_model(args.filter_noise)
     carmen = SHARED_DATA / 'carmen'
     print('run | ATE odometry / ICP [m] (ratio) | RPE 1 m odometry / ICP [cm] | ICP used | '
-          'step yaw error odometry / ICP [deg] | ICP NIS (median)')
+          'step yaw error odometry / ICP [deg] | ICP NIS (median)'
+          + (' | SLAM on odometry / on ICP: ATE [m], RPE [cm]' if args.slam else ''))
     ratios = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             for name in args.logs:
                 bag = Path(tmp) / f'{name}-{seed}'
                 import_log(carmen / f'{name}-corrected.log.gz', bag, seed=seed)
-                r = chain(bag)
+                scenario = load_bag(bag)
+                r, stamps, poses = chain(scenario)
                 ratios.append(r['icp_ate'] / r['odo_ate'])
+                slam = ''
+                if args.slam:
+                    a0, r0 = slam_figures(scenario, options)
+                    a1, r1 = slam_figures(with_odometry(scenario, stamps, poses), options,
+                                          chain_noise)
+                    slam = f' | {a0:.2f}, {100 * r0:.1f} / {a1:.2f}, {100 * r1:.1f}'
+
                 print(f"{name}-{seed} | {r['odo_ate']:.2f} / {r['icp_ate']:.2f} "
                       f"({ratios[-1]:.2f}) | {100 * r['odo_rpe']:.1f} / {100 * r['icp_rpe']:.1f}"
                       f" | {100 * r['used']:.0f} % | {r['yaw_odo']:.2f} / {r['yaw_icp']:.2f} | "
-                      f"{r['nis']:.0f}", flush=True)
+                      f"{r['nis']:.0f}{slam}", flush=True)
     print(f'ATE ratio median {np.median(ratios):.2f}, runs <= 0.2: '
           f'{int(np.sum(np.array(ratios) <= 0.2))} of {len(ratios)}')
     return 0
