@@ -3,7 +3,7 @@
 Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/scan_matching_carmen.py [--seeds 0 1]
-        [--slam [--params-file YAML] [--filter-noise MODEL]] [LOG ...]
+        [--slam [--params-file YAML] [--filter-noise MODEL] [--landmarks KIND]] [LOG ...]
 
 A yardstick for EKF-SLAM on these logs (issue 14): each log is imported as ``landmark_nav
 import`` does (synthetic drift with the importer's default ``pioneer`` model, the given
@@ -24,11 +24,13 @@ errors under the ICP's own covariance (``s^2 (J^T J)^-1``; 3 expected: larger me
 classic covariance is optimistic, and the reference's own few-cm error adds to it).
 
 ``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
-lines, the ``ekf_slam_real_logs`` profile or ``--params-file``) twice per run: on the
+lines, the ``ekf_slam_real_logs`` profile or ``--params-file``; ``--landmarks corners`` or
+``lines`` instead of the file's) twice per run: on the
 bag's odometry with its stated noise model, and on the scan-matched chain (its poses as
 the odometry samples, at the scan stamps) with ``--filter-noise`` as ``U`` (default
 ``k_d=0.04 k_theta=0.015 k_dtheta=0.03``: about twice the ICP motions' per-step errors
-printed by the first part). It prints each one's ATE [m] and RPE over 1 m [cm]: whether
+printed by the first part). It prints each one's ATE [m] (and its ratio to the
+odometry's) and RPE over 1 m [cm]: whether
 the landmark updates add to, or take from, the motion they start from.
 """
 
@@ -154,6 +156,8 @@ def main() -> int:
                     'the ekf_slam_real_logs profile)')
     ap.add_argument('--filter-noise', default='k_d=0.04 k_theta=0.015 k_dtheta=0.03',
                     help="the filter's U on the scan-matched chain")
+    ap.add_argument('--landmarks', choices=('corners', 'lines', 'both'), default=None,
+                    help="landmark types (default: the parameter file's)")
     args = ap.parse_args()
     if args.slam:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -161,10 +165,13 @@ def main() -> int:
         options = params_file_options(args.params_file
                                       or str(config_path('ekf_slam_real_logs')))
         chain_noise = odometry_noise_model(args.filter_noise)
+        if args.landmarks:
+            options['landmarks'] = args.landmarks
     carmen = SHARED_DATA / 'carmen'
     print('run | ATE odometry / ICP [m] (ratio) | RPE 1 m odometry / ICP [cm] | ICP used | '
           'step yaw error odometry / ICP [deg] | ICP NIS (median)'
-          + (' | SLAM on odometry / on ICP: ATE [m], RPE [cm]' if args.slam else ''))
+          + (' | SLAM on odometry / on ICP: ATE [m] (/ odometry ATE), RPE [cm]' if args.slam
+             else ''))
     ratios = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
@@ -179,7 +186,8 @@ def main() -> int:
                     a0, r0 = slam_figures(scenario, options)
                     a1, r1 = slam_figures(with_odometry(scenario, stamps, poses), options,
                                           chain_noise)
-                    slam = f' | {a0:.2f}, {100 * r0:.1f} / {a1:.2f}, {100 * r1:.1f}'
+                    slam = (f" | {a0:.2f} ({a0 / r['odo_ate']:.3f}), {100 * r0:.1f} / "
+                            f"{a1:.2f} ({a1 / r['odo_ate']:.3f}), {100 * r1:.1f}")
 
                 print(f"{name}-{seed} | {r['odo_ate']:.2f} / {r['icp_ate']:.2f} "
                       f"({ratios[-1]:.2f}) | {100 * r['odo_rpe']:.1f} / {100 * r['icp_rpe']:.1f}"
