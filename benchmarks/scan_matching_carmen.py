@@ -55,8 +55,8 @@ from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
 from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams  # noqa: E402
 from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
-from landmark_nav.tools.config_files import config_path  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
+from landmark_nav.tools.config_files import config_path  # noqa: E402
 import numpy as np  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
