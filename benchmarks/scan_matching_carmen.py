@@ -45,7 +45,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.scan_matching import point_to_line_icp  # noqa: E402
-from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
+from landmark_nav.evaluation.slam import (bag_odometry_noise, run_slam,  # noqa: E402
+                                          scan_angles)
 from landmark_nav.evaluation.trajectory import ate, rpe, Trajectory  # noqa: E402
 from landmark_nav.geometry import (compose, interpolate_pose, inverse,  # noqa: E402
                                    relative, wrap_angle)
@@ -68,7 +69,7 @@ ACCEPT = chi2_gate(3, 0.999)
 def scan_points(scan: ScanSample) -> np.ndarray:
     """Return the scan's valid returns within MAX_RANGE as (N, 2) laser-frame points."""
     r = np.asarray(scan.ranges, dtype=float)
-    a = scan.angle_min + scan.angle_increment * np.arange(r.size)
+    a = scan_angles(scan)
     m = np.isfinite(r) & (r > scan.range_min) & (r < min(MAX_RANGE, scan.range_max))
     return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
 
@@ -138,7 +139,7 @@ def slam_figures(scenario, options: dict, noise=None) -> tuple:
 
 
 def with_odometry(scenario, stamps: np.ndarray, poses: np.ndarray):
-    """Return the scenario with ``poses`` at ``stamps`` as its only odometry samples."""
+    """Make ``poses`` at ``stamps`` the scenario's only odometry samples (in place); return it."""
     samples = [OdometrySample(int(t), p, np.zeros((3, 3)), np.zeros(2), np.zeros(2),
                               np.zeros(2)) for t, p in zip(stamps, poses)]
     events = [e for e in scenario.events if not isinstance(e, OdometrySample)]

@@ -4,6 +4,7 @@ import math
 
 from landmark_nav.evaluation.scan_matching import point_to_line_icp
 import numpy as np
+import pytest
 
 
 def _room(rng, n=400, noise=0.0):
@@ -50,3 +51,9 @@ def test_icp_without_enough_points_or_pairs_gives_none():
     assert point_to_line_icp(room[:10], room) is None                    # too few points
     far = room + np.array([5.0, 5.0])                                   # nothing within the gate
     assert point_to_line_icp(far, room, gates=(0.15,)) is None
+
+
+def test_icp_without_a_gate_is_an_error():
+    room = _room(np.random.default_rng(5))
+    with pytest.raises(ValueError, match='gates'):
+        point_to_line_icp(room, room, gates=())

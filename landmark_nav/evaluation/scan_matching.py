@@ -60,7 +60,12 @@ def point_to_line_icp(source: np.ndarray, target: np.ndarray,
 
     Returns:
         The solution, or None (too few points or pairs).
+
+    Raises:
+        ValueError: No gate.
     """
+    if len(gates) == 0:
+        raise ValueError('point_to_line_icp: gates must hold at least one distance')
     p = np.asarray(source, dtype=float).reshape(-1, 2)
     q = np.asarray(target, dtype=float).reshape(-1, 2)
     if len(p) < min_matches or len(q) < max(min_matches, neighbours):
@@ -70,7 +75,6 @@ def point_to_line_icp(source: np.ndarray, target: np.ndarray,
     nbh = q[nb] - q[nb].mean(axis=1, keepdims=True)
     normals = np.linalg.eigh(np.einsum('kni,knj->kij', nbh, nbh))[1][:, :, 0]
     t = np.array(guess, dtype=float)
-    jac = r = None
     for gate in gates:
         for _ in range(iterations):
             c, s = math.cos(t[2]), math.sin(t[2])
