@@ -256,22 +256,34 @@ def far_map(n: int):
 
 
 def params_file_options(path: str) -> dict:
-    """Return the ``SlamParams`` fields (and ``landmarks``) set by an ekf_slam YAML file.
+    """Return the ``SlamParams`` and ``FrontendParams`` fields (and ``landmarks``) of a file.
 
-    Read as the node reads them (``SLAM_PARAMETERS``, :func:`declare_dataclass`): a
-    parameter's "auto" value (0) stands for the field's None (off).
+    Read as the node reads them (``SLAM_PARAMETERS``, ``FRONTEND_PARAMETERS``,
+    :func:`declare_dataclass`): a parameter's "auto" value (0) stands for the field's None
+    (off). :func:`split_frontend` separates the two kinds.
     """
     import yaml
-    from landmark_nav.nodes.ekf_slam import SLAM_PARAMETERS
+    from landmark_nav.nodes.ekf_slam import FRONTEND_PARAMETERS, SLAM_PARAMETERS
     values = yaml.safe_load(Path(path).read_text())['ekf_slam']['ros__parameters']
     out = {}
     for k, v in values.items():
         if k in SLAM_PARAMETERS:
             auto = SLAM_PARAMETERS[k][3:]
             out[k] = None if auto and v == auto[0] else v
+        elif k in FRONTEND_PARAMETERS:
+            out[k] = v
     if 'landmarks' in values:
         out['landmarks'] = values['landmarks']
     return out
+
+
+def split_frontend(options: dict) -> tuple:
+    """Split :func:`params_file_options` output: ``(other options, FrontendParams)``."""
+    from dataclasses import fields
+    from landmark_nav.slam.frontend import FrontendParams
+    names = {f.name for f in fields(FrontendParams)}
+    rest = {k: v for k, v in (options or {}).items() if k not in names}
+    return rest, FrontendParams(**{k: v for k, v in (options or {}).items() if k in names})
 
 
 def core_step_ms(scenario, noise, landmarks: str = 'corners', visibility: bool = True,
@@ -302,7 +314,8 @@ def core_step_ms(scenario, noise, landmarks: str = 'corners', visibility: bool =
     from landmark_nav.slam.visibility import ScanGeometry
     from threadpoolctl import threadpool_limits
     import numpy as np
-    params = SlamParams(**(options or {}))
+    options, fp = split_frontend(options)
+    params = SlamParams(**options)
     params = params if noise is None else replace(params, odometry=noise)
     laser = scenario.laser
     cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
@@ -311,7 +324,7 @@ def core_step_ms(scenario, noise, landmarks: str = 'corners', visibility: bool =
     inputs = [(True, e, None) if isinstance(e, OdometrySample) else
               (False, e, scan_features(e, 'corners', cp)[0] if landmarks != 'lines' else [])
               for e in scenario.events if isinstance(e, (OdometrySample, ScanSample))]
-    fe = SlamFrontend(params, mount, slam_map=slam_map)
+    fe = SlamFrontend(params, mount, fp, slam_map=slam_map)
     steps, cpu = 0, 0.0
     start_wall, start_ns = time.monotonic(), inputs[0][1].stamp_ns if inputs else 0
     with threadpool_limits(1):  # as the nodes (one thread by default)

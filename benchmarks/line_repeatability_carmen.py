@@ -57,7 +57,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from feature_metrics_carmen import carmen_logs, LOGS  # noqa: E402
 from landmark_nav.evaluation.features import normal_form  # noqa: E402
-from landmark_nav.evaluation.scan_matching import point_to_line_icp  # noqa: E402
 from landmark_nav.evaluation.scan_metrics import (corner_repeatability, in_view,  # noqa: E402
                                                   line_opportunities, Repeatability,
                                                   segments_of)
@@ -67,6 +66,7 @@ from landmark_nav.laser.corners import CornerParams, detect_corners  # noqa: E40
 from landmark_nav.laser.lines import extract_lines, LineParams  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
 from landmark_nav.slam.line_landmarks import transform_lines  # noqa: E402
+from landmark_nav.slam.scan_matching import point_to_line_icp  # noqa: E402
 import numpy as np  # noqa: E402
 
 MAX_DRHO, MAX_DALPHA = 0.05, math.radians(2.0)

@@ -8,7 +8,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 A yardstick for EKF-SLAM on these logs (issue 14): each log is imported as ``landmark_nav
 import`` does (synthetic drift with the importer's default ``pioneer`` model, the given
 seed), and its scans are chained by point-to-line ICP
-(:func:`landmark_nav.evaluation.scan_matching.point_to_line_icp`: returns within 20 m,
+(:func:`landmark_nav.slam.scan_matching.point_to_line_icp`: returns within 20 m,
 pairs within 50, 30, then 15 cm) of each scan onto the previous one, the odometry's motion
 between the two stamps (through the laser mount) as the initial guess. The ICP motion is
 used when it converged and lies inside the odometry's own 99.9 % region (its difference
@@ -42,11 +42,11 @@ import sys
 import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_node_cpu import params_file_options, split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
-from landmark_nav.evaluation.scan_matching import point_to_line_icp  # noqa: E402
-from landmark_nav.evaluation.slam import (bag_odometry_noise, run_slam,  # noqa: E402
-                                          scan_angles)
+from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
 from landmark_nav.evaluation.trajectory import ate, rpe, Trajectory  # noqa: E402
 from landmark_nav.geometry import (compose, interpolate_pose, inverse,  # noqa: E402
                                    relative, wrap_angle)
@@ -56,6 +56,7 @@ from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
 from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams  # noqa: E402
 from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
+from landmark_nav.slam.scan_matching import point_to_line_icp, scan_points  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 from landmark_nav.tools.config_files import config_path  # noqa: E402
 import numpy as np  # noqa: E402
@@ -66,12 +67,10 @@ GATES = (0.5, 0.3, 0.15)  # [m] pairing distance per ICP stage
 ACCEPT = chi2_gate(3, 0.999)
 
 
-def scan_points(scan: ScanSample) -> np.ndarray:
+def laser_points(scan: ScanSample) -> np.ndarray:
     """Return the scan's valid returns within MAX_RANGE as (N, 2) laser-frame points."""
-    r = np.asarray(scan.ranges, dtype=float)
-    a = scan_angles(scan)
-    m = np.isfinite(r) & (r > scan.range_min) & (r < min(MAX_RANGE, scan.range_max))
-    return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
+    return scan_points(scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
+                       min(MAX_RANGE, scan.range_max))
 
 
 def chain(scenario) -> tuple:
@@ -88,10 +87,10 @@ def chain(scenario) -> tuple:
     truth = scenario.truth_at(stamps)
     poses = [odometry[0]]
     used, yaw_odo, yaw_icp, nis = 0, [], [], []
-    previous = scan_points(scans[0])
+    previous = laser_points(scans[0])
     for k in range(1, len(scans)):
         u = relative(odometry[k - 1], odometry[k])
-        current = scan_points(scans[k])
+        current = laser_points(scans[k])
         # The laser's motion is M^-1 u M; ICP moves the new scan onto the previous one.
         fit = point_to_line_icp(current, previous, compose(compose(unmount, u), mount),
                                 gates=GATES, iterations=10)
@@ -125,14 +124,20 @@ def chain(scenario) -> tuple:
 
 
 def slam_figures(scenario, options: dict, noise=None) -> tuple:
-    """Run EKF-SLAM on the scenario; return its SE(2)-aligned ATE [m] and RPE over 1 m [m]."""
-    options = dict(options)
+    """Run EKF-SLAM on the scenario; return its SE(2)-aligned ATE [m] and RPE over 1 m [m].
+
+    With ``noise`` (the filter on the scan-matched chain) the front end's own scan matching
+    is off whatever ``options`` say: the chain is already scan-matched.
+    """
+    options, frontend = split_frontend(options)
     landmarks = options.pop('landmarks', 'both')
+    if noise is not None:
+        frontend = replace(frontend, scan_matching=False)
     noise = noise or bag_odometry_noise(scenario)[0]
     cp = CornerParams(sigma_r=float(scenario.laser.sigma_range),
                       sigma_phi=float(scenario.laser.sigma_angle))
     run = run_slam(scenario, replace(SlamParams(**options), odometry=noise), cp,
-                   landmarks=landmarks)
+                   landmarks=landmarks, frontend=frontend)
     ref = Trajectory.from_planar(run.stamps, run.truth)
     est = Trajectory.from_planar(run.stamps, run.poses)
     return ate(est, ref, 'se2')['rmse'], rpe(est, ref, 1.0)['rmse']
@@ -161,8 +166,6 @@ def main() -> int:
                     help="landmark types (default: the parameter file's)")
     args = ap.parse_args()
     if args.slam:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from bench_node_cpu import params_file_options
         options = params_file_options(args.params_file
                                       or str(config_path('ekf_slam_real_logs')))
         chain_noise = odometry_noise_model(args.filter_noise)

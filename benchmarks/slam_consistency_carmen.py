@@ -57,7 +57,9 @@ import sys
 import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_node_cpu import split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.odometry_drift import odometry_window_nees  # noqa: E402
 from landmark_nav.evaluation.slam import (bag_odometry_noise,  # noqa: E402
@@ -99,6 +101,7 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
     """Run the filter on one bag and return the figures of the module docstring."""
     scenario = load_bag(bag, require_reference=False)
     noise = filter_noise or bag_odometry_noise(scenario)[0]
+    extra, frontend = split_frontend(extra)
     prm = replace(SlamParams(**extra), odometry=noise)
     cp = CornerParams(sigma_r=float(scenario.laser.sigma_range),
                       sigma_phi=float(scenario.laser.sigma_angle))
@@ -126,7 +129,8 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
                                 & (res.kind[len(corners):] == LINE)):
             groups.setdefault(int(ids[q]), []).append((g[q], cov[q]))
 
-    run = run_slam(scenario, prm, cp, callback=callback, landmarks=landmarks)
+    run = run_slam(scenario, prm, cp, callback=callback, landmarks=landmarks,
+                   frontend=frontend)
     m2 = []
     for obs in groups.values():
         if len(obs) < 5:

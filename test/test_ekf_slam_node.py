@@ -1,6 +1,6 @@
 """ekf_slam node: office bag through DDS equals the offline run (de-skew on); bad input; QoS."""
 
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 import time
 from types import SimpleNamespace
@@ -17,7 +17,8 @@ from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
 from landmark_nav.slam.ekf_slam import LINE, SlamParams
-from landmark_nav.slam.frontend import odometry_noise_model, ODOMETRY_NOISE_MODELS
+from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
+                                        ODOMETRY_NOISE_MODELS)
 from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness, shared_data
 from nav_msgs.msg import Odometry, Path as PathMsg
@@ -30,6 +31,7 @@ from std_srvs.srv import Trigger
 import yaml
 
 OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
+FRONTEND_FIELDS = {f.name for f in fields(FrontendParams)}
 SECONDS = 40.0
 
 
@@ -87,9 +89,11 @@ def node_and_offline(tmp_path, bag, seconds, landmarks, noise, extra=None):
 
     Both get the bag's laser mount and noise (the node as parameters) and ``noise`` as the
     odometry model; visibility-aware pruning and de-skew on (the defaults of both).
-    ``extra``: further node parameters, the same ``SlamParams`` fields offline.
+    ``extra``: further node parameters, the same ``SlamParams`` / ``FrontendParams``
+    fields offline.
     """
     extra = dict(extra or {})
+    frontend = {k: v for k, v in extra.items() if k in FRONTEND_FIELDS}
     msgs = bag_messages(seconds, bag)
     scenario = load_bag(bag, max_seconds=seconds, require_reference=False)
     laser = scenario.laser
@@ -123,10 +127,11 @@ def node_and_offline(tmp_path, bag, seconds, landmarks, noise, extra=None):
             stats=dict(slam.slam.stats), markers=slam.landmark_markers(0))
         assert call(ros, 'reset', Trigger).success
         assert slam.slam is None
-    params = SlamParams(odometry=odometry_noise_model(noise), **extra)
+    params = SlamParams(odometry=odometry_noise_model(noise),
+                        **{k: v for k, v in extra.items() if k not in frontend})
     ref = run_slam(scenario, params, CornerParams(sigma_r=laser.sigma_range,
                                                   sigma_phi=laser.sigma_angle), deskew=True,
-                   landmarks=landmarks)
+                   landmarks=landmarks, frontend=FrontendParams(**frontend))
     return node, ref
 
 
@@ -586,6 +591,7 @@ def test_node_equals_offline_on_an_imported_carmen_log(tmp_path):
 
 REAL_LOGS = {'jacobians': 'observability_gain', 'line_residual_factor': 2.0,
              'free_space_check': 0.95, 'recovery_probability': 0.99, 'spurious_limit': 0.05}
+REAL_LOGS_FRONTEND = {'scan_matching': True}
 
 
 def real_logs_profile():
@@ -597,7 +603,7 @@ def real_logs_profile():
 def test_real_logs_profile_names_the_measured_options():
     """The profile sets landmarks both and the README's options, nothing else."""
     profile = real_logs_profile()
-    assert profile == dict(REAL_LOGS, landmarks='both')
+    assert profile == dict(REAL_LOGS, **REAL_LOGS_FRONTEND, landmarks='both')
     default = parameter_file(OFFICE.parents[1], 'ekf_slam')
     assert set(profile) < set(default)
     assert all(default[k] != v for k, v in profile.items())
@@ -608,12 +614,14 @@ def test_the_node_takes_the_real_logs_profile():
     with RosHarness() as ros:
         node = EkfSlamNode(context=ros.context, parameter_overrides=[
             Parameter(k, value=v) for k, v in real_logs_profile().items()])
-        params, landmarks = node.params, node.landmarks
+        params, landmarks, frontend = node.params, node.landmarks, node.frontend_params
         node.destroy_node()
         node = EkfSlamNode(context=ros.context)
-        default = node.params
+        default, default_frontend = node.params, node.frontend_params
         node.destroy_node()
     assert landmarks == 'both'
+    assert frontend == FrontendParams(**REAL_LOGS_FRONTEND)
+    assert default_frontend == FrontendParams() and not default_frontend.scan_matching
     assert params == SlamParams(odometry=params.odometry, **REAL_LOGS)
     assert default == SlamParams(odometry=default.odometry)
     assert (default.free_space_check, default.recovery_probability,
@@ -629,6 +637,17 @@ def test_bad_real_logs_option_is_a_parameter_error(name, value):
             EkfSlamNode(context=ros.context, parameter_overrides=[Parameter(name, value=value)])
 
 
+@pytest.mark.parametrize('overrides, match', [
+    ({'scan_matching': True, 'visibility': False}, 'visibility'),
+    ({'scan_matching_noise': 'k_d=fast'}, 'scan_matching_noise'),
+    ({'scan_matching_accept': 1.0}, 'scan_matching_accept')])
+def test_bad_scan_matching_setting_is_a_parameter_error(overrides, match):
+    with RosHarness() as ros:
+        with pytest.raises(ParameterError, match=match):
+            EkfSlamNode(context=ros.context, parameter_overrides=[
+                Parameter(k, value=v) for k, v in overrides.items()])
+
+
 @pytest.mark.dds
 def test_node_equals_offline_with_the_real_logs_profile(tmp_path):
     """The profile's checks run in the node as offline (imported aces, 100 scans)."""
@@ -637,6 +656,9 @@ def test_node_equals_offline_with_the_real_logs_profile(tmp_path):
     bag = tmp_path / 'aces'
     import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
     model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
-    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model, REAL_LOGS)
+    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model,
+                                 dict(REAL_LOGS, **REAL_LOGS_FRONTEND))
     assert_node_equals_offline(node, ref)
+    # The scan-matched motion was used (measured: 96 of the 100 steps; the first has no pair).
+    assert ref.motions['scan_matching'] >= 90
     assert ref.stats['spurious'] > 0  # the check acted (measured 8 pairs dropped)

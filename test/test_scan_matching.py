@@ -1,8 +1,14 @@
-"""Tests of the point-to-line ICP used by the evaluation benchmarks."""
+"""Tests of the point-to-line ICP and of the scan-matched motion of the SLAM front end."""
 
 import math
 
-from landmark_nav.evaluation.scan_matching import point_to_line_icp
+from landmark_nav.evaluation.slam import run_slam
+from landmark_nav.geometry import compose, relative
+from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams
+from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
+                                        SlamFrontend)
+from landmark_nav.slam.scan_matching import point_to_line_icp, scan_motion, scan_points
+from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 import pytest
 
@@ -57,3 +63,122 @@ def test_icp_without_a_gate_is_an_error():
     room = _room(np.random.default_rng(5))
     with pytest.raises(ValueError, match='gates'):
         point_to_line_icp(room, room, gates=())
+
+
+# A 6 m x 4 m room with an L-shaped pillar (segments), seen by a 361-beam laser.
+ROOM = [((-3.0, -2.0), (3.0, -2.0)), ((3.0, -2.0), (3.0, 2.0)), ((3.0, 2.0), (-3.0, 2.0)),
+        ((-3.0, 2.0), (-3.0, -2.0)), ((1.0, 0.5), (1.5, 0.5)), ((1.5, 0.5), (1.5, 1.0))]
+ANGLE_MIN, INC = -math.pi / 2, math.pi / 360
+MOUNT = np.array([0.2, 0.05, 0.1])
+
+
+def _cast(laser_pose, rng=None, sigma=0.005):
+    """Ranges of the room's first surface along each beam of a laser at ``laser_pose``."""
+    a = laser_pose[2] + ANGLE_MIN + INC * np.arange(361)
+    d = np.column_stack([np.cos(a), np.sin(a)])
+    best = np.full(a.size, np.inf)
+    for p0, p1 in ROOM:
+        p0, e = np.asarray(p0), np.asarray(p1) - np.asarray(p0)
+        w = p0 - laser_pose[:2]
+        den = d[:, 0] * e[1] - d[:, 1] * e[0]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            t = (w[0] * e[1] - w[1] * e[0]) / den
+            u = (w[0] * d[:, 1] - w[1] * d[:, 0]) / den
+        hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+        best = np.where(hit & (t < best), t, best)
+    if rng is not None:
+        best = best + sigma * rng.standard_normal(best.size)
+    return best
+
+
+def _geometry(ranges):
+    return ScanGeometry(ranges, ANGLE_MIN, INC, 0.05, 30.0, MOUNT, 0.005)
+
+
+def test_scan_motion_is_the_base_motion_through_the_mount():
+    rng = np.random.default_rng(6)
+    base0, base1 = np.array([-1.0, -0.5, 0.2]), np.array([-0.6, -0.3, 0.35])
+    truth = relative(base0, base1)
+    prev = scan_points(_cast(compose(base0, MOUNT), rng), ANGLE_MIN, INC, 0.05, 20.0)
+    cur = scan_points(_cast(compose(base1, MOUNT), rng), ANGLE_MIN, INC, 0.05, 20.0)
+    u = truth + np.array([0.03, -0.02, math.radians(2.0)])   # drifted odometry
+    u_cov = odometry_noise(u, odometry_noise_model('pioneer'))
+    v = scan_motion(prev, cur, u, u_cov, MOUNT, accept=16.27)   # chi2(3, 0.999)
+    assert v is not None
+    assert np.allclose(v[:2], truth[:2], atol=0.003)   # 0.5 cm noise on ~300 returns
+    assert abs(v[2] - truth[2]) < math.radians(0.1)
+    # The same ICP motion lies outside a much tighter odometry region: not used.
+    assert scan_motion(prev, cur, u, u_cov * 1e-4, MOUNT, accept=16.27) is None
+    # Too few returns (an empty scan): no motion.
+    assert scan_motion(prev, cur[:5], u, u_cov, MOUNT, accept=16.27) is None
+
+
+def test_scan_points_keeps_valid_returns_below_the_range_limit():
+    r = np.array([1.0, np.inf, np.nan, -np.inf, 0.01, 25.0, 2.0])
+    pts = scan_points(r, 0.0, 0.5, 0.05, 20.0)
+    assert pts.shape == (2, 2)
+    assert np.allclose(pts[0], [1.0, 0.0]) and np.allclose(pts[1], 2.0 * np.array(
+        [math.cos(3.0), math.sin(3.0)]))
+
+
+def _drive(scan_matching, scans=True):
+    """Drive through the room with drifting odometry; return the front end and the truth."""
+    rng = np.random.default_rng(7)
+    fe = SlamFrontend(SlamParams(odometry=odometry_noise_model('pioneer')), MOUNT,
+                      FrontendParams(scan_matching=scan_matching))
+    base, odo, truth = np.array([-2.5, -1.5, 0.2]), np.array([-2.5, -1.5, 0.2]), []
+    t0 = 10 ** 9
+    for k in range(40):
+        t = t0 + k * 200_000_000
+        if k:
+            step = np.array([0.08, 0.0, 0.015 if k < 20 else -0.02])   # stays in the room
+            base = compose(base, step)
+            # The odometry turns 15 % too much (an uncalibrated wheel base).
+            odo = compose(odo, step * np.array([1.0, 1.0, 1.15]) + [0.0, 0.0, 0.004])
+        truth.append(base)
+        fe.add_odometry(t, odo)
+        fe.add_features(Corners(t, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0),
+                                np.zeros(0), np.zeros(0),
+                                scan=_geometry(_cast(compose(base, MOUNT), rng))
+                                if scans else None))
+    fe.flush()
+    return fe, np.array(truth)
+
+
+def test_frontend_predicts_with_the_scan_matched_motion():
+    """The ICP motion replaces the drifting odometry; its U is the scan-matching model."""
+    fe, truth = _drive(True)
+    assert fe.motions == {'odometry': 1, 'scan_matching': 39}   # the first step has no pair
+    # Heading: the odometry turns 15 % too much and drifts (8 deg off after 40 steps).
+    start = truth[0]
+    est = relative(start, fe.slam.pose)
+    ref = relative(start, truth[-1])
+    assert abs(est[2] - ref[2]) < math.radians(0.2)
+    assert np.hypot(*(est[:2] - ref[:2])) < 0.02
+    fo, _ = _drive(False)
+    assert fo.motions == {'odometry': 40, 'scan_matching': 0}
+    odo = relative(start, fo.slam.pose)
+    assert abs(odo[2] - ref[2]) > math.radians(7.5)
+    # The scan-matched motion's U (a third of the heading gains' variance) is what was
+    # predicted with: the heading std is below the odometry run's.
+    assert fe.slam.pose_covariance[2, 2] < 0.5 * fo.slam.pose_covariance[2, 2]
+
+
+def test_frontend_without_scans_falls_back_to_the_odometry():
+    fe, _ = _drive(True, scans=False)
+    fo, _ = _drive(False)
+    assert fe.motions == {'odometry': 40, 'scan_matching': 0}
+    np.testing.assert_array_equal(fe.slam.pose, fo.slam.pose)
+
+
+def test_scan_matching_parameters_are_validated():
+    with pytest.raises(ValueError, match='scan_matching_noise'):
+        FrontendParams(scan_matching_noise='k_d=-1')
+    with pytest.raises(ValueError, match='scan_matching_accept'):
+        FrontendParams(scan_matching_accept=1.0)
+    with pytest.raises(ValueError, match='scan_matching_max_range'):
+        FrontendParams(scan_matching_max_range=0.0)
+    with pytest.raises(ValueError, match='scan_matching'):
+        FrontendParams(scan_matching=1)
+    with pytest.raises(ValueError, match='visibility'):
+        run_slam(None, frontend=FrontendParams(scan_matching=True), visibility=False)

@@ -116,6 +116,9 @@ class SlamRun:
     #: (S,) whether the front end bridged an odometry jump before the step (``'jump'``:
     #: the odometry frame broke, e.g. two runs in one log).
     bridged: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: Steps predicted with each motion (:attr:`~landmark_nav.slam.frontend.SlamFrontend.
+    #: motions`: ``odometry``, ``scan_matching``).
+    motions: Dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -197,7 +200,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         descriptors: Pass the corners' bisector / opening to the association (overrides
             ``frontend.descriptors``).
         callback: Called as ``callback(scan index, filter, update result)`` after each scan.
-        frontend: Front-end parameters (odometry checks).
+        frontend: Front-end parameters (odometry checks, scan-matched motion).
         landmarks: ``'corners'``, ``'lines'`` or ``'both'``
             (:func:`landmark_nav.slam.features.extract_scan_features`).
         line_params: Line extractor parameters (default: ``LineParams`` with the corner
@@ -210,8 +213,13 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
 
     Returns:
         The per-scan record.
+
+    Raises:
+        ValueError: ``frontend.scan_matching`` without ``visibility`` (it needs the scan).
     """
     check_landmarks(landmarks)
+    if frontend is not None and frontend.scan_matching and not visibility:
+        raise ValueError('run_slam: frontend.scan_matching needs the scans (visibility=True)')
     corner_params = corner_params or CornerParams()
     if line_params is None and landmarks != 'corners':
         line_params = LineParams(sigma_r=corner_params.sigma_r,
@@ -299,7 +307,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    events=events, scan_index=np.array(index, dtype=np.int64),
                    line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
                    line_ends=slam.line_ends[ln], final_map=slam.export_map(),
-                   obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool))
+                   obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool),
+                   motions=dict(fe.motions))
 
 
 def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
@@ -630,7 +639,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
                  rpe_delta: float = RPE_DISTANCE_M, plots: bool = True,
                  landmarks: str = 'corners', slam_map=None, save_map_to=None,
                  map_pose_covariance: Optional[np.ndarray] = None,
-                 mode: Optional[str] = None) -> dict:
+                 mode: Optional[str] = None,
+                 frontend: Optional[FrontendParams] = None) -> dict:
     """Run EKF-SLAM over a bag and score it against its reference.
 
     Any bag with ``/scan``, ``/odom`` and a reference (``/ground_truth/odom`` or
@@ -666,6 +676,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         save_map_to: Write the final map there (:func:`landmark_nav.slam.slam_map.save_map`).
         map_pose_covariance: (3, 3) covariance of the start pose on ``slam_map``.
         mode: ``'slam'`` or ``'localization'`` (on ``slam_map``); None: ``params.mode``.
+        frontend: Front-end parameters (e.g. ``scan_matching``; default
+            :class:`FrontendParams`).
 
     Returns:
         The figures (see ``slam.json``).
@@ -706,7 +718,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         if slam_map is not None and not isinstance(slam_map, SlamMap):
             slam_map = load_map(slam_map)
         run = run_slam(scenario, prm, corner_params, callback=callback, landmarks=landmarks,
-                       slam_map=slam_map, map_pose_covariance=map_pose_covariance)
+                       slam_map=slam_map, map_pose_covariance=map_pose_covariance,
+                       frontend=frontend)
     finally:
         if bar is not None:
             bar.close()
@@ -717,6 +730,7 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
               'duration_s': float(duration), 'resets': int(run.resets),
               'reset_reasons': dict(run.reset_reasons),
               'frontend_events': dict(run.events),
+              'motions': dict(run.motions),
               'odometry_noise': {**asdict(prm.odometry), 'source': noise_source},
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
@@ -804,6 +818,10 @@ def format_summary(r: dict) -> str:
              f'reference {r["reference"] or "none"}, {r["resets"]} filter resets'
              + (f' ({why})' if why else '')
              + (f'; inputs not used as they came: {events}' if events else '')]
+    motions = r.get('motions', {})
+    if motions.get('scan_matching'):
+        lines.append(f'motion: {motions["scan_matching"]} steps scan-matched, '
+                     f'{motions.get("odometry", 0)} odometry')
     lines += [f'note: {n}' for n in r.get('notes', [])]
     if r['reference'] is None:
         return '\n'.join(lines + _lines_without_reference(r))

@@ -61,6 +61,12 @@ Odometry noise: the ``odometry.*`` parameters (defaults: the ``pioneer`` model o
 :mod:`landmark_nav.slam.frontend`), or ``odometry.model`` = ``pioneer``, ``simulator`` or
 the gains ``'k_d=.. k_theta=.. k_dtheta=..'`` an imported bag states.
 
+Scan-matched motion: ``scan_matching: true`` (needs ``visibility``, i.e. the ``scan``
+subscription) predicts each step with the point-to-line ICP motion of the scan against
+the previous step's scan where it agrees with the odometry (``scan_matching_noise``,
+``scan_matching_max_range``, ``scan_matching_accept``; the front end's
+``FrontendParams``, as ``landmark_nav evaluate --scan-matching`` offline).
+
 Bad input is reported with a warning throttled per kind of problem and counted on
 ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry that is not
 finite, repeated, older than the last sample or a jump (front-end events); corners with NaN
@@ -177,6 +183,15 @@ FRONTEND_PARAMETERS = {
     'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
                        (1e-3, 1e6), None),
     'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
+    'scan_matching': ("predict with the scan's point-to-line ICP motion against the previous "
+                      'scan where it agrees with the odometry (needs scan, visibility: true)',
+                      None, None),
+    'scan_matching_noise': ("U of a scan-matched motion: 'k_d=.. k_theta=.. k_dtheta=..', "
+                            'pioneer or simulator', None, None),
+    'scan_matching_max_range': ('returns at or beyond this are not matched [m]',
+                                (0.1, 1000.0), None),
+    'scan_matching_accept': ("confidence of the odometry's region a scan-matched motion must "
+                             'lie in (chi-square, 3 dof)', (1e-6, 1.0 - 1e-12), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -241,6 +256,9 @@ class EkfSlamNode(Node):
                                  None, list(LANDMARK_TYPES))
         self.visibility = declare(self, 'visibility', True, 'visibility-aware pruning: a '
                                   'landmark the scan sees through is missed (needs scan)')
+        if self.frontend_params.scan_matching and not self.visibility:
+            raise ParameterError('parameter scan_matching needs the scan geometry: set '
+                                 'visibility: true')
         self.laser_sigma_range = declare(self, 'laser_sigma_range', 0.01, "the laser's stated "
                                          '1-sigma range noise [m] (visibility tolerance)',
                                          (0.0, 10.0))

@@ -71,6 +71,23 @@ with the scan's geometry (visibility-aware pruning, :mod:`.visibility`) to
 management runs there). With a saved map (``slam_map``, e.g. ``mode: localization``) the
 filter starts on it at the first odometry pose (:meth:`EkfSlam.load_map`).
 
+Scan-matched motion (``FrontendParams.scan_matching``, off by default)
+----------------------------------------------------------------------
+With it on, each step's increment is the base's motion between the previous step's scan and
+this one by point-to-line ICP (Censi, ICRA 2008; :func:`.scan_matching.scan_motion`: returns
+within ``scan_matching_max_range``, pairs within 50, 30, then 15 cm, the odometry increment
+as the initial guess) when that motion lies inside the odometry's own
+``scan_matching_accept`` confidence region (chi-square on 3 degrees of freedom under ``U``
+plus any bridged variance); it is predicted with ``U`` of ``scan_matching_noise`` (default
+``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer`` position gain and 0.6 of its
+heading gains, chosen on the Carmen logs' first drift seed, README). Otherwise (the first
+step, no scan geometry in the set, ICP without enough pairs, or a motion the odometry rules
+out: ICP sliding along a corridor or locking onto the wrong structure) the odometry
+increment and its ``U`` are used, as without the option. :attr:`SlamFrontend.motions` counts
+the steps of each kind. The same scans then give the landmark observations: the scan-matched
+motion and the update share their data, so the filter's pose is somewhat overconfident (the
+Carmen figures in the README measure how much). The ICP runs on the raw scan (no de-skew).
+
 Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
 --------------------------------------------------------------------------------------
 The filter's ``U`` (:func:`.ekf_slam.odometry_noise`) is distance- and rotation-driven:
@@ -100,9 +117,11 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from landmark_nav.geometry import compose, interpolate_pose, inverse, relative
 import numpy as np
 
+from .consistency import chi2_gate
 from .ekf_slam import EkfSlam, odometry_noise, OdometryNoise, SlamParams, UpdateResult
 from .line_landmarks import lines_to_observations
 from .observations import corner_descriptors, corners_to_observations
+from .scan_matching import scan_motion, scan_points
 from .slam_map import SlamMap
 from .visibility import ScanGeometry
 
@@ -117,6 +136,8 @@ ODOMETRY_EVENTS = ('accepted', 'invalid', 'repeated', 'conflicting', 'backward',
                    'jump')
 #: Feature-set events counted by :attr:`SlamFrontend.events`.
 FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held')
+#: What a step predicted with (:attr:`SlamFrontend.motions`, :attr:`Step.motion`).
+MOTION_SOURCES = ('odometry', 'scan_matching')
 _GAIN = re.compile(r'^(k_d|k_theta|k_dtheta)=(\S+)$')
 _GAIN_FIELD = {'k_d': 'sigma_xy_per_sqrt_m', 'k_theta': 'sigma_yaw_per_sqrt_m',
                'k_dtheta': 'sigma_yaw_per_sqrt_rad'}
@@ -170,6 +191,15 @@ class FrontendParams:
         max_backward_s: A stamp further back than this restarts the front end [s].
         buffer_s: Odometry kept behind the newest sample [s] (bounded memory when no
             feature sets come; a set older than the buffer is dropped as out of order).
+        scan_matching: Predict with the scan's motion against the previous step's scan
+            (point-to-line ICP, :func:`.scan_matching.scan_motion`) instead of the
+            odometry increment when the two agree (module docstring); needs each set's
+            scan geometry (``Corners.scan``).
+        scan_matching_noise: ``U`` of a scan-matched motion, as
+            :func:`odometry_noise_model` reads it.
+        scan_matching_max_range: Returns at or beyond this are not matched [m].
+        scan_matching_accept: Confidence of the odometry's region the scan-matched motion
+            must lie in (chi-square, 3 degrees of freedom).
     """
 
     deskew: bool = True
@@ -180,18 +210,33 @@ class FrontendParams:
     min_step_s: float = 0.02
     max_backward_s: float = 1.0
     buffer_s: float = 60.0
+    scan_matching: bool = False
+    scan_matching_noise: str = 'k_d=0.05 k_theta=0.03 k_dtheta=0.06'
+    scan_matching_max_range: float = 20.0
+    scan_matching_accept: float = 0.999
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
         for name in ('max_speed', 'max_turn_rate', 'jump_sigmas', 'min_step_s',
-                     'max_backward_s', 'buffer_s'):
+                     'max_backward_s', 'buffer_s', 'scan_matching_max_range'):
             v = getattr(self, name)
             if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
                     or v <= 0.0):
                 raise ValueError(f'FrontendParams.{name} must be a finite number > 0, got {v!r}')
-        for name in ('deskew', 'descriptors'):
+        for name in ('deskew', 'descriptors', 'scan_matching'):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f'FrontendParams.{name} must be a bool')
+        a = self.scan_matching_accept
+        if not isinstance(a, (int, float)) or isinstance(a, bool) or not 0.0 < a < 1.0:
+            raise ValueError('FrontendParams.scan_matching_accept must be a probability in '
+                             f'(0, 1), got {a!r}')
+        if not isinstance(self.scan_matching_noise, str):
+            raise ValueError('FrontendParams.scan_matching_noise must be a string, got '
+                             f'{self.scan_matching_noise!r}')
+        try:
+            odometry_noise_model(self.scan_matching_noise)
+        except ValueError as err:
+            raise ValueError(f'FrontendParams.scan_matching_noise: {err}') from None
 
 
 def line_beam_times(lines: Sequence, time_increment: float) -> np.ndarray:
@@ -311,6 +356,8 @@ class Step:
             already past the earlier ones; use ``pose`` / ``covariance``, or the
             ``on_step`` callback of :class:`SlamFrontend` for the full state).
         tag: The ``tag`` given to :meth:`SlamFrontend.add_features`.
+        motion: What ``increment`` is: ``odometry`` or ``scan_matching``
+            (:data:`MOTION_SOURCES`).
     """
 
     stamp_ns: int
@@ -322,6 +369,7 @@ class Step:
     covariance: np.ndarray
     slam: EkfSlam
     tag: object = None
+    motion: str = 'odometry'
 
 
 @dataclass
@@ -384,6 +432,10 @@ class SlamFrontend:
         self.on_event = on_event
         self.on_step = on_step
         self.events: Dict[str, int] = dict.fromkeys(ODOMETRY_EVENTS + FEATURE_EVENTS, 0)
+        #: Steps predicted with each motion (:data:`MOTION_SOURCES`).
+        self.motions: Dict[str, int] = dict.fromkeys(MOTION_SOURCES, 0)
+        self._scan_noise = odometry_noise_model(self.frontend.scan_matching_noise)
+        self._scan_accept = chi2_gate(3, self.frontend.scan_matching_accept)
         self.restarts = 0
         self._seq = 0
         self.clear()
@@ -399,6 +451,7 @@ class SlamFrontend:
         self.last_step: Optional[Tuple[int, np.ndarray]] = None
         self._stepped = False  # a set was processed since the start
         self._extra_since = np.zeros(3)  # bridged variance already predicted with
+        self._scan_points: Optional[np.ndarray] = None  # the last step's scan (matching)
 
     @property
     def pending(self) -> List[Tuple[int, object]]:
@@ -602,11 +655,15 @@ class SlamFrontend:
         for k in range(bisect.bisect_right(b.t, prev_t), bisect.bisect_right(b.t, t)):
             extra += b.extra[k]
         u = relative(prev_odo, odo)  # eq. 13
-        if np.any(extra > 0.0):
-            self.slam.predict(u, odometry_noise(u, self.params.odometry) + np.diag(extra))
-        else:
-            self.slam.predict(u)
         c = p.corners
+        u_cov = None
+        if np.any(extra > 0.0):
+            u_cov = odometry_noise(u, self.params.odometry) + np.diag(extra)
+        source = 'odometry'
+        if self.frontend.scan_matching:
+            u, u_cov, source = self._scan_matched(c.scan, u, u_cov)
+        self.motions[source] += 1
+        self.slam.predict(u, u_cov)
         motion = lmotion = None
         if self.frontend.deskew:
             t_rel = (t - self.t0) * 1e-9
@@ -629,11 +686,32 @@ class SlamFrontend:
         self._event('processed')
         step = Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
                     pose=self.slam.pose, covariance=self.slam.pose_covariance, slam=self.slam,
-                    tag=p.tag)
+                    tag=p.tag, motion=source)
         if self.on_step is not None:
             self.on_step(step)
         return step
 
+    def _scan_matched(self, scan: Optional[ScanGeometry], u: np.ndarray,
+                      u_cov: Optional[np.ndarray]) -> Tuple[np.ndarray, Optional[np.ndarray],
+                                                            str]:
+        """Return ``(increment, U, source)``: the scan-matched motion when usable."""
+        previous = self._scan_points
+        self._scan_points = None
+        if scan is None:
+            return u, u_cov, 'odometry'
+        fp = self.frontend
+        self._scan_points = scan_points(scan.ranges, scan.angle_min, scan.angle_increment,
+                                        scan.range_min,
+                                        min(scan.range_max, fp.scan_matching_max_range))
+        if previous is None:
+            return u, u_cov, 'odometry'
+        cov = odometry_noise(u, self.params.odometry) if u_cov is None else u_cov
+        v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept)
+        if v is None:
+            return u, u_cov, 'odometry'
+        return v, odometry_noise(v, self._scan_noise), 'scan_matching'
 
-__all__ = ['Corners', 'FEATURE_EVENTS', 'FrontendParams', 'line_beam_times', 'ODOMETRY_EVENTS',
-           'ODOMETRY_NOISE_MODELS', 'odometry_noise_model', 'SlamFrontend', 'Step']
+
+__all__ = ['Corners', 'FEATURE_EVENTS', 'FrontendParams', 'line_beam_times', 'MOTION_SOURCES',
+           'ODOMETRY_EVENTS', 'ODOMETRY_NOISE_MODELS', 'odometry_noise_model', 'SlamFrontend',
+           'Step']

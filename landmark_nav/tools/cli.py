@@ -150,6 +150,7 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
+    from landmark_nav.slam.frontend import FrontendParams
     import numpy as np
     progress = not args.no_progress and sys.stderr.isatty()
     if args.mode == 'localization' and args.map is None:
@@ -163,7 +164,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta, landmarks=args.landmarks,
                           slam_map=args.map, save_map_to=args.save_map,
-                          map_pose_covariance=pose_cov, mode=args.mode)
+                          map_pose_covariance=pose_cov, mode=args.mode,
+                          frontend=FrontendParams(scan_matching=args.scan_matching))
     print(format_summary(result))
     if result.get('map_file'):
         print(f'map written: {result["map_file"]}')
@@ -410,6 +412,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='1-sigma of that start pose [m m rad] (default 0 0 0)')
     p.add_argument('--save-map', default=None, metavar='FILE.npz',
                    help='write the final map (landmark_nav.slam.slam_map format)')
+    p.add_argument('--scan-matching', action='store_true',
+                   help="predict with the scans' point-to-line ICP motion where it agrees "
+                        'with the odometry (the node parameter scan_matching)')
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')

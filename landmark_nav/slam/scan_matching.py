@@ -1,8 +1,10 @@
-"""Point-to-line ICP of two laser scans (an evaluation tool, not a filter input).
+"""Point-to-line ICP of two laser scans, and the scan-matched motion of the SLAM front end.
 
-Used by the benchmarks to refine the relative pose of two scans: the reference poses'
-error between consecutive scans (``benchmarks/line_repeatability_carmen.py``) and how far
-dead reckoning by scan matching of consecutive scans gets on a real log
+Used by the SLAM front end (``FrontendParams.scan_matching``: each odometry increment
+replaced by the scan's motion against the previous scan when the two agree,
+:func:`scan_motion`) and by the benchmarks: the reference poses' error between
+consecutive scans (``benchmarks/line_repeatability_carmen.py``) and how far dead
+reckoning by scan matching of consecutive scans gets on a real log
 (``benchmarks/scan_matching_carmen.py``).
 
 Method (Censi's point-to-line metric, solved by Gauss-Newton on the linearised rotation;
@@ -17,8 +19,14 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence
 
+from landmark_nav.geometry import compose, inverse, wrap_angle
 import numpy as np
 from scipy.spatial import cKDTree
+
+#: Pairing distance per ICP stage of :func:`scan_motion` [m] (coarse to fine).
+SCAN_MOTION_GATES = (0.5, 0.3, 0.15)
+#: Gauss-Newton steps per stage of :func:`scan_motion`.
+SCAN_MOTION_ITERATIONS = 10
 
 
 @dataclass(frozen=True)
@@ -96,3 +104,62 @@ def point_to_line_icp(source: np.ndarray, target: np.ndarray,
     except np.linalg.LinAlgError:
         cov = np.full((3, 3), np.inf)
     return IcpResult(t, cov, int(r.size), math.sqrt(s2))
+
+
+def scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
+                range_min: float, range_max: float) -> np.ndarray:
+    """Return a scan's valid returns below ``range_max`` as (N, 2) laser-frame points.
+
+    Args:
+        ranges: (B,) ranges [m] (REP 117: +-inf and NaN are not returns).
+        angle_min: Angle of beam 0 [rad].
+        angle_increment: Beam spacing [rad].
+        range_min: Smallest valid range [m].
+        range_max: Ranges at or beyond this are not used [m].
+    """
+    r = np.asarray(ranges, dtype=float).reshape(-1)
+    a = angle_min + angle_increment * np.arange(r.size)
+    m = np.isfinite(r) & (r > range_min) & (r < range_max)
+    return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
+
+
+def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
+                u_cov: np.ndarray, mount: Sequence[float],
+                accept: float) -> Optional[np.ndarray]:
+    """Return the base's motion between two scans by ICP, or None when it is not usable.
+
+    The current scan's points are matched onto the previous scan's
+    (:func:`point_to_line_icp`, gates :data:`SCAN_MOTION_GATES`), the odometry increment
+    moved into the laser frame (``M^-1 u M``, ``M`` the mount) as the initial guess; the
+    result is moved back to the base (``M v M^-1``). It is used only when it agrees with
+    the odometry: its difference ``d`` from ``u`` must satisfy ``d^T U^-1 d <= accept``
+    (a chi-square bound on 3 degrees of freedom: the ICP motion lies inside the odometry's
+    own confidence region), which rejects ICP solutions that slid along a corridor or
+    locked onto the wrong structure.
+
+    Args:
+        previous: (N, 2) the previous scan's points (laser frame) [m].
+        current: (M, 2) this scan's points [m].
+        u: (3,) the odometry increment between the two scans (base frame).
+        u_cov: (3, 3) its covariance ``U`` (plus any bridged variance).
+        mount: (3,) laser pose in base_link.
+        accept: The chi-square bound.
+
+    Returns:
+        (3,) the base's motion, or None (ICP failed or disagrees with the odometry).
+    """
+    mount = np.asarray(mount, dtype=float)
+    unmount = inverse(mount)
+    u = np.asarray(u, dtype=float)
+    fit = point_to_line_icp(current, previous, compose(compose(unmount, u), mount),
+                            gates=SCAN_MOTION_GATES, iterations=SCAN_MOTION_ITERATIONS)
+    if fit is None or not np.all(np.isfinite(fit.pose)):
+        return None
+    v = compose(compose(mount, fit.pose), unmount)
+    d = v - u
+    d[2] = wrap_angle(d[2])
+    try:
+        m2 = float(d @ np.linalg.solve(u_cov, d))
+    except np.linalg.LinAlgError:
+        return None
+    return v if m2 <= accept else None
