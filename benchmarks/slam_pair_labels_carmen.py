@@ -8,8 +8,9 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 The log is imported as ``landmark_nav import`` does (``--drift none``: the reference's own
 increments as odometry) and run with corners and lines through
 :func:`landmark_nav.evaluation.slam.run_slam`; ``--filter-noise`` gives the filter that
-odometry noise model instead of the bag's, ``--set`` any ``SlamParams`` field (a Python
-literal, e.g. ``--set jacobians="'observability_gain'" --set spurious_limit=0.05``).
+odometry noise model instead of the bag's, ``--set`` any ``SlamParams`` or
+``FrontendParams`` field (a Python literal, e.g. ``--set jacobians="'observability_gain'"
+--set spurious_limit=0.05 --set scan_matching=True``).
 
 Each observation is put in the map with the reference pose of its scan. A landmark's
 reference is its confirming observation put there the same way; a later pair is *wrong*
@@ -35,7 +36,9 @@ import sys
 import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_node_cpu import split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.slam import (bag_odometry_noise, run_slam,  # noqa: E402
                                           scan_features)
@@ -57,7 +60,7 @@ LINE_OFF_DEG = 3.0
 LINE_OFF_M = 0.20
 
 
-def label_run(bag: Path, params: SlamParams) -> dict:
+def label_run(bag: Path, params: SlamParams, frontend=None) -> dict:
     """Run the filter on the bag; return per-step rows and the labelled line pairs."""
     sc = load_bag(bag, require_reference=False)
     cp = CornerParams(sigma_r=float(sc.laser.sigma_range),
@@ -107,7 +110,7 @@ def label_run(bag: Path, params: SlamParams) -> dict:
                     right += 1
         rows.append((right, wrong))
 
-    run = run_slam(sc, params, cp, callback=callback, landmarks='both')
+    run = run_slam(sc, params, cp, callback=callback, landmarks='both', frontend=frontend)
     return {'run': run, 'rows': rows, 'line_z': np.array(line_z)}
 
 
@@ -136,7 +139,8 @@ def main() -> int:
                    drift=args.drift)
         noise = (odometry_noise_model(args.filter_noise) if args.filter_noise else
                  bag_odometry_noise(load_bag(bag, require_reference=False))[0])
-        out = label_run(bag, SlamParams(odometry=noise, **extra))
+        extra, frontend = split_frontend(extra)
+        out = label_run(bag, SlamParams(odometry=noise, **extra), frontend)
     run, rows, line_z = out['run'], out['rows'], out['line_z']
     err = run.poses - run.truth
     err[:, 2] = wrap_angle(err[:, 2])

@@ -15,8 +15,9 @@ corner landmarks, the share within 10 cm of a wall cell (issue 14 asks >= 0.9), 
 wall / unknown cells (asks 0), the share of scan end points near a wall with the filter's
 and with the odometry's poses, and the count per category (``on_wall``, ``moved``,
 ``few_views``, ``off_grid``). ``--establish-hits`` sets ``SlamParams.establish_hits``;
-``--set NAME=VALUE`` (repeatable) any other field of ``SlamParams`` (the value read as a
-Python literal, e.g. ``--set jacobians="'observability_gain'" --set spurious_limit=0.05``).
+``--set NAME=VALUE`` (repeatable) any other field of ``SlamParams`` or ``FrontendParams``
+(the value read as a Python literal, e.g. ``--set jacobians="'observability_gain'" --set
+spurious_limit=0.05 --set scan_matching=True``).
 A log whose odometry the front end had to bridge (``robotdata5``: two runs) gets one more
 line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_segments`:
 each part aligned on its own).
@@ -30,7 +31,9 @@ import sys
 import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_node_cpu import split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnosis,  # noqa: E402
                                                      load_occupancy_grid, run_segments)
@@ -56,6 +59,7 @@ def main() -> int:
     for item in args.set:
         key, _, value = item.partition('=')
         extra[key] = ast.literal_eval(value)
+    extra, frontend = split_frontend(extra)
     wean = SHARED_DATA / 'wean'
     if not wean.is_dir():
         print(f'missing {wean}', file=sys.stderr)
@@ -72,7 +76,7 @@ def main() -> int:
                              establish_hits=args.establish_hits, **extra)
             run = run_slam(sc, prm, CornerParams(sigma_r=sc.laser.sigma_range,
                                                  sigma_phi=sc.laser.sigma_angle),
-                           landmarks=args.landmarks)
+                           landmarks=args.landmarks, frontend=frontend)
             parts = run_segments(run)
             named = [(name, run)] + ([(f'{name}#{k}', p) for k, p in enumerate(parts)]
                                      if len(parts) > 1 else [])

@@ -107,8 +107,11 @@ def test_scan_motion_is_the_base_motion_through_the_mount():
     assert v is not None
     assert np.allclose(v[:2], truth[:2], atol=0.003)   # 0.5 cm noise on ~300 returns
     assert abs(v[2] - truth[2]) < math.radians(0.1)
-    # The same ICP motion lies outside a much tighter odometry region: not used.
+    # The same ICP motion lies outside a much tighter odometry region: not used; unless its
+    # own covariance V (the difference of two estimates has U + V) covers the difference.
     assert scan_motion(prev, cur, u, u_cov * 1e-4, MOUNT, accept=16.27) is None
+    v2 = scan_motion(prev, cur, u, u_cov * 1e-4, MOUNT, 16.27, lambda m: u_cov)
+    assert v2 is not None and np.allclose(v2, v)
     # Too few returns (an empty scan): no motion.
     assert scan_motion(prev, cur[:5], u, u_cov, MOUNT, accept=16.27) is None
 

@@ -76,17 +76,19 @@ Scan-matched motion (``FrontendParams.scan_matching``, off by default)
 With it on, each step's increment is the base's motion between the previous step's scan and
 this one by point-to-line ICP (Censi, ICRA 2008; :func:`.scan_matching.scan_motion`: returns
 within ``scan_matching_max_range``, pairs within 50, 30, then 15 cm, the odometry increment
-as the initial guess) when that motion lies inside the odometry's own
-``scan_matching_accept`` confidence region (chi-square on 3 degrees of freedom under ``U``
-plus any bridged variance); it is predicted with ``U`` of ``scan_matching_noise`` (default
-``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer`` position gain and 0.6 of its
-heading gains, chosen on the Carmen logs' first drift seed, README). Otherwise (the first
-step, no scan geometry in the set, ICP without enough pairs, or a motion the odometry rules
-out: ICP sliding along a corridor or locking onto the wrong structure) the odometry
-increment and its ``U`` are used, as without the option. :attr:`SlamFrontend.motions` counts
-the steps of each kind. The same scans then give the landmark observations: the scan-matched
-motion and the update share their data, so the filter's pose is somewhat overconfident (the
-Carmen figures in the README measure how much). The ICP runs on the raw scan (no de-skew).
+as the initial guess) when that motion agrees with the odometry's: their difference within
+the ``scan_matching_accept`` confidence region of two independent estimates of the same
+motion (chi-square on 3 degrees of freedom under the odometry's ``U``, plus any bridged
+variance, plus the scan-matched motion's own ``U``); it is predicted with ``U`` of
+``scan_matching_noise`` (default ``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer``
+position gain and 0.6 of its heading gains, chosen on the Carmen logs' first drift seed,
+README). Otherwise (the first step, no scan geometry in the set, ICP without enough pairs,
+or a motion the odometry rules out: ICP sliding along a corridor or locking onto the wrong
+structure) the odometry increment and its ``U`` are used, as without the option.
+:attr:`SlamFrontend.motions` counts the steps of each kind. The same scans then give the
+landmark observations: the scan-matched motion and the update share their data, so the
+filter's pose is somewhat overconfident (the Carmen figures in the README measure how much).
+The ICP runs on the raw scan (no de-skew).
 
 Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
 --------------------------------------------------------------------------------------
@@ -706,7 +708,8 @@ class SlamFrontend:
         if previous is None:
             return u, u_cov, 'odometry'
         cov = odometry_noise(u, self.params.odometry) if u_cov is None else u_cov
-        v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept)
+        v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept,
+                        lambda m: odometry_noise(m, self._scan_noise))
         if v is None:
             return u, u_cov, 'odometry'
         return v, odometry_noise(v, self._scan_noise), 'scan_matching'

@@ -17,7 +17,7 @@ the sum of squared residuals; the gate may shrink over stages (coarse to fine).
 
 from dataclasses import dataclass
 import math
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 from landmark_nav.geometry import compose, inverse, wrap_angle
 import numpy as np
@@ -124,18 +124,19 @@ def scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
 
 
 def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
-                u_cov: np.ndarray, mount: Sequence[float],
-                accept: float) -> Optional[np.ndarray]:
+                u_cov: np.ndarray, mount: Sequence[float], accept: float,
+                v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None
+                ) -> Optional[np.ndarray]:
     """Return the base's motion between two scans by ICP, or None when it is not usable.
 
     The current scan's points are matched onto the previous scan's
     (:func:`point_to_line_icp`, gates :data:`SCAN_MOTION_GATES`), the odometry increment
     moved into the laser frame (``M^-1 u M``, ``M`` the mount) as the initial guess; the
     result is moved back to the base (``M v M^-1``). It is used only when it agrees with
-    the odometry: its difference ``d`` from ``u`` must satisfy ``d^T U^-1 d <= accept``
-    (a chi-square bound on 3 degrees of freedom: the ICP motion lies inside the odometry's
-    own confidence region), which rejects ICP solutions that slid along a corridor or
-    locked onto the wrong structure.
+    the odometry: its difference ``d`` from ``u``, two estimates of the same motion, must
+    satisfy ``d^T (U + V)^-1 d <= accept`` (a chi-square bound on 3 degrees of freedom;
+    ``V`` the scan-matched motion's own covariance), which rejects ICP solutions that slid
+    along a corridor or locked onto the wrong structure.
 
     Args:
         previous: (N, 2) the previous scan's points (laser frame) [m].
@@ -144,6 +145,8 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
         u_cov: (3, 3) its covariance ``U`` (plus any bridged variance).
         mount: (3,) laser pose in base_link.
         accept: The chi-square bound.
+        v_cov: ``V`` as a function of the scan-matched motion (None: zero, the odometry's
+            region alone).
 
     Returns:
         (3,) the base's motion, or None (ICP failed or disagrees with the odometry).
@@ -158,8 +161,9 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     v = compose(compose(mount, fit.pose), unmount)
     d = v - u
     d[2] = wrap_angle(d[2])
+    cov = np.asarray(u_cov, dtype=float) + (0.0 if v_cov is None else v_cov(v))
     try:
-        m2 = float(d @ np.linalg.solve(u_cov, d))
+        m2 = float(d @ np.linalg.solve(cov, d))
     except np.linalg.LinAlgError:
         return None
     return v if m2 <= accept else None
