@@ -4,6 +4,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/slam_pair_labels_carmen.py LOG [--seed 0]
         [--drift none] [--filter-noise pioneer] [--set NAME=VALUE ...] [--jump DEG]
+        [--step-error M]
 
 The log is imported as ``landmark_nav import`` does (``--drift none``: the reference's own
 increments as odometry) and run with corners and lines through
@@ -23,9 +24,10 @@ several degrees (the angle error over its stated std is printed to tell).
 Printed: the run's share of steps with the reference inside the 95 % position ellipse,
 its ATE (unaligned) and the pair counts; the line pairs' normalised angle error (median,
 share above 3; under 1 and near 0 for honest covariances); then one row per step with a
-wrong pair or a heading-error change above ``--jump`` degrees (step, position and heading
-error, the heading std, pairs right / wrong, and each wrong pair: landmark id, its offset
-and its d2).
+wrong pair, a heading-error change above ``--jump`` degrees or a step whose motion is off
+the reference's by more than ``--step-error`` metres (step, position and heading error, the
+heading std, the step's motion error, the largest position std, pairs right / wrong, and
+each wrong pair: landmark id, its offset and its d2).
 """
 
 import argparse
@@ -42,7 +44,7 @@ from bench_node_cpu import split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.slam import (bag_odometry_noise, run_slam,  # noqa: E402
                                           scan_features)
-from landmark_nav.geometry import transform_points, wrap_angle  # noqa: E402
+from landmark_nav.geometry import relative, transform_points, wrap_angle  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.laser.lines import LineParams  # noqa: E402
@@ -124,6 +126,9 @@ def main() -> int:
     ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
     ap.add_argument('--jump', type=float, default=1.5,
                     help='also print steps whose heading error changes by more [deg]')
+    ap.add_argument('--step-error', type=float, default=math.inf,
+                    help='also print steps whose motion differs from the reference motion '
+                         'by more [m] (the RPE jumps)')
     args = ap.parse_args()
     carmen = SHARED_DATA / 'carmen'
     if not carmen.is_dir():
@@ -157,11 +162,16 @@ def main() -> int:
         print(f'line pairs {line_z.size}: angle error / stated std median '
               f'{np.median(line_z):.2f}, above 3 on {np.mean(line_z > 3):.3f}')
     psi = np.degrees(err[:, 2])
+    p, t = run.poses, run.truth
     for k, (ok, bad) in enumerate(rows[:len(err)]):
         change = psi[k] - (psi[k - 1] if k else 0.0)
-        if bad or abs(change) > args.jump:
+        step = (math.hypot(*(relative(p[k - 1], p[k])[:2] - relative(t[k - 1], t[k])[:2]))
+                if k else 0.0)
+        if bad or abs(change) > args.jump or step > args.step_error:
             print(f'{k:5d} pos {math.hypot(*err[k, :2]):6.2f} m psi {psi[k]:7.2f} '
                   f'({change:+6.2f}) sd {math.degrees(math.sqrt(cov[k, 2, 2])):5.2f} deg '
+                  f'step error {step:5.2f} m position sd '
+                  f'{math.sqrt(max(np.linalg.eigvalsh(cov[k, :2, :2]))):6.2f} m '
                   f'right {ok:2d} wrong {len(bad)} {"; ".join(bad)}')
     return 0
 

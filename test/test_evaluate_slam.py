@@ -292,6 +292,16 @@ def test_cli_prints_figures(tmp_path, capsys):
     assert (tmp_path / 'o' / 'slam_trajectory.png').is_file()
 
 
+def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
+    out = tmp_path / 'o'
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+                     '--scan-matching', '--out', str(out)]) == 0
+    text = capsys.readouterr().out
+    r = json.loads((out / 'slam.json').read_text())
+    assert sum(r['motions'].values()) == r['scans'] and r['motions']['scan_matching'] > 0
+    assert f"motion: {r['motions']['scan_matching']} steps scan-matched" in text
+
+
 def test_bad_input(tmp_path):
     with pytest.raises(ValueError, match='association'):
         evaluate_bag(BAG, 'nearest', progress=False)
