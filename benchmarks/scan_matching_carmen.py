@@ -26,8 +26,10 @@ classic covariance is optimistic, and the reference's own few-cm error adds to i
 ``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
 lines, the ``ekf_slam_real_logs`` profile or ``--params-file``; ``--landmarks corners`` or
 ``lines`` instead of the file's) twice per run: on the
-bag's odometry with its stated noise model, and on the scan-matched chain (its poses as
-the odometry samples, at the scan stamps) with ``--filter-noise`` as ``U`` (default
+bag's odometry with its stated noise model (and the file's front end: the profile's
+``scan_matching`` scan-matches in the filter itself; the README's yardstick figures predate
+it), and on the scan-matched chain (its poses as the odometry samples, at the scan stamps;
+the front end's own scan matching off) with ``--filter-noise`` as ``U`` (default
 ``k_d=0.04 k_theta=0.015 k_dtheta=0.03``: about twice the ICP motions' per-step errors
 printed by the first part). It prints each one's ATE [m] (and its ratio to the
 odometry's) and RPE over 1 m [cm]: whether
