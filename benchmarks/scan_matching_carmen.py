@@ -8,7 +8,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 A yardstick for EKF-SLAM on these logs (issue 14): each log is imported as ``landmark_nav
 import`` does (synthetic drift with the importer's default ``pioneer`` model, the given
 seed), and its scans are chained by point-to-line ICP
-(:func:`landmark_nav.slam.scan_matching.point_to_line_icp`: returns within 20 m,
+(:func:`landmark_nav.slam.scan_matching.base_motion`: returns within 20 m,
 pairs within 50, 30, then 15 cm) of each scan onto the previous one, the odometry's motion
 between the two stamps (through the laser mount) as the initial guess. The ICP motion is
 used when it converged and lies inside the odometry's own 99.9 % region (its difference
@@ -57,15 +57,14 @@ from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.sim import OdometrySample, ScanSample  # noqa: E402
 from landmark_nav.slam.consistency import chi2_gate  # noqa: E402
 from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams  # noqa: E402
-from landmark_nav.slam.frontend import odometry_noise_model  # noqa: E402
-from landmark_nav.slam.scan_matching import point_to_line_icp, scan_points  # noqa: E402
+from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model  # noqa: E402
+from landmark_nav.slam.scan_matching import base_motion, scan_points  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 from landmark_nav.tools.config_files import config_path  # noqa: E402
 import numpy as np  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
-MAX_RANGE = 20.0   # [m] returns used by the ICP
-GATES = (0.5, 0.3, 0.15)  # [m] pairing distance per ICP stage
+MAX_RANGE = FrontendParams().scan_matching_max_range   # [m] returns used by the ICP
 ACCEPT = chi2_gate(3, 0.999)
 
 
@@ -93,12 +92,12 @@ def chain(scenario) -> tuple:
     for k in range(1, len(scans)):
         u = relative(odometry[k - 1], odometry[k])
         current = laser_points(scans[k])
-        # The laser's motion is M^-1 u M; ICP moves the new scan onto the previous one.
-        fit = point_to_line_icp(current, previous, compose(compose(unmount, u), mount),
-                                gates=GATES, iterations=10)
+        # The front end's ICP (the laser's motion M^-1 u M as the guess), gated here on the
+        # odometry's region alone (the yardstick as first measured).
+        found = base_motion(previous, current, u, mount)
         step = u
-        if fit is not None:
-            v = compose(compose(mount, fit.pose), unmount)
+        if found is not None:
+            v, fit = found
             d = v - u
             d[2] = wrap_angle(d[2])
             if d @ np.linalg.solve(odometry_noise(u, noise), d) <= ACCEPT:

@@ -103,17 +103,17 @@ def test_scan_motion_is_the_base_motion_through_the_mount():
     cur = scan_points(_cast(compose(base1, MOUNT), rng), ANGLE_MIN, INC, 0.05, 20.0)
     u = truth + np.array([0.03, -0.02, math.radians(2.0)])   # drifted odometry
     u_cov = odometry_noise(u, odometry_noise_model('pioneer'))
-    v = scan_motion(prev, cur, u, u_cov, MOUNT, accept=16.27)   # chi2(3, 0.999)
+    v = scan_motion(prev, cur, u, u_cov, MOUNT, gate=16.27)   # chi2(3, 0.999)
     assert v is not None
     assert np.allclose(v[:2], truth[:2], atol=0.003)   # 0.5 cm noise on ~300 returns
     assert abs(v[2] - truth[2]) < math.radians(0.1)
     # The same ICP motion lies outside a much tighter odometry region: not used; unless its
     # own covariance V (the difference of two estimates has U + V) covers the difference.
-    assert scan_motion(prev, cur, u, u_cov * 1e-4, MOUNT, accept=16.27) is None
+    assert scan_motion(prev, cur, u, u_cov * 1e-4, MOUNT, gate=16.27) is None
     v2 = scan_motion(prev, cur, u, u_cov * 1e-4, MOUNT, 16.27, lambda m: u_cov)
     assert v2 is not None and np.allclose(v2, v)
     # Too few returns (an empty scan): no motion.
-    assert scan_motion(prev, cur[:5], u, u_cov, MOUNT, accept=16.27) is None
+    assert scan_motion(prev, cur[:5], u, u_cov, MOUNT, gate=16.27) is None
 
 
 def test_scan_points_keeps_valid_returns_below_the_range_limit():
@@ -124,11 +124,17 @@ def test_scan_points_keeps_valid_returns_below_the_range_limit():
         [math.cos(3.0), math.sin(3.0)]))
 
 
-def _drive(scan_matching, scans=True):
-    """Drive through the room with drifting odometry; return the front end and the truth."""
+def _drive(scan_matching, scans=lambda k: True, odometry='pioneer', bias=0.004, jump_at=None,
+           frontend=None, steps=None):
+    """Drive through the room with drifting odometry; return the front end and the truth.
+
+    ``scans(k)``: whether step k's set carries the scan; ``jump_at``: the odometry frame
+    jumps by 5 m there (bridged); ``steps``: a list that collects each Step.
+    """
     rng = np.random.default_rng(7)
-    fe = SlamFrontend(SlamParams(odometry=odometry_noise_model('pioneer')), MOUNT,
-                      FrontendParams(scan_matching=scan_matching))
+    fe = SlamFrontend(SlamParams(odometry=odometry_noise_model(odometry)), MOUNT,
+                      frontend or FrontendParams(scan_matching=scan_matching),
+                      on_step=None if steps is None else steps.append)
     base, odo, truth = np.array([-2.5, -1.5, 0.2]), np.array([-2.5, -1.5, 0.2]), []
     t0 = 10 ** 9
     for k in range(40):
@@ -136,42 +142,81 @@ def _drive(scan_matching, scans=True):
         if k:
             step = np.array([0.08, 0.0, 0.015 if k < 20 else -0.02])   # stays in the room
             base = compose(base, step)
-            # The odometry turns 15 % too much (an uncalibrated wheel base).
-            odo = compose(odo, step * np.array([1.0, 1.0, 1.15]) + [0.0, 0.0, 0.004])
+            # The odometry turns 15 % too much and drifts by ``bias`` per step.
+            odo = compose(odo, step * np.array([1.0, 1.0, 1.15]) + [0.0, 0.0, bias])
+            if k == jump_at:
+                odo = odo + np.array([5.0, 0.0, 0.0])
         truth.append(base)
         fe.add_odometry(t, odo)
         fe.add_features(Corners(t, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0),
                                 np.zeros(0), np.zeros(0),
                                 scan=_geometry(_cast(compose(base, MOUNT), rng))
-                                if scans else None))
+                                if scans(k) else None))
     fe.flush()
     return fe, np.array(truth)
 
 
 def test_frontend_predicts_with_the_scan_matched_motion():
     """The ICP motion replaces the drifting odometry; its U is the scan-matching model."""
-    fe, truth = _drive(True)
+    steps = []
+    fe, truth = _drive(True, steps=steps)
     assert fe.motions == {'odometry': 1, 'scan_matching': 39}   # the first step has no pair
+    assert [st.motion for st in steps] == ['odometry'] + ['scan_matching'] * 39
     # Heading: the odometry turns 15 % too much and drifts (8 deg off after 40 steps).
     start = truth[0]
     est = relative(start, fe.slam.pose)
     ref = relative(start, truth[-1])
-    assert abs(est[2] - ref[2]) < math.radians(0.2)
-    assert np.hypot(*(est[:2] - ref[:2])) < 0.02
+    assert abs(est[2] - ref[2]) < math.radians(0.2)   # measured 0.07 deg
+    assert np.hypot(*(est[:2] - ref[:2])) < 0.02       # measured 0.9 cm
     fo, _ = _drive(False)
     assert fo.motions == {'odometry': 40, 'scan_matching': 0}
     odo = relative(start, fo.slam.pose)
     assert abs(odo[2] - ref[2]) > math.radians(7.5)
-    # The scan-matched motion's U (a third of the heading gains' variance) is what was
-    # predicted with: the heading std is below the odometry run's.
-    assert fe.slam.pose_covariance[2, 2] < 0.5 * fo.slam.pose_covariance[2, 2]
+    # The scan-matched motion's U (0.6 of the heading gains: 0.36 of the variance) is what
+    # was predicted with: the heading variance is about a third of the odometry run's.
+    assert fe.slam.pose_covariance[2, 2] < 0.4 * fo.slam.pose_covariance[2, 2]
 
 
 def test_frontend_without_scans_falls_back_to_the_odometry():
-    fe, _ = _drive(True, scans=False)
+    fe, _ = _drive(True, scans=lambda k: False)
     fo, _ = _drive(False)
     assert fe.motions == {'odometry': 40, 'scan_matching': 0}
     np.testing.assert_array_equal(fe.slam.pose, fo.slam.pose)
+    # A set without its scan: that step and the next (no previous scan) use the odometry.
+    fe, _ = _drive(True, scans=lambda k: k != 20)
+    assert fe.motions == {'odometry': 3, 'scan_matching': 37}
+
+
+def test_frontend_keeps_the_odometry_where_the_scan_disagrees():
+    """An ICP motion outside the region of U + V is not used (odometry and V both tight)."""
+    tight = FrontendParams(scan_matching=True, scan_matching_noise='k_d=0 k_theta=0 k_dtheta=0')
+    steps = []
+    fe, _ = _drive(True, odometry='simulator', bias=0.05, frontend=tight, steps=steps)
+    assert fe.motions == {'odometry': 40, 'scan_matching': 0}
+    # With a bias the simulator's U covers, the same scans are used.
+    fe, _ = _drive(True, odometry='simulator', bias=0.0, frontend=tight)
+    assert fe.motions['scan_matching'] >= 35
+
+
+def test_a_bridged_odometry_jump_is_predicted_with_the_odometry():
+    """Across a bridged frame jump the increment is unknown: no ICP guess, U keeps its share."""
+    steps = []
+    fe, _ = _drive(True, jump_at=20, steps=steps)
+    jumped = [st for st in steps if np.any(st.bridged_variance > 0.0)]
+    assert len(jumped) == 1 and jumped[0].motion == 'odometry'
+    assert fe.motions == {'odometry': 2, 'scan_matching': 38}
+
+
+def test_a_restart_forgets_the_previous_scan():
+    fe, _ = _drive(True)
+    fe.clear()
+    assert fe._scan_points is None
+    t = 10 ** 10
+    geometry = _geometry(_cast(compose(np.array([-2.5, -1.5, 0.2]), MOUNT)))
+    fe.add_odometry(t, [0.0, 0.0, 0.0])
+    steps = fe.add_features(Corners(t, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0),
+                                    np.zeros(0), np.zeros(0), scan=geometry))
+    assert [st.motion for st in steps] == ['odometry']
 
 
 def test_scan_matching_parameters_are_validated():
@@ -181,7 +226,7 @@ def test_scan_matching_parameters_are_validated():
         FrontendParams(scan_matching_accept=1.0)
     with pytest.raises(ValueError, match='scan_matching_max_range'):
         FrontendParams(scan_matching_max_range=0.0)
-    with pytest.raises(ValueError, match='scan_matching'):
+    with pytest.raises(ValueError, match='scan_matching must be a bool'):
         FrontendParams(scan_matching=1)
     with pytest.raises(ValueError, match='visibility'):
         run_slam(None, frontend=FrontendParams(scan_matching=True), visibility=False)

@@ -116,8 +116,8 @@ class SlamRun:
     #: (S,) whether the front end bridged an odometry jump before the step (``'jump'``:
     #: the odometry frame broke, e.g. two runs in one log).
     bridged: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    #: Steps predicted with each motion (:attr:`~landmark_nav.slam.frontend.SlamFrontend.
-    #: motions`: ``odometry``, ``scan_matching``).
+    #: Steps predicted with each motion (``SlamFrontend.motions``: ``odometry``,
+    #: ``scan_matching``).
     motions: Dict[str, int] = field(default_factory=dict)
 
 
@@ -677,7 +677,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         map_pose_covariance: (3, 3) covariance of the start pose on ``slam_map``.
         mode: ``'slam'`` or ``'localization'`` (on ``slam_map``); None: ``params.mode``.
         frontend: Front-end parameters (e.g. ``scan_matching``; default
-            :class:`FrontendParams`).
+            :class:`FrontendParams`; ``deskew`` and ``descriptors`` are :func:`run_slam`'s
+            defaults whatever it says).
 
     Returns:
         The figures (see ``slam.json``).

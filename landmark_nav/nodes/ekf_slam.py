@@ -190,8 +190,9 @@ FRONTEND_PARAMETERS = {
                             'pioneer or simulator', None, None),
     'scan_matching_max_range': ('returns at or beyond this are not matched [m]',
                                 (0.1, 1000.0), None),
-    'scan_matching_accept': ("confidence of the odometry's region a scan-matched motion must "
-                             'lie in (chi-square, 3 dof)', (1e-6, 1.0 - 1e-12), None),
+    'scan_matching_accept': ('confidence of the region the difference of the scan-matched '
+                             'motion and the odometry must lie in (chi-square, 3 dof, U + V)',
+                             (1e-6, 1.0 - 1e-12), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,

@@ -78,17 +78,17 @@ this one by point-to-line ICP (Censi, ICRA 2008; :func:`.scan_matching.scan_moti
 within ``scan_matching_max_range``, pairs within 50, 30, then 15 cm, the odometry increment
 as the initial guess) when that motion agrees with the odometry's: their difference within
 the ``scan_matching_accept`` confidence region of two independent estimates of the same
-motion (chi-square on 3 degrees of freedom under the odometry's ``U``, plus any bridged
-variance, plus the scan-matched motion's own ``U``); it is predicted with ``U`` of
-``scan_matching_noise`` (default ``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer``
-position gain and 0.6 of its heading gains, chosen on the Carmen logs' first drift seed,
-README). Otherwise (the first step, no scan geometry in the set, ICP without enough pairs,
-or a motion the odometry rules out: ICP sliding along a corridor or locking onto the wrong
-structure) the odometry increment and its ``U`` are used, as without the option.
-:attr:`SlamFrontend.motions` counts the steps of each kind. The same scans then give the
-landmark observations: the scan-matched motion and the update share their data, so the
-filter's pose is somewhat overconfident (the Carmen figures in the README measure how much).
-The ICP runs on the raw scan (no de-skew).
+motion (chi-square on 3 degrees of freedom under the sum of the odometry's ``U`` and the
+scan-matched motion's own); it is predicted with ``U`` of ``scan_matching_noise`` (default
+``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer`` position gain and 0.6 of its
+heading gains, chosen on the Carmen logs' first drift seed, README). Otherwise (the first
+step, no scan geometry in the set or in the one before, a bridged odometry jump in the step,
+ICP without enough pairs, or a motion the odometry rules out: ICP sliding along a corridor
+or locking onto the wrong structure) the odometry increment and its ``U`` are used, as
+without the option. :attr:`SlamFrontend.motions` counts the steps of each kind. The same
+scans then give the landmark observations: the scan-matched motion and the update share
+their data, so the filter's pose is somewhat overconfident (the Carmen figures in the README
+measure how much). The ICP runs on the raw scan (no de-skew).
 
 Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
 --------------------------------------------------------------------------------------
@@ -200,8 +200,9 @@ class FrontendParams:
         scan_matching_noise: ``U`` of a scan-matched motion, as
             :func:`odometry_noise_model` reads it.
         scan_matching_max_range: Returns at or beyond this are not matched [m].
-        scan_matching_accept: Confidence of the odometry's region the scan-matched motion
-            must lie in (chi-square, 3 degrees of freedom).
+        scan_matching_accept: Confidence of the region the difference of the scan-matched
+            motion and the odometry increment must lie in (chi-square, 3 degrees of
+            freedom, covariance ``U + V``: the two estimates' own).
     """
 
     deskew: bool = True
@@ -349,8 +350,10 @@ class Step:
     Attributes:
         stamp_ns: Its stamp [ns].
         odometry: (3,) odometry pose interpolated at the stamp (bridged frame).
-        increment: (3,) the increment predicted with (eq. 13).
-        bridged_variance: (3,) variance added for bridged odometry jumps in the step.
+        increment: (3,) the increment predicted with: the odometry's (eq. 13) or the
+            scan-matched motion (``motion``).
+        bridged_variance: (3,) variance added for bridged odometry jumps in the step (such
+            a step always predicts with the odometry).
         result: The filter's association result.
         pose: (3,) the filter's robot pose after the step (a copy).
         covariance: (3, 3) its covariance (a copy).
@@ -663,7 +666,9 @@ class SlamFrontend:
             u_cov = odometry_noise(u, self.params.odometry) + np.diag(extra)
         source = 'odometry'
         if self.frontend.scan_matching:
-            u, u_cov, source = self._scan_matched(c.scan, u, u_cov)
+            # Across a bridged jump the increment is unknown (bridged as no motion): no
+            # guess for the ICP, and the jump's variance must stay in U; the odometry's.
+            u, u_cov, source = self._scan_matched(c.scan, u, u_cov, bool(np.any(extra > 0.0)))
         self.motions[source] += 1
         self.slam.predict(u, u_cov)
         motion = lmotion = None
@@ -694,8 +699,8 @@ class SlamFrontend:
         return step
 
     def _scan_matched(self, scan: Optional[ScanGeometry], u: np.ndarray,
-                      u_cov: Optional[np.ndarray]) -> Tuple[np.ndarray, Optional[np.ndarray],
-                                                            str]:
+                      u_cov: Optional[np.ndarray], bridged: bool
+                      ) -> Tuple[np.ndarray, Optional[np.ndarray], str]:
         """Return ``(increment, U, source)``: the scan-matched motion when usable."""
         previous = self._scan_points
         self._scan_points = None
@@ -705,7 +710,7 @@ class SlamFrontend:
         self._scan_points = scan_points(scan.ranges, scan.angle_min, scan.angle_increment,
                                         scan.range_min,
                                         min(scan.range_max, fp.scan_matching_max_range))
-        if previous is None:
+        if previous is None or bridged:
             return u, u_cov, 'odometry'
         cov = odometry_noise(u, self.params.odometry) if u_cov is None else u_cov
         v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept,

@@ -114,7 +114,7 @@ def scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
         ranges: (B,) ranges [m] (REP 117: +-inf and NaN are not returns).
         angle_min: Angle of beam 0 [rad].
         angle_increment: Beam spacing [rad].
-        range_min: Smallest valid range [m].
+        range_min: Ranges at or below this are not used [m].
         range_max: Ranges at or beyond this are not used [m].
     """
     r = np.asarray(ranges, dtype=float).reshape(-1)
@@ -123,47 +123,69 @@ def scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
     return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
 
 
-def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
-                u_cov: np.ndarray, mount: Sequence[float], accept: float,
-                v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None
-                ) -> Optional[np.ndarray]:
-    """Return the base's motion between two scans by ICP, or None when it is not usable.
+def base_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
+                mount: Sequence[float]) -> Optional[tuple]:
+    """Return the base's motion between two scans by ICP, and the laser-frame ICP result.
 
     The current scan's points are matched onto the previous scan's
     (:func:`point_to_line_icp`, gates :data:`SCAN_MOTION_GATES`), the odometry increment
     moved into the laser frame (``M^-1 u M``, ``M`` the mount) as the initial guess; the
-    result is moved back to the base (``M v M^-1``). It is used only when it agrees with
-    the odometry: its difference ``d`` from ``u``, two estimates of the same motion, must
-    satisfy ``d^T (U + V)^-1 d <= accept`` (a chi-square bound on 3 degrees of freedom;
-    ``V`` the scan-matched motion's own covariance), which rejects ICP solutions that slid
-    along a corridor or locked onto the wrong structure.
+    result is moved back to the base (``M v M^-1``).
 
     Args:
         previous: (N, 2) the previous scan's points (laser frame) [m].
         current: (M, 2) this scan's points [m].
         u: (3,) the odometry increment between the two scans (base frame).
-        u_cov: (3, 3) its covariance ``U`` (plus any bridged variance).
         mount: (3,) laser pose in base_link.
-        accept: The chi-square bound.
+
+    Returns:
+        ``(v, fit)``: (3,) the base's motion and the :class:`IcpResult`; None when the ICP
+        found no solution.
+    """
+    mount = np.asarray(mount, dtype=float)
+    unmount = inverse(mount)
+    fit = point_to_line_icp(current, previous,
+                            compose(compose(unmount, np.asarray(u, dtype=float)), mount),
+                            gates=SCAN_MOTION_GATES, iterations=SCAN_MOTION_ITERATIONS)
+    if fit is None or not np.all(np.isfinite(fit.pose)):
+        return None
+    return compose(compose(mount, fit.pose), unmount), fit
+
+
+def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
+                u_cov: np.ndarray, mount: Sequence[float], gate: float,
+                v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None
+                ) -> Optional[np.ndarray]:
+    """Return the base's motion between two scans by ICP, or None when it is not usable.
+
+    The motion of :func:`base_motion` is used only when it agrees with the odometry: its
+    difference ``d`` from ``u``, two estimates of the same motion, must satisfy
+    ``d^T (U + V)^-1 d <= gate`` (a chi-square bound on 3 degrees of freedom; ``V`` the
+    scan-matched motion's own covariance), which rejects ICP solutions that slid along a
+    corridor or locked onto the wrong structure.
+
+    Args:
+        previous: (N, 2) the previous scan's points (laser frame) [m].
+        current: (M, 2) this scan's points [m].
+        u: (3,) the odometry increment between the two scans (base frame).
+        u_cov: (3, 3) its covariance ``U``.
+        mount: (3,) laser pose in base_link.
+        gate: The chi-square bound.
         v_cov: ``V`` as a function of the scan-matched motion (None: zero, the odometry's
             region alone).
 
     Returns:
         (3,) the base's motion, or None (ICP failed or disagrees with the odometry).
     """
-    mount = np.asarray(mount, dtype=float)
-    unmount = inverse(mount)
-    u = np.asarray(u, dtype=float)
-    fit = point_to_line_icp(current, previous, compose(compose(unmount, u), mount),
-                            gates=SCAN_MOTION_GATES, iterations=SCAN_MOTION_ITERATIONS)
-    if fit is None or not np.all(np.isfinite(fit.pose)):
+    found = base_motion(previous, current, u, mount)
+    if found is None:
         return None
-    v = compose(compose(mount, fit.pose), unmount)
-    d = v - u
+    v = found[0]
+    d = v - np.asarray(u, dtype=float)
     d[2] = wrap_angle(d[2])
     cov = np.asarray(u_cov, dtype=float) + (0.0 if v_cov is None else v_cov(v))
     try:
         m2 = float(d @ np.linalg.solve(cov, d))
     except np.linalg.LinAlgError:
         return None
-    return v if m2 <= accept else None
+    return v if m2 <= gate else None
