@@ -86,6 +86,7 @@ Choices where the chapters are silent, or misprinted:
 from bisect import bisect_left
 from dataclasses import dataclass, field
 import math
+from operator import lt
 from typing import List, Optional, Sequence, Tuple
 
 from landmark_nav.laser.lowess import lowess, lowess_groups
@@ -1722,6 +1723,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         ends = _noise_only_py(scan, pieces, first, last, line, beam, params)
         if ends is not None:
             return sums, ends[0], ends[1], f
+    if first.size <= _CUT_PY:
+        out = _cut_py(scan, feats, sums, first, last, f, pieces, line, beam, opening, params)
+        if out is not None:
+            return out
     owner = np.full(scan.x.size, -1, dtype=np.int64)
     # a line's support: its pieces and the runs grown before and after (disjoint, so one
     # gather of all of them)
@@ -1831,6 +1836,152 @@ def _noise_only_py(scan: _Scan, pieces: Tuple[np.ndarray, ...], first: np.ndarra
     if new_first == f_l and new_last == l_l:  # the same extents (their beams are cached)
         return first, last
     return np.array(new_first, dtype=np.int64), np.array(new_last, dtype=np.int64)
+
+
+# Lines up to which _cut_seen_through cuts on Python lists (:func:`_cut_py`).
+_CUT_PY = 40
+
+
+def _runs_at(bps: List[int], hidden: List[int]) -> List[Tuple[int, int]]:
+    """Return the runs ``[a, b)`` of a line's support between its hidden beams.
+
+    ``bps`` are the beams of the line's supporting points (increasing), ``hidden`` the
+    hidden beams inside its extent (increasing); a supporting point at a hidden beam
+    leaves (as in :func:`_support_runs`).
+    """
+    runs = []
+    start = 0
+    size = len(bps)
+    for h in hidden:
+        pos = bisect_left(bps, h, start)
+        if pos > start:
+            runs.append((start, pos))
+        start = pos + 1 if pos < size and bps[pos] == h else pos
+    if start < size:
+        runs.append((start, size))
+    return runs
+
+
+def _cut_py(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
+            last: np.ndarray, f: _Fit, pieces: Tuple[np.ndarray, ...], line: np.ndarray,
+            beam: np.ndarray, opening: np.ndarray, params: LineParams
+            ) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit]]:
+    """Return :func:`_cut_seen_through` for the hidden beams of :func:`_seen_through`.
+
+    The same cuts, the same runs and the same fits as its array steps
+    (:func:`_support_runs`, :func:`_splits_in_two`): each line's support is a list of its
+    points, and only the lines that hide beams are cut into runs (at their hidden beams,
+    found by bisection), not the whole scan; the fits of every round are the same
+    ``reduceat`` sums and :func:`_solve` of all lines, tested by :func:`_seen_through`.
+    This needs the lines' supports in point order, one after the other, with beam indices
+    increasing along them (clusters of one ``segment_scan`` call, in beam order): then a
+    line's extent holds no other line's point and its hidden beams cut no other line.
+    Returns None otherwise (the array steps then run).
+    """
+    s, e, label, first0, last0 = pieces
+    n = first.size
+    f_l, l_l = first.tolist(), last.tolist()
+    sup: List[List[int]] = [list(range(a, b)) for a, b in zip(f_l, first0.tolist())]
+    for a, b, k in zip(s.tolist(), e.tolist(), label.tolist()):
+        sup[k].extend(range(a, b + 1))
+    for j, (a, b) in enumerate(zip(last0.tolist(), l_l)):
+        sup[j].extend(range(a + 1, b + 1))
+    pts = [p for ps in sup for p in ps]
+    bps = scan.beam.take(pts).tolist()
+    if not (all(map(lt, pts, pts[1:])) and all(map(lt, bps, bps[1:]))):
+        return None
+    bsup = []
+    k = 0
+    for ps in sup:
+        bsup.append(bps[k:k + len(ps)])
+        k += len(ps)
+    xs, ys = scan.rows()[_X], scan.rows()[_Y]
+    least, min_length = params.min_points, params.min_length
+
+    def hidden_by_line(line_l: List[int], beam_l: List[int], sel: Optional[List[bool]]
+                       ) -> dict:
+        """Return {line: its hidden beams (increasing)}, of the entries ``sel`` (all: None)."""
+        out: dict = {}
+        for i, (j, b) in enumerate(zip(line_l, beam_l)):
+            if sel is None or sel[i]:
+                out.setdefault(j, []).append(b)
+        return out
+
+    def splits_in_two(hidden: dict) -> Tuple[set, dict]:
+        """Return the lines cut into two or more lines at their hidden beams, and the runs."""
+        runs, two = {}, set()
+        for j, hb in hidden.items():
+            ps = sup[j]
+            runs[j] = rj = _runs_at(bsup[j], hb)
+            good = 0
+            for a, b in rj:
+                pa, pb = ps[a], ps[b - 1]
+                if b - a >= least and abs(
+                        complex(xs[pb] - xs[pa], ys[pb] - ys[pa])) >= min_length:
+                    good += 1  # C hypot, as np.hypot
+            if good >= 2:
+                two.add(j)
+        return two, runs
+
+    line_l, beam_l, open_l = line.tolist(), beam.tolist(), opening.tolist()
+    hidden = hidden_by_line(line_l, beam_l, None)
+    two, runs = splits_in_two(hidden)
+    open_l = [o or j in two for o, j in zip(open_l, line_l)]
+    rounds = 0
+    changed = False
+    while any(open_l):
+        if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
+            drop = {j for j, o in zip(line_l, open_l) if o}
+            keep = [j for j in range(n) if j not in drop]
+            relabel = {j: i for i, j in enumerate(keep)}
+            sums, first, last = sums[:, keep], first[keep], last[keep]
+            if not keep:
+                return sums, first, last, f
+            f = _solve(sums, scan.origin)
+            sup, bsup = [sup[j] for j in keep], [bsup[j] for j in keep]
+            sel = [j in relabel for j in line_l]
+            line_l = [relabel[j] for j, ok in zip(line_l, sel) if ok]
+            beam_l = [b for b, ok in zip(beam_l, sel) if ok]
+            hidden = hidden_by_line(line_l, beam_l, None)
+            runs = splits_in_two(hidden)[1]
+            changed = True
+            break
+        rounds += 1
+        cuts = hidden_by_line(line_l, beam_l, open_l)
+        new_sup, new_bsup = [], []
+        for j, (ps, bs) in enumerate(zip(sup, bsup)):
+            for a, b in (_runs_at(bs, cuts[j]) if j in cuts else ((0, len(ps)),)):
+                if b - a >= least:
+                    new_sup.append(ps[a:b])
+                    new_bsup.append(bs[a:b])
+        sup, bsup = new_sup, new_bsup
+        if not sup:
+            return sums[:, :0], first[:0], last[:0], f
+        first = np.array([ps[0] for ps in sup], dtype=np.int64)
+        last = np.array([ps[-1] for ps in sup], dtype=np.int64)
+        n = len(sup)
+        starts = [0]
+        for ps in sup[:-1]:
+            starts.append(starts[-1] + len(ps))
+        sums = np.add.reduceat(feats.take([p for ps in sup for p in ps], axis=1), starts,
+                               axis=1)
+        f = _solve(sums, scan.origin)
+        line, beam, opening = _seen_through(scan, f, first, last, params)
+        line_l, beam_l, open_l = line.tolist(), beam.tolist(), opening.tolist()
+        hidden = hidden_by_line(line_l, beam_l, None)
+        two, runs = splits_in_two(hidden)
+        open_l = [o or j in two for o, j in zip(open_l, line_l)]
+        changed = True
+    if line_l:  # only noise: each line's extent becomes its largest run between them
+        new_first, new_last = first.tolist(), last.tolist()
+        for j, rj in runs.items():
+            if rj:
+                a, b = max(rj, key=lambda r: r[1] - r[0])  # the first run of most points
+                new_first[j], new_last[j] = sup[j][a], sup[j][b - 1]
+        if changed or new_first != first.tolist() or new_last != last.tolist():
+            first = np.array(new_first, dtype=np.int64)
+            last = np.array(new_last, dtype=np.int64)
+    return sums, first, last, f
 
 
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
