@@ -398,6 +398,27 @@ def _normal(sxx: np.ndarray, syy: np.ndarray, sxy: np.ndarray, out: np.ndarray
     return alpha
 
 
+def _math_is_numpy() -> bool:
+    """Return whether math's atan2, cos, sin and x ** 3 give numpy's float64 results here.
+
+    They do where numpy calls the C library for them (no SIMD version for this CPU, e.g.
+    x86-64 without AVX-512); the Python-float paths then call math's, without the array
+    round trip of a numpy call. Checked at import on 4096 arguments of each over the
+    ranges the fits use (eq. 8: alpha in [-pi/2, pi/2]), all signs of atan2's.
+    """
+    rng = np.random.default_rng(0)
+    y, x = rng.standard_normal((2, 4096)) * np.exp(rng.uniform(-20.0, 5.0, (2, 4096)))
+    half = 0.5 * np.arctan2(y, x)
+    base = np.abs(x)
+    return (np.arctan2(y, x).tolist() == list(map(math.atan2, y.tolist(), x.tolist()))
+            and np.cos(half).tolist() == list(map(math.cos, half.tolist()))
+            and np.sin(half).tolist() == list(map(math.sin, half.tolist()))
+            and (base ** 3).tolist() == [b ** 3 for b in base.tolist()])
+
+
+_MATH_TRIG = _math_is_numpy()
+
+
 def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     """Fit a line to each column of sums (6 or 24, G); coordinates relative to ``origin``.
 
@@ -446,7 +467,8 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     """Return :func:`_solve` for a few fits, computed on Python floats.
 
     The same operations in the same order, hence the same results (numpy's arctan2, cos
-    and sin, one call each, as the array version). Raises ZeroDivisionError or ValueError
+    and sin, one call each, as the array version, or math's where they are the same:
+    :func:`_math_is_numpy`). Raises ZeroDivisionError or ValueError
     on degenerate sums (e.g. a zero count or scatter), which :func:`_solve` then fits
     with numpy's inf / nan semantics.
     """
@@ -464,10 +486,14 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
         scat.append((n, cx, cy, sxx, syy, sxy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
-    alpha_a = np.arctan2(a_in, b_in)
-    alpha_a *= 0.5  # eq. 8
-    nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
-    alpha_l = alpha_a.tolist()
+    if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
+        alpha_l = [0.5 * a for a in map(math.atan2, a_in, b_in)]  # eq. 8
+        nx_l, ny_l = list(map(math.cos, alpha_l)), list(map(math.sin, alpha_l))
+    else:
+        alpha_a = np.arctan2(a_in, b_in)
+        alpha_a *= 0.5  # eq. 8
+        nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
+        alpha_l = alpha_a.tolist()
     ox, oy = float(origin[0]), float(origin[1])
     rho_l, err_l, cov_l = [], [], []
     flip = False
@@ -1134,8 +1160,12 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         scat.append((cx, cy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
-    alpha = 0.5 * np.arctan2(a_in, b_in)  # eq. 8 (_normal)
-    nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
+    if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
+        alpha = [0.5 * a for a in map(math.atan2, a_in, b_in)]  # eq. 8 (_normal)
+        nxs, nys = list(map(math.cos, alpha)), list(map(math.sin, alpha))
+    else:
+        alpha = 0.5 * np.arctan2(a_in, b_in)  # eq. 8 (_normal)
+        nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
     xs, ys, rng, cps, sps = scan.rows()[:_TOL]
     ox, oy = scan.origin
     sr, sp_ = params.sigma_r, params.sigma_phi
@@ -1270,7 +1300,10 @@ def _variance_factor_py(sums: np.ndarray, f: _Fit, nx_l: List[float], ny_l: List
         h = 2.0 / (9.0 * dof)
         dofs.append(dof)
         bases.append(1.0 - h + _Z95 * math.sqrt(h))
-    cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
+    if _MATH_TRIG:  # numpy's power (see _math_is_numpy), as _variance_factor
+        cubes = [b ** 3 for b in bases]
+    else:
+        cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
     return [stat / dof if stat > dof * cube else 1.0
             for stat, dof, cube in zip(stats, dofs, cubes)]
 
