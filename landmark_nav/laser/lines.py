@@ -2249,12 +2249,12 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         e0, s1 = int(beam[ends[j][1]]), int(beam[first_l[k]])
         if not b0 <= e0 < s1 <= b1:
             return None
-        idx = np.arange(b0, b1 + 1)
-        cos_in = wc[idx] * nx + ws[idx] * ny
+        span = slice(b0, b1 + 1)  # the beams from j's first to k's last (views)
+        cos_in = wc[span] * nx + ws[span] * ny
         if np.count_nonzero(cos_in <= 1e-9):
             return None
-        beyond = wr[idx] - rg / cos_in
-        ok = wv[idx]
+        beyond = wr[span] - rg / cos_in
+        ok = wv[span]
         if np.count_nonzero(ok & (beyond > tol)):  # a beam seen through the joint line
             return None
         gap = slice(e0 + 1 - b0, s1 - b0)  # the beams between the two lines
