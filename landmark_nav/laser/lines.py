@@ -546,6 +546,38 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     return _Fit(out, np.array(err_l) if rmse else None, sums[0], cov)
 
 
+def _line_py(c: List[float], origin: Tuple[float, float]) -> Tuple[float, float, float, float]:
+    """Return (rho, alpha, nx, ny) of :func:`_solve` of one column of sums ``c`` (a list).
+
+    The operations of :func:`_solve_small` for a single fit, without arrays (eqs. 8-10).
+    Raises ZeroDivisionError on a zero count.
+    """
+    n = c[0]
+    cx = c[1] / n
+    cy = c[2] / n
+    ncx = n * cx
+    sxx = c[3] - ncx * cx
+    syy = c[4] - n * cy * cy
+    sxy = c[5] - ncx * cy
+    if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
+        alpha = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)  # eq. 8
+        nx, ny = math.cos(alpha), math.sin(alpha)
+    else:
+        alpha_a = np.arctan2([-2.0 * sxy], [syy - sxx])
+        alpha_a *= 0.5  # eq. 8
+        nx, ny, alpha = np.cos(alpha_a).item(), np.sin(alpha_a).item(), alpha_a.item()
+    ax = cx + float(origin[0])  # centroid in the laser frame (eq. 10)
+    ay = cy + float(origin[1])
+    rho = ax * nx + ay * ny  # eq. 9
+    if rho < 0.0:
+        rho = -rho
+        alpha += math.pi
+        alpha = (alpha + math.pi) % TWO_PI - math.pi  # _wrap
+        nx = -nx
+        ny = -ny
+    return rho, alpha, nx, ny
+
+
 def _covariance(sums: np.ndarray, n: np.ndarray, cx: np.ndarray, cy: np.ndarray,
                 ax: np.ndarray, ay: np.ndarray, nx: np.ndarray, ny: np.ndarray,
                 root: np.ndarray) -> np.ndarray:
@@ -2236,8 +2268,15 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         if chi2(r1, a1, c1, r2, a2, c2) > gate:
             return None
         joint = line_sums[j] + line_sums[k]
-        g = _solve(joint[:6, None], scan.origin, rmse=False)  # the tests need the line only
-        rg, ag, nx, ny = g.params[:, 0].tolist()
+        line = None  # the tests need the line only: _solve's, on Python floats if it would be
+        if _SMALL_NO_COV >= 1:
+            try:
+                line = _line_py(joint[:6].tolist(), scan.origin)
+            except ZeroDivisionError:  # degenerate sums: numpy's inf / nan below
+                pass
+        if line is None:
+            line = _solve(joint[:6, None], scan.origin, rmse=False).params[:, 0].tolist()
+        rg, ag, nx, ny = line
         if not (chi2(r1, a1, c1, rg, ag, None) <= gate and chi2(r2, a2, c2, rg, ag, None)
                 <= gate):
             return None
