@@ -2097,6 +2097,29 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     return pos, new.cumsum() - 1, starts, bounds[1:] - bounds[:-1]
 
 
+def _shrunk_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
+                    ) -> Optional[List[Tuple[int, int]]]:
+    """Return the lines' beam ranges if they lie within those cached on ``f``, else None.
+
+    :func:`_cut_seen_through` shrinks the extents of lines that hide only their noise and
+    keeps their fits: the beams of the new extents are then among the cached ones of
+    :func:`_extent_beams` (the same values), and a test of those beams needs only to
+    keep the ones inside the new ranges. None when nothing is cached for these fits, the
+    cache is for these very extents, or a range is not within its line's cached one.
+    """
+    ext = f.extent
+    if ext is None or (ext[0] is first and ext[1] is last) or ext[0].size != first.size:
+        return None
+    beam = memoryview(scan.beam)
+    out = []
+    for a, b, a0, b0 in zip(first.tolist(), last.tolist(), ext[0].tolist(), ext[1].tolist()):
+        lo, hi = min(beam[a], beam[b]), max(beam[a], beam[b])
+        if not min(beam[a0], beam[b0]) <= lo <= hi <= max(beam[a0], beam[b0]):
+            return None
+        out.append((lo, hi))
+    return out
+
+
 def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
                       params: LineParams) -> Tuple[Optional[np.ndarray], np.ndarray, np.ndarray]:
     """Cut the lines' extents at occluders (step 5); return (line, first, last) per piece.
@@ -2110,10 +2133,15 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     result is ``(None, first, last)``.
     """
     same = None, first, last
-    idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
+    within = _shrunk_extents(scan, f, first, last)
+    idx, line, rho, r, cos_in = (_extent_beams(scan, f, first, last) if within is None
+                                 else f.extent[2])
     front = rho / cos_in - r  # how far the return lies in front of the line
     # Only a beam in front by more than the tolerance can be in front by the margin.
     hit = ((cos_in > 1e-9) & (front > params.see_through_tolerance)).nonzero()[0]
+    if within is not None and hit.size:  # the beams of the earlier extents: keep those
+        hit = hit[[within[j][0] <= b <= within[j][1]  # inside the lines' extents now
+                   for j, b in zip(line[hit].tolist(), idx[hit].tolist())]]
     if hit.size < 2:
         return same
     r, cos_in = r[hit], cos_in[hit]
