@@ -1712,10 +1712,20 @@ def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
     if f.extent is not None and f.extent[0] is first and f.extent[1] is last:
         return f.extent[2]
     wr, wc, ws, wv = scan.beams()
-    b0, b1 = scan.beam[first], scan.beam[last]
-    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
-    idx, _ = _gather(lo, hi)
-    line = np.arange(first.size).repeat(hi - lo + 1)
+    # the beams lo..hi of every line, back to back (as _gather), laid out on lists
+    beam = memoryview(scan.beam)
+    cnt, shift = [], []
+    total = 0
+    for a, b in zip(first.tolist(), last.tolist()):
+        lo, hi = beam[a], beam[b]
+        if hi < lo:
+            lo, hi = hi, lo
+        cnt.append(hi - lo + 1)
+        shift.append(total - lo)
+        total += hi - lo + 1
+    idx = np.arange(total, dtype=np.int64)
+    idx -= np.array(shift, dtype=np.int64).repeat(cnt)
+    line = np.arange(len(cnt)).repeat(cnt)
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
     rho, _, nx, ny = f.params.take(line, axis=1)
