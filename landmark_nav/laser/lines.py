@@ -721,12 +721,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
         done_s.append(s[lone])
         done_e.append(e[lone])
         s, e = s[~lone], e[~lone]
-    if s.size:
-        steps = np.arange(1, max(e.tolist()) - min(s.tolist()) + 1)
+    steps = None  # 1, 2, ... (made at the first array level, for the pieces' layout)
     while s.size:
-        cnt = e - s
-        cnt -= 1  # interior points of every piece, >= 0
-        cl = cnt.tolist()
+        s_l, e_l = s.tolist(), e.tolist()
+        cl = [b - a - 1 for a, b in zip(s_l, e_l)]  # interior points of every piece, >= 0
         width = max(cl)
         if width == 0:
             done_s.append(s)
@@ -735,7 +733,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             break
         if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
             if not mixed:  # the runs themselves: index the points in place
-                ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist(), min_span)
+                ps, pe = _split_py(px, py, tol, s_l, e_l, min_span)
                 done_s.append(np.array(ps, dtype=np.int64))
                 done_e.append(np.array(pe, dtype=np.int64))
                 break
@@ -745,6 +743,8 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             done_s.append(idx[ps])
             done_e.append(idx[pe])
             break
+        if steps is None:  # the later pieces lie within these
+            steps = np.arange(1, max(e_l) - min(s_l) + 1)
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
         cy = py[e] - y0
@@ -759,6 +759,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             at += s
             k = at + 1
         else:
+            cnt = np.array(cl, dtype=np.int64)
             inner = cnt.nonzero()[0]
             cmax = np.zeros(s.size)
             k = s.copy()
