@@ -1020,11 +1020,13 @@ _X, _Y, _RNG, _COS, _SIN, _TOL, _PHI = range(7)
 
 def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     """Stack the non-empty clusters; None if there are none."""
-    cl, bounds = [], [0]
+    cl, bounds, sizes = [], [0], []
     for c in clusters:
-        if c.indices.size:
+        size = c.indices.size
+        if size:
             cl.append(c)
-            bounds.append(bounds[-1] + c.indices.size)
+            sizes.append(size)
+            bounds.append(bounds[-1] + size)
     if not cl:
         return None
     offsets = np.array(bounds, dtype=np.int64)
@@ -1054,7 +1056,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     cols[_TOL] += params.threshold
     shared = whole if one and whole.valid is not None else None
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.arange(len(cl)).repeat(offsets[1:] - offsets[:-1]), offsets,
+                 np.arange(len(cl)).repeat(sizes), offsets,
                  int(beam.max()) + 1, shared)
 
 
@@ -1323,7 +1325,7 @@ def _variance_factor_py(sums: np.ndarray, f: _Fit, nx_l: List[float], ny_l: List
     ``nx_l``, ``ny_l`` are the fits' normals as lists. Raises ZeroDivisionError on
     degenerate fits (the array version then gives numpy's inf / nan).
     """
-    s6, s12, s18 = sums[6].tolist(), sums[12].tolist(), sums[18].tolist()
+    s6, s12, s18 = sums[6:19:6].tolist()
     stats, dofs, bases = [], [], []
     for n, r, nx, ny, a, b, c in zip(f.count.tolist(), f.rmse.tolist(), nx_l, ny_l, s6, s12,
                                      s18):
