@@ -2491,9 +2491,10 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     if not keep:
         return []
     pts = np.array(flat).reshape(-1, 2, 2)
-    cov = f.cov.take(keep, axis=0)
-    return [_segment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
-                     cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
+    # the (2,) start and end points and (2, 2) covariances as views, made in one pass each
+    return [_segment(rhos[j], alphas[j], p0, p1, int(counts[j]), rmses[j], c,
+                     beam[firsts[j]], beam[lasts[j]])
+            for j, p0, p1, c in zip(keep, pts[:, 0], pts[:, 1], f.cov.take(keep, axis=0))]
 
 
 _new = object.__new__
