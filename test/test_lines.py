@@ -591,7 +591,7 @@ def test_carmen_logs(name):
 
 
 PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_SPLIT_PIECE_PY', '_CLEAN_PY', '_PAIRS_PY',
-            '_GROW_PY', '_NOISE_PY', '_BUILD_PY', '_JOIN_PAIRS_PY', '_SEEN_PY')
+            '_GROW_PY', '_NOISE_PY', '_BUILD_PY', '_JOIN_PAIRS_PY', '_SEEN_PY', '_CUT_PY')
 
 
 def _line_tuples(lines):

@@ -86,6 +86,7 @@ Choices where the chapters are silent, or misprinted:
 from bisect import bisect_left
 from dataclasses import dataclass, field
 import math
+from operator import lt
 from typing import List, Optional, Sequence, Tuple
 
 from landmark_nav.laser.lowess import lowess, lowess_groups
@@ -397,6 +398,27 @@ def _normal(sxx: np.ndarray, syy: np.ndarray, sxy: np.ndarray, out: np.ndarray
     return alpha
 
 
+def _math_is_numpy() -> bool:
+    """Return whether math's atan2, cos, sin and x ** 3 give numpy's float64 results here.
+
+    They do where numpy calls the C library for them (no SIMD version for this CPU, e.g.
+    x86-64 without AVX-512); the Python-float paths then call math's, without the array
+    round trip of a numpy call. Checked at import on 4096 arguments of each over the
+    ranges the fits use (eq. 8: alpha in [-pi/2, pi/2]), all signs of atan2's.
+    """
+    rng = np.random.default_rng(0)
+    y, x = rng.standard_normal((2, 4096)) * np.exp(rng.uniform(-20.0, 5.0, (2, 4096)))
+    half = 0.5 * np.arctan2(y, x)
+    base = np.abs(x)
+    return (np.arctan2(y, x).tolist() == list(map(math.atan2, y.tolist(), x.tolist()))
+            and np.cos(half).tolist() == list(map(math.cos, half.tolist()))
+            and np.sin(half).tolist() == list(map(math.sin, half.tolist()))
+            and (base ** 3).tolist() == [b ** 3 for b in base.tolist()])
+
+
+_MATH_TRIG = _math_is_numpy()
+
+
 def _solve(sums: np.ndarray, origin: np.ndarray, rmse: bool = True) -> _Fit:
     """Fit a line to each column of sums (6 or 24, G); coordinates relative to ``origin``.
 
@@ -445,7 +467,8 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     """Return :func:`_solve` for a few fits, computed on Python floats.
 
     The same operations in the same order, hence the same results (numpy's arctan2, cos
-    and sin, one call each, as the array version). Raises ZeroDivisionError or ValueError
+    and sin, one call each, as the array version, or math's where they are the same:
+    :func:`_math_is_numpy`). Raises ZeroDivisionError or ValueError
     on degenerate sums (e.g. a zero count or scatter), which :func:`_solve` then fits
     with numpy's inf / nan semantics.
     """
@@ -463,10 +486,14 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
         scat.append((n, cx, cy, sxx, syy, sxy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
-    alpha_a = np.arctan2(a_in, b_in)
-    alpha_a *= 0.5  # eq. 8
-    nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
-    alpha_l = alpha_a.tolist()
+    if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
+        alpha_l = [0.5 * a for a in map(math.atan2, a_in, b_in)]  # eq. 8
+        nx_l, ny_l = list(map(math.cos, alpha_l)), list(map(math.sin, alpha_l))
+    else:
+        alpha_a = np.arctan2(a_in, b_in)
+        alpha_a *= 0.5  # eq. 8
+        nx_l, ny_l = np.cos(alpha_a).tolist(), np.sin(alpha_a).tolist()
+        alpha_l = alpha_a.tolist()
     ox, oy = float(origin[0]), float(origin[1])
     rho_l, err_l, cov_l = [], [], []
     flip = False
@@ -517,6 +544,38 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     cov = np.array(cov_l).reshape(-1, 2, 2) if full else None
     out = np.array((rho_l, alpha_l, nx_l, ny_l))
     return _Fit(out, np.array(err_l) if rmse else None, sums[0], cov)
+
+
+def _line_py(c: List[float], origin: Tuple[float, float]) -> Tuple[float, float, float, float]:
+    """Return (rho, alpha, nx, ny) of :func:`_solve` of one column of sums ``c`` (a list).
+
+    The operations of :func:`_solve_small` for a single fit, without arrays (eqs. 8-10).
+    Raises ZeroDivisionError on a zero count.
+    """
+    n = c[0]
+    cx = c[1] / n
+    cy = c[2] / n
+    ncx = n * cx
+    sxx = c[3] - ncx * cx
+    syy = c[4] - n * cy * cy
+    sxy = c[5] - ncx * cy
+    if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
+        alpha = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)  # eq. 8
+        nx, ny = math.cos(alpha), math.sin(alpha)
+    else:
+        alpha_a = np.arctan2([-2.0 * sxy], [syy - sxx])
+        alpha_a *= 0.5  # eq. 8
+        nx, ny, alpha = np.cos(alpha_a).item(), np.sin(alpha_a).item(), alpha_a.item()
+    ax = cx + float(origin[0])  # centroid in the laser frame (eq. 10)
+    ay = cy + float(origin[1])
+    rho = ax * nx + ay * ny  # eq. 9
+    if rho < 0.0:
+        rho = -rho
+        alpha += math.pi
+        alpha = (alpha + math.pi) % TWO_PI - math.pi  # _wrap
+        nx = -nx
+        ny = -ny
+    return rho, alpha, nx, ny
 
 
 def _covariance(sums: np.ndarray, n: np.ndarray, cx: np.ndarray, cy: np.ndarray,
@@ -662,12 +721,10 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
         done_s.append(s[lone])
         done_e.append(e[lone])
         s, e = s[~lone], e[~lone]
-    if s.size:
-        steps = np.arange(1, max(e.tolist()) - min(s.tolist()) + 1)
+    steps = None  # 1, 2, ... (made at the first array level, for the pieces' layout)
     while s.size:
-        cnt = e - s
-        cnt -= 1  # interior points of every piece, >= 0
-        cl = cnt.tolist()
+        s_l, e_l = s.tolist(), e.tolist()
+        cl = [b - a - 1 for a, b in zip(s_l, e_l)]  # interior points of every piece, >= 0
         width = max(cl)
         if width == 0:
             done_s.append(s)
@@ -676,7 +733,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             break
         if sum(cl) <= _SPLIT_PY:  # few points left: finish piece by piece
             if not mixed:  # the runs themselves: index the points in place
-                ps, pe = _split_py(px, py, tol, s.tolist(), e.tolist(), min_span)
+                ps, pe = _split_py(px, py, tol, s_l, e_l, min_span)
                 done_s.append(np.array(ps, dtype=np.int64))
                 done_e.append(np.array(pe, dtype=np.int64))
                 break
@@ -686,6 +743,8 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             done_s.append(idx[ps])
             done_e.append(idx[pe])
             break
+        if steps is None:  # the later pieces lie within these
+            steps = np.arange(1, max(e_l) - min(s_l) + 1)
         x0, y0 = px[s], py[s]
         cx = px[e] - x0
         cy = py[e] - y0
@@ -700,6 +759,7 @@ def _split(px: np.ndarray, py: np.ndarray, s: np.ndarray, e: np.ndarray,
             at += s
             k = at + 1
         else:
+            cnt = np.array(cl, dtype=np.int64)
             inner = cnt.nonzero()[0]
             cmax = np.zeros(s.size)
             k = s.copy()
@@ -960,11 +1020,13 @@ _X, _Y, _RNG, _COS, _SIN, _TOL, _PHI = range(7)
 
 def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     """Stack the non-empty clusters; None if there are none."""
-    cl, bounds = [], [0]
+    cl, bounds, sizes = [], [0], []
     for c in clusters:
-        if c.indices.size:
+        size = c.indices.size
+        if size:
             cl.append(c)
-            bounds.append(bounds[-1] + c.indices.size)
+            sizes.append(size)
+            bounds.append(bounds[-1] + size)
     if not cl:
         return None
     offsets = np.array(bounds, dtype=np.int64)
@@ -994,7 +1056,7 @@ def _concat(clusters: Sequence[Cluster], params: LineParams) -> Optional[_Scan]:
     cols[_TOL] += params.threshold
     shared = whole if one and whole.valid is not None else None
     return _Scan(cols, cols[_X], cols[_Y], (ox, oy), beam,
-                 np.arange(len(cl)).repeat(offsets[1:] - offsets[:-1]), offsets,
+                 np.arange(len(cl)).repeat(sizes), offsets,
                  int(beam.max()) + 1, shared)
 
 
@@ -1133,8 +1195,12 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         scat.append((cx, cy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
-    alpha = 0.5 * np.arctan2(a_in, b_in)  # eq. 8 (_normal)
-    nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
+    if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
+        alpha = [0.5 * a for a in map(math.atan2, a_in, b_in)]  # eq. 8 (_normal)
+        nxs, nys = list(map(math.cos, alpha)), list(map(math.sin, alpha))
+    else:
+        alpha = 0.5 * np.arctan2(a_in, b_in)  # eq. 8 (_normal)
+        nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
     xs, ys, rng, cps, sps = scan.rows()[:_TOL]
     ox, oy = scan.origin
     sr, sp_ = params.sigma_r, params.sigma_phi
@@ -1259,7 +1325,7 @@ def _variance_factor_py(sums: np.ndarray, f: _Fit, nx_l: List[float], ny_l: List
     ``nx_l``, ``ny_l`` are the fits' normals as lists. Raises ZeroDivisionError on
     degenerate fits (the array version then gives numpy's inf / nan).
     """
-    s6, s12, s18 = sums[6].tolist(), sums[12].tolist(), sums[18].tolist()
+    s6, s12, s18 = sums[6:19:6].tolist()
     stats, dofs, bases = [], [], []
     for n, r, nx, ny, a, b, c in zip(f.count.tolist(), f.rmse.tolist(), nx_l, ny_l, s6, s12,
                                      s18):
@@ -1269,7 +1335,10 @@ def _variance_factor_py(sums: np.ndarray, f: _Fit, nx_l: List[float], ny_l: List
         h = 2.0 / (9.0 * dof)
         dofs.append(dof)
         bases.append(1.0 - h + _Z95 * math.sqrt(h))
-    cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
+    if _MATH_TRIG:  # numpy's power (see _math_is_numpy), as _variance_factor
+        cubes = [b ** 3 for b in bases]
+    else:
+        cubes = (np.array(bases) ** 3).tolist()  # numpy's power, as _variance_factor
     return [stat / dof if stat > dof * cube else 1.0
             for stat, dof, cube in zip(stats, dofs, cubes)]
 
@@ -1646,10 +1715,20 @@ def _extent_beams(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
     if f.extent is not None and f.extent[0] is first and f.extent[1] is last:
         return f.extent[2]
     wr, wc, ws, wv = scan.beams()
-    b0, b1 = scan.beam[first], scan.beam[last]
-    lo, hi = np.minimum(b0, b1), np.maximum(b0, b1)
-    idx, _ = _gather(lo, hi)
-    line = np.arange(first.size).repeat(hi - lo + 1)
+    # the beams lo..hi of every line, back to back (as _gather), laid out on lists
+    beam = memoryview(scan.beam)
+    cnt, shift = [], []
+    total = 0
+    for a, b in zip(first.tolist(), last.tolist()):
+        lo, hi = beam[a], beam[b]
+        if hi < lo:
+            lo, hi = hi, lo
+        cnt.append(hi - lo + 1)
+        shift.append(total - lo)
+        total += hi - lo + 1
+    idx = np.arange(total, dtype=np.int64)
+    idx -= np.array(shift, dtype=np.int64).repeat(cnt)
+    line = np.arange(len(cnt)).repeat(cnt)
     ok = wv[idx]
     idx, line = idx[ok], line[ok]
     rho, _, nx, ny = f.params.take(line, axis=1)
@@ -1722,6 +1801,10 @@ def _cut_seen_through(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: n
         ends = _noise_only_py(scan, pieces, first, last, line, beam, params)
         if ends is not None:
             return sums, ends[0], ends[1], f
+    if first.size <= _CUT_PY:
+        out = _cut_py(scan, feats, sums, first, last, f, pieces, line, beam, opening, params)
+        if out is not None:
+            return out
     owner = np.full(scan.x.size, -1, dtype=np.int64)
     # a line's support: its pieces and the runs grown before and after (disjoint, so one
     # gather of all of them)
@@ -1833,6 +1916,152 @@ def _noise_only_py(scan: _Scan, pieces: Tuple[np.ndarray, ...], first: np.ndarra
     return np.array(new_first, dtype=np.int64), np.array(new_last, dtype=np.int64)
 
 
+# Lines up to which _cut_seen_through cuts on Python lists (:func:`_cut_py`).
+_CUT_PY = 40
+
+
+def _runs_at(bps: List[int], hidden: List[int]) -> List[Tuple[int, int]]:
+    """Return the runs ``[a, b)`` of a line's support between its hidden beams.
+
+    ``bps`` are the beams of the line's supporting points (increasing), ``hidden`` the
+    hidden beams inside its extent (increasing); a supporting point at a hidden beam
+    leaves (as in :func:`_support_runs`).
+    """
+    runs = []
+    start = 0
+    size = len(bps)
+    for h in hidden:
+        pos = bisect_left(bps, h, start)
+        if pos > start:
+            runs.append((start, pos))
+        start = pos + 1 if pos < size and bps[pos] == h else pos
+    if start < size:
+        runs.append((start, size))
+    return runs
+
+
+def _cut_py(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
+            last: np.ndarray, f: _Fit, pieces: Tuple[np.ndarray, ...], line: np.ndarray,
+            beam: np.ndarray, opening: np.ndarray, params: LineParams
+            ) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, _Fit]]:
+    """Return :func:`_cut_seen_through` for the hidden beams of :func:`_seen_through`.
+
+    The same cuts, the same runs and the same fits as its array steps
+    (:func:`_support_runs`, :func:`_splits_in_two`): each line's support is a list of its
+    points, and only the lines that hide beams are cut into runs (at their hidden beams,
+    found by bisection), not the whole scan; the fits of every round are the same
+    ``reduceat`` sums and :func:`_solve` of all lines, tested by :func:`_seen_through`.
+    This needs the lines' supports in point order, one after the other, with beam indices
+    increasing along them (clusters of one ``segment_scan`` call, in beam order): then a
+    line's extent holds no other line's point and its hidden beams cut no other line.
+    Returns None otherwise (the array steps then run).
+    """
+    s, e, label, first0, last0 = pieces
+    n = first.size
+    f_l, l_l = first.tolist(), last.tolist()
+    sup: List[List[int]] = [list(range(a, b)) for a, b in zip(f_l, first0.tolist())]
+    for a, b, k in zip(s.tolist(), e.tolist(), label.tolist()):
+        sup[k].extend(range(a, b + 1))
+    for j, (a, b) in enumerate(zip(last0.tolist(), l_l)):
+        sup[j].extend(range(a + 1, b + 1))
+    pts = [p for ps in sup for p in ps]
+    bps = scan.beam.take(pts).tolist()
+    if not (all(map(lt, pts, pts[1:])) and all(map(lt, bps, bps[1:]))):
+        return None
+    bsup = []
+    k = 0
+    for ps in sup:
+        bsup.append(bps[k:k + len(ps)])
+        k += len(ps)
+    xs, ys = scan.rows()[_X], scan.rows()[_Y]
+    least, min_length = params.min_points, params.min_length
+
+    def hidden_by_line(line_l: List[int], beam_l: List[int], sel: Optional[List[bool]]
+                       ) -> dict:
+        """Return {line: its hidden beams (increasing)}, of the entries ``sel`` (all: None)."""
+        out: dict = {}
+        for i, (j, b) in enumerate(zip(line_l, beam_l)):
+            if sel is None or sel[i]:
+                out.setdefault(j, []).append(b)
+        return out
+
+    def splits_in_two(hidden: dict) -> Tuple[set, dict]:
+        """Return the lines cut into two or more lines at their hidden beams, and the runs."""
+        runs, two = {}, set()
+        for j, hb in hidden.items():
+            ps = sup[j]
+            runs[j] = rj = _runs_at(bsup[j], hb)
+            good = 0
+            for a, b in rj:
+                pa, pb = ps[a], ps[b - 1]
+                if b - a >= least and abs(
+                        complex(xs[pb] - xs[pa], ys[pb] - ys[pa])) >= min_length:
+                    good += 1  # C hypot, as np.hypot
+            if good >= 2:
+                two.add(j)
+        return two, runs
+
+    line_l, beam_l, open_l = line.tolist(), beam.tolist(), opening.tolist()
+    hidden = hidden_by_line(line_l, beam_l, None)
+    two, runs = splits_in_two(hidden)
+    open_l = [o or j in two for o, j in zip(open_l, line_l)]
+    rounds = 0
+    changed = False
+    while any(open_l):
+        if rounds == _MAX_CUTS:  # give up on the lines that still hide an opening
+            drop = {j for j, o in zip(line_l, open_l) if o}
+            keep = [j for j in range(n) if j not in drop]
+            relabel = {j: i for i, j in enumerate(keep)}
+            sums, first, last = sums[:, keep], first[keep], last[keep]
+            if not keep:
+                return sums, first, last, f
+            f = _solve(sums, scan.origin)
+            sup, bsup = [sup[j] for j in keep], [bsup[j] for j in keep]
+            sel = [j in relabel for j in line_l]
+            line_l = [relabel[j] for j, ok in zip(line_l, sel) if ok]
+            beam_l = [b for b, ok in zip(beam_l, sel) if ok]
+            hidden = hidden_by_line(line_l, beam_l, None)
+            runs = splits_in_two(hidden)[1]
+            changed = True
+            break
+        rounds += 1
+        cuts = hidden_by_line(line_l, beam_l, open_l)
+        new_sup, new_bsup = [], []
+        for j, (ps, bs) in enumerate(zip(sup, bsup)):
+            for a, b in (_runs_at(bs, cuts[j]) if j in cuts else ((0, len(ps)),)):
+                if b - a >= least:
+                    new_sup.append(ps[a:b])
+                    new_bsup.append(bs[a:b])
+        sup, bsup = new_sup, new_bsup
+        if not sup:
+            return sums[:, :0], first[:0], last[:0], f
+        first = np.array([ps[0] for ps in sup], dtype=np.int64)
+        last = np.array([ps[-1] for ps in sup], dtype=np.int64)
+        n = len(sup)
+        starts = [0]
+        for ps in sup[:-1]:
+            starts.append(starts[-1] + len(ps))
+        sums = np.add.reduceat(feats.take([p for ps in sup for p in ps], axis=1), starts,
+                               axis=1)
+        f = _solve(sums, scan.origin)
+        line, beam, opening = _seen_through(scan, f, first, last, params)
+        line_l, beam_l, open_l = line.tolist(), beam.tolist(), opening.tolist()
+        hidden = hidden_by_line(line_l, beam_l, None)
+        two, runs = splits_in_two(hidden)
+        open_l = [o or j in two for o, j in zip(open_l, line_l)]
+        changed = True
+    if line_l:  # only noise: each line's extent becomes its largest run between them
+        new_first, new_last = first.tolist(), last.tolist()
+        for j, rj in runs.items():
+            if rj:
+                a, b = max(rj, key=lambda r: r[1] - r[0])  # the first run of most points
+                new_first[j], new_last[j] = sup[j][a], sup[j][b - 1]
+        if changed or new_first != first.tolist() or new_last != last.tolist():
+            first = np.array(new_first, dtype=np.int64)
+            last = np.array(new_last, dtype=np.int64)
+    return sums, first, last, f
+
+
 def _splits_in_two(scan: _Scan, owner: np.ndarray, line: np.ndarray, beam: np.ndarray,
                    first: np.ndarray, params: LineParams) -> Tuple[np.ndarray, Optional[tuple]]:
     """Mark the hidden beams (all of a line's) that cut it into two or more lines.
@@ -1881,6 +2110,29 @@ def _support_runs(scan: _Scan, owner: np.ndarray, hidden: np.ndarray
     return pos, new.cumsum() - 1, starts, bounds[1:] - bounds[:-1]
 
 
+def _shrunk_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray
+                    ) -> Optional[List[Tuple[int, int]]]:
+    """Return the lines' beam ranges if they lie within those cached on ``f``, else None.
+
+    :func:`_cut_seen_through` shrinks the extents of lines that hide only their noise and
+    keeps their fits: the beams of the new extents are then among the cached ones of
+    :func:`_extent_beams` (the same values), and a test of those beams needs only to
+    keep the ones inside the new ranges. None when nothing is cached for these fits, the
+    cache is for these very extents, or a range is not within its line's cached one.
+    """
+    ext = f.extent
+    if ext is None or (ext[0] is first and ext[1] is last) or ext[0].size != first.size:
+        return None
+    beam = memoryview(scan.beam)
+    out = []
+    for a, b, a0, b0 in zip(first.tolist(), last.tolist(), ext[0].tolist(), ext[1].tolist()):
+        lo, hi = min(beam[a], beam[b]), max(beam[a], beam[b])
+        if not min(beam[a0], beam[b0]) <= lo <= hi <= max(beam[a0], beam[b0]):
+            return None
+        out.append((lo, hi))
+    return out
+
+
 def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
                       params: LineParams) -> Tuple[Optional[np.ndarray], np.ndarray, np.ndarray]:
     """Cut the lines' extents at occluders (step 5); return (line, first, last) per piece.
@@ -1894,10 +2146,15 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
     result is ``(None, first, last)``.
     """
     same = None, first, last
-    idx, line, rho, r, cos_in = _extent_beams(scan, f, first, last)
+    within = _shrunk_extents(scan, f, first, last)
+    idx, line, rho, r, cos_in = (_extent_beams(scan, f, first, last) if within is None
+                                 else f.extent[2])
     front = rho / cos_in - r  # how far the return lies in front of the line
     # Only a beam in front by more than the tolerance can be in front by the margin.
     hit = ((cos_in > 1e-9) & (front > params.see_through_tolerance)).nonzero()[0]
+    if within is not None and hit.size:  # the beams of the earlier extents: keep those
+        hit = hit[[within[j][0] <= b <= within[j][1]  # inside the lines' extents now
+                   for j, b in zip(line[hit].tolist(), idx[hit].tolist())]]
     if hit.size < 2:
         return same
     r, cos_in = r[hit], cos_in[hit]
@@ -2052,8 +2309,15 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         if chi2(r1, a1, c1, r2, a2, c2) > gate:
             return None
         joint = line_sums[j] + line_sums[k]
-        g = _solve(joint[:6, None], scan.origin, rmse=False)  # the tests need the line only
-        rg, ag, nx, ny = g.params[:, 0].tolist()
+        line = None  # the tests need the line only: _solve's, on Python floats if it would be
+        if _SMALL_NO_COV >= 1:
+            try:
+                line = _line_py(joint[:6].tolist(), scan.origin)
+            except ZeroDivisionError:  # degenerate sums: numpy's inf / nan below
+                pass
+        if line is None:
+            line = _solve(joint[:6, None], scan.origin, rmse=False).params[:, 0].tolist()
+        rg, ag, nx, ny = line
         if not (chi2(r1, a1, c1, rg, ag, None) <= gate and chi2(r2, a2, c2, rg, ag, None)
                 <= gate):
             return None
@@ -2065,12 +2329,12 @@ def _join_occluded(scan: _Scan, sums: np.ndarray, first: np.ndarray, last: np.nd
         e0, s1 = int(beam[ends[j][1]]), int(beam[first_l[k]])
         if not b0 <= e0 < s1 <= b1:
             return None
-        idx = np.arange(b0, b1 + 1)
-        cos_in = wc[idx] * nx + ws[idx] * ny
+        span = slice(b0, b1 + 1)  # the beams from j's first to k's last (views)
+        cos_in = wc[span] * nx + ws[span] * ny
         if np.count_nonzero(cos_in <= 1e-9):
             return None
-        beyond = wr[idx] - rg / cos_in
-        ok = wv[idx]
+        beyond = wr[span] - rg / cos_in
+        ok = wv[span]
         if np.count_nonzero(ok & (beyond > tol)):  # a beam seen through the joint line
             return None
         gap = slice(e0 + 1 - b0, s1 - b0)  # the beams between the two lines
@@ -2227,9 +2491,10 @@ def _build_py(scan: _Scan, params: LineParams, f: _Fit, first: np.ndarray,
     if not keep:
         return []
     pts = np.array(flat).reshape(-1, 2, 2)
-    cov = f.cov.take(keep, axis=0)
-    return [_segment(rhos[j], alphas[j], pts[i, 0], pts[i, 1], int(counts[j]), rmses[j],
-                     cov[i], beam[firsts[j]], beam[lasts[j]]) for i, j in enumerate(keep)]
+    # the (2,) start and end points and (2, 2) covariances as views, made in one pass each
+    return [_segment(rhos[j], alphas[j], p0, p1, int(counts[j]), rmses[j], c,
+                     beam[firsts[j]], beam[lasts[j]])
+            for j, p0, p1, c in zip(keep, pts[:, 0], pts[:, 1], f.cov.take(keep, axis=0))]
 
 
 _new = object.__new__
