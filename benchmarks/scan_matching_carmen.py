@@ -32,8 +32,9 @@ it), and on the scan-matched chain (its poses as the odometry samples, at the sc
 the front end's own scan matching off) with ``--filter-noise`` as ``U`` (default
 ``k_d=0.04 k_theta=0.015 k_dtheta=0.03``: about twice the ICP motions' per-step errors
 printed by the first part). It prints each one's ATE [m] (and its ratio to the
-odometry's) and RPE over 1 m [cm]: whether
-the landmark updates add to, or take from, the motion they start from.
+odometry's), RPE over 1 m [cm] and the share of steps with the reference inside the 95 %
+position ellipse: whether the landmark updates add to, or take from, the motion they start
+from.
 """
 
 import argparse
@@ -48,7 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_node_cpu import params_file_options, split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
-from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
+from landmark_nav.evaluation.slam import (bag_odometry_noise, ellipse_share,  # noqa: E402
+                                          run_slam)
 from landmark_nav.evaluation.trajectory import ate, rpe, Trajectory  # noqa: E402
 from landmark_nav.geometry import (compose, interpolate_pose, inverse,  # noqa: E402
                                    relative, wrap_angle)
@@ -125,7 +127,10 @@ def chain(scenario) -> tuple:
 
 
 def slam_figures(scenario, options: dict, noise=None) -> tuple:
-    """Run EKF-SLAM on the scenario; return its SE(2)-aligned ATE [m] and RPE over 1 m [m].
+    """Run EKF-SLAM on the scenario; return its SE(2)-aligned ATE [m], RPE over 1 m [m], ellipse.
+
+    The ellipse figure is the share of steps with the reference inside the 95 % position
+    ellipse (:func:`landmark_nav.evaluation.slam.ellipse_share`).
 
     With ``noise`` (the filter on the scan-matched chain) the front end's own scan matching
     is off whatever ``options`` say: the chain is already scan-matched.
@@ -141,7 +146,7 @@ def slam_figures(scenario, options: dict, noise=None) -> tuple:
                    landmarks=landmarks, frontend=frontend)
     ref = Trajectory.from_planar(run.stamps, run.truth)
     est = Trajectory.from_planar(run.stamps, run.poses)
-    return ate(est, ref, 'se2')['rmse'], rpe(est, ref, 1.0)['rmse']
+    return ate(est, ref, 'se2')['rmse'], rpe(est, ref, 1.0)['rmse'], ellipse_share(run)
 
 
 def with_odometry(scenario, stamps: np.ndarray, poses: np.ndarray):
@@ -175,7 +180,8 @@ def main() -> int:
     carmen = SHARED_DATA / 'carmen'
     print('run | ATE odometry / ICP [m] (ratio) | RPE 1 m odometry / ICP [cm] | ICP used | '
           'step yaw error odometry / ICP [deg] | ICP NIS (median)'
-          + (' | SLAM on odometry / on ICP: ATE [m] (/ odometry ATE), RPE [cm]' if args.slam
+          + (' | SLAM on odometry / on ICP: ATE [m] (/ odometry ATE), RPE [cm], ellipse'
+             if args.slam
              else ''))
     ratios = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -188,11 +194,12 @@ def main() -> int:
                 ratios.append(r['icp_ate'] / r['odo_ate'])
                 slam = ''
                 if args.slam:
-                    a0, r0 = slam_figures(scenario, options)
-                    a1, r1 = slam_figures(with_odometry(scenario, stamps, poses), options,
-                                          chain_noise)
-                    slam = (f" | {a0:.2f} ({a0 / r['odo_ate']:.3f}), {100 * r0:.1f} / "
-                            f"{a1:.2f} ({a1 / r['odo_ate']:.3f}), {100 * r1:.1f}")
+                    a0, r0, e0 = slam_figures(scenario, options)
+                    a1, r1, e1 = slam_figures(with_odometry(scenario, stamps, poses), options,
+                                              chain_noise)
+                    slam = (f" | {a0:.2f} ({a0 / r['odo_ate']:.3f}), {100 * r0:.1f}, "
+                            f"{100 * e0:.1f} % / {a1:.2f} ({a1 / r['odo_ate']:.3f}), "
+                            f'{100 * r1:.1f}, {100 * e1:.1f} %')
 
                 print(f"{name}-{seed} | {r['odo_ate']:.2f} / {r['icp_ate']:.2f} "
                       f"({ratios[-1]:.2f}) | {100 * r['odo_rpe']:.1f} / {100 * r['icp_rpe']:.1f}"
