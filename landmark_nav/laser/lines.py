@@ -475,14 +475,8 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     full = sums.shape[0] == NUM_SUMS
     cols = sums.T.tolist()  # one list of sums per fit
     scat, a_in, b_in = [], [], []
-    for c in cols:  # _scatter
-        n = c[0]
-        cx = c[1] / n
-        cy = c[2] / n
-        ncx = n * cx
-        sxx = c[3] - ncx * cx
-        syy = c[4] - n * cy * cy
-        sxy = c[5] - ncx * cy
+    for c in cols:
+        n, cx, cy, sxx, syy, sxy = _scatter_py(c)
         scat.append((n, cx, cy, sxx, syy, sxy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
@@ -546,19 +540,25 @@ def _solve_small(sums: np.ndarray, origin: np.ndarray, rmse: bool) -> _Fit:
     return _Fit(out, np.array(err_l) if rmse else None, sums[0], cov)
 
 
-def _line_py(c: List[float], origin: Tuple[float, float]) -> Tuple[float, float, float, float]:
-    """Return (rho, alpha, nx, ny) of :func:`_solve` of one column of sums ``c`` (a list).
+def _scatter_py(c: List[float]) -> Tuple[float, float, float, float, float, float]:
+    """Return (n, cx, cy, sxx, syy, sxy) of one column of sums ``c``: :func:`_scatter` on floats.
 
-    The operations of :func:`_solve_small` for a single fit, without arrays (eqs. 8-10).
     Raises ZeroDivisionError on a zero count.
     """
     n = c[0]
     cx = c[1] / n
     cy = c[2] / n
     ncx = n * cx
-    sxx = c[3] - ncx * cx
-    syy = c[4] - n * cy * cy
-    sxy = c[5] - ncx * cy
+    return n, cx, cy, c[3] - ncx * cx, c[4] - n * cy * cy, c[5] - ncx * cy
+
+
+def _line_py(c: List[float], origin: Tuple[float, float]) -> Tuple[float, float, float, float]:
+    """Return (rho, alpha, nx, ny) of :func:`_solve` of one column of sums ``c`` (a list).
+
+    The operations of :func:`_solve_small` for a single fit, without arrays (eqs. 8-10).
+    Raises ZeroDivisionError on a zero count.
+    """
+    n, cx, cy, sxx, syy, sxy = _scatter_py(c)
     if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
         alpha = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)  # eq. 8
         nx, ny = math.cos(alpha), math.sin(alpha)
