@@ -166,3 +166,31 @@ def test_drivers_stop_cleanly_on_signals(tmp_path, sig):
         for p in emulators:
             p.send_signal(signal.SIGINT)
             p.communicate(timeout=30)
+
+
+# A node whose destruction never ends (as rcl's has, rarely, in Fast DDS after SIGINT).
+STUCK = """
+import sys, time
+import rclpy
+from rclpy.node import Node
+from landmark_nav.nodes import common
+common.SHUTDOWN_TIMEOUT_S = 1.0
+class Stuck(Node):
+    def __init__(self):
+        super().__init__('stuck')
+        self.create_timer(0.1, lambda: rclpy.try_shutdown())
+    def destroy_node(self):
+        print('destroying', flush=True)
+        time.sleep(60.0)
+sys.exit(common.run_node(Stuck, [sys.argv[0]]))
+"""
+
+
+def test_a_node_whose_destruction_hangs_still_exits_with_its_stacks():
+    start = time.monotonic()
+    out = subprocess.run([sys.executable, '-c', STUCK], env=node_env(), capture_output=True,
+                         text=True, timeout=50)
+    assert 'destroying' in out.stdout, out.stderr
+    assert time.monotonic() - start < 30.0  # not the 60 s sleep
+    assert out.returncode == 1, (out.returncode, out.stderr)
+    assert 'Timeout' in out.stderr and 'destroy_node' in out.stderr, out.stderr

@@ -10,6 +10,7 @@
 """
 
 from collections import Counter, deque
+import faulthandler
 import math
 import os
 from pathlib import Path
@@ -159,12 +160,21 @@ def limit_threads(default: int = 1) -> Optional[int]:
     return n
 
 
+#: Seconds the node's destruction may take after the spin ended before the process exits
+#: anyway (status 1, the stacks dumped to stderr by :mod:`faulthandler`). Destroying an rcl
+#: node after SIGINT has, rarely, spun in the middleware (Fast DDS) without end; a node
+#: must still stop on Ctrl-C. The watchdog is native, so it fires even if the stuck call
+#: holds the GIL.
+SHUTDOWN_TIMEOUT_S = 10.0
+
+
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
     """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2.
 
     Numerical libraries run single-threaded unless configured (:func:`limit_threads`).
     SIGINT (Ctrl-C) and SIGTERM shut rclpy down (its signal handlers) and end the spin; the
-    node is then destroyed without a traceback, exit status 0.
+    node is then destroyed without a traceback, exit status 0. A destruction still running
+    after :data:`SHUTDOWN_TIMEOUT_S` ends the process with status 1 and the stacks on stderr.
     """
     node = None
     try:
@@ -182,12 +192,16 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
             raise
         # A callback running while SIGINT / SIGTERM shut the context down: not an error.
     finally:
-        if node is not None:
-            try:
-                node.destroy_node()
-            except Exception:  # already invalid after the shutdown
-                pass
-        rclpy.try_shutdown()
+        faulthandler.dump_traceback_later(SHUTDOWN_TIMEOUT_S, exit=True)
+        try:
+            if node is not None:
+                try:
+                    node.destroy_node()
+                except Exception:  # already invalid after the shutdown
+                    pass
+            rclpy.try_shutdown()
+        finally:
+            faulthandler.cancel_dump_traceback_later()
     return 0
 
 
