@@ -7,7 +7,8 @@ from landmark_nav.geometry import compose, relative
 from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams
 from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
                                         SlamFrontend)
-from landmark_nav.slam.scan_matching import point_to_line_icp, scan_motion, scan_points
+from landmark_nav.slam.scan_matching import (base_motion, point_to_line_icp, scan_motion,
+                                             scan_points)
 from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 import pytest
@@ -72,12 +73,12 @@ ANGLE_MIN, INC = -math.pi / 2, math.pi / 360
 MOUNT = np.array([0.2, 0.05, 0.1])
 
 
-def _cast(laser_pose, rng=None, sigma=0.005):
+def _cast(laser_pose, rng=None, sigma=0.005, room=ROOM):
     """Ranges of the room's first surface along each beam of a laser at ``laser_pose``."""
     a = laser_pose[2] + ANGLE_MIN + INC * np.arange(361)
     d = np.column_stack([np.cos(a), np.sin(a)])
     best = np.full(a.size, np.inf)
-    for p0, p1 in ROOM:
+    for p0, p1 in room:
         p0, e = np.asarray(p0), np.asarray(p1) - np.asarray(p0)
         w = p0 - laser_pose[:2]
         den = d[:, 0] * e[1] - d[:, 1] * e[0]
@@ -114,6 +115,43 @@ def test_scan_motion_is_the_base_motion_through_the_mount():
     assert v2 is not None and np.allclose(v2, v)
     # Too few returns (an empty scan): no motion.
     assert scan_motion(prev, cur[:5], u, u_cov, MOUNT, gate=16.27) is None
+
+
+# A 20 m x 10 m hall with eight square pillars: at 5-10 m a heading error of 30 deg moves
+# the returns metres, beyond ICP's basin.
+def _square(cx, cy, h=0.3):
+    c = [(cx - h, cy - h), (cx + h, cy - h), (cx + h, cy + h), (cx - h, cy + h)]
+    return [(c[i], c[(i + 1) % 4]) for i in range(4)]
+
+
+HALL = [((-10.0, -5.0), (10.0, -5.0)), ((10.0, -5.0), (10.0, 5.0)),
+        ((10.0, 5.0), (-10.0, 5.0)), ((-10.0, 5.0), (-10.0, -5.0))] + [
+    seg for cx in (-6.0, -2.0, 2.0, 6.0) for cy in (-2.0, 2.0) for seg in _square(cx, cy)]
+
+
+def test_scan_motion_restarts_from_other_headings_when_the_odometry_guess_fails():
+    rng = np.random.default_rng(0)
+    base0 = np.array([-4.0, 0.0, 0.1])
+    truth = np.array([0.8, 0.1, math.radians(60.0)])
+    prev = scan_points(_cast(compose(base0, MOUNT), rng, room=HALL), ANGLE_MIN, INC, 0.05, 20.0)
+    cur = scan_points(_cast(compose(compose(base0, truth), MOUNT), rng, room=HALL), ANGLE_MIN,
+                      INC, 0.05, 20.0)
+    u = truth + np.array([0.0, 0.0, math.radians(-30.0)])   # the odometry under-turned
+    u_cov = odometry_noise(u, odometry_noise_model('k_d=0.05 k_theta=0.05 k_dtheta=0.25'))
+    assert 2.5 < math.radians(30.0) / math.sqrt(u_cov[2, 2]) < 3.0   # inside the test region
+    first = base_motion(prev, cur, u, MOUNT)   # from the odometry's guess: the wrong structure
+    assert first is None or np.hypot(*(first[0][:2] - truth[:2])) > 0.3
+    counts = {}
+    v = scan_motion(prev, cur, u, u_cov, MOUNT, 16.27, None, counts)
+    assert v is not None
+    assert np.allclose(v[:2], truth[:2], atol=0.005) and abs(v[2] - truth[2]) < 1e-3
+    assert counts == {'restarted': 1, 'recovered': 1}
+    # A right guess needs no restart; a region that admits none of the solutions: None.
+    counts = {}
+    assert scan_motion(prev, cur, truth, u_cov, MOUNT, 16.27, None, counts) is not None
+    assert counts == {}
+    assert scan_motion(prev, cur, u, u_cov * 1e-2, MOUNT, 16.27, None, counts) is None
+    assert counts == {'restarted': 1}
 
 
 def test_scan_points_keeps_valid_returns_below_the_range_limit():

@@ -119,6 +119,9 @@ class SlamRun:
     #: Steps predicted with each motion (``SlamFrontend.motions``: ``odometry``,
     #: ``scan_matching``).
     motions: Dict[str, int] = field(default_factory=dict)
+    #: ``SlamFrontend.icp_restarts``: steps whose first ICP solution failed or was rejected
+    #: (``restarted``) and those a restart from other headings made usable (``recovered``).
+    icp_restarts: Dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -308,7 +311,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
                    line_ends=slam.line_ends[ln], final_map=slam.export_map(),
                    obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool),
-                   motions=dict(fe.motions))
+                   motions=dict(fe.motions), icp_restarts=dict(fe.icp_restarts))
 
 
 def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
@@ -732,6 +735,7 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
               'reset_reasons': dict(run.reset_reasons),
               'frontend_events': dict(run.events),
               'motions': dict(run.motions),
+              'icp_restarts': dict(run.icp_restarts),
               'odometry_noise': {**asdict(prm.odometry), 'source': noise_source},
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
@@ -821,8 +825,11 @@ def format_summary(r: dict) -> str:
              + (f'; inputs not used as they came: {events}' if events else '')]
     motions = r.get('motions', {})
     if motions.get('scan_matching'):
+        restarts = r.get('icp_restarts', {})
         lines.append(f'motion: {motions["scan_matching"]} steps scan-matched, '
-                     f'{motions.get("odometry", 0)} odometry')
+                     f'{motions.get("odometry", 0)} odometry (ICP restarted from other '
+                     f'headings on {restarts.get("restarted", 0)} steps, usable after '
+                     f'{restarts.get("recovered", 0)})')
     lines += [f'note: {n}' for n in r.get('notes', [])]
     if r['reference'] is None:
         return '\n'.join(lines + _lines_without_reference(r))

@@ -85,7 +85,10 @@ heading gains, chosen on the Carmen logs' first drift seed, README). Otherwise (
 step, no scan geometry in the set or in the one before, a bridged odometry jump in the step,
 ICP without enough pairs, or a motion the odometry rules out: ICP sliding along a corridor
 or locking onto the wrong structure) the odometry increment and its ``U`` are used, as
-without the option. :attr:`SlamFrontend.motions` counts the steps of each kind. The same
+without the option. ICP from the odometry's guess fails when that heading is several degrees
+off (after a turn); it is then restarted from headings across ``U``'s (``scan_motion``).
+:attr:`SlamFrontend.motions` counts the steps of each kind, :attr:`SlamFrontend.icp_restarts`
+the restarts. The same
 scans then give the landmark observations: the scan-matched motion and the update share
 their data, so the filter's pose is somewhat overconfident (the Carmen figures in the README
 measure how much). The ICP runs on the raw scan (no de-skew).
@@ -439,6 +442,10 @@ class SlamFrontend:
         self.events: Dict[str, int] = dict.fromkeys(ODOMETRY_EVENTS + FEATURE_EVENTS, 0)
         #: Steps predicted with each motion (:data:`MOTION_SOURCES`).
         self.motions: Dict[str, int] = dict.fromkeys(MOTION_SOURCES, 0)
+        #: Steps whose first ICP solution failed or was rejected (``restarted``) and those
+        #: a restart from other headings made usable (``recovered``):
+        #: :func:`.scan_matching.scan_motion`.
+        self.icp_restarts: Dict[str, int] = {'restarted': 0, 'recovered': 0}
         self._scan_noise = odometry_noise_model(self.frontend.scan_matching_noise)
         self._scan_accept = chi2_gate(3, self.frontend.scan_matching_accept)
         self.restarts = 0
@@ -714,7 +721,7 @@ class SlamFrontend:
             return u, u_cov, 'odometry'
         cov = odometry_noise(u, self.params.odometry) if u_cov is None else u_cov
         v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept,
-                        lambda m: odometry_noise(m, self._scan_noise))
+                        lambda m: odometry_noise(m, self._scan_noise), self.icp_restarts)
         if v is None:
             return u, u_cov, 'odometry'
         return v, odometry_noise(v, self._scan_noise), 'scan_matching'

@@ -17,7 +17,7 @@ the sum of squared residuals; the gate may shrink over stages (coarse to fine).
 
 from dataclasses import dataclass
 import math
-from typing import Callable, Optional, Sequence
+from typing import Callable, Dict, Optional, Sequence
 
 from landmark_nav.geometry import compose, inverse, wrap_angle
 import numpy as np
@@ -154,8 +154,8 @@ def base_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
 
 def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
                 u_cov: np.ndarray, mount: Sequence[float], gate: float,
-                v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None
-                ) -> Optional[np.ndarray]:
+                v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None,
+                restarts: Optional[Dict[str, int]] = None) -> Optional[np.ndarray]:
     """Return the base's motion between two scans by ICP, or None when it is not usable.
 
     The motion of :func:`base_motion` is used only when it agrees with the odometry: its
@@ -163,6 +163,14 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     ``d^T (U + V)^-1 d <= gate`` (a chi-square bound on 3 degrees of freedom; ``V`` the
     scan-matched motion's own covariance), which rejects ICP solutions that slid along a
     corridor or locked onto the wrong structure.
+
+    ICP converges only from a guess near the motion; the odometry's heading, off by several
+    degrees after a turn, moves points metres away and ICP finds too few pairs or the wrong
+    structure. So when the first solution fails or is rejected, ICP is restarted from the
+    odometry increment turned by ``j s`` (``s`` the heading std of ``U``, ``j = +-1 ..
+    +-ceil(sqrt(gate))``: the headings the agreement test can accept), and the solution
+    with the most pairs is tested (a coarse form of the search over the prior's window of
+    correlative scan matching; Olson, ICRA 2009).
 
     Args:
         previous: (N, 2) the previous scan's points (laser frame) [m].
@@ -173,19 +181,43 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
         gate: The chi-square bound.
         v_cov: ``V`` as a function of the scan-matched motion (None: zero, the odometry's
             region alone).
+        restarts: Optional counts to increment: ``restarted`` (the first solution failed or
+            was rejected) and ``recovered`` (a restart gave a usable motion).
 
     Returns:
         (3,) the base's motion, or None (ICP failed or disagrees with the odometry).
     """
+    restarts = {} if restarts is None else restarts
+    u = np.asarray(u, dtype=float)
+    u_cov = np.asarray(u_cov, dtype=float)
+
+    def agreed(found: Optional[tuple]) -> bool:
+        if found is None:
+            return False
+        d = found[0] - u
+        d[2] = wrap_angle(d[2])
+        cov = u_cov + (0.0 if v_cov is None else v_cov(found[0]))
+        try:
+            return float(d @ np.linalg.solve(cov, d)) <= gate
+        except np.linalg.LinAlgError:
+            return False
+
     found = base_motion(previous, current, u, mount)
-    if found is None:
+    if agreed(found):
+        return found[0]
+    s = math.sqrt(max(float(u_cov[2, 2]), 0.0))
+    if not (s > 0.0 and math.isfinite(s)):
         return None
-    v = found[0]
-    d = v - np.asarray(u, dtype=float)
-    d[2] = wrap_angle(d[2])
-    cov = np.asarray(u_cov, dtype=float) + (0.0 if v_cov is None else v_cov(v))
-    try:
-        m2 = float(d @ np.linalg.solve(cov, d))
-    except np.linalg.LinAlgError:
+    restarts['restarted'] = restarts.get('restarted', 0) + 1
+    best = found
+    for j in range(1, math.ceil(math.sqrt(gate)) + 1):
+        for sign in (1.0, -1.0):
+            guess = u.copy()
+            guess[2] += sign * j * s
+            other = base_motion(previous, current, guess, mount)
+            if other is not None and (best is None or other[1].matches > best[1].matches):
+                best = other
+    if not agreed(best):
         return None
-    return v if m2 <= gate else None
+    restarts['recovered'] = restarts.get('recovered', 0) + 1
+    return best[0]
