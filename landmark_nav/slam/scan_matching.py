@@ -168,8 +168,9 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     degrees after a turn, moves points metres away and ICP finds too few pairs or the wrong
     structure. So when the first solution fails or is rejected, ICP is restarted from the
     odometry increment turned by ``j s`` (``s`` the heading std of ``U``, ``j = +-1 ..
-    +-ceil(sqrt(gate))``: the headings the agreement test can accept), and the solution
-    with the most pairs is tested (a coarse form of the search over the prior's window of
+    +-ceil(sqrt(gate))``: the odometry's headings at the test's confidence; each restart
+    costs one more ICP, up to ``2 ceil(sqrt(gate))`` on a step), and the solution with the
+    most pairs is tested (a coarse form of the search over the prior's window of
     correlative scan matching; Olson, ICRA 2009).
 
     Args:
