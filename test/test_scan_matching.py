@@ -7,8 +7,8 @@ from landmark_nav.geometry import compose, relative
 from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams
 from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
                                         SlamFrontend)
-from landmark_nav.slam.scan_matching import (base_motion, point_to_line_icp, scan_motion,
-                                             scan_points)
+from landmark_nav.slam.scan_matching import (base_motion, larger_motion, point_to_line_icp,
+                                             scan_motion, scan_points)
 from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 import pytest
@@ -152,6 +152,41 @@ def test_scan_motion_restarts_from_other_headings_when_the_odometry_guess_fails(
     assert counts == {}
     assert scan_motion(prev, cur, u, u_cov * 1e-2, MOUNT, 16.27, None, counts) is None
     assert counts == {'restarted': 1}
+
+
+def test_scan_motion_tests_both_noise_models_at_the_larger_motion():
+    """The agreement region is that of the one true motion: U and V at the larger motion.
+
+    The odometry's own error must not shrink its region (freiburg-101, drift seed 1, step
+    137: the odometry turned -15.5 deg of a true -30.2 deg, U at that increment had half the
+    turn-driven variance and the correct ICP motion was rejected; the filter kept a 15 deg
+    heading error for the rest of the run).
+    """
+    assert np.allclose(larger_motion([0.3, 0.4, -0.2], [0.0, 0.1, 0.5]), [0.5, 0.0, 0.5])
+    rng = np.random.default_rng(8)
+    base0 = np.array([-1.0, -0.5, 0.2])
+    truth = np.array([0.3, 0.0, math.radians(-40.0)])
+    base1 = compose(base0, truth)
+    prev = scan_points(_cast(compose(base0, MOUNT), rng), ANGLE_MIN, INC, 0.05, 20.0)
+    cur = scan_points(_cast(compose(base1, MOUNT), rng), ANGLE_MIN, INC, 0.05, 20.0)
+    u = truth + np.array([0.0, 0.0, math.radians(20.0)])   # the odometry turned only -20 deg
+    pioneer = odometry_noise_model('pioneer')
+    scans = odometry_noise_model('k_d=0.05 k_theta=0.03 k_dtheta=0.06')
+
+    def model(m):
+        return odometry_noise(m, pioneer)
+
+    def v_model(m):
+        return odometry_noise(m, scans)
+
+    # U at the odometry's own increment: rejected (d^2 17.4 > 16.27).
+    assert scan_motion(prev, cur, u, model(u), MOUNT, 16.27, v_model) is None
+    # Both at the larger motion (the ICP's 40 deg turn): d^2 11.6, accepted; it is the truth.
+    v = scan_motion(prev, cur, u, model, MOUNT, 16.27, v_model)
+    assert v is not None and abs(v[2] - truth[2]) < math.radians(0.2)
+    # A wrong ICP is still refused: the same odometry against a tight model.
+    assert scan_motion(prev, cur, u, lambda m: 1e-2 * model(m), MOUNT, 16.27,
+                       lambda m: 1e-2 * v_model(m)) is None
 
 
 def test_scan_points_keeps_valid_returns_below_the_range_limit():

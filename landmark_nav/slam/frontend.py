@@ -79,9 +79,12 @@ within ``scan_matching_max_range``, pairs within 50, 30, then 15 cm, the odometr
 as the initial guess) when that motion agrees with the odometry's: their difference within
 the ``scan_matching_accept`` confidence region of two independent estimates of the same
 motion (chi-square on 3 degrees of freedom under the sum of the odometry's ``U`` and the
-scan-matched motion's own); it is predicted with ``U`` of ``scan_matching_noise`` (default
-``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer`` position gain and 0.6 of its
-heading gains, chosen on the Carmen logs' first drift seed, README). Otherwise (the first
+scan-matched motion's own, both noise models evaluated at the larger of the two motions,
+:func:`.scan_matching.larger_motion`: the region is that of the one true motion, so that
+the odometry's own error cannot shrink it); it is predicted with ``U`` of
+``scan_matching_noise`` (default ``k_d=0.05 k_theta=0.03 k_dtheta=0.06``: the ``pioneer``
+position gain and 0.6 of its heading gains, chosen on the Carmen logs' first drift seed,
+README). Otherwise (the first
 step, no scan geometry in the set or in the one before, a bridged odometry jump in the step,
 ICP without enough pairs, or a motion the odometry rules out: ICP sliding along a corridor
 or locking onto the wrong structure) the odometry increment and its ``U`` are used, as
@@ -719,7 +722,8 @@ class SlamFrontend:
                                         min(scan.range_max, fp.scan_matching_max_range))
         if previous is None or bridged:
             return u, u_cov, 'odometry'
-        cov = odometry_noise(u, self.params.odometry) if u_cov is None else u_cov
+        # U as the noise model: the test evaluates U and V at the same (larger) motion.
+        cov = (lambda m: odometry_noise(m, self.params.odometry)) if u_cov is None else u_cov
         v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept,
                         lambda m: odometry_noise(m, self._scan_noise), self.icp_restarts)
         if v is None:

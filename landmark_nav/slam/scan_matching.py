@@ -152,32 +152,53 @@ def base_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     return compose(compose(mount, fit.pose), unmount), fit
 
 
+def larger_motion(u: Sequence[float], v: Sequence[float]) -> np.ndarray:
+    """Return ``[max(|u_xy|, |v_xy|), 0, max(|u_psi|, |v_psi|)]``: the larger of two motions.
+
+    The point at which :func:`scan_motion` evaluates distance- and turn-driven noise models
+    (:func:`landmark_nav.slam.ekf_slam.odometry_noise`, which read only the distance and
+    the turn's size) when it tests two estimates of one motion.
+    """
+    return np.array([max(math.hypot(u[0], u[1]), math.hypot(v[0], v[1])), 0.0,
+                     max(abs(float(u[2])), abs(float(v[2])))])
+
+
 def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
-                u_cov: np.ndarray, mount: Sequence[float], gate: float,
+                u_cov, mount: Sequence[float], gate: float,
                 v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None,
                 restarts: Optional[Dict[str, int]] = None) -> Optional[np.ndarray]:
     """Return the base's motion between two scans by ICP, or None when it is not usable.
 
-    The motion of :func:`base_motion` is used only when it agrees with the odometry: its
-    difference ``d`` from ``u``, two estimates of the same motion, must satisfy
+    The motion ``v`` of :func:`base_motion` is used only when it agrees with the odometry:
+    its difference ``d`` from ``u``, two estimates of the same motion, must satisfy
     ``d^T (U + V)^-1 d <= gate`` (a chi-square bound on 3 degrees of freedom; ``V`` the
     scan-matched motion's own covariance), which rejects ICP solutions that slid along a
     corridor or locked onto the wrong structure.
 
+    Under that hypothesis both covariances are those of the one true motion, which neither
+    estimate knows. When ``u_cov`` is a noise model (a function of the motion), ``U`` and
+    ``V`` are both evaluated at :func:`larger_motion` of ``u`` and ``v``: each model at its
+    own estimate would let the odometry's error shrink its own region (an odometry turn of
+    15 deg for a true 30 deg halves the turn-driven variance, and the scans' correct motion
+    is then rejected exactly when the odometry is worst) and give an ICP motion that
+    found no translation a region of zero size in translation. With an array ``U``
+    (a given covariance), ``V`` is evaluated at ``v``.
+
     ICP converges only from a guess near the motion; the odometry's heading, off by several
     degrees after a turn, moves points metres away and ICP finds too few pairs or the wrong
     structure. So when the first solution fails or is rejected, ICP is restarted from the
-    odometry increment turned by ``j s`` (``s`` the heading std of ``U``, ``j = +-1 ..
-    +-ceil(sqrt(gate))``: the odometry's headings at the test's confidence; each restart
-    costs one more ICP, up to ``2 ceil(sqrt(gate))`` on a step), and the solution with the
-    most pairs is tested (a coarse form of the search over the prior's window of
+    odometry increment turned by ``j s`` (``s`` the heading std of ``U`` at ``u``, ``j =
+    +-1 .. +-ceil(sqrt(gate))``: the odometry's headings at the test's confidence; each
+    restart costs one more ICP, up to ``2 ceil(sqrt(gate))`` on a step), and the solution
+    with the most pairs is tested (a coarse form of the search over the prior's window of
     correlative scan matching; Olson, ICRA 2009).
 
     Args:
         previous: (N, 2) the previous scan's points (laser frame) [m].
         current: (M, 2) this scan's points [m].
         u: (3,) the odometry increment between the two scans (base frame).
-        u_cov: (3, 3) its covariance ``U``.
+        u_cov: (3, 3) its covariance ``U``, or ``U`` as a function of a motion (the noise
+            model; see above).
         mount: (3,) laser pose in base_link.
         gate: The chi-square bound.
         v_cov: ``V`` as a function of the scan-matched motion (None: zero, the odometry's
@@ -190,14 +211,18 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     """
     restarts = {} if restarts is None else restarts
     u = np.asarray(u, dtype=float)
-    u_cov = np.asarray(u_cov, dtype=float)
 
     def agreed(found: Optional[tuple]) -> bool:
         if found is None:
             return False
-        d = found[0] - u
+        v = found[0]
+        d = v - u
         d[2] = wrap_angle(d[2])
-        cov = u_cov + (0.0 if v_cov is None else v_cov(found[0]))
+        if callable(u_cov):
+            at = larger_motion(u, v)
+            cov = np.asarray(u_cov(at), dtype=float) + (0.0 if v_cov is None else v_cov(at))
+        else:
+            cov = np.asarray(u_cov, dtype=float) + (0.0 if v_cov is None else v_cov(v))
         try:
             return float(d @ np.linalg.solve(cov, d)) <= gate
         except np.linalg.LinAlgError:
@@ -206,7 +231,8 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     found = base_motion(previous, current, u, mount)
     if agreed(found):
         return found[0]
-    s = math.sqrt(max(float(u_cov[2, 2]), 0.0))
+    u_at_u = np.asarray(u_cov(u) if callable(u_cov) else u_cov, dtype=float)
+    s = math.sqrt(max(float(u_at_u[2, 2]), 0.0))
     if not (s > 0.0 and math.isfinite(s)):
         return None
     restarts['restarted'] = restarts.get('restarted', 0) + 1
