@@ -23,6 +23,7 @@ from typing import List, Optional
 
 from landmark_nav.bag import BagError, BagReader, message_class
 from landmark_nav.conversions import ns_to_stamp
+from landmark_nav.nodes.common import destroy_and_shutdown
 from landmark_nav.replay import due_after_start_s, ReplayOptions
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -218,12 +219,7 @@ def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> i
         # A publish racing the shutdown by SIGINT / SIGTERM: stopped, not an error.
         return player.published if player else 0
     finally:
-        if player is not None:
-            try:
-                player.destroy_node()
-            except Exception:  # already invalid after the shutdown
-                pass
-        rclpy.try_shutdown()
+        destroy_and_shutdown(player)
 
 
 def main(args: Optional[List[str]] = None) -> int:

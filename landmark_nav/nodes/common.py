@@ -6,7 +6,8 @@
 * :class:`InputStats`: processed / dropped inputs and latency percentiles of a node, on
   ``/diagnostics`` and in throttled warnings.
 * :func:`limit_threads`: numerical libraries single-threaded unless configured.
-* :func:`run_node`: the standard main (threads, spin, clean shutdown on SIGINT / SIGTERM).
+* :func:`run_node`: the standard main (threads, spin, clean shutdown on SIGINT / SIGTERM);
+  :func:`destroy_and_shutdown` its bounded shutdown.
 """
 
 from collections import Counter, deque
@@ -192,17 +193,27 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
             raise
         # A callback running while SIGINT / SIGTERM shut the context down: not an error.
     finally:
-        faulthandler.dump_traceback_later(SHUTDOWN_TIMEOUT_S, exit=True)
-        try:
-            if node is not None:
-                try:
-                    node.destroy_node()
-                except Exception:  # already invalid after the shutdown
-                    pass
-            rclpy.try_shutdown()
-        finally:
-            faulthandler.cancel_dump_traceback_later()
+        destroy_and_shutdown(node)
     return 0
+
+
+def destroy_and_shutdown(node: Optional[Node]) -> None:
+    """Destroy the node (if any) and shut rclpy down, within :data:`SHUTDOWN_TIMEOUT_S`.
+
+    A destruction still running after that ends the process with status 1 and the stacks
+    on stderr (a native :mod:`faulthandler` watchdog); a node already invalid after a
+    signal's shutdown is not an error.
+    """
+    faulthandler.dump_traceback_later(SHUTDOWN_TIMEOUT_S, exit=True)
+    try:
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # already invalid after the shutdown
+                pass
+        rclpy.try_shutdown()
+    finally:
+        faulthandler.cancel_dump_traceback_later()
 
 
 def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
