@@ -191,7 +191,8 @@ FRONTEND_PARAMETERS = {
     'scan_matching_max_range': ('returns at or beyond this are not matched [m]',
                                 (0.1, 1000.0), None),
     'scan_matching_accept': ('confidence of the region the difference of the scan-matched '
-                             'motion and the odometry must lie in (chi-square, 3 dof, U + V)',
+                             'motion and the odometry must lie in (chi-square, 3 dof, U + V '
+                             'at the larger motion)',
                              (1e-6, 1.0 - 1e-12), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
