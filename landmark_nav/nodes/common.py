@@ -163,10 +163,12 @@ def limit_threads(default: int = 1) -> Optional[int]:
 
 #: Seconds the node's destruction may take after the spin ended before the process exits
 #: anyway (status 1, the stacks dumped to stderr by :mod:`faulthandler`). Destroying an rcl
-#: node after SIGINT has, rarely, spun in the middleware (Fast DDS) without end; a node
-#: must still stop on Ctrl-C. The watchdog is native, so it fires even if the stuck call
-#: holds the GIL.
-SHUTDOWN_TIMEOUT_S = 10.0
+#: node after SIGINT / SIGTERM has, rarely and with several nodes starting and stopping on
+#: a loaded machine, spun in the middleware (Fast DDS) for more than 30 s (once) and more
+#: than 10 s (once: ``line_extractor``, SIGTERM); a node must still stop. Generous, so
+#: that a slow teardown ends by itself. The watchdog is native, so it fires even if the
+#: stuck call holds the GIL.
+SHUTDOWN_TIMEOUT_S = 25.0
 
 
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
