@@ -3,12 +3,13 @@
 import math
 
 from landmark_nav.evaluation.slam import run_slam
-from landmark_nav.geometry import compose, relative
+from landmark_nav.geometry import compose, inverse, relative
 from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams
 from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_model,
                                         SlamFrontend)
-from landmark_nav.slam.scan_matching import (base_motion, larger_motion, point_to_line_icp,
-                                             scan_motion, scan_points)
+from landmark_nav.slam.scan_matching import (base_motion, fit_information,
+                                             fused_scan_motion, IcpResult, larger_motion,
+                                             point_to_line_icp, scan_motion, scan_points)
 from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
 import pytest
@@ -189,6 +190,62 @@ def test_scan_motion_tests_both_noise_models_at_the_larger_motion():
                        lambda m: 1e-2 * v_model(m)) is None
 
 
+# A corridor 2 m wide and 60 m long: the walls fix the cross-track position and the heading,
+# nothing fixes the along-track position (ICP's normal equations are singular along it).
+CORRIDOR = [((-30.0, -1.0), (30.0, -1.0)), ((30.0, 1.0), (-30.0, 1.0))]
+
+
+def test_fused_scan_motion_takes_along_a_corridor_the_odometry_and_across_it_the_scans():
+    rng = np.random.default_rng(11)
+    base0 = np.array([0.0, -0.2, 0.05])
+    truth = np.array([0.6, 0.03, math.radians(3.0)])
+    # Returns within 8 m (at 20 m, grazing returns with noisy normals let ICP slide 40 cm
+    # along the corridor, which the agreement test rejects).
+    prev = scan_points(_cast(compose(base0, MOUNT), rng, room=CORRIDOR), ANGLE_MIN, INC,
+                       0.05, 8.0)
+    cur = scan_points(_cast(compose(compose(base0, truth), MOUNT), rng, room=CORRIDOR),
+                      ANGLE_MIN, INC, 0.05, 8.0)
+    u = truth + np.array([0.08, -0.04, math.radians(-2.0)])   # drifted odometry
+    noise = odometry_noise_model('pioneer')
+
+    def model(m):
+        return odometry_noise(m, noise)
+
+    fused = fused_scan_motion(prev, cur, u, model, MOUNT, 16.27, model, pairs=1.0)
+    assert fused is not None
+    m, w = fused
+    # Along the corridor (x, base0's heading 0.05 rad) the odometry's 8 cm error stays; across
+    # it and in heading the scans' answer (0.5 cm noise on ~300 returns).
+    along = np.array([math.cos(base0[2] + m[2] / 2), math.sin(base0[2] + m[2] / 2)])
+    err = compose(base0, m)[:2] - compose(base0, truth)[:2]
+    assert abs(err @ along) > 0.05
+    assert abs(err @ np.array([-along[1], along[0]])) < 0.01
+    assert abs(m[2] - truth[2]) < math.radians(0.2)
+    # W: the odometry's variance along the corridor, far less across it and in heading.
+    u_at = model(larger_motion(u, m))
+    assert w[0, 0] > 0.8 * u_at[0, 0] and w[1, 1] < 0.05 * u_at[1, 1]
+    assert w[2, 2] < 0.05 * u_at[2, 2]
+    assert np.allclose(w, w.T) and np.linalg.eigvalsh(w).min() > 0.0
+    # A motion the odometry rules out: None, as for scan_motion.
+    assert fused_scan_motion(prev, cur, u, lambda m: 1e-3 * model(m), MOUNT, 16.27,
+                             lambda m: 1e-3 * model(m), pairs=1.0) is None
+
+
+def test_fit_information_is_the_fit_covariance_moved_to_the_base():
+    fit = IcpResult(np.array([0.5, 0.2, 0.3]), np.eye(3), 10, 0.1,
+                    np.array([[3.0, 1.0, 0.5], [1.0, 2.0, 0.2], [0.5, 0.2, 4.0]]))
+    info = fit_information(fit, MOUNT, pairs=2.0)
+    # The laser-frame covariance s^2 N / pairs (J^T J)^-1 through v = M p M^-1 (numerically).
+    jac = np.zeros((3, 3))
+    for i in range(3):
+        dp = np.zeros(3)
+        dp[i] = 1e-6
+        jac[:, i] = (compose(compose(MOUNT, fit.pose + dp), inverse(MOUNT))
+                     - compose(compose(MOUNT, fit.pose - dp), inverse(MOUNT))) / 2e-6
+    cov = 0.01 * 10 / 2.0 * np.linalg.inv(fit.hessian)
+    assert np.allclose(np.linalg.inv(info), jac @ cov @ jac.T, atol=1e-9)
+
+
 def test_scan_points_keeps_valid_returns_below_the_range_limit():
     r = np.array([1.0, np.inf, np.nan, -np.inf, 0.01, 25.0, 2.0])
     pts = scan_points(r, 0.0, 0.5, 0.05, 20.0)
@@ -301,5 +358,8 @@ def test_scan_matching_parameters_are_validated():
         FrontendParams(scan_matching_max_range=0.0)
     with pytest.raises(ValueError, match='scan_matching must be a bool'):
         FrontendParams(scan_matching=1)
+    for bad in (-0.1, math.nan, True):
+        with pytest.raises(ValueError, match='scan_matching_fit_pairs'):
+            FrontendParams(scan_matching_fit_pairs=bad)
     with pytest.raises(ValueError, match='visibility'):
         run_slam(None, frontend=FrontendParams(scan_matching=True), visibility=False)

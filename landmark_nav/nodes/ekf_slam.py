@@ -194,6 +194,11 @@ FRONTEND_PARAMETERS = {
                              'motion and the odometry must lie in (chi-square, 3 dof, U + V '
                              'at the larger motion)',
                              (1e-6, 1.0 - 1e-12), None),
+    'scan_matching_fit_pairs': ('0: predict with the scan-matched motion and '
+                                'scan_matching_noise; > 0: with the odometry and the '
+                                "scan-matched motion fused, the latter's covariance from the "
+                                'ICP fit worth this many independent residuals',
+                                (0.0, 1e6), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,

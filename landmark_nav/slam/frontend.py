@@ -90,6 +90,12 @@ ICP without enough pairs, or a motion the odometry rules out: ICP sliding along 
 or locking onto the wrong structure) the odometry increment and its ``U`` are used, as
 without the option. ICP from the odometry's guess fails when that heading is several degrees
 off (after a turn); it is then restarted from headings across ``U``'s (``scan_motion``).
+With ``scan_matching_fit_pairs`` > 0 the step's motion is instead the odometry increment
+and the scan-matched motion fused by their information (``fused_scan_motion``), the
+scan-matched motion's covariance from the ICP fit (``fit_information``: its shape, so that
+along a corridor the odometry decides, and the size of that many independent residuals,
+because the ICP's error against the reference does not shrink with the number of pairs);
+the prediction then uses the fused covariance. The ``real_logs`` profile sets 0.3 (README).
 :attr:`SlamFrontend.motions` counts the steps of each kind, :attr:`SlamFrontend.icp_restarts`
 the restarts. The same
 scans then give the landmark observations: the scan-matched motion and the update share
@@ -129,7 +135,7 @@ from .consistency import chi2_gate
 from .ekf_slam import EkfSlam, odometry_noise, OdometryNoise, SlamParams, UpdateResult
 from .line_landmarks import lines_to_observations
 from .observations import corner_descriptors, corners_to_observations
-from .scan_matching import scan_motion, scan_points
+from .scan_matching import fused_scan_motion, scan_motion, scan_points
 from .slam_map import SlamMap
 from .visibility import ScanGeometry
 
@@ -209,6 +215,12 @@ class FrontendParams:
         scan_matching_accept: Confidence of the region the difference of the scan-matched
             motion and the odometry increment must lie in (chi-square, 3 degrees of
             freedom, covariance ``U + V``: the two estimates' own).
+        scan_matching_fit_pairs: 0: predict with the scan-matched motion and
+            ``scan_matching_noise``'s ``U``. > 0: predict with the odometry and the
+            scan-matched motion fused (:func:`.scan_matching.fused_scan_motion`), the latter's
+            covariance from the ICP fit worth this many independent residuals
+            (:func:`.scan_matching.fit_information`; the test still uses
+            ``scan_matching_noise``).
     """
 
     deskew: bool = True
@@ -223,6 +235,7 @@ class FrontendParams:
     scan_matching_noise: str = 'k_d=0.05 k_theta=0.03 k_dtheta=0.06'
     scan_matching_max_range: float = 20.0
     scan_matching_accept: float = 0.999
+    scan_matching_fit_pairs: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
@@ -239,6 +252,11 @@ class FrontendParams:
         if not isinstance(a, (int, float)) or isinstance(a, bool) or not 0.0 < a < 1.0:
             raise ValueError('FrontendParams.scan_matching_accept must be a probability in '
                              f'(0, 1), got {a!r}')
+        f = self.scan_matching_fit_pairs
+        if (not isinstance(f, (int, float)) or isinstance(f, bool) or not math.isfinite(f)
+                or f < 0.0):
+            raise ValueError('FrontendParams.scan_matching_fit_pairs must be a finite number '
+                             f'>= 0 (0 = off), got {f!r}')
         if not isinstance(self.scan_matching_noise, str):
             raise ValueError('FrontendParams.scan_matching_noise must be a string, got '
                              f'{self.scan_matching_noise!r}')
@@ -724,6 +742,14 @@ class SlamFrontend:
             return u, u_cov, 'odometry'
         # U as the noise model: the test evaluates U and V at the same (larger) motion.
         cov = (lambda m: odometry_noise(m, self.params.odometry)) if u_cov is None else u_cov
+        if self.frontend.scan_matching_fit_pairs > 0.0:
+            fused = fused_scan_motion(previous, self._scan_points, u, cov, self.mount,
+                                      self._scan_accept,
+                                      lambda m: odometry_noise(m, self._scan_noise),
+                                      self.frontend.scan_matching_fit_pairs, self.icp_restarts)
+            if fused is None:
+                return u, u_cov, 'odometry'
+            return fused[0], fused[1], 'scan_matching'
         v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept,
                         lambda m: odometry_noise(m, self._scan_noise), self.icp_restarts)
         if v is None:
