@@ -26,7 +26,10 @@ chain and their ratio (issue 14's SLAM target: at most 0.2), the RPE over 1 m of
 [cm], the share of steps that used ICP, the median per-step heading error [deg] of the
 odometry and of the ICP motions against the reference's, and the median NIS of those
 errors under the ICP's own covariance (``s^2 (J^T J)^-1``; 3 expected: larger means the
-classic covariance is optimistic, and the reference's own few-cm error adds to it).
+classic covariance is optimistic, and the reference's own few-cm error adds to it), then
+the median pairs per step ``N`` and the median of ``NIS / N``: the NIS under the
+covariance of :func:`landmark_nav.slam.scan_matching.fit_information` worth ``pairs``
+residuals is ``pairs NIS / N`` (the front end's ``scan_matching_fit_pairs``).
 
 ``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
 lines, the ``ekf_slam_real_logs`` profile or ``--params-file``; ``--landmarks corners`` or
@@ -96,7 +99,7 @@ def chain(scenario) -> tuple:
                                 np.array([o.pose for o in odo]), extrapolate=True)
     truth = scenario.truth_at(stamps)
     poses = [odometry[0]]
-    used, yaw_odo, yaw_icp, nis = 0, [], [], []
+    used, yaw_odo, yaw_icp, nis, pairs = 0, [], [], [], []
     previous = laser_points(scans[0])
     for k in range(1, len(scans)):
         u = relative(odometry[k - 1], odometry[k])
@@ -116,6 +119,7 @@ def chain(scenario) -> tuple:
                 e = fit.pose - e
                 e[2] = wrap_angle(e[2])
                 nis.append(e @ np.linalg.solve(fit.covariance, e))
+                pairs.append(fit.matches)
                 yaw_icp.append(abs(wrap_angle(v[2] - ref[2])))
                 yaw_odo.append(abs(wrap_angle(u[2] - ref[2])))
         poses.append(compose(poses[-1], step))
@@ -129,7 +133,10 @@ def chain(scenario) -> tuple:
     out.update(used=used / max(1, len(scans) - 1),
                yaw_odo=math.degrees(np.median(yaw_odo)) if yaw_odo else math.nan,
                yaw_icp=math.degrees(np.median(yaw_icp)) if yaw_icp else math.nan,
-               nis=float(np.median(nis)) if nis else math.nan)
+               nis=float(np.median(nis)) if nis else math.nan,
+               pairs=float(np.median(pairs)) if pairs else math.nan,
+               nis_per_pair=float(np.median(np.array(nis) / np.array(pairs)))
+               if nis else math.nan)
     return out, stamps, np.array(poses)
 
 
@@ -189,7 +196,7 @@ def main() -> int:
             options['landmarks'] = args.landmarks
     carmen = SHARED_DATA / 'carmen'
     print('run | ATE odometry / ICP [m] (ratio) | RPE 1 m odometry / ICP [cm] | ICP used | '
-          'step yaw error odometry / ICP [deg] | ICP NIS (median)'
+          'step yaw error odometry / ICP [deg] | ICP NIS (median) | pairs, NIS / pairs'
           + (' | SLAM on odometry / on ICP: ATE [m] (/ odometry ATE), RPE [cm], ellipse'
              if args.slam
              else ''))
@@ -215,7 +222,8 @@ def main() -> int:
                 print(f"{name}-{seed} | {r['odo_ate']:.2f} / {r['icp_ate']:.2f} "
                       f"({ratios[-1]:.2f}) | {100 * r['odo_rpe']:.1f} / {100 * r['icp_rpe']:.1f}"
                       f" | {100 * r['used']:.0f} % | {r['yaw_odo']:.2f} / {r['yaw_icp']:.2f} | "
-                      f"{r['nis']:.0f}{slam}", flush=True)
+                      f"{r['nis']:.0f} | {r['pairs']:.0f}, {r['nis_per_pair']:.2f}{slam}",
+                      flush=True)
     print(f'ATE ratio median {np.median(ratios):.2f}, runs <= 0.2: '
           f'{int(np.sum(np.array(ratios) <= 0.2))} of {len(ratios)}')
     return 0

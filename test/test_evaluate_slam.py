@@ -300,6 +300,15 @@ def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
     r = json.loads((out / 'slam.json').read_text())
     assert sum(r['motions'].values()) == r['scans'] and r['motions']['scan_matching'] > 0
     assert f"motion: {r['motions']['scan_matching']} steps scan-matched" in text
+    # Fused with the odometry: the same steps use the scans, the path differs.
+    fused = tmp_path / 'f'
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+                     '--scan-matching', '--scan-matching-fit-pairs', '0.3',
+                     '--out', str(fused)]) == 0
+    f = json.loads((fused / 'slam.json').read_text())
+    assert f['motions'] == r['motions']
+    fused_path = (fused / 'trajectory_slam.tum').read_text()
+    assert fused_path != (out / 'trajectory_slam.tum').read_text()
 
 
 def test_bad_input(tmp_path):

@@ -190,8 +190,8 @@ def test_scan_motion_tests_both_noise_models_at_the_larger_motion():
                        lambda m: 1e-2 * v_model(m)) is None
 
 
-# A corridor 2 m wide and 60 m long: the walls fix the cross-track position and the heading,
-# nothing fixes the along-track position (ICP's normal equations are singular along it).
+# A corridor 2 m wide and 60 m long along x: the walls fix the cross-track position and the
+# heading; along the track only the noise of the walls' normals gives ICP any information.
 CORRIDOR = [((-30.0, -1.0), (30.0, -1.0)), ((30.0, 1.0), (-30.0, 1.0))]
 
 
@@ -211,24 +211,38 @@ def test_fused_scan_motion_takes_along_a_corridor_the_odometry_and_across_it_the
     def model(m):
         return odometry_noise(m, noise)
 
+    def along_across(motion):
+        # The end position's error along and across the corridor (world x and y).
+        return compose(base0, motion)[:2] - compose(base0, truth)[:2]
+
     fused = fused_scan_motion(prev, cur, u, model, MOUNT, 16.27, model, pairs=1.0)
-    assert fused is not None
+    v = scan_motion(prev, cur, u, model, MOUNT, 16.27, model)
+    assert fused is not None and v is not None
     m, w = fused
-    # Along the corridor (x, base0's heading 0.05 rad) the odometry's 8 cm error stays; across
-    # it and in heading the scans' answer (0.5 cm noise on ~300 returns).
-    along = np.array([math.cos(base0[2] + m[2] / 2), math.sin(base0[2] + m[2] / 2)])
-    err = compose(base0, m)[:2] - compose(base0, truth)[:2]
-    assert abs(err @ along) > 0.05
-    assert abs(err @ np.array([-along[1], along[0]])) < 0.01
+    e_m, e_u, e_v = along_across(m), along_across(u), along_across(v)
+    # ICP alone slid along the track (its answer there is the noise's); across the track
+    # and in heading it has the scans' answer (0.5 cm noise on ~300 returns).
+    assert abs(e_v[0] - e_u[0]) > 0.02
+    assert abs(e_v[1]) < 0.005 and abs(v[2] - truth[2]) < math.radians(0.2)
+    # Fused: along the track mostly the odometry's (more than 3/4 of the way from the
+    # ICP's to it), across it and in heading the scans'.
+    assert abs(e_m[0] - e_u[0]) < 0.25 * abs(e_v[0] - e_u[0])
+    assert abs(e_m[1]) < 0.005 and abs(e_u[1]) > 0.03
     assert abs(m[2] - truth[2]) < math.radians(0.2)
-    # W: the odometry's variance along the corridor, far less across it and in heading.
+    # W: along the corridor (base frame: -base0's heading) most of the odometry's variance,
+    # across it and in heading a small part.
     u_at = model(larger_motion(u, m))
-    assert w[0, 0] > 0.8 * u_at[0, 0] and w[1, 1] < 0.05 * u_at[1, 1]
+    a = np.array([math.cos(-base0[2]), math.sin(-base0[2])])
+    c = np.array([-a[1], a[0]])
+    assert a @ w[:2, :2] @ a > 0.5 * (a @ u_at[:2, :2] @ a)
+    assert c @ w[:2, :2] @ c < 0.05 * (c @ u_at[:2, :2] @ c)
     assert w[2, 2] < 0.05 * u_at[2, 2]
     assert np.allclose(w, w.T) and np.linalg.eigvalsh(w).min() > 0.0
     # A motion the odometry rules out: None, as for scan_motion.
     assert fused_scan_motion(prev, cur, u, lambda m: 1e-3 * model(m), MOUNT, 16.27,
                              lambda m: 1e-3 * model(m), pairs=1.0) is None
+    with pytest.raises(ValueError, match='pairs'):
+        fused_scan_motion(prev, cur, u, model, MOUNT, 16.27, model, pairs=0.0)
 
 
 def test_fit_information_is_the_fit_covariance_moved_to_the_base():
@@ -305,6 +319,33 @@ def test_frontend_predicts_with_the_scan_matched_motion():
     # The scan-matched motion's U (0.6 of the heading gains: 0.36 of the variance) is what
     # was predicted with: the heading variance is about a third of the odometry run's.
     assert fe.slam.pose_covariance[2, 2] < 0.4 * fo.slam.pose_covariance[2, 2]
+
+
+def test_frontend_fuses_the_odometry_and_the_scan_matched_motion():
+    """With ``scan_matching_fit_pairs`` the step's motion is the two estimates fused."""
+    def increments(frontend=None, scan_matching=True):
+        steps = []
+        _drive(scan_matching, frontend=frontend, steps=steps)
+        return np.array([st.increment for st in steps[1:]]), [st.motion for st in steps]
+
+    icp, _ = increments()
+    odo, _ = increments(scan_matching=False)
+    # A fit worth a million residuals gives the ICP's motion, one worth almost none the
+    # odometry's; both are scan-matched steps (the ICP motion agreed).
+    heavy, kinds = increments(FrontendParams(scan_matching=True, scan_matching_fit_pairs=1e6))
+    assert kinds == ['odometry'] + ['scan_matching'] * 39
+    assert np.allclose(heavy, icp, atol=1e-6)
+    light, _ = increments(FrontendParams(scan_matching=True, scan_matching_fit_pairs=1e-9))
+    assert np.allclose(light, odo, atol=1e-6)
+    # Between: the walls of the room fix the turn, so the turns are much nearer the ICP's
+    # than the odometry's (15 % too much and 0.23 deg of drift per step).
+    mid, _ = increments(FrontendParams(scan_matching=True, scan_matching_fit_pairs=0.3))
+
+    def rms(d):
+        return float(np.sqrt(np.mean(d ** 2)))
+
+    assert rms(mid[:, 2] - icp[:, 2]) < 0.25 * rms(odo[:, 2] - icp[:, 2])
+    assert not np.allclose(mid, icp, atol=1e-4) and not np.allclose(mid, odo, atol=1e-4)
 
 
 def test_frontend_without_scans_falls_back_to_the_odometry():

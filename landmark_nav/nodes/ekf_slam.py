@@ -64,7 +64,8 @@ the gains ``'k_d=.. k_theta=.. k_dtheta=..'`` an imported bag states.
 Scan-matched motion: ``scan_matching: true`` (needs ``visibility``, i.e. the ``scan``
 subscription) predicts each step with the point-to-line ICP motion of the scan against
 the previous step's scan where it agrees with the odometry (``scan_matching_noise``,
-``scan_matching_max_range``, ``scan_matching_accept``; the front end's
+``scan_matching_max_range``, ``scan_matching_accept``; with ``scan_matching_fit_pairs`` >
+0 the odometry and that motion fused, its covariance from the ICP fit; the front end's
 ``FrontendParams``, as ``landmark_nav evaluate --scan-matching`` offline).
 
 Bad input is reported with a warning throttled per kind of problem and counted on

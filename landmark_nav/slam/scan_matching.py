@@ -281,9 +281,15 @@ def fit_information(fit: IcpResult, mount: Sequence[float], pairs: float) -> np.
 
     Returns:
         (3, 3) information of the base's motion (singular where the scans fix nothing).
+
+    Raises:
+        ValueError: ``pairs`` not > 0.
     """
+    if not pairs > 0.0:
+        raise ValueError(f'fit_information: pairs must be > 0, got {pairs!r}')
     mount = np.asarray(mount, dtype=float)
     p = fit.pose
+    # s floored at 1 um: noise-free simulated scans give a (near) exact fit.
     info_p = pairs / (fit.matches * max(fit.rms, 1e-6) ** 2) * fit.hessian
     cm, sm = math.cos(mount[2]), math.sin(mount[2])
     rm = np.array([[cm, -sm], [sm, cm]])
@@ -327,6 +333,8 @@ def fused_scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[flo
         ``(m, W)``: (3,) the fused motion and (3, 3) its covariance; None when ICP failed or
         disagrees with the odometry.
     """
+    if not pairs > 0.0:
+        raise ValueError(f'fused_scan_motion: pairs must be > 0, got {pairs!r}')
     u = np.asarray(u, dtype=float)
     found = _search(previous, current, u, u_cov, mount, gate,
                     lambda f: _agrees(u, f[0], u_cov, v_cov, gate), restarts)

@@ -165,7 +165,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           rpe_delta=args.rpe_delta, landmarks=args.landmarks,
                           slam_map=args.map, save_map_to=args.save_map,
                           map_pose_covariance=pose_cov, mode=args.mode,
-                          frontend=FrontendParams(scan_matching=args.scan_matching))
+                          frontend=FrontendParams(
+                              scan_matching=args.scan_matching,
+                              scan_matching_fit_pairs=args.scan_matching_fit_pairs))
     print(format_summary(result))
     if result.get('map_file'):
         print(f'map written: {result["map_file"]}')
@@ -415,6 +417,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--scan-matching', action='store_true',
                    help="predict with the scans' point-to-line ICP motion where it agrees "
                         'with the odometry (the node parameter scan_matching)')
+    p.add_argument('--scan-matching-fit-pairs', type=float, default=0.0, metavar='P',
+                   help='with --scan-matching: fuse the odometry and the ICP motion, the '
+                        "latter's covariance from the fit worth P residuals (the node "
+                        'parameter scan_matching_fit_pairs; the real_logs profile 0.3; '
+                        'default 0: off)')
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
