@@ -591,7 +591,8 @@ def test_node_equals_offline_on_an_imported_carmen_log(tmp_path):
 
 REAL_LOGS = {'jacobians': 'observability_gain', 'line_residual_factor': 2.0,
              'free_space_check': 0.95, 'recovery_probability': 0.99, 'spurious_limit': 0.05}
-REAL_LOGS_FRONTEND = {'scan_matching': True, 'scan_matching_fit_pairs': 0.3}
+REAL_LOGS_FRONTEND = {'scan_matching': True, 'scan_matching_fit_pairs': 0.3,
+                      'scan_matching_side_starts': 2.5}
 
 
 def real_logs_profile():
@@ -642,7 +643,8 @@ def test_bad_real_logs_option_is_a_parameter_error(name, value):
     ({'scan_matching_noise': 'k_d=fast'}, 'scan_matching_noise'),
     ({'scan_matching_accept': 1.0}, 'scan_matching_accept'),
     ({'scan_matching_max_range': 0.0}, 'scan_matching_max_range'),
-    ({'scan_matching_fit_pairs': -1.0}, 'scan_matching_fit_pairs')])
+    ({'scan_matching_fit_pairs': -1.0}, 'scan_matching_fit_pairs'),
+    ({'scan_matching_side_starts': -1.0}, 'scan_matching_side_starts')])
 def test_bad_scan_matching_setting_is_a_parameter_error(overrides, match):
     with RosHarness() as ros:
         with pytest.raises(ParameterError, match=match):

@@ -155,6 +155,36 @@ def test_scan_motion_restarts_from_other_headings_when_the_odometry_guess_fails(
     assert counts == {'restarted': 1}
 
 
+# A ring of 18 pillars every 20 deg around the robot in an off-centre room: turned 20 deg
+# short, the pillars line up again (a wrong minimum with half the pairs).
+RING = [seg for k in range(18) for seg in _square(3.0 * math.cos(math.radians(20 * k)),
+                                                  3.0 * math.sin(math.radians(20 * k)), 0.15)]
+RING_ROOM = RING + [((-7.0, -5.0), (9.0, -5.0)), ((9.0, -5.0), (9.0, 6.0)),
+                    ((9.0, 6.0), (-7.0, 6.0)), ((-7.0, 6.0), (-7.0, -5.0))]
+
+
+def test_side_starts_leave_a_wrong_minimum_near_an_odometry_guess_in_its_tail():
+    rng = np.random.default_rng(0)
+    truth = np.array([0.05, 0.0, math.radians(40.0)])
+    prev = scan_points(_cast(MOUNT, rng, room=RING_ROOM), ANGLE_MIN, INC, 0.05, 20.0)
+    cur = scan_points(_cast(compose(truth, MOUNT), rng, room=RING_ROOM), ANGLE_MIN, INC,
+                      0.05, 20.0)
+    u = truth + np.array([0.0, 0.0, math.radians(-14.0)])   # 2 sigma short
+    u_cov = np.diag([0.05 ** 2, 0.05 ** 2, math.radians(7.0) ** 2])
+    first = base_motion(prev, cur, u, MOUNT)
+    assert abs(math.degrees(first[0][2]) - 20.6) < 0.5   # the pillars one step round
+    # That wrong motion agrees with the odometry (5.4 deg from it): used without side starts.
+    wrong = scan_motion(prev, cur, u, u_cov, MOUNT, 16.27)
+    assert wrong is not None and abs(wrong[2] - truth[2]) > math.radians(19.0)
+    # From +-2.5 sigma (17.5 deg) one start lands in the true basin, with twice the pairs.
+    right = scan_motion(prev, cur, u, u_cov, MOUNT, 16.27, side_starts=2.5)
+    assert right is not None and abs(right[2] - truth[2]) < math.radians(0.2)
+    assert np.hypot(*(right[:2] - truth[:2])) < 0.01
+    fused = fused_scan_motion(prev, cur, u, u_cov, MOUNT, 16.27, lambda m: u_cov, 0.3,
+                              side_starts=2.5)
+    assert fused is not None and abs(fused[0][2] - truth[2]) < math.radians(0.5)
+
+
 def test_scan_motion_tests_both_noise_models_at_the_larger_motion():
     """The agreement region is that of the one true motion: U and V at the larger motion.
 
@@ -400,7 +430,8 @@ def test_scan_matching_parameters_are_validated():
     with pytest.raises(ValueError, match='scan_matching must be a bool'):
         FrontendParams(scan_matching=1)
     for bad in (-0.1, math.nan, True):
-        with pytest.raises(ValueError, match='scan_matching_fit_pairs'):
-            FrontendParams(scan_matching_fit_pairs=bad)
+        for name in ('scan_matching_fit_pairs', 'scan_matching_side_starts'):
+            with pytest.raises(ValueError, match=name):
+                FrontendParams(**{name: bad})
     with pytest.raises(ValueError, match='visibility'):
         run_slam(None, frontend=FrontendParams(scan_matching=True), visibility=False)

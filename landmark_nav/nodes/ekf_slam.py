@@ -65,7 +65,8 @@ Scan-matched motion: ``scan_matching: true`` (needs ``visibility``, i.e. the ``s
 subscription) predicts each step with the point-to-line ICP motion of the scan against
 the previous step's scan where it agrees with the odometry (``scan_matching_noise``,
 ``scan_matching_max_range``, ``scan_matching_accept``; with ``scan_matching_fit_pairs`` >
-0 the odometry and that motion fused, its covariance from the ICP fit; the front end's
+0 the odometry and that motion fused, its covariance from the ICP fit;
+``scan_matching_side_starts``: ICP also from two headings beside the odometry's; the front end's
 ``FrontendParams``, as ``landmark_nav evaluate --scan-matching`` offline).
 
 Bad input is reported with a warning throttled per kind of problem and counted on
@@ -200,6 +201,9 @@ FRONTEND_PARAMETERS = {
                                 "scan-matched motion fused, the latter's covariance from the "
                                 'ICP fit worth this many independent residuals',
                                 (0.0, 1e6), None),
+    'scan_matching_side_starts': ("k > 0: ICP also starts from the odometry's heading +- k "
+                                  'heading stds on every step, the solution with the most '
+                                  'pairs first (3 ICPs a step); 0: off', (0.0, 100.0), None),
 }
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,

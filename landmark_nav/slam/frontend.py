@@ -96,6 +96,10 @@ scan-matched motion's covariance from the ICP fit (``fit_information``: its shap
 along a corridor the odometry decides, and the size of that many independent residuals,
 because the ICP's error against the reference does not shrink with the number of pairs);
 the prediction then uses the fused covariance. The ``real_logs`` profile sets 0.3 (README).
+``scan_matching_side_starts`` k > 0 also starts ICP from the odometry's heading +- k heading
+stds of ``U`` on every step and takes the solution with the most pairs first: an odometry
+increment in its own tail leads ICP into a nearby wrong minimum that can pass the test
+(2.5 in the profile).
 :attr:`SlamFrontend.motions` counts the steps of each kind, :attr:`SlamFrontend.icp_restarts`
 the restarts. The same
 scans then give the landmark observations: the scan-matched motion and the update share
@@ -221,6 +225,9 @@ class FrontendParams:
             covariance from the ICP fit worth this many independent residuals
             (:func:`.scan_matching.fit_information`; the test still uses
             ``scan_matching_noise``).
+        scan_matching_side_starts: k > 0: ICP also starts from the odometry's heading
+            ``+- k`` heading stds on every step, the solution with the most pairs first
+            (:func:`.scan_matching.scan_motion`); 0: off.
     """
 
     deskew: bool = True
@@ -236,6 +243,7 @@ class FrontendParams:
     scan_matching_max_range: float = 20.0
     scan_matching_accept: float = 0.999
     scan_matching_fit_pairs: float = 0.0
+    scan_matching_side_starts: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
@@ -252,11 +260,12 @@ class FrontendParams:
         if not isinstance(a, (int, float)) or isinstance(a, bool) or not 0.0 < a < 1.0:
             raise ValueError('FrontendParams.scan_matching_accept must be a probability in '
                              f'(0, 1), got {a!r}')
-        f = self.scan_matching_fit_pairs
-        if (not isinstance(f, (int, float)) or isinstance(f, bool) or not math.isfinite(f)
-                or f < 0.0):
-            raise ValueError('FrontendParams.scan_matching_fit_pairs must be a finite number '
-                             f'>= 0 (0 = off), got {f!r}')
+        for name in ('scan_matching_fit_pairs', 'scan_matching_side_starts'):
+            f = getattr(self, name)
+            if (not isinstance(f, (int, float)) or isinstance(f, bool) or not math.isfinite(f)
+                    or f < 0.0):
+                raise ValueError(f'FrontendParams.{name} must be a finite number >= 0 '
+                                 f'(0 = off), got {f!r}')
         if not isinstance(self.scan_matching_noise, str):
             raise ValueError('FrontendParams.scan_matching_noise must be a string, got '
                              f'{self.scan_matching_noise!r}')
@@ -746,12 +755,14 @@ class SlamFrontend:
             fused = fused_scan_motion(previous, self._scan_points, u, cov, self.mount,
                                       self._scan_accept,
                                       lambda m: odometry_noise(m, self._scan_noise),
-                                      self.frontend.scan_matching_fit_pairs, self.icp_restarts)
+                                      self.frontend.scan_matching_fit_pairs, self.icp_restarts,
+                                      self.frontend.scan_matching_side_starts)
             if fused is None:
                 return u, u_cov, 'odometry'
             return fused[0], fused[1], 'scan_matching'
         v = scan_motion(previous, self._scan_points, u, cov, self.mount, self._scan_accept,
-                        lambda m: odometry_noise(m, self._scan_noise), self.icp_restarts)
+                        lambda m: odometry_noise(m, self._scan_noise), self.icp_restarts,
+                        self.frontend.scan_matching_side_starts)
         if v is None:
             return u, u_cov, 'odometry'
         return v, odometry_noise(v, self._scan_noise), 'scan_matching'

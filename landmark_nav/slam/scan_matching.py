@@ -170,7 +170,8 @@ def larger_motion(u: Sequence[float], v: Sequence[float]) -> np.ndarray:
 def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
                 u_cov, mount: Sequence[float], gate: float,
                 v_cov: Optional[Callable[[np.ndarray], np.ndarray]] = None,
-                restarts: Optional[Dict[str, int]] = None) -> Optional[np.ndarray]:
+                restarts: Optional[Dict[str, int]] = None,
+                side_starts: float = 0.0) -> Optional[np.ndarray]:
     """Return the base's motion between two scans by ICP, or None when it is not usable.
 
     The motion ``v`` of :func:`base_motion` is used only when it agrees with the odometry:
@@ -209,13 +210,17 @@ def scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
             region alone).
         restarts: Optional counts to increment: ``restarted`` (the first solution failed or
             was rejected) and ``recovered`` (a restart gave a usable motion).
+        side_starts: k > 0: on every step ICP also starts from the odometry's heading
+            ``+- k s`` and the first solution is the one with the most pairs of the three:
+            an odometry guess in its own tail leads ICP into a nearby wrong minimum that
+            may pass the test (three ICPs a step instead of one); 0: off.
 
     Returns:
         (3,) the base's motion, or None (ICP failed or disagrees with the odometry).
     """
     u = np.asarray(u, dtype=float)
     found = _search(previous, current, u, u_cov, mount, gate,
-                    lambda f: _agrees(u, f[0], u_cov, v_cov, gate), restarts)
+                    lambda f: _agrees(u, f[0], u_cov, v_cov, gate), restarts, side_starts)
     return None if found is None else found[0]
 
 
@@ -236,28 +241,44 @@ def _agrees(u: np.ndarray, v: np.ndarray, u_cov, v_cov, gate: float) -> bool:
 
 def _search(previous: np.ndarray, current: np.ndarray, u: np.ndarray, u_cov,
             mount: Sequence[float], gate: float, agreed: Callable[[tuple], bool],
-            restarts: Optional[Dict[str, int]]) -> Optional[tuple]:
+            restarts: Optional[Dict[str, int]], side_starts: float = 0.0) -> Optional[tuple]:
     """Return the :func:`base_motion` result that ``agreed`` accepts, restarting (above)."""
     restarts = {} if restarts is None else restarts
     found = base_motion(previous, current, u, mount)
-    if found is not None and agreed(found):
-        return found
     u_at_u = np.asarray(u_cov(u) if callable(u_cov) else u_cov, dtype=float)
     s = math.sqrt(max(float(u_at_u[2, 2]), 0.0))
+    if side_starts > 0.0 and s > 0.0 and math.isfinite(s):
+        # Two more starts beyond the basin of the odometry's guess: a guess in its tail
+        # leads ICP into a nearby wrong minimum that may pass the test.
+        found = _most_pairs(previous, current, u, mount, (side_starts * s,), found)
+    if found is not None and agreed(found):
+        return found
     if not (s > 0.0 and math.isfinite(s)):
         return None
     restarts['restarted'] = restarts.get('restarted', 0) + 1
-    best = found
-    for j in range(1, math.ceil(math.sqrt(gate)) + 1):
-        for sign in (1.0, -1.0):
-            guess = u.copy()
-            guess[2] += sign * j * s
-            other = base_motion(previous, current, guess, mount)
-            if other is not None and (best is None or other[1].matches > best[1].matches):
-                best = other
+    best = _most_pairs(previous, current, u, mount,
+                       [j * s for j in range(1, math.ceil(math.sqrt(gate)) + 1)], found)
     if best is None or not agreed(best):
         return None
     restarts['recovered'] = restarts.get('recovered', 0) + 1
+    return best
+
+
+def _most_pairs(previous: np.ndarray, current: np.ndarray, u: np.ndarray,
+                mount: Sequence[float], turns: Sequence[float],
+                best: Optional[tuple]) -> Optional[tuple]:
+    """Return the :func:`base_motion` result with the most pairs.
+
+    The candidates: ``best``, then ICP from ``u`` turned by ``+t`` and ``-t`` for each ``t``
+    of ``turns`` in order; a tie keeps the earlier.
+    """
+    for t in turns:
+        for sign in (1.0, -1.0):
+            guess = u.copy()
+            guess[2] += sign * t
+            other = base_motion(previous, current, guess, mount)
+            if other is not None and (best is None or other[1].matches > best[1].matches):
+                best = other
     return best
 
 
@@ -305,7 +326,8 @@ def fit_information(fit: IcpResult, mount: Sequence[float], pairs: float) -> np.
 def fused_scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
                       u_cov, mount: Sequence[float], gate: float,
                       v_cov: Callable[[np.ndarray], np.ndarray], pairs: float,
-                      restarts: Optional[Dict[str, int]] = None) -> Optional[tuple]:
+                      restarts: Optional[Dict[str, int]] = None,
+                      side_starts: float = 0.0) -> Optional[tuple]:
     """Return ``(m, W)``: the odometry and the scan-matched motion fused, or None.
 
     The scan-matched motion ``v`` is found and tested as in :func:`scan_motion` (the test
@@ -328,6 +350,7 @@ def fused_scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[flo
         v_cov: ``V`` of the test as a function of a motion.
         pairs: The independent residuals the fit is worth (:func:`fit_information`).
         restarts: Optional counts, as in :func:`scan_motion`.
+        side_starts: As in :func:`scan_motion`.
 
     Returns:
         ``(m, W)``: (3,) the fused motion and (3, 3) its covariance; None when ICP failed or
@@ -337,7 +360,7 @@ def fused_scan_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[flo
         raise ValueError(f'fused_scan_motion: pairs must be > 0, got {pairs!r}')
     u = np.asarray(u, dtype=float)
     found = _search(previous, current, u, u_cov, mount, gate,
-                    lambda f: _agrees(u, f[0], u_cov, v_cov, gate), restarts)
+                    lambda f: _agrees(u, f[0], u_cov, v_cov, gate), restarts, side_starts)
     if found is None:
         return None
     v, fit = found

@@ -167,7 +167,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           map_pose_covariance=pose_cov, mode=args.mode,
                           frontend=FrontendParams(
                               scan_matching=args.scan_matching,
-                              scan_matching_fit_pairs=args.scan_matching_fit_pairs))
+                              scan_matching_fit_pairs=args.scan_matching_fit_pairs,
+                              scan_matching_side_starts=args.scan_matching_side_starts))
     print(format_summary(result))
     if result.get('map_file'):
         print(f'map written: {result["map_file"]}')
@@ -422,6 +423,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "latter's covariance from the fit worth P residuals (the node "
                         'parameter scan_matching_fit_pairs; the real_logs profile 0.3; '
                         'default 0: off)')
+    p.add_argument('--scan-matching-side-starts', type=float, default=0.0, metavar='K',
+                   help="with --scan-matching: ICP also from the odometry's heading +- K "
+                        'heading stds (the node parameter scan_matching_side_starts; the '
+                        'real_logs profile 2.5; default 0: off)')
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
