@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import math
 from typing import Callable, Dict, Optional, Sequence
 
-from landmark_nav.geometry import compose, inverse, wrap_angle
+from landmark_nav.geometry import compose, compose_jacobians, inverse, wrap_angle
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -309,17 +309,12 @@ def fit_information(fit: IcpResult, mount: Sequence[float], pairs: float) -> np.
     if not pairs > 0.0:
         raise ValueError(f'fit_information: pairs must be > 0, got {pairs!r}')
     mount = np.asarray(mount, dtype=float)
-    p = fit.pose
     # s floored at 1 um: noise-free simulated scans give a (near) exact fit.
     info_p = pairs / (fit.matches * max(fit.rms, 1e-6) ** 2) * fit.hessian
-    cm, sm = math.cos(mount[2]), math.sin(mount[2])
-    rm = np.array([[cm, -sm], [sm, cm]])
-    w = -(rm.T @ mount[:2])   # translation of M^-1
-    cp, sp = math.cos(p[2]), math.sin(p[2])
-    dv = np.eye(3)   # v_xy = m_xy + R_m (p_xy + R(p_psi) w), v_psi = p_psi
-    dv[:2, :2] = rm
-    dv[:2, 2] = rm @ np.array([[-sp, -cp], [cp, -sp]]) @ w
-    dinv = np.linalg.inv(dv)
+    # D = dv/dp through v = (M (+) p) (+) M^-1, the chain of the compound Jacobians.
+    outer, _ = compose_jacobians(compose(mount, fit.pose), inverse(mount))
+    _, inner = compose_jacobians(mount, fit.pose)
+    dinv = np.linalg.inv(outer @ inner)
     return dinv.T @ info_p @ dinv
 
 
