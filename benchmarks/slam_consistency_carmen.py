@@ -63,7 +63,8 @@ from bench_node_cpu import split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.odometry_drift import odometry_window_nees  # noqa: E402
 from landmark_nav.evaluation.slam import (bag_odometry_noise,  # noqa: E402
-                                          ellipse_share, run_slam, scan_features)
+                                          ellipse_share, run_slam, scan_features,
+                                          update_corrections)
 from landmark_nav.evaluation.trajectory import (ate, planar_alignment, rpe,  # noqa: E402
                                                 Trajectory)
 from landmark_nav.geometry import relative  # noqa: E402
@@ -82,6 +83,7 @@ from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
+JUMP_M = 0.2  # an update that moves the pose further is counted as a jump (a loop closed)
 
 
 def _wrap(a):
@@ -151,6 +153,7 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
     sq = np.sort(step ** 2)[::-1]
     odo10 = odometry_nees(scenario, noise, 10.0)
     rot, _, ate_se2 = planar_alignment(run.poses, run.truth)
+    moved = np.hypot(*update_corrections(run)[:, :2].T)  # what each update moved the pose
     ref = Trajectory.from_planar(run.stamps, run.truth)
     est = Trajectory.from_planar(run.stamps, run.poses)
     odo_traj = Trajectory.from_planar(run.stamps, run.odometry)
@@ -167,6 +170,9 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
             'ate_none': float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
             'jump5': float(sq[:max(1, len(sq) // 20)].sum() / sq.sum()),
             'rpe': rpe(est, ref, 1.0)['rmse'], 'odo_rpe': rpe(odo_traj, ref, 1.0)['rmse'],
+            'jumps': int(np.sum(moved > JUMP_M)),
+            'jump_rms': float(np.sqrt(np.sum(moved[moved > JUMP_M] ** 2)
+                                      / max(1, len(moved) - 1))),
             'odo_se2': ate(odo_traj, ref, 'se2')['rmse']}
 
 

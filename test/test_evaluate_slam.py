@@ -8,12 +8,13 @@ from landmark_nav.conversions import make_odometry, odometry_to_pose
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.occupancy_check import check_run, load_occupancy_grid
 from landmark_nav.evaluation.slam import (bag_odometry_noise, evaluate_bag, format_summary,
-                                          run_slam)
+                                          run_slam, update_corrections)
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
 from landmark_nav.importers import import_log
 from landmark_nav.laser.corners import CornerParams
-from landmark_nav.slam.ekf_slam import SlamParams
+from landmark_nav.slam.ekf_slam import EkfSlam, SlamParams
+from landmark_nav.slam.frontend import FrontendParams
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
 from nav_msgs.msg import Odometry
@@ -309,6 +310,36 @@ def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
     assert f['motions'] == r['motions']
     fused_path = (fused / 'trajectory_slam.tum').read_text()
     assert fused_path != (out / 'trajectory_slam.tum').read_text()
+
+
+@pytest.mark.parametrize('scan_matching', [False, True])
+def test_update_corrections_are_what_each_update_moved_the_pose(scan_matching, monkeypatch):
+    scenario = load_bag(BAG, max_seconds=10)
+    priors = []  # the filter's pose right before each update: after the prediction
+    update = EkfSlam.update
+
+    def spy(self, *args, **kwargs):
+        priors.append(self.pose.copy())
+        return update(self, *args, **kwargs)
+
+    monkeypatch.setattr(EkfSlam, 'update', spy)
+    front = FrontendParams(scan_matching=scan_matching,
+                           scan_matching_fit_pairs=0.3 if scan_matching else 0.0)
+    run = run_slam(scenario, SlamParams(odometry=bag_odometry_noise(scenario)[0]),
+                   frontend=front)
+    assert run.increments.shape == run.poses.shape and run.resets == 0
+    odometry = np.array([relative(run.odometry[k - 1], run.odometry[k])
+                         for k in range(1, len(run.poses))])
+    if scan_matching:  # the fused motion, not the odometry's increment, was predicted with
+        assert run.motions['scan_matching'] > 0
+        assert np.max(np.abs(run.increments[1:] - odometry)) > 1e-4
+    else:  # each step predicts with the odometry's increment (eq. 13)
+        assert run.increments[1:] == pytest.approx(odometry, abs=1e-12)
+    corr = update_corrections(run)
+    assert len(priors) == len(run.poses)
+    moved = np.array([relative(priors[k], run.poses[k]) for k in range(1, len(run.poses))])
+    assert corr[1:] == pytest.approx(moved, abs=1e-12)
+    assert np.all(corr[0] == 0.0) and np.max(np.abs(corr[1:, :2])) > 1e-4  # updates move it
 
 
 def test_bad_input(tmp_path):

@@ -52,7 +52,7 @@ from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.features import corner_truth
 from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
                                                 STATISTICS, Trajectory, write_tum)
-from landmark_nav.geometry import covariance_ellipse, transform_points
+from landmark_nav.geometry import compose, covariance_ellipse, relative, transform_points
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.laser.lines import LineParams
 from landmark_nav.sim import OdometrySample, run_scenario, ScanSample, ScenarioResult
@@ -122,6 +122,11 @@ class SlamRun:
     #: ``SlamFrontend.icp_restarts``: steps whose first ICP solution failed or was rejected
     #: (``restarted``) and those a restart from other headings made usable (``recovered``).
     icp_restarts: Dict[str, int] = field(default_factory=dict)
+    #: (S, 3) the motion each step predicted with (the odometry increment, or the
+    #: scan-matched / fused motion), so ``relative(compose(poses[k-1], increments[k]),
+    #: poses[k])`` is what step k's update moved the pose (eq. 25; after a restart the
+    #: first pose is the odometry's).
+    increments: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass(frozen=True)
@@ -236,7 +241,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     scan_k = 0
     o_scan, o_world, o_status, o_lm, o_est = [], [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
-    bridged = []
+    bridged, incs = [], []
 
     def record(st: Step) -> None:  # right after the step (several may come at once)
         nonlocal record_s
@@ -249,6 +254,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         poses.append(st.pose)
         covs.append(st.covariance)
         odo_at.append(st.odometry)
+        incs.append(st.increment)
         bridged.append(bool(np.any(np.asarray(st.bridged_variance) > 0.0)))
         nis_v.append(st.result.nis)
         nis_d.append(st.result.nis_dof)
@@ -311,7 +317,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    line_ids=slam.landmark_ids[ln], lines=slam.landmarks[ln],
                    line_ends=slam.line_ends[ln], final_map=slam.export_map(),
                    obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool),
-                   motions=dict(fe.motions), icp_restarts=dict(fe.icp_restarts))
+                   motions=dict(fe.motions), icp_restarts=dict(fe.icp_restarts),
+                   increments=np.array(incs, dtype=float).reshape(-1, 3))
 
 
 def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
@@ -337,6 +344,27 @@ def ellipse_share(run: SlamRun, probability: float = 0.95) -> float:
         m2 = (e * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / det
     m2 = np.where(det > 0.0, m2, np.where(np.hypot(d[:, 0], d[:, 1]) == 0.0, 0.0, np.inf))
     return float(np.mean(m2 <= chi2_gate(2, probability)))
+
+
+def update_corrections(run: SlamRun) -> np.ndarray:
+    """Return what each step's update moved the pose: ``(-)(x_{k-1} (+) u_k) (+) x_k``.
+
+    ``x_k`` the filter's pose after step k, ``u_k`` the motion step k predicted with
+    (:attr:`SlamRun.increments`; eq. 25 composes it onto ``x_{k-1}``): the difference
+    between the prediction and the estimate, in the predicted pose's frame. A filter that
+    closes a loop moves the pose by the drift accumulated since the landmark was last
+    seen; that move shows in the RPE of its trajectory, as the poses before it stay.
+
+    Args:
+        run: Output of :func:`run_slam`.
+
+    Returns:
+        (S, 3) ``[dx, dy, dpsi]`` per step (zeros for the first).
+    """
+    out = np.zeros((len(run.poses), 3))
+    for k in range(1, len(run.poses)):
+        out[k] = relative(compose(run.poses[k - 1], run.increments[k]), run.poses[k])
+    return out
 
 
 _VISIBLE: Dict[tuple, Tuple[np.ndarray, np.ndarray]] = {}
@@ -866,4 +894,4 @@ def format_summary(r: dict) -> str:
 __all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_odometry_noise', 'DRIFT_KEY', 'ellipse_share',
            'evaluate', 'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M',
            'run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'score_run', 'SlamRun',
-           'SlamScore', 'true_visible_corners']
+           'SlamScore', 'true_visible_corners', 'update_corrections']
