@@ -485,7 +485,10 @@ def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
     localize = {'none': None, 'oracle': oracle_localizer(cfg)}.get(correction, loc)
     errors = []
     fixes = approach_frames = approach_fixes = 0
-    for ev in iter_landmark_shuttle(seed, cfg, localize):
+    # without fixes the stop frames go to nobody: not rendered (the same run, drift only;
+    # the approach frames are counted, so they are rendered)
+    images = localize is not None or cfg.fix_while_driving
+    for ev in iter_landmark_shuttle(seed, cfg, localize, images=images):
         if isinstance(ev, ShuttleSample):
             loc.odometry(ev)
         elif isinstance(ev, ShuttleArrival):
