@@ -49,6 +49,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.conversions import classify_ranges
 from landmark_nav.evaluation.bags import load_bag
+from landmark_nav.evaluation.blas import single_threaded
 from landmark_nav.evaluation.features import corner_truth
 from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
                                                 STATISTICS, Trajectory, write_tum)
@@ -66,7 +67,6 @@ from landmark_nav.slam.frontend import (Corners, FrontendParams, odometry_noise_
 from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
 from landmark_nav.slam.visibility import ScanGeometry
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 ASSOCIATIONS = ('icnn', 'jcbb')
 #: Default ATE alignment of ``evaluate`` (the unaligned ATE is always reported too).
@@ -179,6 +179,7 @@ def scan_features(scan: ScanSample, landmarks: str = 'corners',
                                  landmarks, corner_params, line_params)
 
 
+@single_threaded
 def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              corner_params: Optional[CornerParams] = None, deskew: bool = True,
              descriptors: bool = True,
@@ -268,32 +269,28 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         record_s += time.perf_counter() - tic
 
     pending: Dict[int, Tuple[ScanSample, list]] = {}  # scan index -> scan, corners
-    # BLAS single-threaded, as the ekf_slam node runs (nodes.common.limit_threads): the
-    # filter's matrices are small, and OpenBLAS's threaded triangular solve (dtrtrs, any size)
-    # waits for a second thread on every call, milliseconds when the CPU is busy
-    with threadpool_limits(limits=1):
-        for ev in result.events:
-            if isinstance(ev, OdometrySample):
-                tic = time.perf_counter()
-                fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
-                seconds += time.perf_counter() - tic
-            elif isinstance(ev, ScanSample):
-                corners, segs = scan_features(ev, landmarks, corner_params, line_params)
-                pending[scan_k] = (ev, corners)
-                geometry = None
-                if visibility:
-                    geometry = ScanGeometry(np.asarray(ev.ranges, dtype=float), ev.angle_min,
-                                            ev.angle_increment, ev.range_min, ev.range_max,
-                                            mount, sigma_laser)
-                tic = time.perf_counter()
-                fe.add_features(Corners.from_corners(
-                    ev.stamp_ns, corners, ev.time_increment, segs,
-                    None if line_params is None else line_params.sigma_r, geometry), scan_k)
-                scan_k += 1
-                seconds += time.perf_counter() - tic
-        tic = time.perf_counter()
-        fe.flush()
-        seconds += time.perf_counter() - tic
+    for ev in result.events:
+        if isinstance(ev, OdometrySample):
+            tic = time.perf_counter()
+            fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
+            seconds += time.perf_counter() - tic
+        elif isinstance(ev, ScanSample):
+            corners, segs = scan_features(ev, landmarks, corner_params, line_params)
+            pending[scan_k] = (ev, corners)
+            geometry = None
+            if visibility:
+                geometry = ScanGeometry(np.asarray(ev.ranges, dtype=float), ev.angle_min,
+                                        ev.angle_increment, ev.range_min, ev.range_max,
+                                        mount, sigma_laser)
+            tic = time.perf_counter()
+            fe.add_features(Corners.from_corners(
+                ev.stamp_ns, corners, ev.time_increment, segs,
+                None if line_params is None else line_params.sigma_r, geometry), scan_k)
+            scan_k += 1
+            seconds += time.perf_counter() - tic
+    tic = time.perf_counter()
+    fe.flush()
+    seconds += time.perf_counter() - tic
     seconds -= record_s  # the filter's time only
     slam = fe.slam
     truth = result.truth_at(np.array(stamps, dtype=np.int64))
