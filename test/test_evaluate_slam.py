@@ -2,7 +2,6 @@
 
 import json
 from pathlib import Path
-from typing import Dict, Tuple
 
 from landmark_nav.bag import BagError, BagReader, BagWriter
 from landmark_nav.conversions import make_odometry, odometry_to_pose
@@ -30,20 +29,9 @@ FILES = ('trajectory_slam.tum', 'trajectory_odom.tum', 'trajectory_gt.tum', 'sla
 ODOM_START = np.array([5.0, -3.0, 1.0])
 
 
-_EVALUATED: Dict[str, Tuple[dict, Path]] = {}
-
-
-def evaluation(tmp_path_factory, association: str) -> Tuple[dict, Path]:
-    """Evaluate the office bag with one association (once per module) into its folder."""
-    if association not in _EVALUATED:
-        out = tmp_path_factory.mktemp(association)
-        _EVALUATED[association] = evaluate_bag(BAG, association, out, progress=False), out
-    return _EVALUATED[association]
-
-
 @pytest.fixture(scope='module', params=['icnn', 'jcbb'])
-def evaluated(request, tmp_path_factory):
-    return evaluation(tmp_path_factory, request.param)
+def evaluated(request, office_evaluation):
+    return office_evaluation(request.param)
 
 
 def test_files_written(evaluated):
@@ -118,9 +106,9 @@ def reencode(src: Path, dst: Path, reference_topic: bool, custom: dict,
 
 
 @pytest.fixture(scope='module')
-def office_result(tmp_path_factory):
+def office_result(office_evaluation):
     """Return the reference run: the ICNN evaluation of ``evaluated`` (the same call)."""
-    return evaluation(tmp_path_factory, 'icnn')
+    return office_evaluation('icnn')
 
 
 def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_result):
