@@ -1,6 +1,7 @@
-"""Shared test set-up: every test process gets a private DDS domain on localhost."""
+"""Shared test set-up: a private DDS domain on localhost; runs several test files use."""
 
 from pathlib import Path
+from typing import Callable, Dict, Tuple
 
 from landmark_nav.testing import isolate_dds
 import pytest
@@ -14,3 +15,22 @@ isolate_dds()
 def repo() -> Path:
     """Return the repository root."""
     return REPO
+
+
+@pytest.fixture(scope='session')
+def office_evaluation(tmp_path_factory) -> Callable[[str], Tuple[dict, Path]]:
+    """Return ``get(association)``: ``evaluate_bag`` of bags/office, once per session.
+
+    ``get`` gives the figures and the folder with the written files (TUM, slam.json,
+    plots); test_evaluate_slam.py and test_trajectory.py need the same run.
+    """
+    from landmark_nav.evaluation.slam import evaluate_bag
+    done: Dict[str, Tuple[dict, Path]] = {}
+
+    def get(association: str) -> Tuple[dict, Path]:
+        if association not in done:
+            out = tmp_path_factory.mktemp(f'office_{association}')
+            done[association] = (evaluate_bag(REPO / 'bags' / 'office', association, out,
+                                              progress=False), out)
+        return done[association]
+    return get

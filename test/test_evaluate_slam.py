@@ -31,9 +31,8 @@ ODOM_START = np.array([5.0, -3.0, 1.0])
 
 
 @pytest.fixture(scope='module', params=['icnn', 'jcbb'])
-def evaluated(request, tmp_path_factory):
-    out = tmp_path_factory.mktemp(request.param)
-    return evaluate_bag(BAG, request.param, out, progress=False), out
+def evaluated(request, office_evaluation):
+    return office_evaluation(request.param)
 
 
 def test_files_written(evaluated):
@@ -108,9 +107,9 @@ def reencode(src: Path, dst: Path, reference_topic: bool, custom: dict,
 
 
 @pytest.fixture(scope='module')
-def office_result(tmp_path_factory):
-    out = tmp_path_factory.mktemp('office_ref')
-    return evaluate_bag(BAG, 'icnn', out, progress=False, plots=False), out
+def office_result(office_evaluation):
+    """Return the reference run: the ICNN evaluation of ``evaluated`` (the same call)."""
+    return office_evaluation('icnn')
 
 
 def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_result):

@@ -62,9 +62,8 @@ def synthetic_pair(tmp_path: Path):
 
 
 @pytest.fixture(scope='module')
-def office_files(tmp_path_factory):
-    out = tmp_path_factory.mktemp('office')
-    evaluate_bag(BAG, 'icnn', out, progress=False, plots=False)
+def office_files(office_evaluation):
+    out = office_evaluation('icnn')[1]   # the run of test_evaluate_slam.py (its files)
     return out / 'trajectory_gt.tum', out / 'trajectory_slam.tum'
 
 

@@ -49,6 +49,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.conversions import classify_ranges
 from landmark_nav.evaluation.bags import load_bag
+from landmark_nav.evaluation.blas import single_threaded
 from landmark_nav.evaluation.features import corner_truth
 from landmark_nav.evaluation.trajectory import (aligned, ALIGNMENTS, ate, position_errors, rpe,
                                                 STATISTICS, Trajectory, write_tum)
@@ -183,6 +184,7 @@ def scan_features(scan: ScanSample, landmarks: str = 'corners',
                                  landmarks, corner_params, line_params)
 
 
+@single_threaded
 def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              corner_params: Optional[CornerParams] = None, deskew: bool = True,
              descriptors: bool = True,

@@ -32,6 +32,7 @@ import sys
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
+from landmark_nav.evaluation.blas import single_threaded
 from landmark_nav.geometry import relative
 from landmark_nav.sim import textures
 from landmark_nav.sim.camera import (CameraSimulator, landmark_plane, Photometry, Plane,
@@ -120,6 +121,7 @@ class DetectionRow:
         return self.correct / self.frames if self.frames else math.nan
 
 
+@single_threaded
 def detection_vs_size(block_pixels: Sequence[float] = (3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 8.0),
                       rotations_deg: Sequence[float] = (0.0, 22.5, 45.0), frames: int = 100,
                       seed: int = 1, camera: CameraModel = TABLE2_CAMERA,
@@ -201,6 +203,7 @@ def distractor_scene(rng: np.random.Generator, count: int) -> List[Plane]:
     return planes
 
 
+@single_threaded
 def false_detections(frames: int = 500, seed: int = 2, camera: CameraModel = VGA_CAMERA,
                      params: DetectorParams = DetectorParams(),
                      source: str = 'views') -> FalseDetectionResult:
@@ -275,6 +278,7 @@ class RepeatabilityRow:
     pose_ms: float
 
 
+@single_threaded
 def repeatability(turns_deg: Sequence[float] = (0.0, 10.0, 30.0, 60.0), distance: float = 2.2,
                   frames: int = 100, seed: int = 3, camera: CameraModel = TABLE1_CAMERA,
                   params: DetectorParams = DetectorParams(),
@@ -451,6 +455,7 @@ class LandmarkLocalizer:
 SHUTTLE_PROCEDURES = ('stop', 'approach')
 
 
+@single_threaded
 def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
             config: Optional[ShuttleConfig] = None,
             params: DetectorParams = DetectorParams(),
@@ -485,7 +490,10 @@ def shuttle(trips: int = 100, seed: int = 1, correction: str = 'ekf',
     localize = {'none': None, 'oracle': oracle_localizer(cfg)}.get(correction, loc)
     errors = []
     fixes = approach_frames = approach_fixes = 0
-    for ev in iter_landmark_shuttle(seed, cfg, localize):
+    # without fixes the stop frames go to nobody: not rendered (the same run, drift only;
+    # the approach frames are counted, so they are rendered)
+    images = localize is not None or cfg.fix_while_driving
+    for ev in iter_landmark_shuttle(seed, cfg, localize, images=images):
         if isinstance(ev, ShuttleSample):
             loc.odometry(ev)
         elif isinstance(ev, ShuttleArrival):
