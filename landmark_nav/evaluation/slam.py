@@ -364,8 +364,8 @@ def update_corrections(run: SlamRun) -> np.ndarray:
         (S, 3) ``[dx, dy, dpsi]`` per step (zeros for the first).
     """
     out = np.zeros((len(run.poses), 3))
-    for k in range(1, len(run.poses)):
-        out[k] = relative(compose(run.poses[k - 1], run.increments[k]), run.poses[k])
+    if len(run.poses) > 1:
+        out[1:] = relative(compose(run.poses[:-1], run.increments[1:]), run.poses[1:])
     return out
 
 
