@@ -14,7 +14,13 @@ landmark_diagnosis` says why each corner landmark is off the walls. Printed per 
 corner landmarks, the share within 10 cm of a wall cell (issue 14 asks >= 0.9), poses in
 wall / unknown cells (asks 0), the share of scan end points near a wall with the filter's
 and with the odometry's poses, and the count per category (``on_wall``, ``moved``,
-``few_views``, ``off_grid``). ``--establish-hits`` sets ``SlamParams.establish_hits``;
+``few_views``, ``off_grid``), and for the poses in wall cells
+(:func:`~landmark_nav.evaluation.occupancy_check.wall_pose_diagnosis`) the deepest such
+cell's depth into its wall region [m] (0.1: all at the region's edge), the median number
+of the log's scans that see through those cells, and the same median over every wall cell
+any scan sees through (a cell that many of the log's scans see through was free in this
+run: the grid holds something that was not there). ``--establish-hits`` sets
+``SlamParams.establish_hits``;
 ``--set NAME=VALUE`` (repeatable) any other field of ``SlamParams`` or ``FrontendParams``
 (the value read as a Python literal, e.g. ``--set jacobians="'observability_gain'" --set
 spurious_limit=0.05 --set scan_matching=True``).
@@ -36,12 +42,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_node_cpu import split_frontend  # noqa: E402
 from landmark_nav.evaluation.bags import load_bag  # noqa: E402
 from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnosis,  # noqa: E402
-                                                     load_occupancy_grid, run_segments)
+                                                     load_occupancy_grid, run_segments,
+                                                     wall_pose_diagnosis)
 from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.corners import CornerParams  # noqa: E402
 from landmark_nav.slam.ekf_slam import SlamParams  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
+import numpy as np  # noqa: E402
 
 LOGS = ('robotdata1', 'robotdata2', 'robotdata5')
 CATEGORIES = ('on_wall', 'moved', 'few_views', 'off_grid')
@@ -66,7 +74,8 @@ def main() -> int:
         return 1
     grid = load_occupancy_grid(wean / 'wean.dat.gz')
     print('log corners share_10cm poses_in_wall poses_unknown points_slam points_odom '
-          + ' '.join(CATEGORIES) + ' retired')
+          + ' '.join(CATEGORIES) + ' retired wall_depth_max wall_scans_median '
+          'wall_cells_scans_median')
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.logs:
             bag = Path(tmp) / name
@@ -89,11 +98,16 @@ def main() -> int:
                 diag = landmark_diagnosis(grid, part, s['transform'],
                                           confirm_hits=prm.confirm_hits)
                 count = Counter(diag['category'].tolist())
+                wall = wall_pose_diagnosis(grid, sc, part, s['transform'])
+                depth = f"{wall['depth'].max():.1f}" if wall['steps'].size else '-'
+                seen = f"{np.median(wall['crossings']):.0f}" if wall['steps'].size else '-'
+                cells = (f"{np.median(wall['wall_crossings']):.0f}"
+                         if wall['wall_crossings'].size else '-')
                 print(f'{label} {s["landmarks"]} {s["landmark_share"]:.3f} '
                       f'{s["poses_in_wall"]} {s["poses_unknown"]} {s["point_share"]:.3f} '
                       f'{fit["odometry"]["point_share"]:.3f} '
                       + ' '.join(str(count.get(c, 0)) for c in CATEGORIES)
-                      + f' {run.stats.get("retired", 0)}', flush=True)
+                      + f' {run.stats.get("retired", 0)} {depth} {seen} {cells}', flush=True)
     return 0
 
 

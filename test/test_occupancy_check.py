@@ -117,3 +117,29 @@ def test_run_segments_split_at_bridged_jumps():
     from dataclasses import replace
     whole = replace(run, bridged=np.zeros(n, dtype=bool))
     assert run_segments(whole) == [whole]
+
+
+def test_wall_pose_diagnosis_depth_and_crossings():
+    """Poses at the edge and in the middle of a wall blob that another scan sees through."""
+    from landmark_nav.evaluation.occupancy_check import wall_pose_diagnosis
+    from landmark_nav.sim import ScanSample
+    grid = _room_grid()
+    grid.values[140:143, 100:103] = 0.0  # x 14.0-14.3 m, y 10.0-10.3 m
+    poses = np.array([[12.0, 10.15, 0.0],  # free, its beam crosses row y = 10.15
+                      [14.05, 10.05, 0.0],  # the blob's corner cell: one cell deep
+                      [14.15, 10.15, 0.0]])  # the blob's middle cell: two cells deep
+
+    def scan(r):
+        return ScanSample(stamp_ns=0, ranges=np.array([r, np.inf], dtype=np.float32),
+                          angle_min=0.0, angle_max=0.1, angle_increment=0.1,
+                          time_increment=0.0, scan_time=0.1, range_min=0.02, range_max=30.0)
+    scans = [scan(5.0), scan(np.inf), scan(0.2)]  # the last: a return inside the margin
+    scenario = SimpleNamespace(of_type=lambda cls: scans if cls is ScanSample else [],
+                               laser=SimpleNamespace(mount=(0.0, 0.0, 0.0)))
+    run = SimpleNamespace(poses=poses, scan_index=np.arange(3))
+    d = wall_pose_diagnosis(grid, scenario, run, np.zeros(3), every=1)
+    assert d['steps'].tolist() == [1, 2]
+    assert d['depth'] == pytest.approx([0.1, 0.2])
+    # Scan 0's beam runs from x = 12.3 to 16.7 at y = 10.15: cells (140-142, 101).
+    assert d['crossings'].tolist() == [0, 1]
+    assert d['wall_crossings'].tolist() == [1, 1, 1]

@@ -50,6 +50,7 @@ import math
 from pathlib import Path
 from typing import Dict, Optional, Tuple, Union
 
+from landmark_nav.geometry import compose
 from landmark_nav.slam.ekf_slam import CORNER
 from landmark_nav.slam.slam_map import load_map
 import numpy as np
@@ -376,6 +377,79 @@ def landmark_diagnosis(grid: OccupancyGrid, run, transform: np.ndarray,
             'neighbour': nb, 'category': cat}
 
 
+def wall_pose_diagnosis(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
+                        wall_max: float = 0.1, every: int = 2, max_range: float = 8.0,
+                        margin: float = 0.3) -> Dict[str, np.ndarray]:
+    """Say how deep each estimated pose in a wall cell lies and whether the log saw through it.
+
+    A pose counted in a wall cell by :func:`occupancy_check` may be a trajectory that left
+    the corridor, or a pose a few centimetres off at the edge of a wall region, or a cell
+    the grid calls wall where this log's laser saw free space (an object moved, a door
+    opened since the grid was made). Two figures tell them apart: the cell's depth into
+    its wall region (distance from the cell to the nearest known non-wall cell, in whole
+    cells: one cell at the region's edge), and in how many of the run's scans (every
+    ``every``-th step, placed with the filter's poses, returns up to ``max_range``) a ray
+    passes through the cell at least ``margin`` before its return and beyond ``margin``
+    from the laser (so a pose's own cell is not crossed by its own rays).
+
+    Args:
+        grid: The building's grid.
+        scenario: The bag (:func:`landmark_nav.evaluation.bags.load_bag`).
+        run: :func:`landmark_nav.evaluation.slam.run_slam` on it (or one of
+            :func:`run_segments`).
+        transform: ``[t_x, t_y, theta]`` map frame -> grid frame (an :func:`occupancy_check`
+            result's ``'transform'``).
+        wall_max: See :func:`occupancy_check`.
+        every: Step subsampling of the rays.
+        max_range: Longest return used [m].
+        margin: A ray crosses a cell only this far before its return and from the
+            laser [m].
+
+    Returns:
+        ``steps`` (indices of the run's poses in wall cells), ``depth`` [m] and
+        ``crossings`` (scans with a ray through the cell) per such pose, and
+        ``wall_crossings``: the count of every wall cell that any ray crossed (for
+        comparison).
+    """
+    from landmark_nav.conversions import classify_ranges
+    from landmark_nav.sim import ScanSample
+    t = np.asarray(transform, dtype=float).reshape(3)
+    v, res = grid.values, grid.resolution
+    wall = (v >= 0.0) & (v <= wall_max)
+    depth = ndimage.distance_transform_edt(wall | (v < 0.0)) * res
+    shape = np.array(v.shape)
+    ij = np.floor(_transform(np.asarray(run.poses, dtype=float)[:, :2], t) / res
+                  ).astype(np.int64)
+    inside = np.all((ij >= 0) & (ij < shape), axis=1)
+    hit = np.zeros(ij.shape[0], dtype=bool)
+    hit[inside] = wall[ij[inside, 0], ij[inside, 1]]
+    steps = np.flatnonzero(hit)
+    crossed = np.zeros(v.size, dtype=np.int64)
+    scans = scenario.of_type(ScanSample)
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    along = np.arange(0.0, max_range, 0.5 * res)
+    for k in range(0, ij.shape[0], every):
+        s = scans[int(run.scan_index[k])]
+        r = np.asarray(s.ranges, dtype=float)
+        ok = classify_ranges(r, s.range_min, s.range_max)[0]
+        with np.errstate(invalid='ignore'):
+            ok &= r <= max_range
+        if not np.any(ok):
+            continue
+        lp = compose(np.asarray(run.poses[k], dtype=float), mount)
+        a = lp[2] + s.angle_min + s.angle_increment * np.flatnonzero(ok)
+        use = (along[None, :] >= margin) & (along[None, :] < (r[ok] - margin)[:, None])
+        pts = lp[:2] + along[None, :, None] * np.stack([np.cos(a), np.sin(a)], axis=1)[:, None]
+        g = np.floor(_transform(pts[use], t) / res).astype(np.int64)
+        g = g[np.all((g >= 0) & (g < shape), axis=1)]
+        cells = np.unique(g[:, 0] * shape[1] + g[:, 1])
+        crossed[cells] += 1
+    crossed = crossed.reshape(v.shape)
+    return {'steps': steps, 'depth': depth[ij[steps, 0], ij[steps, 1]],
+            'crossings': crossed[ij[steps, 0], ij[steps, 1]],
+            'wall_crossings': crossed[wall & (crossed > 0)]}
+
+
 def scan_end_points(poses: np.ndarray, mount: np.ndarray, ranges: np.ndarray,
                     angles: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Scan end points in the map frame: each scan's valid returns through its pose.
@@ -460,4 +534,4 @@ def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: flo
 __all__ = ['check_run', 'landmark_diagnosis', 'load_occupancy_grid', 'occupancy_check',
            'occupancy_check_files', 'run_segments',
            'OccupancyGrid',
-           'scan_end_points']
+           'scan_end_points', 'wall_pose_diagnosis']
