@@ -3,7 +3,7 @@
 Run from the repository root (needs ``../shared/data/wean``)::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/wean_map_check.py [--landmarks both]
-        [--establish-hits N] [--set NAME=VALUE ...] [LOG ...]
+        [--establish-hits N] [--odometry-scale S] [--set NAME=VALUE ...] [LOG ...]
 
 Each log (default ``robotdata1 robotdata2 robotdata5``) is imported with ``landmark_nav
 import`` defaults (raw odometry) into a temporary directory and run as the test
@@ -21,7 +21,9 @@ of the log's scans that see through those cells, and the same median over every 
 any scan sees through (a cell that many of the log's scans see through was free in this
 run: the grid holds something that was not there). ``--establish-hits`` sets
 ``SlamParams.establish_hits``;
-``--set NAME=VALUE`` (repeatable) any other field of ``SlamParams`` or ``FrontendParams``
+``--odometry-scale S`` multiplies the raw odometry's translations by S before the filter (is
+the odometry's scale wrong? the grid says which scale fits). ``--set NAME=VALUE``
+(repeatable) any other field of ``SlamParams`` or ``FrontendParams``
 (the value read as a Python literal, e.g. ``--set jacobians="'observability_gain'" --set
 spurious_limit=0.05 --set scan_matching=True``).
 A log whose odometry the front end had to bridge (``robotdata5``: two runs) gets one more
@@ -32,6 +34,7 @@ each part aligned on its own).
 import argparse
 import ast
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 import sys
 import tempfile
@@ -47,12 +50,24 @@ from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnos
 from landmark_nav.evaluation.slam import bag_odometry_noise, run_slam  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.laser.corners import CornerParams  # noqa: E402
+from landmark_nav.sim.scenarios import OdometrySample  # noqa: E402
 from landmark_nav.slam.ekf_slam import SlamParams  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
 
 LOGS = ('robotdata1', 'robotdata2', 'robotdata5')
 CATEGORIES = ('on_wall', 'moved', 'few_views', 'off_grid')
+
+
+def scale_odometry(scenario, factor: float) -> None:
+    """Scale the odometry's positions (so every increment's translation) in place."""
+    for i, e in enumerate(scenario.events):
+        if type(e) is OdometrySample:
+            pose = np.array(e.pose, dtype=float)
+            pose[:2] *= factor
+            twist = np.array(e.twist, dtype=float)
+            twist[:-1] *= factor  # linear part; the last component is the turn rate
+            scenario.events[i] = replace(e, pose=pose, twist=twist)
 
 
 def main() -> int:
@@ -62,6 +77,9 @@ def main() -> int:
     ap.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
     ap.add_argument('--establish-hits', type=int, default=0)
     ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
+    ap.add_argument('--odometry-scale', type=float, default=1.0,
+                    help='scale the raw odometry translations before the filter (a test of '
+                         'the odometry scale against the grid; default 1)')
     args = ap.parse_args()
     extra = {}
     for item in args.set:
@@ -81,6 +99,8 @@ def main() -> int:
             bag = Path(tmp) / name
             import_log(wean / f'{name}.log.gz', bag)
             sc = load_bag(bag, require_reference=False)
+            if args.odometry_scale != 1.0:
+                scale_odometry(sc, args.odometry_scale)
             prm = SlamParams(odometry=bag_odometry_noise(sc)[0],
                              establish_hits=args.establish_hits, **extra)
             run = run_slam(sc, prm, CornerParams(sigma_r=sc.laser.sigma_range,
