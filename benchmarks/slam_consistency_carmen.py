@@ -83,6 +83,20 @@ from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
+# The reference poses' own per-pose std along / across their heading [m], as
+# ``benchmarks/reference_noise_carmen.py`` measures them from the scans (README, EKF-SLAM,
+# "Reference noise"): ``ellipse95_ref`` adds them to the filter's covariance.
+REFERENCE_SD = {'aces': (0.0181, 0.0061), 'seattle': (0.0118, 0.0072),
+                'fhw': (0.0204, 0.0120), 'freiburg-101': (0.0136, 0.0174),
+                'belgioioso': (0.0095, 0.0095), 'acapulco': (0.0242, 0.0230)}
+
+
+def log_name(bag: Path) -> str:
+    """Return the Carmen log a bag was imported from (``aces-3`` -> ``aces``), or ''."""
+    name = Path(bag).name
+    return next((g for g in LOGS if name == g or name.startswith(g + '-')), '')
+
+
 JUMP_M = 0.2  # an update that moves the pose further is counted as a jump (a loop closed)
 
 
@@ -166,6 +180,8 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
             'psi_err': float(np.degrees(np.sqrt(np.mean(err[:, 2] ** 2)))),
             'psi_sd': float(np.degrees(np.median(np.sqrt(run.covariances[:, 2, 2])))),
             'ellipse95': ellipse_share(run),
+            'ellipse95_ref': (ellipse_share(run, reference_sd=REFERENCE_SD[log_name(bag)])
+                              if log_name(bag) in REFERENCE_SD else math.nan),
             'rot_deg': math.degrees(rot), 'ate_se2': ate_se2,
             'ate_none': float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))),
             'jump5': float(sq[:max(1, len(sq) // 20)].sum() / sq.sum()),

@@ -341,6 +341,28 @@ def test_update_corrections_are_what_each_update_moved_the_pose(scan_matching, m
     assert np.all(corr[0] == 0.0) and np.max(np.abs(corr[1:, :2])) > 1e-4  # updates move it
 
 
+def test_ellipse_share_with_the_reference_noise():
+    """A filter right about its own error, scored against a reference with noise of its own."""
+    from types import SimpleNamespace
+    from landmark_nav.evaluation.slam import ellipse_share
+    rng = np.random.default_rng(5)
+    n, sa, sc = 40000, 0.03, 0.005  # the reference's std along / across its heading [m]
+    th = rng.uniform(-np.pi, np.pi, n)
+    cov = np.zeros((n, 3, 3))
+    cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1] = 4e-4, 1e-4, 1e-4
+    cov[:, 1, 0] = cov[:, 0, 1]
+    own = np.einsum('ij,kj->ki', np.linalg.cholesky(cov[0, :2, :2]), rng.standard_normal((n, 2)))
+    ref = rng.standard_normal((n, 2)) * [sa, sc]  # along / across
+    ref = np.column_stack([np.cos(th) * ref[:, 0] - np.sin(th) * ref[:, 1],
+                           np.sin(th) * ref[:, 0] + np.cos(th) * ref[:, 1]])
+    truth = np.column_stack([ref, th])  # the true pose is 0: the reference is its noise
+    run = SimpleNamespace(poses=np.column_stack([own, th]), truth=truth, covariances=cov)
+    assert ellipse_share(run) < 0.6  # the reference's noise counted as the filter's error
+    assert ellipse_share(run, reference_sd=(sa, sc)) == pytest.approx(0.95, abs=0.006)
+    assert ellipse_share(run, reference_sd=(sc, sa)) < 0.75  # along and across matter
+    assert ellipse_share(run, reference_sd=(0.0, 0.0)) == ellipse_share(run)
+
+
 def test_bad_input(tmp_path):
     with pytest.raises(ValueError, match='association'):
         evaluate_bag(BAG, 'nearest', progress=False)
