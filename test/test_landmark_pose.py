@@ -18,10 +18,23 @@ from landmark_nav.vision.pose import (angles_from_rotation, estimate_pose, Landm
                                       project_corners, rotation_matrix, solve_pnp)
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 CAMERA = default_camera()
 DESIGN = LandmarkDesign()
 M = np.asarray(OPTICAL_FROM_BODY)
+
+
+@pytest.fixture(autouse=True, scope='module')
+def one_blas_thread():
+    """Run this module with BLAS on one thread, as the nodes run the pose code.
+
+    Its 6 x 6 normal equations and small products gain nothing from OpenBLAS's threads and
+    lose much to their wake-ups (25 -> 18 s); every library result of this module (and each
+    numpy.linalg result) is bit-identical either way.
+    """
+    with threadpool_limits(limits=1):
+        yield
 
 
 def random_pose(rng, max_turn=70.0):

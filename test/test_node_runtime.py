@@ -5,6 +5,7 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -118,25 +119,73 @@ def _start(args, env):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+class _Child:
+    """A started child whose stdout and stderr threads collect, so a test can wait on them."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc = proc
+        self._out, self._err = [], []
+        self._threads = [threading.Thread(target=self._read, args=(stream, lines), daemon=True)
+                         for stream, lines in ((proc.stdout, self._out),
+                                               (proc.stderr, self._err))]
+        for t in self._threads:
+            t.start()
+
+    @staticmethod
+    def _read(stream, lines) -> None:
+        for line in stream:
+            lines.append(line)
+
+    def err(self) -> str:
+        """Return the stderr so far (all of it once the child has exited)."""
+        if self.proc.poll() is not None:
+            for t in self._threads:
+                t.join(5.0)
+        return ''.join(self._err)
+
+    def communicate(self, timeout: float):
+        """Wait for the exit like ``Popen.communicate``; return (stdout, stderr)."""
+        self.proc.wait(timeout=timeout)
+        for t in self._threads:
+            t.join(timeout)
+        return ''.join(self._out), ''.join(self._err)
+
+
+def _wait_for(condition, timeout: float, what: str) -> None:
+    """Poll ``condition`` every 0.1 s until it holds; fail after ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < end, f'not within {timeout} s: {what}'
+        time.sleep(0.1)
+
+
+# the line each node logs once it is constructed (before it spins)
+STARTED = {'corner_extractor': 'corner_extractor: method',
+           'line_extractor': 'line_extractor: method', 'ekf_slam': 'ekf_slam: landmarks',
+           'sonar_localizer': 'sonar_localizer: ', 'landmark_detector': 'landmark_detector: '}
+
+
 @pytest.mark.dds
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
     """Ctrl-C or kill printed tracebacks (bag_player, ekf_slam while processing)."""
     env = node_env()
-    nodes = {n: _start([f'landmark_nav.nodes.{n}'], env) for n in NODES}
-    time.sleep(8.0)  # start-up, generous on a loaded machine
-    player = _start(['landmark_nav.nodes.bag_player', str(REPO / 'bags' / 'office'),
-                     '--rate', '2'], env)
+    nodes = {n: _Child(_start([f'landmark_nav.nodes.{n}'], env)) for n in NODES}
+    # start-up: every node has logged its start line (it slept a fixed 8 s)
+    _wait_for(lambda: all(STARTED[n] in c.err() or c.proc.poll() is not None
+                          for n, c in nodes.items()), 60.0, 'the nodes start')
+    player = _Child(_start(['landmark_nav.nodes.bag_player', str(REPO / 'bags' / 'office'),
+                            '--rate', '2'], env))
     time.sleep(6.0)  # data flowing through every node
     procs = dict(nodes, bag_player=player)
-    assert all(p.poll() is None for p in procs.values()), {
-        n: p.stderr.read() for n, p in procs.items() if p.poll() is not None}
-    for p in procs.values():
-        p.send_signal(sig)
-    for name, p in procs.items():
-        _, err = p.communicate(timeout=60)
+    assert all(c.proc.poll() is None for c in procs.values()), {
+        n: c.err() for n, c in procs.items() if c.proc.poll() is not None}
+    for c in procs.values():
+        c.proc.send_signal(sig)
+    for name, c in procs.items():
+        _, err = c.communicate(timeout=60)
         assert 'Traceback' not in err and 'Error' not in err, f'{name}:\n{err}'
-        assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
+        assert c.proc.returncode == 0, f'{name} exited with {c.proc.returncode}:\n{err}'
 
 
 @pytest.mark.dds
@@ -146,21 +195,30 @@ def test_drivers_stop_cleanly_on_signals(tmp_path, sig):
     urg, p2os = str(tmp_path / 'urg'), str(tmp_path / 'p2os')
     emulators = [_start(['landmark_nav.tools.cli', 'emulate', 'urg', '--link', urg], env),
                  _start(['landmark_nav.tools.cli', 'emulate', 'p2os', '--link', p2os], env)]
-    time.sleep(4.0)
-    drivers = {'laser_driver': _start(['landmark_nav.nodes.laser_driver', '--ros-args', '-p',
-                                       f'port:={urg}'], env),
-               'base_driver': _start(['landmark_nav.nodes.base_driver', '--ros-args', '-p',
-                                      f'port:={p2os}'], env)}
     try:
-        time.sleep(8.0)  # connected and publishing
-        assert all(p.poll() is None for p in drivers.values()), {
-            n: p.stderr.read() for n, p in drivers.items() if p.poll() is not None}
-        for p in drivers.values():
-            p.send_signal(sig)
-        for name, p in drivers.items():
-            _, err = p.communicate(timeout=60)
+        # the emulators serve their links (it slept a fixed 4 s)
+        _wait_for(lambda: (os.path.islink(urg) and os.path.islink(p2os))
+                  or any(p.poll() is not None for p in emulators), 30.0, 'the emulators serve')
+        drivers = {'laser_driver': _Child(_start(['landmark_nav.nodes.laser_driver',
+                                                  '--ros-args', '-p', f'port:={urg}'], env)),
+                   'base_driver': _Child(_start(['landmark_nav.nodes.base_driver',
+                                                 '--ros-args', '-p', f'port:={p2os}'], env))}
+
+        def connected(c):
+            err = c.err()
+            return 'connected' in err or 'opened' in err.lower() or c.proc.poll() is not None
+        # connected (it slept a fixed 8 s), then publishing for a second
+        _wait_for(lambda: all(connected(c) for c in drivers.values()), 60.0,
+                  'the drivers connect')
+        time.sleep(1.0)
+        assert all(c.proc.poll() is None for c in drivers.values()), {
+            n: c.err() for n, c in drivers.items() if c.proc.poll() is not None}
+        for c in drivers.values():
+            c.proc.send_signal(sig)
+        for name, c in drivers.items():
+            _, err = c.communicate(timeout=60)
             assert 'Traceback' not in err, f'{name}:\n{err}'
-            assert p.returncode == 0, f'{name} exited with {p.returncode}:\n{err}'
+            assert c.proc.returncode == 0, f'{name} exited with {c.proc.returncode}:\n{err}'
             assert 'connected' in err or 'opened' in err.lower(), f'{name} never connected:\n{err}'
     finally:
         for p in emulators:

@@ -88,17 +88,31 @@ def _tf_bytes(stamp_ns: int, transforms) -> bytes:
     return bytes(store.serialize_cdr(t[TF_TYPE](transforms=out), TF_TYPE))
 
 
-def _path(stamps: np.ndarray, poses: np.ndarray, frame: str) -> PathMsg:
-    msg = PathMsg()
-    msg.header.stamp = ns_to_stamp(int(stamps[-1]))
-    msg.header.frame_id = frame
-    for t, pose in zip(stamps, poses):
-        ps = PoseStamped()
-        ps.header.stamp = ns_to_stamp(int(t))
-        ps.header.frame_id = frame
-        ps.pose = pose_msg_from_2d(pose)
-        msg.poses.append(ps)
-    return msg
+class _PathTopic:
+    """The growing path of one topic: each pose message is built once, not once per path.
+
+    ``path(k)`` is the ``nav_msgs/Path`` of poses ``0..k`` stamped with pose ``k``'s stamp;
+    the paths share their ``PoseStamped`` messages (each path holds the whole path so far,
+    so building them anew made the viewer file quadratic in the poses).
+    """
+
+    def __init__(self, stamps: np.ndarray, poses: np.ndarray, frame: str) -> None:
+        self._stamps, self._poses, self._frame = stamps, poses, frame
+        self._msgs: List[PoseStamped] = []
+
+    def path(self, k: int) -> PathMsg:
+        """Return the path of poses ``0..k``."""
+        for i in range(len(self._msgs), k + 1):
+            ps = PoseStamped()
+            ps.header.stamp = ns_to_stamp(int(self._stamps[i]))
+            ps.header.frame_id = self._frame
+            ps.pose = pose_msg_from_2d(self._poses[i])
+            self._msgs.append(ps)
+        msg = PathMsg()
+        msg.header.stamp = ns_to_stamp(int(self._stamps[k]))
+        msg.header.frame_id = self._frame
+        msg.poses = self._msgs[:k + 1]
+        return msg
 
 
 def _world_markers(world, stamp_ns: int) -> MarkerArray:
@@ -205,6 +219,10 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
             put('/odom', o.stamp_ns, make_odometry(o.stamp_ns, 'odom', 'base_link', o.pose,
                                                    o.covariance))
         snap, last_path, path_ns = 0, -math.inf, int(path_period * 1e9)
+        paths = {'/path': _PathTopic(run.stamps, run.poses, 'map'),
+                 '/odom/path': _PathTopic(run.stamps, run.odometry, 'odom')}
+        if scenario.has_reference:
+            paths['/ground_truth/path'] = _PathTopic(run.stamps, run.truth, 'map')
         for k, scan in enumerate(scans):
             t = int(scan.stamp_ns)
             put('/scan', t, make_scan(t, 'laser', scan.angle_min, scan.angle_increment,
@@ -227,11 +245,10 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
                 put('/landmarks', t, make_landmark_markers(t, 'map', ids, means, covs))
             if t - last_path >= path_ns or k == len(scans) - 1:
                 last_path = t
-                put('/path', t, _path(run.stamps[:k + 1], run.poses[:k + 1], 'map'))
-                put('/odom/path', t, _path(run.stamps[:k + 1], run.odometry[:k + 1], 'odom'))
+                put('/path', t, paths['/path'].path(k))
+                put('/odom/path', t, paths['/odom/path'].path(k))
                 if scenario.has_reference:
-                    put('/ground_truth/path', t, _path(run.stamps[:k + 1],
-                                                       run.truth[:k + 1], 'map'))
+                    put('/ground_truth/path', t, paths['/ground_truth/path'].path(k))
     mcap = next(out.glob('*.mcap'))
     return {'mcap': str(mcap), 'counts': counts}
 
