@@ -159,6 +159,25 @@ def _wait_for(condition, timeout: float, what: str) -> None:
         time.sleep(0.1)
 
 
+def _signal_all(children: dict, sig) -> dict:
+    """Check every child still runs, send ``sig`` to all, check each exits 0 without a traceback.
+
+    Returns:
+        Each child's stderr by name.
+    """
+    assert all(c.proc.poll() is None for c in children.values()), {
+        n: c.err() for n, c in children.items() if c.proc.poll() is not None}
+    for c in children.values():
+        c.proc.send_signal(sig)
+    errs = {}
+    for name, c in children.items():
+        _, err = c.communicate(timeout=60)
+        assert 'Traceback' not in err, f'{name}:\n{err}'
+        assert c.proc.returncode == 0, f'{name} exited with {c.proc.returncode}:\n{err}'
+        errs[name] = err
+    return errs
+
+
 # the line each node logs once it is constructed (before it spins)
 STARTED = {'corner_extractor': 'corner_extractor: method',
            'line_extractor': 'line_extractor: method', 'ekf_slam': 'ekf_slam: landmarks',
@@ -177,15 +196,8 @@ def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
     player = _Child(_start(['landmark_nav.nodes.bag_player', str(REPO / 'bags' / 'office'),
                             '--rate', '2'], env))
     time.sleep(6.0)  # data flowing through every node
-    procs = dict(nodes, bag_player=player)
-    assert all(c.proc.poll() is None for c in procs.values()), {
-        n: c.err() for n, c in procs.items() if c.proc.poll() is not None}
-    for c in procs.values():
-        c.proc.send_signal(sig)
-    for name, c in procs.items():
-        _, err = c.communicate(timeout=60)
-        assert 'Traceback' not in err and 'Error' not in err, f'{name}:\n{err}'
-        assert c.proc.returncode == 0, f'{name} exited with {c.proc.returncode}:\n{err}'
+    for name, err in _signal_all(dict(nodes, bag_player=player), sig).items():
+        assert 'Error' not in err, f'{name}:\n{err}'
 
 
 @pytest.mark.dds
@@ -211,14 +223,7 @@ def test_drivers_stop_cleanly_on_signals(tmp_path, sig):
         _wait_for(lambda: all(connected(c) for c in drivers.values()), 60.0,
                   'the drivers connect')
         time.sleep(1.0)
-        assert all(c.proc.poll() is None for c in drivers.values()), {
-            n: c.err() for n, c in drivers.items() if c.proc.poll() is not None}
-        for c in drivers.values():
-            c.proc.send_signal(sig)
-        for name, c in drivers.items():
-            _, err = c.communicate(timeout=60)
-            assert 'Traceback' not in err, f'{name}:\n{err}'
-            assert c.proc.returncode == 0, f'{name} exited with {c.proc.returncode}:\n{err}'
+        for name, err in _signal_all(drivers, sig).items():
             assert 'connected' in err or 'opened' in err.lower(), f'{name} never connected:\n{err}'
     finally:
         for p in emulators:
