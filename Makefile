@@ -1,6 +1,7 @@
 # The two commands of the README:
 #   make demo   -- set up .venv if needed, then run the main job (writes out/)
-#   make test   -- set up .venv if needed, then run the test suite
+#   make test   -- set up .venv if needed, then run the test suite (one worker per CPU)
+# and, by hand: make bench -- the timed benchmarks, checked against benchmarks/results/
 # Both create or update the local virtual environment .venv; a second run installs nothing
 # (the install step re-runs only when a requirements file or the package metadata changes).
 
@@ -10,7 +11,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.landmark_nav-installed
 DEPS := requirements.txt requirements-test.txt constraints.txt setup.py setup.cfg package.xml
 
-.PHONY: demo test venv bags lint clean
+.PHONY: demo test bench venv bags lint clean
 
 venv: $(STAMP)
 
@@ -28,8 +29,15 @@ $(STAMP): $(DEPS)
 demo: $(STAMP)
 	$(BIN)/landmark_nav demo --out out
 
+# One pytest-xdist worker per CPU; a test file stays on one worker (its module fixtures,
+# e.g. the golden runs, are computed once).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q test
+	$(BIN)/python -m pytest -q -n auto --dist loadfile test
+
+# Timing, soak and long evaluations: figures as ratios against an in-run reference,
+# compared with the stored results (exit 1 on a regression). Run on an idle machine.
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_soak.py
 
 # Regenerate the committed recordings (fixed seeds) with the package's own simulator.
 bags: $(STAMP)

@@ -353,33 +353,28 @@ def test_shutdown_sends_stop_and_close(tmp_path):
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
-def test_ctrl_c_sends_stop_and_close_over_tcp(sig):
+def test_ctrl_c_sends_stop_and_close_over_tcp(sig, processes):
     device = P2osDevice(sonar_noise=False)
     with DeviceServer(device, tcp_port=0) as server:
-        proc = subprocess.Popen(
+        proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.nodes.base_driver', '--ros-args',
              '-p', f'port:={server.url}', '-p', 'publish_tf:=false'],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=dict(os.environ))
-        try:
-            deadline = time.monotonic() + 15.0
-            while not device.is_open and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert device.is_open, proc.stdout.read1().decode() if proc.poll() else ''
-            time.sleep(0.3)
-            proc.send_signal(sig)
-            out, _ = proc.communicate(timeout=10.0)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        deadline = time.monotonic() + 15.0
+        while not device.is_open and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert device.is_open, proc.stdout.read1().decode() if proc.poll() else ''
+        time.sleep(0.3)
+        proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=10.0)
         assert proc.returncode == 0, out.decode()
         names = [c.name for c in device.commands]
         assert names[-2:] == ['STOP', 'CLOSE'], names
         assert device.state == WAIT_SYNC0
 
 
-def test_emulate_command_over_tcp():
-    proc = subprocess.Popen(
+def test_emulate_command_over_tcp(processes):
+    proc = processes.start(
         [sys.executable, '-m', 'landmark_nav.tools.cli', 'emulate', 'p2os', '--link', '',
          '--tcp', '0', '--no-sonar-noise'], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
         text=True)
@@ -411,12 +406,8 @@ def test_emulate_command_over_tcp():
             assert truth[3] == math.inf and sonar[-1].range == math.inf
             assert sonar4[-1].range == pytest.approx(truth[4], abs=0.134e-3 + 1e-6)
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        exit_code = processes.stop(proc, signal.SIGINT, timeout=10.0)
+    assert exit_code == 0, ''.join(lines)
 
 
 # ------------------------------------------------------------------------- faults

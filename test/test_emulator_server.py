@@ -149,11 +149,13 @@ class _Delayed(Device):
 
 
 def test_frames_leave_when_the_device_says_not_on_the_loop_tick(tmp_path):
-    # Loop period 100 ms, replies due 5 ms after each request: the server sleeps until the
-    # device's next deadline, so the reply arrives in about 5 ms, not at the next tick.
+    # Loop period 1 s, replies due 5 ms after each request: the server sleeps until the
+    # device's next deadline, so the reply arrives in about 5 ms, not at the next tick (a
+    # server waking on its ticks answers each request sent right after a reply about 1 s
+    # later). Only which wake-up is checked: the delay itself depends on the machine's load.
     link = str(tmp_path / 'dev')
     delays = []
-    with DeviceServer(_Delayed(0.005), link=link, period=0.1):
+    with DeviceServer(_Delayed(0.005), link=link, period=1.0):
         with serial.serial_for_url(link, timeout=0.002) as port:
             for k in range(5):
                 sent = time.monotonic()
@@ -162,4 +164,4 @@ def test_frames_leave_when_the_device_says_not_on_the_loop_tick(tmp_path):
                 delays.append(time.monotonic() - sent)
     print('reply delays [ms]', [round(d * 1e3, 2) for d in delays])
     assert min(delays) >= 0.005
-    assert sorted(delays)[2] < 0.02  # median: the model's 5 ms plus scheduling, not 100 ms
+    assert sorted(delays)[2] < 0.1  # median: the deadline's wake-up, not the 1 s tick

@@ -387,9 +387,9 @@ def test_missing_port_is_retried_until_it_appears(tmp_path):
 # ---------------------------------------------------------------------------- command line
 
 
-def test_driver_against_the_emulate_command(tmp_path):
+def test_driver_against_the_emulate_command(tmp_path, processes):
     link = tmp_path / 'urg'
-    proc = subprocess.Popen([str(BIN / 'landmark_nav'), 'emulate', 'urg', '--link', str(link),
+    proc = processes.start([str(BIN / 'landmark_nav'), 'emulate', 'urg', '--link', str(link),
                              '--seed', '3', '--motion', 'rotate'],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

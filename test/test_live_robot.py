@@ -31,15 +31,15 @@ def _planar(traj):
     return np.column_stack([traj.positions[:, :2], 2.0 * np.arctan2(q[:, 2], q[:, 3])])
 
 
-def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path):
+def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path, processes):
     cli = [sys.executable, '-m', 'landmark_nav.tools.cli']
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
     base, laser, truth = tmp_path / 'p2os', tmp_path / 'urg', tmp_path / 'truth.tum'
-    emulator = subprocess.Popen(
+    emulator = processes.start(
         cli + ['emulate', 'robot', '--link', str(base), '--tcp', '0', '--laser-link',
                str(laser), '--truth', str(truth)], env=env, stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
-    pipeline = subprocess.Popen(
+    pipeline = processes.start(
         cli + ['pipeline', 'slam', '--set', f'laser_driver.port={laser}', '--set',
                'laser_driver.skip=3', '--set', f'base_driver.port={base}', '--set',
                'ekf_slam.odometry.model=simulator'], env=env,

@@ -114,9 +114,9 @@ def test_config_paths_work_from_any_directory(tmp_path):
     assert '--params-file config/' not in readme and '$(landmark_nav config' in readme
 
 
-def _start(args, env):
-    return subprocess.Popen([sys.executable, '-m', *args], env=env, cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _start(processes, args, env):
+    return processes.start([sys.executable, '-m', *args], env=env, cwd=REPO,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 class _Child:
@@ -186,15 +186,15 @@ STARTED = {'corner_extractor': 'corner_extractor: method',
 
 @pytest.mark.dds
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
-def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
+def test_nodes_and_bag_player_stop_cleanly_on_signals(sig, processes):
     """Ctrl-C or kill printed tracebacks (bag_player, ekf_slam while processing)."""
     env = node_env()
-    nodes = {n: _Child(_start([f'landmark_nav.nodes.{n}'], env)) for n in NODES}
+    nodes = {n: _Child(_start(processes, [f'landmark_nav.nodes.{n}'], env)) for n in NODES}
     # start-up: every node has logged its start line (it slept a fixed 8 s)
     _wait_for(lambda: all(STARTED[n] in c.err() or c.proc.poll() is not None
                           for n, c in nodes.items()), 60.0, 'the nodes start')
-    player = _Child(_start(['landmark_nav.nodes.bag_player', str(REPO / 'bags' / 'office'),
-                            '--rate', '2'], env))
+    player = _Child(_start(processes, ['landmark_nav.nodes.bag_player',
+                                       str(REPO / 'bags' / 'office'), '--rate', '2'], env))
     time.sleep(6.0)  # data flowing through every node
     for name, err in _signal_all(dict(nodes, bag_player=player), sig).items():
         assert 'Error' not in err, f'{name}:\n{err}'
@@ -202,33 +202,36 @@ def test_nodes_and_bag_player_stop_cleanly_on_signals(sig):
 
 @pytest.mark.dds
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
-def test_drivers_stop_cleanly_on_signals(tmp_path, sig):
+def test_drivers_stop_cleanly_on_signals(tmp_path, sig, processes):
     env = node_env()
     urg, p2os = str(tmp_path / 'urg'), str(tmp_path / 'p2os')
-    emulators = [_start(['landmark_nav.tools.cli', 'emulate', 'urg', '--link', urg], env),
-                 _start(['landmark_nav.tools.cli', 'emulate', 'p2os', '--link', p2os], env)]
-    try:
-        # the emulators serve their links (it slept a fixed 4 s)
-        _wait_for(lambda: (os.path.islink(urg) and os.path.islink(p2os))
-                  or any(p.poll() is not None for p in emulators), 30.0, 'the emulators serve')
-        drivers = {'laser_driver': _Child(_start(['landmark_nav.nodes.laser_driver',
-                                                  '--ros-args', '-p', f'port:={urg}'], env)),
-                   'base_driver': _Child(_start(['landmark_nav.nodes.base_driver',
-                                                 '--ros-args', '-p', f'port:={p2os}'], env))}
+    emulators = [_start(processes, ['landmark_nav.tools.cli', 'emulate', 'urg', '--link', urg],
+                        env),
+                 _start(processes, ['landmark_nav.tools.cli', 'emulate', 'p2os', '--link', p2os,
+                                   '--tcp', '0'],
+                        env)]
+    # the emulators serve their links (it slept a fixed 4 s)
+    _wait_for(lambda: (os.path.islink(urg) and os.path.islink(p2os))
+              or any(p.poll() is not None for p in emulators), 30.0, 'the emulators serve')
+    drivers = {'laser_driver': _Child(_start(processes, ['landmark_nav.nodes.laser_driver',
+                                                         '--ros-args', '-p', f'port:={urg}'],
+                                             env)),
+               'base_driver': _Child(_start(processes, ['landmark_nav.nodes.base_driver',
+                                                        '--ros-args', '-p', f'port:={p2os}'],
+                                            env))}
 
-        def connected(c):
-            err = c.err()
-            return 'connected' in err or 'opened' in err.lower() or c.proc.poll() is not None
-        # connected (it slept a fixed 8 s), then publishing for a second
-        _wait_for(lambda: all(connected(c) for c in drivers.values()), 60.0,
-                  'the drivers connect')
-        time.sleep(1.0)
-        for name, err in _signal_all(drivers, sig).items():
-            assert 'connected' in err or 'opened' in err.lower(), f'{name} never connected:\n{err}'
-    finally:
-        for p in emulators:
-            p.send_signal(signal.SIGINT)
-            p.communicate(timeout=30)
+    def connected(c):
+        err = c.err()
+        return 'connected' in err or 'opened' in err.lower() or c.proc.poll() is not None
+    # connected (it slept a fixed 8 s), then publishing for a second
+    _wait_for(lambda: all(connected(c) for c in drivers.values()), 60.0, 'the drivers connect')
+    time.sleep(1.0)
+    for name, err in _signal_all(drivers, sig).items():
+        assert 'connected' in err or 'opened' in err.lower(), f'{name} never connected:\n{err}'
+    # the emulators stop on the same signal and remove their pty links
+    for p in emulators:
+        assert processes.stop(p, sig, timeout=30.0) == 0
+    assert not os.path.lexists(urg) and not os.path.lexists(p2os)
 
 
 # A node whose destruction never ends (as rcl's has, rarely, in Fast DDS after SIGINT).

@@ -38,10 +38,10 @@ def test_bad_settings_are_one_line_errors():
 
 
 @pytest.mark.dds
-def test_replay_pipeline_runs_prefixes_output_and_stops_on_ctrl_c():
+def test_replay_pipeline_runs_prefixes_output_and_stops_on_ctrl_c(processes):
     with RosHarness() as ros:
         poses = ros.collect('/pose', PoseWithCovarianceStamped)
-        proc = subprocess.Popen(
+        proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.tools.cli', 'pipeline', 'replay', '--bag',
              str(REPO / 'bags' / 'office'), '--rate', '2', '--set',
              'ekf_slam.association=jcbb'], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

@@ -30,21 +30,18 @@ def test_bad_options_are_rejected(kwargs):
 
 
 @pytest.mark.dds
-def test_replay_delivers_every_message_in_order_with_original_stamps(tmp_path):
+def test_replay_delivers_every_message_in_order_with_original_stamps(tmp_path, processes):
     bag = tmp_path / 'b'
     write_small_bag(bag, n=50)
     with BagReader(bag) as reader:
         recorded = [m.data for m in reader.messages(['/scan'])]
     with RosHarness() as ros:
         got = ros.collect('/scan', LaserScan)
-        proc = subprocess.Popen(
+        proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
              '--topics', '/scan', '--rate', '5', '--wait-for-subscribers', '20'],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
-            out, _ = proc.communicate(timeout=60)
-        finally:
-            proc.kill()
+        out, _ = proc.communicate(timeout=60)
         assert proc.returncode == 0, out
         assert ros.wait_until(lambda: len(got) >= len(recorded), timeout=10), \
             f'{len(got)} of {len(recorded)} messages arrived'
@@ -58,13 +55,13 @@ def test_replay_delivers_every_message_in_order_with_original_stamps(tmp_path):
 
 
 @pytest.mark.dds
-def test_replay_timing_follows_rate(tmp_path):
+def test_replay_timing_follows_rate(tmp_path, processes):
     bag = tmp_path / 'b'
     write_small_bag(bag, n=20)  # 1.9 s of scans
     with RosHarness() as ros:
         arrivals = []
         got = ros.collect('/scan', LaserScan)
-        proc = subprocess.Popen(
+        proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
              '--topics', '/scan', '--rate', '2', '--wait-for-subscribers', '20'],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -82,14 +79,14 @@ def test_replay_timing_follows_rate(tmp_path):
 
 
 @pytest.mark.dds
-def test_replay_start_offset_clock_and_loop(tmp_path):
+def test_replay_start_offset_clock_and_loop(tmp_path, processes):
     from rosgraph_msgs.msg import Clock
     bag = tmp_path / 'b'
     write_small_bag(bag, n=20)  # scans logged at 1.0, 1.1, ..., 2.9 s
     with RosHarness() as ros:
         got = ros.collect('/scan', LaserScan)
         clock = ros.collect('/clock', Clock)
-        proc = subprocess.Popen(
+        proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
              '--topics', '/scan', '--rate', '4', '--start-offset', '1.0', '--clock', '50',
              '--loop', '--wait-for-subscribers', '20'],
@@ -110,20 +107,20 @@ def test_replay_start_offset_clock_and_loop(tmp_path):
     assert first_pass == sorted(first_pass)  # /clock never goes back within a pass
 
 
-def _replay(bag, *options):
-    return subprocess.Popen([sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
-                             *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
+def _replay(processes, bag, *options):
+    return processes.start([sys.executable, '-m', 'landmark_nav.tools.cli', 'replay', str(bag),
+                            *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                           text=True)
 
 
 @pytest.mark.dds
-def test_replay_waits_for_running_subscribers_by_default(tmp_path):
+def test_replay_waits_for_running_subscribers_by_default(tmp_path, processes):
     """Without --wait-for-subscribers the first messages were lost to DDS discovery."""
     bag = tmp_path / 'b'
     write_small_bag(bag, n=20)
     with RosHarness() as ros:
         got = ros.collect('/scan', LaserScan)
-        proc = _replay(bag, '--rate', '5')  # no option: the default waits
+        proc = _replay(processes, bag, '--rate', '5')  # no option: the default waits
         out, _ = proc.communicate(timeout=60)
         assert proc.returncode == 0, out
         assert ros.wait_until(lambda: len(got) >= 20, timeout=10), f'{len(got)} of 20 arrived'
@@ -131,7 +128,7 @@ def test_replay_waits_for_running_subscribers_by_default(tmp_path):
 
 
 @pytest.mark.dds
-def test_replay_start_offset_still_publishes_the_latched_topics(tmp_path):
+def test_replay_start_offset_still_publishes_the_latched_topics(tmp_path, processes):
     """--start-offset skipped the latched ground truth recorded at the start of the bag."""
     from geometry_msgs.msg import PoseArray
     from landmark_nav.testing.harness import reliable_qos
@@ -140,8 +137,8 @@ def test_replay_start_offset_still_publishes_the_latched_topics(tmp_path):
     with RosHarness() as ros:
         got = ros.collect('/scan', LaserScan)
         latched = ros.collect('/ground_truth/corners', PoseArray, reliable_qos(latched=True))
-        proc = _replay(bag, '--rate', '5', '--start-offset', '1.5', '--wait-for-subscribers',
-                       '20')
+        proc = _replay(processes, bag, '--rate', '5', '--start-offset', '1.5',
+                       '--wait-for-subscribers', '20')
         out, _ = proc.communicate(timeout=60)
         assert proc.returncode == 0, out
         assert ros.wait_until(lambda: len(got) >= 5 and latched, timeout=10), \

@@ -44,6 +44,7 @@ from landmark_nav.geometry import relative
 from landmark_nav.sim.laser import compose
 from landmark_nav.sim.robot import step_pose, wheel_to_twist
 from landmark_nav.sim.scenarios import office_world
+from landmark_nav.stop_signals import stop_on_signals
 import numpy as np
 
 LASERS = ('urg', 'lms200')
@@ -359,7 +360,6 @@ def make_from_args(args: argparse.Namespace) -> Tuple[RobotBase, Device]:
 def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
           stop: Optional[threading.Event] = None) -> int:
     """Serve the base and the laser until Ctrl-C / SIGTERM (or ``stop`` is set)."""
-    import signal
     base, laser = make_from_args(args)
     laser_link = (args.laser_link if args.laser_link is not None
                   else f'/tmp/landmark_nav_{args.laser}')
@@ -378,12 +378,7 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
                                           period=min(0.01, base.cycle_s)))
     stop = stop or threading.Event()
 
-    def _terminate(signum, frame):
-        stop.set()
-
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _terminate)
-        signal.signal(signal.SIGINT, _terminate)
+    stop_on_signals(stop)  # SIGINT stops it even if it started ignored (a background job)
     try:
         for server, what in zip(servers, ('base (P2OS)', f'laser ({args.laser})')):
             server.start()

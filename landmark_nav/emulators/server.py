@@ -20,13 +20,13 @@ from dataclasses import dataclass
 import errno
 import os
 import select
-import signal
 import socket
 import threading
 import time
 import tty
 from typing import Callable, List, Optional, Sequence
 
+from landmark_nav.stop_signals import stop_on_signals
 import numpy as np
 
 FAULT_KINDS = ('garbage', 'corrupt', 'truncate', 'drop', 'silence', 'vanish')
@@ -389,21 +389,28 @@ class DeviceServer:
         return 0
 
 
-def serve_forever(server: DeviceServer, announce: Callable[[str], None] = print) -> None:
-    """Start ``server``, announce its endpoints and block until Ctrl-C or SIGTERM."""
-    def _terminate(signum, frame):
-        raise KeyboardInterrupt
+def serve_forever(server: DeviceServer, announce: Callable[[str], None] = print,
+                  stop: Optional[threading.Event] = None) -> None:
+    """Start ``server``, announce its endpoints and block until SIGINT / SIGTERM.
 
-    signal.signal(signal.SIGTERM, _terminate)
+    Both signals stop it even when the process started with SIGINT ignored (a background
+    job of a script); the pty link and the TCP port are closed before it returns.
+
+    Args:
+        server: The device server.
+        announce: Prints the endpoints.
+        stop: Ends the serving when set (default: a new event the signals set).
+
+    """
+    stop = stop or threading.Event()
+    stop_on_signals(stop)
     server.start()
-    if server.link is not None:
-        announce(f'pty: {server.link} -> {server.pty_path}')
-    if server.tcp_port is not None:
-        announce(f'tcp: socket://{server.tcp_host}:{server.tcp_port}')
     try:
-        while True:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        pass
+        if server.link is not None:
+            announce(f'pty: {server.link} -> {server.pty_path}')
+        if server.tcp_port is not None:
+            announce(f'tcp: socket://{server.tcp_host}:{server.tcp_port}')
+        while not stop.wait(0.5):
+            pass
     finally:
         server.stop()

@@ -13,7 +13,6 @@ frame; ``--route office`` is the office scenario's loop. Commands go out at 10 H
 import argparse
 import math
 from pathlib import Path
-import signal
 import threading
 import time
 from typing import Optional, Sequence
@@ -136,7 +135,8 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
                 raise TimeoutError(f'no pose on {pose_topic} within {wait:g} s')
             executor.spin_once(timeout_sec=0.1)
         started = time.monotonic()
-        log(f'drive: first pose on {pose_topic}; driving {len(follower.points)} waypoints')
+        if 'pose' in latest:  # not when stopped while waiting
+            log(f'drive: first pose on {pose_topic}; driving {len(follower.points)} waypoints')
         next_cmd = started
         reached = laps = 0
         while not stop.is_set() and not follower.done:
@@ -172,10 +172,10 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
 def run(args: argparse.Namespace) -> int:
     """Drive until the route is done, ``--duration`` passes, or Ctrl-C / SIGTERM."""
     from landmark_nav.nodes.common import limit_threads
+    from landmark_nav.stop_signals import stop_on_signals
     limit_threads()
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop_on_signals(stop)
     x, y, yaw_deg = args.start_pose
     points = args.waypoint or ROUTES[args.route]
     result = drive(points, (x, y, math.radians(yaw_deg)), args.pose_topic, args.cmd_vel,

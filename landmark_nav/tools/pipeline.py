@@ -5,7 +5,9 @@ Each node runs as its own process with its shipped parameter file
 ``--set NODE.PARAMETER=VALUE``; honcho (a Python port of Foreman) starts them, prefixes
 every output line with the node's name and, on Ctrl-C or SIGTERM, stops them all with
 SIGTERM (every node shuts down cleanly on it). When one process ends, the others are
-stopped too (so a replay pipeline ends with its bag, unless ``--loop``).
+stopped too (so a replay pipeline ends with its bag, unless ``--loop``). Stopped by a
+signal, the command exits 0 if every node did (honcho alone would give 130 / 143), else
+with the first node's non-zero status.
 
 Pipelines:
 
@@ -153,4 +155,20 @@ def run(args: argparse.Namespace) -> int:
     for node, cmd in commands.items():
         manager.add_process(node, 'exec ' + shlex.join(cmd))  # no shell between
     manager.loop()
+    return exit_status(manager)
+
+
+#: honcho's exit status after it stopped the nodes on SIGINT / SIGTERM (128 + signal).
+_SIGNAL_STATUS = (130, 143)
+
+
+def exit_status(manager) -> int:
+    """Return the pipeline's exit status once honcho's loop has ended.
+
+    Stopped by SIGINT / SIGTERM, every node exiting 0 is a clean stop (0) like a single
+    node's; otherwise the first non-zero status of a node (or honcho's own).
+    """
+    codes = [p.get('returncode') for p in manager._processes.values()]  # honcho 2.0
+    if manager.returncode in _SIGNAL_STATUS:
+        return next((c for c in codes if c), 0)
     return manager.returncode or 0
