@@ -390,8 +390,8 @@ def test_missing_port_is_retried_until_it_appears(tmp_path):
 def test_driver_against_the_emulate_command(tmp_path, processes):
     link = tmp_path / 'urg'
     proc = processes.start([str(BIN / 'landmark_nav'), 'emulate', 'urg', '--link', str(link),
-                             '--seed', '3', '--motion', 'rotate'],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            '--seed', '3', '--motion', 'rotate'],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 20.0
         while not os.path.islink(link) and time.monotonic() < deadline:

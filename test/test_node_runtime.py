@@ -205,11 +205,9 @@ def test_nodes_and_bag_player_stop_cleanly_on_signals(sig, processes):
 def test_drivers_stop_cleanly_on_signals(tmp_path, sig, processes):
     env = node_env()
     urg, p2os = str(tmp_path / 'urg'), str(tmp_path / 'p2os')
-    emulators = [_start(processes, ['landmark_nav.tools.cli', 'emulate', 'urg', '--link', urg],
-                        env),
-                 _start(processes, ['landmark_nav.tools.cli', 'emulate', 'p2os', '--link', p2os,
-                                   '--tcp', '0'],
-                        env)]
+    emulate = ['landmark_nav.tools.cli', 'emulate']
+    emulators = [_start(processes, emulate + ['urg', '--link', urg], env),
+                 _start(processes, emulate + ['p2os', '--link', p2os, '--tcp', '0'], env)]
     # the emulators serve their links (it slept a fixed 4 s)
     _wait_for(lambda: (os.path.islink(urg) and os.path.islink(p2os))
               or any(p.poll() is not None for p in emulators), 30.0, 'the emulators serve')

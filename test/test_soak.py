@@ -37,7 +37,7 @@ def _statuses(diagnostics, node: str) -> list:
 
 
 def _settled(diagnostics, node: str, total: int) -> bool:
-    """The node's last status accounts for ``total`` inputs, or stopped changing."""
+    """Tell whether the last status accounts for ``total`` inputs or stopped changing."""
     statuses = _statuses(diagnostics, node)
     if not statuses:
         return False

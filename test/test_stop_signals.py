@@ -41,8 +41,8 @@ def test_a_child_can_start_with_sigint_ignored(processes):
     time.sleep(0.2)
     assert _sigint_ignored(background.pid) and not _sigint_ignored(foreground.pid)
     # and a shell's background job has it ignored too
-    job = subprocess.run(['bash', '-c', 'sleep 30 > /dev/null 2>&1 & echo $!'], capture_output=True, text=True,
-                         timeout=10)
+    job = subprocess.run(['bash', '-c', 'sleep 30 > /dev/null 2>&1 & echo $!'],
+                         capture_output=True, text=True, timeout=10)
     pid = int(job.stdout)
     try:
         assert _sigint_ignored(pid)
