@@ -27,9 +27,12 @@ OWNER_VAR = 'LANDMARK_NAV_TEST_OWNER'
 def mark_descendants() -> str:
     """Mark the processes this one starts from now on; return the run's session id.
 
-    The first process of a run (pytest, or the xdist controller) sets the session id to its
-    pid; processes started below it keep it. The owner is always this process.
+    The first process of a run (pytest, or the pytest-xdist controller) sets the session id
+    to its pid; an xdist worker (``PYTEST_XDIST_WORKER`` set) keeps its controller's. The
+    owner is always this process.
     """
+    if not os.environ.get('PYTEST_XDIST_WORKER'):
+        os.environ[SESSION_VAR] = str(os.getpid())
     os.environ.setdefault(SESSION_VAR, str(os.getpid()))
     os.environ[OWNER_VAR] = str(os.getpid())
     return os.environ[SESSION_VAR]
