@@ -27,4 +27,8 @@ Modules:
   ground truth (``landmark_nav evaluate-corridor``).
 * :mod:`.vision` -- landmark detection and pose statistics on rendered frames
   (``python -m landmark_nav.evaluation.vision``).
+* :mod:`.landmarks_real` -- landmarks, AprilTags and ArUco markers composited into real
+  photographs (``python -m landmark_nav.evaluation.landmarks_real``), with its parts
+  :mod:`.marker_composites`, :mod:`.marker_detectors`, :mod:`.marker_trials`,
+  :mod:`.marker_free_frames` and :mod:`.landmark_stages`.
 """

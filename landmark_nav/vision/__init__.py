@@ -8,7 +8,10 @@ Pure Python/numpy/OpenCV; no rclpy and no message types (see
   :class:`InvalidCodeError`.
 * :mod:`.camera` -- :class:`CameraModel` (pinhole + plumb_bob distortion in the REP 103
   camera optical frame), :data:`OPTICAL_FROM_BODY`.
-* :mod:`.detector` -- corner filters, frame and code detection (chapter §2.2.1–2.2.3).
+* :mod:`.detector` -- corner filters, frame and code detection (chapter §2.2.1–2.2.3):
+  :func:`~.detector.detect_landmarks` over its four steps :mod:`.corner_candidates`
+  (eqs. 1–2, saddle points), :mod:`.frame_search` (eqs. 3–4), :mod:`.frame_fit` (eq. 5,
+  sub-pixel refinement) and :mod:`.code_reading` (cells, threshold, decoding).
 * :mod:`.pose` -- 6-DOF landmark pose by Gauss–Newton (§2.2.4, eqs. 6–19) with covariance,
   and the ``cv2.solvePnP`` reference.
 * :mod:`.localize` -- landmark map, camera mount, robot pose from a detection and the
