@@ -47,7 +47,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from feature_metrics_carmen import carmen_logs, LOGS  # noqa: E402
 from landmark_nav.evaluation.scan_metrics import corner_observable, in_view  # noqa: E402
 from landmark_nav.geometry import inverse_transform_points, transform_points  # noqa: E402
-from landmark_nav.laser import corners as cm  # noqa: E402
+from landmark_nav.laser.corner_detection.corner import _free_side  # noqa: E402
+from landmark_nav.laser.corner_detection.refine import _arm_support, _fit_arms  # noqa: E402
+from landmark_nav.laser.corner_detection.scan_stack import _stack  # noqa: E402
+from landmark_nav.laser.corner_detection.tls_lines import (_arm_directions,  # noqa: E402
+                                                           _line_angle_variance)
+from landmark_nav.laser.corner_detection.windows import (_local_minima,  # noqa: E402
+                                                         _minus_cos, _window_f_sd)
+from landmark_nav.laser.corners import CornerParams, detect_corners  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -56,10 +63,10 @@ STAGES = ('segmentation', 'field of view', 'window', 'cluster end', 'gate angle'
           'arm reach', 'arm rmse', 'arm inliers', 'fit angle', 'offset', 'moved', 'merged')
 
 
-def trace(s, p: cm.CornerParams) -> dict:
+def trace(s, p: CornerParams) -> dict:
     """Run the minus-cosine pipeline on one scan and keep every stage's outcome."""
     cl = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment, sigma_r=p.sigma_r)
-    st = cm._stack(cl)
+    st = _stack(cl)
     out = {'st': st, 'n_beams': len(s.ranges)}
     if st is None:
         return out
@@ -73,10 +80,10 @@ def trace(s, p: cm.CornerParams) -> dict:
         hi = np.minimum(m + h, st.end - 1)
         win = (m - lo >= h0) & (hi - m >= h0)
         x, y = st.x, st.y
-        f, a2, b2 = cm._minus_cos(x[lo], y[lo], x, y, x[hi], y[hi])
+        f, a2, b2 = _minus_cos(x[lo], y[lo], x, y, x[hi], y[hi])
         widen = 0.0
         if p.gate_sigmas > 0.0:
-            widen = p.gate_sigmas * cm._window_f_sd(st, lo, m, hi, p)
+            widen = p.gate_sigmas * _window_f_sd(st, lo, m, hi, p)
         gate = win & (f >= p.f_min - widen) & (f <= p.f_max + widen)
         arms = gate & (np.minimum(a2, b2) >= 0.25 * p.arm_length ** 2)
         a, b = np.sqrt(a2), np.sqrt(b2)
@@ -85,39 +92,39 @@ def trace(s, p: cm.CornerParams) -> dict:
         shift = arms.copy()
         for sh in (p.midpoint_shift, -p.midpoint_shift):
             mm = np.clip(m + sh, 0, m.size - 1)
-            fs = cm._minus_cos(x[lo], y[lo], x[mm], y[mm], x[hi], y[hi])[0]
+            fs = _minus_cos(x[lo], y[lo], x[mm], y[mm], x[hi], y[hi])[0]
             shift &= (fs >= p.f_min - tol) & (fs <= p.f_max + tol)
         mid = np.flatnonzero(shift)
         out.update(win=win, f=f, gate=gate, arms=arms, shift=shift, lo=lo, hi=hi)
         locmin = np.zeros(m.size, dtype=bool)
         if mid.size:
-            sel = cm._local_minima(mid, f[mid], m.size)
+            sel = _local_minima(mid, f[mid], m.size)
             locmin[mid[sel]] = True
             out['ref'] = refine_trace(st, mid[sel], lo[mid[sel]], hi[mid[sel]], f[mid[sel]], p)
         out['locmin'] = locmin
     return out
 
 
-def refine_trace(st, g, lo, hi, fg, p: cm.CornerParams) -> dict:
-    """Return every refinement check of windows ``g`` (the checks of ``corners._refine``)."""
+def refine_trace(st, g, lo, hi, fg, p: CornerParams) -> dict:
+    """Return every refinement check of windows ``g`` (the checks of ``refine._refine``)."""
     g0 = g
-    g, found, lines, cx, cy, x, y, r, valid, w = cm._fit_arms(st, g, lo, hi, p)
-    ux, uy = cm._arm_directions(lines, cx, cy)
-    _, _, cos_t = cm._free_side(cx, cy, ux[:, 0], uy[:, 0], ux[:, 1], uy[:, 1])
+    g, found, lines, cx, cy, x, y, r, valid, w = _fit_arms(st, g, lo, hi, p)
+    ux, uy = _arm_directions(lines, cx, cy)
+    _, _, cos_t = _free_side(cx, cy, ux[:, 0], uy[:, 0], ux[:, 1], uy[:, 1])
     f_fit = -cos_t
     px, py = st.x[g], st.y[g]
     reach2 = np.minimum((st.x[lo] - px) ** 2 + (st.y[lo] - py) ** 2,
                         (st.x[hi] - px) ** 2 + (st.y[hi] - py) ** 2)
     shift2 = (cx - px) ** 2 + (cy - py) ** 2
-    # the real_arms sub-checks, each alone (see corners._arm_support)
+    # the real_arms sub-checks, each alone (see corner_detection.refine._arm_support)
     sub = {}
     big = 1e6
     for name, q in (('arm points', replace(p, real_arms=False)),
                     ('arm reach', replace(p, arm_rmse=big, min_arm_inliers=0.0)),
                     ('arm rmse', replace(p, min_arm_length=0.0, min_arm_inliers=0.0)),
                     ('arm inliers', replace(p, min_arm_length=0.0, arm_rmse=big))):
-        sub[name] = cm._arm_support(x, y, r, valid, w, lines, q)[1]
-    var_a = cm._line_angle_variance(x, y, w, lines, p.sigma_r, p.sigma_phi)
+        sub[name] = _arm_support(x, y, r, valid, w, lines, q)[1]
+    var_a = _line_angle_variance(x, y, w, lines, p.sigma_r, p.sigma_phi)
     return {'g0': g0, 'g': g, 'cx': cx, 'cy': cy, 'found': found, 'sub': sub,
             'f_fit': f_fit, 'offset_ok': shift2 <= reach2,
             'sd_theta': np.sqrt(var_a.sum(axis=1))}
@@ -137,14 +144,14 @@ def classify(tr: dict, pt: np.ndarray, detected: np.ndarray, radius: float = 0.1
         if not tr[key][nb].any():
             detail = ''
             if stage == 'window':
-                h0 = cm.CornerParams().window // 2
+                h0 = CornerParams().window // 2
                 if (st.beam[nb].min() < h0 or st.beam[nb].max() > tr['n_beams'] - 1 - h0):
                     stage = 'field of view'
             if stage == 'gate angle':
                 fv = tr['f'][nb][tr['win'][nb]]
                 fv = fv[np.isfinite(fv)]
                 if fv.size:
-                    p = cm.CornerParams()
+                    p = CornerParams()
                     k = np.argmin(np.maximum(p.f_min - fv, fv - p.f_max))
                     detail = f'f {fv[k]:+.3f} ({np.degrees(np.arccos(-fv[k])):.1f} deg)'
                 ends = (st.start[nb] == nb) | (st.end[nb] - 1 == nb)
@@ -152,7 +159,7 @@ def classify(tr: dict, pt: np.ndarray, detected: np.ndarray, radius: float = 0.1
                     stage = 'cluster end'
             return stage, detail
     ref = tr['ref']
-    p = cm.CornerParams()
+    p = CornerParams()
     near_g = np.isin(ref['g'], nb) | np.isin(ref['g0'], nb)
     close = np.hypot(ref['cx'] - pt[0], ref['cy'] - pt[1]) <= radius
     cand = np.flatnonzero(near_g | close)
@@ -186,12 +193,12 @@ def main() -> None:
     ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                     help='a CornerParams field (float value)')
     args = ap.parse_args()
-    p = cm.CornerParams(**{k: float(v) for k, v in (a.split('=', 1) for a in args.set)})
+    p = CornerParams(**{k: float(v) for k, v in (a.split('=', 1) for a in args.set)})
     for name, scans in carmen_logs(args.logs):
         found = []
         for s in scans:
             cl = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment, sigma_r=p.sigma_r)
-            found.append(cm.detect_corners(cl, p))
+            found.append(detect_corners(cl, p))
         causes, shown, n_opp = Counter(), 0, 0
         fit_angles = []
         for k in range(len(scans) - 1):

@@ -56,7 +56,19 @@ from landmark_nav.evaluation.scan_metrics import (approx_poly_segments,  # noqa:
                                                   ray_metrics, ray_ranges, sample_scans,
                                                   segments_of)
 from landmark_nav.importers.writer import import_log  # noqa: E402
-from landmark_nav.laser import lines as L  # noqa: E402
+from landmark_nav.laser.line_extraction.cleanup import (_clean_pieces,  # noqa: E402
+                                                        _refine_breaks)
+from landmark_nav.laser.line_extraction.growth import _grow  # noqa: E402
+from landmark_nav.laser.line_extraction.merge import _merge  # noqa: E402
+from landmark_nav.laser.line_extraction.occlusion import _occluded_extents  # noqa: E402
+from landmark_nav.laser.line_extraction.scan_batch import (_concat, _COS,  # noqa: E402
+                                                           _gather, _PHI, _RNG, _SIN, _TOL)
+from landmark_nav.laser.line_extraction.see_through import _cut_seen_through  # noqa: E402
+from landmark_nav.laser.line_extraction.segments import _build  # noqa: E402
+from landmark_nav.laser.line_extraction.split import _split  # noqa: E402
+from landmark_nav.laser.line_extraction.tls_fit import _features, _Fit, _solve  # noqa: E402
+from landmark_nav.laser.lines import alfa_pieces, LineParams, METHODS  # noqa: E402
+from landmark_nav.laser.lowess import lowess_groups  # noqa: E402
 from landmark_nav.laser.segmentation import segment_scan  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
 import numpy as np  # noqa: E402
@@ -75,11 +87,11 @@ def _cover(scan, nbeam: int, first: np.ndarray, last: np.ndarray) -> np.ndarray:
     return out.cumsum()[:-1] > 0
 
 
-def _stages(clusters, params: L.LineParams, nbeam: int):
+def _stages(clusters, params: LineParams, nbeam: int):
     """Replay ``lines._extract``; return ({step: covered beams}, lines, small-piece beams)."""
     empty = np.zeros(nbeam, dtype=bool)
     st = {k: empty for k in ('cluster', 'split', 'clean', 'grow', 'seen', 'occluders')}
-    scan = L._concat(clusters, params)
+    scan = _concat(clusters, params)
     if scan is None:
         return st, [], empty
     offsets = scan.offsets
@@ -89,45 +101,45 @@ def _stages(clusters, params: L.LineParams, nbeam: int):
     st['cluster'] = _cover(scan, nbeam, offsets[big], offsets[big + 1] - 1)
     cols = scan.cols
     n = scan.x.size
-    feats = L._features(scan.x, scan.y, cols[L._RNG], cols[L._COS], cols[L._SIN],
-                        params.sigma_r, params.sigma_phi, pad=1)
+    feats = _features(scan.x, scan.y, cols[_RNG], cols[_COS], cols[_SIN],
+                      params.sigma_r, params.sigma_phi, pad=1)
     pre = np.zeros((5, n + 1))
     feats[1:6, :n].cumsum(axis=1, out=pre[:, 1:])
     if params.method == 'split_merge':
-        s, e = L._split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[L._TOL])
+        s, e = _split(scan.x, scan.y, offsets[big], offsets[big + 1] - 1, cols[_TOL])
         keep = e - s >= 2
         s, e = s[keep], e[keep]
     else:
-        sub, sub_offs = L._gather(offsets[big], offsets[big + 1] - 1)
-        r_s = L.lowess_groups(cols[L._PHI][sub], cols[L._RNG][sub], sub_offs,
-                              params.lowess_span, params.lowess_iterations)
-        pieces = L.alfa_pieces(np.stack([r_s * cols[L._COS][sub], r_s * cols[L._SIN][sub]],
-                                        axis=1), sub_offs, params)
+        sub, sub_offs = _gather(offsets[big], offsets[big + 1] - 1)
+        r_s = lowess_groups(cols[_PHI][sub], cols[_RNG][sub], sub_offs,
+                            params.lowess_span, params.lowess_iterations)
+        pieces = alfa_pieces(np.stack([r_s * cols[_COS][sub], r_s * cols[_SIN][sub]],
+                                      axis=1), sub_offs, params)
         pieces = sub[pieces] if pieces.size else pieces
         s, e = pieces[:, 0], pieces[:, 1]
-    s, e = L._refine_breaks(scan, pre, s, e, params.min_points)
+    s, e = _refine_breaks(scan, pre, s, e, params.min_points)
     st['split'] = _cover(scan, nbeam, s, e)
     small = e - s + 1 < params.min_points
     small_beams = _cover(scan, nbeam, s[small], e[small])
-    s, e = L._clean_pieces(scan, pre, s, e, params)
+    s, e = _clean_pieces(scan, pre, s, e, params)
     if not s.size:
         return st, [], small_beams
     st['clean'] = _cover(scan, nbeam, s, e)
-    sums, first0, last0, fit, label = L._merge(scan, feats, s, e, params)
-    sums, first, last, grown = L._grow(scan, feats, sums, first0, last0, fit, params)
+    sums, first0, last0, fit, label = _merge(scan, feats, s, e, params)
+    sums, first, last, grown = _grow(scan, feats, sums, first0, last0, fit, params)
     if grown or fit.cov is None:
-        fit = L._solve(sums, scan.origin)
+        fit = _solve(sums, scan.origin)
     st['grow'] = _cover(scan, nbeam, first, last)
-    sums, first, last, fit = L._cut_seen_through(scan, feats, sums, first, last, fit,
-                                                 (s, e, label, first0, last0), params)
+    sums, first, last, fit = _cut_seen_through(scan, feats, sums, first, last, fit,
+                                               (s, e, label, first0, last0), params)
     if not first.size:
         return st, [], small_beams
     st['seen'] = _cover(scan, nbeam, first, last)
-    col, first, last = L._occluded_extents(scan, fit, first, last, params)
-    fit = L._Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
-                 fit.cov.take(col, axis=0))
+    col, first, last = _occluded_extents(scan, fit, first, last, params)
+    fit = _Fit(fit.params.take(col, axis=1), fit.rmse[col], fit.count[col],
+               fit.cov.take(col, axis=0))
     st['occluders'] = _cover(scan, nbeam, first, last)
-    return st, L._build(scan, params, fit, first, last), small_beams
+    return st, _build(scan, params, fit, first, last), small_beams
 
 
 _STEPS = ('cluster', 'split', 'clean', 'grow', 'seen', 'occluders', 'kept')
@@ -183,10 +195,10 @@ def score_log(scans, sigma_r: float, detailed: bool) -> dict:
     """Return per method f, baseline f, gain, deficit by cause, and the baseline variants."""
     kw = {'min_points': 3, 'min_length': 0.05} if detailed else {}
     seg_min = 1 if detailed else 5
-    ref = L.LineParams(**kw)
+    ref = LineParams(**kw)
     margin = max(3.0 * sigma_r, 0.05)
     out = {m: {'f': [], 'base': [], 'gain': 0.0, 'own': 0.0,
-               'causes': dict.fromkeys(CAUSES, 0.0)} for m in L.METHODS}
+               'causes': dict.fromkeys(CAUSES, 0.0)} for m in METHODS}
     variants = {'held to no false surface': [], 'shared vertex half': []}
     for s in scans:
         nb = s.ranges.size
@@ -207,8 +219,8 @@ def score_log(scans, sigma_r: float, detailed: bool) -> dict:
         hb = s.valid & np.isfinite(ray_ranges(s.angles, base)).any(axis=1)
         own = np.zeros(nb, dtype=bool)
         own[ray_metrics(s.ranges, s.angles, s.valid, base, sigma_r).false_surface] = True
-        for m in L.METHODS:
-            params = L.LineParams(method=m, **kw)
+        for m in METHODS:
+            params = LineParams(method=m, **kw)
             clusters = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment,
                                     sigma_r=params.sigma_r, min_points=seg_min)
             st, lines, small = _stages(clusters, params, nb)

@@ -4,21 +4,26 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 
     python benchmarks/lines_same_as_rev.py [--rev HEAD] [--step 1] [--tol 1e-9] [LOG ...]
 
-``landmark_nav/laser/lines.py`` and ``lowess.py`` of ``--rev`` are loaded as modules of
-their own (``git show``) and both versions extract the lines of every ``--step``-th scan
-of the Carmen logs (default: all scans of the six logs of ``bench_lines_real.py``,
-segmented as there), with both methods and the default parameters. Per scan the line
+``landmark_nav/laser/lines.py`` of ``--rev`` is loaded with the rest of that revision's
+``landmark_nav/laser`` package (``git archive``: the modules it imports, e.g. ``lowess.py``
+and ``line_extraction/``, as they were there) and both versions extract the lines of
+every ``--step``-th scan of the Carmen logs (default: all scans of the six logs of
+``bench_lines_real.py``, segmented as there), with both methods and the default
+parameters. Per scan the line
 count, beam indices and point counts must be equal and rho, alpha, the end points, RMSE
 and covariance must agree to ``--tol`` (absolute, alpha wrapped). Prints one row per log
 and method; exits 1 on a difference. Meant for speed work that must not change results.
 """
 
 import argparse
+import importlib
 import importlib.util
+import io
 import math
 from pathlib import Path
 import subprocess
 import sys
+import tarfile
 import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -34,24 +39,37 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def load_module(rev: str, name: str):
-    """Return ``landmark_nav/laser/<name>.py`` of git revision ``rev`` as a module."""
-    src = subprocess.run(['git', 'show', f'{rev}:landmark_nav/laser/{name}.py'], cwd=ROOT,
-                         check=True, capture_output=True, text=True).stdout
-    tmp = Path(tempfile.mkdtemp()) / f'{name}_rev.py'
-    tmp.write_text(src)
-    spec = importlib.util.spec_from_file_location(f'{name}_rev', tmp)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+LASER = 'landmark_nav.laser'
 
 
 def load_rev(rev: str):
-    """Return ``lines.py`` of git revision ``rev``, using the lowess of that revision."""
-    mod = load_module(rev, 'lines')
-    low = load_module(rev, 'lowess')
-    mod.lowess, mod.lowess_groups = low.lowess, low.lowess_groups
-    return mod
+    """Return ``landmark_nav/laser/lines.py`` of git revision ``rev`` as a module.
+
+    The revision's ``landmark_nav/laser`` package is extracted to a temporary folder and
+    imported in place of the current one while ``lines`` and the modules it imports load;
+    then the current modules are put back (the loaded ones keep the names they imported).
+    """
+    tar = subprocess.run(['git', 'archive', rev, 'landmark_nav/laser'], cwd=ROOT, check=True,
+                         capture_output=True).stdout
+    tmp = Path(tempfile.mkdtemp())
+    with tarfile.open(fileobj=io.BytesIO(tar)) as archive:
+        archive.extractall(tmp, filter='data')
+    folder = tmp / 'landmark_nav' / 'laser'
+    current = {k: v for k, v in sys.modules.items() if k == LASER or k.startswith(LASER + '.')}
+    for k in current:
+        del sys.modules[k]
+    try:
+        spec = importlib.util.spec_from_file_location(
+            LASER, folder / '__init__.py', submodule_search_locations=[str(folder)])
+        pkg = importlib.util.module_from_spec(spec)
+        sys.modules[LASER] = pkg
+        spec.loader.exec_module(pkg)
+        return importlib.import_module(LASER + '.lines')
+    finally:
+        for k in [k for k in sys.modules if k == LASER or k.startswith(LASER + '.')]:
+            del sys.modules[k]
+        sys.modules.update(current)
+        sys.modules['landmark_nav'].laser = current[LASER]
 
 
 def difference(a, b) -> float:

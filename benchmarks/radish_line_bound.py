@@ -18,7 +18,7 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from landmark_nav.importers.carmen import read_carmen_scans  # noqa: E402
-from landmark_nav.laser.lines import _prefix5, _sse  # noqa: E402
+from landmark_nav.laser.line_extraction.tls_fit import _prefix5, _sse  # noqa: E402
 from landmark_nav.testing import shared_data  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -1,7 +1,8 @@
 """Corners need two real surfaces (issue 15, items 1 and 2).
 
 Both arms of a refined corner must be fitted lines (enough samples, reach, RMS distance,
-inlier share; see ``corners._arm_support``) and no arm may cover a beam seen through it.
+inlier share; see ``corner_detection.refine._arm_support``) and no arm may cover a beam
+seen through it.
 ``real_arms=False, see_through=1e3`` gives the earlier behaviour (the chapter's checks
 only), against which each scene is shown to have changed.
 """

@@ -2,7 +2,10 @@
 
 import math
 
-from landmark_nav.laser import corners as cm
+from landmark_nav.laser.corner_detection.scan_stack import _stack
+from landmark_nav.laser.corner_detection.tls_lines import (_line_angle_variance, _lines,
+                                                           _weighted_moments)
+from landmark_nav.laser.corner_detection.windows import _minus_cos, _window_f_sd
 from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.segmentation import Cluster
 import numpy as np
@@ -44,15 +47,15 @@ def noisy_xy(r: np.ndarray, phi: np.ndarray, sigma_r: float, sigma_phi: float,
 ])
 def test_window_f_deviation_matches_monte_carlo(theta_deg, half, sigma_r, sigma_phi):
     cl = bend_cluster(theta_deg)
-    st = cm._stack([cl])
+    st = _stack([cl])
     x, y = cl.points[:, 0], cl.points[:, 1]
     mid = int(np.argmin(np.hypot(x - 2.0, y - 0.5)))
     lo, hi = np.array([mid - half]), np.array([mid + half])
     p = CornerParams(sigma_r=sigma_r, sigma_phi=sigma_phi)
-    pred = cm._window_f_sd(st, lo, np.array([mid]), hi, p)[0]
+    pred = _window_f_sd(st, lo, np.array([mid]), hi, p)[0]
     i = np.array([mid - half, mid, mid + half])
     xs, ys = noisy_xy(st.r[i], st.phi[i], sigma_r, sigma_phi, np.random.default_rng(3), 20000)
-    f = cm._minus_cos(xs[:, 0], ys[:, 0], xs[:, 1], ys[:, 1], xs[:, 2], ys[:, 2])[0]
+    f = _minus_cos(xs[:, 0], ys[:, 0], xs[:, 1], ys[:, 1], xs[:, 2], ys[:, 2])[0]
     assert pred == pytest.approx(np.std(f), rel=0.1)
 
 
@@ -64,11 +67,11 @@ def test_line_angle_variance_matches_monte_carlo(sigma_r, sigma_phi):
     arm = np.flatnonzero((x - 2.0) * u2[0] + (y - 0.5) * u2[1] > 0.05)[:20]
     r, phi = cl.ranges[arm], cl.angles[arm]
     w = np.ones((1, 1, arm.size))
-    ln = cm._lines(cm._weighted_moments(w, x[arm][None, None], y[arm][None, None]))
-    pred = cm._line_angle_variance(x[arm][None, None], y[arm][None, None], w, ln,
-                                   sigma_r, sigma_phi)[0, 0]
+    ln = _lines(_weighted_moments(w, x[arm][None, None], y[arm][None, None]))
+    pred = _line_angle_variance(x[arm][None, None], y[arm][None, None], w, ln,
+                                sigma_r, sigma_phi)[0, 0]
     xs, ys = noisy_xy(r, phi, sigma_r, sigma_phi, np.random.default_rng(5), 5000)
-    alpha = cm._lines(cm._weighted_moments(np.ones_like(xs), xs, ys)).alpha
+    alpha = _lines(_weighted_moments(np.ones_like(xs), xs, ys)).alpha
     d = np.angle(np.exp(2j * (alpha - ln.alpha[0, 0]))) / 2.0  # the normal is mod pi
     assert math.sqrt(pred) == pytest.approx(np.std(d), rel=0.1)
 

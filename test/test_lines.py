@@ -410,7 +410,7 @@ def test_split_paths_agree_and_leave_out_short_pieces_as_a_filter_would(monkeypa
     # _split runs array levels, then _split_py on the runs themselves (none ran) or on the
     # gathered points of the pieces left: all paths give the same pieces. _extract asks
     # for those of 3 or more points (min_span 2): the same as filtering all of them.
-    import landmark_nav.laser.lines as lines_mod
+    from landmark_nav.laser.line_extraction import split as split_mod
     rng = np.random.default_rng(3)
     for _ in range(20):
         xy = np.cumsum(rng.normal(size=(120, 2)) * 0.05, axis=0)
@@ -420,17 +420,17 @@ def test_split_paths_agree_and_leave_out_short_pieces_as_a_filter_would(monkeypa
         s, e = offs[:-1], offs[1:] - 1
         runs = []
         for py in (10 ** 9, 60, -1):  # Python only; array levels, then Python; arrays only
-            monkeypatch.setattr(lines_mod, '_SPLIT_PY', py)
-            every = lines_mod._split(x, y, s, e, tol)
+            monkeypatch.setattr(split_mod, '_SPLIT_PY', py)
+            every = split_mod._split(x, y, s, e, tol)
             short = every[1] - every[0] < 2
             assert short.any()
-            assert lines_mod._split(x, y, s, e, tol, 2).tolist() == every[:, ~short].tolist()
+            assert split_mod._split(x, y, s, e, tol, 2).tolist() == every[:, ~short].tolist()
             runs.append(every.tolist())
         assert runs[0] == runs[1] == runs[2]
 
 
 def test_segment_builds_the_dataclass_fields():
-    from landmark_nav.laser.lines import _segment, LineSegment
+    from landmark_nav.laser.line_extraction.segments import _segment, LineSegment
     a, b, c = np.array([1.0, 2.0]), np.array([3.0, 4.0]), np.eye(2)
     values = (1.5, -0.5, a, b, 12, 0.01, c, 3, 14)
     fast, slow = _segment(*values), LineSegment(*values)
@@ -594,6 +594,22 @@ PY_PATHS = ('_SMALL', '_SMALL_NO_COV', '_SPLIT_PY', '_SPLIT_PIECE_PY', '_CLEAN_P
             '_GROW_PY', '_NOISE_PY', '_BUILD_PY', '_JOIN_PAIRS_PY', '_SEEN_PY', '_CUT_PY')
 
 
+def _py_path_switches():
+    """Return (module, name) of every PY_PATHS switch in the modules of the line steps.
+
+    A switch used by a module other than its own (imported by name) is set there too.
+    """
+    import importlib
+    import pkgutil
+
+    from landmark_nav.laser import line_extraction
+    mods = [importlib.import_module(f'{line_extraction.__name__}.{m.name}')
+            for m in pkgutil.iter_modules(line_extraction.__path__)]
+    out = [(mod, name) for name in PY_PATHS for mod in mods if hasattr(mod, name)]
+    assert {name for _, name in out} == set(PY_PATHS)
+    return out
+
+
 def _line_tuples(lines):
     return [(ln.rho, ln.alpha, *ln.start, *ln.end, ln.num_points, ln.rmse,
              *ln.covariance.ravel(), ln.first_index, ln.last_index) for ln in lines]
@@ -601,13 +617,12 @@ def _line_tuples(lines):
 
 @pytest.mark.parametrize('method', METHODS)
 def test_python_float_paths_give_the_array_paths_lines(monkeypatch, method):
-    # lines.py runs small batches on Python floats and large ones as arrays, the same
+    # The line steps run small batches on Python floats and large ones as arrays, the same
     # operations in the same order; the size switches are speed choices only. Every step
     # forced onto one path, then onto the other, must give the same lines bit for bit
     # (office bag: 361 beams, clutter, occlusions).
     from landmark_nav.bag import BagReader
     from landmark_nav.conversions import scan_to_data
-    import landmark_nav.laser.lines as lines_mod
     params = LineParams(method=method)
     inputs = []
     with BagReader(Path(__file__).resolve().parents[1] / 'bags' / 'office') as reader:
@@ -620,8 +635,8 @@ def test_python_float_paths_give_the_array_paths_lines(monkeypatch, method):
                 inputs.append(segment_scan(r, angles, valid, scan.angle_increment))
     runs = []
     for size in (10 ** 9, -1):            # every batch on Python floats; every batch as arrays
-        for name in PY_PATHS:
-            monkeypatch.setattr(lines_mod, name, size)
+        for mod, name in _py_path_switches():
+            monkeypatch.setattr(mod, name, size)
         runs.append([_line_tuples(extract_lines(c, params)) for c in inputs])
     assert sum(map(len, runs[0])) >= 3 * len(inputs)
     assert runs[0] == runs[1]
