@@ -1,6 +1,6 @@
 """Cartesian (map-frame) gate of corner pairs with a wide range prediction (issue 14).
 
-``SlamParams.cartesian_gate`` / :func:`landmark_nav.slam.ekf_slam.cartesian_pair_d2`: the
+``SlamParams.cartesian_gate`` / :func:`landmark_nav.slam.gating.cartesian_pair_d2`: the
 aces failure of the README ("What goes wrong on aces and acapulco") in miniature: a landmark
 22 m ahead whose predicted range has a std of 40 % of the range, and a corner seen 3 m away
 at a bearing of 0.5 rad.
@@ -8,7 +8,7 @@ at a bearing of 0.5 rad.
 
 import math
 
-from landmark_nav.slam import chi2_gate, ekf_slam, SlamParams
+from landmark_nav.slam import chi2_gate, gating, SlamParams
 from landmark_nav.slam.ekf_slam import (cartesian_pair_d2, do_data_association,
                                         feature_initialization)
 from landmark_nav.slam.line_landmarks import line_observation_model
@@ -104,7 +104,7 @@ def test_line_pairs_inside_the_gate_are_untouched(monkeypatch):
         tested.append((z_.tolist(), index.tolist()))
         return cartesian_pair_d2(x_, p_, z_, r_, index)
 
-    monkeypatch.setattr(ekf_slam, 'cartesian_pair_d2', spy)
+    monkeypatch.setattr(gating, 'cartesian_pair_d2', spy)  # where it is looked up
     hyp_c, d2_c, _ = do_data_association(x, p, z, r, cartesian_ratio=0.0, **kinds)
     assert tested == [([[3.0, 0.5]], [0])]  # the corner pair only
     assert hyp.tolist() == [0, 1] and hyp_c.tolist() == [-1, 1]

@@ -2,8 +2,10 @@
 
 Modules:
 
-* :mod:`.ekf_slam` -- :class:`EkfSlam` (state layout, noise models, tentative landmarks in
-  its module docstring) and one function per filter step of Fig. 17.
+* :mod:`.ekf_slam` -- :class:`EkfSlam` (the state layout in its module docstring) and the
+  filter steps of Fig. 17, one function each, re-exported from the modules that compute
+  them: :mod:`.slam_params`, :mod:`.prediction`, :mod:`.observation_models`,
+  :mod:`.gating`, :mod:`.update`, :mod:`.consistent_linearisation`, :mod:`.map_management`.
 * :mod:`.association` -- ICNN (eqs. 49-55) and JCBB (Neira & Tardos 2001) on innovations.
 * :mod:`.consistency` -- NEES (eq. 59), NIS (eq. 60), chi-square gates and bands.
 * :mod:`.observations` -- laser corners to base_link range-bearing with propagated ``R``.

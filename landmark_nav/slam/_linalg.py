@@ -1,5 +1,8 @@
-"""Small dense linear-algebra helpers shared by the SLAM modules."""
+"""Small numerical helpers shared by the SLAM modules: triangular solve, angle wrap."""
 
+import math
+
+from landmark_nav.geometry import wrap_angle
 import numpy as np
 from scipy.linalg.lapack import dtrtrs
 
@@ -27,3 +30,14 @@ def solve_lower(low: np.ndarray, b: np.ndarray) -> np.ndarray:
     if info != 0:
         raise np.linalg.LinAlgError(f'triangular solve failed (LAPACK info {info})')
     return x
+
+
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+
+
+def _wrap(a):
+    """Wrap angle(s) to [-pi, pi) (fast path of :func:`landmark_nav.geometry.wrap_angle`)."""
+    if isinstance(a, float):
+        return a if -_PI <= a < _PI else float(wrap_angle(a))
+    return np.mod(a + _PI, _TWO_PI) - _PI

@@ -1,0 +1,120 @@
+"""Figures of an EKF-SLAM run: the map over the scans, the paths, the errors."""
+
+import math
+from pathlib import Path
+from typing import List
+
+from landmark_nav.evaluation.slam_run import scan_angles, SlamRun
+from landmark_nav.evaluation.slam_scores import ALIGN_DEFAULT
+from landmark_nav.evaluation.trajectory import aligned, Trajectory
+from landmark_nav.geometry import covariance_ellipse, transform_points
+from landmark_nav.sim import ScanSample
+from landmark_nav.sim.laser import compose as sensor_pose
+import numpy as np
+
+
+def _scan_points(scenario, run: SlamRun, max_points: int = 200_000) -> np.ndarray:
+    """(P, 2) scan end points in the map frame through the filter poses (a subsample)."""
+    scans = scenario.of_type(ScanSample)
+    n = sum(int(np.isfinite(s.ranges).sum()) for s in scans)
+    step = max(1, int(math.ceil(n / max_points)))
+    mount = tuple(float(v) for v in scenario.laser.mount)
+    out = []
+    index = run.scan_index if run.scan_index is not None else np.arange(len(run.poses))
+    for k, i in enumerate(index):
+        scan = scans[i]
+        ok = np.isfinite(scan.ranges)
+        if not np.any(ok):
+            continue
+        r = scan.ranges[ok].astype(float)
+        a = scan_angles(scan)[ok]
+        pts = np.column_stack([r * np.cos(a), r * np.sin(a)])[::step]
+        out.append(transform_points(sensor_pose(run.poses[k], mount), pts))
+    return np.concatenate(out) if out else np.zeros((0, 2))
+
+
+def _save_plan(fig, ax, title: str, path: Path) -> None:
+    """Finish a top view in metres (equal axes, labels, legend), write it and close it."""
+    import matplotlib.pyplot as plt
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    ax.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALIGN_DEFAULT
+             ) -> List[str]:
+    """Write the figures of a run; return their file names.
+
+    * ``slam_map.png``: the scans' end points through the filter poses (the map over the
+      scans), the mapped landmarks with 2-sigma ellipses and the filter path; with a world,
+      also its walls and true corners (Fig. 19 of the chapter).
+    * ``slam_trajectory.png``: filter and odometry paths against the reference after the
+      ``align`` alignment (each aligned on its own, as the ATE is computed).
+    * ``slam_errors.png``: x, y, heading error against the reference with the filter's
+      +-2 sigma (unaligned, in the map frame).
+
+    Without a reference (a bag's ``has_reference`` False) only ``slam_map.png``.
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 7.5))
+    pts = _scan_points(scenario, run)
+    ax.plot(pts[:, 0], pts[:, 1], ',', color='0.55', alpha=0.6)
+    ax.plot([], [], '.', color='0.55', label='scans through the EKF-SLAM poses')
+    if scenario.world is not None:
+        for x1, y1, x2, y2 in scenario.world.walls().segments:
+            ax.plot([x1, x2], [y1, y2], color='0.3', lw=1.5)
+        tc = scenario.world.corners().positions
+        ax.plot(tc[:, 0], tc[:, 1], 'k+', ms=9, label='true corners')
+    ax.plot(run.poses[:, 0], run.poses[:, 1], 'b-', lw=1, label='EKF-SLAM path')
+    if run.landmarks.shape[0]:
+        ax.plot(run.landmarks[:, 0], run.landmarks[:, 1], 'ro', mfc='none', ms=5,
+                label='mapped landmarks (2 sigma)')
+        for m, c in zip(run.landmarks, run.landmark_covariances):
+            e = covariance_ellipse(m, c)
+            ax.plot(e[:, 0], e[:, 1], 'r-', lw=0.8)
+    _save_plan(fig, ax, title, out_dir / 'slam_map.png')
+    if not getattr(scenario, 'has_reference', True):
+        return ['slam_map.png']  # the other figures are against the reference
+
+    ref = Trajectory.from_planar(run.stamps, run.truth)
+    fig, ax = plt.subplots(figsize=(9, 7.5))
+    ax.plot(run.truth[:, 0], run.truth[:, 1], 'g-', lw=1.2, label='reference')
+    for poses, style, name in ((run.odometry, 'r:', 'odometry'), (run.poses, 'b-', 'EKF-SLAM')):
+        try:
+            _, est = aligned(Trajectory.from_planar(run.stamps, poses), ref, align)
+        except ValueError:
+            continue
+        ax.plot(est[:, 0], est[:, 1], style, lw=1, label=f'{name} ({align} aligned)')
+    _save_plan(fig, ax, title, out_dir / 'slam_trajectory.png')
+
+    t = (run.stamps - run.stamps[0]) * 1e-9
+    err = run.poses - run.truth
+    err[:, 2] = np.angle(np.exp(1j * err[:, 2]))
+    sig = np.sqrt(np.maximum(np.diagonal(run.covariances, axis1=1, axis2=2), 0.0))
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    scale = (100.0, 100.0, 180.0 / math.pi)
+    for k, (ax, lab) in enumerate(zip(axes, ('x error [cm]', 'y error [cm]',
+                                             'psi error [deg]'))):
+        ax.plot(t, scale[k] * err[:, k], 'b-', lw=1, label='error')
+        ax.plot(t, 2 * scale[k] * sig[:, k], 'r--', lw=0.8, label='+-2 sigma')
+        ax.plot(t, -2 * scale[k] * sig[:, k], 'r--', lw=0.8)
+        ax.set_ylabel(lab)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc='upper right', fontsize=8)
+    axes[-1].set_xlabel('time [s]')
+    axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(out_dir / 'slam_errors.png', dpi=120)
+    plt.close(fig)
+    return ['slam_map.png', 'slam_trajectory.png', 'slam_errors.png']
+
+
+__all__ = ['plot_run']
