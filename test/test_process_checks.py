@@ -12,7 +12,7 @@ import sys
 
 from landmark_nav.testing.processes import marked_processes, SESSION_VAR
 
-LEAKY = '''
+LEAKY = """
 import os
 import subprocess
 
@@ -36,7 +36,7 @@ def test_owned_child_stops(processes):
 
 def test_clean():
     assert subprocess.run(['true']).returncode == 0
-'''
+"""
 
 
 def test_each_leak_fails_its_test_or_the_run_and_is_killed(tmp_path):

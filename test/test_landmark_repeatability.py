@@ -1,0 +1,36 @@
+"""Pose repeatability and accuracy of the landmark detector on rendered data (Table 1).
+
+The same functions run the full-size statistics from the command line
+(``python -m landmark_nav.evaluation.vision``). Sizes here: the 2000 reads and 500 frames the
+issue names; Table 1 with 25 instead of 100 frames per turn and the shuttle with 20 (fixes
+at the stops) and 40 (fixes also on the approach) instead of 100 round trips (the full runs
+are reported by the tool).
+"""
+
+from landmark_nav.evaluation.vision import repeatability
+import pytest
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('distance', [1.0, 2.2])
+def test_table1_repeatability_and_accuracy(distance):
+    rows = repeatability(distance=distance, frames=25, seed=14)
+    for r in rows:
+        # at 60 deg the foreshortened blocks (about 4.5 px) are near the small-cell rule;
+        # the chapter's Table 1 has 24 samples of 100 there
+        assert r.detected >= (r.frames if r.turn_deg < 60 else 0.9 * r.frames), r
+        assert r.sigma_xy <= 0.0025                          # position sigma <= 2.5 mm
+        assert r.max_position_error <= 0.02                  # absolute error <= 2 cm
+        assert r.max_angle_error <= 1.0, r                   # angle errors <= 1 deg, per frame
+    # the Gauss-Newton pose against cv2.solvePnP (IPPE and ITERATIVE, unweighted) on the
+    # same corners: angles at least as accurate (much more head-on than IPPE), positions
+    # equal: all carry the same sub-millimetre corner bias, their RMS differ by less than
+    # 0.1 mm (exact figures in the report)
+
+    def total(name):
+        return sum(getattr(r, name) ** 2 for r in rows) ** 0.5
+
+    assert total('rms_angle_gn') <= total('rms_angle_ippe')
+    assert total('rms_angle_gn') <= total('rms_angle_iterative')
+    assert total('rms_position_gn') <= total('rms_position_ippe') + 1e-4
+    assert total('rms_position_gn') <= total('rms_position_iterative') + 1e-4
