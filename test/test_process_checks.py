@@ -27,7 +27,9 @@ def test_leaves_a_process_running():
 
 
 def test_owned_child_ignores_sigterm(processes):
-    processes.start(['bash', '-c', 'trap "" TERM; sleep 63 & wait'])
+    child = processes.start(['bash', '-c', 'trap "" TERM; echo ready; sleep 63 & wait'],
+                            stdout=subprocess.PIPE, text=True)
+    assert child.stdout.readline() == 'ready\\n'  # SIGTERM is ignored from here on
 
 
 def test_owned_child_stops(processes):
