@@ -19,12 +19,13 @@ Rules:
   they never import ``landmark_nav.sim``, ``landmark_nav.evaluation``,
   ``landmark_nav.tools``, ``landmark_nav.nodes``;
 * the nodes never import ``landmark_nav.sim`` (a node runs on the real robot);
-* the scorers live in ``landmark_nav.evaluation``: no core keeps an ``evaluate`` module.
+* the scorers live in ``landmark_nav.evaluation``: no core keeps an ``evaluate`` module;
+* no import circle anywhere in the package (:func:`test_no_import_circle`).
 """
 
 import ast
 from pathlib import Path
-from typing import Iterator, List, Tuple
+from typing import Dict, Iterator, List, Optional, Set, Tuple
 
 import pytest
 
@@ -45,24 +46,35 @@ def module_name(path: Path, root: Path = ROOT) -> str:
     return '.'.join(parts)
 
 
-def imports(path: Path, root: Path = ROOT) -> Iterator[Tuple[int, str]]:
-    """Yield ``(line, absolute module name)`` of every import in a file, at any depth."""
+def import_statements(path: Path, root: Path = ROOT
+                      ) -> Iterator[Tuple[int, str, Optional[List[str]]]]:
+    """Yield ``(line, absolute module name, names)`` of every import statement, at any depth.
+
+    ``names`` is None for ``import a.b`` (one entry per module) and the imported names for
+    ``from a.b import x, y`` (relative imports resolved against the file's package).
+    """
     name = module_name(path, root)
     package = name.split('.') if path.name == '__init__.py' else name.split('.')[:-1]
     tree = ast.parse(path.read_text(), filename=str(path))
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for alias in node.names:
-                yield node.lineno, alias.name
+                yield node.lineno, alias.name, None
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package[:len(package) - node.level + 1]
                 mod = '.'.join(base + ([node.module] if node.module else []))
             else:
                 mod = node.module or ''
-            yield node.lineno, mod
-            for alias in node.names:  # ``from landmark_nav import sim`` imports a module
-                yield node.lineno, f'{mod}.{alias.name}'
+            yield node.lineno, mod, [alias.name for alias in node.names]
+
+
+def imports(path: Path, root: Path = ROOT) -> Iterator[Tuple[int, str]]:
+    """Yield ``(line, absolute module name)`` of every import in a file, at any depth."""
+    for line, mod, names in import_statements(path, root):
+        yield line, mod
+        for alias in names or ():  # ``from landmark_nav import sim`` imports a module
+            yield line, f'{mod}.{alias}'
 
 
 def _forbidden(mod: str, prefixes: Tuple[str, ...]) -> bool:
@@ -139,3 +151,129 @@ def test_check_catches_an_added_import(tmp_path, core, source, caught):
     f = pkg / 'added.py'
     f.write_text(source)
     assert bool(violations(f, core, root)) is caught
+
+
+def import_graph(root: Path = ROOT) -> Dict[str, Dict[str, List[str]]]:
+    """Return the imports between the package's modules: ``{importer: {imported: [where]}}``.
+
+    Every import statement of every source file counts, at any depth (module level, inside
+    functions, under ``if``/``try``). An import names the module whose code it needs, which
+    is the edge:
+
+    * ``import a.b.c`` and ``from a.b.c import x`` need ``a.b.c``;
+    * ``from a.b import c`` needs the submodule ``a.b.c`` when ``c`` is one, and the package
+      ``a.b`` (its ``__init__``) for every other name (a name the ``__init__`` defines or
+      re-exports);
+    * the parent packages that Python initialises first (``a``, ``a.b``) are not edges: by
+      the time a submodule runs, its packages are already in ``sys.modules``, so a package
+      ``__init__`` that imports its submodules for re-export while a submodule imports a
+      sibling by its full name (``from a.b.other import x``) is no circle. It is one when
+      the submodule imports from the package ``__init__`` itself (``from a.b import x`` or
+      ``from . import x`` with ``x`` not a submodule): then the ``__init__`` and the
+      submodule need each other.
+    """
+    files = {module_name(p, root): p for p in sorted(root.rglob('*.py'))}
+    graph: Dict[str, Dict[str, List[str]]] = {m: {} for m in files}
+    for importer, path in files.items():
+        for line, mod, names in import_statements(path, root):
+            if names is None:
+                targets = [mod]
+            else:
+                subs = [f'{mod}.{n}' for n in names if f'{mod}.{n}' in files]
+                targets = subs + ([mod] if len(subs) < len(names) else [])
+            for target in targets:
+                if target in files and target != importer:
+                    where = f'{path.relative_to(root.parent)}:{line}'
+                    graph[importer].setdefault(target, []).append(where)
+    return graph
+
+
+def strongly_connected(graph: Dict[str, Dict[str, List[str]]]) -> List[List[str]]:
+    """Strongly connected components of more than one module (Tarjan's, iterative), sorted."""
+    index: Dict[str, int] = {}
+    low: Dict[str, int] = {}
+    stack: List[str] = []
+    on_stack: Set[str] = set()
+    found = []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                parent = work[-1][0]
+                low[parent] = min(low[parent], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return sorted(found)
+
+
+def import_circles(root: Path = ROOT) -> List[str]:
+    """Describe each import circle: its modules and the imports between them."""
+    graph = import_graph(root)
+    out = []
+    for component in strongly_connected(graph):
+        members = set(component)
+        edges = [f'    {a} -> {b} ({", ".join(where)})' for a in component
+                 for b, where in sorted(graph[a].items()) if b in members]
+        out.append('import circle: ' + ', '.join(component) + '\n' + '\n'.join(edges))
+    return out
+
+
+def test_no_import_circle():
+    """No set of the package's modules imports each other (see :func:`import_graph`)."""
+    graph = import_graph()
+    assert len(graph) > 100 and sum(map(len, graph.values())) > 300, 'graph not built'
+    circles = import_circles()
+    assert not circles, '\n'.join(circles)
+
+
+@pytest.mark.parametrize('sources,circle', [
+    # a function-level import closes the circle
+    ({'sim/a.py': 'from landmark_nav.sim.b import x\n',
+      'sim/b.py': 'def f():\n    from landmark_nav.sim.a import y\n'}, ['a', 'b']),
+    # three modules, relative imports
+    ({'sim/a.py': 'from .b import x\n', 'sim/b.py': 'from . import c\n',
+      'sim/c.py': 'import landmark_nav.sim.a\n'}, ['a', 'b', 'c']),
+    # a package re-exports its submodule, which imports a sibling by its full name: no circle
+    ({'sim/__init__.py': 'from .a import x\nfrom .b import y\n',
+      'sim/a.py': 'from landmark_nav.sim.b import y\n', 'sim/b.py': 'y = 1\n'}, []),
+    # ``from package import submodule`` needs the submodule, not the package's __init__
+    ({'sim/__init__.py': 'from .a import x\n',
+      'sim/a.py': 'from landmark_nav.sim import b\nx = 1\n', 'sim/b.py': 'y = 1\n'}, []),
+    # ... but importing a name the __init__ re-exports needs the __init__: a circle
+    ({'sim/__init__.py': 'from .a import x\nfrom .b import y\n',
+      'sim/a.py': 'from landmark_nav.sim import y\nx = 1\n', 'sim/b.py': 'y = 1\n'},
+     ['', 'a']),
+])
+def test_circle_check_catches_a_circle(tmp_path, sources, circle):
+    """The circle check flags modules that import each other, and only those."""
+    root = tmp_path / 'landmark_nav'
+    for rel, text in {'__init__.py': '', 'sim/__init__.py': '', **sources}.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    want = [['.'.join(['landmark_nav.sim', m]).rstrip('.') for m in circle]] if circle else []
+    assert strongly_connected(import_graph(root)) == want

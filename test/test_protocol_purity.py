@@ -3,7 +3,8 @@
 import ast
 
 from landmark_nav.drivers import (clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2,
-                                  stream)
+                                  scip2_commands, scip2_decoder, scip2_encoders, scip2_frames,
+                                  scip2_values, stream)
 import pytest
 
 ALLOWED = {'collections', 'dataclasses', 'math', 're', 'statistics', 'struct', 'typing', 'numpy',
@@ -11,7 +12,8 @@ ALLOWED = {'collections', 'dataclasses', 'math', 're', 'statistics', 'struct', '
 
 
 @pytest.mark.parametrize('module', [clock_filter, laser_session, lms2xx, p2os, p2os_client, scip2,
-                                    stream],
+                                    scip2_commands, scip2_decoder, scip2_encoders, scip2_frames,
+                                    scip2_values, stream],
                          ids=lambda m: m.__name__)
 def test_module_is_pure(module):
     with open(module.__file__, encoding='utf-8') as f:

@@ -129,7 +129,8 @@ def test_road_edges_fall_on_the_reading_where_the_surface_changes():
 def test_batched_profile_segmentation_matches_the_recursive_one():
     # _segment_profiles splits every stretch level by level in one pass of array
     # operations; it must give exactly the pieces of the recursive reference.
-    from landmark_nav.road.terrain import _moment_table, _segment_profile, _segment_profiles
+    from landmark_nav.road.profile_fits import _moment_table
+    from landmark_nav.road.profile_segmentation import _segment_profile, _segment_profiles
     rng = np.random.default_rng(3)
     params = TerrainParams()
     tables = []
@@ -155,7 +156,7 @@ def test_closed_form_fits_hold_far_from_the_stretch_centre():
     # ~10^-6. The fits must still match a least-squares fit on the piece's own centred
     # readings (the cofactor form on the raw sums was off by up to 9 times the SSE and
     # misplaced two edges in 800 scans).
-    from landmark_nav.road.terrain import _fit_piece, _moment_table, _poly_sse
+    from landmark_nav.road.profile_fits import _fit_piece, _moment_table, _poly_sse
     rng = np.random.default_rng(0)
     worst = 0.0
     for _ in range(200):
@@ -181,7 +182,8 @@ def test_hinge_fit_matches_the_constrained_least_squares_fit(quad_left):
     # weighted least-squares fit solved directly, at every split, far from the stretch
     # centre too. (The former normal-equation form on moments shifted to tau was off by
     # up to 3e-3 of the NLL.)
-    from landmark_nav.road.terrain import _hinge_edge, _hinge_nll, _moment_table
+    from landmark_nav.road.profile_fits import _moment_table
+    from landmark_nav.road.road_edges import _hinge_edge, _hinge_nll
     rng = np.random.default_rng(4)
     worst = 0.0
     for _ in range(30):

@@ -40,10 +40,10 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image, JointState
 import yaml
 
+from .bag_layout import BASE_FRAME, GROUND_TRUTH_FILE, MAP_FRAME, ODOM_FRAME, WHEEL_JOINTS
 from .camera_scenarios import (CameraFrame, iter_landmark_shuttle, iter_landmark_views,
                                LandmarkTruth, oracle_localizer, ShuttleArrival, ShuttleConfig,
                                ShuttleSample, ViewOptions)
-from .record import BASE_FRAME, GROUND_TRUTH_FILE, MAP_FRAME, ODOM_FRAME, WHEEL_JOINTS
 
 CAMERA_FRAME = 'camera_optical'
 IMAGE_TOPIC = '/camera/image_raw'

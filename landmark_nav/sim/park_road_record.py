@@ -21,8 +21,8 @@ import numpy as np
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
 import yaml
 
+from .bag_layout import GROUND_TRUTH_FILE
 from .park_road import cast_scan, Lighting, ParkRoad, render_view
-from .record import GROUND_TRUTH_FILE
 
 SCAN_TOPIC = '/tilted_scan'
 IMAGE_TOPIC = '/camera/image_raw'

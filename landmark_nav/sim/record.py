@@ -31,6 +31,9 @@ from geometry_msgs.msg import Point, Pose, PoseArray
 from landmark_nav.bag import BagWriter
 from landmark_nav.conversions import (make_joint_state, make_odometry, make_range, make_scan,
                                       ns_to_stamp, quaternion_msg_from_yaw)
+# The bag layout, shared with the camera and park-road recorders (still importable from here).
+from landmark_nav.sim.bag_layout import (BASE_FRAME, GROUND_TRUTH_FILE, LASER_FRAME, MAP_FRAME,
+                                         ODOM_FRAME, WHEEL_JOINTS)
 from landmark_nav.sim.laser import ScanSample
 from landmark_nav.sim.scenarios import OdometrySample, run_scenario, scenario_names, TruthSample
 from landmark_nav.sim.sonar import SonarSample
@@ -39,10 +42,6 @@ import numpy as np
 from sensor_msgs.msg import JointState, LaserScan, Range
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
-
-GROUND_TRUTH_FILE = 'ground_truth.yaml'
-WHEEL_JOINTS = ('left_wheel_joint', 'right_wheel_joint')
-MAP_FRAME, ODOM_FRAME, BASE_FRAME, LASER_FRAME = 'map', 'odom', 'base_link', 'laser'
 
 
 def sonar_topic(i: int) -> str:
