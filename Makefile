@@ -1,6 +1,6 @@
 # The two commands of the README:
 #   make demo   -- set up .venv if needed, then run the main job (writes out/)
-#   make test   -- set up .venv if needed, then run the test suite (one worker per CPU)
+#   make test   -- set up .venv if needed, then run the test suite (two workers per CPU)
 # and, by hand: make bench -- the timed benchmarks, checked against benchmarks/results/
 # Both create or update the local virtual environment .venv; a second run installs nothing
 # (the install step re-runs only when a requirements file or the package metadata changes).
@@ -29,10 +29,12 @@ $(STAMP): $(DEPS)
 demo: $(STAMP)
 	$(BIN)/landmark_nav demo --out out
 
-# One pytest-xdist worker per CPU; a test file stays on one worker (its module fixtures,
-# e.g. the golden runs, are computed once).
+# pytest-xdist, two workers per CPU: much of the suite waits on node processes and DDS,
+# so a second worker per CPU fills those waits. A test file stays on one worker (its
+# module fixtures, e.g. the golden runs, are computed once).
+WORKERS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n auto --dist loadfile test
+	$(BIN)/python -m pytest -q -n $(WORKERS) --dist loadfile test
 
 # Timing, soak and long evaluations: figures as ratios against an in-run reference,
 # compared with the stored results (exit 1 on a regression). Run on an idle machine.

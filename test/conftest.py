@@ -42,3 +42,13 @@ def office_evaluation(tmp_path_factory) -> Callable[[str], Tuple[dict, Path]]:
                                               progress=False), out)
         return done[association]
     return get
+
+
+def pytest_collection_modifyitems(items):
+    """Put the files that hold slow tests first (the rest keep their order).
+
+    ``make test`` gives each pytest-xdist worker whole files in collection order; a long
+    file that started last would run alone at the end while the other workers idle.
+    """
+    slow_files = {item.path for item in items if item.get_closest_marker('slow')}
+    items.sort(key=lambda item: item.path not in slow_files)
