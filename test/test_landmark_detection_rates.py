@@ -1,10 +1,8 @@
-"""Detection rates of the landmark detector on rendered data (Table 2, false detections).
+"""Detection rates of the landmark detector on rendered data (visual navigation §2.3, Table 2).
 
-The same functions run the full-size statistics from the command line
-(``python -m landmark_nav.evaluation.vision``). Sizes here: the 2000 reads and 500 frames the
-issue names; Table 1 with 25 instead of 100 frames per turn and the shuttle with 20 (fixes
-at the stops) and 40 (fixes also on the approach) instead of 100 round trips (the full runs
-are reported by the tool).
+The sizes the issue names: 2000 error-free reads from 5 px per block up, and 500
+landmark-free frames with distractors. The full statistics come from the command line
+(``python -m landmark_nav.evaluation.vision``), which runs the same functions.
 """
 
 from landmark_nav.evaluation.vision import detection_vs_size, false_detections

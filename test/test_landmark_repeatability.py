@@ -1,10 +1,8 @@
 """Pose repeatability and accuracy of the landmark detector on rendered data (Table 1).
 
-The same functions run the full-size statistics from the command line
-(``python -m landmark_nav.evaluation.vision``). Sizes here: the 2000 reads and 500 frames the
-issue names; Table 1 with 25 instead of 100 frames per turn and the shuttle with 20 (fixes
-at the stops) and 40 (fixes also on the approach) instead of 100 round trips (the full runs
-are reported by the tool).
+Table 1 of visual navigation §2.3 with 25 instead of 100 frames per turn, at 1.0 and 2.2 m;
+the full run is reported by ``python -m landmark_nav.evaluation.vision``, which runs the
+same function.
 """
 
 from landmark_nav.evaluation.vision import repeatability

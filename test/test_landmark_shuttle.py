@@ -1,10 +1,8 @@
-"""The shuttle of the visual navigation chapter: landmark fixes keep the robot near its goal.
+"""The shuttle of visual navigation §2.3: landmark fixes keep the robot at its goal.
 
-The same functions run the full-size statistics from the command line
-(``python -m landmark_nav.evaluation.vision``). Sizes here: the 2000 reads and 500 frames the
-issue names; Table 1 with 25 instead of 100 frames per turn and the shuttle with 20 (fixes
-at the stops) and 40 (fixes also on the approach) instead of 100 round trips (the full runs
-are reported by the tool).
+20 round trips with fixes at the stops and 40 with fixes also on the approach, instead of
+the chapter's 100; the full runs are reported by ``python -m
+landmark_nav.evaluation.vision``, which runs the same function.
 """
 
 from landmark_nav.evaluation.vision import shuttle
