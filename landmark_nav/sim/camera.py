@@ -48,6 +48,10 @@ from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 
 
+
+#: float32(m) / 255 for each 8-bit coverage value m (as ``mask.astype(float32) * (1/255)``)
+_COVERAGE_TABLE = np.arange(256, dtype=np.uint8).astype(np.float32) * np.float32(1.0 / 255.0)
+
 def _ro(a: np.ndarray, dtype=float) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True, order='C')
     out.setflags(write=False)
@@ -413,18 +417,28 @@ class CameraSimulator:
         mask = np.zeros((size[1], size[0]), dtype=np.uint8)
         pts = np.round((poly_roi - [x0, y0]) * 256.0).astype(np.int32)
         cv2.fillPoly(mask, [pts], 255, lineType=cv2.LINE_8, shift=8)
-        tex = warped.astype(np.float32)
-        tex *= np.float32((opt.white - opt.black) / 255.0)
-        tex += np.float32(opt.black)
+        # float32(texel) * gain + black and float32(mask) / 255, each through a 256-entry
+        # table computed with the same float32 operations (one pass instead of three)
+        tex = cv2.LUT(warped, self._reflectance_table())
         roi = canvas[y0:y1, x0:x1]
         if mask.min() == 255:
             roi[...] = tex
         else:
-            a = mask.astype(np.float32)
-            a *= np.float32(1.0 / 255.0)
+            a = cv2.LUT(mask, _COVERAGE_TABLE)
             tex -= roi
             tex *= a
             roi += tex
+
+    def _reflectance_table(self) -> np.ndarray:
+        """Return the reflectance of each 8-bit texel value (black .. white), float32."""
+        opt = self.options
+        key = (opt.black, opt.white)
+        if getattr(self, '_table_key', None) != key:
+            table = np.arange(256, dtype=np.uint8).astype(np.float32)
+            table *= np.float32((opt.white - opt.black) / 255.0)
+            table += np.float32(opt.black)
+            self._table, self._table_key = table, key
+        return self._table
 
     def _order(self, items: list) -> list:
         """Painter's order: far to near, refined by which side of each other planes lie on.
