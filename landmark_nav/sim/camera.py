@@ -509,7 +509,13 @@ class CameraSimulator:
                 k += 1
             if k == len(ordered):
                 return canvas
-            canvas = cv2.resize(canvas, (cam.width, cam.height), interpolation=cv2.INTER_LINEAR)
+            # into a buffer kept between frames: a new one (hundreds of MB at 16 x 16) was
+            # paged in afresh for every frame
+            if getattr(self, '_canvas', None) is None or self._canvas.shape != (cam.height,
+                                                                                cam.width):
+                self._canvas = np.empty((cam.height, cam.width), dtype=np.float32)
+            canvas = cv2.resize(canvas, (cam.width, cam.height), dst=self._canvas,
+                                interpolation=cv2.INTER_LINEAR)
         else:
             canvas = np.full((cam.height, cam.width), opt.background, dtype=np.float32)
         for item in ordered[k:]:
