@@ -20,12 +20,13 @@ offline, back to back, in this process). Printed per node: latency p95 / core st
 per scan / core step; memory growth in MB and the drop share are absolute.
 
 Each figure is compared with ``--results`` (``{figure: {"value": v, "band": b}}``): a
-ratio over ``v * (1 + b)`` (``b``: the relative noise band measured over repeated runs on
-an idle machine), memory growth over ``v`` MB or a drop share over ``v`` is a regression,
-and the script exits 1 naming it. ``--record`` writes the run's figures as the new values
-(keeping each band) instead of checking. This is the timed part of what was the unit
-suite's soak test; ``test/test_soak.py`` keeps the functional part (every scan processed
-or counted, drops warned, a clean stop).
+ratio over ``v * (1 + b)``, memory growth over ``v`` MB or a drop share over ``v`` is a
+regression, and the script exits 1 naming it. ``--record N`` runs the soak N times on an
+idle machine and stores each ratio's median as ``v`` and its noise band as ``b`` = twice
+the largest relative deviation of a run from the median (at least 0.2); the memory and
+drop bounds are the unit test's former ones (2 MB, 1 %). This is the timed part of what
+was the unit suite's soak test; ``test/test_soak.py`` keeps the functional part (every
+scan processed or counted, drops warned, a clean stop).
 """
 
 import argparse
@@ -146,6 +147,24 @@ def regressions(figures: dict, stored: dict) -> list:
     return out
 
 
+def record(runs: list) -> dict:
+    """Return the stored results of repeated soaks (see the module docstring)."""
+    import statistics
+    stored = {}
+    for name in runs[0]:
+        if name.endswith('_ratio'):
+            values = [r[name] for r in runs]
+            mid = statistics.median(values)
+            spread = max(abs(v / mid - 1.0) for v in values) if mid > 0 else 0.0
+            stored[name] = {'value': round(mid, 3), 'band': round(max(0.2, 2.0 * spread), 3),
+                            'runs': [round(v, 3) for v in values]}
+        elif name.endswith('rss_growth_mb'):
+            stored[name] = {'value': 2.0}
+        elif name.endswith('drop_share'):
+            stored[name] = {'value': 0.01}
+    return stored
+
+
 def main() -> int:
     """Run the soak, print the figures, compare with (or record) the stored results."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -154,22 +173,24 @@ def main() -> int:
     parser.add_argument('--seconds', type=float, default=45.0, help='soak length [s]')
     parser.add_argument('--rate', type=float, default=4.0, help='replay rate (default 4)')
     parser.add_argument('--results', default=str(RESULTS), help='stored results (JSON)')
-    parser.add_argument('--record', action='store_true',
-                        help="store this run's ratios as the new values (bands kept)")
+    parser.add_argument('--record', type=int, default=0, metavar='N',
+                        help='run N soaks and store their figures as the new results')
     args = parser.parse_args()
-    figures = soak(args.bag, args.seconds, args.rate)
-    for name, value in figures.items():
-        print(f'{name:36s} {value:.4g}')
+    runs = []
+    for _ in range(max(1, args.record)):
+        runs.append(soak(args.bag, args.seconds, args.rate))
+        for name, value in runs[-1].items():
+            print(f'{name:36s} {value:.4g}')
     path = Path(args.results)
-    stored = json.loads(path.read_text()) if path.exists() else {}
     if args.record:
-        for name, ref in stored.items():
-            if name.endswith('_ratio'):
-                ref['value'] = round(figures[name], 3)
-        path.write_text(json.dumps(stored, indent=2) + '\n')
-        print(f'recorded in {path}')
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(record(runs), indent=2) + '\n')
+        print(f'recorded {args.record} runs in {path}')
         return 0
-    bad = regressions(figures, stored)
+    if not path.exists():
+        print(f'error: no stored results at {path} (make them with --record 3)')
+        return 2
+    bad = regressions(runs[0], json.loads(path.read_text()))
     for line in bad:
         print(f'REGRESSION {line}')
     print('OK: no regression' if not bad else f'{len(bad)} regressions')

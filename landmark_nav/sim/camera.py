@@ -47,10 +47,9 @@ from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 
-
-
 #: float32(m) / 255 for each 8-bit coverage value m (as ``mask.astype(float32) * (1/255)``)
 _COVERAGE_TABLE = np.arange(256, dtype=np.uint8).astype(np.float32) * np.float32(1.0 / 255.0)
+
 
 def _ro(a: np.ndarray, dtype=float) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True, order='C')
@@ -368,7 +367,6 @@ class CameraSimulator:
 
     def _draw_polygon(self, canvas: np.ndarray, cam: CameraModel, plane: Plane,
                       R_cp: np.ndarray, t_cp: np.ndarray, clipped: np.ndarray) -> None:
-        opt = self.options
         Hc, Wc = canvas.shape
         poly2 = cam.project(clipped, distort=False)
         lo = np.floor(poly2.min(axis=0)) - 1
