@@ -6,8 +6,11 @@ after which a process it started still runs fails, and so does the run if anythi
 started outlives it.
 """
 
+import fcntl
+import os
 from pathlib import Path
-from typing import Callable, Dict, Tuple
+import pickle
+from typing import Any, Callable, Tuple
 
 from landmark_nav.testing import isolate_dds
 import pytest
@@ -26,22 +29,53 @@ def repo() -> Path:
 
 
 @pytest.fixture(scope='session')
-def office_evaluation(tmp_path_factory) -> Callable[[str], Tuple[dict, Path]]:
-    """Return ``get(association)``: ``evaluate_bag`` of bags/office, once per session.
+def run_once(tmp_path_factory) -> Callable[[str, Callable[[Path], Any]], Tuple[Any, Path]]:
+    """Return ``get(key, compute)``: ``compute(folder)`` once per test run, for every worker.
+
+    The pytest-xdist workers of one run share the parent of their temporary folders; the
+    first worker to ask for ``key`` computes it (under a file lock) into a folder there
+    and stores its return value; the others wait and read it. ``get`` returns that value
+    and the folder, which the tests only read. For the runs several test files need (the
+    office evaluation, the demo), each done once instead of once per worker.
+    """
+    base = tmp_path_factory.getbasetemp()
+    shared = (base.parent if os.environ.get('PYTEST_XDIST_WORKER') else base) / 'run_once'
+
+    def get(key: str, compute: Callable[[Path], Any]) -> Tuple[Any, Path]:
+        shared.mkdir(parents=True, exist_ok=True)
+        folder, result = shared / key, shared / f'{key}.pickle'
+        with open(shared / f'{key}.lock', 'a') as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not result.exists():
+                value = compute(folder)
+                partial = result.with_suffix('.partial')
+                partial.write_bytes(pickle.dumps(value))
+                partial.rename(result)
+            return pickle.loads(result.read_bytes()), folder
+    return get
+
+
+@pytest.fixture(scope='session')
+def office_evaluation(run_once) -> Callable[[str], Tuple[dict, Path]]:
+    """Return ``get(association)``: ``evaluate_bag`` of bags/office, once per test run.
 
     ``get`` gives the figures and the folder with the written files (TUM, slam.json,
-    plots); test_evaluate_slam.py and test_trajectory.py need the same run.
+    plots); test_evaluate_slam.py, test_trajectory.py and the golden jcbb run need the same
+    run.
     """
     from landmark_nav.evaluation.slam import evaluate_bag
-    done: Dict[str, Tuple[dict, Path]] = {}
 
     def get(association: str) -> Tuple[dict, Path]:
-        if association not in done:
-            out = tmp_path_factory.mktemp(f'office_{association}')
-            done[association] = (evaluate_bag(REPO / 'bags' / 'office', association, out,
-                                              progress=False), out)
-        return done[association]
+        return run_once(f'office_evaluate_{association}', lambda out: evaluate_bag(
+            REPO / 'bags' / 'office', association, out, progress=False))
     return get
+
+
+@pytest.fixture(scope='session')
+def office_demo(run_once) -> Tuple[str, Path]:
+    """Return the summary and the folder of ``run_demo`` on bags/office, once per test run."""
+    from landmark_nav.tools.demo import run_demo
+    return run_once('office_demo', lambda out: run_demo(REPO / 'bags' / 'office', out))
 
 
 def pytest_collection_modifyitems(items):

@@ -10,8 +10,8 @@ prints it in the one line that ``readme_line`` (a regular expression) picks out.
 
 import re
 
-from landmark_nav.testing.golden import (figure_value, load_expected, ROOT, run_outputs,
-                                         within_tolerance)
+from landmark_nav.testing.golden import (figure_value, load_expected, read_outputs, ROOT,
+                                         run_outputs, within_tolerance)
 import pytest
 
 BAGS = ('office', 'hallway', 'calibration', 'corridor')
@@ -21,14 +21,23 @@ README = (ROOT / 'README.md').read_text()
 
 
 @pytest.fixture(scope='module')
-def outputs(tmp_path_factory):
-    """Return ``get(bag, run)``: the outputs of one run, computed on first use."""
+def outputs(tmp_path_factory, office_demo, office_evaluation):
+    """Return ``get(bag, run)``: the outputs of one run, computed on first use.
+
+    The office demo and JCBB evaluation are the suite's shared runs (conftest), the same
+    calls as the runs of expected.yaml.
+    """
+    shared = {('office', 'demo'): lambda: office_demo[1],
+              ('office', 'evaluate_jcbb'): lambda: office_evaluation('jcbb')[1]}
     cache = {}
 
     def get(name, run):
         if (name, run) not in cache:
-            out = tmp_path_factory.mktemp(f'{name}_{run}')
-            cache[name, run] = run_outputs(run, ROOT / 'bags' / name, out)
+            if (name, run) in shared:
+                cache[name, run] = read_outputs(run, shared[name, run]())
+            else:
+                out = tmp_path_factory.mktemp(f'{name}_{run}')
+                cache[name, run] = run_outputs(run, ROOT / 'bags' / name, out)
         return cache[name, run]
     return get
 

@@ -10,7 +10,6 @@ from landmark_nav.landmark_msgs import compressed_to_gray
 from landmark_nav.sim.record import load_ground_truth, record_scenario, sonar_topic
 from landmark_nav.sim.world import World
 from landmark_nav.tools.bag_info import bag_size_bytes
-from landmark_nav.tools.demo import run_demo
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -95,18 +94,18 @@ def test_recording_is_consistent(office):
     assert ranges.shape[1] == 361
 
 
-def test_demo_writes_plot_and_summary(office, tmp_path):
-    summary = run_demo(office, tmp_path / 'out')
-    png = tmp_path / 'out' / 'world_paths.png'
+def test_demo_writes_plot_and_summary(office_demo):
+    summary, out = office_demo  # run_demo of bags/office (shared with test_golden.py)
+    png = out / 'world_paths.png'
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
-    drift = (tmp_path / 'out' / 'summary.txt').read_text().strip()
+    drift = (out / 'summary.txt').read_text().strip()
     assert summary.startswith(drift) and 'odometry final position error' in drift
     assert 'EKF-SLAM' in summary and 'ATE RMSE' in summary
     for name in ('slam_map.png', 'slam_errors.png', 'slam.json', 'trajectory_slam.tum',
                  'view/view.mcap'):
-        assert (tmp_path / 'out' / name).is_file(), name
+        assert (out / name).is_file(), name
     assert 'viewer file: ' in summary  # its content in detail: test_viewer_mcap.py
-    with open(tmp_path / 'out' / 'view' / 'view.mcap', 'rb') as f:
+    with open(out / 'view' / 'view.mcap', 'rb') as f:
         view = make_reader(f).get_summary()
     channels = {c.topic: c for c in view.channels.values()}
     assert set(channels) == set(VIEW_TOPICS)  # every topic typed: a ros2msg schema

@@ -25,16 +25,27 @@ ROOT = Path(__file__).resolve().parents[2]
 Outputs = Dict[str, Any]
 
 
+#: The JSON files the outputs of these runs are read from, so that a run already computed
+#: elsewhere (the test suite computes the office demo and JCBB evaluation once per run)
+#: gives its outputs with :func:`read_outputs`.
+RUN_FILES = {'demo': ('slam.json', 'drift.json'), 'evaluate_jcbb': ('slam.json',)}
+
+
+def read_outputs(run: str, out: Any) -> Outputs:
+    """Return the outputs of a run of :data:`RUN_FILES` already written into ``out``."""
+    return {name: json.loads((Path(out) / name).read_text()) for name in RUN_FILES[run]}
+
+
 def _demo(bag: Path, out: Path) -> Outputs:
     from landmark_nav.tools.demo import run_demo
     run_demo(bag, out)
-    return {name: json.loads((out / name).read_text()) for name in ('slam.json', 'drift.json')}
+    return read_outputs('demo', out)
 
 
 def _evaluate_jcbb(bag: Path, out: Path) -> Outputs:
     from landmark_nav.evaluation.slam import evaluate_bag
     evaluate_bag(bag, 'jcbb', out, progress=False)
-    return {'slam.json': json.loads((out / 'slam.json').read_text())}
+    return read_outputs('evaluate_jcbb', out)
 
 
 def _features(every: int) -> Callable[[Path, Path], Outputs]:
