@@ -229,8 +229,10 @@ def test_lms_scans_equal_the_emulator_exactly(tmp_path):
             sinks = {name: start_driver(ros, name, str(tmp_path / name), protocol='lms2xx',
                                         **case[1])[1]
                      for name, case in LMS_CASES.items()}
-            assert ros.wait_until(lambda: all(len(s.scans) >= 10 for s in sinks.values()),
-                                  15.0)
+            # 20 scans: on a loaded host the min filter needs more than a few scans to see
+            # a prompt arrival (at 38400 baud one scan in eight reaches the host)
+            assert ros.wait_until(lambda: all(len(s.scans) >= 20 for s in sinks.values()),
+                                  30.0)
         for name, (_, params, lo, hi) in LMS_CASES.items():
             dev = servers[name].device
             msgs = sinks[name].msgs()
@@ -260,7 +262,7 @@ def test_lms_scans_equal_the_emulator_exactly(tmp_path):
             # filter has seen a prompt one, and a scan delayed by more than 9/10 of a scan
             # period (a stalled host) is counted a period late; stamps are never early
             assert np.all(err > -0.5e-3), f'{name}: stamp errors {err}'
-            assert np.median(np.abs(err[5:])) < 2e-3, f'{name}: stamp errors {err}'
+            assert np.median(np.abs(err[10:])) < 2e-3, f'{name}: stamp errors {err}'
             assert _eventually(lambda: not dev.continuous)  # shutdown stopped the stream
         every = np.concatenate([np.asarray(m.ranges) for s in sinks.values() for m in s.msgs()])
         assert np.isneginf(every).any()  # something on the window: too close
