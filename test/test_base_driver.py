@@ -39,7 +39,9 @@ from sensor_msgs.msg import BatteryState, JointState, Range
 from std_srvs.srv import SetBool
 import yaml
 
-pytestmark = pytest.mark.dds
+# real-time driver tests (stamps, watchdog, reconnect within bounds): make test runs them
+# after the parallel part, alone, so that the other workers do not starve them of CPU
+pytestmark = [pytest.mark.dds, pytest.mark.realtime]
 
 REPO = Path(__file__).resolve().parents[1]
 TRUE_K = (RobotParams().k1, RobotParams().k2, RobotParams().k3)

@@ -50,7 +50,9 @@ MONO_TO_SYSTEM = _mono_to_system()
 FAST_DIAGNOSTICS = {'diagnostics_period': 0.1, 'stale_warn': 0.3, 'stale_error': 1.0,
                     'problem_hold': 1.0}
 
-pytestmark = pytest.mark.dds
+# real-time driver tests (stamps, watchdog, reconnect within bounds): make test runs them
+# after the parallel part, alone, so that the other workers do not starve them of CPU
+pytestmark = [pytest.mark.dds, pytest.mark.realtime]
 
 
 class Sink:
