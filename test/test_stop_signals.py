@@ -17,6 +17,7 @@ import threading
 import time
 
 from landmark_nav.testing import RosHarness
+from landmark_nav.testing.processes import kill_all
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -47,7 +48,7 @@ def test_a_child_can_start_with_sigint_ignored(processes):
     try:
         assert _sigint_ignored(pid)
     finally:
-        os.kill(pid, signal.SIGKILL)
+        kill_all([pid])  # and wait until it is gone (a loaded machine takes a moment)
 
 
 def _collect(proc) -> list:
