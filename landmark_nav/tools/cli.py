@@ -499,6 +499,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from landmark_nav.tools.road_tools import add_parsers as add_road_parsers
     add_road_parsers(sub, _Parser)
+
+    from landmark_nav.tools.docs_params import add_parser as add_docs_params_parser
+    add_docs_params_parser(sub, _Parser)
     return parser
 
 
