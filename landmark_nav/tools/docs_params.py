@@ -229,7 +229,8 @@ def write_pages(tables: Dict[str, List[DeclaredParameter]], root: Path = ROOT) -
         new = block(node, rows)
         if new != old:
             page.write_text(text.replace(old, new))
-            changed.append(str(page.relative_to(root)))
+            if str(page.relative_to(root)) not in changed:
+                changed.append(str(page.relative_to(root)))
     return changed
 
 
