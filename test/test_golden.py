@@ -1,11 +1,12 @@
-"""Golden results: every README figure of a committed bag, recomputed as the README says.
+"""Golden results: every documented figure of a committed bag, recomputed as its page says.
 
-``bags/<name>/expected.yaml`` holds per figure the run (README command) and output it comes
-from, the seed-1 value and its tolerance (see its ``tolerance_policy``). Each run executes
-once per module (the Python entry point the command line calls, writing the same JSON
-files), and every figure is one test case; a second case per figure checks that the
-number quoted in expected.yaml is the value as the README rounds it and that the README
-prints it in the one line that ``readme_line`` (a regular expression) picks out.
+``bags/<name>/expected.yaml`` holds per figure the run (the documented command) and output it
+comes from, the seed-1 value and its tolerance (see its ``tolerance_policy``). Each run
+executes once per module (the Python entry point the command line calls, writing the same
+JSON files), and every figure is one test case; a second case per figure checks that the
+number quoted in expected.yaml is the value as the documentation rounds it and that the
+documentation (README.md and the pages under docs/) prints it in the one line that
+``readme_line`` (a regular expression) picks out.
 """
 
 import re
@@ -17,7 +18,9 @@ import pytest
 BAGS = ('office', 'hallway', 'calibration', 'corridor')
 EXPECTED = {name: load_expected(ROOT / 'bags' / name) for name in BAGS}
 CASES = [(name, fid) for name in BAGS for fid in EXPECTED[name]['figures']]
-README = (ROOT / 'README.md').read_text()
+#: The documentation pages and their lines: README.md and every page under docs/.
+PAGES = {str(p.relative_to(ROOT)): p.read_text().splitlines()
+         for p in [ROOT / 'README.md', *sorted((ROOT / 'docs').rglob('*.md'))]}
 
 
 @pytest.fixture(scope='module')
@@ -62,7 +65,7 @@ def test_figure(outputs, name, fid):
     assert ok, (f'bags/{name} {fid} ({fig["readme"]}): got {got!r}, expected '
                 f'{fig["value"]!r} +- {tol:.3g} (seeds 1-6: {fig["seed_spread"]["min"]} .. '
                 f'{fig["seed_spread"]["max"]}); if the change is intended, update '
-                f'bags/{name}/expected.yaml and the README together')
+                f'bags/{name}/expected.yaml and the documentation together')
 
 
 _QUOTED = re.compile(r'([-\d.]+) ?(cm|mm|m|deg|%|x)?( of steps| of distance)?$')
@@ -70,7 +73,7 @@ _QUOTED = re.compile(r'([-\d.]+) ?(cm|mm|m|deg|%|x)?( of steps| of distance)?$')
 
 @pytest.mark.parametrize('name,fid', CASES, ids=[f'{n}:{f}' for n, f in CASES])
 def test_readme_quotes_the_value(name, fid):
-    """The number in ``readme`` is the value rounded as printed, and the README prints it."""
+    """The number in ``readme`` is the value rounded as printed, and one page prints it."""
     fig = EXPECTED[name]['figures'][fid]
     m = _QUOTED.search(fig['readme'])
     assert m, fig['readme']
@@ -84,7 +87,10 @@ def test_readme_quotes_the_value(name, fid):
     elif unit == '%' and abs(fig['value']) <= 1.0:
         scale = 100.0
     assert round(fig['value'] * scale, digits) == float(text), (fid, fig['value'])
-    lines = [line for line in README.splitlines() if re.search(fig['readme_line'], line)]
-    assert len(lines) == 1, f'readme_line {fig["readme_line"]!r} picks {len(lines)} README lines'
+    lines = [(page, line) for page, page_lines in PAGES.items() for line in page_lines
+             if re.search(fig['readme_line'], line)]
+    assert len(lines) == 1, (f'readme_line {fig["readme_line"]!r} picks {len(lines)} lines of '
+                             f'README.md and docs/: {[page for page, _ in lines]}')
+    page, line = lines[0]
     number = re.compile(r'(?<![\w.])' + re.escape(text) + r'(?![\w])')
-    assert number.search(lines[0]), f'README line {lines[0]!r} does not quote {text} ({fid})'
+    assert number.search(line), f'{page} line {line!r} does not quote {text} ({fid})'
