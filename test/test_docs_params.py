@@ -53,13 +53,13 @@ def test_declared_defaults_are_the_values_in_the_code(declared):
     corner = {p.name: p for p in declared['corner_extractor']}
     assert corner['method'].default == CornerParams().method == 'minus_cosine'
     assert corner['window'].default == str(CornerParams().window)
-    assert corner['window'].type_name == 'int' and corner['window'].range == '5 … 101'
+    assert corner['window'].type_name == 'int' and corner['window'].limits == '5 … 101'
     assert corner['segmentation.min_points'].default == '5'
     assert not any(p.description.endswith(READ_ONLY_NOTE) for p in declared['ekf_slam'])
     laser = {p.name: p for p in declared['laser_driver']}
     # The declared default, not the port the tool starts the driver on.
     assert laser['port'].default != '/nonexistent/landmark_nav_docs'
-    assert laser['protocol'].range == 'scip2, lms2xx'
+    assert laser['protocol'].limits == 'scip2, lms2xx'
     names = [p.name for p in declared['ekf_slam']]
     assert len(names) == len(set(names)) and 'use_sim_time' not in names
 
@@ -71,7 +71,7 @@ def test_a_changed_default_is_reported_by_row(tmp_path, declared, monkeypatch):
     page.parent.mkdir(parents=True)
     page.write_text(f'# page\n\n{block(node, declared[node])}\n\ntext after\n')
     rows = [DeclaredParameter(p.name, p.type_name, '13' if p.name == 'window' else p.default,
-                              p.range, p.description) for p in declared[node]]
+                              p.limits, p.description) for p in declared[node]]
     printed = table_defaults(marked_block(page.read_text(), node))
     assert printed['window'] == '11' and {p.name for p in rows} == set(printed)
     assert write_pages({node: rows}, root=tmp_path) == [NODES[node][2]]

@@ -13,7 +13,7 @@ MAX_LINES = 400
 
 
 def _executables():
-    """The EXECUTABLES dict of setup.py, read without running setup()."""
+    """Return the EXECUTABLES dict of setup.py, read without running setup()."""
     tree = ast.parse((ROOT / 'setup.py').read_text())
     for node in tree.body:
         if isinstance(node, ast.Assign) and [t.id for t in node.targets] == ['EXECUTABLES']:
@@ -25,7 +25,7 @@ EXECUTABLES = _executables()
 
 
 def _table_rows():
-    """{executable: its row} of the README's table under '## Executables'."""
+    """Return {executable: its row} of the README's table under '## Executables'."""
     section = README.split('\n## Executables\n', 1)[1].split('\n## ', 1)[0]
     rows = {}
     for line in section.splitlines():

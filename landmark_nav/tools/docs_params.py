@@ -62,7 +62,7 @@ class DeclaredParameter:
     name: str
     type_name: str
     default: str  # formatted as in a parameter file
-    range: str
+    limits: str  # range or choices, as printed
     description: str
 
 
@@ -86,7 +86,7 @@ def _type_name(descriptor, default) -> str:
     return names.get(descriptor.type, type(default).__name__)
 
 
-def _range(descriptor) -> str:
+def _limits(descriptor) -> str:
     if descriptor.floating_point_range:
         r = descriptor.floating_point_range[0]
         return f'{format_value(r.from_value)} … {format_value(r.to_value)}'
@@ -117,7 +117,7 @@ def _recording(records: list) -> Iterator[None]:
 
 @contextmanager
 def _private_context() -> Iterator[object]:
-    """An initialised rclpy context with automatic discovery off (in-process only)."""
+    """Yield an initialised rclpy context with automatic discovery off (in-process only)."""
     import rclpy
     key = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
     before = os.environ.get(key)
@@ -136,7 +136,8 @@ def _private_context() -> Iterator[object]:
         rclpy.try_shutdown(context=context)
 
 
-def declared_parameters(nodes: Optional[Sequence[str]] = None) -> Dict[str, List[DeclaredParameter]]:
+def declared_parameters(
+        nodes: Optional[Sequence[str]] = None) -> Dict[str, List[DeclaredParameter]]:
     """Return {node: its declared parameters in declaration order}.
 
     Args:
@@ -168,7 +169,7 @@ def declared_parameters(nodes: Optional[Sequence[str]] = None) -> Dict[str, List
                     continue  # rclpy's own (use_sim_time, ...)
                 rows.append(DeclaredParameter(
                     pname, _type_name(descriptor, default), format_value(default),
-                    _range(descriptor), descriptor.description[:-len(READ_ONLY_NOTE)]))
+                    _limits(descriptor), descriptor.description[:-len(READ_ONLY_NOTE)]))
             result[name] = rows
     return result
 
@@ -181,7 +182,7 @@ def markdown_table(rows: Sequence[DeclaredParameter]) -> str:
     """Return the markdown table of one node's parameters."""
     lines = [HEADER]
     for p in rows:
-        rng = f'`{_cell(p.range)}`' if p.range else ''
+        rng = f'`{_cell(p.limits)}`' if p.limits else ''
         lines.append(f'| `{p.name}` | {p.type_name} | `{_cell(p.default)}` | {rng} | '
                      f'{_cell(p.description)} |')
     return '\n'.join(lines)
