@@ -35,9 +35,10 @@ residuals is ``pairs NIS / N`` (the front end's ``scan_matching_fit_pairs``).
 lines, the ``ekf_slam_real_logs`` profile or ``--params-file``; ``--landmarks corners`` or
 ``lines`` instead of the file's) twice per run: on the
 bag's odometry with its stated noise model (and the file's front end: the profile's
-``scan_matching`` scan-matches in the filter itself; the README's yardstick figures predate
-it), and on the scan-matched chain (its poses as the odometry samples, at the scan stamps;
-the front end's own scan matching off) with ``--filter-noise`` as ``U`` (default
+``scan_matching`` scan-matches in the filter itself; the yardstick figures of
+README.md at commit 67eb6cc predate it), and on the scan-matched chain (its poses as the
+odometry samples, at the scan stamps; the front end's own scan matching off) with
+``--filter-noise`` as ``U`` (default
 ``k_d=0.04 k_theta=0.015 k_dtheta=0.03``: about twice the ICP motions' per-step errors
 printed by the first part). It prints each one's ATE [m] (and its ratio to the
 odometry's), RPE over 1 m [cm] and the share of steps with the reference inside the 95 %

@@ -84,8 +84,9 @@ import numpy as np  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
 # The reference poses' own per-pose std along / across their heading [m], as
-# ``benchmarks/reference_noise_carmen.py`` measures them from the scans (README, EKF-SLAM,
-# "Reference noise"): ``ellipse95_ref`` adds them to the filter's covariance.
+# ``benchmarks/reference_noise_carmen.py`` measures them from the scans (README.md at
+# commit 67eb6cc, EKF-SLAM, "Reference noise"): ``ellipse95_ref`` adds them to the filter's
+# covariance.
 REFERENCE_SD = {'aces': (0.0181, 0.0061), 'seattle': (0.0118, 0.0072),
                 'fhw': (0.0204, 0.0120), 'freiburg-101': (0.0136, 0.0174),
                 'belgioioso': (0.0095, 0.0095), 'acapulco': (0.0242, 0.0230)}

@@ -24,7 +24,7 @@ loop closed moves it by the drift since the landmark was last seen): their count
 reference's own per-pose noise added to the filter's covariance
 (``slam_consistency_carmen.REFERENCE_SD``; not issue 14's figure, which takes the reference
 as truth: it tells a filter that misjudges its own error from one the reference's noise
-pushes out). Then the summary used in the README: ellipse median (runs >= 80 %), ATE /
+pushes out). Then the summary of docs/ekf_slam.md: ellipse median (runs >= 80 %), ATE /
 odometry median (runs <= 0.2), RPE / odometry median (runs <= 1), runs meeting all three
 (issue 14's targets per log), and the median (runs >= 80 %) of the second ellipse share.
 """

@@ -1,6 +1,6 @@
 """Laser features (corners, lines) to and from standard ROS messages.
 
-Encodings (documented in the README topic table):
+Encodings (documented in docs/laser_features.md, Topics):
 
 * Corners: ``geometry_msgs/PoseArray`` (position = corner, orientation = yaw of the
   free-space bisector) plus ``sensor_msgs/PointCloud2`` with one point per corner and the

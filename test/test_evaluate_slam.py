@@ -46,7 +46,7 @@ def test_files_written(evaluated):
     assert np.all(np.diff(rows[:, 0]) > 0)
 
 
-# Worst of the 10 office seeds (0-9) in the README's EKF-SLAM table, per association: ATE
+# Worst of the 10 office seeds (0-9) of docs/ekf_slam.md, per association: ATE
 # RMSE, max position error, landmark RMSE [m], lowest per-seed share of steps with the robot
 # NEES inside the 95 % band. The bag is one more recording of the same scenario; its exact
 # ICNN figures are guarded by test_golden.py (bags/office/expected.yaml).

@@ -522,8 +522,8 @@ def test_office_run_line_targets():
         # an efficient extractor would get on the same walls (Cramer-Rao bound from all
         # their beams), is itself 0.99 cm here (0.97-1.01 cm on seeds 1-6), so the 1 cm
         # target cannot be met reliably: ALFA is at 1.02 cm, split_merge at 0.95 cm on this
-        # seed, reported in the README. Asserted: both near-efficient, within a few % of
-        # their ratios to the floor on this seed (split_merge 0.956, alfa 1.044; 1.002 and
+        # seed, reported in docs/laser_features.md. Asserted: both near-efficient, within a few %
+        # of their ratios to the floor on this seed (split_merge 0.956, alfa 1.044; 1.002 and
         # 1.093 without the join across occluders; 0.956-1.147 on seeds 1-6).
         assert 0.0095 <= sc.floor_sigma_rho <= 0.0105
         bound = {'split_merge': 1.0, 'alfa': 1.07}[method]
@@ -567,10 +567,10 @@ def test_carmen_logs(name):
               f'min {explained.min():.3f}, scans >= 0.85: {(explained >= 0.85).mean():.2f}; '
               f'RMSE mean {100 * rmse.mean():.2f} cm max {100 * rmse.max():.2f} cm')
         # The issue asks for >= 85 % explained and RMSE <= 3 cm on EVERY scan. Not reached
-        # (README); every scan runs and gives finite lines with positive-definite
-        # covariances (asserted above), and the README's figures are guarded: explained
-        # mean / worst scan, RMSE mean / max [m], scans. A fixed log gives the same figures
-        # on every run, so the margin only covers floating-point differences.
+        # (README.md at commit 67eb6cc); every scan runs and gives finite lines with
+        # positive-definite covariances (asserted above), and that README's figures are guarded:
+        # explained mean / worst scan, RMSE mean / max [m], scans. A fixed log gives the same
+        # figures on every run, so the margin only covers floating-point differences.
         want = {
             ('aces-corrected.log.gz', 'split_merge'): (0.6564549041505786, 0.05027932960893855,
                                                        0.018129567332187818,

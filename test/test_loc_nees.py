@@ -3,8 +3,8 @@
 Protocol of :func:`landmark_nav.evaluation.localization.hallway_study` and
 ``test_loc_accuracy.py``: map ``rasterize_world(result.world, 0.1)``, calibrated odometry,
 initial estimate drawn from N(truth, CHAPTER_P0) with generator seed ``1000 + seed`` and
-initial covariance CHAPTER_P0; full runs (607 stamps, 20 m), the same runs the README's
-10-seed figures and ``bags/hallway`` (seed 1) come from.
+initial covariance CHAPTER_P0; full runs (607 stamps, 20 m), the same runs
+docs/sonar_localization.md's 10-seed figures and ``bags/hallway`` (seed 1) come from.
 
 NEES (corner chapter eq. 59, :func:`landmark_nav.slam.consistency.nees`) of the pose
 ``[x, y, Theta]`` (d = 3, heading error wrapped) at every stamp from the first motion to

@@ -101,8 +101,8 @@ def test_scans_and_frames_give_grid_route_width_and_outline():
         assert ros.wait_until(lambda: len(rig.widths) == 6 and len(rig.outlines) == 6, 10)
         assert node.stats.dropped_count == 0
         # The asphalt road is 4.9 m wide: measured here laser 4.88, 4.85, 4.76, 4.86, 4.85,
-        # 4.92 m (mean 4.85; one scan's sigma is 0.09 m, see the README; 5.09 ... 5.23 m,
-        # mean 5.00, before the edges were re-placed by a continuous fit), vision 4.82 m
+        # 4.92 m (mean 4.85; one scan's sigma is 0.09 m, see docs/road_following.md; 5.09 ...
+        # 5.23 m, mean 5.00, before the edges were re-placed by a continuous fit), vision 4.82 m
         # (ground plane, flat-ground rendering).
         w = rig.widths[-1].vector
         assert abs(np.mean([m.vector.x for m in rig.widths]) - 4.9) < 0.15

@@ -77,7 +77,7 @@ def test_pedestrian_beyond_laser_range_gives_an_avoidance_route():
 @pytest.mark.slow
 @pytest.mark.parametrize('kind', ['asphalt', 'gravel'])
 def test_vision_road_width_overcast_and_soft_shadows(kind):
-    """Table 3 style on 60 rendered frames each; see the README for the 250-frame figures."""
+    """Table 3 style on 60 rendered frames each (docs/road_following.md: 250 frames)."""
     truth = {'asphalt': 4.9, 'gravel': 4.0}[kind]
     for lighting in ('overcast', 'soft_shadows'):
         s = evaluate_vision_road(kind, lighting, 60, seed=2)
@@ -102,7 +102,7 @@ def test_route_open_detects_a_closed_or_off_road_route():
 @pytest.mark.slow
 @pytest.mark.parametrize('kind', ['asphalt', 'gravel'])
 def test_hard_shadows_and_markings_do_not_close_the_route(kind):
-    """Issue acceptance on 60 rendered frames each (the README has the 250-frame figures).
+    """Issue acceptance on 60 rendered frames each (docs/road_following.md: 250 frames).
 
     Hard shadow bands across the road stop the vision outline on most frames (a vision
     failure, reported), yet every route stays open: it reaches at least the laser line and

@@ -1,9 +1,9 @@
 """Cartesian (map-frame) gate of corner pairs with a wide range prediction (issue 14).
 
 ``SlamParams.cartesian_gate`` / :func:`landmark_nav.slam.gating.cartesian_pair_d2`: the
-aces failure of the README ("What goes wrong on aces and acapulco") in miniature: a landmark
-22 m ahead whose predicted range has a std of 40 % of the range, and a corner seen 3 m away
-at a bearing of 0.5 rad.
+aces failure of README.md at commit 67eb6cc ("What goes wrong on aces and acapulco") in miniature:
+a landmark 22 m ahead whose predicted range has a std of 40 % of the range, and a corner seen 3 m
+away at a bearing of 0.5 rad.
 """
 
 import math

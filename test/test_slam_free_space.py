@@ -1,9 +1,9 @@
 """Negative information: the free-space check of association hypotheses (issue 14).
 
 ``SlamParams.free_space_check`` / :func:`landmark_nav.slam.ekf_slam.free_space_contradictions`:
-the aces failure of the README ("What goes wrong on aces and acapulco") in miniature. Two
-corners are mapped 22 m ahead, then the robot's position becomes uncertain by 8 m along x
-and a corner 3 m ahead (not mapped) is seen: the range-bearing gate admits it as the
+the aces failure of README.md at commit 67eb6cc ("What goes wrong on aces and acapulco") in
+miniature. Two corners are mapped 22 m ahead, then the robot's position becomes uncertain by 8 m
+along x and a corner 3 m ahead (not mapped) is seen: the range-bearing gate admits it as the
 mapped corner A at 22 m (the only landmark in its gate), and that pair would put the robot
 19 m ahead, 5 m from the other mapped corner B, where the scan's beams pass 25 m into free
 space (from where the robot is, the scan returns at B).

@@ -1,7 +1,7 @@
 """Recovery after a common heading error (``SlamParams.recovery_probability``, issue 14).
 
-The belgioioso failure of the README ("Recovery") in miniature: corners are mapped from the
-origin, then the heading becomes uncertain (std 5 deg) while the robot in truth turned by
+The belgioioso failure of README.md at commit 67eb6cc ("Recovery") in miniature: corners are mapped
+from the origin, then the heading becomes uncertain (std 5 deg) while the robot in truth turned by
 13 deg (2.6 sigma). Seen from the true pose, every corner's bearing is off by the same
 13 deg: each pair alone lies outside the 95 % gate (d2 about 6.7 > 5.99), so nothing is
 matched; at the recovery's 99 % gate (9.21) each is admitted, and JCBB's joint test keeps

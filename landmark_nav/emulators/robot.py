@@ -1,7 +1,8 @@
 """One emulated robot: a Pioneer base (P2OS) carrying a laser (SCIP 2.0 or LMS2xx), one world.
 
 ``landmark_nav emulate robot`` serves both devices at once, so the drivers, the extractors
-and ``ekf_slam`` run on a live robot that ``cmd_vel`` drives (README, "One emulated robot"):
+and ``ekf_slam`` run on a live robot that ``cmd_vel`` drives (docs/drivers.md, "One
+emulated robot"):
 
 * :class:`RobotBase` is the :class:`~landmark_nav.emulators.p2os.P2osDevice` (the robot that
   ``cmd_vel`` moves through ``base_driver``, with the true k1, k2, k3 of eqs. 17-18) that

@@ -5,7 +5,7 @@ Runs the extractors directly on the bag's scans (no DDS). Two kinds of bag:
 * **Simulator bags** (``ground_truth.yaml`` beside the bag): :func:`evaluate_features`
   compares every scan with the ground-truth corners and walls (see
   :mod:`landmark_nav.evaluation.features` for the matching rules): the corner and line
-  tables of the README.
+  tables of docs/laser_features.md.
 * **Any other bag with** ``/scan`` (e.g. written by ``landmark_nav import`` from a real
   log), or a simulator bag with ``truth_free``: :func:`evaluate_truth_free`, the metrics
   that need no ground-truth features (:mod:`landmark_nav.evaluation.scan_metrics`): the PLE

@@ -1,4 +1,4 @@
-"""Odometry drift against the ground truth of a bag: the README's drift table.
+"""Odometry drift against the ground truth of a bag: the drift table of docs/ekf_slam.md.
 
 :func:`bag_odometry_drift` reads ``/odom`` and ``/ground_truth/odom`` of a bag (no DDS),
 pairs the samples that share a stamp and scores them with :func:`odometry_drift`: path

@@ -144,7 +144,8 @@ def evaluate_vision_road(kind: str, lighting: str = 'overcast', frames: int = 25
                            opened, float(np.median(reach)) if reach else math.nan)
 
 
-#: The five overlay cases of the README: (title, road kind, lighting, markings, pedestrian).
+#: The five overlay cases of docs/road_following.md: (title, road kind, lighting, markings,
+#: pedestrian).
 OVERLAY_CASES = (('asphalt, overcast', 'asphalt', 'overcast', False, False),
                  ('asphalt, soft shadows', 'asphalt', 'soft_shadows', False, False),
                  ('asphalt, hard shadows', 'asphalt', 'hard_shadows', False, False),
@@ -184,7 +185,9 @@ def sim_overlay(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
 
 
 def write_sim_overlays(out, seed: int = 0, scale: float = 0.75, quality: int = 70):
-    """Write the five README overlays (:data:`OVERLAY_CASES`) as one JPEG montage.
+    """Write the five overlays (:data:`OVERLAY_CASES`) as one JPEG montage.
+
+    They are the overlays of docs/road_following.md.
 
     Rendered park-road frames (nothing from a data set), the robot 0.2 m left of the
     centre, heading 2 degrees off the road; the pedestrian stands 7 m ahead, 0.6 m left.

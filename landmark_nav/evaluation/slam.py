@@ -132,7 +132,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     the landmark scores need the simulator's ``ground_truth.yaml`` and are None without it.
 
     Figures (``slam.json``): the :class:`SlamScore` fields (``ate_rmse`` / ``ate_max``:
-    unaligned, in the map frame, as the README's office table); ``ate_<align>_<stat>`` and
+    unaligned, in the map frame, as the office table of docs/ekf_slam.md);
+    ``ate_<align>_<stat>`` and
     ``odom_ate_<align>_<stat>`` with the chosen alignment; ``rpe_trans_<stat>``,
     ``rpe_rot_<stat>_deg``, ``rpe_pairs`` and the ``odom_`` equivalents over ``rpe_delta`` m
     (:mod:`landmark_nav.evaluation.trajectory`: evo's metrics); ``resets`` (filter resets

@@ -27,7 +27,7 @@ Three detectors work on the clusters of :func:`~landmark_nav.laser.segmentation.
   Optionally (``gate_sigmas``, ``fit_sigmas``, off by default) the bounds are tested with
   the uncertainty of ``f`` propagated from eq. 7 (a confidence test instead of the hard
   cut); on the Carmen logs this moved corners across the widened bounds instead of
-  steadying them (README, "Real logs").
+  steadying them (README.md at commit 67eb6cc, "Real logs").
 
 Design decisions where the chapter is silent (all documented on :class:`CornerParams`):
 

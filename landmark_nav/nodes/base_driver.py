@@ -134,7 +134,8 @@ class BaseDriver(Node):
         self.odom_frame = d(self, 'odom_frame', 'odom', 'frame of the odometry')
         self.base_frame = d(self, 'base_frame', 'base_link', 'child frame of the odometry')
         self.sonar_prefix = d(self, 'sonar_frame_prefix', 'sonar_', 'sonar i has frame '
-                              '<prefix><i> (static transform from base_frame, see README)')
+                              '<prefix><i> (static transform from base_frame, see '
+                              'docs/drivers.md)')
         self.sonar_fov = d(self, 'sonar_field_of_view', SONAR_FIELD_OF_VIEW, 'sonar cone '
                            'width [rad]', (0.0, 3.0))
         self.sonar_min = d(self, 'sonar_min_range', SONAR_MIN_RANGE, 'shorter readings are '

@@ -32,7 +32,8 @@ Beyond the chapter, on its stated weaknesses:
   (``chroma='invariant'``) the chromaticity is Finlayson's 1-D illuminant invariant -- the
   log chromaticities ``(log(r / g), log(b / g))`` projected orthogonal to the
   illuminant-colour direction ``invariant_angle`` (a camera constant), paired with the
-  eq. 25 ``g`` -- which did not improve the real street frames (see the README).
+  eq. 25 ``g`` -- which did not improve the real street frames (README.md at commit
+  67eb6cc, Road following).
 """
 
 from dataclasses import dataclass

@@ -54,7 +54,8 @@ and 6 runs, all three issue targets on 2), better than the standard filter in el
 share on all 12 runs and in RPE on 8, but on aces and acapulco far worse (ATE 9-31 m, worse
 than the odometry's except on aces seed 1; RPE 0.47-1.4 m), so the default stays
 ``'standard'``. Measured cause
-(README, EKF-SLAM; ``--drift none --filter-noise pioneer``): with the reference's own
+(README.md at commit 67eb6cc, EKF-SLAM; ``--drift none --filter-noise pioneer``): with the
+reference's own
 increments as odometry the updates alone turn the whole run by 0.5-16 deg while the
 reported heading std is 0.4-5 deg; the map's heading was fixed at scan 2 with 4.8-6 deg of
 heading std and no observation can reduce that, so the filter gained information in the

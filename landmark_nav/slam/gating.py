@@ -46,9 +46,9 @@ admits in the map frame (:func:`cartesian_pair_d2`: the observation put in the m
 against the landmark, linear in the robot position and the landmark, nonlinear in the
 heading only through the observed range) when the predicted range std is at least that
 fraction of the predicted range, and keeps the larger ``d2`` (so a pair it rejects may
-still be ``'ambiguous'``). Aim: the aces pair of the README (perfect odometry, scan 199:
-a corner 3 m away against a landmark predicted at 22.6 m with a range std of 8.6 m,
-``d2`` 5.81, map frame 7.32). Measured (README, EKF-SLAM, ``observability_gain``, six
+still be ``'ambiguous'``). Aim: the aces pair of README.md at commit 67eb6cc (perfect odometry,
+scan 199: a corner 3 m away against a landmark predicted at 22.6 m with a range std of 8.6 m,
+``d2`` 5.81, map frame 7.32). Measured (same, EKF-SLAM, ``observability_gain``, six
 Carmen logs, drift seeds 0-1, and aces and acapulco with perfect odometry) with ``0``
 (every admitted corner pair): it rejects that pair, but 22 scans later a corner 0.85 m
 away is paired with the first landmark (predicted 16.6 m, range std 9.2 m, ``d2`` 5.04,
@@ -96,7 +96,7 @@ them the check dropped 29 right pairs and 23 wrong ones over the 12 Carmen runs,
 those eight runs unchanged (perhaps because a line's extent is the hull of its seen
 segments and may span a doorway; not verified). Cost: one update on a copy and two
 visibility tests of the whole map per scan with a hypothesis, more only when it is
-refuted. Measured in the README (EKF-SLAM, "Free-space check").
+refuted. Measured in README.md at commit 67eb6cc (EKF-SLAM, "Free-space check").
 
 Recovery
 --------
@@ -118,8 +118,8 @@ correlation through the robot and the count: the hypothesis is used only if at l
 the free-space check (default 3: six measurements for a relocation of the three pose dof,
 three of them to test it; with two, one redundant dof, acapulco's ATE doubled in one run).
 Counted in ``stats['recovered']``. A scan with any pair is not touched, nor is a plain
-widening of the gate (``gate_probability`` 0.99 everywhere, README: it broke acapulco).
-Measured in the README (EKF-SLAM, "Recovery").
+widening of the gate (``gate_probability`` 0.99 everywhere, it broke acapulco).
+Measured in README.md at commit 67eb6cc (EKF-SLAM, "Recovery").
 
 Spurious pairs
 --------------
@@ -131,8 +131,8 @@ paired. On the Carmen logs with the importer's odometry replaced by the referenc
 increments (no drift), such pairs are what breaks the filter: aces, one corner 25 m from
 the landmark it was paired with (d2 5.8, heading std 22 deg) turned the robot by 48 deg;
 acapulco, corners 1.3-4.8 m off turned it by 10-16 deg, a wall 17 m off by 35 deg (a
-per-step trace with each pair labelled through the reference poses, README). With
-``spurious_limit`` (off by default) each pair of the hypothesis is kept only when the
+per-step trace with each pair labelled through the reference poses, README.md at commit 67eb6cc).
+With ``spurious_limit`` (off by default) each pair of the hypothesis is kept only when the
 expected number of features of its kind inside its gate (the density is estimated with
 the observed one counted), ``lambda A`` (the clutter density times the validation volume
 of Bar-Shalom's probabilistic data association), is at most the limit
@@ -154,7 +154,7 @@ of Bar-Shalom's probabilistic data association), is at most the limit
 ``0.05`` (the gate's own miss rate, ``1 - gate_probability``) makes a spurious pair as
 likely as a missed right one. A dropped pair lies inside the gate, so its observation is
 'ambiguous' (no new landmark); counted in ``stats['spurious']``. Needs the scan geometry.
-Measured in the README (EKF-SLAM, "Spurious pairs").
+Measured in README.md at commit 67eb6cc (EKF-SLAM, "Spurious pairs").
 """
 
 import math

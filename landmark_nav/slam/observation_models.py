@@ -65,8 +65,8 @@ Noise models
   ``theta`` spans ranges: effective range noise ``sigma_r^2 + (r delta / tan(theta))^2``,
   along the wall's normal ``delta r cos(theta) = delta |t|`` (``t``: the point's position
   along the line from the foot point). ``line_beam_width = delta`` adds it segment-wide at
-  the two ends (:func:`.line_landmarks.line_footprint_covariance`; off by default, README
-  "EKF-SLAM" for the measured effect).
+  the two ends (:func:`.line_landmarks.line_footprint_covariance`; off by default, README.md at
+  commit 67eb6cc "EKF-SLAM" for the measured effect).
 
 Line landmarks
 --------------

@@ -1,7 +1,7 @@
-"""Golden results: the README figures each committed bag produces, and how to recompute them.
+"""Golden results: the documented figures each committed bag produces, and how to recompute them.
 
-Each ``bags/<name>/expected.yaml`` lists *runs* (a command of the README and the Python
-entry point the command line calls for it) and *figures* (a README figure, the run and the
+Each ``bags/<name>/expected.yaml`` lists *runs* (a documented command and the Python
+entry point the command line calls for it) and *figures* (a documented figure, the run and the
 output file / key it is read from, the seed-1 value, its tolerance and the spread over
 simulator seeds 1-6). :func:`run_outputs` executes one run and returns its outputs as
 plain dicts (the JSON files the tools write, or the parsed report), :func:`figure_value`

@@ -63,7 +63,7 @@ class CornerParams:
             deviations of ``[f_min, f_max]`` (``f``'s deviation propagated from the three
             points' noise ``Q_i``, eq. 7; the midpoint-shift bounds widen as much). 0 (the
             default) is the chapter's hard cut. Measured on the six Carmen logs and not
-            made the default (README, "Real logs").
+            made the default (README.md at commit 67eb6cc, "Real logs").
         fit_sigmas: the same for the refined corner's angle: the fitted arms' ``f`` may lie
             ``fit_sigmas`` standard deviations (propagated through the TLS fits, eqs. 7-8)
             outside the bounds. 0 (the default) is the hard cut.
