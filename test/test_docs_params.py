@@ -89,4 +89,5 @@ def test_values_are_formatted_as_a_parameter_file_writes_them():
     assert format_value(True) == 'true' and format_value(False) == 'false'
     assert format_value('') == "''" and format_value('map') == 'map'
     assert format_value([0.0, 1.5]) == '[0.0, 1.5]' and format_value(3) == '3'
-    assert format_value(0.01) == '0.01' and format_value(float('inf')) == 'inf'
+    assert format_value(0.01) == '0.01' and format_value(float('inf')) == '.inf'
+    assert format_value(-float('inf')) == '-.inf' and format_value(float('nan')) == '.nan'

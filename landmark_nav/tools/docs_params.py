@@ -17,6 +17,7 @@ the declared default.
 from contextlib import contextmanager
 from dataclasses import dataclass
 import importlib
+import math
 import os
 from pathlib import Path
 import re
@@ -74,6 +75,8 @@ def format_value(value) -> str:
         return "''" if value == '' else value
     if isinstance(value, (list, tuple)):
         return '[' + ', '.join(format_value(v) for v in value) + ']'
+    if isinstance(value, float) and not math.isfinite(value):
+        return '.nan' if math.isnan(value) else ('.inf' if value > 0 else '-.inf')
     return repr(value)
 
 
