@@ -3,7 +3,7 @@
 import math
 import random
 
-from fuzzing import mutated, random_chunks
+from fuzzing import frame_batches, FRAMES_PER_EXAMPLE, mutated, random_chunks
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from landmark_nav.drivers import lms2xx
@@ -390,10 +390,12 @@ def _decode_one(data, mode):
     return frame
 
 
-@settings(max_examples=10_000, deadline=None)
-@given(mutated(_POOL, _SPECIAL, _fix), st.sampled_from(sorted(lms2xx.MEASURING_MODES)))
-def test_fuzz_decode_raises_only_protocol_errors(data, mode):
-    _decode_one(data, mode)
+@settings(max_examples=10_000 // FRAMES_PER_EXAMPLE, deadline=None)
+@given(frame_batches(st.tuples(mutated(_POOL, _SPECIAL, _fix),
+                               st.sampled_from(sorted(lms2xx.MEASURING_MODES)))))
+def test_fuzz_decode_raises_only_protocol_errors(frames):
+    for data, mode in frames:   # 10,000 frames
+        _decode_one(data, mode)
 
 
 @settings(max_examples=1_000, deadline=None)

@@ -3,7 +3,7 @@
 import math
 import random
 
-from fuzzing import mutated, random_chunks
+from fuzzing import frame_batches, FRAMES_PER_EXAMPLE, mutated, random_chunks
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from landmark_nav.drivers import p2os
@@ -400,12 +400,13 @@ def _decode_one(data):
     return results
 
 
-@settings(max_examples=10_000, deadline=None)
-@given(mutated(_POOL, _SPECIAL, _fix))
-def test_fuzz_decode_raises_only_protocol_errors(data):
-    for frame in _decode_one(data):
-        assert isinstance(frame, (p2os.StatusPacket, p2os.SyncReply, p2os.Packet,
-                                  p2os.Command))
+@settings(max_examples=10_000 // FRAMES_PER_EXAMPLE, deadline=None)
+@given(frame_batches(mutated(_POOL, _SPECIAL, _fix)))
+def test_fuzz_decode_raises_only_protocol_errors(frames):
+    for data in frames:   # 10,000 frames
+        for frame in _decode_one(data):
+            assert isinstance(frame, (p2os.StatusPacket, p2os.SyncReply, p2os.Packet,
+                                      p2os.Command))
 
 
 @settings(max_examples=1_000, deadline=None)

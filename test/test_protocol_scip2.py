@@ -3,7 +3,7 @@
 import math
 import random
 
-from fuzzing import mutated, random_chunks
+from fuzzing import frame_batches, FRAMES_PER_EXAMPLE, mutated, random_chunks
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from landmark_nav.drivers import scip2
@@ -428,15 +428,16 @@ def _fix(data: bytearray) -> bytearray:
         for line in lines[1:]]))
 
 
-@settings(max_examples=10_000, deadline=None)
-@given(mutated(_POOL, _SPECIAL, _fix))
-def test_fuzz_decode_reply_raises_only_protocol_errors(data):
-    try:
-        frame = scip2.decode_reply(data)
-    except ProtocolError:
-        return
-    assert isinstance(frame, (scip2.ScanFrame, scip2.InfoReply, scip2.TimeReply,
-                              scip2.StatusReply))
+@settings(max_examples=10_000 // FRAMES_PER_EXAMPLE, deadline=None)
+@given(frame_batches(mutated(_POOL, _SPECIAL, _fix)))
+def test_fuzz_decode_reply_raises_only_protocol_errors(frames):
+    for data in frames:   # 10,000 frames
+        try:
+            frame = scip2.decode_reply(data)
+        except ProtocolError:
+            continue
+        assert isinstance(frame, (scip2.ScanFrame, scip2.InfoReply, scip2.TimeReply,
+                                  scip2.StatusReply))
 
 
 @settings(max_examples=1_000, deadline=None)
