@@ -32,14 +32,16 @@ demo: $(STAMP)
 # pytest-xdist, two workers per CPU: much of the suite waits on node processes and DDS,
 # so a second worker per CPU fills those waits. A test file stays on one worker (its
 # module fixtures, e.g. the golden runs, are computed once); files go out longest first
-# (test/conftest.py orders them; --no-loadscope-reorder keeps that order). The real-time driver tests
-# (wall-clock bounds on device I/O) run afterwards, alone: beside the workers on a busy
-# machine they were starved of CPU.
+# (test/conftest.py orders them; --no-loadscope-reorder keeps that order). The real-time
+# driver tests (wall-clock bounds on device I/O) run afterwards, apart: beside the workers
+# on a busy machine they were starved of CPU. Their two files run side by side: their
+# tests mostly wait on device timers (a quarter of a CPU each).
+REALTIME_FILES := $(shell grep -l 'mark.realtime' test/test_*.py)
 WORKERS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(WORKERS) --dist loadfile --no-loadscope-reorder \
 		-m 'not realtime' test
-	$(BIN)/python -m pytest -q -m realtime test
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m realtime $(REALTIME_FILES)
 
 # Timing, soak and long evaluations: figures as ratios against an in-run reference,
 # compared with the stored results (exit 1 on a regression). Run on an idle machine.
