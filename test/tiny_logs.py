@@ -1,0 +1,97 @@
+"""Tiny real-format logs of a simulated room, for the benchmark smoke runs.
+
+A rectangular room (8 x 5 m) with a pillar, ray cast for a robot driving along it: a Carmen
+log (``FLASER``, 361 beams over 180 deg, the pose as the corrected pose), a CMU Wean log
+(``O`` and ``L`` lines, cm, 180 beams, the laser 25 cm ahead) and the room as a beesoft
+occupancy map (``wean.dat.gz``, 10 cm cells, the value the probability of free space as in
+the Wean data).
+"""
+
+import gzip
+import math
+from pathlib import Path
+
+import numpy as np
+
+ROOM = np.array([[0.0, 0.0], [8.0, 0.0], [8.0, 5.0], [0.0, 5.0]])
+PILLAR = np.array([[5.0, 3.2], [5.8, 3.2], [5.8, 4.0], [5.0, 4.0]])
+
+
+def _walls() -> np.ndarray:
+    """Return the wall segments, (M, 2, 2)."""
+    segs = []
+    for poly in (ROOM, PILLAR):
+        segs += [(poly[k], poly[(k + 1) % len(poly)]) for k in range(len(poly))]
+    return np.array(segs)
+
+
+def ray_cast(pose, angles: np.ndarray, max_range: float = 30.0) -> np.ndarray:
+    """Return the distance along each beam (laser at ``pose``) to the nearest wall."""
+    walls = _walls()
+    d = np.stack([np.cos(pose[2] + angles), np.sin(pose[2] + angles)], axis=1)   # (N, 2)
+    a, b = walls[:, 0], walls[:, 1]                                             # (M, 2)
+    e = b - a
+    denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
+    w = a[None] - np.asarray(pose[:2])[None, None]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = (w[..., 0] * e[None, :, 1] - w[..., 1] * e[None, :, 0]) / denom
+        u = (w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]) / denom
+    hit = (np.abs(denom) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    return np.minimum(np.where(hit, t, np.inf).min(axis=1), max_range)
+
+
+def poses(n: int) -> np.ndarray:
+    """Return ``n`` poses of a drive along the room, turning slowly (10 Hz, 0.4 m/s)."""
+    k = np.arange(n)
+    return np.column_stack([1.0 + 0.04 * k, 2.0 + 0.01 * k, 0.2 + 0.01 * k])
+
+
+def write_carmen(path: Path, n: int = 40, seed: int = 0) -> Path:
+    """Write a Carmen ``-corrected`` log of ``n`` scans (1 cm range noise); return its path."""
+    rng = np.random.default_rng(seed)
+    angles = np.radians(np.linspace(-90.0, 90.0, 361))
+    lines = []
+    for k, p in enumerate(poses(n)):
+        r = ray_cast(p, angles) + rng.normal(0.0, 0.01, angles.size)
+        pose = ' '.join(f'{v:.4f}' for v in p)
+        stamp = 1000.0 + 0.1 * k
+        lines.append(f'FLASER 361 {" ".join(f"{v:.3f}" for v in r)} {pose} {pose} '
+                     f'{stamp:.3f} host {stamp:.3f}\n')
+    with gzip.open(path, 'wt') as f:
+        f.writelines(lines)
+    return path
+
+
+def write_wean(folder: Path, name: str = 'robotdata1', n: int = 40, seed: int = 0) -> Path:
+    """Write ``folder/<name>.log.gz`` and ``folder/wean.dat.gz``; return the folder."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    angles = np.radians(np.arange(180) - 89.5)
+    lines = []
+    for k, p in enumerate(poses(n)):
+        laser = np.array([p[0] + 0.25 * math.cos(p[2]), p[1] + 0.25 * math.sin(p[2]), p[2]])
+        cm = 100.0 * (ray_cast(laser, angles) + rng.normal(0.0, 0.01, angles.size))
+        x, y, t = 100.0 * p[0], 100.0 * p[1], p[2]
+        xl, yl = 100.0 * laser[0], 100.0 * laser[1]
+        ts = 0.1 * k
+        lines.append(f'O {x:.2f} {y:.2f} {t:.5f} {ts:.3f}\n')
+        lines.append(f'L {x:.2f} {y:.2f} {t:.5f} {xl:.2f} {yl:.2f} {t:.5f} '
+                     f'{" ".join(str(int(round(v))) for v in cm)} {ts + 0.05:.3f}\n')
+    with gzip.open(folder / f'{name}.log.gz', 'wt') as f:
+        f.writelines(lines)
+    # The map: 10 cm cells over 10 x 7 m (the room at 1 m from the edges), 1 = free,
+    # 0 = wall, -1 = outside the building; rows are x, columns y (beesoft order).
+    nx, ny = 100, 70
+    c = (np.arange(nx) + 0.5) * 0.1 - 1.0
+    r = (np.arange(ny) + 0.5) * 0.1 - 1.0
+    x, y = np.meshgrid(c, r, indexing='ij')
+    inside = (x > 0) & (x < 8) & (y > 0) & (y < 5)
+    pillar = (x > 5.0) & (x < 5.8) & (y > 3.2) & (y < 4.0)
+    near = (x > -0.2) & (x < 8.2) & (y > -0.2) & (y < 5.2)
+    grid = np.where(inside & ~pillar, 1.0, np.where(near, 0.0, -1.0))
+    with gzip.open(folder / 'wean.dat.gz', 'wt') as f:
+        f.write('robot_specifications->resolution 10\n')
+        f.write(f'global_map[0]: {nx} {ny}\n')
+        for row in grid:
+            f.write(' '.join(f'{v:g}' for v in row) + '\n')
+    return folder
