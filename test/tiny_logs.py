@@ -41,9 +41,10 @@ def ray_cast(pose, angles: np.ndarray, max_range: float = 30.0) -> np.ndarray:
 
 
 def poses(n: int) -> np.ndarray:
-    """Return ``n`` poses of a drive along the room, turning slowly (10 Hz, 0.4 m/s)."""
+    """Return ``n`` poses of a drive along the room on an S curve (10 Hz, 0.5 m/s)."""
     k = np.arange(n)
-    return np.column_stack([1.0 + 0.04 * k, 2.0 + 0.01 * k, 0.2 + 0.01 * k])
+    x, y = 1.0 + 0.05 * k, 2.0 + 0.6 * np.sin(0.1 * k)
+    return np.column_stack([x, y, np.arctan2(0.06 * np.cos(0.1 * k), 0.05)])
 
 
 def write_carmen(path: Path, n: int = 40, seed: int = 0) -> Path:
