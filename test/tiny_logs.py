@@ -96,3 +96,39 @@ def write_wean(folder: Path, name: str = 'robotdata1', n: int = 40, seed: int = 
         for row in grid:
             f.write(' '.join(f'{v:g}' for v in row) + '\n')
     return folder
+
+
+def write_york(folder: Path, images: int = 2, seed: int = 0) -> Path:
+    """Write York Urban-format images (``NAME.jpg`` + ``NAME_gt.npz``) of line segments.
+
+    Each 640 x 480 image holds dark segments toward the three orthogonal vanishing points
+    of a random camera rotation (the dataset's intrinsics and y-up convention); the
+    ground truth lists the segments and their vanishing point (1-based, as the dataset).
+    """
+    import cv2
+    from landmark_nav.evaluation.vanishing_points import YORK_FLIP, YORK_K
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    for n in range(images):
+        a, b = rng.uniform(-0.4, 0.4, 2)
+        ca, sa, cb, sb = math.cos(a), math.sin(a), math.cos(b), math.sin(b)
+        rot = np.array([[ca, 0, sa], [0, 1, 0], [-sa, 0, ca]]) @ np.array(
+            [[1, 0, 0], [0, cb, -sb], [0, sb, cb]])
+        img = np.full((480, 640), 200, np.uint8)
+        lines, assoc = [], []
+        for i in range(3):
+            d = rot[:, i]
+            for _ in range(12):
+                p = rng.uniform([60, 60], [580, 420])
+                ray = np.linalg.solve(YORK_K, [p[0], p[1], 1.0])
+                q = YORK_K @ (ray + 0.4 * d)   # a point further along the 3-D direction
+                q = q[:2] / q[2] if q[2] > 1e-3 else p + 80 * d[:2] / np.linalg.norm(d[:2])
+                u = (q - p) / max(np.linalg.norm(q - p), 1e-9)
+                e = p + 70.0 * u
+                cv2.line(img, tuple(int(v) for v in p), tuple(int(v) for v in e), 30, 2)
+                lines.append([p[0], p[1], e[0], e[1]])
+                assoc.append(i + 1)
+        cv2.imwrite(str(folder / f'T{n:03d}.jpg'), img)
+        np.savez(folder / f'T{n:03d}_gt.npz', vp=np.linalg.inv(YORK_FLIP) @ rot,
+                 lines=np.array(lines), vp_association=np.array(assoc))
+    return folder
