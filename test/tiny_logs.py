@@ -132,3 +132,27 @@ def write_york(folder: Path, images: int = 2, seed: int = 0) -> Path:
         np.savez(folder / f'T{n:03d}_gt.npz', vp=np.linalg.inv(YORK_FLIP) @ rot,
                  lines=np.array(lines), vp_association=np.array(assoc))
     return folder
+
+
+def write_camvid(folder: Path, frames: int = 2, seed: int = 0) -> Path:
+    """Write CamVid-format frames (``images/NAME.png``, ``labels_camvid11/NAME.png``).
+
+    480 x 360: a grey road (label 3) widening toward the bottom between green verges and
+    a blue sky, with pixel noise.
+    """
+    import cv2
+    rng = np.random.default_rng(seed)
+    (folder / 'images').mkdir(parents=True, exist_ok=True)
+    (folder / 'labels_camvid11').mkdir(parents=True, exist_ok=True)
+    h, w = 360, 480
+    v, u = np.mgrid[0:h, 0:w]
+    for n in range(frames):
+        half = np.clip((v - 150) * 0.9, 0, None)
+        road = (v > 150) & (np.abs(u - w / 2 - 10 * n) < half)
+        label = np.where(road, 3, np.where(v < 150, 0, 4)).astype(np.uint8)
+        colour = np.array([[200, 170, 120], [110, 110, 110], [60, 140, 60]], float)
+        rgb = colour[np.where(v < 150, 0, np.where(road, 1, 2))]
+        rgb = np.clip(rgb + rng.normal(0, 6, rgb.shape), 0, 255).astype(np.uint8)
+        cv2.imwrite(str(folder / 'images' / f'f{n:03d}.png'), rgb[..., ::-1])
+        cv2.imwrite(str(folder / 'labels_camvid11' / f'f{n:03d}.png'), label)
+    return folder
