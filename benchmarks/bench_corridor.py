@@ -9,9 +9,9 @@ Run from the repository root::
 Both run on rendered frames of the simulated corridor (``landmark_nav.sim.corridor``,
 ``--seed``).
 
-``frames``: per-frame time of :func:`landmark_nav.corridor.frame.measure_frame` (lines, corridor VP,
-heading, lateral position) for each line input, at 640 x 480 and 320 x 240 on the same
-rendered corridor frames (``landmark_nav.sim.corridor``), with the ratios to the
+``frames``: per-frame time of :func:`landmark_nav.corridor.frame.measure_frame` (lines,
+corridor VP, heading, lateral position) for each line input, at 640 x 480 and 320 x 240 on
+the same rendered corridor frames (``landmark_nav.sim.corridor``), with the ratios to the
 HoughLinesP- and LSD-input pipelines in the same run (machines differ), and the
 single-frame errors; the hard cases; then a fused 27 m run and a closed loop of three
 lengths back and forth (:func:`landmark_nav.evaluation.corridor_run.run_corridor`).
@@ -83,7 +83,7 @@ def measure(img, c, model, mount, p):
 
 
 def run_frames(args) -> int:
-    """The ``frames`` subcommand: the timing tables, hard cases and fused runs."""
+    """Run the ``frames`` subcommand: the timing tables, hard cases and fused runs."""
     threads = limit_threads()
     cfg = CorridorConfig()
     cam = default_corridor_camera()
@@ -152,7 +152,7 @@ def run_frames(args) -> int:
 
 
 def run_closed_loop(args) -> int:
-    """The ``loop`` subcommand: run the loop and print its figures."""
+    """Run the ``loop`` subcommand: run the loop and print its figures."""
     os.environ['ROS_DOMAIN_ID'] = str(args.domain)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     import rclpy  # (after the domain is set)
@@ -191,7 +191,6 @@ def run_closed_loop(args) -> int:
           and len(result.legs) == args.lengths)
     print('  acceptance (within 5 cm, no wall touched):', 'met' if ok else 'NOT met')
     return 0
-
 
 
 def main(argv=None) -> int:

@@ -83,7 +83,7 @@ def carmen_metric_scans(path: Path) -> list:
 
 
 def carmen_logs(data: str, logs):
-    """Yield ``(name, scans)`` of each log (:func:`log_paths`) read by :func:`carmen_metric_scans`."""
+    """Yield ``(name, scans)`` of each log (:func:`log_paths`), :func:`carmen_metric_scans`."""
     for name, path in log_paths(data, logs):
         yield name, carmen_metric_scans(path)
 
@@ -141,7 +141,7 @@ def summary(results: dict) -> str:
 
 
 def run_metrics(args) -> int:
-    """The ``metrics`` subcommand: the tables of every log and the summary."""
+    """Run the ``metrics`` subcommand: the tables of every log and the summary."""
     results = {}
     for name, path in log_paths(args.data, args.logs):
         if args.direct:
@@ -183,7 +183,7 @@ def run_metrics(args) -> int:
 
 
 def run_corner_repeatability(args) -> int:
-    """The ``corner-repeatability`` subcommand: one row per log."""
+    """Run the ``corner-repeatability`` subcommand: one row per log."""
     changes = parse_set(args.set)
     params = CornerParams(method=args.method, **changes)
     base = CornerParams(method=args.method) if changes else None

@@ -32,11 +32,11 @@ array operations, one sparse scan, grouping of the sparse pixels only).
 ``real`` (needs the test extra ``pupil-apriltags``, see requirements-test.txt, and the York
 Urban photographs in ``../shared/data/york_urban_train`` or any folder of photographs given
 with ``--data DIR``): landmarks against AprilTag 3 and OpenCV ArUco composited into real
-photographs. The same trials (background, pose, print, blur, gain/gamma, noise, JPEG 70) are rendered
-once per marker type and run through the landmark detector, AprilTag tag36h11 at decimate
-1 and 2 and ArUco DICT_6X6_250 with sub-pixel corners, single-threaded, in one run; it
-prints detection against px per module and tilt, wrong codes, false detections, pose
-errors at 1 m and 2.2 m and the time per frame with its ratios. The method and every
+photographs. The same trials (background, pose, print, blur, gain/gamma, noise, JPEG 70)
+are rendered once per marker type and run through the landmark detector, AprilTag tag36h11
+at decimate 1 and 2 and ArUco DICT_6X6_250 with sub-pixel corners, single-threaded, in one
+run; it prints detection against px per module and tilt, wrong codes, false detections,
+pose errors at 1 m and 2.2 m and the time per frame with its ratios. The method and every
 option are those of :mod:`landmark_nav.evaluation.landmarks_real` (this subcommand is its
 command line with the benchmark's defaults: 100 trials per size, 150 per distance, seed 1).
 
@@ -125,7 +125,7 @@ def reference_corner_stage(img: np.ndarray) -> np.ndarray:
 
 
 def run_detector(args) -> int:
-    """The ``detector`` subcommand: render the frames, time both detectors, print the table."""
+    """Run the ``detector`` subcommand: render the frames, time both detectors, print the table."""
     if args.threads is not None:
         cv2.setNumThreads(args.threads)
     rng = np.random.default_rng(args.seed)
@@ -217,7 +217,7 @@ def _median_ms(fn, n: int) -> float:
 
 
 def run_camera_sim(args) -> int:
-    """The ``camera-sim`` subcommand: print the timings."""
+    """Run the ``camera-sim`` subcommand: print the timings."""
     n = args.frames
     cam = default_camera()
     sim = simulator_for(cam)

@@ -81,7 +81,7 @@ def clusters_table(name: str, scans: list, repeat: int) -> None:
 
 
 def run_clusters(args) -> int:
-    """The ``clusters`` subcommand."""
+    """Run the ``clusters`` subcommand."""
     if args.bag:
         scans = bag_scans(args.bag, args.scans)
         clusters_table(f'{args.bag} ({len(scans[0].ranges)} beams)', scans, args.repeat)
@@ -141,7 +141,7 @@ def time_scans(scans: List[Scan], repeat: int) -> Dict[str, float]:
 
 
 def run_logs(args) -> int:
-    """The ``logs`` subcommand."""
+    """Run the ``logs`` subcommand."""
     sets = {name: carmen_scans(path, args.scans)
             for name, path in log_paths(args.data, args.logs)}
     if args.sim:

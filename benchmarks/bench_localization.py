@@ -67,7 +67,7 @@ def median_ms(fn: Callable[[], object], runs: int) -> float:
 
 
 def run_sonar(args) -> int:
-    """The ``sonar`` subcommand: the update and ray-cast times."""
+    """Run the ``sonar`` subcommand: the update and ray-cast times."""
     runs = args.runs
     if args.bag:
         if not Path(args.bag, 'metadata.yaml').is_file():
@@ -108,9 +108,8 @@ def run_sonar(args) -> int:
     return 0
 
 
-
 def run_model(args) -> int:
-    """The ``model`` subcommand: one row per line source."""
+    """Run the ``model`` subcommand: one row per line source."""
     limit_threads()                      # as in the node
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     by_seed = [run_hallway_methods(s, MODEL_LINE_METHODS, HallwayRunConfig(max_frames=args.frames))

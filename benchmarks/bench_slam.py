@@ -9,8 +9,9 @@ Run from the repository root::
 Both run on generated input: a random map (``--seed``) and the simulator's ``ambiguous``
 scenario (``--seeds``).
 
-``step-time``: one EKF-SLAM step (prediction + ICNN association + update). For each map size N a filter is built with N landmarks scattered over a 40 m x 40 m area
-(augmented with eqs. 38-48 from one pose) and then driven in a circle; every step is
+``step-time``: one EKF-SLAM step (prediction + ICNN association + update). For each map
+size N a filter is built with N landmarks scattered over a 40 m x 40 m area (augmented with
+eqs. 38-48 from one pose) and then driven in a circle; every step is
 :meth:`EkfSlam.predict` + :meth:`EkfSlam.update` with 10 observations of the 10 landmarks
 nearest to the robot (all associated: the update is a 20-row batch), the PSD check of P
 included. The script prints the median and 90th percentile step time, the split into
@@ -23,19 +24,21 @@ BLAS threads: ``--threads`` (default 1) is exported as ``OPENBLAS_NUM_THREADS`` 
 small and threading costs more than it gives. Targets: <= 1 ms (N = 50), <= 2 ms (100),
 <= 6 ms (200).
 
-``ambiguous``: The ``ambiguous`` scenario (:func:`landmark_nav.sim.scenarios.ambiguous_world`): the robot
-maps an irregular row of 0.3 m posts whose corners of the same kind are 0.45-0.77 m apart,
-then drives a 72 m loop with the laser blind, so that its pose error grows to tens of
-centimetres and degrees, and re-observes the row from 2.5 m. For every seed the same
-simulated run goes through the filter with the default :class:`SlamParams` once per method:
-``ICNN`` (the chapter's: ``association='icnn'``, ``joint_check=False``), ``JCBB`` and
-``ICNN+JOINT`` (the filter's default: ICNN whose hypothesis, when jointly incompatible at a
-gross-error level, is decided by JCBB) (nothing else differs), and is scored by
-:func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth corner
-ids). Printed per seed: the odometry error accumulated over the blackout (position, heading),
-then per method the wrong associations out of all associations, the ATE RMSE over the scans
-after the blackout, the mapped landmarks against the true visible corners, duplicated and
-ghost landmarks and the filter time. The last line sums the wrong associations.
+``ambiguous``: the ``ambiguous`` scenario
+(:func:`landmark_nav.sim.scenarios.ambiguous_world`): the robot maps an irregular row of
+0.3 m posts whose corners of the same kind are 0.45-0.77 m apart, then drives a 72 m loop
+with the laser blind, so that its pose error grows to tens of centimetres and degrees, and
+re-observes the row from 2.5 m. For every seed the same simulated run goes through the
+filter with the default :class:`SlamParams` once per method: ``ICNN`` (the chapter's:
+``association='icnn'``, ``joint_check=False``), ``JCBB`` and ``ICNN+JOINT`` (the filter's
+default: ICNN whose hypothesis, when jointly incompatible at a gross-error level, is
+decided by JCBB) (nothing else differs), and is scored by
+:func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth
+corner ids). Printed per seed: the odometry error accumulated over the blackout (position,
+heading), then per method the wrong associations out of all associations, the ATE RMSE over
+the scans after the blackout, the mapped landmarks against the true visible corners,
+duplicated and ghost landmarks and the filter time. The last line sums the wrong
+associations.
 """
 
 import argparse
@@ -194,7 +197,7 @@ def run_seed(seed: int) -> Dict[str, object]:
 
 
 def run_ambiguous(args) -> int:
-    """The ``ambiguous`` subcommand: one line per seed, then the sums."""
+    """Run the ``ambiguous`` subcommand: one line per seed, then the sums."""
     seeds = parse_seeds(args.seeds)
     head = (f'{"seed":>4} {"blackout drift":>15} | ' + ' | '.join(
         f'{m.upper()}: {"wrong":>9} {"ATE after":>9} {"mapped":>6} {"dup":>3} {"ghost":>5} '
@@ -221,7 +224,7 @@ def run_ambiguous(args) -> int:
 
 
 def run_step_time(args) -> int:
-    """The ``step-time`` subcommand: one line per map size."""
+    """Run the ``step-time`` subcommand: one line per map size."""
     print(f'EKF-SLAM step = predict + ICNN + update with {OBS} observations '
           f'(BLAS threads: {os.environ["OPENBLAS_NUM_THREADS"]})')
     head = (f'{"N":>4} {"n":>4} {"step ms":>8} {"p90":>6} {"target":>6} {"pred":>6} '

@@ -186,6 +186,7 @@ each part aligned on its own).
 import argparse
 from collections import Counter
 from dataclasses import replace
+import json
 import math
 from multiprocessing import Pool
 import os
@@ -468,7 +469,7 @@ def scale_odometry(scenario, factor: float) -> None:
 
 
 def run_evaluate(args) -> int:
-    """The ``evaluate`` subcommand: one line per log, seed and landmark type."""
+    """Run the ``evaluate`` subcommand: one line per log, seed and landmark type."""
     logs = log_paths(args.data, args.logs)
     prm = None  # evaluate_bag: SlamParams with the bag's stated noise model
     given = {'prune_misses': args.prune_misses, 'line_floor': args.line_floor,
@@ -503,9 +504,8 @@ def run_evaluate(args) -> int:
     return 0
 
 
-
 def run_diagnose(args) -> int:
-    """The ``diagnose`` subcommand: one line per log."""
+    """Run the ``diagnose`` subcommand: one line per log."""
     filter_noise = None if args.filter_noise is None else odometry_noise_model(args.filter_noise)
     logs = log_paths(args.data, args.logs)
     given = {'line_floor': args.line_floor,
@@ -535,9 +535,8 @@ def run_diagnose(args) -> int:
     return 0
 
 
-
 def run_grid(args) -> int:
-    """The ``grid`` subcommand: one line per run, then the summary."""
+    """Run the ``grid`` subcommand: one line per run, then the summary."""
     logs = log_paths(args.data, args.logs)
     options = params_file_options(args.params_file or str(config_path('ekf_slam_real_logs')))
     options.update(parse_set(args.set))
@@ -565,9 +564,8 @@ def run_grid(args) -> int:
     return 0
 
 
-
 def run_scan_matching(args) -> int:
-    """The ``scan-matching`` subcommand: one line per run."""
+    """Run the ``scan-matching`` subcommand: one line per run."""
     if args.slam:
         options = params_file_options(args.params_file
                                       or str(config_path('ekf_slam_real_logs')))
@@ -608,9 +606,8 @@ def run_scan_matching(args) -> int:
     return 0
 
 
-
 def run_wean(args) -> int:
-    """The ``wean`` subcommand: one line per log (and per part of a bridged log)."""
+    """Run the ``wean`` subcommand: one line per log (and per part of a bridged log)."""
     extra = parse_set(args.set)
     extra, frontend = split_frontend(extra)
     logs = log_paths(args.data, args.logs, suffix='.log.gz')

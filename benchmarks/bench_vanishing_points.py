@@ -7,13 +7,14 @@ Run from the repository root::
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
-with ``--data DIR``, the first ``--images N`` of them), each line input (the chapter's segmented Hough, OpenCV HoughLinesP, OpenCV LSD)
-feeds the Manhattan-frame estimator (:func:`landmark_nav.corridor.vanishing_point.
-manhattan_frame`); the chapter's own clustering (§3.1.2) on the segmented Hough lines is
-reported beside it. Per image at 640 x 480 and 320 x 240 (INTER_AREA resize, K scaled):
-the angular error of the direction closest to the optical axis, the errors of all three
-directions, and the best of ``R`` times of the line and VP stages. Times are also given
-as ratios to LSD's line stage on the same frames in the same run (machines differ).
+with ``--data DIR``, the first ``--images N`` of them), each line input (the chapter's
+segmented Hough, OpenCV HoughLinesP, OpenCV LSD) feeds the Manhattan-frame estimator
+(:func:`landmark_nav.corridor.vanishing_point.manhattan_frame`); the chapter's own
+clustering (§3.1.2) on the segmented Hough lines is reported beside it. Per image at 640 x
+480 and 320 x 240 (INTER_AREA resize, K scaled): the angular error of the direction closest
+to the optical axis, the errors of all three directions, and the best of ``R`` times of the
+line and VP stages. Times are also given as ratios to LSD's line stage on the same frames
+in the same run (machines differ).
 
 Acceptance (640 x 480, segmented Hough): axis error <= 2 deg on >= 90 % and median <= 1 deg;
 median over all three directions <= 1.3 deg.

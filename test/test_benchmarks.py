@@ -99,7 +99,7 @@ DDS_RUNS = {('bench_corridor.py', 'loop'), ('bench_node_cpu.py', None),
 
 # Runs each (script, argv) of a JSON list as ``__main__`` in this interpreter; writes
 # [[exit status, output], ...] to the file named by argv[2].
-_RUNNER = r'''
+_RUNNER = r"""
 import contextlib, io, json, runpy, sys, traceback
 folder, result = sys.argv[1:3]
 sys.path.insert(0, folder)
@@ -122,7 +122,7 @@ for script, argv in jobs:
     out.append([code, buf.getvalue()])
 with open(result, 'w') as f:
     json.dump(out, f)
-'''
+"""
 
 
 def _is_dds(script: str, argv: list) -> bool:

@@ -1,4 +1,4 @@
-"""Every command printed in README.md and docs/ names what exists and options it accepts.
+r"""Every command printed in README.md and docs/ names what exists and options it accepts.
 
 The commands are read from the fenced code blocks (``sh``, ``bash``, ``console`` or no
 language) and from the inline code spans of the prose that start like a command
@@ -175,7 +175,7 @@ def _arguments(words: List[str]) -> List[str]:
 
 
 # One child interpreter prints the --help of each job: [kind, target, argv] -> output.
-_HELP_RUNNER = r'''
+_HELP_RUNNER = r"""
 import contextlib, importlib, io, json, runpy, sys
 repo, result = sys.argv[1:3]
 sys.path.insert(0, repo + '/benchmarks')
@@ -203,7 +203,7 @@ for kind, target, argv in jobs:
     out.append([code, buf.getvalue()])
 with open(result, 'w') as f:
     json.dump(out, f)
-'''
+"""
 
 
 def _help_job(words: List[str]) -> Tuple[Optional[Tuple[str, str, tuple]], Optional[str]]:
@@ -285,8 +285,8 @@ def test_command_extraction(tmp_path):
         ['python', 'benchmarks/bench_x.py', 'run', '--seeds', '0']]
 
 
-def test_every_doc_command_runs_as_printed(tmp_path):
-    commands = [c for path in DOCS for c in doc_commands(path)]
+def check_commands(commands: List[Tuple[str, List[str]]], tmp_path: Path) -> List[str]:
+    """Return a line per problem of the commands (module docstring)."""
     problems, targets = [], _make_targets()
     first_jobs: Dict[tuple, tuple] = {}
     for where, words in commands:
@@ -340,6 +340,39 @@ def test_every_doc_command_runs_as_printed(tmp_path):
         for opt in _options(words):
             if opt not in accepted:
                 problems.append(f'{where}: {" ".join(job[2][:-1])}: {opt} is not an option')
+    return problems
+
+
+def test_every_doc_command_runs_as_printed(tmp_path):
+    problems = check_commands([c for path in DOCS for c in doc_commands(path)], tmp_path)
     assert not problems, f'{len(problems)} doc commands do not run as printed:\n' + '\n'.join(
         problems)
 
+
+def test_check_finds_what_does_not_run(tmp_path):
+    doc = tmp_path / 'x.md'
+    doc.write_text('```sh\nmake demo nothing\nlandmark_nav info BAG --no-such-option\n'
+                   'landmark_nav no-such-command\nlandmark_nav emulate urg --motion rotate\n'
+                   'python benchmarks/bench_lines.py clusters --scans 3 --bogus 1\n'
+                   'python benchmarks/bench_lines.py --scans 3\n'
+                   'python benchmarks/no_such.py\nekf_slam --rate 2 --ros-args -p a:=1\n'
+                   'no_such_node --ros-args\n```\n')
+    commands = doc_commands(doc)
+    assert [w[0] for _, w in commands] == [
+        'make', 'landmark_nav', 'landmark_nav', 'landmark_nav', 'python', 'python', 'python',
+        'ekf_slam']   # no_such_node is not a command of the project
+    subs = _subcommands(_help_text([sys.executable, '-m', 'landmark_nav.tools.cli', '--help']))
+    assert 'emulate' in subs
+    assert check_commands(commands, tmp_path) == [
+        "x.md:2: make ['nothing']: no such target",
+        'x.md:8: benchmarks/no_such.py: no such script',
+        "x.md:9: ekf_slam is a ROS node: options ['--rate'] before --ros-args",
+        f"x.md:4: landmark_nav: subcommand 'no-such-command' not one of {subs}",
+        "x.md:7: benchmarks/bench_lines.py: subcommand '--scans' not one of "
+        "['clusters', 'logs']",
+        'x.md:3: landmark_nav info: --no-such-option is not an option',
+        'x.md:6: benchmarks/bench_lines.py clusters: --bogus is not an option']
+
+
+def _help_text(argv: List[str]) -> str:
+    return subprocess.run(argv, capture_output=True, text=True, cwd=REPO).stdout

@@ -7,12 +7,13 @@ Run from the repository root::
 NAME: office, hallway, calibration or corridor.
 
 Reads ``bags/<name>/expected.yaml`` (``--bags DIR``: ``DIR/<name>/expected.yaml``; its runs
-and figures, see :mod:`landmark_nav.testing.golden`), runs every run on the committed bag (seed 1) twice --
-the second time with the BLAS thread pools limited to one thread, to see run-to-run
-floating-point variation -- and on ``landmark_nav simulate <name> --seed S`` recordings of
-the other seeds, then prints per figure the seed-1 value, the largest relative difference
-between the two seed-1 runs and the min / max over the seeds. ``--write`` stores the seed-1
-values and the seed spread back into expected.yaml (the tolerances are left as they are).
+and figures, see :mod:`landmark_nav.testing.golden`), runs every run on the committed bag
+(seed 1) twice -- the second time with the BLAS thread pools limited to one thread, to see
+run-to-run floating-point variation -- and on ``landmark_nav simulate <name> --seed S``
+recordings of the other seeds, then prints per figure the seed-1 value, the largest
+relative difference between the two seed-1 runs and the min / max over the seeds.
+``--write`` stores the seed-1 values and the seed spread back into expected.yaml (the
+tolerances are left as they are).
 """
 
 import argparse
