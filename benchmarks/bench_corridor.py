@@ -40,7 +40,6 @@ Acceptance (issue): within 5 cm of the centre line on 3 lengths, never touching 
 start transient from 15 cm off).
 """
 
-import argparse
 import math
 import os
 from pathlib import Path
@@ -50,7 +49,7 @@ import sys
 import tempfile
 import time
 
-from common import REPO
+from common import REPO, run_subcommand, subcommand_parser
 import cv2
 from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame
 from landmark_nav.corridor.lateral import CorridorModel
@@ -195,8 +194,7 @@ def run_closed_loop(args) -> int:
 
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('frames', help='per-frame pipeline, hard cases and fused runs offline')
     p.add_argument('--frames', type=int, default=40)
     p.add_argument('--seed', type=int, default=0)
@@ -209,8 +207,7 @@ def main(argv=None) -> int:
     p.add_argument('--lengths', type=int, default=3, help='legs, back and forth')
     p.add_argument('--domain', type=int, default=80 + os.getpid() % 10)
     p.set_defaults(run=run_closed_loop)
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

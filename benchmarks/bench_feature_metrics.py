@@ -44,14 +44,14 @@ of those new corners that are re-detected in the next scan themselves (``new: pe
 re-detected / opportunities``).
 """
 
-import argparse
 import json
 from pathlib import Path
 import sys
 import tempfile
 import time
 
-from common import add_data_argument, log_paths, parse_set
+from common import (add_logs_argument, log_paths, parse_set, run_subcommand,
+                    subcommand_parser)
 from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_truth_free,
                                                   sensor_facts)
 from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repeatability,
@@ -243,12 +243,9 @@ def run_corner_repeatability(args) -> int:
 
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('metrics', help='the truth-free feature metrics of every log')
-    p.add_argument('logs', nargs='*', default=list(LOGS),
-                   help='log names in --data or log paths (default: the six Carmen logs)')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', LOGS)
     p.add_argument('--scans', type=int, default=20, help='scans drawn for the PLE figures')
     p.add_argument('--seed', type=int, default=0, help='seed of the draw')
     p.add_argument('--sigma-r', type=float, default=0.01,
@@ -260,15 +257,12 @@ def main(argv=None) -> int:
     p.set_defaults(run=run_metrics)
     p = sub.add_parser('corner-repeatability',
                        help='corner re-detection between consecutive scans, and the misses')
-    p.add_argument('logs', nargs='*', default=list(LOGS),
-                   help='log names in --data or log paths (default: the six Carmen logs)')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', LOGS)
     p.add_argument('--method', default='minus_cosine', help='corner detector')
     p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                    help='a CornerParams field (the value a Python literal)')
     p.set_defaults(run=run_corner_repeatability)
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

@@ -54,14 +54,13 @@ Target: render <= 20 ms per frame. As an in-run reference it also times
 ``cv2.warpPerspective`` of one 640 x 480 uint8 image (the cost of a single full-frame warp).
 """
 
-import argparse
 import math
 import statistics
 import sys
 import time
 from typing import Callable, Tuple
 
-from common import REPO  # noqa: F401 (puts the checkout on sys.path)
+from common import run_subcommand, subcommand_parser
 import cv2
 from landmark_nav.evaluation import landmarks_real
 from landmark_nav.evaluation.vision import (backdrop, landmark_in_view, random_code,
@@ -258,8 +257,7 @@ def run_camera_sim(args) -> int:
 def main(argv=None) -> int:
     """Parse the subcommand and run it (``real``: the options of ``landmarks_real``)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('detector', help='the detector against ArUco on rendered frames')
     p.add_argument('--frames', type=int, default=60, help='frames of each kind')
     p.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
@@ -275,8 +273,7 @@ def main(argv=None) -> int:
     p.set_defaults(run=run_camera_sim)
     if argv[:1] == ['real']:
         return landmarks_real.main(argv[1:], prog=f'{ap.prog} real')
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

@@ -31,13 +31,12 @@ scans and its ratio to the baseline's median (targets: split_merge <= 2x, alfa <
 every log). ``--sim`` adds the simulated office run's 1081-beam scans.
 """
 
-import argparse
 import statistics
 import sys
 from typing import Callable, Dict, List, Tuple
 
-from common import (add_data_argument, approx_poly, bag_scans, best_ms, CARMEN_LOGS, LASERS,
-                    log_paths, office_scans, spread)
+from common import (add_logs_argument, approx_poly, bag_scans, best_ms, CARMEN_LOGS, LASERS,
+                    log_paths, office_scans, run_subcommand, spread, subcommand_parser)
 from landmark_nav.evaluation.scan_metrics import approx_poly_segments
 from landmark_nav.importers.carmen import read_carmen_scans
 from landmark_nav.laser.lines import extract_lines, LineParams, METHODS
@@ -162,8 +161,7 @@ def run_logs(args) -> int:
 
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('clusters', help='the extractors alone on simulated clusters')
     p.add_argument('--scans', type=int, default=200, help='scans per laser')
     p.add_argument('--repeat', type=int, default=5, help='timing repeats per scan (best)')
@@ -171,15 +169,12 @@ def main(argv=None) -> int:
                    help="a recorded bag's /scan instead of the simulated office scans")
     p.set_defaults(run=run_clusters)
     p = sub.add_parser('logs', help='whole pipelines on real Carmen scans')
-    p.add_argument('logs', nargs='*', default=list(CARMEN_LOGS),
-                   help='log names in --data or log paths (default: the six Carmen logs)')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', CARMEN_LOGS)
     p.add_argument('--scans', type=int, default=200, help='scans per log')
     p.add_argument('--repeat', type=int, default=5, help='timing repeats per scan (best)')
     p.add_argument('--sim', action='store_true', help='also the 1081-beam office scans')
     p.set_defaults(run=run_logs)
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

@@ -32,14 +32,13 @@ absolute times vary between machines and with load.
 Target (issue): >= 10 frames/s end to end at 320 x 240.
 """
 
-import argparse
 import math
 from pathlib import Path
 import sys
 import time
 from typing import Callable, List
 
-from common import REPO  # noqa: F401 (puts the checkout on sys.path)
+from common import run_subcommand, subcommand_parser
 from landmark_nav.evaluation.localization import LocalizationInput
 from landmark_nav.evaluation.localization_bags import load_bag_input, world_map
 from landmark_nav.evaluation.model_localization import (HallwayRunConfig, run_hallway_methods,
@@ -138,14 +137,12 @@ def run_model(args) -> int:
         print(f'{method:>16} {pm:10.1f} {pr:7.1f} {hm:8.2f}d {mm:9.1f} {ne:7.0f}% {lm:9.1f} '
               f'{fm:10.1f} '
               f'{tot:9.1f} {1e3 / tot:9.1f} {tot / lsd_total:6.2f}')
-
     return 0
 
 
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('sonar', help="time of the sonar EKF / UKF core's steps")
     p.add_argument('--runs', type=int, default=500, help='repetitions per figure (median)')
     p.add_argument('--bag', default=None, metavar='DIR',
@@ -157,8 +154,7 @@ def main(argv=None) -> int:
     p.add_argument('--seeds', type=int, default=1, help='number of seeds')
     p.add_argument('--first-seed', type=int, default=0)
     p.set_defaults(run=run_model)
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

@@ -41,7 +41,6 @@ duplicated and ghost landmarks and the filter time. The last line sums the wrong
 associations.
 """
 
-import argparse
 import math
 import os
 from pathlib import Path
@@ -65,6 +64,7 @@ for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ[_var] = _threads_from_argv()
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from common import run_subcommand, subcommand_parser  # noqa: E402
 from landmark_nav.evaluation.slam import run_slam, score_run  # noqa: E402
 from landmark_nav.geometry import compose, inverse_transform_points, wrap_angle  # noqa: E402
 from landmark_nav.sim import run_scenario  # noqa: E402
@@ -249,8 +249,7 @@ def run_step_time(args) -> int:
 
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('step-time', help='time of one filter step against the map size')
     p.add_argument('--landmarks', type=int, nargs='+', default=[50, 100, 200])
     p.add_argument('--steps', type=int, default=200, help='timed steps per map size')
@@ -260,8 +259,7 @@ def main(argv=None) -> int:
     p = sub.add_parser('ambiguous', help='ICNN against JCBB on the ambiguous scenario')
     p.add_argument('--seeds', default='0-9', help="simulator seeds, e.g. '0-9' or '1,4,7'")
     p.set_defaults(run=run_ambiguous)
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

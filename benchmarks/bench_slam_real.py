@@ -183,7 +183,6 @@ line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_s
 each part aligned on its own).
 """
 
-import argparse
 from collections import Counter
 from dataclasses import replace
 import json
@@ -195,7 +194,8 @@ import sys
 import tempfile
 
 from bench_node_cpu import params_file_options, split_frontend
-from common import add_data_argument, CARMEN_LOGS, data_folder, log_paths, parse_set
+from common import (add_logs_argument, CARMEN_LOGS, data_folder, log_paths, parse_set,
+                    run_subcommand, subcommand_parser)
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnosis,
                                                      load_occupancy_grid, run_segments,
@@ -657,12 +657,9 @@ def run_wean(args) -> int:
 
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest='command', required=True)
+    ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('evaluate', help='landmark_nav evaluate on each imported log')
-    p.add_argument('logs', nargs='*', default=list(CARMEN_LOGS),
-                   help='log names in --data or log paths')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', CARMEN_LOGS)
     p.add_argument('--landmarks', nargs='+', default=['corners', 'lines', 'both'])
     p.add_argument('--association', default='icnn', choices=['icnn', 'jcbb'])
     p.add_argument('--prune-misses', type=int, default=None)
@@ -678,9 +675,7 @@ def main(argv=None) -> int:
     p.set_defaults(run=run_evaluate)
     p = sub.add_parser('diagnose',
                        help='consistency figures of the filter on each imported log')
-    p.add_argument('logs', nargs='*', default=list(CARMEN_LOGS),
-                   help='log names in --data or log paths')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', CARMEN_LOGS)
     p.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--line-floor', type=float, default=None)
@@ -711,9 +706,7 @@ def main(argv=None) -> int:
                    help="the filter's odometry noise model instead of the bag's")
     p.set_defaults(run=run_diagnose)
     p = sub.add_parser('grid', help='drift runs with a parameter file: per run and summary')
-    p.add_argument('logs', nargs='*', default=list(CARMEN_LOGS),
-                   help='log names in --data or log paths')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', CARMEN_LOGS)
     p.add_argument('--seeds', nargs='+', type=int, default=[0, 1])
     p.add_argument('--params-file', default=None,
                    help='ekf_slam parameter file (default: the ekf_slam_real_logs profile)')
@@ -724,9 +717,7 @@ def main(argv=None) -> int:
     p.set_defaults(run=run_grid)
     p = sub.add_parser('scan-matching',
                        help='dead reckoning by ICP of consecutive scans (and SLAM on it)')
-    p.add_argument('logs', nargs='*', default=list(CARMEN_LOGS),
-                   help='log names in --data or log paths')
-    add_data_argument(p, 'carmen')
+    add_logs_argument(p, 'carmen', CARMEN_LOGS)
     p.add_argument('--seeds', nargs='+', type=int, default=[0, 1])
     p.add_argument('--drift', default=None,
                    help="the importer's drift model (default pioneer; none: the reference's "
@@ -740,9 +731,7 @@ def main(argv=None) -> int:
                    help="landmark types (default: the parameter file's)")
     p.set_defaults(run=run_scan_matching)
     p = sub.add_parser('wean', help='EKF-SLAM on the Wean logs judged on the occupancy map')
-    p.add_argument('logs', nargs='*', default=list(WEAN_LOGS),
-                   help='log names in --data or log paths')
-    add_data_argument(p, 'wean')
+    add_logs_argument(p, 'wean', WEAN_LOGS)
     p.add_argument('--map', default=None, metavar='FILE',
                    help='beesoft occupancy map (default: DATA/wean.dat.gz)')
     p.add_argument('--landmarks', default='both', choices=['corners', 'lines', 'both'])
@@ -752,8 +741,7 @@ def main(argv=None) -> int:
                    help='scale the raw odometry translations before the filter (a test of '
                         'the odometry scale against the grid; default 1)')
     p.set_defaults(run=run_wean)
-    args = ap.parse_args(argv)
-    return args.run(args)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':

@@ -13,7 +13,7 @@ import math
 from pathlib import Path
 import sys
 import time
-from typing import Callable, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Iterable, List, Optional, Tuple
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -134,3 +134,24 @@ def bag_scans(bag: str, count: int, max_seconds: Optional[float] = None) -> list
     if not scans:
         sys.exit(f'error: bag {bag} has no /scan message')
     return spread(scans, count)
+
+
+def subcommand_parser(doc: str) -> Tuple[argparse.ArgumentParser, Any]:
+    """Return a parser described by ``doc``'s first line and its subcommand group."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    return parser, parser.add_subparsers(dest='command', required=True)
+
+
+def add_logs_argument(parser: argparse.ArgumentParser, folder: str, logs: Iterable[str]
+                      ) -> None:
+    """Add the positional LOG arguments (default ``logs``) and ``--data DIR`` (``folder``)."""
+    parser.add_argument('logs', nargs='*', default=list(logs), metavar='LOG',
+                        help='log names in --data DIR or paths to log files (default: '
+                             + ' '.join(logs) + ')')
+    add_data_argument(parser, folder)
+
+
+def run_subcommand(parser: argparse.ArgumentParser, argv=None) -> int:
+    """Parse ``argv`` and run the chosen subcommand's ``run`` function; return its status."""
+    args = parser.parse_args(argv)
+    return args.run(args)
