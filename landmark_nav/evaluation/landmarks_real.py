@@ -1,7 +1,7 @@
 """Landmarks, AprilTags and ArUco markers composited into real photographs, side by side.
 
 Run ``python -m landmark_nav.evaluation.landmarks_real [detection|pose|false|all]`` (see
-``--help``; ``benchmarks/bench_landmarks_real.py`` runs the same functions with the
+``--help``; ``benchmarks/bench_landmarks.py real`` runs the same functions with the
 benchmark's sizes). Backgrounds are the real photographs of a folder (by default the York
 Urban images in ``../shared/data/york_urban_train``, found with
 :func:`landmark_nav.testing.shared_data`), converted to grey and cut to 640 x 480.
