@@ -2,7 +2,7 @@ r"""Every command printed in README.md and docs/ names what exists and options i
 
 The commands are read from the fenced code blocks (``sh``, ``bash``, ``console`` or no
 language) and from the inline code spans of the prose that start like a command
-(``landmark_nav ...``, ``ros2 run landmark_nav ...``, ``[python] benchmarks/...``,
+(``landmark_nav ...``, ``ros2 run|launch landmark_nav ...``, ``[python] benchmarks/...``,
 ``python -m landmark_nav...``, ``make ...``, a console script of ``setup.py``, optionally
 after ``.venv/bin/`` and ``NAME=value`` environment settings; a span of one word is a name,
 not a command). A line is split at ``&&``, ``||``, ``;``, ``|`` and a trailing ``&``; a
@@ -13,6 +13,8 @@ Checked per command:
 * ``landmark_nav SUB``: ``SUB`` is a subcommand of the command line;
 * ``ros2 run landmark_nav EXE`` and ``EXE`` itself: ``EXE`` is a console script of
   ``setup.py``; a ROS node's options all come after ``--ros-args``;
+* ``ros2 launch landmark_nav FILE name:=value``: ``launch/FILE`` exists and declares each
+  ``name``;
 * ``python benchmarks/NAME.py [SUB]``: the script exists and, when it has subcommands,
   ``SUB`` is one of them; ``python -m MODULE``: the module exists;
 * ``make TARGET``: the Makefile has the target;
@@ -109,7 +111,8 @@ def _is_ours(words: List[str]) -> bool:
         return False
     head = words[0]
     return (head in SCRIPTS or head == 'make'
-            or (head == 'ros2' and words[1:3] == ['run', 'landmark_nav'])
+            or (head == 'ros2' and words[1:2] in (['run'], ['launch'])
+                and words[2:3] == ['landmark_nav'])
             or (head in ('python', 'python3') and len(words) > 1
                 and (words[1].startswith('benchmarks/')
                      or (words[1] == '-m' and len(words) > 2
@@ -209,6 +212,8 @@ with open(result, 'w') as f:
 def _help_job(words: List[str]) -> Tuple[Optional[Tuple[str, str, tuple]], Optional[str]]:
     """Return the --help job of a command (None: nothing to ask) or a problem."""
     head = words[0]
+    if head == 'ros2' and words[1] == 'launch':
+        return None, _launch_problem(words[3:])
     if head == 'ros2':
         words = words[3:]
         if not words:
@@ -231,6 +236,19 @@ def _help_job(words: List[str]) -> Tuple[Optional[Tuple[str, str, tuple]], Optio
         return None, (f'{head} is a ROS node: options {opts} before --ros-args'
                       if opts else None)
     return ('console', SCRIPTS[head], (head, '--help')), None
+
+
+def _launch_problem(words: List[str]) -> Optional[str]:
+    """Check ``ros2 launch landmark_nav FILE name:=value ...``: the file and its arguments."""
+    if not words:
+        return 'ros2 launch landmark_nav without a launch file'
+    path = REPO / 'launch' / words[0]
+    if not path.is_file():
+        return f'{words[0]}: no such launch file in launch/'
+    declared = set(re.findall(r"DeclareLaunchArgument\(\s*'([\w]+)'", path.read_text()))
+    unknown = [w.split(':=')[0] for w in words[1:]
+               if ':=' in w and w.split(':=')[0] not in declared]
+    return f'{words[0]}: no launch argument {unknown}' if unknown else None
 
 
 def _subcommands(help_text: str) -> List[str]:
@@ -356,17 +374,21 @@ def test_check_finds_what_does_not_run(tmp_path):
                    'python benchmarks/bench_lines.py clusters --scans 3 --bogus 1\n'
                    'python benchmarks/bench_lines.py --scans 3\n'
                    'python benchmarks/no_such.py\nekf_slam --rate 2 --ros-args -p a:=1\n'
-                   'no_such_node --ros-args\n```\n')
+                   'no_such_node --ros-args\n'
+                   'ros2 launch landmark_nav slam.launch.py laser_port:=/dev/x no_arg:=1\n'
+                   'ros2 launch landmark_nav none.launch.py\n```\n')
     commands = doc_commands(doc)
     assert [w[0] for _, w in commands] == [
         'make', 'landmark_nav', 'landmark_nav', 'landmark_nav', 'python', 'python', 'python',
-        'ekf_slam']   # no_such_node is not a command of the project
+        'ekf_slam', 'ros2', 'ros2']   # no_such_node is not a command of the project
     subs = _subcommands(_help_text([sys.executable, '-m', 'landmark_nav.tools.cli', '--help']))
     assert 'emulate' in subs
     assert check_commands(commands, tmp_path) == [
         "x.md:2: make ['nothing']: no such target",
         'x.md:8: benchmarks/no_such.py: no such script',
         "x.md:9: ekf_slam is a ROS node: options ['--rate'] before --ros-args",
+        "x.md:11: slam.launch.py: no launch argument ['no_arg']",
+        'x.md:12: none.launch.py: no such launch file in launch/',
         f"x.md:4: landmark_nav: subcommand 'no-such-command' not one of {subs}",
         "x.md:7: benchmarks/bench_lines.py: subcommand '--scans' not one of "
         "['clusters', 'logs']",
