@@ -17,6 +17,7 @@ Checked per command:
   ``name``;
 * ``python benchmarks/NAME.py [SUB]``: the script exists and, when it has subcommands,
   ``SUB`` is one of them; ``python -m MODULE``: the module exists;
+* ``landmark_nav config NAME`` (also inside ``$(...)``): ``config/NAME.yaml`` exists;
 * ``make TARGET``: the Makefile has the target;
 * every ``--option`` (before ``--ros-args``) appears in the ``--help`` of the command (of
   the subcommand when there is one), read in one child interpreter for all commands.
@@ -133,6 +134,15 @@ def _split(text: str, prose: bool = False) -> Iterator[List[str]]:
             yield words
 
 
+def _with_substitutions(where: str, words: List[str]) -> List[Tuple[str, List[str]]]:
+    """Return the command and those of its ``$(...)`` substitutions."""
+    out = [(where, words)]
+    for w in words:
+        for inner in re.findall(r'\$\(([^()]*)\)', w):
+            out += [(where, c) for c in _split(inner) if _is_ours(c)]
+    return out
+
+
 def doc_commands(path: Path) -> List[Tuple[str, List[str]]]:
     """Return ``(where, words)`` of each of the project's commands printed in ``path``."""
     text = path.read_text()
@@ -146,14 +156,14 @@ def doc_commands(path: Path) -> List[Tuple[str, List[str]]]:
             continue
         for words in _split(joined + line):
             if _is_ours(words):
-                out.append((f'{path.name}:{first}', words))
+                out += _with_substitutions(f'{path.name}:{first}', words)
         joined, first = '', None
     for m in re.finditer(r'(?<!`)`([^`]+)`(?!`)', prose):
         span = ' '.join(m.group(1).split())
         n = prose.count('\n', 0, m.start()) + 1
         for words in _split(_strip_comment(span), prose=True):
             if len(words) > 1 and _is_ours(words):
-                out.append((f'{path.name}:{n}', words))
+                out += _with_substitutions(f'{path.name}:{n}', words)
     return out
 
 
@@ -230,6 +240,9 @@ def _help_job(words: List[str]) -> Tuple[Optional[Tuple[str, str, tuple]], Optio
         return ('script', str(script), (words[1], '--help')), None
     if head not in SCRIPTS:
         return None, f'{head}: not a console script of setup.py'
+    if head == 'landmark_nav' and words[1:2] == ['config'] and len(words) > 2 \
+            and not words[2].isupper() and not (REPO / 'config' / f'{words[2]}.yaml').is_file():
+        return None, f'landmark_nav config {words[2]}: no config/{words[2]}.yaml'
     if head not in ARGPARSE_SCRIPTS:
         before = words[1:words.index('--ros-args')] if '--ros-args' in words else words[1:]
         opts = [w for w in before if w.startswith('-')]
@@ -299,6 +312,7 @@ def test_command_extraction(tmp_path):
         ['make', 'demo'], ['landmark_nav', 'info', '/tmp/a'],
         ['landmark_nav', 'replay', '/tmp/a', '--rate', '2'],
         ['ekf_slam', '--ros-args', '--params-file', '$(landmark_nav config ekf_slam)'],
+        ['landmark_nav', 'config', 'ekf_slam'],
         ['landmark_nav', 'evaluate', 'BAG', '--out', 'DIR'],
         ['python', 'benchmarks/bench_x.py', 'run', '--seeds', '0']]
 
@@ -376,11 +390,12 @@ def test_check_finds_what_does_not_run(tmp_path):
                    'python benchmarks/no_such.py\nekf_slam --rate 2 --ros-args -p a:=1\n'
                    'no_such_node --ros-args\n'
                    'ros2 launch landmark_nav slam.launch.py laser_port:=/dev/x no_arg:=1\n'
-                   'ros2 launch landmark_nav none.launch.py\n```\n')
+                   'ros2 launch landmark_nav none.launch.py\n'
+                   'ekf_slam --ros-args --params-file "$(landmark_nav config no_such)"\n```\n')
     commands = doc_commands(doc)
     assert [w[0] for _, w in commands] == [
         'make', 'landmark_nav', 'landmark_nav', 'landmark_nav', 'python', 'python', 'python',
-        'ekf_slam', 'ros2', 'ros2']   # no_such_node is not a command of the project
+        'ekf_slam', 'ros2', 'ros2', 'ekf_slam', 'landmark_nav']   # not no_such_node
     subs = _subcommands(_help_text([sys.executable, '-m', 'landmark_nav.tools.cli', '--help']))
     assert 'emulate' in subs
     assert check_commands(commands, tmp_path) == [
@@ -389,6 +404,7 @@ def test_check_finds_what_does_not_run(tmp_path):
         "x.md:9: ekf_slam is a ROS node: options ['--rate'] before --ros-args",
         "x.md:11: slam.launch.py: no launch argument ['no_arg']",
         'x.md:12: none.launch.py: no such launch file in launch/',
+        'x.md:13: landmark_nav config no_such: no config/no_such.yaml',
         f"x.md:4: landmark_nav: subcommand 'no-such-command' not one of {subs}",
         "x.md:7: benchmarks/bench_lines.py: subcommand '--scans' not one of "
         "['clusters', 'logs']",
