@@ -1,10 +1,15 @@
-"""Time the landmark detector against OpenCV ArUco on frames of the same size.
+"""Landmarks: the detector against ArUco, against AprilTag on real photographs; the camera sim.
 
 Run from the repository root::
 
-    python benchmarks/bench_landmarks.py [--frames N] [--repeat R] [--threads T]
+    python benchmarks/bench_landmarks.py detector [--frames N] [--repeat R] [--threads T]
+        [--seed S]
+    python benchmarks/bench_landmarks.py real [detection|pose|false|stages|all]
+        [--data DIR] [--per-size N] ...
+    python benchmarks/bench_landmarks.py camera-sim [--frames N]
 
-Frames: 640 x 480 mono8, rendered by the camera simulator (f = 525 px, noise 2 DN,
+``detector``: the landmark detector against OpenCV ArUco on rendered frames of the same
+size. Frames: 640 x 480 mono8, rendered by the camera simulator (f = 525 px, noise 2 DN,
 defocus 0.5 px) with one landmark (random valid code, 0.175 m frame) at 1.0-2.5 m, turned
 up to 40 deg and rolled at random, in front of a wall. The reference frames show an ArUco
 marker (DICT_4X4_50, printed as 6 x 6 modules with its black border) of the same printed
@@ -23,29 +28,55 @@ Before/after the vectorisation of the corner stage (eqs. 1-2): the same frames t
 direct numpy (float64) + ``scipy.ndimage`` implementation of the chapter's filters and
 8-connected groups, against :func:`corner_pixels` + :func:`corner_groups` (OpenCV 8-bit
 array operations, one sparse scan, grouping of the sparse pixels only).
+
+``real`` (needs the test extra ``pupil-apriltags``, see requirements-test.txt, and the York
+Urban photographs in ``../shared/data/york_urban_train`` or any folder of photographs given
+with ``--data DIR``): landmarks against AprilTag 3 and OpenCV ArUco composited into real
+photographs. The same trials (background, pose, print, blur, gain/gamma, noise, JPEG 70)
+are rendered once per marker type and run through the landmark detector, AprilTag tag36h11
+at decimate 1 and 2 and ArUco DICT_6X6_250 with sub-pixel corners, single-threaded, in one
+run; it prints detection against px per module and tilt, wrong codes, false detections,
+pose errors at 1 m and 2.2 m and the time per frame with its ratios. The method and every
+option are those of :mod:`landmark_nav.evaluation.landmarks_real` (this subcommand is its
+command line with the benchmark's defaults: 100 trials per size, 150 per distance, seed 1).
+
+``camera-sim``: the camera simulator on 640 x 480 frames with a landmark and distractors.
+Three figures (median ms per frame over N frames, after one warm-up frame):
+
+* ``render``: :meth:`CameraSimulator.render` of one fixed scene (a wall, the landmark and
+  four distractors at 1.5 m, turned 30 deg; default camera with lens distortion,
+  supersampling 2, gamma, vignetting, defocus and pixel noise);
+* ``landmark_views``: a complete :func:`landmark_view` (scene sampling, textures, landmark
+  texture and mipmaps, random photometry, render, ground truth);
+* ``landmark_shuttle``: frames of the shuttle room (floor, four walls, landmark, posters).
+
+Target: render <= 20 ms per frame. As an in-run reference it also times
+``cv2.warpPerspective`` of one 640 x 480 uint8 image (the cost of a single full-frame warp).
 """
 
-import argparse
 import math
-from pathlib import Path
 import statistics
 import sys
 import time
 from typing import Callable, Tuple
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import cv2  # noqa: E402
-from landmark_nav.evaluation.vision import (backdrop, landmark_in_view, random_code,  # noqa: E402
+from common import run_subcommand, subcommand_parser
+import cv2
+from landmark_nav.evaluation import landmarks_real
+from landmark_nav.evaluation.vision import (backdrop, landmark_in_view, random_code,
                                             VGA_CAMERA)
-from landmark_nav.sim.camera import CameraSimulator, Photometry, Plane  # noqa: E402
-from landmark_nav.vision.camera import OPTICAL_FROM_BODY  # noqa: E402
-from landmark_nav.vision.detector import (corner_groups, corner_pixels,  # noqa: E402
-                                          detect_landmarks, DetectorParams, smooth)
-from landmark_nav.vision.landmark import LandmarkDesign  # noqa: E402
-from landmark_nav.vision.pose import estimate_pose, rotation_matrix, solve_pnp  # noqa: E402
-import numpy as np  # noqa: E402
-from scipy import ndimage  # noqa: E402
+from landmark_nav.sim.camera import CameraSimulator, Photometry, Plane
+from landmark_nav.sim.camera_scenarios import (CameraFrame, default_camera,
+                                               iter_landmark_shuttle, landmark_view,
+                                               ShuttleConfig, simulator_for, view_scene,
+                                               ViewOptions)
+from landmark_nav.vision.camera import OPTICAL_FROM_BODY
+from landmark_nav.vision.detector import (corner_groups, corner_pixels, detect_landmarks,
+                                          DetectorParams, smooth)
+from landmark_nav.vision.landmark import LandmarkDesign
+from landmark_nav.vision.pose import estimate_pose, rotation_matrix, solve_pnp
+import numpy as np
+from scipy import ndimage
 
 _M = np.asarray(OPTICAL_FROM_BODY)
 ARUCO_DICT = cv2.aruco.DICT_4X4_50
@@ -92,16 +123,8 @@ def reference_corner_stage(img: np.ndarray) -> np.ndarray:
     return np.vstack(centres)[:, ::-1] + o if centres else np.zeros((0, 2))
 
 
-def main() -> None:
-    """Render the frames, time both detectors and print the table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--frames', type=int, default=60, help='frames of each kind')
-    ap.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
-    ap.add_argument('--seed', type=int, default=1)
-    ap.add_argument('--threads', type=int, default=None,
-                    help='OpenCV threads (cv2.setNumThreads) for both detectors; default: '
-                         "OpenCV's choice")
-    args = ap.parse_args()
+def run_detector(args) -> int:
+    """Run the ``detector`` subcommand: render the frames, time both detectors, print the table."""
     if args.threads is not None:
         cv2.setNumThreads(args.threads)
     rng = np.random.default_rng(args.seed)
@@ -179,7 +202,79 @@ def main() -> None:
           f'<= 3x ArUco: wall {wall / ref_wall:.2f}x '
           f'{"met" if wall / ref_wall <= 3.0 else "NOT met"}, CPU {cpu / ref_cpu:.2f}x '
           f'{"met" if cpu / ref_cpu <= 3.0 else "NOT met"}')
+    return 0
+
+
+def _median_ms(fn, n: int) -> float:
+    fn()
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1000.0 * statistics.median(times)
+
+
+def run_camera_sim(args) -> int:
+    """Run the ``camera-sim`` subcommand: print the timings."""
+    n = args.frames
+    cam = default_camera()
+    sim = simulator_for(cam)
+    opts = ViewOptions(distance=1.5, turn_deg=30.0, tilt_deg=5.0, roll_deg=22.5,
+                       quarter_turns=False, distractors=4)
+    planes, _, kinds = view_scene(np.random.default_rng(1), cam, opts)
+    ph = Photometry(exposure=0.9, gradient=(0.2, -0.1), vignetting=0.2, gamma=2.2,
+                    defocus_sigma=0.5, noise_sigma=2.0, shot_noise=0.02)
+    rng = np.random.default_rng(2)
+    eye = np.eye(3)
+    render = _median_ms(lambda: sim.render(planes, eye, np.zeros(3), ph, rng), n)
+    counter = iter(range(10 ** 9))
+    views = _median_ms(lambda: landmark_view(1, next(counter)), n)
+    shuttle = iter_landmark_shuttle(1, ShuttleConfig(trips=1000, image_rate=10.0))
+
+    def next_frame():
+        for ev in shuttle:
+            if isinstance(ev, CameraFrame):
+                return ev
+        return None
+
+    shuttle_ms = _median_ms(next_frame, n)
+    img = (np.random.default_rng(0).random((480, 640)) * 255).astype(np.uint8)
+    H = np.array([[1.0, 0.05, 3.0], [0.02, 1.0, 2.0], [1e-5, 2e-5, 1.0]])
+    warp = _median_ms(lambda: cv2.warpPerspective(img, H, (640, 480)), n)
+    print(f'camera simulator, 640x480 mono8, {n} frames, median per frame:')
+    print(f'  render (wall + landmark + {len(kinds)} distractors): {render:7.2f} ms '
+          f'(target <= 20 ms)')
+    print(f'  landmark_view (scene + render + truth):         {views:7.2f} ms')
+    print(f'  landmark_shuttle frame:                          {shuttle_ms:7.2f} ms '
+          '(includes 10 Hz robot steps between frames)')
+    print(f'  reference cv2.warpPerspective 640x480 uint8:     {warp:7.2f} ms '
+          f'(render = {render / warp:.1f} x)')
+
+    return 0
+
+
+def main(argv=None) -> int:
+    """Parse the subcommand and run it (``real``: the options of ``landmarks_real``)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    ap, sub = subcommand_parser(__doc__)
+    p = sub.add_parser('detector', help='the detector against ArUco on rendered frames')
+    p.add_argument('--frames', type=int, default=60, help='frames of each kind')
+    p.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
+    p.add_argument('--seed', type=int, default=1)
+    p.add_argument('--threads', type=int, default=None,
+                   help='OpenCV threads (cv2.setNumThreads) for both detectors; default: '
+                        "OpenCV's choice")
+    p.set_defaults(run=run_detector)
+    sub.add_parser('real', add_help=False,
+                   help='against AprilTag and ArUco on real photographs (real --help: options)')
+    p = sub.add_parser('camera-sim', help='the camera simulator per frame')
+    p.add_argument('--frames', type=int, default=100)
+    p.set_defaults(run=run_camera_sim)
+    if argv[:1] == ['real']:
+        return landmarks_real.main(argv[1:], prog=f'{ap.prog} real')
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -2,13 +2,14 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_protocols.py [--repeat R]
+    python benchmarks/bench_protocols.py [--repeat R] [--no-fail]
 
 Frames are built with the emulator-side encoders (fixed seed): one 1081-step SCIP 2.0 ``MD``
 scan (3-character values, 51 data lines), one 361-value SICK LMS2xx ``B0`` telegram and one
 P2OS status packet with 4 sonar readings. Each is decoded both by the one-shot decoder and by
 a stream decoder fed the whole frame. The script prints the median time per frame. Targets:
-<= 0.5 ms for the SCIP scan and the ``B0`` telegram, <= 0.05 ms for the P2OS packet.
+<= 0.5 ms for the SCIP scan and the ``B0`` telegram, <= 0.05 ms for the P2OS packet; the
+exit status is 1 when one is missed (0 with ``--no-fail``).
 """
 
 import argparse
@@ -39,6 +40,8 @@ def main(argv: List[str] = None) -> int:
     """Build the frames, time the decoders, print the medians; return 1 if a target fails."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--repeat', type=int, default=200, help='timed runs per decoder')
+    parser.add_argument('--no-fail', action='store_true',
+                        help='exit 0 even when a target is missed (the figures only)')
     args = parser.parse_args(argv)
     rng = np.random.default_rng(1)
 
@@ -78,7 +81,7 @@ def main(argv: List[str] = None) -> int:
         ok = ms <= target
         failed += not ok
         print(f'{name:56s} {ms:10.4f} {target:8.2f} {"ok" if ok else "SLOW"}')
-    return 1 if failed else 0
+    return 1 if failed and not args.no_fail else 0
 
 
 if __name__ == '__main__':

@@ -2,36 +2,35 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_road.py [--scans N] [--frames N] [--seed S]
+    python benchmarks/bench_road.py [--scans N] [--frames N] [--seed S] [--data DIR]
 
 * :func:`landmark_nav.road.terrain.classify_scan` on simulated 361-beam tilted scans of the
   asphalt and gravel park roads; reference in the same run: one ``np.polyfit`` of degree 2
   over the scan's valid points (a floor any per-scan fit pays). Target (issue): <= 2 ms.
 * :func:`landmark_nav.road.outline.road_outline` on 320 x 240 rendered park-road frames and
-  on the real CamVid frames (480 x 360, resampled to 320 x 240 inside) when present;
+  on the real CamVid frames (480 x 360, resampled to 320 x 240 inside) of ``--data DIR``
+  (``images/*.png`` and ``labels_camvid11/*.png``; default ``../shared/data/camvid_road``,
+  left out when that default is not there);
   reference in the same run: a full-frame OpenCV Sobel 3 x 3 + 5 x 5 and a Mahalanobis pass
   on the eq. 25 chromaticity at 320 x 240. Target (issue): <= 20 ms.
 Times are medians of single-threaded calls.
 """
 
 import argparse
-from pathlib import Path
 import statistics
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import cv2  # noqa: E402
-from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT  # noqa: E402
-from landmark_nav.evaluation.road_laser import ANGLES  # noqa: E402
-from landmark_nav.evaluation.road_outline import (frame_names, load_frame,  # noqa: E402
-                                                  SEED_COLS, SEED_ROWS)
-from landmark_nav.road.outline import band_seed, chromaticity, road_outline  # noqa: E402
-from landmark_nav.road.terrain import classify_scan, LaserMount  # noqa: E402
-from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view  # noqa: E402
-from landmark_nav.testing import shared_data  # noqa: E402
-import numpy as np  # noqa: E402
+from common import data_folder, SHARED_DATA
+import cv2
+from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT
+from landmark_nav.evaluation.road_laser import ANGLES
+from landmark_nav.evaluation.road_outline import (frame_names, load_frame, SEED_COLS,
+                                                  SEED_ROWS)
+from landmark_nav.road.outline import band_seed, chromaticity, road_outline
+from landmark_nav.road.terrain import classify_scan, LaserMount
+from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view
+import numpy as np
 
 
 def median_ms(fn, items, repeat: int = 3) -> float:
@@ -60,13 +59,15 @@ def reference_pass(rgb: np.ndarray) -> None:
     np.einsum('...i,ij,...j->...', d, q, d)
 
 
-def main() -> None:
+def main(argv=None) -> int:
     """Run the benchmark and print the table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--scans', type=int, default=100)
     ap.add_argument('--frames', type=int, default=30)
     ap.add_argument('--seed', type=int, default=0)
-    args = ap.parse_args()
+    ap.add_argument('--data', default=None, metavar='DIR',
+                    help='CamVid-format frames (default: ../shared/data/camvid_road if there)')
+    args = ap.parse_args(argv)
     cv2.setNumThreads(1)
     rng = np.random.default_rng(args.seed)
     mount = LaserMount()
@@ -89,17 +90,20 @@ def main() -> None:
     t = median_ms(lambda f: road_outline(f, seed), frames)
     r = median_ms(reference_pass, frames)
     print(f'{"vision rendered 320x240":34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
-    try:
-        folder = shared_data('camvid_road')
-    except FileNotFoundError as err:
-        print(f'(skipped CamVid: {err})')
-        return
+    if args.data is None and not (SHARED_DATA / 'camvid_road').is_dir():
+        print(f'(CamVid left out: {SHARED_DATA / "camvid_road"} not found; --data DIR)')
+        return 0
+    folder = data_folder(args.data or str(SHARED_DATA / 'camvid_road'))
+    if not frame_names(folder):
+        sys.exit(f'error: {folder}: no frame with both images/NAME.png and '
+                 'labels_camvid11/NAME.png')
     real = [load_frame(folder, n)[0] for n in frame_names(folder)[:args.frames]]
     seed = band_seed(real[0].shape, SEED_ROWS, SEED_COLS)
     t = median_ms(lambda f: road_outline(f, seed), real)
     r = median_ms(reference_pass, real)
     print(f'{"vision CamVid 480x360 -> 320x240":34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -1,11 +1,17 @@
-"""Time one EKF-SLAM step (prediction + ICNN association + update) against the map size.
+"""EKF-SLAM on the simulator: step time against the map size, ICNN against JCBB.
 
 Run from the repository root::
 
-    python benchmarks/bench_slam.py [--landmarks 50 100 200] [--steps 200] [--threads 1]
+    python benchmarks/bench_slam.py step-time [--landmarks 50 100 200] [--steps 200]
+        [--threads 1] [--seed 0]
+    python benchmarks/bench_slam.py ambiguous [--seeds 0-9]
 
-For each map size N a filter is built with N landmarks scattered over a 40 m x 40 m area
-(augmented with eqs. 38-48 from one pose) and then driven in a circle; every step is
+Both run on generated input: a random map (``--seed``) and the simulator's ``ambiguous``
+scenario (``--seeds``).
+
+``step-time``: one EKF-SLAM step (prediction + ICNN association + update). For each map
+size N a filter is built with N landmarks scattered over a 40 m x 40 m area (augmented with
+eqs. 38-48 from one pose) and then driven in a circle; every step is
 :meth:`EkfSlam.predict` + :meth:`EkfSlam.update` with 10 observations of the 10 landmarks
 nearest to the robot (all associated: the update is a 20-row batch), the PSD check of P
 included. The script prints the median and 90th percentile step time, the split into
@@ -17,9 +23,24 @@ BLAS threads: ``--threads`` (default 1) is exported as ``OPENBLAS_NUM_THREADS`` 
 ``OMP_NUM_THREADS`` before numpy is imported; with a few hundred states the matrices are
 small and threading costs more than it gives. Targets: <= 1 ms (N = 50), <= 2 ms (100),
 <= 6 ms (200).
+
+``ambiguous``: the ``ambiguous`` scenario
+(:func:`landmark_nav.sim.scenarios.ambiguous_world`): the robot maps an irregular row of
+0.3 m posts whose corners of the same kind are 0.45-0.77 m apart, then drives a 72 m loop
+with the laser blind, so that its pose error grows to tens of centimetres and degrees, and
+re-observes the row from 2.5 m. For every seed the same simulated run goes through the
+filter with the default :class:`SlamParams` once per method: ``ICNN`` (the chapter's:
+``association='icnn'``, ``joint_check=False``), ``JCBB`` and ``ICNN+JOINT`` (the filter's
+default: ICNN whose hypothesis, when jointly incompatible at a gross-error level, is
+decided by JCBB) (nothing else differs), and is scored by
+:func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth
+corner ids). Printed per seed: the odometry error accumulated over the blackout (position,
+heading), then per method the wrong associations out of all associations, the ATE RMSE over
+the scans after the blackout, the mapped landmarks against the true visible corners,
+duplicated and ghost landmarks and the filter time. The last line sums the wrong
+associations.
 """
 
-import argparse
 import math
 import os
 from pathlib import Path
@@ -43,7 +64,10 @@ for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ[_var] = _threads_from_argv()
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from landmark_nav.geometry import compose, inverse_transform_points  # noqa: E402
+from common import run_subcommand, subcommand_parser  # noqa: E402
+from landmark_nav.evaluation.slam import run_slam, score_run  # noqa: E402
+from landmark_nav.geometry import compose, inverse_transform_points, wrap_angle  # noqa: E402
+from landmark_nav.sim import run_scenario  # noqa: E402
 from landmark_nav.slam import EkfSlam, SlamParams  # noqa: E402
 from landmark_nav.slam.ekf_slam import (do_data_association, ekf_predict,  # noqa: E402
                                         ekf_update, is_psd, observation_model,
@@ -51,6 +75,7 @@ from landmark_nav.slam.ekf_slam import (do_data_association, ekf_predict,  # noq
 import numpy as np  # noqa: E402
 
 TARGET_MS = {50: 1.0, 100: 2.0, 200: 6.0}
+METHODS = ('icnn', 'jcbb', 'icnn+joint')  # the associations of ``ambiguous``
 OBS = 10
 SIG = np.array([0.01, math.radians(0.3)])
 
@@ -139,14 +164,67 @@ def bench(n_lm: int, steps: int, seed: int) -> Dict[str, float]:
     return out
 
 
-def main() -> None:
-    """Run the benchmark and print a table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--landmarks', type=int, nargs='+', default=[50, 100, 200])
-    ap.add_argument('--steps', type=int, default=200, help='timed steps per map size')
-    ap.add_argument('--threads', default='1', help='BLAS threads (exported before numpy)')
-    ap.add_argument('--seed', type=int, default=0)
-    args = ap.parse_args()
+def parse_seeds(text: str) -> List[int]:
+    """Return the seeds of ``'0-9'`` or ``'1,4,7'``."""
+    if '-' in text:
+        a, b = text.split('-', 1)
+        return list(range(int(a), int(b) + 1))
+    return [int(v) for v in text.split(',')]
+
+
+def run_seed(seed: int) -> Dict[str, object]:
+    """Simulate one seed and run both association methods on the same data."""
+    res = run_scenario('ambiguous', seed)
+    (b0, b1), = res.blackout
+    k0, k1 = [int(np.searchsorted(res.trajectory.stamps_ns, t)) for t in (b0, b1)]
+    drift = (res.odometry.poses[k1] - res.odometry.poses[k0]) - (
+        res.trajectory.poses[k1] - res.trajectory.poses[k0])
+    out: Dict[str, object] = {
+        'seed': seed, 'drift_m': float(np.hypot(drift[0], drift[1])),
+        'drift_deg': float(np.degrees(wrap_angle(drift[2])))}
+    for method in METHODS:
+        params = SlamParams(association='jcbb' if method == 'jcbb' else 'icnn',
+                            joint_check=method == 'icnn+joint')
+        tic = time.perf_counter()
+        run = run_slam(res, params)
+        seconds = time.perf_counter() - tic
+        score = score_run(res, run, params)
+        after = run.stamps >= b1
+        err = np.hypot(*(run.poses[after, :2] - run.truth[after, :2]).T)
+        out[method] = {'score': score, 'ate_after': float(np.sqrt(np.mean(err ** 2))),
+                       'seconds': seconds}
+    return out
+
+
+def run_ambiguous(args) -> int:
+    """Run the ``ambiguous`` subcommand: one line per seed, then the sums."""
+    seeds = parse_seeds(args.seeds)
+    head = (f'{"seed":>4} {"blackout drift":>15} | ' + ' | '.join(
+        f'{m.upper()}: {"wrong":>9} {"ATE after":>9} {"mapped":>6} {"dup":>3} {"ghost":>5} '
+        f'{"s":>4}' for m in METHODS))
+    print('ambiguous scenario, default SlamParams, only the association differs')
+    print(head)
+    total = dict.fromkeys(METHODS, 0)
+    for seed in seeds:
+        r = run_seed(seed)
+        cells = []
+        for m in METHODS:
+            s, sc = r[m], r[m]['score']
+            total[m] += sc.wrong_associations
+            cells.append(f'{m.upper()}: {sc.wrong_associations:>4}/{sc.associations:<4} '
+                         f'{100 * s["ate_after"]:>6.1f} cm {sc.mapped:>3}/{sc.true_visible:<2} '
+                         f'{sc.duplicates:>3} {sc.ghost_landmarks:>5} {s["seconds"]:>4.1f}')
+        print(f'{seed:>4} {100 * r["drift_m"]:>6.1f} cm {r["drift_deg"]:>+5.1f} deg | '
+              + ' | '.join(cells), flush=True)
+    print('wrong associations summed over seeds ' + ', '.join(
+        f'{m.upper()} {total[m]}' for m in METHODS)
+        + f' ({len(seeds)} seeds; JCBB {"<" if total["jcbb"] < total["icnn"] else ">="} ICNN)')
+
+    return 0
+
+
+def run_step_time(args) -> int:
+    """Run the ``step-time`` subcommand: one line per map size."""
     print(f'EKF-SLAM step = predict + ICNN + update with {OBS} observations '
           f'(BLAS threads: {os.environ["OPENBLAS_NUM_THREADS"]})')
     head = (f'{"N":>4} {"n":>4} {"step ms":>8} {"p90":>6} {"target":>6} {"pred":>6} '
@@ -166,7 +244,23 @@ def main() -> None:
               f'{r["associate"]:>6.3f} {r["update"]:>6.3f} {r["psd"]:>6.3f} '
               f'{r["step"] / base[0]:>6.2f} {(n / base[1]) ** 2:>8.2f} {r["dense"]:>12.3f} '
               f'{r["dense"] / r["update"]:>10.1f} {r["matched"]:>7.1f}')
+    return 0
+
+
+def main(argv=None) -> int:
+    """Parse the subcommand and run it."""
+    ap, sub = subcommand_parser(__doc__)
+    p = sub.add_parser('step-time', help='time of one filter step against the map size')
+    p.add_argument('--landmarks', type=int, nargs='+', default=[50, 100, 200])
+    p.add_argument('--steps', type=int, default=200, help='timed steps per map size')
+    p.add_argument('--threads', default='1', help='BLAS threads (exported before numpy)')
+    p.add_argument('--seed', type=int, default=0, help='seed of the random map')
+    p.set_defaults(run=run_step_time)
+    p = sub.add_parser('ambiguous', help='ICNN against JCBB on the ambiguous scenario')
+    p.add_argument('--seeds', default='0-9', help="simulator seeds, e.g. '0-9' or '1,4,7'")
+    p.set_defaults(run=run_ambiguous)
+    return run_subcommand(ap, argv)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -2,43 +2,46 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_vanishing_points.py [--repeat R] [--scales 1,0.5]
+    python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
+        [--scales 1,0.5]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
-ECCV 2008), each line input (the chapter's segmented Hough, OpenCV HoughLinesP, OpenCV LSD)
-feeds the Manhattan-frame estimator (:func:`landmark_nav.corridor.vanishing_point.
-manhattan_frame`); the chapter's own clustering (§3.1.2) on the segmented Hough lines is
-reported beside it. Per image at 640 x 480 and 320 x 240 (INTER_AREA resize, K scaled):
-the angular error of the direction closest to the optical axis, the errors of all three
-directions, and the best of ``R`` times of the line and VP stages. Times are also given
-as ratios to LSD's line stage on the same frames in the same run (machines differ).
+ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
+with ``--data DIR``, the first ``--images N`` of them), each line input (the chapter's
+segmented Hough, OpenCV HoughLinesP, OpenCV LSD) feeds the Manhattan-frame estimator
+(:func:`landmark_nav.corridor.vanishing_point.manhattan_frame`); the chapter's own
+clustering (§3.1.2) on the segmented Hough lines is reported beside it. Per image at 640 x
+480 and 320 x 240 (INTER_AREA resize, K scaled): the angular error of the direction closest
+to the optical axis, the errors of all three directions, and the best of ``R`` times of the
+line and VP stages. Times are also given as ratios to LSD's line stage on the same frames
+in the same run (machines differ).
 
 Acceptance (640 x 480, segmented Hough): axis error <= 2 deg on >= 90 % and median <= 1 deg;
 median over all three directions <= 1.3 deg.
 """
 
 import argparse
-from pathlib import Path
 import statistics
 import sys
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from landmark_nav.evaluation.vanishing_points import (evaluate_image,  # noqa: E402
-                                                      load_york_urban, summarize)
-from landmark_nav.testing import shared_data  # noqa: E402
-from landmark_nav.vision.image_lines import METHODS  # noqa: E402
+from common import add_data_argument, data_folder
+from landmark_nav.evaluation.vanishing_points import (evaluate_image, load_york_urban,
+                                                      summarize)
+from landmark_nav.vision.image_lines import METHODS
 
 RUNS = [(m, 'manhattan') for m in METHODS] + [('segmented_hough', 'chapter')]
 
 
-def main() -> None:
+def main(argv=None) -> int:
     """Run the benchmark and print the tables."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_data_argument(ap, 'york_urban_train')
+    ap.add_argument('--images', type=int, default=None, metavar='N',
+                    help='only the first N images (default: all)')
     ap.add_argument('--repeat', type=int, default=3, help='timing repeats per image (best)')
     ap.add_argument('--scales', default='1,0.5', help='image scales (1 = 640 x 480)')
-    args = ap.parse_args()
-    items = load_york_urban(shared_data('york_urban_train'))
+    args = ap.parse_args(argv)
+    items = load_york_urban(data_folder(args.data))[:args.images]
     for scale in (float(s) for s in args.scales.split(',')):
         w, h = round(640 * scale), round(480 * scale)
         rows = {}
@@ -71,7 +74,8 @@ def main() -> None:
                   and s['all_median'] <= 1.3)
             print(f'  acceptance (segmented Hough + Manhattan): {"met" if ok else "NOT met"}')
         print()
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -282,7 +282,7 @@ def test_closed_loop_through_cmd_vel():
     """The simulated robot obeys the node's cmd_vel: 2 x 4 m back and forth, one turn.
 
     Starts 15 cm off the centre line, 10 m into the 30 m corridor; the full 3 x 26 m run
-    is ``benchmarks/bench_corridor_loop.py``.
+    is ``benchmarks/bench_corridor.py loop``.
     """
     from landmark_nav.sim.corridor_loop import follower_parameters, LoopConfig, run_loop
     cfg = LoopConfig(start=(10.0, 0.15, math.radians(4.0)), distance=4.0, lengths=2)

@@ -1,6 +1,6 @@
 """Composites of printed markers in real photographs (landmark_nav.evaluation.landmarks_real).
 
-The full tables come from ``benchmarks/bench_landmarks_real.py``; these tests check the
+The full tables come from ``benchmarks/bench_landmarks.py real``; these tests check the
 geometry of the composites against the detectors and the scoring on a few trials.
 """
 

@@ -8,7 +8,7 @@ parameters once per association method: JCBB, ICNN as the chapter has it (``icnn
 ``joint_check=False``) and ICNN with the filter's default joint-compatibility check. Wrong
 associations are counted against the ground-truth corner ids
 (:func:`landmark_nav.evaluation.slam.score_run`). Seeds 0-2 here; the 10-seed table comes
-from ``benchmarks/bench_slam_ambiguous.py``.
+from ``benchmarks/bench_slam.py ambiguous``.
 """
 
 from dataclasses import replace

@@ -548,7 +548,7 @@ def test_line_residual_factor_makes_the_nis_consistent_on_a_carmen_log(tmp_path)
     freiburg-101 imported with the default drift (seed 0), corners and lines, the bag's
     stated odometry noise. Measured: 28.6 % of the updates above the bound with the
     extractor's line covariance alone, 2.4 % with ``line_residual_factor = 2`` (5 %
-    expected of a consistent filter; benchmarks/slam_consistency_carmen.py prints the
+    expected of a consistent filter; benchmarks/bench_slam_real.py diagnose prints the
     same share per log: 8-30 % before, 1.2-4.7 % after).
     """
     import_log(shared_data('carmen', 'freiburg-101-corrected.log.gz'), tmp_path / 'bag')

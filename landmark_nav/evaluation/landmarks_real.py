@@ -1,7 +1,7 @@
 """Landmarks, AprilTags and ArUco markers composited into real photographs, side by side.
 
 Run ``python -m landmark_nav.evaluation.landmarks_real [detection|pose|false|all]`` (see
-``--help``; ``benchmarks/bench_landmarks_real.py`` runs the same functions with the
+``--help``; ``benchmarks/bench_landmarks.py real`` runs the same functions with the
 benchmark's sizes). Backgrounds are the real photographs of a folder (by default the York
 Urban images in ``../shared/data/york_urban_train``, found with
 :func:`landmark_nav.testing.shared_data`), converted to grey and cut to 640 x 480.
@@ -180,11 +180,10 @@ def parse_detector_params(items: Sequence[str]) -> Dict[str, object]:
     return out
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Optional[Sequence[str]] = None,
+         prog: str = 'python -m landmark_nav.evaluation.landmarks_real') -> int:
     """Command line: detection, pose and speed tables on composites of real photographs."""
-    ap = argparse.ArgumentParser(
-        prog='python -m landmark_nav.evaluation.landmarks_real', description=__doc__.split(
-            '\n')[0])
+    ap = argparse.ArgumentParser(prog=prog, description=__doc__.split('\n')[0])
     ap.add_argument('what', nargs='?', default='all',
                     choices=('detection', 'pose', 'false', 'stages', 'all'))
     ap.add_argument('--per-size', type=int, default=100, help='trials per px per module')
@@ -204,7 +203,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     'chessboard photographs')
     ap.add_argument('--seed', type=int, default=1)
     ap.add_argument('--detectors', nargs='+', default=list(DETECTORS), choices=DETECTORS)
-    ap.add_argument('--backgrounds', type=Path, default=None,
+    ap.add_argument('--backgrounds', '--data', type=Path, default=None, metavar='DIR',
                     help='folder of photographs (default ../shared/data/york_urban_train)')
     ap.add_argument('--deblur-margin', type=float, default=DetectorParams().deblur_margin,
                     help='landmark detector deblur_margin (0: the code read before issue 20)')

@@ -362,8 +362,9 @@ def summarize(run: HallwayRun,
     """Return the figures of one run.
 
     ``pos_max_moving_cm`` counts from the first frame after the robot has moved 1 cm (the
-    standstill frames after the initial draw apart); ``pos_over_5cm`` / ``head_over_1deg``
-    count the frames above the acceptance bounds from the first update on.
+    standstill frames after the initial draw apart; nan for a run that never moved);
+    ``pos_over_5cm`` / ``head_over_1deg`` count the frames above the acceptance bounds from
+    the first update on.
     ``head_lost_z_max`` is the largest heading error while lost in units of the heading std
     the filter would have from odometry alone, i.e. without the lost state's inflation by
     ``lost_inflation_rad`` (exact, since the heading row of the motion Jacobian is
@@ -375,7 +376,8 @@ def summarize(run: HallwayRun,
     sd_odo = np.sqrt(np.maximum(run.cov[:, 2, 2] - lost_inflation_rad ** 2, 1e-12))
     return {
         'pos_max_cm': 100 * float(run.position_error.max()),
-        'pos_max_moving_cm': 100 * float(run.position_error[moving].max()),
+        'pos_max_moving_cm': 100 * float(run.position_error[moving].max())
+        if moving.any() else math.nan,
         'pos_over_5cm': int(np.count_nonzero(run.position_error > 0.05)),
         'head_over_1deg': int(np.count_nonzero(run.heading_error > math.radians(1.0))),
         'head_lost_z_max': float((run.heading_error / sd_odo)[run.lost].max())

@@ -82,8 +82,8 @@ def ellipse_share(run: SlamRun, probability: float = 0.95,
     reference's, and a filter whose covariance is right about its own error contains
     fewer than ``probability`` of the steps (with equal stds, about 78 % instead of 95 %).
     ``reference_sd = (along, across)`` [m], the reference's per-pose std along and across
-    its heading (e.g. as ``benchmarks/reference_noise_carmen.py`` measures it), adds
-    ``R(theta_ref) diag(along^2, across^2) R^T`` to ``P_xy``: the share then says whether
+    its heading (e.g. as ``benchmarks/reference_noise_carmen.py`` of commit 67eb6cc measured
+    it), adds ``R(theta_ref) diag(along^2, across^2) R^T`` to ``P_xy``: the share then says whether
     the filter's covariance covers its own error. The default (None) is the plain test.
 
     Args:

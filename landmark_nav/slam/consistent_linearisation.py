@@ -42,7 +42,7 @@ these filters keep into the gate: on acapulco (perfect odometry) single pairs en
 an update NIS of 805 and 1698 for 2 dof and turned the map by 14 and 41 deg.
 
 All four keep ``N^T P^-1 N`` unchanged through updates and new landmarks
-(``test/test_slam_consistency.py``). On the Carmen logs (benchmarks/slam_consistency_carmen.py,
+(``test/test_slam_consistency.py``). On the Carmen logs (benchmarks/bench_slam_real.py diagnose,
 six logs, drift seeds 0-1, ``line_residual_factor = 2``; medians over the 12 runs of the
 share of steps with the reference inside the 95 % ellipse, the robot NEES median, the
 SE(2) ATE and the RPE over 1 m as ratios to the odometry's): standard 10 %, 206, 0.26,

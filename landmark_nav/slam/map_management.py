@@ -50,7 +50,7 @@ detected again from other viewpoints as clutter is, and with ``establish_hits =
 confirm_hits`` the share of corners within 10 cm of a wall of the building's grid fell
 on two of the three logs (robotdata1 0.77 -> 0.70, robotdata5 0.62 -> 0.51, robotdata2
 0.47 -> 0.58 with its scans 0.563 -> 0.540 near a wall; 16-18 corners retired per log;
-``benchmarks/wean_map_check.py --establish-hits 3``).
+``benchmarks/bench_slam_real.py wean --establish-hits 3``).
 """
 
 from dataclasses import dataclass

@@ -38,9 +38,9 @@ Noise models
   middle of the segment and 0.2-0.8 deg in direction (seattle; shorter segments more),
   against a stated std of 2-3 mm and 0.04-0.45 deg: the median squared Mahalanobis error is
   31-93 instead of 2 on the six logs, and 8-30 % of the updates have a joint NIS above its
-  95 % bound; with ``line_floor = 0.01`` 4-13 % (benchmarks/slam_consistency_carmen.py).
+  95 % bound; with ``line_floor = 0.01`` 4-13 % (benchmarks/bench_slam_real.py diagnose).
   The default is 0 (off): over drift seeds 1-2 of the six logs it did not improve ATE or
-  RPE (benchmarks/slam_landmarks_carmen.py).
+  RPE (benchmarks/bench_slam_real.py evaluate).
   A fixed floor does not carry from one log to another: the segment-wide error grows with
   how much the beams scatter about the line (a cluttered, uneven wall moves the fit as a
   whole). ``line_residual_factor = k`` gives each segment end offsets of std ``k s`` with

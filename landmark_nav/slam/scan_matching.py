@@ -4,8 +4,9 @@ Used by the SLAM front end (``FrontendParams.scan_matching``: each odometry incr
 replaced by the scan's motion against the previous scan when the two agree,
 :func:`scan_motion`, or fused with it, :func:`fused_scan_motion`) and by the benchmarks:
 the reference poses' error between consecutive scans
-(``benchmarks/line_repeatability_carmen.py``) and how far dead reckoning by scan matching
-of consecutive scans gets on a real log (``benchmarks/scan_matching_carmen.py``).
+(``benchmarks/line_repeatability_carmen.py`` of commit 67eb6cc) and how far dead reckoning
+by scan matching of consecutive scans gets on a real log (``benchmarks/bench_slam_real.py
+scan-matching``).
 
 Method (Censi's point-to-line metric, solved by Gauss-Newton on the linearised rotation;
 Censi, "An ICP variant using a point-to-line metric", ICRA 2008): each source point, moved

@@ -8,7 +8,7 @@ plain dicts (the JSON files the tools write, or the parsed report), :func:`figur
 picks one figure out of them and :func:`within_tolerance` applies the tolerance.
 
 ``test/test_golden.py`` asserts every figure on the committed bag;
-``benchmarks/golden_seed_spread.py`` recomputes the values and the seed spread.
+``python -m landmark_nav.testing.golden_spread`` recomputes the values and the seed spread.
 """
 
 import json

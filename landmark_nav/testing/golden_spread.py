@@ -2,39 +2,39 @@
 
 Run from the repository root::
 
-    python benchmarks/golden_seed_spread.py NAME [--seeds 1-6] [--write]
+    python -m landmark_nav.testing.golden_spread NAME [--seeds 1-6] [--write] [--bags DIR]
 
 NAME: office, hallway, calibration or corridor.
 
-Reads ``bags/<name>/expected.yaml`` (its runs and figures, see
-:mod:`landmark_nav.testing.golden`), runs every run on the committed bag (seed 1) twice --
-the second time with the BLAS thread pools limited to one thread, to see run-to-run
-floating-point variation -- and on ``landmark_nav simulate <name> --seed S`` recordings of
-the other seeds, then prints per figure the seed-1 value, the largest relative difference
-between the two seed-1 runs and the min / max over the seeds. ``--write`` stores the seed-1
-values and the seed spread back into expected.yaml (the tolerances are left as they are).
+Reads ``bags/<name>/expected.yaml`` (``--bags DIR``: ``DIR/<name>/expected.yaml``; its runs
+and figures, see :mod:`landmark_nav.testing.golden`), runs every run on the committed bag
+(seed 1) twice -- the second time with the BLAS thread pools limited to one thread, to see
+run-to-run floating-point variation -- and on ``landmark_nav simulate <name> --seed S``
+recordings of the other seeds, then prints per figure the seed-1 value, the largest
+relative difference between the two seed-1 runs and the min / max over the seeds.
+``--write`` stores the seed-1 values and the seed spread back into expected.yaml (the
+tolerances are left as they are).
 """
 
 import argparse
 from pathlib import Path
 import sys
 import tempfile
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional, Sequence
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from landmark_nav.testing.golden import figure_value, run_outputs
+from landmark_nav.tools.cli import main as cli_main
+from threadpoolctl import threadpool_limits
+import yaml
 
-from landmark_nav.testing.golden import figure_value, run_outputs  # noqa: E402
-from landmark_nav.tools.cli import main as cli_main  # noqa: E402
-from threadpoolctl import threadpool_limits  # noqa: E402
-import yaml  # noqa: E402
+BAGS = Path(__file__).resolve().parents[2] / 'bags'  # the committed bags of a checkout
 
 HEADER = """\
 # Golden results of bags/{name} (`landmark_nav simulate {name} --seed 1`): the README
 # figures this bag produces, asserted by test/test_golden.py. Per figure: the README text,
 # the run and the output (file, key) it is read from, the seed-1 value, the tolerance (abs,
 # or rel times |value|) and the spread over seeds 1-6 of the same scenario. Values and
-# spread: `python benchmarks/golden_seed_spread.py {name} --write`.
+# spread: `python -m landmark_nav.testing.golden_spread {name} --write`.
 """
 
 
@@ -55,15 +55,20 @@ def _round(v: float) -> float:
     return float(f'{v:.6g}')
 
 
-def main() -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the seeds and print (and optionally store) the figures."""
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap = argparse.ArgumentParser(prog='python -m landmark_nav.testing.golden_spread',
+                                 description=__doc__.split('\n')[0])
     ap.add_argument('name', choices=['office', 'hallway', 'calibration', 'corridor'])
     ap.add_argument('--seeds', default='1-6', help='seeds, e.g. 1-6 or 1,3,5 (1 = the bag)')
     ap.add_argument('--write', action='store_true', help='store values and spread')
-    args = ap.parse_args()
-    bag = ROOT / 'bags' / args.name
+    ap.add_argument('--bags', default=str(BAGS), metavar='DIR',
+                    help=f'folder of the committed bags (default {BAGS})')
+    args = ap.parse_args(argv)
+    bag = Path(args.bags) / args.name
     path = bag / 'expected.yaml'
+    if not path.is_file():
+        sys.exit(f'error: {path} not found (a bag folder with expected.yaml under --bags DIR)')
     data = yaml.safe_load(path.read_text())
     seeds = _seeds(args.seeds)
     per_seed: Dict[int, Dict[str, float]] = {}

@@ -1,0 +1,269 @@
+"""Truth-free feature metrics and corner repeatability on real logs (Carmen format).
+
+Run from the repository root (needs ``../shared/data/carmen`` or ``--data DIR``)::
+
+    python benchmarks/bench_feature_metrics.py metrics [--data DIR] [--scans 20] [--seed 0]
+        [--json out.json] [--direct] [LOG ...]
+    python benchmarks/bench_feature_metrics.py corner-repeatability [--data DIR]
+        [--method minus_cosine] [--set NAME=VALUE ...] [LOG ...]
+
+A LOG is a log name in ``--data DIR`` (``aces`` -> ``DIR/aces-corrected.log.gz``; default
+the six Carmen logs) or a path to a Carmen log.
+
+``metrics``: each log is imported (``landmark_nav import``, defaults, into a temporary
+directory) and scored as ``landmark_nav evaluate-features BAG`` does: every extractor with
+the node defaults and the approxPolyDP baseline (epsilon 5 cm, per breakpoint cluster; in
+full and restricted to the line extractor's minimum size) on every scan; f, ray RMSE, fit
+residual on ``--scans`` scans drawn with ``numpy.random.default_rng(--seed)``;
+false-surface beams on every scan; repeatability between consecutive scans through the
+corrected poses (``/ground_truth/odom`` composed with the laser mount); milliseconds per
+scan (segmentation included). See :mod:`landmark_nav.evaluation.scan_metrics` for the
+definitions. Also the ray-metric f of the ``detailed`` profile
+(``config/line_extractor_detailed.yaml``) on the same sampled scans against 0.9 x the full
+baseline's. ``--direct`` reads the logs with the simple FLASER reader instead (FLASER pose
+= laser pose, readings >= 40 m = no return), without the importer.
+
+``corner-repeatability``: every scan of each log (the FLASER pose as laser pose, readings
+>= 40 m no return, as ``metrics --direct``; node defaults), corners of scan k scored
+against scan k+1 through the reference poses as :func:`corner_repeatability` does. Printed
+per log, the fraction re-detected within 10 cm (re-detected / opportunities) under three
+rules for an opportunity (:func:`corner_observable`):
+
+* ``place + arms`` (the metric): the next scan's beam toward the corner returned within
+  10 cm of its distance, and so did its beams toward the point 15 cm along each arm;
+* ``place``: only the corner's own beam;
+* ``former``: the rule before, shared with the lines: the beam toward the corner not
+  occluded (returned at least its distance - 10 cm, or nothing).
+
+Then the misses of the metric split by the distance to the nearest corner of the next scan
+(10-50 cm: moved; farther or none: not detected again), corners per scan and the median
+detector time (segmentation included). ``--set NAME=VALUE`` (repeatable) changes a
+:class:`CornerParams` field; the row then also gives the corners the change adds (per
+scan: corners with no corner of the defaults within 5 cm in the same scan) and the share
+of those new corners that are re-detected in the next scan themselves (``new: per scan,
+re-detected / opportunities``).
+"""
+
+import json
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+from common import (add_logs_argument, log_paths, parse_set, run_subcommand,
+                    subcommand_parser)
+from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_truth_free,
+                                                  sensor_facts)
+from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repeatability,
+                                                  evaluate_scans, format_scan_metrics,
+                                                  MetricScan, ray_metrics, Repeatability,
+                                                  segments_of)
+from landmark_nav.geometry import transform_points
+from landmark_nav.importers.carmen import read_carmen_scans
+from landmark_nav.importers.writer import import_log
+from landmark_nav.laser.corners import CornerParams, detect_corners
+from landmark_nav.laser.lines import extract_lines, LineParams
+from landmark_nav.laser.segmentation import segment_scan
+import numpy as np
+
+# The order of the README's feature tables.
+LOGS = ('aces', 'seattle', 'belgioioso', 'fhw', 'freiburg-101', 'acapulco')
+MAX_RANGE = 40.0  # the reader's no-return cut [m]
+
+
+def carmen_metric_scans(path: Path) -> list:
+    """Read a Carmen log as :class:`MetricScan` with the corrected pose as laser pose."""
+    out = []
+    for s in read_carmen_scans(path, max_range=MAX_RANGE):
+        r = np.asarray(s.ranges, dtype=float)
+        valid = np.isfinite(r) & (r > 0.0)
+        out.append(MetricScan(r, s.angles, valid, np.isposinf(r), 0.0, MAX_RANGE,
+                              np.asarray(s.pose, dtype=float)))
+    return out
+
+
+def carmen_logs(data: str, logs):
+    """Yield ``(name, scans)`` of each log (:func:`log_paths`), :func:`carmen_metric_scans`."""
+    for name, path in log_paths(data, logs):
+        yield name, carmen_metric_scans(path)
+
+
+DETAILED = {'min_points': 3, 'min_length': 0.05}  # config/line_extractor_detailed.yaml
+DETAILED_SEGMENTATION_MIN_POINTS = 1
+
+
+def detailed_f(scans: list, sample, sigma_r: float) -> dict:
+    """Return the ray-metric f of the ``detailed`` profile on the sampled scans, per method.
+
+    The profile of ``config/line_extractor_detailed.yaml`` (``min_points`` 3,
+    ``min_length`` 0.05 m, segmentation ``min_points`` 1) on the same scans as the PLE
+    figures (issue target: f >= 0.9 x the full approxPolyDP baseline's f).
+    """
+    out = {}
+    for method in ('split_merge', 'alfa'):
+        params = LineParams(method=method, **DETAILED)
+        f = []
+        for k in sample:
+            s = scans[k]
+            clusters = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment,
+                                    sigma_r=params.sigma_r,
+                                    min_points=DETAILED_SEGMENTATION_MIN_POINTS)
+            f.append(ray_metrics(s.ranges, s.angles, s.valid,
+                                 segments_of(extract_lines(clusters, params)), sigma_r,
+                                 s.no_return).f)
+        out[method] = float(np.mean(f))
+    return out
+
+
+def summary(results: dict) -> str:
+    """One table, one row per log and method: the issue's figures side by side."""
+    rows = ['| log | method | f | ray RMSE mean / median | false-surface beams (scans) '
+            '{> 30 cm (scans)} | '
+            'fit RMS | lines re-detected | corners re-detected | ms/scan |',
+            '| --- | --- | --- | --- | --- | --- | --- | --- | --- |']
+    for log, res in results.items():
+        for m in ('split_merge', 'alfa', 'approxPolyDP', 'approxPolyDP_min_size'):
+            f = res['lines'][m]
+            rows.append(
+                f'| {log} | {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
+                f'{100 * f["ray_rmse_median_m"]:.2f} cm | {f["false_surface_beams"]} '
+                f'({f["false_surface_scans"]}) {{{f["false_surface_beams_over_30cm"]} '
+                f'({f["false_surface_scans_over_30cm"]})}} | {100 * f["fit_rms_m"]:.2f} cm | '
+                f'{f["line_repeatability"]:.3f} ({f["line_opportunities"]}) | | '
+                f'{f["median_ms_per_scan"]:.2f} |')
+        for m in ('minus_cosine',):
+            f = res['corners'][m]
+            rows.append(f'| {log} | {m} | | | | | | {f["corner_repeatability"]:.3f} '
+                        f'({f["corner_opportunities"]}; counting the unobserved '
+                        f'{f["corner_repeatability_with_unobserved"]:.3f}) | '
+                        f'{f["median_ms_per_scan"]:.2f} |')
+    return '\n'.join(rows)
+
+
+def run_metrics(args) -> int:
+    """Run the ``metrics`` subcommand: the tables of every log and the summary."""
+    results = {}
+    for name, path in log_paths(args.data, args.logs):
+        if args.direct:
+            scans = carmen_metric_scans(path)
+            res = evaluate_scans(scans, sigma_r=args.sigma_r,
+                                 ple_scans=args.scans, seed=args.seed, progress=name)
+            res['detailed_f'] = detailed_f(scans, res['sample'], args.sigma_r)
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                import_log(path, Path(tmp) / name)
+                res, notes = evaluate_truth_free(Path(tmp) / name, scans=args.scans,
+                                                 seed=args.seed, progress=True)
+                mount, sigma_r, _ = sensor_facts(Path(tmp) / name)
+                scans, _ = bag_metric_scans(Path(tmp) / name, mount)
+                res['detailed_f'] = detailed_f(scans, res['sample'], sigma_r)
+            for note in notes:
+                print(note)
+        results[name] = res
+        print(format_scan_metrics(res, f'{name}: '), '\n', flush=True)
+    print(summary(results))
+    print('\n| log | approxPolyDP f | 0.9 x | detailed split_merge f | detailed alfa f |\n'
+          '| --- | --- | --- | --- | --- |')
+    for log, res in results.items():
+        base = res['lines']['approxPolyDP']['f']
+        det = res['detailed_f']
+        print(f'| {log} | {base:.3f} | {0.9 * base:.3f} | {det["split_merge"]:.3f} | '
+              f'{det["alfa"]:.3f} |')
+    pooled = {m: [] for m in ('split_merge', 'alfa', 'approxPolyDP', 'approxPolyDP_min_size')}
+    for res in results.values():
+        for m in pooled:
+            f = res['lines'][m]
+            pooled[m].append((f['fit_rms_m'] ** 2 * f['fit_beams'], f['fit_beams']))
+    print('\npooled fit RMS over the logs: ' + ', '.join(
+        f'{m} {100 * np.sqrt(sum(a for a, _ in v) / max(sum(b for _, b in v), 1)):.2f} cm'
+        for m, v in pooled.items()))
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+def run_corner_repeatability(args) -> int:
+    """Run the ``corner-repeatability`` subcommand: one row per log."""
+    changes = parse_set(args.set)
+    params = CornerParams(method=args.method, **changes)
+    base = CornerParams(method=args.method) if changes else None
+    print('| log | place + arms | place | former | '
+          'misses: next 10-50 cm / none within 50 cm | corners/scan | ms/scan |'
+          + (' new: per scan, re-detected |' if base else ''))
+    print('| --- | --- | --- | --- | --- | --- | --- |' + (' --- |' if base else ''))
+    for name, scans in carmen_logs(args.data, args.logs):
+        corners, arms, times, new = [], [], [], []
+        for s in scans:
+            if base is not None:
+                cl = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment,
+                                  sigma_r=base.sigma_r)
+                old = np.array([c.position for c in detect_corners(cl, base)]).reshape(-1, 2)
+            t0 = time.perf_counter()
+            cl = segment_scan(s.ranges, s.angles, s.valid, s.angle_increment,
+                              sigma_r=params.sigma_r)
+            found = detect_corners(cl, params)
+            times.append(time.perf_counter() - t0)
+            corners.append(np.array([c.position for c in found]).reshape(-1, 2))
+            arms.append(np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2))
+            if base is not None:
+                d = np.hypot(*(corners[-1][:, None] - old[None]).transpose(2, 0, 1))
+                new.append(d.min(axis=1, initial=np.inf) > 0.05)
+        score, place, added = Repeatability(), Repeatability(), Repeatability()
+        near = []
+        for k in range(len(scans) - 1):
+            corner_repeatability(score, corners[k], scans[k].pose, corners[k + 1],
+                                 scans[k + 1], wedges_k=arms[k])
+            corner_repeatability(place, corners[k], scans[k].pose, corners[k + 1],
+                                 scans[k + 1])
+            if base is not None and new[k].any():
+                corner_repeatability(added, corners[k][new[k]], scans[k].pose, corners[k + 1],
+                                     scans[k + 1], wedges_k=arms[k][new[k]])
+            if len(corners[k]):
+                world = transform_points(scans[k].pose, corners[k])
+                ang = (scans[k].pose[2] + arms[k][:, :1]
+                       + 0.5 * arms[k][:, 1:] * np.array([1.0, -1.0]))
+                world = world[corner_observable(scans[k + 1], world, ang)]
+                other = transform_points(scans[k + 1].pose, corners[k + 1]).reshape(-1, 2)
+                near.append(np.hypot(*(world[:, None] - other[None]).transpose(2, 0, 1)
+                                     ).min(axis=1, initial=np.inf))
+        near = np.concatenate(near) if near else np.zeros(0)
+        n_all = score.opportunities + score.unobserved
+        print(f'| {name} | {score.fraction:.3f} ({score.redetected}/{score.opportunities}) | '
+              f'{place.fraction:.3f} ({place.redetected}/{place.opportunities}) | '
+              f'{score.fraction_with_unobserved:.3f} '
+              f'({score.redetected + score.unobserved_redetected}/{n_all}) | '
+              f'{np.mean((near > 0.1) & (near <= 0.5)):.3f} / {np.mean(near > 0.5):.3f} | '
+              f'{sum(map(len, corners)) / len(scans):.2f} | '
+              f'{1e3 * np.median(times):.2f} |'
+              + (f' {sum(map(np.sum, new)) / len(scans):.2f}, {added.fraction:.3f} '
+                 f'({added.redetected}/{added.opportunities}) |' if base else ''), flush=True)
+
+    return 0
+
+
+def main(argv=None) -> int:
+    """Parse the subcommand and run it."""
+    ap, sub = subcommand_parser(__doc__)
+    p = sub.add_parser('metrics', help='the truth-free feature metrics of every log')
+    add_logs_argument(p, 'carmen', LOGS)
+    p.add_argument('--scans', type=int, default=20, help='scans drawn for the PLE figures')
+    p.add_argument('--seed', type=int, default=0, help='seed of the draw')
+    p.add_argument('--sigma-r', type=float, default=0.01,
+                   help='--direct: sensor range noise for the false-surface margin [m] '
+                        '(imported bags state theirs)')
+    p.add_argument('--json', default=None, help='write all figures to this file')
+    p.add_argument('--direct', action='store_true',
+                   help='read the logs with the simple FLASER reader, not the importer')
+    p.set_defaults(run=run_metrics)
+    p = sub.add_parser('corner-repeatability',
+                       help='corner re-detection between consecutive scans, and the misses')
+    add_logs_argument(p, 'carmen', LOGS)
+    p.add_argument('--method', default='minus_cosine', help='corner detector')
+    p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                   help='a CornerParams field (the value a Python literal)')
+    p.set_defaults(run=run_corner_repeatability)
+    return run_subcommand(ap, argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
