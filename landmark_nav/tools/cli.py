@@ -105,7 +105,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
                         lenient=args.lenient, force=args.force, max_scans=args.max_scans,
                         fallback_period=args.period, progress=sys.stderr.isatty(),
                         max_range=args.max_range, odom_lines=args.odom_lines,
-                        fov=args.fov)
+                        fov=args.fov, range_max_from=args.range_max_from)
     print(result.summary)
     return 0
 
@@ -326,6 +326,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help='Carmen: readings at or above this are "no return" (default: the '
                         "log's ROBOTLASER1 maximum_range or PARAM robot_front_laser_max, "
                         'else 50)')
+    p.add_argument('--range-max-from', choices=['auto', 'header', 'data'], default='auto',
+                   help='Carmen: where the range cap comes from (without --max-range): the '
+                        "log's header (maximum_range, PARAM robot_front_laser_max, else 50 m) "
+                        'unless at least 1 %% of the readings lie above it (auto, default), '
+                        'the header always (header), or the readings (data)')
     p.add_argument('--fov', type=_positive_float, default=None, metavar='DEG',
                    help='Carmen: field of view of FLASER / RLASER lines, beams spread evenly '
                         'from -DEG/2 to +DEG/2 (needed for counts other than 180, 181, 360, '
