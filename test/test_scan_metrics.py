@@ -46,6 +46,21 @@ def test_half_segment_covers_half_the_beams():
     assert none.hits == 0 and math.isnan(none.rmse) and none.false_surface.size == 0
 
 
+def test_occluders_reported_apart():
+    # a wall at 2 m with 1 cm residuals and two stray returns 1.5 m in front of it, kept
+    # inside the wall's segment: they dominate the ray RMSE; without them it is 1 cm
+    r = wall_scan(2.0) + np.where(np.arange(PHI.size) % 2, 0.01, -0.01) / np.cos(PHI)
+    r[[30, 90]] = 0.5
+    m = ray_metrics(r, PHI, np.ones(PHI.size, bool), wall(2.0), sigma_r=0.01)
+    assert m.occluders == 2 and m.hits == 121 and m.margin == pytest.approx(0.05)
+    assert m.rmse > 0.15
+    kept = np.delete(r - wall_scan(2.0), [30, 90])
+    assert m.rmse_without_occluders == pytest.approx(np.sqrt(np.mean(kept ** 2)), rel=1e-9)
+    # a beam 4 cm short (inside the 5 cm margin) is noise, not an occluder
+    r[30] = wall_scan(2.0)[30] - 0.04
+    assert ray_metrics(r, PHI, np.ones(PHI.size, bool), wall(2.0)).occluders == 1
+
+
 def test_shifted_segment_gives_known_residuals():
     r = wall_scan(2.0)
     valid = np.ones(PHI.size, bool)

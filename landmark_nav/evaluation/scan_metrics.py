@@ -11,7 +11,10 @@ reference pose of each scan (e.g. the corrected pose of a Carmen log).
   those beams whose ray hits a segment; ray RMSE = RMS over the hitting beams of
   (measured range - range to the first segment hit along the ray). Beams without a return
   (REP 117 +inf) are scored apart as in the paper: ``f_no_return`` = fraction of them whose
-  ray hits no segment. :func:`ray_metrics`.
+  ray hits no segment. :func:`ray_metrics`. The ray RMSE is also given without the
+  **occluders**, hitting beams that end more than the false-surface margin in front of their
+  segment (an object before the line, e.g. a lone stray return that the extractor kept
+  inside a wall line): a few such beams metres short dominate a scan's RMSE.
 * **False-surface beams**: beams with a return measured more than ``max(3 sigma_r, 5 cm)``
   beyond a segment that their ray crosses inside the segment's extent: the laser saw
   through a surface that is not there. :func:`ray_metrics`.
@@ -104,6 +107,9 @@ class RayMetrics:
             opening bridged by a line gives metres).
         fit_residuals: Perpendicular residuals of the hitting beams within ``FIT_WINDOW``
             of their first-hit segment's line [m].
+        margin: A hitting beam that ends more than this in front of its first-hit segment
+            is an occluder (a return from an object before the line, e.g. a lone stray
+            return kept inside a wall line) [m]; the false-surface margin.
 
     """
 
@@ -115,6 +121,7 @@ class RayMetrics:
     false_surface: np.ndarray
     false_surface_excess: np.ndarray
     fit_residuals: np.ndarray
+    margin: float = FALSE_SURFACE_MIN
 
     @property
     def f(self) -> float:
@@ -126,6 +133,17 @@ class RayMetrics:
         """RMS range residual of the hitting beams [m] (PLE ray RMSE); NaN without hits."""
         return (float(np.sqrt(np.mean(np.square(self.residuals)))) if self.hits
                 else float('nan'))
+
+    @property
+    def occluders(self) -> int:
+        """Return the hitting beams that end more than ``margin`` in front of the segment."""
+        return int(np.count_nonzero(self.residuals < -self.margin))
+
+    @property
+    def rmse_without_occluders(self) -> float:
+        """Ray RMSE over the hitting beams that are not occluders [m]; NaN without any."""
+        kept = self.residuals[self.residuals >= -self.margin]
+        return float(np.sqrt(np.mean(np.square(kept)))) if kept.size else float('nan')
 
     @property
     def f_no_return(self) -> float:
@@ -187,7 +205,8 @@ def ray_metrics(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
                       residuals=r[hit] - s_first[hit], no_return=int(nr.sum()),
                       no_return_clear=int((nr & ~np.isfinite(s_first)).sum()),
                       false_surface=np.flatnonzero(seen_through),
-                      false_surface_excess=excess[seen_through], fit_residuals=fit)
+                      false_surface_excess=excess[seen_through], fit_residuals=fit,
+                      margin=margin)
 
 
 # ---------------------------------------------------------------------------- baseline
@@ -471,6 +490,9 @@ class _LineTally:
     def __init__(self) -> None:
         self.f: List[float] = []
         self.rmse: List[float] = []
+        self.rmse_open: List[float] = []  # without occluders
+        self.occluders = 0
+        self.hits = 0
         self.f_nr: List[float] = []
         self.fit: List[np.ndarray] = []
         self.fs_sample = 0
@@ -494,6 +516,9 @@ class _LineTally:
             self.fs_sample += n_fs
             self.f.append(m.f)
             self.rmse.append(m.rmse)
+            self.rmse_open.append(m.rmse_without_occluders)
+            self.occluders += m.occluders
+            self.hits += m.hits
             self.f_nr.append(m.f_no_return)
             self.fit.append(m.fit_residuals)
 
@@ -501,12 +526,20 @@ class _LineTally:
         fit = np.concatenate(self.fit) if self.fit else np.zeros(0)
         rmse = np.asarray(self.rmse, dtype=float)
         rmse = rmse[np.isfinite(rmse)]
+        rmse_open = np.asarray(self.rmse_open, dtype=float)
+        rmse_open = rmse_open[np.isfinite(rmse_open)]
         f_nr = np.asarray(self.f_nr, dtype=float)
         f_nr = f_nr[np.isfinite(f_nr)]
         return {
             'f': float(np.mean(self.f)) if self.f else float('nan'),
             'ray_rmse_mean_m': float(rmse.mean()) if rmse.size else float('nan'),
             'ray_rmse_median_m': float(np.median(rmse)) if rmse.size else float('nan'),
+            'ray_rmse_no_occluders_mean_m': (float(rmse_open.mean()) if rmse_open.size
+                                             else float('nan')),
+            'ray_rmse_no_occluders_median_m': (float(np.median(rmse_open)) if rmse_open.size
+                                               else float('nan')),
+            'occluder_beams_sample': self.occluders,
+            'hit_beams_sample': self.hits,
             'f_no_return': float(f_nr.mean()) if f_nr.size else float('nan'),
             'fit_rms_m': float(np.sqrt(np.mean(fit ** 2))) if fit.size else float('nan'),
             'fit_beams': int(fit.size),
@@ -659,14 +692,17 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
            f'{100 * result["false_surface_margin_m"]:.1f} cm (sigma_r '
            f'{100 * result["sigma_r"]:.1f} cm); extractors at sigma_r '
            f'{100 * result["extractor_sigma_r"]:.1f} cm', '',
-           '| line method | f | ray RMSE mean / median | f no-return | false-surface beams '
-           '(scans) [sample] {> 30 cm (scans)} | fit RMS (beams) | lines >= 1 m re-detected | '
-           'segments/scan | ms/scan median |',
-           '| --- | --- | --- | --- | --- | --- | --- | --- | --- |']
+           '| line method | f | ray RMSE mean / median | without occluders (occluder beams '
+           '/ hits) | f no-return | false-surface beams (scans) [sample] {> 30 cm (scans)} | '
+           'fit RMS (beams) | lines >= 1 m re-detected | segments/scan | ms/scan median |',
+           '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |']
     for m, f in result['lines'].items():
         out.append(
             f'| {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
-            f'{100 * f["ray_rmse_median_m"]:.2f} cm | {f["f_no_return"]:.3f} | '
+            f'{100 * f["ray_rmse_median_m"]:.2f} cm | '
+            f'{100 * f["ray_rmse_no_occluders_mean_m"]:.2f} / '
+            f'{100 * f["ray_rmse_no_occluders_median_m"]:.2f} cm ({f["occluder_beams_sample"]} / '
+            f'{f["hit_beams_sample"]}) | {f["f_no_return"]:.3f} | '
             f'{f["false_surface_beams"]} ({f["false_surface_scans"]}) '
             f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]} '
             f'({f["false_surface_scans_over_30cm"]})}} | '
