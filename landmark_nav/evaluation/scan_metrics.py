@@ -41,10 +41,10 @@ Choices stated (the paper leaves them open or its script differs from its text):
   metric); 20 cm keeps beams of a neighbouring object out.
 """
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 import time
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from landmark_nav.evaluation.features import normal_form
 from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
@@ -562,7 +562,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                    corner_methods: Sequence[str] = ('minus_cosine', 'sliding_window',
                                                     'split_merge'),
                    line_methods: Sequence[str] = ('split_merge', 'alfa'),
-                   extractor_sigma_r: Optional[float] = None,
+                   extractor_sigma_r: Optional[Union[float, str]] = None,
                    progress: Optional[str] = None) -> dict:
     """Score the extractors and the baseline on real scans with the truth-free metrics.
 
@@ -584,11 +584,16 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         corner_methods: Corner detectors.
         line_methods: Line extractors.
         extractor_sigma_r: Range noise the extractors and the segmentation assume [m];
-            None: the node default (0.01 m).
+            None: the node default (0.01 m); ``'auto'``: estimated from the scans with
+            ``sigma_r`` as its lower bound
+            (:func:`landmark_nav.laser.range_noise.estimate_range_noise`, stated in the
+            result's ``extractor_sigma_r_estimate``); the false-surface margin then uses
+            the estimate too (the sensor's noise as its data shows it).
         progress: Label of a tqdm progress bar, or None for none.
 
     Returns:
-        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r', 'repeat_pairs',
+        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r',
+        'extractor_sigma_r_estimate' (the estimate's figures, or None), 'repeat_pairs',
         'lines': {method: figures}, 'corners': {method: figures}}; without a pair of
         consecutive scans with poses (no reference) the repeatability figures are None.
 
@@ -597,7 +602,16 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     from landmark_nav.laser.lines import extract_lines, LineParams
     from landmark_nav.laser.segmentation import segment_scan
 
-    ext_sigma = LineParams().sigma_r if extractor_sigma_r is None else float(extractor_sigma_r)
+    estimate = None
+    if extractor_sigma_r == 'auto':
+        from landmark_nav.laser.range_noise import estimate_range_noise
+        estimate = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans),
+                                        stated=sigma_r)
+        ext_sigma = sigma_r = estimate.sigma_r  # the noise the data shows, for the margin too
+    elif extractor_sigma_r is None:
+        ext_sigma = LineParams().sigma_r
+    else:
+        ext_sigma = float(extractor_sigma_r)
     line_params = {m: LineParams(method=m, sigma_r=ext_sigma) for m in line_methods}
     corner_params = {m: CornerParams(method=m, sigma_r=ext_sigma) for m in corner_methods}
     min_points, min_length = LineParams().min_points, LineParams().min_length
@@ -659,6 +673,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     return {
         'scans': n, 'ple_scans': len(sample), 'sample': sorted(sample), 'seed': seed,
         'sigma_r': sigma_r, 'extractor_sigma_r': ext_sigma, 'repeat_pairs': pairs,
+        'extractor_sigma_r_estimate': None if estimate is None else asdict(estimate),
         'false_surface_margin_m': max(3.0 * sigma_r, FALSE_SURFACE_MIN),
         'lines': lines,
         'corners': {m: {
@@ -684,6 +699,15 @@ def _repeat_text(figures: dict, kind: str) -> str:
             f'{figures[f"{kind}_opportunities"]})')
 
 
+def _estimate_text(result: dict) -> str:
+    """Return ' (estimated: ...)' when the extractors' sigma_r was estimated, else ''."""
+    est = result.get('extractor_sigma_r_estimate')
+    if not est:
+        return ''
+    from landmark_nav.laser.range_noise import RangeNoise
+    return f' ({RangeNoise(**est).describe()})'
+
+
 def format_scan_metrics(result: dict, title: str = '') -> str:
     """Render :func:`evaluate_scans` figures as two Markdown tables."""
     out = [f'{title}scans: {result["scans"]} ({result["ple_scans"]} drawn with seed '
@@ -691,7 +715,7 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
            f'pairs with reference poses; false-surface margin '
            f'{100 * result["false_surface_margin_m"]:.1f} cm (sigma_r '
            f'{100 * result["sigma_r"]:.1f} cm); extractors at sigma_r '
-           f'{100 * result["extractor_sigma_r"]:.1f} cm', '',
+           f'{100 * result["extractor_sigma_r"]:.2f} cm' + _estimate_text(result), '',
            '| line method | f | ray RMSE mean / median | without occluders (occluder beams '
            '/ hits) | f no-return | false-surface beams (scans) [sample] {> 30 cm (scans)} | '
            'fit RMS (beams) | lines >= 1 m re-detected | segments/scan | ms/scan median |',

@@ -132,6 +132,11 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _sigma_or_auto(text: str):
+    """Parse ``auto`` or a finite number > 0."""
+    return 'auto' if text == 'auto' else _positive_float(text)
+
+
 def _image_size(text: str) -> int:
     """Parse a corridor camera size ``WxH``; return the downscale of 640 x 480 (1, 2, 4)."""
     sizes = {'640x480': 1, '320x240': 2, '160x120': 4}
@@ -347,9 +352,11 @@ def build_parser() -> argparse.ArgumentParser:
                             'metric, false-surface beams, fit, repeatability)')
     p.add_argument('bag', help='rosbag2 directory with /scan (simulator or imported)')
     p.add_argument('--every', type=int, default=1, help='use every n-th scan')
-    p.add_argument('--sigma-r', type=float, default=None,
-                   help='range noise the extractors assume [m] (default: the simulated one; '
-                        'truth-free: the node default 0.01)')
+    p.add_argument('--sigma-r', type=_sigma_or_auto, default=None, metavar='METRES|auto',
+                   help='range noise the extractors assume [m], or auto: estimated from the '
+                        "bag's scans (local line fits, at least the range step / sqrt(12) and "
+                        "the sensor's stated noise; the false-surface margin follows it) "
+                        '(default: the simulated one on a simulator bag, else auto)')
     p.add_argument('--truth-free', action='store_true',
                    help='truth-free metrics even on a simulator bag')
     p.add_argument('--reference', default=None, metavar='FILE.tum',
