@@ -254,14 +254,15 @@ def bag_metric_scans(bag, mount: np.ndarray, reference: Optional[str] = None,
 def evaluate_truth_free(bag, reference: Optional[str] = None,
                         mount: Optional[Sequence[float]] = None,
                         sigma_r: Optional[float] = None,
-                        extractor_sigma_r: Optional[Union[float, str]] = 'auto',
+                        extractor_sigma_r: Optional[Union[float, str]] = None,
                         scans: int = 20, seed: int = 0, every: int = 1, progress: bool = False
                         ) -> Tuple[dict, List[str]]:
     """Score every method on a bag with the truth-free metrics (module docstring).
 
     ``extractor_sigma_r``: the range noise the extractors assume [m], None for the node
-    default (0.01 m), or ``'auto'`` (default): estimated from the bag's scans, at least the
-    sensor's stated noise (:func:`landmark_nav.evaluation.scan_metrics.evaluate_scans`).
+    default (0.01 m), or ``'auto'`` (the command's default, :func:`evaluate_bag_features`):
+    estimated from the bag's scans, at least the sensor's stated noise
+    (:func:`landmark_nav.evaluation.scan_metrics.evaluate_scans`).
 
     Returns:
         (figures of :func:`landmark_nav.evaluation.scan_metrics.evaluate_scans` plus
