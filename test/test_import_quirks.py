@@ -99,6 +99,7 @@ def test_lms_mm_codes_are_no_return_not_ranges(tmp_path):
     assert np.isposinf(ranges).sum() == marks[32.767].count  # no echo: +inf
     assert np.isnan(ranges).sum() == marks[32.763].count  # S/N too low: error
     assert np.nanmax(ranges[np.isfinite(ranges)]) <= 30.0
+    assert log.sensor.model == 'SICK LMS (mm mode, codes from 32.759 m)'
 
 
 def test_lms_code_band_follows_the_largest_reading():

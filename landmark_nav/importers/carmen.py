@@ -299,7 +299,8 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
     if use == 'ROBOTLASER1':
         stated_by = 'ROBOTLASER1 maximum_range'
     raw = np.concatenate([s.values for s in lasers])
-    band = lms_code_band(raw) or (LMS_CM_BAND_M if range_resolution(raw) >= 0.01 else None)
+    mm_band = lms_code_band(raw)  # mm readings: an LMS in a mm mode
+    band = mm_band or (LMS_CM_BAND_M if range_resolution(raw) >= 0.01 else None)
     spikes = find_spikes(raw)
     cap = None
     if max_range is not None:
@@ -323,7 +324,8 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
     else:
         mount = (param('robot_frontlaser_offset', 0.0), 0.0, 0.0)
     maxima = {s.max_range or log_max for s in lasers}
-    sensor = Sensor(model='SICK LMS (cm mode)', range_min=0.0, range_max=float(max(maxima)),
+    model = f'SICK LMS (mm mode, codes from {mm_band[0]:g} m)' if mm_band else 'SICK LMS (cm mode)'
+    sensor = Sensor(model=model, range_min=0.0, range_max=float(max(maxima)),
                     sigma_range=LMS_SIGMA_RANGE)
 
     def records(scans: List[_Laser]) -> List[ScanRecord]:
