@@ -318,3 +318,17 @@ def test_a_corner_the_next_scan_sees_past_is_no_opportunity():
     toward = (c - B[:2]) / np.hypot(*(c - B[:2]).T)
     assert in_view(near, c - 0.05 * toward, surface=True).all()
     assert not in_view(near, c - 0.2 * toward, surface=True).any()
+
+
+def test_structural_corners_have_two_long_arms():
+    from landmark_nav.laser.corner_detection.corner import Corner, STRUCTURAL_ARM
+
+    def corner(a, b):
+        arms = np.array([[[0.0, 0.0], [a, 0.0]], [[0.0, 0.0], [0.0, b]]])
+        return Corner(np.zeros(2), 0.0, math.pi / 2, np.eye(2), 0, 0.0, arms)
+
+    assert corner(0.6, 1.2).structural and corner(STRUCTURAL_ARM, STRUCTURAL_ARM).structural
+    assert not corner(0.6, 0.3).structural and not corner(0.2, 0.9).structural
+    np.testing.assert_allclose(corner(0.6, 0.3).arm_lengths, [0.6, 0.3])
+    bare = Corner(np.zeros(2), 0.0, math.pi / 2, np.eye(2), 0, 0.0)
+    assert not bare.structural and np.isnan(bare.arm_lengths).all()

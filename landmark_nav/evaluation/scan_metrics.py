@@ -23,7 +23,9 @@ reference pose of each scan (e.g. the corrected pose of a Carmen log).
 * **Repeatability** between consecutive scans through the reference poses:
   :func:`line_repeatability`, :func:`corner_repeatability`. An opportunity is a feature
   the next scan could re-detect: a line's midpoint in view (:func:`in_view`), a corner's
-  place and a point 15 cm along each arm seen (:func:`corner_observable`).
+  place and a point 15 cm along each arm seen (:func:`corner_observable`). Corner
+  repeatability is also given per class of the corner in scan k: structural (both arms at
+  least ``STRUCTURAL_ARM`` = 0.5 m, ``Corner.structural``) and the others.
 * **Baseline** line extractor: iterative end-point fit (Douglas-Peucker) per breakpoint
   cluster, OpenCV ``approxPolyDP``: :func:`approx_poly_segments`.
 
@@ -593,6 +595,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
 
     Returns:
         {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r',
+        (corner figures per class: ``corner_repeatability_structural`` / ``_other``, with
+        their opportunities and re-detections, and ``structural_share``),
         'extractor_sigma_r_estimate' (the estimate's figures, or None), 'repeat_pairs',
         'lines': {method: figures}, 'corners': {method: figures}}; without a pair of
         consecutive scans with poses (no reference) the repeatability figures are None.
@@ -618,6 +622,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     sample = {int(i) for i in sample_scans(len(scans), ple_scans, seed)}
     tallies = {m: _LineTally() for m in (*line_methods, BASELINE, BASELINE_MIN)}
     c_repeat = {m: Repeatability() for m in corner_methods}
+    c_class = {m: (Repeatability(), Repeatability()) for m in corner_methods}  # structural, other
+    c_structural = dict.fromkeys(corner_methods, 0)
     c_times = {m: [] for m in corner_methods}
     c_count = dict.fromkeys(corner_methods, 0)
     prev = None  # (scan, {method: segments}, {method: corners})
@@ -645,14 +651,16 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         size_ok = ((idx[:, 1] - idx[:, 0] + 1 >= min_points)
                    & (np.hypot(*(base[:, 1] - base[:, 0]).T) >= min_length))
         segs[BASELINE_MIN] = base[size_ok]
-        corners: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
+        corners: Dict[str, Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for m, params in corner_params.items():
             t0 = time.perf_counter()
             found = detect_corners(clusters, params)
             c_times[m].append(t_seg + time.perf_counter() - t0)
             corners[m] = (np.array([c.position for c in found]).reshape(-1, 2),
-                          np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2))
+                          np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2),
+                          np.array([c.structural for c in found], dtype=bool))
             c_count[m] += len(found)
+            c_structural[m] += int(corners[m][2].sum())
         for m, tally in tallies.items():
             tally.count += len(segs[m])
             tally.add(k, ray_metrics(scan.ranges, scan.angles, scan.valid, segs[m], sigma_r,
@@ -662,8 +670,12 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             for m, tally in tallies.items():
                 line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], scan)
             for m in corner_methods:
-                corner_repeatability(c_repeat[m], prev[2][m][0], prev[0].pose, corners[m][0],
-                                     scan, wedges_k=prev[2][m][1])
+                pos, wedge, label = prev[2][m]
+                corner_repeatability(c_repeat[m], pos, prev[0].pose, corners[m][0], scan,
+                                     wedges_k=wedge)
+                for score, keep in zip(c_class[m], (label, ~label)):
+                    corner_repeatability(score, pos[keep], prev[0].pose, corners[m][0], scan,
+                                         wedges_k=wedge[keep])
         prev = (scan, segs, corners)
     n = len(scans)
     lines = {m: t.figures(n) for m, t in tallies.items()}
@@ -684,6 +696,13 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             'corner_unobserved_redetected': c_repeat[m].unobserved_redetected,
             'corner_repeatability_with_unobserved': (
                 c_repeat[m].fraction_with_unobserved if pairs else None),
+            'corner_repeatability_structural': c_class[m][0].fraction if pairs else None,
+            'corner_opportunities_structural': c_class[m][0].opportunities,
+            'corner_redetected_structural': c_class[m][0].redetected,
+            'corner_repeatability_other': c_class[m][1].fraction if pairs else None,
+            'corner_opportunities_other': c_class[m][1].opportunities,
+            'corner_redetected_other': c_class[m][1].redetected,
+            'structural_share': c_structural[m] / c_count[m] if c_count[m] else float('nan'),
             'corners_per_scan': c_count[m] / n if n else float('nan'),
             'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None,
             'mean_ms_per_scan': 1e3 * float(np.mean(c_times[m])) if c_times[m] else None}
@@ -734,13 +753,19 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
             f'({f["fit_beams"]}) | {_repeat_text(f, "line")} | '
             f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
     out += ['', '| corner method | corners re-detected within 10 cm | counting the '
-            'unobserved | corners/scan | ms/scan median |', '| --- | --- | --- | --- | --- |']
+            'unobserved | structural (both arms >= 0.5 m) re-detected | others re-detected '
+            '| structural share | corners/scan | ms/scan median |',
+            '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for m, f in result['corners'].items():
         former = 'n/a'
         if f['corner_repeatability_with_unobserved'] is not None:
             former = (f'{f["corner_repeatability_with_unobserved"]:.3f} '
                       f'({f["corner_redetected"] + f["corner_unobserved_redetected"]}/'
                       f'{f["corner_opportunities"] + f["corner_unobserved"]})')
-        out.append(f'| {m} | {_repeat_text(f, "corner")} | {former} | '
-                   f'{f["corners_per_scan"]:.2f} | {f["median_ms_per_scan"]:.2f} |')
+        classes = ' | '.join(_repeat_text({k.replace(f'_{c}', ''): v for k, v in f.items()
+                                           if k.endswith(f'_{c}')}, 'corner')
+                             for c in ('structural', 'other'))
+        out.append(f'| {m} | {_repeat_text(f, "corner")} | {former} | {classes} | '
+                   f'{f["structural_share"]:.2f} | {f["corners_per_scan"]:.2f} | '
+                   f'{f["median_ms_per_scan"]:.2f} |')
     return '\n'.join(out)
