@@ -330,7 +330,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--max-range', type=_positive_float, default=None, metavar='METRES',
                    help='Carmen: readings at or above this are "no return" (default: the '
                         "log's ROBOTLASER1 maximum_range or PARAM robot_front_laser_max, "
-                        'else 50)')
+                        'else 50, unless the readings overrule it: --range-max-from)')
     p.add_argument('--range-max-from', choices=['auto', 'header', 'data'], default='auto',
                    help='Carmen: where the range cap comes from (without --max-range): the '
                         "log's header (maximum_range, PARAM robot_front_laser_max, else 50 m) "
