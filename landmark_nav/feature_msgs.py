@@ -4,9 +4,10 @@ Encodings (documented in docs/laser_features.md, Topics):
 
 * Corners: ``geometry_msgs/PoseArray`` (position = corner, orientation = yaw of the
   free-space bisector) plus ``sensor_msgs/PointCloud2`` with one point per corner and the
-  float64 fields ``x y z bisector opening cov_xx cov_xy cov_yy time`` (z = 0; covariance
-  of the position in m^2; ``time`` = the corner beam's time after the header stamp [s],
-  beam index times the scan's ``time_increment``, 0 when the scan has none) -- the
+  float64 fields ``x y z bisector opening cov_xx cov_xy cov_yy time structural`` (z = 0;
+  covariance of the position in m^2; ``time`` = the corner beam's time after the header
+  stamp [s], beam index times the scan's ``time_increment``, 0 when the scan has none;
+  ``structural`` 1 when both arms are at least 0.5 m long, else 0: ``Corner.structural``) -- the
   PointCloud2 carries what a PoseArray cannot. Float64, so that the SLAM node sees the
   same numbers as the offline evaluation (float32 would move a corner by up to 0.1 um).
 * Lines: ``sensor_msgs/PointCloud2`` with one point per line and the float32 fields
@@ -29,7 +30,8 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 from visualization_msgs.msg import Marker, MarkerArray
 
-CORNER_FIELDS = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy', 'time')
+CORNER_FIELDS = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy', 'time',
+                 'structural')
 LINE_FIELDS = ('x', 'y', 'z', 'rho', 'alpha', 'x1', 'y1', 'x2', 'y2', 'cov_rr', 'cov_ra',
                'cov_aa', 'num_points', 'rmse')
 
@@ -117,7 +119,7 @@ def make_corner_pose_array(stamp_ns: int, frame_id: str, corners) -> PoseArray:
 
 def make_corner_cloud(stamp_ns: int, frame_id: str, corners,
                       time_increment: float = 0.0) -> PointCloud2:
-    """Corners with bisector, opening, position covariance and beam time as a PointCloud2.
+    """Corners with bisector, opening, covariance, beam time and label as a PointCloud2.
 
     ``time`` = the corner's beam index times ``time_increment`` (the scan's) [s].
     """
@@ -128,7 +130,8 @@ def make_corner_cloud(stamp_ns: int, frame_id: str, corners,
         'cov_xx': [c.covariance[0, 0] for c in corners],
         'cov_xy': [c.covariance[0, 1] for c in corners],
         'cov_yy': [c.covariance[1, 1] for c in corners],
-        'time': [float(time_increment) * c.index for c in corners]}
+        'time': [float(time_increment) * c.index for c in corners],
+        'structural': [float(c.structural) for c in corners]}
     return make_feature_cloud(stamp_ns, frame_id, CORNER_FIELDS, cols, float64=True)
 
 

@@ -259,6 +259,23 @@ def recording_node(ros):
     return slam, stamps
 
 
+def test_structural_corners_only_keeps_the_labelled_corners():
+    names = ('x', 'y', 'z', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy', 'structural')
+    rows = np.array([GOOD_CORNER + [1.0], [3.0, -1.0] + GOOD_CORNER[2:] + [0.0]])
+    labelled = make_feature_cloud(T0, 'laser', names, dict(zip(names, rows.T)))
+    with RosHarness() as ros:
+        for only, kept in ((False, 2), (True, 1)):
+            slam = EkfSlamNode(context=ros.context, parameter_overrides=[
+                Parameter('structural_corners_only', value=only)])
+            offered = []
+            slam._offer = lambda part, t, cols: offered.append(cols)
+            slam.on_corners(labelled)
+            assert len(offered[0]) == kept and offered[0][0, 0] == 2.0
+            slam.on_corners(corner_cloud(T0, [GOOD_CORNER, GOOD_CORNER]))  # no label: all
+            assert len(offered[1]) == 2 and slam.warner.count == int(only)
+            slam.destroy_node()
+
+
 @pytest.mark.dds
 def test_bad_input():
     t0 = 1_700_000_000_000_000_000

@@ -77,6 +77,11 @@ def test_static_room_is_repeatable_with_the_stated_mount(tmp_path):
     # Room corners: every one seen again within 10 cm.
     mc = res['corners']['minus_cosine']
     assert mc['corner_opportunities'] >= 5 and mc['corner_repeatability'] == 1.0
+    # the room's corners have walls of metres on both sides: all structural
+    assert mc['structural_share'] == 1.0 and mc['corner_opportunities_other'] == 0
+    assert (mc['corner_opportunities_structural'], mc['corner_redetected_structural']) == (
+        mc['corner_opportunities'], mc['corner_redetected'])
+    assert mc['corner_repeatability_other'] != mc['corner_repeatability_other']  # NaN: none
 
 
 def test_missing_mount_falls_back_to_zero_with_a_note_and_breaks_repeatability(tmp_path):
@@ -101,7 +106,8 @@ def test_tum_reference_and_bag_without_reference(tmp_path):
     assert all(f['line_repeatability'] is None for f in res['lines'].values())
     assert all(f['corner_repeatability'] is None for f in res['corners'].values())
     text = run(tmp_path / 'b', json_out=tmp_path / 'out.json', scans=4)
-    assert text.count('n/a (no reference poses)') == len(res['lines']) + len(res['corners'])
+    # one per line method, three per corner method (all corners, structural, others)
+    assert text.count('n/a (no reference poses)') == len(res['lines']) + 3 * len(res['corners'])
     assert json.loads((tmp_path / 'out.json').read_text())['lines']['alfa'][
         'line_repeatability'] is None
     write_tum(tmp_path / 'ref.tum', poses)
@@ -174,7 +180,8 @@ def test_bag_path_equals_the_offline_path_on_a_real_log(tmp_path):
                     continue
                 got = via_bag[kind][m][key]
                 if isinstance(value, float):
-                    assert got == pytest.approx(value, rel=1e-9, abs=1e-12), (m, key)
+                    assert got == pytest.approx(value, rel=1e-9, abs=1e-12, nan_ok=True), (
+                        m, key)
                 else:
                     assert got == value, (m, key)
     assert offline['lines']['split_merge']['line_opportunities'] > 100

@@ -1,5 +1,6 @@
 """corner_extractor and line_extractor nodes: bag replay through DDS and bad input."""
 
+from dataclasses import replace
 import math
 from pathlib import Path
 import time
@@ -240,6 +241,40 @@ def test_line_extractor_replays_the_office_bag():
         np.testing.assert_allclose(fields['num_points'], [ln.num_points for ln in expected])
         total += len(expected)
     assert total > 0
+
+
+@pytest.mark.dds
+def test_line_extractor_estimates_the_range_noise_when_asked():
+    # the office scans rounded to 5 cm: the node's lines are those of the extractor at the
+    # noise the tracker measures on the scans so far (more than the stated 1 cm)
+    from landmark_nav.laser.lines import extract_lines
+    from landmark_nav.laser.range_noise import RangeNoiseTracker
+    from landmark_nav.nodes.line_extractor import LineExtractor
+    scans = []
+    for msg in first_scans():
+        r = np.asarray(msg.ranges, dtype=float)
+        msg.ranges = np.where(np.isfinite(r), np.round(r / 0.05) * 0.05, r).astype(
+            np.float32).tolist()
+        scans.append(msg)
+    with RosHarness() as ros:
+        node = ros.add_node(LineExtractor(context=ros.context, parameter_overrides=[
+            Parameter('sigma_r_from_data', value=True), Parameter('sigma_r_scans', value=3)]))
+        clouds = ros.collect('lines', PointCloud2)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        play_lockstep(ros, pub, scans, clouds)
+        params = node.params
+    assert len(clouds) == len(scans) and params.sigma_r == 0.01
+    tracker = RangeNoiseTracker(3, stated=params.sigma_r)
+    for scan, cloud in zip(scans, clouds):
+        data = scan_to_data(scan)
+        sigma = tracker.add(data.ranges, data.angles, data.valid).sigma_r
+        assert sigma > 0.014  # at least the 5 cm step's q / sqrt(12)
+        at = replace(params, sigma_r=sigma)
+        expected = extract_lines(segment_scan(data.ranges, data.angles, data.valid,
+                                              data.angle_increment, 10.0, sigma, 5), at)
+        fields = feature_cloud_to_arrays(cloud)
+        np.testing.assert_allclose(fields['rho'], [ln.rho for ln in expected], atol=1e-5)
+        np.testing.assert_allclose(fields['num_points'], [ln.num_points for ln in expected])
 
 
 @pytest.mark.dds

@@ -46,6 +46,21 @@ def test_half_segment_covers_half_the_beams():
     assert none.hits == 0 and math.isnan(none.rmse) and none.false_surface.size == 0
 
 
+def test_occluders_reported_apart():
+    # a wall at 2 m with 1 cm residuals and two stray returns 1.5 m in front of it, kept
+    # inside the wall's segment: they dominate the ray RMSE; without them it is 1 cm
+    r = wall_scan(2.0) + np.where(np.arange(PHI.size) % 2, 0.01, -0.01) / np.cos(PHI)
+    r[[30, 90]] = 0.5
+    m = ray_metrics(r, PHI, np.ones(PHI.size, bool), wall(2.0), sigma_r=0.01)
+    assert m.occluders == 2 and m.hits == 121 and m.margin == pytest.approx(0.05)
+    assert m.rmse > 0.15
+    kept = np.delete(r - wall_scan(2.0), [30, 90])
+    assert m.rmse_without_occluders == pytest.approx(np.sqrt(np.mean(kept ** 2)), rel=1e-9)
+    # a beam 4 cm short (inside the 5 cm margin) is noise, not an occluder
+    r[30] = wall_scan(2.0)[30] - 0.04
+    assert ray_metrics(r, PHI, np.ones(PHI.size, bool), wall(2.0)).occluders == 1
+
+
 def test_shifted_segment_gives_known_residuals():
     r = wall_scan(2.0)
     valid = np.ones(PHI.size, bool)
@@ -303,3 +318,17 @@ def test_a_corner_the_next_scan_sees_past_is_no_opportunity():
     toward = (c - B[:2]) / np.hypot(*(c - B[:2]).T)
     assert in_view(near, c - 0.05 * toward, surface=True).all()
     assert not in_view(near, c - 0.2 * toward, surface=True).any()
+
+
+def test_structural_corners_have_two_long_arms():
+    from landmark_nav.laser.corner_detection.corner import Corner, STRUCTURAL_ARM
+
+    def corner(a, b):
+        arms = np.array([[[0.0, 0.0], [a, 0.0]], [[0.0, 0.0], [0.0, b]]])
+        return Corner(np.zeros(2), 0.0, math.pi / 2, np.eye(2), 0, 0.0, arms)
+
+    assert corner(0.6, 1.2).structural and corner(STRUCTURAL_ARM, STRUCTURAL_ARM).structural
+    assert not corner(0.6, 0.3).structural and not corner(0.2, 0.9).structural
+    np.testing.assert_allclose(corner(0.6, 0.3).arm_lengths, [0.6, 0.3])
+    bare = Corner(np.zeros(2), 0.0, math.pi / 2, np.eye(2), 0, 0.0)
+    assert not bare.structural and np.isnan(bare.arm_lengths).all()

@@ -21,9 +21,10 @@ Runs the extractors directly on the bag's scans (no DDS). Two kinds of bag:
 :func:`evaluate_bag_features` picks one of the two as the command does and writes the JSON.
 """
 
+from dataclasses import asdict
 import json
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import scan_to_data
@@ -51,7 +52,7 @@ def _truth_track(bag):
 
 def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
                       line_methods: Sequence[str] = LINE_METHODS,
-                      sigma_r: Optional[float] = None, every: int = 1,
+                      sigma_r: Optional[Union[float, str]] = None, every: int = 1,
                       progress: bool = False) -> Dict[str, dict]:
     """Score every method on every ``every``-th scan of a simulator bag.
 
@@ -59,7 +60,9 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
         bag: rosbag2 directory recorded by ``landmark_nav simulate``.
         corner_methods: Corner detectors to run.
         line_methods: Line extractors to run.
-        sigma_r: Range noise the extractors assume [m]; default: the simulated laser's.
+        sigma_r: Range noise the extractors assume [m]; default: the simulated laser's;
+            ``'auto'``: estimated from the scans used, at least the simulated one
+            (:func:`landmark_nav.laser.range_noise.estimate_range_noise`).
         every: Use every n-th scan.
         progress: Show a progress bar.
 
@@ -79,7 +82,12 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
     world = World.from_dict(meta['world'])
     mount = np.asarray(meta['laser']['mount'], dtype=float)
     true_sigma = float(meta['laser']['sigma_range'])  # the simulated noise (for the bound)
-    sigma = true_sigma if sigma_r is None else float(sigma_r)
+    estimate = None
+    if sigma_r == 'auto':
+        estimate = bag_range_noise(bag, every, stated=true_sigma)
+        sigma = estimate.sigma_r
+    else:
+        sigma = true_sigma if sigma_r is None else float(sigma_r)
     sigma_phi = float(meta['laser'].get('sigma_angle', 0.0))
     t_truth, truth = _truth_track(bag)
     t_rel = (t_truth - t_truth[0]).astype(float)
@@ -110,7 +118,8 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
                 continue
             score_scan(run, world, sensor_pose_at, scan)
             n_used += 1
-    result = {'scans': n_used, 'sigma_r': sigma, 'corners': {}, 'lines': {}}
+    result = {'scans': n_used, 'sigma_r': sigma, 'corners': {}, 'lines': {},
+              'sigma_r_estimate': None if estimate is None else asdict(estimate)}
     for m, s in run.corners.items():
         times = run.corner_times[m]
         result['corners'][m] = {
@@ -128,6 +137,20 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
             'detections': s.detections, 'relevant': s.relevant, 'found': s.found,
             'median_ms_per_scan': 1e3 * float(np.median(times)) if times else None}
     return result
+
+
+def bag_range_noise(bag, every: int = 1, stated: Optional[float] = None):
+    """Estimate the range noise from every ``every``-th scan of a bag's ``/scan``."""
+    from landmark_nav.laser.range_noise import estimate_range_noise
+
+    def scans():
+        with BagReader(bag) as reader:
+            for k, (_, _, msg) in enumerate(reader.decoded(['/scan'])):
+                if k % every == 0:
+                    s = scan_to_data(msg)
+                    yield s.ranges, s.angles, s.valid
+
+    return estimate_range_noise(scans(), stated)
 
 
 def _parse_mount(text: str, where: str) -> np.ndarray:
@@ -231,10 +254,15 @@ def bag_metric_scans(bag, mount: np.ndarray, reference: Optional[str] = None,
 def evaluate_truth_free(bag, reference: Optional[str] = None,
                         mount: Optional[Sequence[float]] = None,
                         sigma_r: Optional[float] = None,
-                        extractor_sigma_r: Optional[float] = None, scans: int = 20,
-                        seed: int = 0, every: int = 1, progress: bool = False
+                        extractor_sigma_r: Optional[Union[float, str]] = None,
+                        scans: int = 20, seed: int = 0, every: int = 1, progress: bool = False
                         ) -> Tuple[dict, List[str]]:
     """Score every method on a bag with the truth-free metrics (module docstring).
+
+    ``extractor_sigma_r``: the range noise the extractors assume [m], None for the node
+    default (0.01 m), or ``'auto'`` (the command's default, :func:`evaluate_bag_features`):
+    estimated from the bag's scans, at least the sensor's stated noise
+    (:func:`landmark_nav.evaluation.scan_metrics.evaluate_scans`).
 
     Returns:
         (figures of :func:`landmark_nav.evaluation.scan_metrics.evaluate_scans` plus
@@ -252,7 +280,7 @@ def evaluate_truth_free(bag, reference: Optional[str] = None,
     return result, notes + more
 
 
-def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[float] = None,
+def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[Union[float, str]] = None,
                           json_out=None, reference: Optional[str] = None,
                           mount: Optional[Sequence[float]] = None,
                           sensor_sigma_r: Optional[float] = None, scans: int = 20,
@@ -262,8 +290,9 @@ def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[float] = None,
 
     With ground-truth features (a simulator bag) and not ``truth_free``:
     :func:`evaluate_features`; otherwise :func:`evaluate_truth_free`, ``sigma_r`` then being
-    the range noise the extractors assume (default: the node default) and ``sensor_sigma_r``
-    the sensor's. ``progress``: a tqdm bar.
+    the range noise the extractors assume (default ``'auto'``: estimated from the scans, at
+    least the sensor's stated noise) and ``sensor_sigma_r`` the sensor's. ``progress``: a
+    tqdm bar.
 
     Returns:
         (figures, notes, whether the figures are the truth-free ones).
@@ -273,7 +302,8 @@ def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[float] = None,
         result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=progress)
         notes, free = [], False
     else:
-        result, notes = evaluate_truth_free(bag, reference, mount, sensor_sigma_r, sigma_r,
+        result, notes = evaluate_truth_free(bag, reference, mount, sensor_sigma_r,
+                                            'auto' if sigma_r is None else sigma_r,
                                             scans, seed, every, progress=progress)
         free = True
     if json_out:
@@ -281,5 +311,5 @@ def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[float] = None,
     return result, notes, free
 
 
-__all__ = ['bag_metric_scans', 'CORNER_METHODS', 'evaluate_bag_features', 'evaluate_features',
-           'evaluate_truth_free', 'LINE_METHODS', 'sensor_facts']
+__all__ = ['bag_metric_scans', 'bag_range_noise', 'CORNER_METHODS', 'evaluate_bag_features',
+           'evaluate_features', 'evaluate_truth_free', 'LINE_METHODS', 'sensor_facts']

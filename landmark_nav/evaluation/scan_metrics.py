@@ -11,7 +11,10 @@ reference pose of each scan (e.g. the corrected pose of a Carmen log).
   those beams whose ray hits a segment; ray RMSE = RMS over the hitting beams of
   (measured range - range to the first segment hit along the ray). Beams without a return
   (REP 117 +inf) are scored apart as in the paper: ``f_no_return`` = fraction of them whose
-  ray hits no segment. :func:`ray_metrics`.
+  ray hits no segment. :func:`ray_metrics`. The ray RMSE is also given without the
+  **occluders**, hitting beams that end more than the false-surface margin in front of their
+  segment (an object before the line, e.g. a lone stray return that the extractor kept
+  inside a wall line): a few such beams metres short dominate a scan's RMSE.
 * **False-surface beams**: beams with a return measured more than ``max(3 sigma_r, 5 cm)``
   beyond a segment that their ray crosses inside the segment's extent: the laser saw
   through a surface that is not there. :func:`ray_metrics`.
@@ -20,7 +23,9 @@ reference pose of each scan (e.g. the corrected pose of a Carmen log).
 * **Repeatability** between consecutive scans through the reference poses:
   :func:`line_repeatability`, :func:`corner_repeatability`. An opportunity is a feature
   the next scan could re-detect: a line's midpoint in view (:func:`in_view`), a corner's
-  place and a point 15 cm along each arm seen (:func:`corner_observable`).
+  place and a point 15 cm along each arm seen (:func:`corner_observable`). Corner
+  repeatability is also given per class of the corner in scan k: structural (both arms at
+  least ``STRUCTURAL_ARM`` = 0.5 m, ``Corner.structural``) and the others.
 * **Baseline** line extractor: iterative end-point fit (Douglas-Peucker) per breakpoint
   cluster, OpenCV ``approxPolyDP``: :func:`approx_poly_segments`.
 
@@ -38,10 +43,10 @@ Choices stated (the paper leaves them open or its script differs from its text):
   metric); 20 cm keeps beams of a neighbouring object out.
 """
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 import time
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from landmark_nav.evaluation.features import normal_form
 from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
@@ -104,6 +109,9 @@ class RayMetrics:
             opening bridged by a line gives metres).
         fit_residuals: Perpendicular residuals of the hitting beams within ``FIT_WINDOW``
             of their first-hit segment's line [m].
+        margin: A hitting beam that ends more than this in front of its first-hit segment
+            is an occluder (a return from an object before the line, e.g. a lone stray
+            return kept inside a wall line) [m]; the false-surface margin.
 
     """
 
@@ -115,6 +123,7 @@ class RayMetrics:
     false_surface: np.ndarray
     false_surface_excess: np.ndarray
     fit_residuals: np.ndarray
+    margin: float = FALSE_SURFACE_MIN
 
     @property
     def f(self) -> float:
@@ -126,6 +135,17 @@ class RayMetrics:
         """RMS range residual of the hitting beams [m] (PLE ray RMSE); NaN without hits."""
         return (float(np.sqrt(np.mean(np.square(self.residuals)))) if self.hits
                 else float('nan'))
+
+    @property
+    def occluders(self) -> int:
+        """Return the hitting beams that end more than ``margin`` in front of the segment."""
+        return int(np.count_nonzero(self.residuals < -self.margin))
+
+    @property
+    def rmse_without_occluders(self) -> float:
+        """Ray RMSE over the hitting beams that are not occluders [m]; NaN without any."""
+        kept = self.residuals[self.residuals >= -self.margin]
+        return float(np.sqrt(np.mean(np.square(kept)))) if kept.size else float('nan')
 
     @property
     def f_no_return(self) -> float:
@@ -187,7 +207,8 @@ def ray_metrics(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
                       residuals=r[hit] - s_first[hit], no_return=int(nr.sum()),
                       no_return_clear=int((nr & ~np.isfinite(s_first)).sum()),
                       false_surface=np.flatnonzero(seen_through),
-                      false_surface_excess=excess[seen_through], fit_residuals=fit)
+                      false_surface_excess=excess[seen_through], fit_residuals=fit,
+                      margin=margin)
 
 
 # ---------------------------------------------------------------------------- baseline
@@ -471,6 +492,9 @@ class _LineTally:
     def __init__(self) -> None:
         self.f: List[float] = []
         self.rmse: List[float] = []
+        self.rmse_open: List[float] = []  # without occluders
+        self.occluders = 0
+        self.hits = 0
         self.f_nr: List[float] = []
         self.fit: List[np.ndarray] = []
         self.fs_sample = 0
@@ -494,6 +518,9 @@ class _LineTally:
             self.fs_sample += n_fs
             self.f.append(m.f)
             self.rmse.append(m.rmse)
+            self.rmse_open.append(m.rmse_without_occluders)
+            self.occluders += m.occluders
+            self.hits += m.hits
             self.f_nr.append(m.f_no_return)
             self.fit.append(m.fit_residuals)
 
@@ -501,12 +528,20 @@ class _LineTally:
         fit = np.concatenate(self.fit) if self.fit else np.zeros(0)
         rmse = np.asarray(self.rmse, dtype=float)
         rmse = rmse[np.isfinite(rmse)]
+        rmse_open = np.asarray(self.rmse_open, dtype=float)
+        rmse_open = rmse_open[np.isfinite(rmse_open)]
         f_nr = np.asarray(self.f_nr, dtype=float)
         f_nr = f_nr[np.isfinite(f_nr)]
         return {
             'f': float(np.mean(self.f)) if self.f else float('nan'),
             'ray_rmse_mean_m': float(rmse.mean()) if rmse.size else float('nan'),
             'ray_rmse_median_m': float(np.median(rmse)) if rmse.size else float('nan'),
+            'ray_rmse_no_occluders_mean_m': (float(rmse_open.mean()) if rmse_open.size
+                                             else float('nan')),
+            'ray_rmse_no_occluders_median_m': (float(np.median(rmse_open)) if rmse_open.size
+                                               else float('nan')),
+            'occluder_beams_sample': self.occluders,
+            'hit_beams_sample': self.hits,
             'f_no_return': float(f_nr.mean()) if f_nr.size else float('nan'),
             'fit_rms_m': float(np.sqrt(np.mean(fit ** 2))) if fit.size else float('nan'),
             'fit_beams': int(fit.size),
@@ -529,7 +564,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                    corner_methods: Sequence[str] = ('minus_cosine', 'sliding_window',
                                                     'split_merge'),
                    line_methods: Sequence[str] = ('split_merge', 'alfa'),
-                   extractor_sigma_r: Optional[float] = None,
+                   extractor_sigma_r: Optional[Union[float, str]] = None,
                    progress: Optional[str] = None) -> dict:
     """Score the extractors and the baseline on real scans with the truth-free metrics.
 
@@ -551,11 +586,18 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         corner_methods: Corner detectors.
         line_methods: Line extractors.
         extractor_sigma_r: Range noise the extractors and the segmentation assume [m];
-            None: the node default (0.01 m).
+            None: the node default (0.01 m); ``'auto'``: estimated from the scans with
+            ``sigma_r`` as its lower bound
+            (:func:`landmark_nav.laser.range_noise.estimate_range_noise`, stated in the
+            result's ``extractor_sigma_r_estimate``); the false-surface margin then uses
+            the estimate too (the sensor's noise as its data shows it).
         progress: Label of a tqdm progress bar, or None for none.
 
     Returns:
-        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r', 'repeat_pairs',
+        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r',
+        (corner figures per class: ``corner_repeatability_structural`` / ``_other``, with
+        their opportunities and re-detections, and ``structural_share``),
+        'extractor_sigma_r_estimate' (the estimate's figures, or None), 'repeat_pairs',
         'lines': {method: figures}, 'corners': {method: figures}}; without a pair of
         consecutive scans with poses (no reference) the repeatability figures are None.
 
@@ -564,13 +606,24 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     from landmark_nav.laser.lines import extract_lines, LineParams
     from landmark_nav.laser.segmentation import segment_scan
 
-    ext_sigma = LineParams().sigma_r if extractor_sigma_r is None else float(extractor_sigma_r)
+    estimate = None
+    if extractor_sigma_r == 'auto':
+        from landmark_nav.laser.range_noise import estimate_range_noise
+        estimate = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans),
+                                        stated=sigma_r)
+        ext_sigma = sigma_r = estimate.sigma_r  # the noise the data shows, for the margin too
+    elif extractor_sigma_r is None:
+        ext_sigma = LineParams().sigma_r
+    else:
+        ext_sigma = float(extractor_sigma_r)
     line_params = {m: LineParams(method=m, sigma_r=ext_sigma) for m in line_methods}
     corner_params = {m: CornerParams(method=m, sigma_r=ext_sigma) for m in corner_methods}
     min_points, min_length = LineParams().min_points, LineParams().min_length
     sample = {int(i) for i in sample_scans(len(scans), ple_scans, seed)}
     tallies = {m: _LineTally() for m in (*line_methods, BASELINE, BASELINE_MIN)}
     c_repeat = {m: Repeatability() for m in corner_methods}
+    c_class = {m: (Repeatability(), Repeatability()) for m in corner_methods}  # structural, other
+    c_structural = dict.fromkeys(corner_methods, 0)
     c_times = {m: [] for m in corner_methods}
     c_count = dict.fromkeys(corner_methods, 0)
     prev = None  # (scan, {method: segments}, {method: corners})
@@ -598,14 +651,16 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         size_ok = ((idx[:, 1] - idx[:, 0] + 1 >= min_points)
                    & (np.hypot(*(base[:, 1] - base[:, 0]).T) >= min_length))
         segs[BASELINE_MIN] = base[size_ok]
-        corners: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
+        corners: Dict[str, Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for m, params in corner_params.items():
             t0 = time.perf_counter()
             found = detect_corners(clusters, params)
             c_times[m].append(t_seg + time.perf_counter() - t0)
             corners[m] = (np.array([c.position for c in found]).reshape(-1, 2),
-                          np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2))
+                          np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2),
+                          np.array([c.structural for c in found], dtype=bool))
             c_count[m] += len(found)
+            c_structural[m] += int(corners[m][2].sum())
         for m, tally in tallies.items():
             tally.count += len(segs[m])
             tally.add(k, ray_metrics(scan.ranges, scan.angles, scan.valid, segs[m], sigma_r,
@@ -615,8 +670,12 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             for m, tally in tallies.items():
                 line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], scan)
             for m in corner_methods:
-                corner_repeatability(c_repeat[m], prev[2][m][0], prev[0].pose, corners[m][0],
-                                     scan, wedges_k=prev[2][m][1])
+                pos, wedge, label = prev[2][m]
+                corner_repeatability(c_repeat[m], pos, prev[0].pose, corners[m][0], scan,
+                                     wedges_k=wedge)
+                for score, keep in zip(c_class[m], (label, ~label)):
+                    corner_repeatability(score, pos[keep], prev[0].pose, corners[m][0], scan,
+                                         wedges_k=wedge[keep])
         prev = (scan, segs, corners)
     n = len(scans)
     lines = {m: t.figures(n) for m, t in tallies.items()}
@@ -626,6 +685,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     return {
         'scans': n, 'ple_scans': len(sample), 'sample': sorted(sample), 'seed': seed,
         'sigma_r': sigma_r, 'extractor_sigma_r': ext_sigma, 'repeat_pairs': pairs,
+        'extractor_sigma_r_estimate': None if estimate is None else asdict(estimate),
         'false_surface_margin_m': max(3.0 * sigma_r, FALSE_SURFACE_MIN),
         'lines': lines,
         'corners': {m: {
@@ -636,6 +696,13 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             'corner_unobserved_redetected': c_repeat[m].unobserved_redetected,
             'corner_repeatability_with_unobserved': (
                 c_repeat[m].fraction_with_unobserved if pairs else None),
+            'corner_repeatability_structural': c_class[m][0].fraction if pairs else None,
+            'corner_opportunities_structural': c_class[m][0].opportunities,
+            'corner_redetected_structural': c_class[m][0].redetected,
+            'corner_repeatability_other': c_class[m][1].fraction if pairs else None,
+            'corner_opportunities_other': c_class[m][1].opportunities,
+            'corner_redetected_other': c_class[m][1].redetected,
+            'structural_share': c_structural[m] / c_count[m] if c_count[m] else float('nan'),
             'corners_per_scan': c_count[m] / n if n else float('nan'),
             'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None,
             'mean_ms_per_scan': 1e3 * float(np.mean(c_times[m])) if c_times[m] else None}
@@ -651,6 +718,15 @@ def _repeat_text(figures: dict, kind: str) -> str:
             f'{figures[f"{kind}_opportunities"]})')
 
 
+def _estimate_text(result: dict) -> str:
+    """Return ' (estimated: ...)' when the extractors' sigma_r was estimated, else ''."""
+    est = result.get('extractor_sigma_r_estimate')
+    if not est:
+        return ''
+    from landmark_nav.laser.range_noise import RangeNoise
+    return f' ({RangeNoise(**est).describe()})'
+
+
 def format_scan_metrics(result: dict, title: str = '') -> str:
     """Render :func:`evaluate_scans` figures as two Markdown tables."""
     out = [f'{title}scans: {result["scans"]} ({result["ple_scans"]} drawn with seed '
@@ -658,15 +734,18 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
            f'pairs with reference poses; false-surface margin '
            f'{100 * result["false_surface_margin_m"]:.1f} cm (sigma_r '
            f'{100 * result["sigma_r"]:.1f} cm); extractors at sigma_r '
-           f'{100 * result["extractor_sigma_r"]:.1f} cm', '',
-           '| line method | f | ray RMSE mean / median | f no-return | false-surface beams '
-           '(scans) [sample] {> 30 cm (scans)} | fit RMS (beams) | lines >= 1 m re-detected | '
-           'segments/scan | ms/scan median |',
-           '| --- | --- | --- | --- | --- | --- | --- | --- | --- |']
+           f'{100 * result["extractor_sigma_r"]:.2f} cm' + _estimate_text(result), '',
+           '| line method | f | ray RMSE mean / median | without occluders (occluder beams '
+           '/ hits) | f no-return | false-surface beams (scans) [sample] {> 30 cm (scans)} | '
+           'fit RMS (beams) | lines >= 1 m re-detected | segments/scan | ms/scan median |',
+           '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |']
     for m, f in result['lines'].items():
         out.append(
             f'| {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
-            f'{100 * f["ray_rmse_median_m"]:.2f} cm | {f["f_no_return"]:.3f} | '
+            f'{100 * f["ray_rmse_median_m"]:.2f} cm | '
+            f'{100 * f["ray_rmse_no_occluders_mean_m"]:.2f} / '
+            f'{100 * f["ray_rmse_no_occluders_median_m"]:.2f} cm ({f["occluder_beams_sample"]} / '
+            f'{f["hit_beams_sample"]}) | {f["f_no_return"]:.3f} | '
             f'{f["false_surface_beams"]} ({f["false_surface_scans"]}) '
             f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]} '
             f'({f["false_surface_scans_over_30cm"]})}} | '
@@ -674,13 +753,19 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
             f'({f["fit_beams"]}) | {_repeat_text(f, "line")} | '
             f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
     out += ['', '| corner method | corners re-detected within 10 cm | counting the '
-            'unobserved | corners/scan | ms/scan median |', '| --- | --- | --- | --- | --- |']
+            'unobserved | structural (both arms >= 0.5 m) re-detected | others re-detected '
+            '| structural share | corners/scan | ms/scan median |',
+            '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for m, f in result['corners'].items():
         former = 'n/a'
         if f['corner_repeatability_with_unobserved'] is not None:
             former = (f'{f["corner_repeatability_with_unobserved"]:.3f} '
                       f'({f["corner_redetected"] + f["corner_unobserved_redetected"]}/'
                       f'{f["corner_opportunities"] + f["corner_unobserved"]})')
-        out.append(f'| {m} | {_repeat_text(f, "corner")} | {former} | '
-                   f'{f["corners_per_scan"]:.2f} | {f["median_ms_per_scan"]:.2f} |')
+        classes = ' | '.join(_repeat_text({k.replace(f'_{c}', ''): v for k, v in f.items()
+                                           if k.endswith(f'_{c}')}, 'corner')
+                             for c in ('structural', 'other'))
+        out.append(f'| {m} | {_repeat_text(f, "corner")} | {former} | {classes} | '
+                   f'{f["structural_share"]:.2f} | {f["corners_per_scan"]:.2f} | '
+                   f'{f["median_ms_per_scan"]:.2f} |')
     return '\n'.join(out)

@@ -27,6 +27,7 @@ the axle. Range noise: the URG-04LX datasheet states an accuracy of +-10 mm from
 1 m (+-1 % of the distance beyond), written as ``laser_sigma_range`` 0.01 m.
 """
 
+from dataclasses import replace
 import math
 from pathlib import Path
 from typing import Optional
@@ -35,6 +36,7 @@ from landmark_nav.drivers.scip2 import ERROR_CODE_RANGES, step_angles, URG_04LX
 import numpy as np
 
 from .common import LineSource, ParsedLog, ScanRecord, Sensor
+from .sentinels import mark_scans
 
 __all__ = ['BREEZY_BEAMS', 'RoverGeometry', 'parse_breezyslam', 'ticks_to_odometry']
 
@@ -84,7 +86,7 @@ def parse_breezyslam(path, lenient: bool = False,
     angles = step_angles(URG_04LX.amin, BREEZY_BEAMS)
     angle_min = float(angles[0])
     inc = 2.0 * math.pi / URG_04LX.ares
-    scans, stamps, ticks = [], [], []
+    scans, stamps, ticks, readings = [], [], [], []
     for lineno, tokens in source.lines():
         if max_scans is not None and len(scans) >= max_scans:
             break
@@ -104,6 +106,7 @@ def parse_breezyslam(path, lenient: bool = False,
         code = mm < URG_04LX.dmin_mm
         ranges = np.where(code, _CODES[np.minimum(mm, URG_04LX.dmin_mm - 1)], mm / 1000.0)
         stamp = stamp_us * 1e-6
+        readings.append(np.where(code, math.nan, mm / 1000.0))  # URG codes: no readings
         scans.append(ScanRecord(stamp, lineno, angle_min, inc, ranges))
         stamps.append(stamp)
         ticks.append((left, right))
@@ -112,7 +115,10 @@ def parse_breezyslam(path, lenient: bool = False,
     sensor = Sensor(model='Hokuyo URG-04LX', range_min=URG_04LX.dmin_mm / 1000.0,
                     range_max=URG_04LX.dmax_mm / 1000.0, sigma_range=URG_SIGMA_RANGE,
                     time_increment=60.0 / URG_04LX.scan_rpm / URG_04LX.ares)
-    log = ParsedLog('breezyslam', path, sensor, (RoverGeometry.laser_x, 0.0, 0.0), scans=scans)
+    parts, marks = mark_scans(readings, [sc.ranges for sc in scans])
+    scans = [replace(sc, ranges=r) for sc, r in zip(scans, parts)]
+    log = ParsedLog('breezyslam', path, sensor, (RoverGeometry.laser_x, 0.0, 0.0), scans=scans,
+                    sentinels=marks)
     ticks = np.array(ticks, dtype=float)
     log.odom_stamps = np.array(stamps)
     log.odom_lineno = np.array([s.lineno for s in scans], dtype=int)

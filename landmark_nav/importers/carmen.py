@@ -40,9 +40,15 @@ such (the importer writes synthetic drift instead), but ``odom_lines=True``
 Ranges (SICK LMS in cm mode, 1 cm steps): the LMS reserved codes (81.83 .. 81.91 m) map per
 :func:`landmark_nav.importers.common.lms_cm_ranges`; other readings at or above the maximum
 range are the logger's "no return" (+inf, REP 117). The maximum is ``--max-range`` when
-given, else ``maximum_range`` of a ``ROBOTLASER1`` line, else ``PARAM
+given, else the log's: ``maximum_range`` of a ``ROBOTLASER1`` line, else ``PARAM
 robot_front_laser_max``, else 50 m (Carmen's default cap: the Radish logs without that
-PARAM write 50, 51.05 or 51.15 m for beams without echo).
+PARAM write 50, 51.05 or 51.15 m for beams without echo), taken as a hint the readings can
+overrule (``range_max_from``, :func:`landmark_nav.importers.sentinels.judge_cap`). Logs at
+mm resolution (an LMS in a mm mode) get the reserved band of their mode (e.g. 32.759 ..
+32.767 m, :func:`landmark_nav.importers.sentinels.lms_code_band`), and values repeated far
+more often than their neighbours at the top of the range are the logger's sentinels
+(:func:`landmark_nav.importers.sentinels.find_spikes`): both no return, counted per value
+in ``ParsedLog.sentinels``.
 
 Range noise: SICK LMS200 / LMS291 technical data, statistical error (1 sigma) typ. 5 mm
 (mm mode, up to 8 m); these logs are in cm mode (1 cm reading steps, +-4 cm systematic
@@ -56,8 +62,9 @@ from typing import Dict, Iterator, List, Optional
 
 import numpy as np
 
-from .common import LineError, LineSource, lms_cm_ranges, open_text, ParsedLog, \
-    ScanRecord, Sensor
+from .common import LineError, LineSource, LMS_CM_BAND_M, lms_cm_ranges, open_text, \
+    ParsedLog, ScanRecord, Sensor
+from .sentinels import find_spikes, judge_cap, lms_code_band, mark_scans, range_resolution
 
 __all__ = ['CARMEN_DEFAULT_MAX_RANGE', 'CarmenScan', 'GeometryError', 'KNOWN_BEAMS',
            'LMS_SIGMA_RANGE', 'default_poses',
@@ -198,7 +205,8 @@ def _robot_from_laser(laser: np.ndarray, mount) -> np.ndarray:
 
 def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
                  max_scans: Optional[int] = None, max_range: Optional[float] = None,
-                 odom_lines: bool = False, fov: Optional[float] = None) -> ParsedLog:
+                 odom_lines: bool = False, fov: Optional[float] = None,
+                 range_max_from: str = 'auto') -> ParsedLog:
     """Parse a Carmen log (``.log``, ``.clf``, optionally gzipped).
 
     Args:
@@ -213,6 +221,10 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
             lines (:func:`rebuild_odometry`) instead of leaving it to synthetic drift.
         fov: Field of view of ``FLASER`` / ``RLASER`` lines [deg] (:func:`scan_geometry`);
             needed for beam counts other than :data:`KNOWN_BEAMS`.
+        range_max_from: Where the range cap comes from when ``max_range`` is None:
+            ``'auto'`` the log's (``maximum_range``, ``PARAM robot_front_laser_max``, else
+            50 m) unless the readings overrule it, ``'header'`` the log's always, ``'data'``
+            the readings' (:func:`landmark_nav.importers.sentinels.judge_cap`).
 
     Raises:
         LineError: A malformed line (file and line number), unless ``lenient``; a beam
@@ -282,11 +294,26 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
         return value
 
     log_max = param('robot_front_laser_max', CARMEN_DEFAULT_MAX_RANGE)
+    stated_by = ('PARAM robot_front_laser_max' if params.get('robot_front_laser_max')
+                 else 'the Carmen default cap')
+    if use == 'ROBOTLASER1':
+        stated_by = 'ROBOTLASER1 maximum_range'
+    raw = np.concatenate([s.values for s in lasers])
+    mm_band = lms_code_band(raw)  # mm readings: an LMS in a mm mode
+    band = mm_band or (LMS_CM_BAND_M if range_resolution(raw) >= 0.01 else None)
+    spikes = find_spikes(raw)
+    cap = None
     if max_range is not None:
         if not 0 < max_range < math.inf:
             raise ValueError(f'max range must be > 0, got {max_range}')
         log_max = float(max_range)
         lasers = [_replace(s, max_range=None) for s in lasers]
+    else:
+        stated = max(s.max_range or log_max for s in lasers)
+        cap = judge_cap(raw, stated, [p.value for p in spikes], band, mode=range_max_from)
+        if cap.overruled:
+            log_max = cap.used
+            lasers = [_replace(s, max_range=None) for s in lasers]
     if use == 'ROBOTLASER1':
         rel = np.array([_relative(s.robot, s.laser) for s in lasers])
         mount = tuple(float(v) for v in np.median(rel, axis=0))
@@ -297,16 +324,23 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
     else:
         mount = (param('robot_frontlaser_offset', 0.0), 0.0, 0.0)
     maxima = {s.max_range or log_max for s in lasers}
-    sensor = Sensor(model='SICK LMS (cm mode)', range_min=0.0, range_max=float(max(maxima)),
+    model = f'SICK LMS (mm mode, codes from {mm_band[0]:g} m)' if mm_band else 'SICK LMS (cm mode)'
+    sensor = Sensor(model=model, range_min=0.0, range_max=float(max(maxima)),
                     sigma_range=LMS_SIGMA_RANGE)
 
-    def record(s: _Laser) -> ScanRecord:
-        ranges = lms_cm_ranges(s.values * 100.0, s.max_range or log_max)
-        return ScanRecord(s.stamp, s.lineno, s.angle_min, s.angle_increment, ranges,
-                          _key(s.values))
+    def records(scans: List[_Laser]) -> List[ScanRecord]:
+        parts, marks = mark_scans([s.values for s in scans],
+                                  [lms_cm_ranges(s.values * 100.0, s.max_range or log_max)
+                                   for s in scans], spikes, band)
+        if scans is lasers:
+            log.sentinels = marks
+        return [ScanRecord(s.stamp, s.lineno, s.angle_min, s.angle_increment, r,
+                           _key(s.values)) for s, r in zip(scans, parts)]
 
     log = ParsedLog('carmen', path, sensor, mount, notes=notes)
-    log.scans = [record(s) for s in lasers]
+    log.scans = records(lasers)
+    if cap is not None:
+        log.cap = _replace(cap, stated_by=stated_by)
     last_line = lasers[-1].lineno
     robot = np.array([s.robot for s in lasers])
     if poses == 'corrected':
@@ -341,7 +375,7 @@ def parse_carmen(path, poses: Optional[str] = None, lenient: bool = False,
             log.odom_poses = robot
     if rear:
         rear = [s for s in rear if max_scans is None or s.lineno <= last_line]
-        log.rear_scans = [record(s) for s in rear]
+        log.rear_scans = records(rear)
         log.rear_mount = (param('robot_rearlaser_offset', 0.0), 0.0, math.pi)
     for kind, count in ignored.items():
         log.ignored[kind] += count

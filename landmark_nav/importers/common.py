@@ -15,7 +15,8 @@ from typing import Iterator, List, Optional, TextIO, Tuple
 
 import numpy as np
 
-__all__ = ['LMS_CM_CODES', 'LineError', 'LineSource', 'ParsedLog', 'ScanRecord', 'Sensor',
+__all__ = ['LMS_CM_BAND_M', 'LMS_CM_CODES', 'LineError', 'LineSource', 'ParsedLog',
+           'ScanRecord', 'Sensor',
            'lms_cm_ranges', 'open_text']
 
 
@@ -130,6 +131,8 @@ class ParsedLog:
     first_skipped: Optional[str] = None
     ignored: Counter = field(default_factory=Counter)  # line types not imported
     notes: List[str] = field(default_factory=list)
+    sentinels: list = field(default_factory=list)  # sentinels.Sentinel, per value
+    cap: Optional[object] = None  # sentinels.CapJudgement of the log's stated range cap
 
     @property
     def scan_stamps(self) -> np.ndarray:
@@ -157,6 +160,7 @@ class ParsedLog:
 # the loggers print it as 0 / 0.00. Negative readings cannot come from the sensor: NaN.
 LMS_CM_CODES = {8183: math.inf, 8191: math.inf}
 _LMS_CM_BAND = (8183, 8191)
+LMS_CM_BAND_M = (81.83, 81.91)  # [m] the same band in metres (sentinels.mark_sentinels)
 
 
 def lms_cm_ranges(values_cm: np.ndarray, range_max: float) -> np.ndarray:

@@ -1,7 +1,12 @@
 """Repair the time stamps of real logs (pure numpy).
 
-Real logs carry three kinds of bad stamps, each repaired and counted:
+Real logs carry these kinds of bad stamps, each repaired and counted:
 
+* **wrapped** stamps: a negative stamp written as an unsigned 32-bit number (2**32 - 0.45
+  for -0.45 s). A stamp of at least 2**31 s (a date after 2038) is read as one and
+  unwrapped (minus 2**32); when it was printed too coarsely to resolve a second after
+  unwrapping (a multiple of :data:`WRAP_COARSE` s, e.g. ``4.29497e+09``: +-5000 s) it is
+  treated as missing;
 * **zero** stamps (the logger had no clock yet) and **non-finite** ones (``nan``, ``inf``:
   the parsers accept what ``float`` reads): treated as missing;
 * stamps going **backwards** (below the last good stamp ``t[last]``): the run of
@@ -15,7 +20,10 @@ Real logs carry three kinds of bad stamps, each repaired and counted:
   distinct stamp is spread at the nominal period.
 
 Missing stamps are then interpolated linearly (by index) between their good neighbours and
-extrapolated at the nominal period at the ends. The nominal period is the median of the
+extrapolated at the nominal period at the ends. **Negative** stamps left after that (a
+clock counting from before the log's start; a bag stamp cannot be before 1970) are counted
+and every stamp (every stream of the log, :func:`repair_streams`) is shifted by one offset
+so that the first is one nominal period after 0. The nominal period is the median of the
 positive steps between successive distinct good stamps, each divided by the number of
 entries it spans; ``fallback_period`` when the stream has no two distinct stamps.
 """
@@ -25,7 +33,13 @@ from typing import List, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ['GLITCH_MAX', 'StampRepairs', 'repair_stamps', 'repair_streams']
+__all__ = ['GLITCH_MAX', 'StampRepairs', 'WRAP_COARSE', 'repair_stamps', 'repair_streams',
+           'unwrap_stamps']
+
+#: Unsigned 32-bit wrap: stamps in [2**31, 2**33) s are read as t - 2**32.
+_WRAP, _WRAP_FROM, _WRAP_TO = 2.0 ** 32, 2.0 ** 31, 2.0 ** 33
+#: A wrapped stamp that is a multiple of this [s] was printed too coarsely to unwrap.
+WRAP_COARSE = 1000.0
 
 #: Longest run of backward stamps [entries] still treated as a glitch when the stream
 #: comes back to (or past) the last good stamp after it; longer runs are clock resets.
@@ -43,11 +57,16 @@ class StampRepairs:
     resets: int = 0  # lasting backward jumps, later stamps shifted
     period: float = 0.0  # nominal period used [s]
     period_fallback: bool = False  # no two distinct stamps: fallback_period used
+    wrapped: int = 0  # unsigned 32-bit stamps unwrapped
+    wrapped_coarse: int = 0  # of those, printed too coarsely: interpolated
+    negative: int = 0  # stamps before 0 after the other repairs
+    offset: float = 0.0  # [s] added to every stamp (negative stamps), 0 if none
 
     @property
     def total(self) -> int:
         """Return the number of stamps changed (resets count once each)."""
-        return self.repeated + self.zero + self.nonfinite + self.backward + self.resets
+        return (self.repeated + self.zero + self.nonfinite + self.backward + self.resets
+                + self.wrapped + self.negative)
 
     def describe(self) -> str:
         """Return e.g. ``'12 repeated stamps spread, 0 zero, 1 backward, 0 clock resets'``.
@@ -58,6 +77,13 @@ class StampRepairs:
                 f'{self.backward} backward, {self.resets} clock resets')
         if self.nonfinite:
             text += f', {self.nonfinite} non-finite'
+        if self.wrapped:
+            text += (f', {self.wrapped} unsigned 32-bit wrapped stamps unwrapped '
+                     f'({self.wrapped_coarse} printed too coarsely: interpolated)')
+        if self.negative:
+            text += f', {self.negative} negative'
+        if self.offset:
+            text += f' (all stamps shifted by {self.offset:+.6g} s)'
 
         if self.period_fallback:
             text += f' (no distinct stamps: {self.period:g} s period assumed)'
@@ -107,22 +133,26 @@ def _backward(t: np.ndarray, bad: np.ndarray, good_idx: np.ndarray,
     return n_back, resets
 
 
-def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, StampRepairs]:
-    """Return (repaired stamps, what was repaired) for one stream of stamps [s].
+def unwrap_stamps(stamps) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (stamps with unsigned 32-bit wraps undone, wrapped mask, too-coarse mask).
 
-    The result is non-decreasing, has no zeros and no runs of equal values (unless the
-    stream has fewer than two entries); good stamps keep their values up to clock-reset
-    shifts.
-
-    Raises:
-        ValueError: ``fallback_period`` is not positive.
-
+    A stamp in [2**31, 2**33) s is taken for an unsigned 32-bit wrap of a negative one and
+    unwrapped (minus 2**32); one that is a multiple of :data:`WRAP_COARSE` was printed with
+    too few digits to tell its value after unwrapping (the caller treats it as missing).
     """
-    if not fallback_period > 0:
-        raise ValueError(f'fallback period must be > 0, got {fallback_period}')
     t = np.array(stamps, dtype=float).ravel()
+    with np.errstate(invalid='ignore'):
+        wrapped = np.isfinite(t) & (t >= _WRAP_FROM) & (t < _WRAP_TO)
+    coarse = wrapped & (np.fmod(t, WRAP_COARSE) == 0.0)
+    t[wrapped] -= _WRAP
+    return t, wrapped, coarse
+
+
+def _repair(t: np.ndarray, coarse: np.ndarray, n_wrapped: int,
+            fallback_period: float) -> Tuple[np.ndarray, StampRepairs]:
+    """Repair unwrapped stamps ``t`` (``coarse`` ones missing); no negative-stamp shift."""
     n = len(t)
-    bad = ~np.isfinite(t) | (t == 0.0)
+    bad = ~np.isfinite(t) | (t == 0.0) | coarse
     n_zero = int(np.count_nonzero(t == 0.0))
     n_nonfinite = int(np.count_nonzero(~np.isfinite(t)))
     good_idx = np.flatnonzero(~bad)
@@ -166,7 +196,39 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
             filled[hi + 1:] = t[hi] + period * (idx[hi + 1:] - hi)
             t = filled
     repairs = StampRepairs(repeated=n_rep, zero=n_zero, nonfinite=n_nonfinite, backward=n_back,
-                           resets=n_reset, period=period, period_fallback=bool(fallback and n > 1))
+                           resets=n_reset, period=period, period_fallback=bool(fallback and n > 1),
+                           wrapped=n_wrapped, wrapped_coarse=int(np.count_nonzero(coarse)),
+                           negative=int(np.count_nonzero(t < 0.0)))
+    return t, repairs
+
+
+def _first_at_one_period(streams: Sequence[np.ndarray], period: float) -> float:
+    """Return the offset [s] that puts the earliest stamp at ``period``; 0 if none is < 0."""
+    lows = [float(t.min()) for t in streams if len(t)]
+    if not lows or min(lows) >= 0.0:
+        return 0.0
+    return period - min(lows)
+
+
+def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, StampRepairs]:
+    """Return (repaired stamps, what was repaired) for one stream of stamps [s].
+
+    The result is non-decreasing, has no zeros, no negative stamps and no runs of equal
+    values (unless the stream has fewer than two entries); good stamps keep their values up
+    to clock-reset shifts and the one offset of negative stamps.
+
+    Raises:
+        ValueError: ``fallback_period`` is not positive.
+
+    """
+    if not fallback_period > 0:
+        raise ValueError(f'fallback period must be > 0, got {fallback_period}')
+    t, wrapped, coarse = unwrap_stamps(stamps)
+    t, repairs = _repair(t, coarse, int(np.count_nonzero(wrapped)), fallback_period)
+    offset = _first_at_one_period([t], repairs.period)
+    if offset:
+        t = t + offset
+        repairs = replace(repairs, offset=offset)
     return t, repairs
 
 
@@ -178,8 +240,10 @@ def repair_streams(streams: Sequence, lines: Sequence,
     The streams are merged in log order and clock resets are detected on the merged stream
     (as in :func:`repair_stamps`), so one reset shifts every stream by the same amount
     (stream by stream, each would get its own shift from its own last stamp and period).
-    Each shifted stream is then repaired on its own (repeated, zero, non-finite, backward
-    stamps); its ``resets`` count the merged resets that fall inside it.
+    Each shifted stream is then repaired on its own (wrapped, repeated, zero, non-finite,
+    backward stamps); its ``resets`` count the merged resets that fall inside it. Negative
+    stamps left then shift every stream by one offset (the first stamp of the log one
+    nominal period of the first stream after 0).
 
     Raises:
         ValueError: A stream and its line numbers differ in length, or
@@ -188,15 +252,17 @@ def repair_streams(streams: Sequence, lines: Sequence,
     """
     if not fallback_period > 0:
         raise ValueError(f'fallback period must be > 0, got {fallback_period}')
-    streams = [np.array(t, dtype=float).ravel() for t in streams]
+    unwrapped = [unwrap_stamps(t) for t in streams]
+    streams = [u[0] for u in unwrapped]
     lines = [np.asarray(n, dtype=float).ravel() for n in lines]
     for k, (t, n) in enumerate(zip(streams, lines)):
         if len(t) != len(n):
             raise ValueError(f'stream {k}: {len(t)} stamps but {len(n)} line numbers')
     merged = np.concatenate(streams) if streams else np.zeros(0)
+    coarse_all = np.concatenate([u[2] for u in unwrapped]) if streams else np.zeros(0, bool)
     order = np.argsort(np.concatenate(lines), kind='stable') if streams else np.zeros(0, int)
     t = merged[order]
-    bad = ~np.isfinite(t) | (t == 0.0)
+    bad = ~np.isfinite(t) | (t == 0.0) | coarse_all[order]
     good_idx = np.flatnonzero(~bad)
     period = _nominal_period(t[good_idx], good_idx) or float(fallback_period)
     _, resets = _backward(t, bad, good_idx, period)
@@ -208,12 +274,17 @@ def repair_streams(streams: Sequence, lines: Sequence,
     shift[order] = shift_sorted
     out, reports = [], []
     start = 0
-    for s in streams:
+    for s, (_, wrapped, coarse) in zip(streams, unwrapped):
         sh = shift[start:start + len(s)]
         changes = int(np.count_nonzero(np.diff(sh) != 0))
         start += len(s)
         ok = np.isfinite(s) & (s != 0.0)  # zero and non-finite stamps stay missing
-        fixed, rep = repair_stamps(np.where(ok, s + sh, s), fallback_period)
+        fixed, rep = _repair(np.where(ok, s + sh, s), coarse, int(np.count_nonzero(wrapped)),
+                             fallback_period)
         out.append(fixed)
         reports.append(replace(rep, resets=rep.resets + changes))
+    offset = _first_at_one_period(out, reports[0].period if reports else 1.0)
+    if offset:
+        out = [t + offset for t in out]
+        reports = [replace(r, offset=offset) for r in reports]
     return out, reports

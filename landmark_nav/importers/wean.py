@@ -18,6 +18,7 @@ Ranges: the laser reports in cm with the SICK LMS cm-mode codes (8183 = above th
 cm-mode figure of :data:`landmark_nav.importers.carmen.LMS_SIGMA_RANGE` (0.01 m).
 """
 
+from dataclasses import replace
 import math
 from pathlib import Path
 from typing import Optional
@@ -25,7 +26,8 @@ from typing import Optional
 import numpy as np
 
 from .carmen import LMS_SIGMA_RANGE
-from .common import LineSource, lms_cm_ranges, ParsedLog, ScanRecord, Sensor
+from .common import LineSource, LMS_CM_BAND_M, lms_cm_ranges, ParsedLog, ScanRecord, Sensor
+from .sentinels import mark_scans
 
 __all__ = ['WEAN_BEAMS', 'WEAN_RANGE_MAX', 'parse_wean']
 
@@ -62,7 +64,7 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
     """
     path = Path(path)
     source = LineSource(path, lenient)
-    scans, robot, laser = [], [], []
+    scans, robot, laser, readings = [], [], [], []
     odom_t, odom_p, odom_n = [], [], []
     ignored = {}
     angle_min, inc = -math.pi / 2, math.pi / WEAN_BEAMS
@@ -82,6 +84,7 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
             odom_p.append((values[0] * _CM, values[1] * _CM, values[2]))
         else:
             cm = values[6:6 + WEAN_BEAMS]
+            readings.append(cm * _CM)
             scans.append(ScanRecord(float(values[-1]), lineno, angle_min, inc,
                                     lms_cm_ranges(cm, WEAN_RANGE_MAX)))
             robot.append((values[0] * _CM, values[1] * _CM, values[2]))
@@ -97,7 +100,9 @@ def parse_wean(path, lenient: bool = False, max_scans: Optional[int] = None) -> 
     mount = tuple(float(v) for v in np.round(np.median(rel, axis=0), 4))  # cm data
     sensor = Sensor(model='SICK LMS (cm mode)', range_min=0.0, range_max=WEAN_RANGE_MAX,
                     sigma_range=LMS_SIGMA_RANGE)
-    log = ParsedLog('wean', path, sensor, mount, scans=scans)
+    parts, marks = mark_scans(readings, [sc.ranges for sc in scans], band=LMS_CM_BAND_M)
+    scans = [replace(sc, ranges=r) for sc, r in zip(scans, parts)]
+    log = ParsedLog('wean', path, sensor, mount, scans=scans, sentinels=marks)
     log.odom_stamps = np.array(odom_t, dtype=float)
     log.odom_lineno = np.array(odom_n, dtype=int)
     log.odom_poses = np.array(odom_p, dtype=float).reshape(-1, 3)

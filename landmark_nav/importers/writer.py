@@ -79,7 +79,7 @@ def guess_format(path) -> str:
 def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
               lenient: bool = False, max_scans: Optional[int] = None,
               max_range: Optional[float] = None, odom_lines: bool = False,
-              fov: Optional[float] = None) -> ParsedLog:
+              fov: Optional[float] = None, range_max_from: str = 'auto') -> ParsedLog:
     """Parse a log of any supported format (``fmt`` guessed when None).
 
     Raises:
@@ -99,7 +99,10 @@ def parse_log(path, fmt: Optional[str] = None, poses: Optional[str] = None,
     if fmt == 'carmen':
         from .carmen import parse_carmen
         return parse_carmen(path, poses=poses, lenient=lenient, max_scans=max_scans,
-                            max_range=max_range, odom_lines=odom_lines, fov=fov)
+                            max_range=max_range, odom_lines=odom_lines, fov=fov,
+                            range_max_from=range_max_from)
+    if range_max_from != 'auto':
+        raise ValueError(f'--range-max-from applies to Carmen logs only ({fmt} states no cap)')
     if fov is not None:
         raise ValueError(f'--fov applies to Carmen logs only ({fmt} geometry is fixed)')
     if odom_lines:
@@ -153,6 +156,19 @@ def _twist(stamps: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return out
 
 
+def _range_lines(log: ParsedLog) -> List[str]:
+    """Return the summary lines on no-return sentinels and the range cap of a parsed log."""
+    out = []
+    if log.sentinels:
+        out.append('  no-return sentinels: ' + ', '.join(
+            f'{m.value:g} m x{m.count} ({m.source}, -> {"+inf" if m.code > 0 else "NaN"})'
+            for m in sorted(log.sentinels, key=lambda m: -m.count)))
+    if log.cap is not None:
+        out.append(f'  range cap: {log.cap.describe()}' + (
+            ' (--range-max-from header keeps it)' if log.cap.overruled else ''))
+    return out
+
+
 def _fmt_pose(p) -> str:
     return ' '.join(f'{float(v):.6g}' for v in p)
 
@@ -162,7 +178,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                lenient: bool = False, force: bool = False, max_scans: Optional[int] = None,
                fallback_period: float = 1.0, progress: bool = False,
                max_range: Optional[float] = None, odom_lines: bool = False,
-               fov: Optional[float] = None) -> ImportResult:
+               fov: Optional[float] = None, range_max_from: str = 'auto') -> ImportResult:
     """Import a log into a bag directory ``out``; return what was written.
 
     Args:
@@ -185,6 +201,9 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
             re-anchored ``ODOM`` lines instead of synthetic drift.
         fov: Carmen only: field of view of ``FLASER`` / ``RLASER`` lines [deg], for beam
             counts other than 180, 181, 360, 361.
+        range_max_from: Carmen only: the range cap from the log's header unless its readings
+            overrule it (``'auto'``), always from the header (``'header'``) or from the
+            readings (``'data'``).
 
     Raises:
         LineError: A malformed line, unless ``lenient``.
@@ -205,7 +224,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         raise ValueError(f'seed must be in [0, 2**32), got {seed}')
     if out.exists() and not force:
         raise BagError(f'{out} exists already; use --force to replace it')
-    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines, fov)
+    log = parse_log(path, fmt, poses, lenient, max_scans, max_range, odom_lines, fov,
+                    range_max_from)
     if reference is not None:
         if log.fmt != 'carmen':
             raise ValueError(f'--reference applies to Carmen logs only, not {log.fmt}')
@@ -355,6 +375,7 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                      f'{_fmt_pose(log.rear_mount)}')
     lines.append(f'  mount base_link -> laser: {_fmt_pose(log.mount)} (x y yaw)')
     lines.append(f'  repairs: {repairs_text}')
+    lines += _range_lines(log)
     if log.skipped:
         lines.append(f'  skipped {log.skipped} malformed lines (--lenient); first: '
                      f'{log.first_skipped}')

@@ -78,7 +78,7 @@ class CornerExtractor(ScanFeatureNode):
 
     def process(self, scan: ScanData, clusters: list) -> None:
         """Detect and publish the corners of one scan."""
-        corners = detect_corners(clusters, self.params)
+        corners = detect_corners(clusters, self.at_scan_noise(self.params))
         stamp, frame = scan.stamp_ns, scan.frame_id
         self.pub_corners.publish(make_corner_pose_array(stamp, frame, corners))
         self.pub_features.publish(

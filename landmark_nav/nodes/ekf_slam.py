@@ -10,7 +10,9 @@ Subscribes:
 * ``corners/features`` (sensor_msgs/PointCloud2 from ``corner_extractor``; with
   ``landmarks`` ``corners`` or ``both``). Not the ``corners`` PoseArray: the cloud carries
   each corner's 2x2 position covariance (the observation noise ``R``), its opening angle
-  and bisector (the association's descriptors) and its beam time (the de-skew);
+  and bisector (the association's descriptors) and its beam time (the de-skew); with
+  ``structural_corners_only`` only the corners it labels structural (field ``structural``)
+  are used;
 * ``scan`` (sensor_msgs/LaserScan, sensor-data QoS; with ``landmarks`` ``lines`` or
   ``both``, or ``visibility``): the line landmarks are extracted from it here with
   :func:`landmark_nav.slam.features.extract_scan_features` (parameters ``lines.*``, those
@@ -266,6 +268,9 @@ class EkfSlamNode(Node):
         self.landmarks = declare(self, 'landmarks', 'corners', 'landmark types mapped: corners '
                                  '(corners/features), lines (extracted from scan) or both',
                                  None, list(LANDMARK_TYPES))
+        self.structural_only = declare(
+            self, 'structural_corners_only', False, 'map only the corners the extractor '
+            'labels structural (both arms >= 0.5 m; field structural of corners/features)')
         self.visibility = declare(self, 'visibility', True, 'visibility-aware pruning: a '
                                   'landmark the scan sees through is missed (needs scan)')
         if self.frontend_params.scan_matching and not self.visibility:
@@ -435,6 +440,13 @@ class EkfSlamNode(Node):
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping corners: {err}')
             return
+        if self.structural_only:
+            if 'structural' in a:
+                a = {k: v[a['structural'] > 0.5] for k, v in a.items()}
+            else:
+                self.warner.warn('corners/features has no field structural: every corner is '
+                                 'used (structural_corners_only needs a corner_extractor '
+                                 'that labels them)')
         cols = np.column_stack([a[n] for n in CORNER_NAMES]
                                + [a.get('time', np.zeros(len(a['x'])))])
         cols = self._valid_corners(cols.reshape(-1, len(CORNER_NAMES) + 1))

@@ -64,7 +64,7 @@ class LineExtractor(ScanFeatureNode):
 
     def process(self, scan: ScanData, clusters: list) -> None:
         """Extract and publish the lines of one scan."""
-        lines = extract_lines(clusters, self.params)
+        lines = extract_lines(clusters, self.at_scan_noise(self.params))
         self.pub_lines.publish(make_line_cloud(scan.stamp_ns, scan.frame_id, lines))
         self.pub_markers.publish(make_line_markers(scan.stamp_ns, scan.frame_id, lines))
 

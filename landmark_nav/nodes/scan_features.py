@@ -5,15 +5,21 @@ Subscribes ``scan`` (sensor_msgs/LaserScan) best effort with a queue of 20 (0.5 
 (REP 117 aware), drops malformed scans and scans of more than ``max_beams`` beams with a
 warning naming the value (throttled per kind of problem), and segments the rest
 (parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``) before handing
-the clusters to :meth:`ScanFeatureNode.process`. Finite negative ranges (no laser
+the clusters to :meth:`ScanFeatureNode.process`. With ``sigma_r_from_data`` the range noise
+of the segmentation and the extractor is estimated from the latest ``sigma_r_scans`` scans
+(:class:`landmark_nav.laser.range_noise.RangeNoiseTracker`: local line fits and the range
+step), the node's ``sigma_r`` being its lower bound; :meth:`ScanFeatureNode.at_scan_noise`
+gives the extractor's parameters with it. Finite negative ranges (no laser
 measures them; REP 117 reserves -inf for "too close") are treated as invalid beams, with a
 warning naming the first one. Processed and dropped scans and the latency are on
 ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
+from dataclasses import replace
 import math
 
 from landmark_nav.conversions import ConversionError, scan_to_data, ScanData
+from landmark_nav.laser.range_noise import RangeNoiseTracker
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.nodes.common import declare, InputStats, ProblemWarner, SCAN_QOS
 import numpy as np
@@ -37,13 +43,30 @@ class ScanFeatureNode(Node):
         self.max_beams = declare(
             self, 'max_beams', 20000, 'scans with more beams are dropped with a warning '
             '(real 2-D lasers have up to a few thousand)', (1, 100000000))
+        self.from_data = declare(
+            self, 'sigma_r_from_data', False,
+            'estimate the range noise from the scans (local line fits, range step / sqrt(12)); '
+            'sigma_r is then its lower bound')
+        self.noise_scans = declare(
+            self, 'sigma_r_scans', 50, 'scans the range noise is estimated over (the latest)',
+            (1, 100000))
+        self.noise = None  # RangeNoiseTracker when from_data
+        self.scan_sigma_r = self.sigma_r  # the range noise of the scan being processed
         self.warner = ProblemWarner(self)
         self.stats = InputStats(self, self.warner)
 
     def subscribe_scans(self, sigma_r: float) -> None:
-        """Start receiving scans; ``sigma_r`` is the range noise used by the segmentation."""
-        self.sigma_r = sigma_r
+        """Start receiving scans; ``sigma_r`` is the range noise (its lower bound if estimated)."""
+        self.sigma_r = self.scan_sigma_r = sigma_r
+        if self.from_data:
+            self.noise = RangeNoiseTracker(self.noise_scans, stated=sigma_r)
         self.stats.subscribe(LaserScan, 'scan', self.on_scan, SCAN_QOS)
+
+    def at_scan_noise(self, params):
+        """Return ``params`` with ``sigma_r`` the range noise of the current scan."""
+        if params.sigma_r == self.scan_sigma_r:
+            return params
+        return replace(params, sigma_r=self.scan_sigma_r)
 
     def on_scan(self, msg: LaserScan) -> None:
         """Validate and segment one scan, then process it."""
@@ -66,8 +89,10 @@ class ScanFeatureNode(Node):
             i = int(negative[0])
             self.warner.warn(f'LaserScan: {negative.size} negative ranges treated as invalid '
                              f'(first: ranges[{i}]={scan.ranges[i]:g})')
+        if self.noise is not None:
+            self.scan_sigma_r = self.noise.add(scan.ranges, scan.angles, scan.valid).sigma_r
         clusters = segment_scan(scan.ranges, scan.angles, scan.valid, scan.angle_increment,
-                                self.incidence_deg, self.sigma_r, self.min_cluster_points)
+                                self.incidence_deg, self.scan_sigma_r, self.min_cluster_points)
         self.process(scan, clusters)
         self.stats.processed()
 

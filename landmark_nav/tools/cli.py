@@ -105,7 +105,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
                         lenient=args.lenient, force=args.force, max_scans=args.max_scans,
                         fallback_period=args.period, progress=sys.stderr.isatty(),
                         max_range=args.max_range, odom_lines=args.odom_lines,
-                        fov=args.fov)
+                        fov=args.fov, range_max_from=args.range_max_from)
     print(result.summary)
     return 0
 
@@ -130,6 +130,11 @@ def _positive_float(text: str) -> float:
     if not 0 < value < float('inf'):
         raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
     return value
+
+
+def _sigma_or_auto(text: str):
+    """Parse ``auto`` or a finite number > 0."""
+    return 'auto' if text == 'auto' else _positive_float(text)
 
 
 def _image_size(text: str) -> int:
@@ -325,7 +330,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--max-range', type=_positive_float, default=None, metavar='METRES',
                    help='Carmen: readings at or above this are "no return" (default: the '
                         "log's ROBOTLASER1 maximum_range or PARAM robot_front_laser_max, "
-                        'else 50)')
+                        'else 50, unless the readings overrule it: --range-max-from)')
+    p.add_argument('--range-max-from', choices=['auto', 'header', 'data'], default='auto',
+                   help='Carmen: where the range cap comes from (without --max-range): the '
+                        "log's header (maximum_range, PARAM robot_front_laser_max, else 50 m) "
+                        'unless at least 1 %% of the readings lie above it (auto, default), '
+                        'the header always (header), or the readings (data)')
     p.add_argument('--fov', type=_positive_float, default=None, metavar='DEG',
                    help='Carmen: field of view of FLASER / RLASER lines, beams spread evenly '
                         'from -DEG/2 to +DEG/2 (needed for counts other than 180, 181, 360, '
@@ -342,9 +352,11 @@ def build_parser() -> argparse.ArgumentParser:
                             'metric, false-surface beams, fit, repeatability)')
     p.add_argument('bag', help='rosbag2 directory with /scan (simulator or imported)')
     p.add_argument('--every', type=int, default=1, help='use every n-th scan')
-    p.add_argument('--sigma-r', type=float, default=None,
-                   help='range noise the extractors assume [m] (default: the simulated one; '
-                        'truth-free: the node default 0.01)')
+    p.add_argument('--sigma-r', type=_sigma_or_auto, default=None, metavar='METRES|auto',
+                   help='range noise the extractors assume [m], or auto: estimated from the '
+                        "bag's scans (local line fits, at least the range step / sqrt(12) and "
+                        "the sensor's stated noise; the false-surface margin follows it) "
+                        '(default: the simulated one on a simulator bag, else auto)')
     p.add_argument('--truth-free', action='store_true',
                    help='truth-free metrics even on a simulator bag')
     p.add_argument('--reference', default=None, metavar='FILE.tum',

@@ -9,11 +9,14 @@ from typing import Optional, Sequence
 
 from landmark_nav.evaluation.feature_bags import evaluate_bag_features
 from landmark_nav.evaluation.scan_metrics import format_scan_metrics
+from landmark_nav.laser.range_noise import RangeNoise
 
 
 def format_tables(result: dict) -> str:
     """Render the figures as two Markdown tables."""
-    lines = [f'scans: {result["scans"]}, extractor sigma_r = {100 * result["sigma_r"]:.1f} cm',
+    est = result.get('sigma_r_estimate')
+    lines = [f'scans: {result["scans"]}, extractor sigma_r = {100 * result["sigma_r"]:.1f} cm'
+             + (f' ({RangeNoise(**est).describe()})' if est else ''),
              '', '| corner method | precision | recall | RMS error | ghosts/scan | ms/scan |',
              '| --- | --- | --- | --- | --- | --- |']
     for m, f in result['corners'].items():
@@ -32,7 +35,7 @@ def format_tables(result: dict) -> str:
     return '\n'.join(lines)
 
 
-def run(bag, every: int = 1, sigma_r: Optional[float] = None, json_out=None,
+def run(bag, every: int = 1, sigma_r=None, json_out=None,
         reference: Optional[str] = None, mount: Optional[Sequence[float]] = None,
         sensor_sigma_r: Optional[float] = None, scans: int = 20, seed: int = 0,
         truth_free: bool = False, progress: bool = False) -> str:

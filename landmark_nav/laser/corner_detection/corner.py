@@ -11,6 +11,11 @@ import numpy as np
 
 
 _TWO_PI = 2.0 * math.pi
+#: A corner is **structural** when both its arms (``Corner.arms``) are at least this long
+#: [m]: two surfaces of a building (walls, pillars) rather than furniture or clutter. On the
+#: six Carmen logs the corners with both arms >= 0.5 m are re-detected in the next scan
+#: 0.79 .. 0.91 of the time, the others 0.63 .. 0.82 (0.3 m: 0.76 .. 0.89 and 0.65 .. 0.80).
+STRUCTURAL_ARM = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,6 +40,9 @@ class Corner:
             each arm's line (ends where the first and last sample's ray meets the line; no
             sample inside is seen through it), for unrefined corners the corner sample and
             the window's terminal samples.
+
+    ``structural`` labels the corners whose two arms are both at least
+    :data:`STRUCTURAL_ARM` long (a building's corner rather than clutter).
     """
 
     position: np.ndarray
@@ -44,6 +52,19 @@ class Corner:
     index: int
     f_theta: float
     arms: Optional[np.ndarray] = None
+
+    @property
+    def arm_lengths(self) -> np.ndarray:
+        """Return the (2,) lengths of the arms [m]; NaN without arms."""
+        if self.arms is None:
+            return np.full(2, np.nan)
+        a = np.asarray(self.arms, dtype=float)
+        return np.hypot(a[:, 1, 0] - a[:, 0, 0], a[:, 1, 1] - a[:, 0, 1])
+
+    @property
+    def structural(self) -> bool:
+        """Return whether both arms are at least :data:`STRUCTURAL_ARM` long."""
+        return bool(np.all(self.arm_lengths >= STRUCTURAL_ARM))
 
 
 def _free_side(cx: np.ndarray, cy: np.ndarray, u1x: np.ndarray, u1y: np.ndarray,
