@@ -263,7 +263,7 @@ def params_file_options(path: str) -> dict:
     (off). :func:`split_frontend` separates the two kinds.
     """
     import yaml
-    from landmark_nav.nodes.ekf_slam import FRONTEND_PARAMETERS, SLAM_PARAMETERS
+    from landmark_nav.slam.configuration import FRONTEND_PARAMETERS, SLAM_PARAMETERS
     values = yaml.safe_load(Path(path).read_text())['ekf_slam']['ros__parameters']
     out = {}
     for k, v in values.items():

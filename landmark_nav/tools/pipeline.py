@@ -61,40 +61,15 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
 def bag_slam_settings(bag: str) -> List[str]:
     """``ekf_slam`` parameters a bag states, as ``-p`` arguments (module docstring).
 
-    The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
-    ``ground_truth.yaml``), its range noise (``laser_sigma_range``, ``lines.sigma_r``) and
-    bearing noise (``lines.sigma_phi``), as ``evaluate`` uses them, and ``odometry.model``:
-    ``custom_data`` ``landmark_nav.drift_model``, ``simulator`` for a simulator recording,
-    else nothing (the node's default, ``pioneer``). Nothing for what the bag does not state
-    or a bag that cannot be read (the player reports that).
+    :func:`landmark_nav.evaluation.slam.bag_slam_parameters`, as ``evaluate`` uses them;
+    nothing for a bag that cannot be read (the player reports that).
     """
-    from pathlib import Path
-
-    from landmark_nav.bag import BagReader
-    from landmark_nav.evaluation.bags import laser_config
-    from landmark_nav.evaluation.slam import DRIFT_KEY
-    from landmark_nav.sim.record import GROUND_TRUTH_FILE
-    import yaml
+    from landmark_nav.evaluation.slam import bag_slam_parameters
+    from landmark_nav.tools.node_parameters import as_ros_arguments
     try:
-        with BagReader(bag) as reader:
-            custom = reader.custom_data
-        meta_path = Path(bag) / GROUND_TRUTH_FILE
-        meta = yaml.safe_load(meta_path.read_text()) if meta_path.is_file() else None
-        laser, notes = laser_config(custom, meta if isinstance(meta, dict) else None)
+        return as_ros_arguments(bag_slam_parameters(bag))
     except Exception:  # noqa: B902 - the player names the problem with the bag
         return []
-    out = []
-    if not any('(default)' in n for n in notes):
-        mount = ','.join(repr(float(v)) for v in laser.mount)
-        out += ['-p', f'laser_pose:=[{mount}]']
-    if not any('no laser range noise' in n for n in notes):  # lines and visibility
-        sr, sp = repr(float(laser.sigma_range)), repr(float(laser.sigma_angle))
-        out += ['-p', f'laser_sigma_range:={sr}', '-p', f'lines.sigma_r:={sr}',
-                '-p', f'lines.sigma_phi:={sp}']
-    model = custom.get(DRIFT_KEY) or ('simulator' if meta is not None else None)
-    if model:
-        out += ['-p', f'odometry.model:={model}']
-    return out
 
 
 def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str] = None,
