@@ -32,7 +32,7 @@ covariance of :func:`landmark_nav.slam.scan_matching.fit_information` worth ``pa
 residuals is ``pairs NIS / N`` (the front end's ``scan_matching_fit_pairs``).
 
 ``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
-lines, the ``ekf_slam_real_logs`` profile or ``--params-file``; ``--landmarks corners`` or
+lines, the ``ekf_slam`` defaults or ``--params-file`` on top; ``--landmarks corners`` or
 ``lines`` instead of the file's) twice per run: on the
 bag's odometry with its stated noise model (and the file's front end: the profile's
 ``scan_matching`` scan-matches in the filter itself; the README's yardstick figures predate
@@ -70,7 +70,6 @@ from landmark_nav.slam.ekf_slam import odometry_noise, SlamParams  # noqa: E402
 from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model  # noqa: E402
 from landmark_nav.slam.scan_matching import base_motion, scan_points  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
-from landmark_nav.tools.config_files import config_path  # noqa: E402
 import numpy as np  # noqa: E402
 
 LOGS = ('aces', 'seattle', 'fhw', 'freiburg-101', 'belgioioso', 'acapulco')
@@ -181,16 +180,15 @@ def main() -> int:
                     help="the importer's drift model (default pioneer; none: the reference's "
                          'own increments as odometry, the ICP gated with pioneer)')
     ap.add_argument('--slam', action='store_true', help='also EKF-SLAM on both motions')
-    ap.add_argument('--params-file', default=None, help='ekf_slam parameter file (default: '
-                    'the ekf_slam_real_logs profile)')
+    ap.add_argument('--params-file', default=None, help='ekf_slam parameter file on top of '
+                    'the defaults')
     ap.add_argument('--filter-noise', default='k_d=0.04 k_theta=0.015 k_dtheta=0.03',
                     help="the filter's U on the scan-matched chain")
     ap.add_argument('--landmarks', choices=('corners', 'lines', 'both'), default=None,
                     help="landmark types (default: the parameter file's)")
     args = ap.parse_args()
     if args.slam:
-        options = params_file_options(args.params_file
-                                      or str(config_path('ekf_slam_real_logs')))
+        options = params_file_options(args.params_file)
         chain_noise = odometry_noise_model(args.filter_noise)
         if args.landmarks:
             options['landmarks'] = args.landmarks

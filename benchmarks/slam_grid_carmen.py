@@ -9,7 +9,7 @@ Run from the repository root (needs ``../shared/data/carmen``)::
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, one draw
 per seed) and run through :func:`slam_consistency_carmen.diagnose` (the filter of
 :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated odometry noise). The
-parameters are the ``ekf_slam_real_logs`` profile (read as the node reads the file,
+parameters are the ``ekf_slam`` defaults (read as the node reads its file,
 ``bench_node_cpu.params_file_options``) or ``--params-file``, with ``--set`` (Python
 literals, e.g. ``--set association="'jcbb'"``) and ``--landmarks`` on top. Runs go to
 ``--procs`` processes; ``--cache`` keeps the imported bags between invocations.
@@ -43,7 +43,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_node_cpu import params_file_options  # noqa: E402
 from landmark_nav.importers.writer import import_log  # noqa: E402
 from landmark_nav.testing.shared_data import SHARED_DATA  # noqa: E402
-from landmark_nav.tools.config_files import config_path  # noqa: E402
 import numpy as np  # noqa: E402
 from slam_consistency_carmen import diagnose, LOGS  # noqa: E402
 
@@ -81,7 +80,7 @@ def main() -> int:
     ap.add_argument('logs', nargs='*', default=list(LOGS))
     ap.add_argument('--seeds', nargs='+', type=int, default=[0, 1])
     ap.add_argument('--params-file', default=None,
-                    help='ekf_slam parameter file (default: the ekf_slam_real_logs profile)')
+                    help='ekf_slam parameter file on top of the defaults')
     ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
     ap.add_argument('--landmarks', choices=('corners', 'lines', 'both'), default=None)
     ap.add_argument('--procs', type=int, default=2)
@@ -90,7 +89,7 @@ def main() -> int:
     if not (SHARED_DATA / 'carmen').is_dir():
         print(f'missing {SHARED_DATA / "carmen"}', file=sys.stderr)
         return 1
-    options = params_file_options(args.params_file or str(config_path('ekf_slam_real_logs')))
+    options = params_file_options(args.params_file)
     for item in args.set:
         key, _, value = item.partition('=')
         options[key] = ast.literal_eval(value)

@@ -253,9 +253,9 @@ def _cmd_make_landmark(args: argparse.Namespace) -> int:
 
 
 def _cmd_config(args: argparse.Namespace) -> int:
-    from landmark_nav.tools.config_files import available, config_path
+    from landmark_nav.tools.config_files import config_path, listing
     if args.node is None:
-        print('\n'.join(available()))
+        print(listing())
         return 0
     print(config_path(args.node))
     return 0
@@ -500,8 +500,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_make_landmark)
 
     p = sub.add_parser('config', help="print the path of a node's shipped parameter file "
-                       '(for --params-file; no NODE: list the nodes)')
-    p.add_argument('node', nargs='?', default=None, help='node name, e.g. ekf_slam')
+                       'or profile (for --params-file; no NAME: list the files and profiles)')
+    p.add_argument('node', nargs='?', default=None, metavar='NAME',
+                   help='node or profile name, e.g. ekf_slam or ekf_slam_chapter')
     p.set_defaults(func=_cmd_config)
 
     from landmark_nav.tools.pipeline import add_parser as add_pipeline_parser

@@ -28,6 +28,7 @@ import shlex
 import sys
 from typing import Dict, List, Optional, Sequence
 
+from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.tools.config_files import config_path
 
 PIPELINES = {
@@ -41,8 +42,12 @@ PIPELINES = {
 def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
     """Parse ``NODE.PARAMETER=VALUE`` settings into ``-p`` arguments per node.
 
+    The nodes refuse a parameter they do not declare (exit status 2, the nearest name);
+    ``ekf_slam``'s names are checked here, before anything starts.
+
     Raises:
-        ValueError: A setting is malformed or names a node outside the pipeline.
+        ValueError: A setting is malformed, names a node outside the pipeline or an
+            unknown ``ekf_slam`` parameter.
 
     """
     out: Dict[str, List[str]] = {n: [] for n in nodes}
@@ -54,6 +59,11 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
         if node not in out or node == 'bag_player':
             raise ValueError(f'--set {text!r}: no node {node!r} with parameters in this '
                              f'pipeline ({", ".join(n for n in nodes if n != "bag_player")})')
+        if node == 'ekf_slam':  # its parameters are known without starting it
+            from landmark_nav.slam.configuration import NODE, parameters
+            known = parameters()
+            if name not in known:
+                raise ValueError(f'--set {text!r}: {unknown_parameter(NODE, name, known)}')
         out[node] += ['-p', f'{name}:={value}']
     return out
 
