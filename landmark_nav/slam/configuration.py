@@ -31,6 +31,8 @@ from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
 from landmark_nav.slam.slam_params import JACOBIANS, OdometryNoise, SlamParams
 
 NODE = 'ekf_slam'
+#: The parameters rclpy declares in every node (accepted, no effect on the configuration).
+RCLPY_PARAMETERS = ('use_sim_time', 'start_type_description_service')
 
 #: SlamParams fields -> (description, limits, choices[, value standing for None]).
 SLAM_PARAMETERS = {
@@ -308,6 +310,8 @@ def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamCon
     table = parameters()
     values = {name: p.default for name, p in table.items()}
     for name, value in (overrides or {}).items():
+        if name in RCLPY_PARAMETERS:
+            continue  # every node has them; nothing here depends on them
         if name not in table:
             raise ValueError(unknown_parameter(NODE, name, table))
         values[name] = check_value(name, value, table[name])
