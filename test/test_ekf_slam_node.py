@@ -182,7 +182,10 @@ def test_node_equals_offline_with_lines(tmp_path, landmarks):
 
 @pytest.mark.dds
 def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
-    """Localization on a load_map map: node = offline run on the same map; .npz save_map."""
+    """Localization on a load_map map: node = offline run on the same map; .npz save_map.
+
+    Both run the chapter's filter (the profile).
+    """
     scenario = load_bag(OFFICE, max_seconds=SECONDS)
     laser = scenario.laser
     cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
@@ -199,7 +202,8 @@ def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
             Parameter('load_map', value=str(map_path)),
             Parameter('map_file', value=str(tmp_path / 'after.npz')),
             Parameter('odometry.model', value='simulator'),
-            Parameter('odometry_timeout', value=3600.0)]))
+            Parameter('odometry_timeout', value=3600.0)]
+            + [Parameter(k, value=v) for k, v in chapter_profile().items()]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
         n_scan = replay(ros, msgs, slam)
         assert ros.wait_until(lambda: len(poses) >= n_scan - 1, 5)

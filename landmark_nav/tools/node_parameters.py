@@ -115,12 +115,20 @@ def given_parameters(files: Iterable[str], settings: Iterable[str], node: str
     return out
 
 
+def _ros_value(value: Any) -> str:
+    """Write a parameter value as ``-p NAME:=VALUE`` reads it back (YAML, shortest repr)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (list, tuple)):
+        return '[' + ','.join(_ros_value(v) for v in value) + ']'
+    if isinstance(value, (int, float)):
+        return repr(value)
+    return str(value)
+
+
 def as_ros_arguments(values: Mapping[str, Any]) -> List[str]:
     """Return ``-p NAME:=VALUE`` arguments giving a node these parameter values."""
     out = []
     for name, value in values.items():
-        text = yaml.safe_dump(value, default_flow_style=True).strip()
-        if text.endswith('\n...'):
-            text = text[:-4].strip()
-        out += ['-p', f'{name}:={text}']
+        out += ['-p', f'{name}:={_ros_value(value)}']
     return out
