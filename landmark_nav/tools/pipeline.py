@@ -1,7 +1,8 @@
 """``landmark_nav pipeline NAME``: start a whole pipeline of nodes with one command.
 
 Each node runs as its own process with its shipped parameter file
-(:func:`~landmark_nav.tools.config_files.config_path`) and the overrides given with
+(:func:`~landmark_nav.tools.config_files.config_path`), the shipped profiles given with
+``--profile NAME`` (e.g. ``ekf_slam_chapter``) and the overrides given with
 ``--set NODE.PARAMETER=VALUE``; honcho (a Python port of Foreman) starts them, prefixes
 every output line with the node's name and, on Ctrl-C or SIGTERM, stops them all with
 SIGTERM (every node shuts down cleanly on it). When one process ends, the others are
@@ -82,12 +83,35 @@ def bag_slam_settings(bag: str) -> List[str]:
         return []
 
 
-def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str] = None,
-                      rate: float = 1.0, loop: bool = False) -> Dict[str, List[str]]:
-    """Return the command line of every process of a pipeline, by node name.
+def _profile_files(names: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
+    """Return the ``--params-file`` arguments of shipped profiles, by node.
 
     Raises:
-        ValueError: Unknown pipeline, a bad ``--set``, or a replay without a bag.
+        ValueError: Not a shipped profile of a node of the pipeline.
+
+    """
+    from landmark_nav.tools.config_files import profiles
+    known = profiles()
+    out: Dict[str, List[str]] = {n: [] for n in nodes}
+    for name in names:
+        if known.get(name) not in out:
+            raise ValueError(f'--profile {name!r}: not a profile of a node of this pipeline '
+                             f'({", ".join(k for k, n in known.items() if n in out) or "none"})')
+        out[known[name]] += ['--params-file', str(config_path(name))]
+    return out
+
+
+def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str] = None,
+                      rate: float = 1.0, loop: bool = False,
+                      profiles: Sequence[str] = ()) -> Dict[str, List[str]]:
+    """Return the command line of every process of a pipeline, by node name.
+
+    Each node gets its shipped parameter file, then its ``profiles`` (e.g.
+    ``ekf_slam_chapter``), then what the bag states (``replay``), then ``settings``.
+
+    Raises:
+        ValueError: Unknown pipeline, a bad ``--set`` or ``--profile``, or a replay without
+            a bag.
         FileNotFoundError: A node's parameter file is missing.
 
     """
@@ -95,6 +119,7 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
         raise ValueError(f'unknown pipeline {name!r}; one of {", ".join(PIPELINES)}')
     nodes = PIPELINES[name]
     extra = _overrides(settings, nodes)
+    files = _profile_files(profiles, nodes)
     commands = {}
     for node in nodes:
         cmd = [sys.executable, '-m', f'landmark_nav.nodes.{node}']
@@ -105,7 +130,8 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
                     '--wait-for-subscribers', '30'] + (['--loop'] if loop else [])
         else:
             stated = bag_slam_settings(bag) if (node == 'ekf_slam' and bag) else []
-            cmd += ['--ros-args', '--params-file', str(config_path(node))] + stated + extra[node]
+            cmd += (['--ros-args', '--params-file', str(config_path(node))] + files[node]
+                    + stated + extra[node])
         commands[node] = cmd
     return commands
 
@@ -122,13 +148,17 @@ def add_parser(sub, parser_class) -> None:
     p.add_argument('--set', action='append', default=[], metavar='NODE.PARAMETER=VALUE',
                    help='override a parameter, e.g. laser_driver.port=/dev/ttyUSB0 '
                    '(repeatable)')
+    p.add_argument('--profile', action='append', default=[], metavar='NAME',
+                   help="a shipped profile on top of its node's file, e.g. ekf_slam_chapter "
+                   "(the chapter's filter; landmark_nav config lists them; repeatable)")
     p.add_argument('--dry-run', action='store_true', help='print the commands, start nothing')
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Start the pipeline and wait until it stops; return honcho's exit status."""
-    commands = pipeline_commands(args.name, args.set, args.bag, args.rate, args.loop)
+    commands = pipeline_commands(args.name, args.set, args.bag, args.rate, args.loop,
+                                 args.profile)
     if args.dry_run:
         for node, cmd in commands.items():
             print(f'{node}: {shlex.join(cmd)}')
