@@ -32,7 +32,7 @@ from landmark_nav.evaluation.trajectory import (ALIGNMENTS, ate, rpe, STATISTICS
                                                 write_tum)
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.sim import run_scenario, ScanSample
-from landmark_nav.slam.configuration import slam_configuration, SlamConfiguration
+from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
 from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model
 from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
@@ -171,6 +171,18 @@ def bag_configuration(bag, parameters: Optional[Mapping[str, Any]] = None,
     return slam_configuration(values)
 
 
+def _noise_source(bag, scenario, config: SlamConfiguration) -> str:
+    """Where the configuration's odometry noise comes from (``slam.json``)."""
+    model = config.values['odometry.model'].strip()
+    if model and model == bag_slam_parameters(bag).get('odometry.model'):
+        return f'custom_data {DRIFT_KEY}' if DRIFT_KEY in scenario.custom_data else model
+    if model:
+        return f'odometry.model {model}'
+    pioneer = all(config.values[k] == p.default for k, p in parameters().items()
+                  if k.startswith('odometry.'))
+    return 'default pioneer' if pioneer else 'odometry.*'
+
+
 def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress: bool = True,
                  params: Optional[SlamParams] = None, max_seconds: Optional[float] = None,
                  reference=None, align: str = ALIGN_DEFAULT,
@@ -236,8 +248,8 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
                         require_reference=False)
-    noise_source = 'params' if params is not None else 'configuration'
     cfg = config or bag_configuration(bag)
+    noise_source = 'params' if params is not None else _noise_source(bag, scenario, cfg)
     prm = params or cfg.params
     association = association or prm.association
     prm = SlamParams(**{**{f.name: getattr(prm, f.name) for f in fields(SlamParams)},
@@ -245,7 +257,7 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
     if prm.mode == 'localization' and slam_map is None:
         raise ValueError('mode localization needs a map (slam_map: a file saved with '
                          'save_map_to / --save-map)')
-    if params is None and 'odometry.model' not in bag_slam_parameters(bag) and config is None:
+    if noise_source == 'default pioneer':
         scenario.notes.append('no odometry noise model in the bag (custom_data '
                               f'{DRIFT_KEY}): using the pioneer model')
     landmarks = landmarks or cfg.landmarks

@@ -24,6 +24,7 @@ from typing import Callable, Optional, Sequence
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ConversionError, pose_with_covariance_to_pose
 from landmark_nav.parameter_names import unknown_parameter
+from landmark_nav.parameter_tables import dataclass_parameters, field_value
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -255,16 +256,10 @@ def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
         prefix: Prefix for the parameter names (e.g. ``'segmentation.'``).
 
     """
-    defaults = cls()
     values = {}
-    for name, (description, limits, choices, *auto) in docs.items():
-        default = getattr(defaults, name)
-        if default is None:
-            default = auto[0]
-        if isinstance(default, tuple):
-            default = [float(v) for v in default]
-        value = declare(node, prefix + name, default, description, limits, choices)
-        values[name] = None if auto and value == auto[0] else value
+    for name, p in dataclass_parameters(docs, cls(), prefix).items():
+        value = declare(node, name, p.default, p.description, p.limits, p.choices)
+        values[name[len(prefix):]] = field_value(p, value)
     try:
         return cls(**values)
     except (TypeError, ValueError) as err:

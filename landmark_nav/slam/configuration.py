@@ -21,10 +21,11 @@ options back their chapter values: the profile ``config/ekf_slam_chapter.yaml``.
 
 from dataclasses import dataclass, replace
 import math
-from typing import Any, Dict, Mapping, NamedTuple, Optional, Tuple
+from typing import Any, Dict, Mapping, Optional, Tuple
 
 from landmark_nav.laser.lines import LINE_PARAMETERS, LineParams
 from landmark_nav.parameter_names import unknown_parameter
+from landmark_nav.parameter_tables import dataclass_parameters, field_value, Parameter
 from landmark_nav.slam.features import LANDMARK_TYPES
 from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
                                         ODOMETRY_NOISE_MODELS)
@@ -169,29 +170,6 @@ REAL_DATA: Dict[str, Any] = {
 }
 
 
-class Parameter(NamedTuple):
-    """One node parameter: its shipped default (parameter form) and descriptor."""
-
-    default: Any
-    description: str
-    limits: Optional[Tuple[float, float]] = None
-    choices: Optional[list] = None
-    auto: Tuple = ()  # (the value standing for a field default of None,) or ()
-
-
-def _field_parameters(table: dict, instance, prefix: str = '') -> Dict[str, Parameter]:
-    """Parameters of a dataclass's documented fields, defaults from ``instance``."""
-    out = {}
-    for name, (description, limits, choices, *auto) in table.items():
-        default = getattr(instance, name)
-        if default is None:
-            default = auto[0]
-        if isinstance(default, tuple):
-            default = [float(v) for v in default]
-        out[prefix + name] = Parameter(default, description, limits, choices, tuple(auto))
-    return out
-
-
 def _as_parameter(name: str, value: Any) -> Any:
     """Return a dataclass field value in parameter form (None -> its "off" value)."""
     if value is None:
@@ -213,13 +191,13 @@ def parameters() -> Dict[str, Parameter]:
                          for k, v in options.items() if k in SLAM_PARAMETERS})
     frontend = FrontendParams(**{k: v for k, v in options.items()
                                  if k in FRONTEND_PARAMETERS})
-    out = _field_parameters(SLAM_PARAMETERS, slam)
+    out = dataclass_parameters(SLAM_PARAMETERS, slam)
     pioneer = ODOMETRY_NOISE_MODELS['pioneer']
     for name, description in ODOMETRY_PARAMETERS.items():
         out[f'odometry.{name}'] = Parameter(float(getattr(pioneer, name)), description,
                                             (0.0, 10.0))
-    out.update(_field_parameters(FRONTEND_PARAMETERS, frontend))
-    out.update(_field_parameters(SLAM_LINE_PARAMETERS, LineParams(), 'lines.'))
+    out.update(dataclass_parameters(FRONTEND_PARAMETERS, frontend))
+    out.update(dataclass_parameters(SLAM_LINE_PARAMETERS, LineParams(), 'lines.'))
     out.update({k: Parameter(*v) for k, v in NODE_PARAMETERS.items()})
     return out
 
@@ -287,13 +265,11 @@ class SlamConfiguration:
     values: Dict[str, Any]
 
 
-def _fields(table: dict, values: Mapping[str, Any], prefix: str = '') -> Dict[str, Any]:
+def _fields(table: dict, values: Mapping[str, Any], instance,
+            prefix: str = '') -> Dict[str, Any]:
     """Dataclass field values of the parameters of ``table`` (the "off" value -> None)."""
-    out = {}
-    for name, (_, _, _, *auto) in table.items():
-        value = values[prefix + name]
-        out[name] = None if auto and value == auto[0] else value
-    return out
+    return {name[len(prefix):]: field_value(p, values[name])
+            for name, p in dataclass_parameters(table, instance, prefix).items()}
 
 
 def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamConfiguration:
@@ -322,9 +298,10 @@ def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamCon
     except ValueError as err:
         raise ValueError(f'parameter odometry.model: {err}') from None
     try:
-        params = SlamParams(odometry=noise, **_fields(SLAM_PARAMETERS, values))
-        frontend = FrontendParams(**_fields(FRONTEND_PARAMETERS, values))
-        line_params = replace(LineParams(), **_fields(SLAM_LINE_PARAMETERS, values, 'lines.'))
+        params = SlamParams(odometry=noise, **_fields(SLAM_PARAMETERS, values, SlamParams()))
+        frontend = FrontendParams(**_fields(FRONTEND_PARAMETERS, values, FrontendParams()))
+        line_params = replace(LineParams(), **_fields(SLAM_LINE_PARAMETERS, values,
+                                                      LineParams(), 'lines.'))
     except (TypeError, ValueError) as err:
         raise ValueError(f'{NODE}: {err}') from None
     if frontend.scan_matching and not values['visibility']:
