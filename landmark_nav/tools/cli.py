@@ -398,7 +398,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_calibrate_odometry)
 
     p = sub.add_parser('evaluate', help='run EKF-SLAM on a bag and score it against a reference '
-                       '(without one: map, path and filter figures only)')
+                       '(without one: map, path and filter figures only)',
+                       epilog="The filter runs ekf_slam's configuration: its defaults, then "
+                       'the --params-file files, then what the bag states (laser mount and '
+                       'noise, odometry noise model), then --set and the options above, as '
+                       '`landmark_nav pipeline replay` gives them to the node. The filter '
+                       'of the corner chapter: --params-file "$(landmark_nav config '
+                       'ekf_slam_chapter)".')
     p.add_argument('bag', help='rosbag2 directory with /scan, /odom and optionally a reference '
                    '(/ground_truth/odom or --reference)')
     p.add_argument('--association', choices=['icnn', 'jcbb'], default=None,

@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser, node: str) -> None:
                         'repeatable, a later file wins; e.g. "$(landmark_nav config '
                         f'{node})")')
     parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
-                        help=f'a {node} parameter, after the files ({node}.NAME=VALUE or '
+                        help=f'one {node} parameter, after the files ({node}.NAME=VALUE or '
                         'NAME=VALUE; the value as YAML, as -p NAME:=VALUE; repeatable)')
 
 
