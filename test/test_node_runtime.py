@@ -332,3 +332,12 @@ def test_the_shipped_parameter_files_pass_the_check(processes, profile):
                            text=True, cwd=REPO)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0 and 'SPINNING' in out and not error_lines(err), err
+
+
+def test_the_bag_player_refuses_a_parameter(processes):
+    """Its options are arguments (--rate); a -p override would be silently unused."""
+    code, err = run_owned(processes, [sys.executable, '-m', 'landmark_nav.nodes.bag_player',
+                                      str(REPO / 'bags' / 'office'), '--ros-args', '-p',
+                                      'rate:=2.0'])
+    assert code == 2, err
+    assert "bag_player: error: bag_player has no parameter 'rate'" in err.splitlines(), err
