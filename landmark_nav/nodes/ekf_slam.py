@@ -57,6 +57,15 @@ evaluate --save-map``) starts the filter on that map at the first odometry pose 
 ``map_pose_sigma``), again after a reset; with ``mode: localization`` it tracks the robot
 on it without adding landmarks.
 
+Parameters: :mod:`landmark_nav.slam.configuration` describes them all (defaults, limits,
+choices) and builds the filter's and the front end's parameters from their values, for
+this node and for ``landmark_nav evaluate``. The defaults are the configuration measured
+on real logs (corners and lines, consistent heading, the free-space, recovery and
+spurious-pair checks, the scan-matched motion fused with the odometry); the corner
+chapter's filter is the profile ``config/ekf_slam_chapter.yaml``, given after
+``config/ekf_slam.yaml``. A parameter the node does not declare is refused at start
+(:func:`~landmark_nav.nodes.common.reject_undeclared`).
+
 Odometry noise: the ``odometry.*`` parameters (defaults: the ``pioneer`` model of
 :mod:`landmark_nav.slam.frontend`), or ``odometry.model`` = ``pioneer``, ``simulator`` or
 the gains ``'k_d=.. k_theta=.. k_dtheta=..'`` an imported bag states.
