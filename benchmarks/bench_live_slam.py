@@ -8,7 +8,8 @@ Run from the repository root::
 Starts, each as its own process on a private DDS domain, exactly what the README shows:
 ``landmark_nav emulate robot --truth truth.tum`` (the P2OS base and the laser on one
 world), ``landmark_nav pipeline slam`` (laser_driver + base_driver + corner_extractor +
-ekf_slam with the shipped parameters; the UTM-30LX's 40 scans/s thinned to 10 with
+ekf_slam with the shipped parameters, ``--profile`` on top; the UTM-30LX's
+40 scans/s thinned to 10 with
 ``laser_driver.skip=3`` unless ``--skip 0``) and ``landmark_nav drive --route office --record
 slam.tum`` (cmd_vel closed on ekf_slam's ``/odometry``) for ``--seconds``; this process
 also records ``/odom``. Printed: the ATE (position error after interpolating the truth to
@@ -93,6 +94,9 @@ def main() -> int:
                         help='data rate factor of the emulated devices (10: the 10x soak, '
                              '400 scans/s with --skip 0 and 100 Hz odometry)')
     parser.add_argument('--out', default=None, help='keep the files here')
+    parser.add_argument('--profile', action='append', default=[], metavar='NAME',
+                        help='a shipped profile for the pipeline (e.g. ekf_slam_chapter: the '
+                        'filter of the figures measured before the real-data defaults)')
     args = parser.parse_args()
 
     import numpy as np
@@ -124,7 +128,8 @@ def main() -> int:
         procs.append(subprocess.Popen(
             cli + ['pipeline', 'slam', '--set', f'base_driver.port={base_link}',
                    '--set', f'base_driver.cycle_time={0.1 / args.rate!r}',
-                   '--set', 'ekf_slam.odometry.model=simulator'] + laser_set,
+                   '--set', 'ekf_slam.odometry.model=simulator'] + laser_set
+            + [a for name in args.profile for a in ('--profile', name)],
             env=env, stdout=log, stderr=subprocess.STDOUT))
         started = time.monotonic()
         try:

@@ -33,9 +33,10 @@ does); printed: ``ekf_slam``'s CPU per step over the paced core's (the issue's t
 most 2; what the node spends beyond the same work at the same rate) and over the
 back-to-back core's. ``--no-visibility`` runs both without the scan geometry (the
 node does not subscribe ``scan``; what the node before the visibility-aware pruning did).
-``--params-file YAML`` gives ``ekf_slam`` a parameter file on top of its defaults
-(e.g. ``config/ekf_slam_real_logs.yaml``, the ``real_logs`` profile) and the core the same
-``SlamParams`` (0 = off as in the node; its ``landmarks`` replaces ``--landmarks``).
+Node and core run the ``ekf_slam`` defaults; ``--params-file YAML`` gives ``ekf_slam`` a
+parameter file on top of them (e.g. ``config/ekf_slam_chapter.yaml``, the chapter's filter)
+and the core the same ``SlamParams`` (0 = off as in the node; ``--landmarks`` replaces its
+``landmarks``).
 ``--map-landmarks N`` (the issue's figure is at 200): node and core start on a saved map of
 N landmarks placed 1 km and more away (never in view: no association, no pruning; the
 state and covariance the filter carries are those of an N-landmark map) and map the bag's
@@ -94,19 +95,19 @@ def main() -> int:
     parser.add_argument('--soak', type=float, default=None, metavar='S')
     parser.add_argument('--repo', default=str(REPO), help='checkout whose code is run')
     parser.add_argument('--domain', type=int, default=90 + os.getpid() % 10)
-    parser.add_argument('--landmarks', default='corners', choices=('corners', 'lines', 'both'))
+    parser.add_argument('--landmarks', default=None, choices=('corners', 'lines', 'both'),
+                        help="landmark types (default: the configuration's)")
     parser.add_argument('--no-visibility', dest='visibility', action='store_false')
     parser.add_argument('--map-landmarks', type=int, default=0, metavar='N')
     parser.add_argument('--profile', metavar='FILE', default=None,
                         help='run ekf_slam under cProfile, statistics written to FILE')
     parser.add_argument('--params-file', metavar='YAML', default=None,
                         help="ekf_slam's parameters on top of the defaults (e.g. "
-                             'config/ekf_slam_real_logs.yaml), node and core alike')
+                             'config/ekf_slam_chapter.yaml), node and core alike')
     args = parser.parse_args()
-    slam_options = {}
-    if args.params_file:
-        slam_options = params_file_options(args.params_file)
-        args.landmarks = slam_options.pop('landmarks', args.landmarks)
+    slam_options = params_file_options(args.params_file)
+    landmarks = slam_options.pop('landmarks')
+    args.landmarks = args.landmarks or landmarks
     env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                PYTHONPATH=args.repo + os.pathsep + os.environ.get('PYTHONPATH', ''))
@@ -121,14 +122,13 @@ def main() -> int:
     from landmark_nav.evaluation.bags import load_bag
     scenario = load_bag(args.bag, max_seconds=args.seconds, require_reference=False)
     laser = scenario.laser
-    node_args = {'ekf_slam': ['--ros-args', '-p', 'laser_pose:=[' + ','.join(
-        f'{v!r}' for v in map(float, laser.mount)) + ']',
+    files = ['--params-file', str(Path(args.params_file).resolve())] if args.params_file else []
+    node_args = {'ekf_slam': ['--ros-args'] + files + [
+        '-p', 'laser_pose:=[' + ','.join(f'{v!r}' for v in map(float, laser.mount)) + ']',
         '-p', f'landmarks:={args.landmarks}', '-p', f'visibility:={str(args.visibility).lower()}',
         '-p', f'laser_sigma_range:={float(laser.sigma_range)!r}',
         '-p', f'lines.sigma_r:={float(laser.sigma_range)!r}',
-        '-p', f'lines.sigma_phi:={float(laser.sigma_angle)!r}']
-        + (['--params-file', str(Path(args.params_file).resolve())] if args.params_file
-           else []),
+        '-p', f'lines.sigma_phi:={float(laser.sigma_angle)!r}'],
         'corner_extractor': ['--ros-args', '-p', f'sigma_r:={float(laser.sigma_range)!r}',
                              '-p', f'sigma_phi:={float(laser.sigma_angle)!r}']}
     slam_map = None
@@ -255,16 +255,19 @@ def far_map(n: int):
                    max_seen=np.full(n, 5.0), next_id=n)
 
 
-def params_file_options(path: str) -> dict:
-    """Return the ``SlamParams`` and ``FrontendParams`` fields (and ``landmarks``) of a file.
+def params_file_options(path: str = None) -> dict:
+    """Return the ``SlamParams`` and ``FrontendParams`` fields and ``landmarks`` of a run.
 
-    Read as the node reads them (``SLAM_PARAMETERS``, ``FRONTEND_PARAMETERS``,
-    :func:`declare_dataclass`): a parameter's "auto" value (0) stands for the field's None
-    (off). :func:`split_frontend` separates the two kinds.
+    The ``ekf_slam`` defaults with the file (None: none) on top, read as the node reads
+    them (``SLAM_PARAMETERS``, ``FRONTEND_PARAMETERS``): a parameter's "auto" value (0)
+    stands for the field's None (off). :func:`split_frontend` separates the two kinds.
     """
-    import yaml
-    from landmark_nav.nodes.ekf_slam import FRONTEND_PARAMETERS, SLAM_PARAMETERS
-    values = yaml.safe_load(Path(path).read_text())['ekf_slam']['ros__parameters']
+    from landmark_nav.slam.configuration import (default_values, FRONTEND_PARAMETERS,
+                                                 SLAM_PARAMETERS)
+    from landmark_nav.tools.node_parameters import read_params_file
+    values = default_values()
+    if path:
+        values.update(read_params_file(path, 'ekf_slam'))
     out = {}
     for k, v in values.items():
         if k in SLAM_PARAMETERS:

@@ -23,6 +23,8 @@ or ``--data DIR``)::
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py scan-matching [--seeds 0 1]
         [--drift none] [--slam [--params-file YAML] [--filter-noise MODEL]
         [--landmarks KIND]] [--data DIR] [LOG ...]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py defaults
+        [--params-file YAML ...] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py wean [--landmarks both]
         [--establish-hits N] [--odometry-scale S] [--set NAME=VALUE ...] [--data DIR]
         [LOG ...]
@@ -95,7 +97,7 @@ log:
 Each log is imported as ``landmark_nav import`` does (synthetic ``pioneer`` drift, one draw
 per seed) and run through ``diagnose`` (the filter of
 :func:`landmark_nav.evaluation.slam.run_slam` with the bag's stated odometry noise). The
-parameters are the ``ekf_slam_real_logs`` profile (read as the node reads the file,
+parameters are the ``ekf_slam`` defaults (read as the node reads its file,
 ``bench_node_cpu.params_file_options``) or ``--params-file``, with ``--set`` (Python
 literals, e.g. ``--set association="'jcbb'"``) and ``--landmarks`` on top. Runs go to
 ``--procs`` processes; ``--cache`` keeps the imported bags between invocations.
@@ -143,7 +145,7 @@ covariance of :func:`landmark_nav.slam.scan_matching.fit_information` worth ``pa
 residuals is ``pairs NIS / N`` (the front end's ``scan_matching_fit_pairs``).
 
 ``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
-lines, the ``ekf_slam_real_logs`` profile or ``--params-file``; ``--landmarks corners`` or
+lines, the ``ekf_slam`` defaults or ``--params-file`` on top; ``--landmarks corners`` or
 ``lines`` instead of the file's) twice per run: on the
 bag's odometry with its stated noise model (and the file's front end: the profile's
 ``scan_matching`` scan-matches in the filter itself; the README's yardstick figures predate
@@ -215,7 +217,6 @@ from landmark_nav.slam.ekf_slam import (ASSOCIATION_METHODS, JACOBIANS, LINE,
 from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model
 from landmark_nav.slam.line_landmarks import line_initialization, lines_to_observations
 from landmark_nav.slam.scan_matching import base_motion, scan_points
-from landmark_nav.tools.config_files import config_path
 import numpy as np
 
 WEAN_LOGS = ('robotdata1', 'robotdata2', 'robotdata5')
@@ -538,7 +539,7 @@ def run_diagnose(args) -> int:
 def run_grid(args) -> int:
     """Run the ``grid`` subcommand: one line per run, then the summary."""
     logs = log_paths(args.data, args.logs)
-    options = params_file_options(args.params_file or str(config_path('ekf_slam_real_logs')))
+    options = params_file_options(args.params_file)
     options.update(parse_set(args.set))
     if args.landmarks:
         options['landmarks'] = args.landmarks
@@ -567,8 +568,7 @@ def run_grid(args) -> int:
 def run_scan_matching(args) -> int:
     """Run the ``scan-matching`` subcommand: one line per run."""
     if args.slam:
-        options = params_file_options(args.params_file
-                                      or str(config_path('ekf_slam_real_logs')))
+        options = params_file_options(args.params_file)
         chain_noise = odometry_noise_model(args.filter_noise)
         if args.landmarks:
             options['landmarks'] = args.landmarks
@@ -604,6 +604,42 @@ def run_scan_matching(args) -> int:
     print(f'ATE ratio median {np.median(ratios):.2f}, runs <= 0.2: '
           f'{int(np.sum(np.array(ratios) <= 0.2))} of {len(ratios)}')
     return 0
+
+
+def run_defaults(args) -> int:
+    """Run ``defaults``: ``landmark_nav import LOG`` then ``evaluate`` with no flags, per log.
+
+    One row per log (default aces, seattle, fhw): unaligned ATE of the filter and of the
+    odometry and their ratio, SE(2) ATE, resets, RPE over 1 m, the share of steps with the
+    reference inside the 95 % ellipse, time per step; exit 1 when a log misses ATE <=
+    odometry / 5 with no reset. ``--params-file`` is given to ``evaluate`` (e.g.
+    ``config/ekf_slam_chapter.yaml``: the chapter's filter).
+    """
+    from landmark_nav.tools.cli import main as cli_main
+    files = [a for f in args.params_file for a in ('--params-file', f)]
+    missed = []
+    print('log | ATE filter / odometry [m] (ratio) | SE(2) ATE filter / odometry [m] | resets '
+          '| RPE 1 m filter / odometry [cm, deg] | 95 % ellipse | ms per step')
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, path in log_paths(args.data, args.logs):
+            bag, out = Path(tmp) / name, Path(tmp) / f'{name}-out'
+            import_log(path, bag)
+            if cli_main(['evaluate', str(bag), '--no-progress', '--out', str(out)] + files):
+                sys.exit(f'error: landmark_nav evaluate {bag} failed')
+            r = json.loads((out / 'slam.json').read_text())
+            ratio = r['ate_rmse'] / r['odom_ate_rmse']
+            share = r.get('ellipse95_share')
+            print(f"{name} | {r['ate_rmse']:.2f} / {r['odom_ate_rmse']:.2f} ({ratio:.3f}) | "
+                  f"{r['ate_se2_rmse']:.2f} / {r['odom_ate_se2_rmse']:.2f} | {r['resets']} | "
+                  f"{100 * r['rpe_trans_rmse']:.1f} / {r['rpe_rot_rmse_deg']:.2f}, "
+                  f"{100 * r['odom_rpe_trans_rmse']:.1f} / {r['odom_rpe_rot_rmse_deg']:.2f} | "
+                  f"{'n/a' if share is None else f'{100 * share:.1f} %'} | "
+                  f"{r['ms_per_step_total']:.1f}", flush=True)
+            if ratio > 0.2 or r['resets']:
+                missed.append(name)
+    if missed:
+        print(f'target missed (ATE <= odometry / 5, 0 resets): {", ".join(missed)}')
+    return 1 if missed else 0
 
 
 def run_wean(args) -> int:
@@ -709,7 +745,7 @@ def main(argv=None) -> int:
     add_logs_argument(p, 'carmen', CARMEN_LOGS)
     p.add_argument('--seeds', nargs='+', type=int, default=[0, 1])
     p.add_argument('--params-file', default=None,
-                   help='ekf_slam parameter file (default: the ekf_slam_real_logs profile)')
+                   help='ekf_slam parameter file on top of the defaults')
     p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
     p.add_argument('--landmarks', choices=('corners', 'lines', 'both'), default=None)
     p.add_argument('--procs', type=int, default=2)
@@ -724,12 +760,18 @@ def main(argv=None) -> int:
                         'own increments as odometry, the ICP gated with pioneer)')
     p.add_argument('--slam', action='store_true', help='also EKF-SLAM on both motions')
     p.add_argument('--params-file', default=None, help='ekf_slam parameter file (default: '
-                   'the ekf_slam_real_logs profile)')
+                   'the defaults)')
     p.add_argument('--filter-noise', default='k_d=0.04 k_theta=0.015 k_dtheta=0.03',
                    help="the filter's U on the scan-matched chain")
     p.add_argument('--landmarks', choices=('corners', 'lines', 'both'), default=None,
                    help="landmark types (default: the parameter file's)")
     p.set_defaults(run=run_scan_matching)
+    p = sub.add_parser('defaults', help='import, then evaluate with no flags (the shipped '
+                       'defaults): ATE <= odometry / 5 and no reset, or exit 1')
+    add_logs_argument(p, 'carmen', ('aces', 'seattle', 'fhw'))
+    p.add_argument('--params-file', action='append', default=[],
+                   help='given to evaluate (repeatable)')
+    p.set_defaults(run=run_defaults)
     p = sub.add_parser('wean', help='EKF-SLAM on the Wean logs judged on the occupancy map')
     add_logs_argument(p, 'wean', WEAN_LOGS)
     p.add_argument('--map', default=None, metavar='FILE',

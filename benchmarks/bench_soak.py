@@ -50,13 +50,18 @@ WARM_UP_S = 15.0
 
 
 def node_arguments(scenario) -> dict:
-    """Return each node's ``--ros-args``: the bag's laser mount, noise and odometry model."""
+    """Return each node's ``--ros-args``: the bag's laser mount, noise and odometry model.
+
+    ``ekf_slam`` runs the chapter profile (``config/ekf_slam_chapter.yaml``), the filter the
+    stored results were measured with.
+    """
     from landmark_nav.evaluation.slam import DRIFT_KEY
     laser = scenario.laser
     model = scenario.custom_data.get(DRIFT_KEY) or (
         'simulator' if scenario.simulator else 'pioneer')
     mount = ','.join(f'{v!r}' for v in map(float, laser.mount))
-    return {'ekf_slam': ['--ros-args', '-p', f'odometry.model:={model}',
+    chapter = str(REPO / 'config' / 'ekf_slam_chapter.yaml')
+    return {'ekf_slam': ['--ros-args', '--params-file', chapter, '-p', f'odometry.model:={model}',
                          '-p', f'laser_pose:=[{mount}]',
                          '-p', f'laser_sigma_range:={float(laser.sigma_range)!r}'],
             'corner_extractor': ['--ros-args', '-p', f'sigma_r:={float(laser.sigma_range)!r}']}

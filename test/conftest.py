@@ -59,15 +59,17 @@ def run_once(tmp_path_factory) -> Callable[[str, Callable[[Path], Any]], Tuple[A
 def office_evaluation(run_once) -> Callable[[str], Tuple[dict, Path]]:
     """Return ``get(association)``: ``evaluate_bag`` of bags/office, once per test run.
 
-    ``get`` gives the figures and the folder with the written files (TUM, slam.json,
-    plots); test_evaluate_slam.py, test_trajectory.py and the golden jcbb run need the same
-    run.
+    With the chapter profile (the filter of the simulator figures). ``get`` gives the
+    figures and the folder with the written files (TUM, slam.json, plots);
+    test_evaluate_slam.py, test_trajectory.py and the golden jcbb run need the same run.
     """
     from landmark_nav.evaluation.slam import evaluate_bag
+    from landmark_nav.tools.demo import chapter_config
+    bag = REPO / 'bags' / 'office'
 
     def get(association: str) -> Tuple[dict, Path]:
         return run_once(f'office_evaluate_{association}', lambda out: evaluate_bag(
-            REPO / 'bags' / 'office', association, out, progress=False))
+            bag, association, out, progress=False, config=chapter_config(bag)))
     return get
 
 

@@ -60,7 +60,8 @@ TINY_RUNS = {
          r'1 runs: ellipse median [\d.]+ %'),
         (['scan-matching', '--data', '{carmen}', 'tiny', '--seeds', '0', '--slam'],
          r'tiny-0 \| [\d.]+ / [\d.]+'),
-        (['wean', '--data', '{wean}', 'robotdata1'], r'\nrobotdata1 \d+ [\d.]+ ')],
+        (['wean', '--data', '{wean}', 'robotdata1'], r'\nrobotdata1 \d+ [\d.]+ '),
+        (['defaults', '--data', '{carmen}', 'tiny'], r'\ntiny \| [\d.]+ / [\d.]+ \([\d.]+\) \|')],
     'bench_localization.py': [
         (['sonar', '--bag', '{hallway}', '--runs', '3'], r'EKF update\s+[\d.]+'),
         (['model', '--frames', '3'], r'lsd\s+[\d.]+\s+[\d.]+')],

@@ -1,5 +1,6 @@
 """Bad input to the command line: one line on stderr, non-zero exit, never a traceback."""
 
+from pathlib import Path
 import subprocess
 import sys
 
@@ -101,3 +102,41 @@ def test_bad_replay_options(tmp_path):
 def test_usage_errors_are_one_line():
     assert_one_line_error(run_cli())
     assert_one_line_error(run_cli('frobnicate'))
+
+
+def test_parameter_files_are_read_as_ros2_run_reads_them(tmp_path):
+    """The node's sections (wildcard first), nested keys joined; a later file wins."""
+    from landmark_nav.tools.node_parameters import given_parameters, read_params_file
+    first = tmp_path / 'a.yaml'
+    first.write_text('ekf_slam:\n  ros__parameters:\n    max_speed: 2.0\n'
+                     '/**:\n  ros__parameters:\n    max_speed: 9.0\n    use_sim_time: true\n'
+                     'corner_extractor:\n  ros__parameters:\n    sigma_r: 0.02\n'
+                     '/robot/ekf_slam:\n  ros__parameters:\n    odometry:\n'
+                     '      model: pioneer\n')
+    assert read_params_file(str(first), 'ekf_slam') == {
+        'max_speed': 2.0, 'use_sim_time': True, 'odometry.model': 'pioneer'}
+    second = tmp_path / 'b.yaml'
+    second.write_text('ekf_slam:\n  ros__parameters:\n    max_speed: 1.0\n')
+    assert given_parameters([str(first), str(second)], ['ekf_slam.landmarks=corners',
+                                                        "odometry.model='k_d=0.1'",
+                                                        'laser_pose=[0.1, 0.0, 0.0]'],
+                            'ekf_slam') == {
+        'max_speed': 1.0, 'use_sim_time': True, 'odometry.model': 'k_d=0.1',
+        'landmarks': 'corners', 'laser_pose': [0.1, 0.0, 0.0]}
+
+
+@pytest.mark.parametrize('text, words', [
+    ('ekf_slam: 3\n', ["section 'ekf_slam' has no ros__parameters"]),
+    ('- a\n- b\n', ['expected node names at the top level']),
+    ('ekf_slam: [\n', ['not YAML']),
+])
+def test_bad_parameter_files_are_one_line_errors(tmp_path, text, words, capsys):
+    from landmark_nav.tools.cli import main
+    path = tmp_path / 'p.yaml'
+    path.write_text(text)
+    bag = Path(__file__).resolve().parents[1] / 'bags' / 'office'
+    assert main(['evaluate', str(bag), '--params-file', str(path)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('landmark_nav: error: --params-file ')
+    for word in [str(path)] + words:
+        assert word in lines[0], lines[0]

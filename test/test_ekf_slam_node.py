@@ -1,6 +1,6 @@
 """ekf_slam node: office bag through DDS equals the offline run (de-skew on); bad input; QoS."""
 
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 import time
 from types import SimpleNamespace
@@ -16,9 +16,9 @@ from landmark_nav.nodes import ekf_slam as ekf_slam_module
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.corner_extractor import CornerExtractor
 from landmark_nav.nodes.ekf_slam import EkfSlamNode
+from landmark_nav.slam.configuration import CHAPTER, default_values, slam_configuration
 from landmark_nav.slam.ekf_slam import LINE, SlamParams
-from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
-                                        ODOMETRY_NOISE_MODELS)
+from landmark_nav.slam.frontend import FrontendParams, ODOMETRY_NOISE_MODELS
 from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness, shared_data
 from nav_msgs.msg import Odometry, Path as PathMsg
@@ -31,7 +31,6 @@ from std_srvs.srv import Trigger
 import yaml
 
 OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
-FRONTEND_FIELDS = {f.name for f in fields(FrontendParams)}
 SECONDS = 40.0
 
 
@@ -84,35 +83,38 @@ def replay(ros, msgs, slam, odom_qos=10):
     return n_scan
 
 
+def chapter_profile() -> dict:
+    """Return the ``ros__parameters`` of config/ekf_slam_chapter.yaml (the chapter's filter)."""
+    return yaml.safe_load((OFFICE.parents[1] / 'config' / 'ekf_slam_chapter.yaml')
+                          .read_text())['ekf_slam']['ros__parameters']
+
+
 def node_and_offline(tmp_path, bag, seconds, landmarks, noise, extra=None):
     """Replay a bag through corner_extractor + ekf_slam; return the node's and offline runs.
 
-    Both get the bag's laser mount and noise (the node as parameters) and ``noise`` as the
-    odometry model; visibility-aware pruning and de-skew on (the defaults of both).
-    ``extra``: further node parameters, the same ``SlamParams`` / ``FrontendParams``
-    fields offline.
+    Both get the bag's laser mount and noise (the node as parameters), ``noise`` as the
+    odometry model, ``landmarks`` and ``extra`` (further parameters, e.g. a profile) on top
+    of the shipped defaults; the offline run's configuration is
+    :func:`~landmark_nav.slam.configuration.slam_configuration` of the same parameters.
     """
-    extra = dict(extra or {})
-    frontend = {k: v for k, v in extra.items() if k in FRONTEND_FIELDS}
     msgs = bag_messages(seconds, bag)
     scenario = load_bag(bag, max_seconds=seconds, require_reference=False)
     laser = scenario.laser
-    mount = [float(v) for v in laser.mount]
+    given = dict(extra or {})
+    given.update({'odometry.model': noise, 'landmarks': landmarks,
+                  'laser_pose': [float(v) for v in laser.mount],
+                  'laser_sigma_range': float(laser.sigma_range),
+                  'lines.sigma_r': float(laser.sigma_range),
+                  'lines.sigma_phi': float(laser.sigma_angle)})
     with RosHarness() as ros:
         ros.add_node(CornerExtractor(context=ros.context, parameter_overrides=[
             Parameter('sigma_r', value=float(laser.sigma_range)),
             Parameter('sigma_phi', value=float(laser.sigma_angle))]))
         slam = ros.add_node(EkfSlamNode(context=ros.context, parameter_overrides=[
             Parameter('map_file', value=str(tmp_path / 'map.yaml')),
-            Parameter('odometry.model', value=noise),
-            Parameter('landmarks', value=landmarks),
-            Parameter('laser_pose', value=mount),
-            Parameter('laser_sigma_range', value=float(laser.sigma_range)),
-            Parameter('lines.sigma_r', value=float(laser.sigma_range)),
-            Parameter('lines.sigma_phi', value=float(laser.sigma_angle)),
             # The test paces the messages; a stall of the machine is no odometry outage.
             Parameter('odometry_timeout', value=3600.0)]
-            + [Parameter(k, value=v) for k, v in extra.items()]))
+            + [Parameter(k, value=v) for k, v in given.items()]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
         clouds = ros.collect('corners/features', PointCloud2)
         n_scan = replay(ros, msgs, slam)
@@ -127,11 +129,11 @@ def node_and_offline(tmp_path, bag, seconds, landmarks, noise, extra=None):
             stats=dict(slam.slam.stats), markers=slam.landmark_markers(0))
         assert call(ros, 'reset', Trigger).success
         assert slam.slam is None
-    params = SlamParams(odometry=odometry_noise_model(noise),
-                        **{k: v for k, v in extra.items() if k not in frontend})
-    ref = run_slam(scenario, params, CornerParams(sigma_r=laser.sigma_range,
-                                                  sigma_phi=laser.sigma_angle), deskew=True,
-                   landmarks=landmarks, frontend=FrontendParams(**frontend))
+    config = slam_configuration(given)
+    ref = run_slam(scenario, config.params, CornerParams(sigma_r=laser.sigma_range,
+                                                         sigma_phi=laser.sigma_angle),
+                   deskew=True, landmarks=config.landmarks, frontend=config.frontend,
+                   line_params=config.line_params, visibility=config.visibility)
     return node, ref
 
 
@@ -154,7 +156,8 @@ def assert_node_equals_offline(node, ref):
 @pytest.mark.dds
 def test_node_equals_offline_with_deskew_and_services(tmp_path):
     """Node and offline run are one pipeline (SlamFrontend): equal to 1e-9 m, de-skew on."""
-    node, ref = node_and_offline(tmp_path, OFFICE, SECONDS, 'corners', 'simulator')
+    node, ref = node_and_offline(tmp_path, OFFICE, SECONDS, 'corners', 'simulator',
+                                 chapter_profile())
     assert len(node.clouds) == node.n_scan
     assert max(np.max(feature_cloud_to_arrays(c)['time'], initial=0.0)
                for c in node.clouds) > 0.0
@@ -167,7 +170,8 @@ def test_node_equals_offline_with_deskew_and_services(tmp_path):
 @pytest.mark.parametrize('landmarks', ['lines', 'both'])
 def test_node_equals_offline_with_lines(tmp_path, landmarks):
     """Lines from the scan, visibility-aware pruning: node = offline run (de-skew on)."""
-    node, ref = node_and_offline(tmp_path, OFFICE, 20.0, landmarks, 'simulator')
+    node, ref = node_and_offline(tmp_path, OFFICE, 20.0, landmarks, 'simulator',
+                                 chapter_profile())
     assert_node_equals_offline(node, ref)
     assert ref.lines.shape[0] >= 3 and np.sum(node.kinds == LINE) == ref.lines.shape[0]
     if landmarks == 'both':
@@ -178,7 +182,10 @@ def test_node_equals_offline_with_lines(tmp_path, landmarks):
 
 @pytest.mark.dds
 def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
-    """Localization on a load_map map: node = offline run on the same map; .npz save_map."""
+    """Localization on a load_map map: node = offline run on the same map; .npz save_map.
+
+    Both run the chapter's filter (the profile).
+    """
     scenario = load_bag(OFFICE, max_seconds=SECONDS)
     laser = scenario.laser
     cp = CornerParams(sigma_r=laser.sigma_range, sigma_phi=laser.sigma_angle)
@@ -195,7 +202,8 @@ def test_node_localization_on_a_saved_map_equals_offline(tmp_path):
             Parameter('load_map', value=str(map_path)),
             Parameter('map_file', value=str(tmp_path / 'after.npz')),
             Parameter('odometry.model', value='simulator'),
-            Parameter('odometry_timeout', value=3600.0)]))
+            Parameter('odometry_timeout', value=3600.0)]
+            + [Parameter(k, value=v) for k, v in chapter_profile().items()]))
         poses = ros.collect('pose', PoseWithCovarianceStamped)
         n_scan = replay(ros, msgs, slam)
         assert ros.wait_until(lambda: len(poses) >= n_scan - 1, 5)
@@ -599,57 +607,68 @@ def test_node_equals_offline_on_an_imported_carmen_log(tmp_path):
     bag = tmp_path / 'aces'
     import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
     model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
-    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model)
+    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model, chapter_profile())
     assert_node_equals_offline(node, ref)
     # The scans' geometry reached the node: visibility-aware pruning removed landmarks
     # (measured 2; none without the scans).
     assert ref.stats['pruned'] > 0 and ref.lines.shape[0] > 10
 
 
-REAL_LOGS = {'jacobians': 'observability_gain', 'line_residual_factor': 2.0,
-             'free_space_check': 0.95, 'recovery_probability': 0.99, 'spurious_limit': 0.05}
-REAL_LOGS_FRONTEND = {'scan_matching': True, 'scan_matching_fit_pairs': 0.3,
+REAL_DATA_OPTIONS = {'jacobians': 'observability_gain', 'line_residual_factor': 2.0,
+                     'free_space_check': 0.95, 'recovery_probability': 0.99,
+                     'spurious_limit': 0.05}
+REAL_DATA_FRONTEND = {'scan_matching': True, 'scan_matching_fit_pairs': 0.3,
                       'scan_matching_side_starts': 2.5}
 
 
-def real_logs_profile():
-    """Return the ``ros__parameters`` of config/ekf_slam_real_logs.yaml."""
-    return yaml.safe_load((OFFICE.parents[1] / 'config' / 'ekf_slam_real_logs.yaml')
-                          .read_text())['ekf_slam']['ros__parameters']
-
-
-def test_real_logs_profile_names_the_measured_options():
-    """The profile sets landmarks both and the README's options, nothing else."""
-    profile = real_logs_profile()
-    assert profile == dict(REAL_LOGS, **REAL_LOGS_FRONTEND, landmarks='both')
+def test_chapter_profile_names_the_options_measured_on_real_logs():
+    """The profile sets landmarks corners and those options off, nothing else."""
+    profile = chapter_profile()
+    assert set(profile) == set(REAL_DATA_OPTIONS) | set(REAL_DATA_FRONTEND) | {'landmarks'}
+    assert profile == CHAPTER
     default = parameter_file(OFFICE.parents[1], 'ekf_slam')
-    assert set(profile) < set(default)
     assert all(default[k] != v for k, v in profile.items())
 
 
-def test_the_node_takes_the_real_logs_profile():
-    """Its values reach SlamParams; 0 is off (None) for the optional checks."""
+def test_defaults_are_the_real_data_options_and_the_chapter_profile_the_chapter_filter():
+    """Declared defaults: the options measured on real logs; the profile: SlamParams()."""
     with RosHarness() as ros:
         node = EkfSlamNode(context=ros.context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in real_logs_profile().items()])
+            Parameter(k, value=v) for k, v in chapter_profile().items()])
         params, landmarks, frontend = node.params, node.landmarks, node.frontend_params
         node.destroy_node()
         node = EkfSlamNode(context=ros.context)
-        default, default_frontend = node.params, node.frontend_params
+        default, default_frontend, default_landmarks = (node.params, node.frontend_params,
+                                                        node.landmarks)
         node.destroy_node()
-    assert landmarks == 'both'
-    assert frontend == FrontendParams(**REAL_LOGS_FRONTEND)
-    assert default_frontend == FrontendParams() and not default_frontend.scan_matching
-    assert params == SlamParams(odometry=params.odometry, **REAL_LOGS)
-    assert default == SlamParams(odometry=default.odometry)
-    assert (default.free_space_check, default.recovery_probability,
-            default.spurious_limit, default.jacobians) == (None, None, None, 'standard')
+    assert landmarks == 'corners' and default_landmarks == 'both'
+    assert frontend == FrontendParams() and not frontend.scan_matching
+    assert default_frontend == FrontendParams(**REAL_DATA_FRONTEND)
+    assert params == SlamParams(odometry=params.odometry)  # the chapter's filter
+    assert (params.free_space_check, params.recovery_probability, params.spurious_limit,
+            params.jacobians) == (None, None, None, 'standard')
+    assert default == SlamParams(odometry=default.odometry, **REAL_DATA_OPTIONS)
+
+
+def test_declared_defaults_equal_the_offline_defaults_and_the_config_file():
+    """The node, config/ekf_slam.yaml and the offline tools (evaluate) start alike."""
+    values = parameter_file(OFFICE.parents[1], 'ekf_slam')
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context)
+        declared = declared_parameters(node)
+        built = (node.params, node.frontend_params, node.landmarks, node.visibility,
+                 node.line_params, tuple(node.laser_pose), node.laser_sigma_range)
+        node.destroy_node()
+    offline = slam_configuration()
+    assert declared == default_values() == values
+    assert built == (offline.params, offline.frontend, offline.landmarks, offline.visibility,
+                     offline.line_params, offline.laser_pose, offline.laser_sigma_range)
 
 
 @pytest.mark.parametrize('name, value', [('jacobians', 'exact'), ('free_space_check', 1.5),
                                          ('spurious_limit', -0.1),
                                          ('recovery_probability', 0.5)])
-def test_bad_real_logs_option_is_a_parameter_error(name, value):
+def test_bad_real_data_option_is_a_parameter_error(name, value):
     with RosHarness() as ros:
         with pytest.raises(ParameterError, match=name):
             EkfSlamNode(context=ros.context, parameter_overrides=[Parameter(name, value=value)])
@@ -670,15 +689,14 @@ def test_bad_scan_matching_setting_is_a_parameter_error(overrides, match):
 
 
 @pytest.mark.dds
-def test_node_equals_offline_with_the_real_logs_profile(tmp_path):
-    """The profile's checks run in the node as offline (imported aces, 100 scans)."""
+def test_node_equals_offline_with_the_default_configuration(tmp_path):
+    """The defaults' checks run in the node as offline (imported aces, 100 scans)."""
     from landmark_nav.evaluation.slam import DRIFT_KEY
     from landmark_nav.importers.writer import import_log
     bag = tmp_path / 'aces'
     import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
     model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
-    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model,
-                                 dict(REAL_LOGS, **REAL_LOGS_FRONTEND))
+    node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model)
     assert_node_equals_offline(node, ref)
     # The scan-matched motion was used (measured: 98 of the 100 steps; the first has no pair).
     assert ref.motions['scan_matching'] >= 95

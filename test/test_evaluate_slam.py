@@ -13,16 +13,20 @@ from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_
 from landmark_nav.geometry import compose, relative
 from landmark_nav.importers import import_log
 from landmark_nav.laser.corners import CornerParams
+from landmark_nav.slam.configuration import CHAPTER
 from landmark_nav.slam.ekf_slam import EkfSlam, SlamParams
 from landmark_nav.slam.frontend import FrontendParams
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
+from landmark_nav.tools.demo import chapter_config
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
 from sensor_msgs.msg import LaserScan
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'office'
+CONFIG_DIR = Path(__file__).resolve().parents[1] / 'config'
+CHAPTER_FILE = CONFIG_DIR / 'ekf_slam_chapter.yaml'
 FILES = ('trajectory_slam.tum', 'trajectory_odom.tum', 'trajectory_gt.tum', 'slam.json',
          'slam_map.png', 'slam_trajectory.png', 'slam_errors.png')
 #: Where the re-encoded office bag's odometry frame starts (a real log's odometry starts
@@ -133,7 +137,7 @@ def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_
     # The re-encoded bag states no odometry noise (it would get the pioneer model): give it
     # the simulator's, the reference run's.
     r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, reference=tum,
-                     params=SlamParams())
+                     params=SlamParams(), config=chapter_config(BAG))
     assert r['simulator_truth'] is False and r['reference'] == str(tum)
     assert any('re-expressed' in n for n in r['notes'])
     assert any('custom_data landmark_nav.laser_mount' in n for n in r['notes'])
@@ -166,8 +170,8 @@ def test_bag_without_reference(tmp_path, office_result):
     reencode(BAG, bag, reference_topic=False,
              custom={'landmark_nav.laser_mount': '0 0 0',
                      'landmark_nav.laser_sigma_range': '0.01'})
-    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False,
-                     params=SlamParams())  # the reference run's (simulator) odometry noise
+    r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, params=SlamParams(),
+                     config=chapter_config(BAG))  # the reference run's odometry noise
     assert r['reference'] is None and r['simulator_truth'] is False
     assert not any('re-expressed' in n for n in r['notes'])
     for k in ('scans', 'mapped', 'associations', 'resets'):
@@ -206,13 +210,14 @@ def test_evaluate_imported_wean_log_without_reference(tmp_path, capsys):
     filter may differ from it by metres (measured 7.1 m) and still fit the building
     better, so the old "SLAM close to odometry" bound is no criterion. Corners and lines:
     with corners alone (the CLI default) the scans fit the walls worse than with the
-    odometry (measured 0.505 vs 0.575), the corridor needs the lines.
+    odometry (measured 0.505 vs 0.575), the corridor needs the lines. The chapter profile's
+    filter (with lines), the run below.
     """
     log = shared_data('wean', 'robotdata1.log.gz')
     imported = import_log(log, tmp_path / 'bag')
     assert cli_main(['evaluate', str(tmp_path / 'bag'), '--no-progress', '--out',
-                     str(tmp_path / 'out'), '--landmarks', 'both', '--save-map',
-                     str(tmp_path / 'map.npz')]) == 0
+                     str(tmp_path / 'out'), '--params-file', str(CHAPTER_FILE),
+                     '--landmarks', 'both', '--save-map', str(tmp_path / 'map.npz')]) == 0
     text = capsys.readouterr().out
     assert 'ATE, RPE and NEES need one' in text and 'path length: EKF-SLAM' in text
     r = json.loads((tmp_path / 'out' / 'slam.json').read_text())
@@ -295,7 +300,8 @@ def test_cli_prints_figures(tmp_path, capsys):
 def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
     out = tmp_path / 'o'
     assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
-                     '--scan-matching', '--out', str(out)]) == 0
+                     '--params-file', str(CHAPTER_FILE), '--scan-matching', '--out',
+                     str(out)]) == 0
     text = capsys.readouterr().out
     r = json.loads((out / 'slam.json').read_text())
     assert sum(r['motions'].values()) == r['scans'] and r['motions']['scan_matching'] > 0
@@ -303,8 +309,8 @@ def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
     # Fused with the odometry: the same steps use the scans, the path differs.
     fused = tmp_path / 'f'
     assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
-                     '--scan-matching', '--scan-matching-fit-pairs', '0.3',
-                     '--out', str(fused)]) == 0
+                     '--params-file', str(CHAPTER_FILE), '--scan-matching',
+                     '--scan-matching-fit-pairs', '0.3', '--out', str(fused)]) == 0
     f = json.loads((fused / 'slam.json').read_text())
     assert f['motions'] == r['motions']
     fused_path = (fused / 'trajectory_slam.tum').read_text()
@@ -416,7 +422,8 @@ def test_odometry_as_it_really_comes(tmp_path, office_result):
         for key, value in {'landmark_nav.laser_mount': '0 0 0',
                            'landmark_nav.laser_sigma_range': '0.01'}.items():
             out.set_custom_data(key, value)
-    r = evaluate_bag(bag, 'icnn', None, progress=False, params=SlamParams())
+    r = evaluate_bag(bag, 'icnn', None, progress=False, params=SlamParams(),
+                     config=chapter_config(BAG))
     assert r['resets'] == 0 and r['scans'] == ref['scans']
     assert r['frontend_events'] == {'repeated': repeated, 'backward': stale, 'jump': 1}
     assert repeated > 10 and stale > 10
@@ -425,3 +432,67 @@ def test_odometry_as_it_really_comes(tmp_path, office_result):
     # (0.05 s at 0.35 m/s = 1.75 cm): the motion across a jump is unknown.
     assert r['ate_rmse'] < 1.1 * ref['ate_rmse']
     assert r['ate_max'] < 0.0175
+
+
+def test_cli_takes_the_nodes_parameter_files_and_settings(tmp_path, capsys):
+    """--params-file and --set give evaluate the node's configuration; --set wins."""
+    runs = {
+        'file': ['--params-file', str(CHAPTER_FILE)],
+        'set': [arg for k, v in chapter_config(BAG).values.items() if k in CHAPTER
+                for arg in ('--set', f'ekf_slam.{k}={json.dumps(v)}')],
+        'later': ['--params-file', str(CHAPTER_FILE), '--set', 'landmarks=both'],
+    }
+    figures = {}
+    for name, args in runs.items():
+        assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+                         '--out', str(tmp_path / name)] + args) == 0
+        figures[name] = json.loads((tmp_path / name / 'slam.json').read_text())
+    capsys.readouterr()
+    direct = evaluate_bag(BAG, progress=False, max_seconds=10, config=chapter_config(BAG))
+    for k in ('ate_rmse', 'mapped', 'associations', 'landmarks', 'motions'):
+        assert figures['file'][k] == figures['set'][k] == direct[k], k
+    assert figures['file']['landmarks'] == 'corners' and figures['later']['landmarks'] == 'both'
+    assert not figures['file']['motions'].get('scan_matching')  # the chapter: odometry
+
+
+def test_cli_without_flags_runs_the_shipped_defaults(tmp_path, capsys):
+    """No flags: the node's declared defaults (corners and lines, the scan-matched motion)."""
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+                     '--out', str(tmp_path / 'a')]) == 0
+    default = CONFIG_DIR / 'ekf_slam.yaml'
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+                     '--params-file', str(default), '--out', str(tmp_path / 'b')]) == 0
+    capsys.readouterr()
+    a, b = (json.loads((tmp_path / n / 'slam.json').read_text()) for n in 'ab')
+    assert a['landmarks'] == 'both' and a['motions']['scan_matching'] > 0
+    # The shipped file changes nothing: the bag's statements come after it, as in
+    # `pipeline replay` (here the simulator's odometry noise).
+    assert (tmp_path / 'a' / 'trajectory_slam.tum').read_text() == (
+        tmp_path / 'b' / 'trajectory_slam.tum').read_text()
+    assert a['odometry_noise'] == b['odometry_noise']
+
+
+@pytest.mark.parametrize('args, words', [
+    (['--set', 'ekf_slam.no_such_param=1'], ["no parameter 'no_such_param'"]),
+    (['--set', 'max_sped=1.0'], ["no parameter 'max_sped'", 'did you mean max_speed?']),
+    (['--set', 'free_space_check=1'], ['free_space_check', 'write 1.0 for a double']),
+    (['--set', 'landmarks=walls'], ['landmarks', 'not one of corners, lines, both']),
+    (['--set', 'max_speed'], ['expected ekf_slam.NAME=VALUE']),
+])
+def test_cli_refuses_bad_parameters(args, words, capsys):
+    assert cli_main(['evaluate', str(BAG), '--no-progress'] + args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith('landmark_nav: error: '), err
+    for word in words:
+        assert word in err[0], err[0]
+
+
+def test_cli_refuses_an_unknown_name_in_a_parameter_file(tmp_path, capsys):
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    use_sim_time: false\n'
+                    'ekf_slam:\n  ros__parameters:\n    odometry:\n      modle: pioneer\n'
+                    'corner_extractor:\n  ros__parameters:\n    sigma_r: 0.02\n')
+    assert cli_main(['evaluate', str(BAG), '--no-progress', '--params-file', str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "ekf_slam has no parameter 'use_sim_time'" not in err  # rclpy declares it
+    assert "no parameter 'odometry.modle' (did you mean odometry.model?)" in err, err

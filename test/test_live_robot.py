@@ -2,7 +2,8 @@
 
 ``landmark_nav emulate robot`` (the P2OS base and a UTM-30LX on one world, writing the
 true path) and ``landmark_nav pipeline slam`` (scans thinned to 10 Hz with
-``laser_driver.skip=3``) run as processes; this test drives the robot
+``laser_driver.skip=3``; ekf_slam with the chapter profile, the filter its figures were
+measured with) run as processes; this test drives the robot
 by ``cmd_vel`` (``landmark_nav.tools.drive``, closed on ekf_slam's ``/odometry``) along the
 first leg of the ``short`` route (2 m, to its end) and scores ekf_slam's poses against the
 emulator's truth.
@@ -42,7 +43,7 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path, processes):
     pipeline = processes.start(
         cli + ['pipeline', 'slam', '--set', f'laser_driver.port={laser}', '--set',
                'laser_driver.skip=3', '--set', f'base_driver.port={base}', '--set',
-               'ekf_slam.odometry.model=simulator'], env=env,
+               'ekf_slam.odometry.model=simulator', '--profile', 'ekf_slam_chapter'], env=env,
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         with RosHarness() as ros:

@@ -258,3 +258,86 @@ def test_a_node_whose_destruction_hangs_still_exits_with_its_stacks():
     assert time.monotonic() - start < 30.0  # not the 60 s sleep
     assert out.returncode == 1, (out.returncode, out.stderr)
     assert 'Timeout' in out.stderr and 'destroy_node' in out.stderr, out.stderr
+
+
+def run_owned(processes, args, cwd=None):
+    """Run a command owned by the ``processes`` fixture until it exits; return (code, stderr)."""
+    proc = processes.start(args, env=node_env(), stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, cwd=cwd or REPO)
+    _, err = proc.communicate(timeout=120)
+    return proc.returncode, err
+
+
+def error_lines(stderr: str) -> list:
+    """Return the lines of a node's stderr that are its own errors (not ROS log lines)."""
+    return [line for line in stderr.splitlines() if line.startswith('error: ')]
+
+
+def test_the_ekf_slam_executable_refuses_a_misspelt_parameter(processes):
+    """``ros2 run landmark_nav ekf_slam --ros-args -p max_sped:=1.0`` used to run on."""
+    exe = str(Path(sys.executable).parent / 'ekf_slam')  # the console script
+    code, err = run_owned(processes, [exe, '--ros-args', '-p', 'max_sped:=1.0'])
+    assert code == 2, err
+    assert error_lines(err) == [
+        "error: ekf_slam has no parameter 'max_sped' (did you mean max_speed?)"], err
+
+
+def test_a_misspelt_name_in_a_parameter_file_is_refused(processes, tmp_path):
+    """Nested keys of a --params-file are checked too (odometry.*)."""
+    path = tmp_path / 'params.yaml'
+    path.write_text('ekf_slam:\n  ros__parameters:\n    max_speed: 1.0\n'
+                    '    odometry:\n      sigma_xy_per_sqrt: 0.1\n')
+    code, err = run_owned(processes, [sys.executable, '-m', 'landmark_nav.nodes.ekf_slam',
+                                      '--ros-args', '--params-file', str(path)])
+    assert code == 2, err
+    assert error_lines(err) == ["error: ekf_slam has no parameter 'odometry.sigma_xy_per_sqrt' "
+                                '(did you mean odometry.sigma_xy_per_sqrt_m?)'], err
+
+
+@pytest.mark.parametrize('node, name, near', [
+    ('corner_extractor', 'sigma_rr', 'sigma_r'),
+    ('line_extractor', 'min_pionts', 'min_points'),
+    ('sonar_localizer', 'filtr', 'filter'),
+    ('base_driver', 'cmd_vel_timeuot', 'cmd_vel_timeout'),
+    ('landmark_detector', 'landmark_mapp', 'landmark_map'),
+])
+def test_every_node_refuses_an_undeclared_parameter(processes, node, name, near):
+    code, err = run_owned(processes, [sys.executable, '-m', f'landmark_nav.nodes.{node}',
+                                      '--ros-args', '-p', f'{name}:=1.0'])
+    assert code == 2, err
+    assert error_lines(err) == [
+        f"error: {node} has no parameter '{name}' (did you mean {near}?)"], err
+
+
+#: Run a node's main with rclpy.spin replaced by a probe that prints SPINNING and returns.
+SPIN_PROBE = """
+import importlib, sys
+import rclpy
+def spin(node):
+    print('SPINNING', flush=True)
+    raise KeyboardInterrupt
+rclpy.spin = spin
+module = importlib.import_module('landmark_nav.nodes.' + sys.argv[1])
+sys.exit(module.main([sys.argv[0], '--ros-args'] + sys.argv[2:]))
+"""
+
+
+@pytest.mark.parametrize('profile', ['ekf_slam', 'ekf_slam_chapter'])
+def test_the_shipped_parameter_files_pass_the_check(processes, profile):
+    """The shipped files hold declared names only: the node starts and spins."""
+    proc = processes.start([sys.executable, '-c', SPIN_PROBE, 'ekf_slam', '--params-file',
+                            str(REPO / 'config' / 'ekf_slam.yaml'), '--params-file',
+                            str(REPO / 'config' / f'{profile}.yaml')],
+                           env=node_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True, cwd=REPO)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0 and 'SPINNING' in out and not error_lines(err), err
+
+
+def test_the_bag_player_refuses_a_parameter(processes):
+    """Its options are arguments (--rate); a -p override would be silently unused."""
+    code, err = run_owned(processes, [sys.executable, '-m', 'landmark_nav.nodes.bag_player',
+                                      str(REPO / 'bags' / 'office'), '--ros-args', '-p',
+                                      'rate:=2.0'])
+    assert code == 2, err
+    assert "bag_player: error: bag_player has no parameter 'rate'" in err.splitlines(), err

@@ -35,6 +35,21 @@ def test_bad_settings_are_one_line_errors():
         pipeline_commands('replay')
     assert pipeline_commands('slam', ['laser_driver.port=/dev/ttyUSB1'])['laser_driver'][-2:] \
         == ['-p', 'port:=/dev/ttyUSB1']
+    # ekf_slam's names are checked before anything starts (the other nodes refuse theirs)
+    with pytest.raises(ValueError, match=r"ekf_slam has no parameter 'max_sped' \(did you "
+                                         r'mean max_speed\?\)'):
+        pipeline_commands('slam', ['ekf_slam.max_sped=1.0'])
+
+
+def test_a_profile_comes_after_its_nodes_file_and_before_the_settings():
+    cmd = pipeline_commands('replay', ['ekf_slam.association=jcbb'], bag='bags/office',
+                            profiles=['ekf_slam_chapter'])['ekf_slam']
+    files = [Path(cmd[k + 1]).name for k, a in enumerate(cmd) if a == '--params-file']
+    assert files == ['ekf_slam.yaml', 'ekf_slam_chapter.yaml']
+    assert cmd.index('--params-file') < cmd.index('odometry.model:=simulator') \
+        < cmd.index('association:=jcbb')
+    with pytest.raises(ValueError, match="--profile 'line_extractor_detailed': not a profile"):
+        pipeline_commands('slam', profiles=['line_extractor_detailed'])
 
 
 @pytest.mark.dds
@@ -62,7 +77,7 @@ def test_replay_gives_ekf_slam_what_the_bag_states():
     """The simulator bag's laser mount and odometry noise model, before the user's --set."""
     cmd = pipeline_commands('replay', ['ekf_slam.odometry.model=pioneer'],
                             bag=str(REPO / 'bags' / 'office'))['ekf_slam']
-    stated = cmd[cmd.index('--params-file') + 2:]
+    stated = cmd[cmd.index('--params-file') + 2:]  # after the shipped file
     assert stated == ['-p', 'laser_pose:=[0.0,0.0,0.0]', '-p', 'laser_sigma_range:=0.01',
                       '-p', 'lines.sigma_r:=0.01', '-p', 'lines.sigma_phi:=0.0017453292519943296',
                       '-p', 'odometry.model:=simulator',

@@ -8,10 +8,12 @@ from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import evaluate_bag, run_slam
 from landmark_nav.slam.slam_map import load_map
 from landmark_nav.tools.cli import main as cli_main
+from landmark_nav.tools.demo import chapter_config
 import numpy as np
 import pytest
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'office'
+CHAPTER_FILE = Path(__file__).resolve().parents[1] / 'config' / 'ekf_slam_chapter.yaml'
 
 
 def _segment_distance(p, seg):
@@ -45,7 +47,8 @@ def test_office_line_landmarks_lie_on_the_true_walls():
                                                         ('both', 0.0012, (13, 15))])
 def test_office_with_lines_is_at_least_as_good_as_corners(landmarks, ate_bound, mapped):
     """Office ATE RMSE: corners 2.8 mm (golden), lines 1.1 mm, both 0.8 mm (measured)."""
-    r = evaluate_bag(BAG, progress=False, plots=False, landmarks=landmarks)
+    r = evaluate_bag(BAG, progress=False, plots=False, landmarks=landmarks,
+                     config=chapter_config(BAG))  # the chapter's filter, with lines
     assert (r['mapped'], r['lines_mapped']) == mapped
     assert r['ate_rmse'] < ate_bound
     assert r['wrong_associations'] == 0 and r['ghost_landmarks'] == 0
@@ -54,8 +57,12 @@ def test_office_with_lines_is_at_least_as_good_as_corners(landmarks, ate_bound, 
 
 
 def test_cli_save_map_then_localize(tmp_path, capsys):
-    """Map 40 s of the office, save; localize on it: no new landmark, the same accuracy."""
+    """Map 40 s of the office, save; localize on it: no new landmark, the same accuracy.
+
+    The chapter's filter (the profile) with corners and lines.
+    """
     assert cli_main(['evaluate', str(BAG), '--max-seconds', '40', '--no-progress',
+                     '--params-file', str(CHAPTER_FILE),
                      '--landmarks', 'both', '--save-map', str(tmp_path / 'office'),
                      '--out', str(tmp_path / 'map')]) == 0
     assert 'map written' in capsys.readouterr().out
@@ -63,6 +70,7 @@ def test_cli_save_map_then_localize(tmp_path, capsys):
     mapped = json.loads((tmp_path / 'map' / 'slam.json').read_text())
     assert saved.size == mapped['mapped'] + mapped['lines_mapped'] > 10
     assert cli_main(['evaluate', str(BAG), '--max-seconds', '60', '--no-progress',
+                     '--params-file', str(CHAPTER_FILE),
                      '--landmarks', 'both', '--mode', 'localization', '--map',
                      str(tmp_path / 'office.npz'), '--map-pose-sigma', '0.02', '0.02', '0.01',
                      '--out', str(tmp_path / 'loc')]) == 0

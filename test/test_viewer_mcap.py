@@ -124,3 +124,25 @@ def test_rviz_config_shows_the_slam_topics_in_map():
     topics = {d['Topic']['Value'] for d in manager['Displays'] if 'Topic' in d}
     assert manager['Global Options']['Fixed Frame'] == 'map'
     assert {'/scan', '/landmarks', '/path', '/pose'} <= topics <= set(VIEW_TOPICS)
+
+
+def test_the_view_of_evaluate_runs_its_configuration(tmp_path):
+    """``evaluate --view`` with the defaults: the lines are drawn, the path is evaluate's."""
+    from landmark_nav.evaluation.slam import bag_configuration, evaluate_bag
+    bag = REPO / 'bags' / 'office'
+    config = bag_configuration(bag)
+    assert config.landmarks == 'both'
+    result = write_slam_view(bag, tmp_path / 'view', 'icnn', max_seconds=8.0, config=config)
+    with open(result['mcap'], 'rb') as f:
+        rows = [(channel.topic, message) for _, channel, message
+                in make_reader(f).iter_messages(topics=['/landmarks', '/pose'])]
+    last = [deserialize(m.data, VIEW_TOPICS[t]) for t, m in rows if t == '/landmarks'][-1]
+    kinds = [mk.ns for mk in last.markers[1:]]
+    assert 'landmark_lines' in kinds and 'landmark_ellipses' in kinds
+    pose = pose_msg_to_2d([deserialize(m.data, VIEW_TOPICS[t]) for t, m in rows
+                           if t == '/pose'][-1].pose.pose)
+    evaluate_bag(bag, 'icnn', tmp_path / 'eval', progress=False, max_seconds=8.0,
+                 config=config)
+    last_tum = (tmp_path / 'eval' / 'trajectory_slam.tum').read_text().splitlines()[-1]
+    x, y = (float(v) for v in last_tum.split()[1:3])
+    assert (x, y) == pytest.approx(tuple(pose[:2]), abs=1e-9)

@@ -19,7 +19,7 @@ import json
 import math
 from pathlib import Path
 import time
-from typing import List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam_plots import plot_run
@@ -32,6 +32,7 @@ from landmark_nav.evaluation.trajectory import (ALIGNMENTS, ate, rpe, STATISTICS
                                                 write_tum)
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.sim import run_scenario, ScanSample
+from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
 from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model
 from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
@@ -116,15 +117,82 @@ def bag_odometry_noise(scenario) -> Tuple[OdometryNoise, str]:
     return odometry_noise_model('pioneer'), 'default pioneer'
 
 
-def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = True,
+def bag_slam_parameters(bag) -> Dict[str, Any]:
+    """Return the ``ekf_slam`` parameters a bag states (``pipeline replay``, ``evaluate``).
+
+    The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
+    ``ground_truth.yaml``) as ``laser_pose``, its range noise as ``laser_sigma_range`` and
+    ``lines.sigma_r`` and its bearing noise as ``lines.sigma_phi``, and ``odometry.model``:
+    ``custom_data`` ``landmark_nav.drift_model``, ``simulator`` for a simulator
+    recording, else nothing (the configuration's ``odometry.*``). Nothing for what the bag
+    does not state.
+
+    Raises:
+        BagError, ValueError: The bag cannot be read or states a malformed value.
+    """
+    from landmark_nav.bag import BagReader
+    from landmark_nav.evaluation.bags import laser_config
+    from landmark_nav.sim.record import GROUND_TRUTH_FILE
+    import yaml
+    with BagReader(bag) as reader:
+        custom = reader.custom_data
+    meta_path = Path(bag) / GROUND_TRUTH_FILE
+    meta = yaml.safe_load(meta_path.read_text()) if meta_path.is_file() else None
+    meta = meta if isinstance(meta, dict) else None
+    laser, notes = laser_config(custom, meta)
+    out: Dict[str, Any] = {}
+    if not any('(default)' in n for n in notes):
+        out['laser_pose'] = [float(v) for v in laser.mount]
+    if not any('no laser range noise' in n for n in notes):  # lines and visibility
+        out.update({'laser_sigma_range': float(laser.sigma_range),
+                    'lines.sigma_r': float(laser.sigma_range),
+                    'lines.sigma_phi': float(laser.sigma_angle)})
+    model = custom.get(DRIFT_KEY) or ('simulator' if meta is not None else None)
+    if model:
+        out['odometry.model'] = str(model)
+    return out
+
+
+def bag_configuration(bag, parameters: Optional[Mapping[str, Any]] = None,
+                      settings: Optional[Mapping[str, Any]] = None) -> SlamConfiguration:
+    """Return the ``ekf_slam`` configuration of a run on a bag, layered as the node's.
+
+    The shipped defaults, then ``parameters`` (e.g. the ``--params-file`` files), then what
+    the bag states (:func:`bag_slam_parameters`), then ``settings`` (``--set``): the order in
+    which ``landmark_nav pipeline replay`` gives them to the node (its parameter file, the
+    bag's statements, ``--set``).
+
+    Raises:
+        ValueError: An unknown parameter, a bad value, an unreadable bag.
+    """
+    values = dict(parameters or {})
+    values.update(bag_slam_parameters(bag))
+    values.update(settings or {})
+    return slam_configuration(values)
+
+
+def _noise_source(bag, scenario, config: SlamConfiguration) -> str:
+    """Where the configuration's odometry noise comes from (``slam.json``)."""
+    model = config.values['odometry.model'].strip()
+    if model and model == bag_slam_parameters(bag).get('odometry.model'):
+        return f'custom_data {DRIFT_KEY}' if DRIFT_KEY in scenario.custom_data else model
+    if model:
+        return f'odometry.model {model}'
+    pioneer = all(config.values[k] == p.default for k, p in parameters().items()
+                  if k.startswith('odometry.'))
+    return 'default pioneer' if pioneer else 'odometry.*'
+
+
+def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress: bool = True,
                  params: Optional[SlamParams] = None, max_seconds: Optional[float] = None,
                  reference=None, align: str = ALIGN_DEFAULT,
                  laser_pose: Optional[Sequence[float]] = None, sigma_r: Optional[float] = None,
                  rpe_delta: float = RPE_DISTANCE_M, plots: bool = True,
-                 landmarks: str = 'corners', slam_map=None, save_map_to=None,
+                 landmarks: Optional[str] = None, slam_map=None, save_map_to=None,
                  map_pose_covariance: Optional[np.ndarray] = None,
                  mode: Optional[str] = None,
-                 frontend: Optional[FrontendParams] = None) -> dict:
+                 frontend: Optional[FrontendParams] = None,
+                 config: Optional[SlamConfiguration] = None) -> dict:
     """Run EKF-SLAM over a bag and score it against its reference.
 
     Any bag with ``/scan``, ``/odom`` and a reference (``/ground_truth/odom`` or
@@ -141,12 +209,12 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
 
     Args:
         bag: rosbag2 directory.
-        association: ``'icnn'`` or ``'jcbb'``.
+        association: ``'icnn'`` or ``'jcbb'`` (None: the configuration's).
         out_dir: Directory for the TUM files, ``slam.json`` and the PNGs (None: nothing
             written).
         progress: Show a tqdm progress bar.
-        params: Filter parameters (default :class:`SlamParams` with the bag's odometry noise
-            model, :func:`bag_odometry_noise`; ``association`` and ``mode`` win).
+        params: Filter parameters (default: the configuration's; ``association`` and
+            ``mode`` win).
         max_seconds: Use only the first seconds of the bag.
         reference: TUM file of the reference (None: ``/ground_truth/odom``).
         align: ATE alignment, one of :data:`~landmark_nav.evaluation.trajectory.ALIGNMENTS`.
@@ -154,16 +222,19 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
         sigma_r: Laser range noise [m] when the bag does not state it.
         rpe_delta: RPE distance [m].
         plots: Write the PNGs (with ``out_dir``).
-        landmarks: ``'corners'``, ``'lines'`` or ``'both'`` (what the filter maps).
+        landmarks: ``'corners'``, ``'lines'`` or ``'both'`` (what the filter maps; None:
+            the configuration's).
         slam_map: A saved map (path or :class:`~landmark_nav.slam.slam_map.SlamMap`) to
             start on (e.g. with ``params.mode == 'localization'``); the start pose is the
             first odometry pose, with ``map_pose_covariance`` (default zeros).
         save_map_to: Write the final map there (:func:`landmark_nav.slam.slam_map.save_map`).
         map_pose_covariance: (3, 3) covariance of the start pose on ``slam_map``.
         mode: ``'slam'`` or ``'localization'`` (on ``slam_map``); None: ``params.mode``.
-        frontend: Front-end parameters (e.g. ``scan_matching``; default
-            :class:`FrontendParams`; ``deskew`` and ``descriptors`` are :func:`run_slam`'s
-            defaults whatever it says).
+        frontend: Front-end parameters (default: the configuration's; ``deskew`` and
+            ``descriptors`` are :func:`run_slam`'s defaults whatever it says).
+        config: The ``ekf_slam`` configuration (default: :func:`bag_configuration`, the
+            shipped defaults with what the bag states); its line extractor takes the
+            laser's noise, as the corner extractor does.
 
     Returns:
         The figures (see ``slam.json``).
@@ -171,28 +242,31 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
     Raises:
         ValueError: Bad option or unusable bag (one-line message).
     """
-    if association not in ASSOCIATIONS:
+    if association is not None and association not in ASSOCIATIONS:
         raise ValueError(f'association must be one of {", ".join(ASSOCIATIONS)}, '
                          f'got {association!r}')
     if align not in ALIGNMENTS:
         raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
                         require_reference=False)
-    prm = params or SlamParams()
+    cfg = config or bag_configuration(bag)
+    noise_source = 'params' if params is not None else _noise_source(bag, scenario, cfg)
+    prm = params or cfg.params
+    association = association or prm.association
     prm = SlamParams(**{**{f.name: getattr(prm, f.name) for f in fields(SlamParams)},
                         'association': association, 'mode': mode or prm.mode})
     if prm.mode == 'localization' and slam_map is None:
         raise ValueError('mode localization needs a map (slam_map: a file saved with '
                          'save_map_to / --save-map)')
-    noise_source = 'params'
-    if params is None:
-        noise, noise_source = bag_odometry_noise(scenario)
-        prm = replace(prm, odometry=noise)
-        if noise_source.startswith('default'):
-            scenario.notes.append('no odometry noise model in the bag (custom_data '
-                                  f'{DRIFT_KEY}): using the pioneer model')
+    if noise_source == 'default pioneer':
+        scenario.notes.append('no odometry noise model in the bag (custom_data '
+                              f'{DRIFT_KEY}): using the pioneer model')
+    landmarks = landmarks or cfg.landmarks
+    frontend = frontend or cfg.frontend
     corner_params = CornerParams(sigma_r=float(scenario.laser.sigma_range),
                                  sigma_phi=float(scenario.laser.sigma_angle))
+    line_params = replace(cfg.line_params, sigma_r=corner_params.sigma_r,
+                          sigma_phi=corner_params.sigma_phi)
     n_scans = len(scenario.of_type(ScanSample))
     bar = None
     if progress:
@@ -205,7 +279,8 @@ def evaluate_bag(bag, association: str = 'icnn', out_dir=None, progress: bool = 
             slam_map = load_map(slam_map)
         run = run_slam(scenario, prm, corner_params, callback=callback, landmarks=landmarks,
                        slam_map=slam_map, map_pose_covariance=map_pose_covariance,
-                       frontend=frontend)
+                       frontend=frontend, line_params=line_params,
+                       visibility=cfg.visibility)
     finally:
         if bar is not None:
             bar.close()
@@ -345,7 +420,8 @@ def format_summary(r: dict) -> str:
     return '\n'.join(lines)
 
 
-__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_odometry_noise', 'DRIFT_KEY', 'ellipse_share',
+__all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_configuration', 'bag_odometry_noise',
+           'bag_slam_parameters', 'DRIFT_KEY', 'ellipse_share',
            'evaluate', 'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M',
            'run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'score_run', 'SlamRun',
            'SlamScore', 'true_visible_corners', 'update_corrections']

@@ -30,6 +30,7 @@ Without a reference the ground-truth topics are left out; without the simulator'
 messages are serialized with the rosbags type store (the same CDR).
 """
 
+from dataclasses import replace
 import functools
 import math
 from pathlib import Path
@@ -47,7 +48,7 @@ from landmark_nav.feature_msgs import (make_corner_markers, make_corner_pose_arr
 from landmark_nav.geometry import compose, relative
 from landmark_nav.laser.corners import CornerParams, extract_corners
 from landmark_nav.sim import OdometrySample, ScanSample
-from landmark_nav.slam.ekf_slam import SlamParams
+from landmark_nav.slam.ekf_slam import CORNER, LINE, SlamParams
 from nav_msgs.msg import Path as PathMsg
 import numpy as np
 from visualization_msgs.msg import Marker, MarkerArray
@@ -146,7 +147,7 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
                     max_seconds: Optional[float] = None, display_period: float = 0.5,
                     path_period: float = 2.0, force: bool = False, reference=None,
                     laser_pose: Optional[Sequence[float]] = None,
-                    sigma_r: Optional[float] = None) -> dict:
+                    sigma_r: Optional[float] = None, config=None) -> dict:
     """Run EKF-SLAM over ``bag`` and write the viewer file into the directory ``out_dir``.
 
     Args:
@@ -160,6 +161,10 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
         reference: TUM file of the reference (None: ``/ground_truth/odom`` if any).
         laser_pose: Laser mount when the bag does not state it.
         sigma_r: Laser range noise when the bag does not state it [m].
+        config: The ``ekf_slam`` configuration
+            (:class:`~landmark_nav.slam.configuration.SlamConfiguration`, as
+            ``landmark_nav evaluate`` runs it; ``association`` wins); None: the chapter's
+            filter with corners.
 
     Returns:
         ``{'mcap': path of the .mcap file, 'counts': {topic: messages}}``.
@@ -174,9 +179,17 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
         shutil.rmtree(out)
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
                         require_reference=False)
-    params = SlamParams(association=association)
     corner_params = CornerParams(sigma_r=float(scenario.laser.sigma_range),
                                  sigma_phi=float(scenario.laser.sigma_angle))
+    options = {}
+    if config is None:
+        params = SlamParams(association=association)
+    else:
+        params = replace(config.params, association=association)
+        options = {'frontend': config.frontend, 'landmarks': config.landmarks,
+                   'visibility': config.visibility,
+                   'line_params': replace(config.line_params, sigma_r=corner_params.sigma_r,
+                                          sigma_phi=corner_params.sigma_phi)}
     scans: List[ScanSample] = scenario.of_type(ScanSample)
     corners: List[list] = []
     snapshots: List[tuple] = []
@@ -188,10 +201,12 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
                                        scan.angle_increment, corner_params))
         if not snapshots or scan.stamp_ns - snapshots[-1][0] >= period_ns or \
                 k == len(scans) - 1:
-            snapshots.append((scan.stamp_ns, k, slam.landmark_ids.copy(),
-                              slam.landmarks.copy(), slam.landmark_covariances.copy()))
+            c, ln = slam.landmark_kinds == CORNER, slam.landmark_kinds == LINE
+            snapshots.append((scan.stamp_ns, k, slam.landmark_ids[c], slam.landmarks[c],
+                              slam.landmark_covariances[c], slam.landmark_ids[ln],
+                              slam.line_ends[ln]))
 
-    run = run_slam(scenario, params, corner_params, callback=record)
+    run = run_slam(scenario, params, corner_params, callback=record, **options)
     mount = tuple(float(v) for v in scenario.laser.mount)
     counts: Dict[str, int] = {}
     with BagWriter(out) as writer:
@@ -240,9 +255,11 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
                 put('/ground_truth/odom', t, make_odometry(t, 'map', 'base_link',
                                                            run.truth[k]))
             if snap < len(snapshots) and snapshots[snap][1] == k:
-                _, _, ids, means, covs = snapshots[snap]
+                _, _, ids, means, covs, line_ids, line_ends = snapshots[snap]
                 snap += 1
-                put('/landmarks', t, make_landmark_markers(t, 'map', ids, means, covs))
+                put('/landmarks', t, make_landmark_markers(t, 'map', ids, means, covs,
+                                                           line_ids=line_ids,
+                                                           line_ends=line_ends))
             if t - last_path >= path_ns or k == len(scans) - 1:
                 last_path = t
                 put('/path', t, paths['/path'].path(k))

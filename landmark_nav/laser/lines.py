@@ -99,7 +99,8 @@ from landmark_nav.laser.line_extraction.cleanup import _clean_pieces, _refine_br
 from landmark_nav.laser.line_extraction.growth import _grow
 from landmark_nav.laser.line_extraction.merge import _merge
 from landmark_nav.laser.line_extraction.occlusion import _join_occluded, _occluded_extents
-from landmark_nav.laser.line_extraction.params import CHI2_2DOF_95, LineParams, METHODS
+from landmark_nav.laser.line_extraction.params import (CHI2_2DOF_95, LINE_PARAMETERS,
+                                                       LineParams, METHODS)
 from landmark_nav.laser.line_extraction.scan_batch import (_concat, _COS, _gather, _RNG, _SIN,
                                                            _TOL)
 from landmark_nav.laser.line_extraction.see_through import _cut_seen_through
@@ -112,8 +113,8 @@ from landmark_nav.laser.segmentation import Cluster
 import numpy as np
 
 __all__ = ['alfa_pieces', 'CHI2_2DOF_95', 'explained_points', 'extract_lines', 'fit_line',
-           'LineParams', 'LineSegment', 'lowess', 'METHODS', 'point_covariances',
-           'split_pieces']
+           'LINE_PARAMETERS', 'LineParams', 'LineSegment', 'lowess', 'METHODS',
+           'point_covariances', 'split_pieces']
 
 
 def extract_lines(clusters: Sequence[Cluster], params: Optional[LineParams] = None

@@ -23,7 +23,7 @@ from typing import List, Optional
 
 from landmark_nav.bag import BagError, BagReader, message_class
 from landmark_nav.conversions import ns_to_stamp
-from landmark_nav.nodes.common import destroy_and_shutdown
+from landmark_nav.nodes.common import destroy_and_shutdown, reject_undeclared
 from landmark_nav.replay import due_after_start_s, ReplayOptions
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -204,6 +204,7 @@ def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> i
     player = None
     try:
         player = BagPlayer(bag, options)
+        reject_undeclared(player)  # its options are arguments; -p names nothing here
         published = player.play()
         if rclpy.ok():
             # Give reliable transports a moment to deliver the tail of the stream.

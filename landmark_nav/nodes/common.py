@@ -6,7 +6,8 @@
 * :class:`InputStats`: processed / dropped inputs and latency percentiles of a node, on
   ``/diagnostics`` and in throttled warnings.
 * :func:`limit_threads`: numerical libraries single-threaded unless configured.
-* :func:`run_node`: the standard main (threads, spin, clean shutdown on SIGINT / SIGTERM);
+* :func:`run_node`: the standard main (threads, undeclared parameter names refused
+  (:func:`reject_undeclared`), spin, clean shutdown on SIGINT / SIGTERM);
   :func:`destroy_and_shutdown` its bounded shutdown.
 """
 
@@ -22,6 +23,8 @@ from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ConversionError, pose_with_covariance_to_pose
+from landmark_nav.parameter_names import unknown_parameter
+from landmark_nav.parameter_tables import dataclass_parameters, field_value
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -171,8 +174,27 @@ def limit_threads(default: int = 1) -> Optional[int]:
 SHUTDOWN_TIMEOUT_S = 25.0
 
 
+def reject_undeclared(node: Node) -> None:
+    """Refuse an override (``-p``, ``--params-file``) of a parameter the node did not declare.
+
+    rclpy keeps such an override unused and says nothing, so a misspelt name leaves the
+    default in force; the node is started only with names it declares.
+
+    Raises:
+        ParameterError: The first unknown name, with the nearest declared one.
+
+    """
+    declared = set(node.list_parameters([], 0).names)
+    for name in node._parameter_overrides:  # rclpy keeps them there (no public accessor)
+        if name not in declared:
+            raise ParameterError(unknown_parameter(node.get_name(), name, declared))
+
+
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
     """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2.
+
+    A bad parameter value or an undeclared parameter name (:func:`reject_undeclared`) is
+    one line on stderr (``error: ...``) and exit status 2.
 
     Numerical libraries run single-threaded unless configured (:func:`limit_threads`).
     SIGINT (Ctrl-C) and SIGTERM shut rclpy down (its signal handlers) and end the spin; the
@@ -184,6 +206,7 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
         limit_threads()
         rclpy.init(args=args)
         node = factory()
+        reject_undeclared(node)
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -233,16 +256,10 @@ def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
         prefix: Prefix for the parameter names (e.g. ``'segmentation.'``).
 
     """
-    defaults = cls()
     values = {}
-    for name, (description, limits, choices, *auto) in docs.items():
-        default = getattr(defaults, name)
-        if default is None:
-            default = auto[0]
-        if isinstance(default, tuple):
-            default = [float(v) for v in default]
-        value = declare(node, prefix + name, default, description, limits, choices)
-        values[name] = None if auto and value == auto[0] else value
+    for name, p in dataclass_parameters(docs, cls(), prefix).items():
+        value = declare(node, name, p.default, p.description, p.limits, p.choices)
+        values[name[len(prefix):]] = field_value(p, value)
     try:
         return cls(**values)
     except (TypeError, ValueError) as err:

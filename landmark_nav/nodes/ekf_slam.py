@@ -59,6 +59,15 @@ evaluate --save-map``) starts the filter on that map at the first odometry pose 
 ``map_pose_sigma``), again after a reset; with ``mode: localization`` it tracks the robot
 on it without adding landmarks.
 
+Parameters: :mod:`landmark_nav.slam.configuration` describes them all (defaults, limits,
+choices) and builds the filter's and the front end's parameters from their values, for
+this node and for ``landmark_nav evaluate``. The defaults are the configuration measured
+on real logs (corners and lines, consistent heading, the free-space, recovery and
+spurious-pair checks, the scan-matched motion fused with the odometry); the corner
+chapter's filter is the profile ``config/ekf_slam_chapter.yaml``, given after
+``config/ekf_slam.yaml``. A parameter the node does not declare is refused at start
+(:func:`~landmark_nav.nodes.common.reject_undeclared`).
+
 Odometry noise: the ``odometry.*`` parameters (defaults: the ``pioneer`` model of
 :mod:`landmark_nav.slam.frontend`), or ``odometry.model`` = ``pioneer``, ``simulator`` or
 the gains ``'k_d=.. k_theta=.. k_dtheta=..'`` an imported bag states.
@@ -89,7 +98,6 @@ in that queue in its first 15 s).
 """
 
 from collections import deque
-from dataclasses import replace
 import itertools
 import time
 
@@ -100,17 +108,14 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
                                       odometry_pose_covariance, scan_to_data, set_covariance3,
                                       set_pose_2d, set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
-from landmark_nav.laser.lines import LineParams
-from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
+from landmark_nav.nodes.common import (declare, InputStats,
                                        output_path, ParameterError, ProblemWarner, run_node,
                                        SCAN_DEPTH, SCAN_QOS)
-from landmark_nav.nodes.line_extractor import LINE_PARAMETERS
 from landmark_nav.nodes.stamp_join import StampJoin
-from landmark_nav.slam.ekf_slam import CORNER, JACOBIANS, LINE, OdometryNoise, SlamParams
-from landmark_nav.slam.features import extract_scan_features, LANDMARK_TYPES
-from landmark_nav.slam.frontend import (Corners, FrontendParams, line_beam_times,
-                                        odometry_noise_model, ODOMETRY_NOISE_MODELS,
-                                        SlamFrontend, Step)
+from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
+from landmark_nav.slam.ekf_slam import CORNER, LINE
+from landmark_nav.slam.features import extract_scan_features
+from landmark_nav.slam.frontend import Corners, line_beam_times, SlamFrontend, Step
 from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.slam.visibility import ScanGeometry
 from nav_msgs.msg import Odometry, Path as PathMsg
@@ -123,90 +128,6 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 import yaml
 
-SLAM_PARAMETERS = {
-    'sigma_range': ('default range std when a corner has no covariance [m]', None, None),
-    'sigma_bearing': ('default bearing std [rad]', None, None),
-    'r_scale': ('factor on the corner covariances (>= 1 inflates)', None, None),
-    'range_floor': ('std added in quadrature to every range [m]', None, None),
-    'bearing_floor': ('std added in quadrature to every bearing [rad]', None, None),
-    'position_floor': ('isotropic corner position std added in quadrature [m]', None, None),
-    'max_range': ('observations farther than this are rejected [m]', None, None),
-    'association': ('data association: icnn or jcbb', None, ['icnn', 'jcbb']),
-    'bisector_gate': ('largest bisector difference of a corner pair [rad]', None, None),
-    'opening_gate': ('largest opening difference of a corner pair [rad]', None, None),
-    'min_view_margin': ('reject corners with an arm seen within this of edge-on [rad]',
-                        None, None),
-    'gate_probability': ('confidence of the compatibility gate (eq. 55)', None, None),
-    'new_landmark_probability': ('gate inside which an unmatched corner is ambiguous',
-                                 None, None),
-    'candidate_probability': ('gate confidence for matching candidates', None, None),
-    'confirm_hits': ('observations a candidate needs to enter the map', None, None),
-    'confirm_window': ('...within this many consecutive scans', None, None),
-    'max_landmarks': ('map size budget (see map_full)', None, None),
-    'map_full': ('when the map is full: evict the least recently seen landmark, or reject',
-                 None, ['evict', 'reject']),
-    'mode': ('slam, or localization on the load_map map (no new landmarks)', None,
-             ['slam', 'localization']),
-    'jcbb_max_nodes': ('node budget of JCBB per scan', None, None),
-    'psd_tolerance': ('relative jitter of the PSD test of P', None, None),
-    'psd_check_interval': ('test P every this many updates', None, None),
-    'max_update_iterations': ('largest number of linearisations of one update (1 = plain EKF)',
-                              None, None),
-    'relinearize_ratio': ('re-linearise when a landmark moves by more than this fraction of its '
-                          'range', None, None),
-    'jacobians': ("linearisation: standard (the chapter's), observability_gain (consistent "
-                  'heading), first_estimates, observability or invariant', None,
-                  list(JACOBIANS)),
-    'line_residual_factor': ('k: each line end gets an offset std of k times its fit residual '
-                             'std', None, None),
-    'free_space_check': ('confidence of the free-space check of each hypothesis (needs '
-                         'visibility); 0 = off', None, None, 0.0),
-    'recovery_probability': ('gate confidence of the second association of a scan that paired '
-                             'nothing; 0 = off', None, None, 0.0),
-    'recovery_pairs': ('fewest pairs of that recovery', None, None),
-    'spurious_limit': ('largest expected number of other features in a pair gate (needs '
-                       'visibility); 0 = off', None, None, 0.0),
-}
-ODOMETRY_PARAMETERS = {
-    'sigma_xy_per_sqrt_m': 'odometry translation std per sqrt(m) [m/sqrt(m)]',
-    'sigma_yaw_per_sqrt_m': 'odometry heading std per sqrt(m) [rad/sqrt(m)]',
-    'sigma_yaw_per_sqrt_rad': 'odometry heading std per sqrt(rad) turned [rad/sqrt(rad)]',
-    'sigma_xy_floor': 'odometry translation std floor per step [m]',
-    'sigma_yaw_floor': 'odometry heading std floor per step [rad]',
-}
-FRONTEND_PARAMETERS = {
-    'deskew': ('move each corner through the odometry motion up to its beam time', None,
-               None),
-    'max_speed': ('fastest plausible translation of the base [m/s] (odometry check)',
-                  (1e-3, 100.0), None),
-    'max_turn_rate': ('fastest plausible rotation of the base [rad/s] (odometry check)',
-                      (1e-3, 100.0), None),
-    'jump_sigmas': ('odometry noise stds allowed on top of the speed limits', (0.1, 100.0),
-                    None),
-    'min_step_s': ('smallest elapsed time the odometry check uses [s]', (1e-6, 10.0), None),
-    'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
-                       (1e-3, 1e6), None),
-    'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
-    'scan_matching': ("predict with the scan's point-to-line ICP motion against the previous "
-                      'scan where it agrees with the odometry (needs scan, visibility: true)',
-                      None, None),
-    'scan_matching_noise': ("U of a scan-matched motion: 'k_d=.. k_theta=.. k_dtheta=..', "
-                            'pioneer or simulator', None, None),
-    'scan_matching_max_range': ('returns at or beyond this are not matched [m]',
-                                (0.1, 1000.0), None),
-    'scan_matching_accept': ('confidence of the region the difference of the scan-matched '
-                             'motion and the odometry must lie in (chi-square, 3 dof, U + V '
-                             'at the larger motion)',
-                             (1e-6, 1.0 - 1e-12), None),
-    'scan_matching_fit_pairs': ('0: predict with the scan-matched motion and '
-                                'scan_matching_noise; > 0: with the odometry and the '
-                                "scan-matched motion fused, the latter's covariance from the "
-                                'ICP fit worth this many independent residuals',
-                                (0.0, 1e6), None),
-    'scan_matching_side_starts': ("k > 0: ICP also starts from the odometry's heading +- k "
-                                  'heading stds on every step, the solution with the most '
-                                  'pairs first (3 ICPs a step); 0: off', (0.0, 100.0), None),
-}
 #: /odom: best effort takes reliable and best-effort publishers; deep enough for bursts.
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
@@ -241,19 +162,19 @@ class SlamInputStats(InputStats):
         return status
 
 
-def _declare_odometry_noise(node: Node) -> OdometryNoise:
-    """Declare ``odometry.*`` (pioneer defaults) and ``odometry.model``; return the noise."""
-    base = ODOMETRY_NOISE_MODELS['pioneer']
-    values = {name: declare(node, f'odometry.{name}', float(getattr(base, name)), doc,
-                            (0.0, 10.0)) for name, doc in ODOMETRY_PARAMETERS.items()}
-    model = declare(node, 'odometry.model', '', "'' = the odometry.* values; else pioneer, "
-                    "simulator or drift gains 'k_d=.. k_theta=.. k_dtheta=..' (replace them)")
+def declare_configuration(node: Node) -> SlamConfiguration:
+    """Declare every parameter of :mod:`landmark_nav.slam.configuration`; return the result.
+
+    Defaults, descriptions, limits and choices come from there, the objects from
+    :func:`~landmark_nav.slam.configuration.slam_configuration`: the offline tools read a
+    parameter file with the same code.
+    """
+    values = {name: declare(node, name, p.default, p.description, p.limits, p.choices)
+              for name, p in parameters().items()}
     try:
-        if model.strip():
-            return odometry_noise_model(model)
-        return OdometryNoise(**values)
+        return slam_configuration(values)
     except ValueError as err:
-        raise ParameterError(f'parameter odometry.model: {err}') from None
+        raise ParameterError(str(err)) from None
 
 
 class EkfSlamNode(Node):
@@ -262,46 +183,21 @@ class EkfSlamNode(Node):
     def __init__(self, **kwargs) -> None:
         """Declare the parameters, create subscriptions, publishers and services."""
         super().__init__('ekf_slam', **kwargs)
-        params = declare_dataclass(self, SlamParams, SLAM_PARAMETERS)
-        self.params = replace(params, odometry=_declare_odometry_noise(self))
-        self.frontend_params = declare_dataclass(self, FrontendParams, FRONTEND_PARAMETERS)
-        self.landmarks = declare(self, 'landmarks', 'corners', 'landmark types mapped: corners '
-                                 '(corners/features), lines (extracted from scan) or both',
-                                 None, list(LANDMARK_TYPES))
-        self.structural_only = declare(
-            self, 'structural_corners_only', False, 'map only the corners the extractor '
-            'labels structural (both arms >= 0.5 m; field structural of corners/features)')
-        self.visibility = declare(self, 'visibility', True, 'visibility-aware pruning: a '
-                                  'landmark the scan sees through is missed (needs scan)')
-        if self.frontend_params.scan_matching and not self.visibility:
-            raise ParameterError('parameter scan_matching needs the scan geometry: set '
-                                 'visibility: true')
-        self.laser_sigma_range = declare(self, 'laser_sigma_range', 0.01, "the laser's stated "
-                                         '1-sigma range noise [m] (visibility tolerance)',
-                                         (0.0, 10.0))
-        # Each side of an occluder is its own line observation (extract_scan_features).
-        self.line_params = declare_dataclass(
-            self, LineParams, {k: v for k, v in LINE_PARAMETERS.items() if k != 'join_occluded'},
-            'lines.')
-        self.laser_pose = np.array(declare(
-            self, 'laser_pose', [0.0, 0.0, 0.0], 'laser pose [x, y, yaw] in base_link'))
-        if self.laser_pose.shape != (3,) or not np.all(np.isfinite(self.laser_pose)):
-            raise ParameterError('parameter laser_pose must be 3 finite numbers [x, y, yaw]')
-        self.map_frame = declare(self, 'map_frame', 'map', 'frame of the estimates')
-        self.base_frame = declare(self, 'base_frame', 'base_link', 'robot frame')
-        self.map_file = declare(self, 'map_file', 'landmarks.yaml',
-                                'file written by the save_map service: .npz = the filter map '
-                                '(load_map format), else YAML (relative: under '
-                                '$ROS_HOME/landmark_nav, default ~/.ros/landmark_nav)')
-        load_file = declare(self, 'load_map', '', "'' = start with an empty map; else a .npz "
-                            'map (save_map with map_file *.npz, landmark_nav evaluate '
-                            '--save-map) the filter starts on at the first odometry pose '
-                            '(relative: as map_file)')
-        pose_sigma = np.array(declare(self, 'map_pose_sigma', [0.0, 0.0, 0.0],
-                                      '1-sigma [x, y, yaw] of that start pose [m, m, rad]'))
-        if pose_sigma.shape != (3,) or not np.all(np.isfinite(pose_sigma)) or np.any(
-                pose_sigma < 0.0):
-            raise ParameterError('parameter map_pose_sigma must be 3 finite numbers >= 0')
+        config = declare_configuration(self)
+        values = config.values
+        self.params = config.params
+        self.frontend_params = config.frontend
+        self.landmarks = config.landmarks
+        self.structural_only = values['structural_corners_only']
+        self.visibility = config.visibility
+        self.laser_sigma_range = config.laser_sigma_range
+        self.line_params = config.line_params
+        self.laser_pose = np.array(config.laser_pose)
+        self.map_frame = values['map_frame']
+        self.base_frame = values['base_frame']
+        self.map_file = values['map_file']
+        load_file = values['load_map']
+        pose_sigma = np.array(values['map_pose_sigma'])
         self.slam_map = None
         if load_file:
             try:
@@ -310,16 +206,9 @@ class EkfSlamNode(Node):
                 raise ParameterError(f'parameter load_map: {err}') from None
         elif self.params.mode == 'localization':
             raise ParameterError('parameter mode localization needs load_map (a .npz map)')
-        self.path_max_poses = declare(self, 'path_max_poses', 2000,
-                                      'poses kept in the published path (the latest)',
-                                      (1, 1000000))
-        display_period = declare(self, 'display_period', 0.5, 'period of the path and '
-                                 'landmarks topics (published when changed) [s]',
-                                 (0.01, 3600.0))
-        self.odometry_timeout = declare(
-            self, 'odometry_timeout', 1.0, 'wall time without odometry after which waiting '
-            'corner sets the odometry reaches are processed (last pose held) [s]',
-            (0.01, 3600.0))
+        self.path_max_poses = values['path_max_poses']
+        display_period = values['display_period']
+        self.odometry_timeout = values['odometry_timeout']
         self.warner = ProblemWarner(self)
         self.stats = SlamInputStats(self, self.warner)
         # Outputs without rclpy's default QoS-event handlers (two waitables each, which its

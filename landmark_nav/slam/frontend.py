@@ -95,7 +95,8 @@ and the scan-matched motion fused by their information (``fused_scan_motion``), 
 scan-matched motion's covariance from the ICP fit (``fit_information``: its shape, so that
 along a corridor the odometry decides, and the size of that many independent residuals,
 because the ICP's error against the reference does not shrink with the number of pairs);
-the prediction then uses the fused covariance. The ``real_logs`` profile sets 0.3 (README).
+the prediction then uses the fused covariance. The shipped configuration sets 0.3
+(:mod:`.configuration`).
 ``scan_matching_side_starts`` k > 0 also starts ICP from the odometry's heading +- k heading
 stds of ``U`` on every step and takes the solution with the most pairs first: an odometry
 increment in its own tail leads ICP into a nearby wrong minimum that can pass the test

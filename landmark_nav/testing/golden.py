@@ -44,7 +44,8 @@ def _demo(bag: Path, out: Path) -> Outputs:
 
 def _evaluate_jcbb(bag: Path, out: Path) -> Outputs:
     from landmark_nav.evaluation.slam import evaluate_bag
-    evaluate_bag(bag, 'jcbb', out, progress=False)
+    from landmark_nav.tools.demo import chapter_config
+    evaluate_bag(bag, 'jcbb', out, progress=False, config=chapter_config(bag))
     return read_outputs('evaluate_jcbb', out)
 
 

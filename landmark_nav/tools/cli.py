@@ -153,35 +153,54 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
     return 0
 
 
+def _slam_configuration(args: argparse.Namespace):
+    """Return the ``ekf_slam`` configuration of ``evaluate`` and the parameters given.
+
+    The files, then the bag's statements, then ``--set`` and the flags.
+    """
+    from landmark_nav.evaluation.slam import bag_configuration
+    from landmark_nav.tools.node_parameters import given_parameters
+    files = given_parameters(args.params_file, [], 'ekf_slam')
+    settings = given_parameters([], args.set, 'ekf_slam')
+    flags = {'association': args.association, 'landmarks': args.landmarks,
+             'scan_matching': True if args.scan_matching else None,
+             'scan_matching_fit_pairs': args.scan_matching_fit_pairs,
+             'scan_matching_side_starts': args.scan_matching_side_starts}
+    settings.update({k: v for k, v in flags.items() if v is not None})
+    return bag_configuration(args.bag, files, settings), {**files, **settings}
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
-    from landmark_nav.slam.frontend import FrontendParams
     import numpy as np
     progress = not args.no_progress and sys.stderr.isatty()
     if args.mode == 'localization' and args.map is None:
         raise ValueError('--mode localization needs --map FILE.npz (a map saved with '
                          '--save-map)')
+    config, given = _slam_configuration(args)
     pose_cov = None if args.map_pose_sigma is None else np.diag(
         np.square(np.asarray(args.map_pose_sigma, dtype=float)))
-    result = evaluate_bag(args.bag, args.association, args.out, progress=progress,
+    laser_pose = args.laser_pose  # the bag's statement wins over both (evaluate --help)
+    if laser_pose is None and 'laser_pose' in given:
+        laser_pose = config.laser_pose
+    sigma_r = args.sigma_r
+    if sigma_r is None and 'laser_sigma_range' in given:
+        sigma_r = config.laser_sigma_range
+    result = evaluate_bag(args.bag, None, args.out, progress=progress,
                           max_seconds=args.max_seconds,
                           reference=args.reference, align=args.align,
-                          laser_pose=args.laser_pose, sigma_r=args.sigma_r,
-                          rpe_delta=args.rpe_delta, landmarks=args.landmarks,
-                          slam_map=args.map, save_map_to=args.save_map,
-                          map_pose_covariance=pose_cov, mode=args.mode,
-                          frontend=FrontendParams(
-                              scan_matching=args.scan_matching,
-                              scan_matching_fit_pairs=args.scan_matching_fit_pairs,
-                              scan_matching_side_starts=args.scan_matching_side_starts))
+                          laser_pose=laser_pose, sigma_r=sigma_r,
+                          rpe_delta=args.rpe_delta, slam_map=args.map,
+                          save_map_to=args.save_map, map_pose_covariance=pose_cov,
+                          mode=args.mode, config=config)
     print(format_summary(result))
     if result.get('map_file'):
         print(f'map written: {result["map_file"]}')
     if args.view is not None:
         from landmark_nav.evaluation.viewer import write_slam_view
-        view = write_slam_view(args.bag, args.view, args.association,
+        view = write_slam_view(args.bag, args.view, result['association'],
                                max_seconds=args.max_seconds, reference=args.reference,
-                               laser_pose=args.laser_pose, sigma_r=args.sigma_r)
+                               laser_pose=laser_pose, sigma_r=sigma_r, config=config)
         print(f'viewer file: {view["mcap"]} (Foxglove / Lichtblick; layout '
               'viewer/slam_layout.json)')
     if args.out is not None and result['reference'] is None:
@@ -239,9 +258,9 @@ def _cmd_make_landmark(args: argparse.Namespace) -> int:
 
 
 def _cmd_config(args: argparse.Namespace) -> int:
-    from landmark_nav.tools.config_files import available, config_path
+    from landmark_nav.tools.config_files import config_path, listing
     if args.node is None:
-        print('\n'.join(available()))
+        print(listing())
         return 0
     print(config_path(args.node))
     return 0
@@ -250,6 +269,7 @@ def _cmd_config(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser with every subcommand."""
     from landmark_nav.nodes.bag_player import add_replay_arguments
+    from landmark_nav.tools.node_parameters import add_arguments as add_parameter_arguments
 
     parser = _Parser(prog=PROG, description=__doc__.split('\n')[0])
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND',
@@ -390,11 +410,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_calibrate_odometry)
 
     p = sub.add_parser('evaluate', help='run EKF-SLAM on a bag and score it against a reference '
-                       '(without one: map, path and filter figures only)')
+                       '(without one: map, path and filter figures only)',
+                       epilog="The filter runs ekf_slam's configuration: its defaults, then "
+                       'the --params-file files, then what the bag states (laser mount and '
+                       'noise, odometry noise model), then --set and the options above, as '
+                       '`landmark_nav pipeline replay` gives them to the node. The filter '
+                       'of the corner chapter: --params-file "$(landmark_nav config '
+                       'ekf_slam_chapter)".')
     p.add_argument('bag', help='rosbag2 directory with /scan, /odom and optionally a reference '
                    '(/ground_truth/odom or --reference)')
-    p.add_argument('--association', choices=['icnn', 'jcbb'], default='icnn',
-                   help='data association (default icnn)')
+    p.add_argument('--association', choices=['icnn', 'jcbb'], default=None,
+                   help='data association (the parameter association; default icnn)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
     p.add_argument('--reference', default=None, metavar='FILE.tum',
@@ -416,9 +442,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='also write the inputs and outputs as one MCAP for Foxglove / '
                         'Lichtblick into the new bag directory DIR')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
-    p.add_argument('--landmarks', choices=['corners', 'lines', 'both'], default='corners',
-                   help='landmarks the filter maps (default corners)')
-    p.add_argument('--mode', choices=['slam', 'localization'], default='slam',
+    p.add_argument('--landmarks', choices=['corners', 'lines', 'both'], default=None,
+                   help='landmarks the filter maps (the parameter landmarks; default both)')
+    p.add_argument('--mode', choices=['slam', 'localization'], default=None,
                    help='slam (default) or localization on --map (no new landmarks)')
     p.add_argument('--map', default=None, metavar='FILE.npz',
                    help='start on this saved map (the first odometry pose is its start pose)')
@@ -429,16 +455,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help='write the final map (landmark_nav.slam.slam_map format)')
     p.add_argument('--scan-matching', action='store_true',
                    help="predict with the scans' point-to-line ICP motion where it agrees "
-                        'with the odometry (the node parameter scan_matching)')
-    p.add_argument('--scan-matching-fit-pairs', type=float, default=0.0, metavar='P',
-                   help='with --scan-matching: fuse the odometry and the ICP motion, the '
-                        "latter's covariance from the fit worth P residuals (the node "
-                        'parameter scan_matching_fit_pairs; the real_logs profile 0.3; '
-                        'default 0: off)')
-    p.add_argument('--scan-matching-side-starts', type=float, default=0.0, metavar='K',
-                   help="with --scan-matching: ICP also from the odometry's heading +- K "
-                        'heading stds (the node parameter scan_matching_side_starts; the '
-                        'real_logs profile 2.5; default 0: off)')
+                        'with the odometry (the parameter scan_matching; on by default)')
+    p.add_argument('--scan-matching-fit-pairs', type=float, default=None, metavar='P',
+                   help='the parameter scan_matching_fit_pairs (default 0.3)')
+    p.add_argument('--scan-matching-side-starts', type=float, default=None, metavar='K',
+                   help='the parameter scan_matching_side_starts (default 2.5)')
+    add_parameter_arguments(p, 'ekf_slam')
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
@@ -496,8 +518,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_make_landmark)
 
     p = sub.add_parser('config', help="print the path of a node's shipped parameter file "
-                       '(for --params-file; no NODE: list the nodes)')
-    p.add_argument('node', nargs='?', default=None, help='node name, e.g. ekf_slam')
+                       'or profile (for --params-file; no NAME: list the files and profiles)')
+    p.add_argument('node', nargs='?', default=None, metavar='NAME',
+                   help='node or profile name, e.g. ekf_slam or ekf_slam_chapter')
     p.set_defaults(func=_cmd_config)
 
     from landmark_nav.tools.pipeline import add_parser as add_pipeline_parser

@@ -7,11 +7,15 @@ virtual environment's prefix of a pip install. In a source checkout (editable in
 works from any directory::
 
     ekf_slam --ros-args --params-file "$(landmark_nav config ekf_slam)"
+
+A *profile* is a file named ``<node>_<profile>.yaml`` that sets a few of the node's
+parameters, given on top of its file (e.g. ``ekf_slam_chapter``: the chapter's filter);
+``landmark_nav config`` lists the files, each profile with its node (:func:`listing`).
 """
 
 from pathlib import Path
 import sys
-from typing import List
+from typing import Dict, List
 
 PACKAGE = 'landmark_nav'
 
@@ -52,3 +56,19 @@ def available() -> List[str]:
         if names:
             return names
     return []
+
+
+def profiles() -> Dict[str, str]:
+    """Return ``{profile file name: its node}`` of the shipped profiles."""
+    names = available()
+    return {name: node for name in names for node in names
+            if name.startswith(node + '_')}
+
+
+def listing() -> str:
+    """Return the shipped files, one a line; a profile says its node and how to give it."""
+    found = profiles()
+    return '\n'.join(
+        f'{name}  (profile of {found[name]}: --params-file "$(landmark_nav config '
+        f'{found[name]})" --params-file "$(landmark_nav config {name})")'
+        if name in found else name for name in available())

@@ -3,7 +3,8 @@
 Reads the bag directly (no DDS). Writes into the output directory: ``world_paths.png``,
 ``summary.txt`` and ``drift.json`` (odometry drift against ``/ground_truth/odom``, scored by
 :func:`landmark_nav.evaluation.odometry_drift.bag_odometry_drift`) and the EKF-SLAM
-evaluation of :func:`landmark_nav.evaluation.slam.evaluate_bag`
+evaluation of :func:`landmark_nav.evaluation.slam.evaluate_bag` with the chapter profile
+(``config/ekf_slam_chapter.yaml``, as ``landmark_nav evaluate --params-file``)
 (``slam_map.png``, ``slam_errors.png``, ``slam.json``, TUM trajectories) and the viewer file
 ``view/view.mcap`` (:func:`landmark_nav.evaluation.viewer.write_slam_view`: inputs and
 outputs in standard message types for Foxglove / Lichtblick); returns both summaries.
@@ -17,6 +18,10 @@ from landmark_nav.evaluation.odometry_drift import bag_odometry_drift
 from landmark_nav.sim.record import load_ground_truth
 from landmark_nav.sim.world import World
 import numpy as np
+
+#: The EKF-SLAM profile of the demo: the chapter's filter, which the simulator figures of
+#: ``bags/office/expected.yaml`` are measured with.
+CHAPTER_PROFILE = 'ekf_slam_chapter'
 
 
 def plot_world_paths(world: World, truth: np.ndarray, odom: np.ndarray, path: Path,
@@ -47,6 +52,19 @@ def plot_world_paths(world: World, truth: np.ndarray, odom: np.ndarray, path: Pa
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def chapter_config(bag):
+    """Return the chapter profile's ``ekf_slam`` configuration on ``bag``.
+
+    ``config/ekf_slam_chapter.yaml`` read as ``landmark_nav evaluate --params-file`` reads
+    it, with what the bag states (:func:`landmark_nav.evaluation.slam.bag_configuration`).
+    """
+    from landmark_nav.evaluation.slam import bag_configuration
+    from landmark_nav.tools.config_files import config_path
+    from landmark_nav.tools.node_parameters import read_params_file
+    return bag_configuration(bag, read_params_file(str(config_path(CHAPTER_PROFILE)),
+                                                   'ekf_slam'))
 
 
 def run_demo(bag, out) -> str:
@@ -83,7 +101,8 @@ def run_demo(bag, out) -> str:
     (out / 'drift.json').write_text(json.dumps(
         {k: v for k, v in drift.items() if k != 'position_error_m'}, indent=2) + '\n')
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
-    slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=sys.stderr.isatty()))
+    slam = format_summary(evaluate_bag(bag, 'icnn', out, progress=sys.stderr.isatty(),
+                                       config=chapter_config(bag)))
     from landmark_nav.evaluation.viewer import write_slam_view
     view = write_slam_view(bag, out / 'view', 'icnn', force=True)
     return (summary + '\n\nEKF-SLAM (ICNN):\n' + slam + f'\nviewer file: {view["mcap"]} '

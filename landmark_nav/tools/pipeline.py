@@ -1,7 +1,8 @@
 """``landmark_nav pipeline NAME``: start a whole pipeline of nodes with one command.
 
 Each node runs as its own process with its shipped parameter file
-(:func:`~landmark_nav.tools.config_files.config_path`) and the overrides given with
+(:func:`~landmark_nav.tools.config_files.config_path`), the shipped profiles given with
+``--profile NAME`` (e.g. ``ekf_slam_chapter``) and the overrides given with
 ``--set NODE.PARAMETER=VALUE``; honcho (a Python port of Foreman) starts them, prefixes
 every output line with the node's name and, on Ctrl-C or SIGTERM, stops them all with
 SIGTERM (every node shuts down cleanly on it). When one process ends, the others are
@@ -28,6 +29,7 @@ import shlex
 import sys
 from typing import Dict, List, Optional, Sequence
 
+from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.tools.config_files import config_path
 
 PIPELINES = {
@@ -41,8 +43,12 @@ PIPELINES = {
 def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
     """Parse ``NODE.PARAMETER=VALUE`` settings into ``-p`` arguments per node.
 
+    The nodes refuse a parameter they do not declare (exit status 2, the nearest name);
+    ``ekf_slam``'s names are checked here, before anything starts.
+
     Raises:
-        ValueError: A setting is malformed or names a node outside the pipeline.
+        ValueError: A setting is malformed, names a node outside the pipeline or an
+            unknown ``ekf_slam`` parameter.
 
     """
     out: Dict[str, List[str]] = {n: [] for n in nodes}
@@ -54,6 +60,11 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
         if node not in out or node == 'bag_player':
             raise ValueError(f'--set {text!r}: no node {node!r} with parameters in this '
                              f'pipeline ({", ".join(n for n in nodes if n != "bag_player")})')
+        if node == 'ekf_slam':  # its parameters are known without starting it
+            from landmark_nav.slam.configuration import NODE, parameters
+            known = parameters()
+            if name not in known:
+                raise ValueError(f'--set {text!r}: {unknown_parameter(NODE, name, known)}')
         out[node] += ['-p', f'{name}:={value}']
     return out
 
@@ -61,48 +72,46 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
 def bag_slam_settings(bag: str) -> List[str]:
     """``ekf_slam`` parameters a bag states, as ``-p`` arguments (module docstring).
 
-    The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
-    ``ground_truth.yaml``), its range noise (``laser_sigma_range``, ``lines.sigma_r``) and
-    bearing noise (``lines.sigma_phi``), as ``evaluate`` uses them, and ``odometry.model``:
-    ``custom_data`` ``landmark_nav.drift_model``, ``simulator`` for a simulator recording,
-    else nothing (the node's default, ``pioneer``). Nothing for what the bag does not state
-    or a bag that cannot be read (the player reports that).
+    :func:`landmark_nav.evaluation.slam.bag_slam_parameters`, as ``evaluate`` uses them;
+    nothing for a bag that cannot be read (the player reports that).
     """
-    from pathlib import Path
-
-    from landmark_nav.bag import BagReader
-    from landmark_nav.evaluation.bags import laser_config
-    from landmark_nav.evaluation.slam import DRIFT_KEY
-    from landmark_nav.sim.record import GROUND_TRUTH_FILE
-    import yaml
+    from landmark_nav.evaluation.slam import bag_slam_parameters
+    from landmark_nav.tools.node_parameters import as_ros_arguments
     try:
-        with BagReader(bag) as reader:
-            custom = reader.custom_data
-        meta_path = Path(bag) / GROUND_TRUTH_FILE
-        meta = yaml.safe_load(meta_path.read_text()) if meta_path.is_file() else None
-        laser, notes = laser_config(custom, meta if isinstance(meta, dict) else None)
+        return as_ros_arguments(bag_slam_parameters(bag))
     except Exception:  # noqa: B902 - the player names the problem with the bag
         return []
-    out = []
-    if not any('(default)' in n for n in notes):
-        mount = ','.join(repr(float(v)) for v in laser.mount)
-        out += ['-p', f'laser_pose:=[{mount}]']
-    if not any('no laser range noise' in n for n in notes):  # lines and visibility
-        sr, sp = repr(float(laser.sigma_range)), repr(float(laser.sigma_angle))
-        out += ['-p', f'laser_sigma_range:={sr}', '-p', f'lines.sigma_r:={sr}',
-                '-p', f'lines.sigma_phi:={sp}']
-    model = custom.get(DRIFT_KEY) or ('simulator' if meta is not None else None)
-    if model:
-        out += ['-p', f'odometry.model:={model}']
+
+
+def _profile_files(names: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
+    """Return the ``--params-file`` arguments of shipped profiles, by node.
+
+    Raises:
+        ValueError: Not a shipped profile of a node of the pipeline.
+
+    """
+    from landmark_nav.tools.config_files import profiles
+    known = profiles()
+    out: Dict[str, List[str]] = {n: [] for n in nodes}
+    for name in names:
+        if known.get(name) not in out:
+            raise ValueError(f'--profile {name!r}: not a profile of a node of this pipeline '
+                             f'({", ".join(k for k, n in known.items() if n in out) or "none"})')
+        out[known[name]] += ['--params-file', str(config_path(name))]
     return out
 
 
 def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str] = None,
-                      rate: float = 1.0, loop: bool = False) -> Dict[str, List[str]]:
+                      rate: float = 1.0, loop: bool = False,
+                      profiles: Sequence[str] = ()) -> Dict[str, List[str]]:
     """Return the command line of every process of a pipeline, by node name.
 
+    Each node gets its shipped parameter file, then its ``profiles`` (e.g.
+    ``ekf_slam_chapter``), then what the bag states (``replay``), then ``settings``.
+
     Raises:
-        ValueError: Unknown pipeline, a bad ``--set``, or a replay without a bag.
+        ValueError: Unknown pipeline, a bad ``--set`` or ``--profile``, or a replay without
+            a bag.
         FileNotFoundError: A node's parameter file is missing.
 
     """
@@ -110,6 +119,7 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
         raise ValueError(f'unknown pipeline {name!r}; one of {", ".join(PIPELINES)}')
     nodes = PIPELINES[name]
     extra = _overrides(settings, nodes)
+    files = _profile_files(profiles, nodes)
     commands = {}
     for node in nodes:
         cmd = [sys.executable, '-m', f'landmark_nav.nodes.{node}']
@@ -120,7 +130,8 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
                     '--wait-for-subscribers', '30'] + (['--loop'] if loop else [])
         else:
             stated = bag_slam_settings(bag) if (node == 'ekf_slam' and bag) else []
-            cmd += ['--ros-args', '--params-file', str(config_path(node))] + stated + extra[node]
+            cmd += (['--ros-args', '--params-file', str(config_path(node))] + files[node]
+                    + stated + extra[node])
         commands[node] = cmd
     return commands
 
@@ -137,13 +148,17 @@ def add_parser(sub, parser_class) -> None:
     p.add_argument('--set', action='append', default=[], metavar='NODE.PARAMETER=VALUE',
                    help='override a parameter, e.g. laser_driver.port=/dev/ttyUSB0 '
                    '(repeatable)')
+    p.add_argument('--profile', action='append', default=[], metavar='NAME',
+                   help="a shipped profile on top of its node's file, e.g. ekf_slam_chapter "
+                   "(the chapter's filter; landmark_nav config lists them; repeatable)")
     p.add_argument('--dry-run', action='store_true', help='print the commands, start nothing')
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Start the pipeline and wait until it stops; return honcho's exit status."""
-    commands = pipeline_commands(args.name, args.set, args.bag, args.rate, args.loop)
+    commands = pipeline_commands(args.name, args.set, args.bag, args.rate, args.loop,
+                                 args.profile)
     if args.dry_run:
         for node, cmd in commands.items():
             print(f'{node}: {shlex.join(cmd)}')

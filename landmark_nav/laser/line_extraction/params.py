@@ -143,3 +143,33 @@ class LineParams:
         lo = 0.3 * self.sigma_r if self.rmse_min is None else float(self.rmse_min)
         hi = self.sigma_r if self.rmse_max is None else float(self.rmse_max)
         return lo, hi
+
+
+#: The ``line_extractor`` node's parameters (also ``ekf_slam``'s ``lines.*``): field ->
+#: (description, limits, choices[, parameter value standing for a field default of None]).
+LINE_PARAMETERS = {
+    'method': ('line extractor: split_merge or alfa', None, ['split_merge', 'alfa']),
+    'split_threshold': ('split_merge: split distance tolerance [m] (eq. 4); 0 = automatic, '
+                        'max(0.03, 4 sigma_r)', (0.0, 10.0), None, 0.0),
+    'min_points': ('fewest points of a line', (2, 10000), None),
+    'min_length': ('shortest line [m]', (0.0, 100.0), None),
+    'merge_chi2': ('chi-square gate (2 dof) of the collinearity test for merging',
+                   (0.001, 1000.0), None),
+    'merge_gap': ('largest gap between collinear lines of neighbouring clusters merged '
+                  'into one [m]', (0.0, 100.0), None),
+    'sigma_r': ('laser range noise std [m] (covariances, thresholds, segmentation)',
+                (0.0001, 1.0), None),
+    'sigma_phi': ('laser bearing noise std [rad] (covariances)', (0.0, 0.1), None),
+    'lowess_span': ('alfa: lowess window [points] (odd)', (3, 1001), None),
+    'lowess_iterations': ('alfa: lowess robustness iterations', (0, 20), None),
+    'rmse_min': ('alfa: lowest floating RMSE threshold [m]; 0 = automatic, 0.3 sigma_r',
+                 (0.0, 1.0), None, 0.0),
+    'rmse_max': ('alfa: highest floating RMSE threshold [m]; 0 = automatic, sigma_r',
+                 (0.0, 1.0), None, 0.0),
+    'max_gradient': ('alfa: largest RMSE growth per added point, relative to the threshold',
+                     (0.0001, 100.0), None),
+    'see_through': ('a line never covers a beam more than this beyond it along the ray [m]; '
+                    '0 = automatic, max(3 sigma_r, 0.05)', (0.0, 10.0), None, 0.0),
+    'join_occluded': ('one fit for the lines of a surface on both sides of an occluder '
+                      '(their segments share it)', None, None),
+}
