@@ -143,9 +143,18 @@ def _with_substitutions(where: str, words: List[str]) -> List[Tuple[str, List[st
     return out
 
 
+def _doc_name(path: Path) -> str:
+    """Name a page in a report: its path in the repository (README.md and docs/README.md)."""
+    try:
+        return str(path.resolve().relative_to(REPO))
+    except ValueError:
+        return path.name
+
+
 def doc_commands(path: Path) -> List[Tuple[str, List[str]]]:
     """Return ``(where, words)`` of each of the project's commands printed in ``path``."""
     text = path.read_text()
+    name = _doc_name(path)
     lines, prose = _blocks(text)
     out, joined, first = [], '', None
     for n, line in lines:
@@ -156,14 +165,14 @@ def doc_commands(path: Path) -> List[Tuple[str, List[str]]]:
             continue
         for words in _split(joined + line):
             if _is_ours(words):
-                out += _with_substitutions(f'{path.name}:{first}', words)
+                out += _with_substitutions(f'{name}:{first}', words)
         joined, first = '', None
     for m in re.finditer(r'(?<!`)`([^`]+)`(?!`)', prose):
         span = ' '.join(m.group(1).split())
         n = prose.count('\n', 0, m.start()) + 1
         for words in _split(_strip_comment(span), prose=True):
             if len(words) > 1 and _is_ours(words):
-                out += _with_substitutions(f'{path.name}:{n}', words)
+                out += _with_substitutions(f'{name}:{n}', words)
     return out
 
 
