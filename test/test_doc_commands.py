@@ -280,7 +280,7 @@ def _subcommands(help_text: str) -> List[str]:
     of choices shows ``[{a,b} ...]``); with a metavar the names are the lines indented by
     four spaces under it.
     """
-    usage = help_text.split('\n\n', 1)[0]
+    usage = ' '.join(help_text.split('\n\n', 1)[0].split())   # argparse wraps long usages
     m = re.search(r'(?<![\[\w])(\{[\w,-]+\}|[A-Z][A-Z_]*) \.\.\.', usage)
     if not m:
         return []
