@@ -141,9 +141,9 @@ def unwrap_stamps(stamps) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     too few digits to tell its value after unwrapping (the caller treats it as missing).
     """
     t = np.array(stamps, dtype=float).ravel()
-    with np.errstate(invalid='ignore'):
+    with np.errstate(invalid='ignore'):   # non-finite stamps: neither wrapped nor coarse
         wrapped = np.isfinite(t) & (t >= _WRAP_FROM) & (t < _WRAP_TO)
-    coarse = wrapped & (np.fmod(t, WRAP_COARSE) == 0.0)
+        coarse = wrapped & (np.fmod(t, WRAP_COARSE) == 0.0)
     t[wrapped] -= _WRAP
     return t, wrapped, coarse
 
