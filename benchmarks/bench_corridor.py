@@ -3,11 +3,11 @@
 Run from the repository root::
 
     python benchmarks/bench_corridor.py frames [--frames N] [--seed S] [--repeat R]
-        [--speed-only]
+        [--speed-only] [--data DIR]
     python benchmarks/bench_corridor.py loop [--seed S] [--distance M] [--lengths N]
 
 Both run on rendered frames of the simulated corridor (``landmark_nav.sim.corridor``,
-``--seed``).
+``--seed``); ``frames --data DIR`` times the per-frame pipeline on recorded images instead.
 
 ``frames``: per-frame time of :func:`landmark_nav.corridor.frame.measure_frame` (lines,
 corridor VP, heading, lateral position) for each line input, at 640 x 480 and 320 x 240 on
@@ -21,12 +21,22 @@ Times: the numerical libraries single-threaded, as in the node
 of the process CPU time (``time.process_time``: what the frame costs, hardly changed by
 other jobs on a shared machine) and of the wall time; the medians over the frames.
 ``--speed-only`` stops after the timing tables.
+
+``frames --data DIR``: the timing table on the user's corridor images: a folder of images
+(png / jpg, converted to grey) or a bag with ``/camera/image_raw`` or
+``/camera/image_raw/compressed`` (e.g. ``bags/corridor``, or one recorded by the robot's
+camera); ``--frames N`` images spread over them (default all). Each image is measured at
+its own size with the rendered corridor's camera (70 deg horizontal field of view; its
+distortion at 640 x 480 / 1, 2, 4), mount (1.1 m high, pitched 5 deg down) and corridor
+model. With no ground truth the heading and lateral errors are not printed (``-``); the
+lost frames are. The hard cases and fused runs are simulations and are not run.
 Targets (issue): >= 30 frames/s at 320 x 240 and >= 10 at 640 x 480; single frames
 heading <= 0.5 deg and lateral <= 3 cm median; fused lateral <= 1.5 cm and heading
 <= 0.5 deg RMS.
 
 ``loop``: the corridor follower in closed loop over DDS, three lengths of the corridor back
-and forth. Starts the ``corridor_follower`` node in a process of its own (its shipped parameters,
+and forth. It takes no data argument: a closed loop needs a world that answers the node's
+``cmd_vel``, which a recording cannot; it is the simulated corridor's. Starts the ``corridor_follower`` node in a process of its own (its shipped parameters,
 with the rendered corridor's camera mount and geometry, ``stamped_cmd_vel: true`` and
 ``speed`` 0.5 m/s) on a private DDS domain (localhost only), and drives the simulated robot
 of :mod:`landmark_nav.sim.corridor_loop` with the node's ``cmd_vel``: 320 x 240 frames at
@@ -49,7 +59,7 @@ import sys
 import tempfile
 import time
 
-from common import REPO, run_subcommand, subcommand_parser
+from common import load_images, REPO, run_subcommand, subcommand_parser
 import cv2
 from landmark_nav.corridor.frame import CorridorLost, FrameParams, measure_frame
 from landmark_nav.corridor.lateral import CorridorModel
@@ -58,6 +68,7 @@ from landmark_nav.nodes.common import limit_threads
 from landmark_nav.sim.camera import CameraSimulator, Photometry
 from landmark_nav.sim.corridor import (corridor_scene, corridor_view, CorridorConfig,
                                        default_corridor_camera)
+from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.image_lines import detect_lines, METHODS
 import numpy as np
 import yaml
@@ -81,58 +92,95 @@ def measure(img, c, model, mount, p):
         return None
 
 
-def run_frames(args) -> int:
-    """Run the ``frames`` subcommand: the timing tables, hard cases and fused runs."""
-    threads = limit_threads()
-    cfg = CorridorConfig()
-    cam = default_corridor_camera()
-    sim = CameraSimulator(cam)
-    planes = corridor_scene(cfg, args.seed)
-    mount = (0.1, 0.0, 1.1, 0.0, math.radians(5.0), 0.0)
-    model = CorridorModel(cfg.width, cfg.height)
-    rng = np.random.default_rng(args.seed)
+def image_camera(img: np.ndarray) -> CameraModel:
+    """Return the rendered corridor's camera at ``img``'s size (70 deg horizontal FOV)."""
+    h, w = img.shape[:2]
+    for k in (1, 2, 4):
+        cam = default_corridor_camera(k)
+        if (cam.width, cam.height) == (w, h):
+            return cam
+    f = (w / 2.0) / math.tan(math.radians(35.0))
+    return CameraModel(w, h, np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0],
+                                       [0.0, 0.0, 1.0]]), np.zeros(5))
+
+
+def rendered_views(cfg: CorridorConfig, mount: tuple, frames: int, seed: int) -> list:
+    """Return ``frames`` rendered views of the simulated corridor at random poses."""
+    sim = CameraSimulator(default_corridor_camera())
+    planes = corridor_scene(cfg, seed)
+    rng = np.random.default_rng(seed)
     views = []
-    for _ in range(args.frames):
+    for _ in range(frames):
         robot = (rng.uniform(2, 20), rng.uniform(-0.5, 0.5),
                  math.radians(rng.uniform(-15, 15)))
         views.append(corridor_view(sim, planes, robot, mount,
                                    Photometry(noise_sigma=2.0, defocus_sigma=0.5), rng))
+    return views
+
+
+def time_pipelines(frames: list, model, mount, repeat: int) -> dict:
+    """Time each line input's pipeline on ``[(image, camera, true robot pose or None)]``.
+
+    Returns:
+        ``{method: (CPU s, wall s, line CPU s, heading errors, lateral errors, lost)}``,
+        the times as medians over the frames.
+    """
+    rows = {}
+    for m in METHODS:
+        p = FrameParams(line_method=m)
+        cpu, wall, line_cpu, eh, ey, lost = [], [], [], [], [], 0
+        for img, c, robot in frames:
+            line_cpu.append(best_time(lambda: detect_lines(img, m, p.lines), repeat)[0])
+            t_cpu, t_wall, meas = best_time(lambda: measure(img, c, model, mount, p), repeat)
+            cpu.append(t_cpu)
+            wall.append(t_wall)
+            if meas is None:
+                lost += 1
+            elif robot is not None:
+                eh.append(abs(math.degrees(meas.heading - robot[2])))
+                ey.append(abs(meas.y - robot[1]))
+        rows[m] = (statistics.median(cpu), statistics.median(wall),
+                   statistics.median(line_cpu), eh, ey, lost)
+    return rows
+
+
+def print_table(rows: dict, what: str) -> None:
+    """Print the timing table of :func:`time_pipelines` (``what``: the frames' description)."""
+    ref_h, ref_l = rows['hough_p'][0], rows['lsd'][0]
+    print(f'{what}: per-frame pipeline, CPU ms (frames/s) and wall ms; ratios of the CPU '
+          f'times to the HoughLinesP- and LSD-input pipelines of this run')
+    print(f'  {"lines":<16s}{"lines ms":>9s}{"CPU ms":>8s}{"fps":>7s}{"wall ms":>9s}'
+          f'{"x HLP":>7s}{"x LSD":>7s}{"heading med":>13s}{"lateral med":>13s}{"lost":>6s}')
+    for m, (t, tw, tl, eh, ey, lost) in rows.items():
+        hm = f'{statistics.median(eh):11.3f} deg' if eh else f'{"-":>15s}'
+        ym = f'{100 * statistics.median(ey):10.2f} cm' if ey else f'{"-":>13s}'
+        print(f'  {m:<16s}{1e3 * tl:9.1f}{1e3 * t:8.1f}{1 / t:7.1f}{1e3 * tw:9.1f}'
+              f'{t / ref_h:7.2f}{t / ref_l:7.2f}{hm}{ym}{lost:6d}')
+    print()
+
+
+def run_frames(args) -> int:
+    """Run the ``frames`` subcommand: the timing tables, hard cases and fused runs."""
+    threads = limit_threads()
+    cfg = CorridorConfig()
+    mount = (0.1, 0.0, 1.1, 0.0, math.radians(5.0), 0.0)
+    model = CorridorModel(cfg.width, cfg.height)
     print(f'library threads: {threads}; times per frame: best of {args.repeat}, median over '
           'the frames')
-    for scale, c in ((1, cam), (2, default_corridor_camera(2))):
-        rows = {}
-        for m in METHODS:
-            p = FrameParams(line_method=m)
-            cpu, wall, line_cpu, eh, ey, lost = [], [], [], [], [], 0
-            for v in views:
-                img = v.image
-                if scale != 1:
-                    img = cv2.resize(img, (c.width, c.height), interpolation=cv2.INTER_AREA)
-                line_cpu.append(best_time(lambda: detect_lines(img, m, p.lines),
-                                          args.repeat)[0])
-                t_cpu, t_wall, meas = best_time(lambda: measure(img, c, model, mount, p),
-                                                args.repeat)
-                cpu.append(t_cpu)
-                wall.append(t_wall)
-                if meas is None:
-                    lost += 1
-                    continue
-                eh.append(abs(math.degrees(meas.heading - v.robot[2])))
-                ey.append(abs(meas.y - v.robot[1]))
-            rows[m] = (statistics.median(cpu), statistics.median(wall),
-                       statistics.median(line_cpu), eh, ey, lost)
-        ref_h, ref_l = rows['hough_p'][0], rows['lsd'][0]
-        print(f'rendered corridor, {len(views)} frames at {c.width} x {c.height}: per-frame '
-              f'pipeline, CPU ms (frames/s) and wall ms; ratios of the CPU times to the '
-              f'HoughLinesP- and LSD-input pipelines of this run')
-        print(f'  {"lines":<16s}{"lines ms":>9s}{"CPU ms":>8s}{"fps":>7s}{"wall ms":>9s}'
-              f'{"x HLP":>7s}{"x LSD":>7s}{"heading med":>13s}{"lateral med":>13s}{"lost":>6s}')
-        for m, (t, tw, tl, eh, ey, lost) in rows.items():
-            hm = statistics.median(eh) if eh else math.nan
-            ym = statistics.median(ey) if ey else math.nan
-            print(f'  {m:<16s}{1e3 * tl:9.1f}{1e3 * t:8.1f}{1 / t:7.1f}{1e3 * tw:9.1f}'
-                  f'{t / ref_h:7.2f}{t / ref_l:7.2f}{hm:11.3f} deg{100 * ym:10.2f} cm{lost:6d}')
-        print()
+    if args.data:
+        images = [img for _, img in load_images(args.data, args.frames)]
+        sizes = sorted({f'{img.shape[1]} x {img.shape[0]}' for img in images})
+        print_table(time_pipelines([(img, image_camera(img), None) for img in images],
+                                   model, mount, args.repeat),
+                    f'{args.data}, {len(images)} images at {", ".join(sizes)}')
+        return 0
+    views = rendered_views(cfg, mount, args.frames or 40, args.seed)
+    for scale, c in ((1, default_corridor_camera()), (2, default_corridor_camera(2))):
+        frames = [(v.image if scale == 1 else
+                   cv2.resize(v.image, (c.width, c.height), interpolation=cv2.INTER_AREA),
+                   c, v.robot) for v in views]
+        print_table(time_pipelines(frames, model, mount, args.repeat),
+                    f'rendered corridor, {len(views)} frames at {c.width} x {c.height}')
     if args.speed_only:
         return 0
     print('hard cases (20 frames each; medians / worst):')
@@ -196,12 +244,20 @@ def main(argv=None) -> int:
     """Parse the subcommand and run it."""
     ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('frames', help='per-frame pipeline, hard cases and fused runs offline')
-    p.add_argument('--frames', type=int, default=40)
+    p.add_argument('--frames', type=int, default=None,
+                   help='rendered frames (default 40), or images spread over --data DIR '
+                        '(default all)')
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
     p.add_argument('--speed-only', action='store_true', help='only the timing tables')
+    p.add_argument('--data', default=None, metavar='DIR',
+                   help='time the pipeline on these corridor images instead (timing table '
+                        'only): a folder of png / jpg images or a bag with '
+                        '/camera/image_raw(/compressed), e.g. bags/corridor')
     p.set_defaults(run=run_frames)
-    p = sub.add_parser('loop', help='the corridor_follower node in closed loop over DDS')
+    p = sub.add_parser('loop', help='the corridor_follower node in closed loop over DDS in the '
+                                    'simulated corridor (no data: a closed loop needs a world '
+                                    "that answers the node's cmd_vel)")
     p.add_argument('--seed', type=int, default=1)
     p.add_argument('--distance', type=float, default=26.0, help='leg length [m]')
     p.add_argument('--lengths', type=int, default=3, help='legs, back and forth')

@@ -3,7 +3,7 @@
 Run from the repository root::
 
     python benchmarks/bench_landmarks.py detector [--frames N] [--repeat R] [--threads T]
-        [--seed S]
+        [--seed S] [--data DIR]
     python benchmarks/bench_landmarks.py real [detection|pose|false|stages|all]
         [--data DIR] [--per-size N] ...
     python benchmarks/bench_landmarks.py camera-sim [--frames N]
@@ -16,6 +16,14 @@ marker (DICT_4X4_50, printed as 6 x 6 modules with its black border) of the same
 module size as the landmark's blocks (2.5 cm) at the same poses, on the same wall, and are
 processed by ``cv2.aruco.ArucoDetector.detectMarkers`` (default parameters) -- the in-run
 reference of the same image size.
+
+With ``--data DIR`` the frames are the user's instead: a folder of images (png / jpg,
+converted to grey) or a bag with ``/camera/image_raw`` or ``/camera/image_raw/compressed``
+(``--frames N`` spread over them; default all). Both detectors run on the same images, so
+the ArUco reference sees the same size and content; with no ground truth, ``found`` counts
+the frames with at least one detection. The poses use a pinhole camera of the image size
+(focal length 525 px scaled to the image width, no distortion): their times do not depend
+on it, their values are not printed.
 
 Each frame's time is the best of ``--repeat`` runs, both wall clock and CPU time of this
 process (``time.process_time``; less sensitive to other load on the machine); the script
@@ -41,6 +49,8 @@ option are those of :mod:`landmark_nav.evaluation.landmarks_real` (this subcomma
 command line with the benchmark's defaults: 100 trials per size, 150 per distance, seed 1).
 
 ``camera-sim``: the camera simulator on 640 x 480 frames with a landmark and distractors.
+It takes no data argument: what it times is the rendering of synthetic scenes, which no
+recording replaces (``detector --data DIR`` times the detector on recorded images).
 Three figures (median ms per frame over N frames, after one warm-up frame):
 
 * ``render``: :meth:`CameraSimulator.render` of one fixed scene (a wall, the landmark and
@@ -60,7 +70,7 @@ import sys
 import time
 from typing import Callable, Tuple
 
-from common import run_subcommand, subcommand_parser
+from common import load_images, run_subcommand, subcommand_parser
 import cv2
 from landmark_nav.evaluation import landmarks_real
 from landmark_nav.evaluation.vision import (backdrop, landmark_in_view, random_code,
@@ -70,7 +80,7 @@ from landmark_nav.sim.camera_scenarios import (CameraFrame, default_camera,
                                                iter_landmark_shuttle, landmark_view,
                                                ShuttleConfig, simulator_for, view_scene,
                                                ViewOptions)
-from landmark_nav.vision.camera import OPTICAL_FROM_BODY
+from landmark_nav.vision.camera import CameraModel, OPTICAL_FROM_BODY
 from landmark_nav.vision.detector import (corner_groups, corner_pixels, detect_landmarks,
                                           DetectorParams, smooth)
 from landmark_nav.vision.landmark import LandmarkDesign
@@ -123,17 +133,13 @@ def reference_corner_stage(img: np.ndarray) -> np.ndarray:
     return np.vstack(centres)[:, ::-1] + o if centres else np.zeros((0, 2))
 
 
-def run_detector(args) -> int:
-    """Run the ``detector`` subcommand: render the frames, time both detectors, print the table."""
-    if args.threads is not None:
-        cv2.setNumThreads(args.threads)
-    rng = np.random.default_rng(args.seed)
-    design = LandmarkDesign()
-    camera = VGA_CAMERA
-    sim = CameraSimulator(camera)
+def rendered_frames(frames: int, seed: int, design: LandmarkDesign):
+    """Return ``(landmark frames, ArUco frames, codes)`` rendered at the same random poses."""
+    rng = np.random.default_rng(seed)
+    sim = CameraSimulator(VGA_CAMERA)
     ph = Photometry(noise_sigma=2.0, defocus_sigma=0.5)
     lm_frames, ar_frames, codes = [], [], []
-    for _ in range(args.frames):
+    for _ in range(frames):
         d = rng.uniform(1.0, 2.5)
         v = np.array([d, rng.uniform(-0.25, 0.25) * d, rng.uniform(-0.15, 0.15) * d,
                       rng.uniform(-math.pi, math.pi), math.radians(rng.uniform(-15, 15)),
@@ -145,6 +151,33 @@ def run_detector(args) -> int:
                                     np.zeros(3), ph, rng))
         ar_frames.append(sim.render([wall, aruco_plane(v, design.block_size)], np.eye(3),
                                     np.zeros(3), ph, rng))
+    return lm_frames, ar_frames, codes
+
+
+def image_camera(img: np.ndarray) -> CameraModel:
+    """Return a pinhole camera of ``img``'s size: f = 525 px at 640 px wide, centred."""
+    h, w = img.shape[:2]
+    f = 525.0 * w / 640.0
+    return CameraModel(w, h, np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0],
+                                       [0.0, 0.0, 1.0]]), np.zeros(5))
+
+
+def run_detector(args) -> int:
+    """Run the ``detector`` subcommand: render the frames, time both detectors, print the table."""
+    if args.threads is not None:
+        cv2.setNumThreads(args.threads)
+    design = LandmarkDesign()
+    if args.data:
+        lm_frames = [img for _, img in load_images(args.data, args.frames)]
+        ar_frames, codes = lm_frames, [None] * len(lm_frames)
+        cameras = [image_camera(img) for img in lm_frames]
+        sizes = sorted({f'{img.shape[1]}x{img.shape[0]}' for img in lm_frames})
+        source = f'{len(lm_frames)} images of {args.data} ({", ".join(sizes)}) for both'
+    else:
+        lm_frames, ar_frames, codes = rendered_frames(args.frames or 60, args.seed, design)
+        cameras = [VGA_CAMERA] * len(lm_frames)
+        source = f'{len(lm_frames)} rendered frames 640x480 mono8 per kind'
+    n_frames = len(lm_frames)
     aruco = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(ARUCO_DICT),
                                     cv2.aruco.DetectorParameters())
     plain = DetectorParams(refine_corners=False, refine_edges=False)
@@ -155,15 +188,17 @@ def run_detector(args) -> int:
              'corner stage eqs. 1-2, OpenCV 8-bit (after)']
     rows = {k: [] for k in names}
     found = dict.fromkeys(names, 0)
-    for img_l, img_a, code in zip(lm_frames, ar_frames, codes):
+    for img_l, img_a, code, camera in zip(lm_frames, ar_frames, codes, cameras):
         rows[names[0]].append(best_ms(lambda: aruco.detectMarkers(img_a), args.repeat))
         found[names[0]] += int(aruco.detectMarkers(img_a)[1] is not None)
         rows[names[1]].append(best_ms(lambda: detect_landmarks(img_l, full, camera),
                                       args.repeat))
-        found[names[1]] += any(d.code == code for d in detect_landmarks(img_l, full, camera))
+        found[names[1]] += any(code is None or d.code == code
+                               for d in detect_landmarks(img_l, full, camera))
         rows[names[2]].append(best_ms(lambda: detect_landmarks(img_l, plain, camera),
                                       args.repeat))
-        found[names[2]] += any(d.code == code for d in detect_landmarks(img_l, plain, camera))
+        found[names[2]] += any(code is None or d.code == code
+                               for d in detect_landmarks(img_l, plain, camera))
 
         def with_pose(method):
             out = []
@@ -184,20 +219,21 @@ def run_detector(args) -> int:
         found[names[6]] += len(after)
     ref_wall = statistics.median(t[0] for t in rows[names[0]])
     ref_cpu = statistics.median(t[1] for t in rows[names[0]])
-    print(f'{args.frames} frames 640x480 mono8 per kind, best of {args.repeat}, '
+    print(f'{source}, best of {args.repeat}, '
           f'{cv2.getNumThreads()} OpenCV threads, OpenCV {cv2.__version__}')
     print(f'{"":44s} {"wall ms":>8s} {"frames/s":>9s} {"x aruco":>8s} {"cpu ms":>8s} '
           f'{"x aruco":>8s} {"found":>8s}')
     for name in names:
         wall = statistics.median(t[0] for t in rows[name])
         cpu = statistics.median(t[1] for t in rows[name])
-        what = (f'{found[name]:4d}/{args.frames}' if 'stage' not in name
-                else f'{found[name] / args.frames:5.1f} c')
+        what = (f'{found[name]:4d}/{n_frames}' if 'stage' not in name
+                else f'{found[name] / n_frames:5.1f} c')
         print(f'{name:44s} {wall:8.2f} {1e3 / wall:9.1f} {wall / ref_wall:8.2f} {cpu:8.2f} '
               f'{cpu / ref_cpu:8.2f} {what:>8s}')
     wall = statistics.median(t[0] for t in rows[names[1]])
     cpu = statistics.median(t[1] for t in rows[names[1]])
-    print('(found: frames with the right code; for the corner stage: corners per frame)')
+    print('(found: frames with ' + ('a detection' if args.data else 'the right code')
+          + '; for the corner stage: corners per frame)')
     print(f'targets: >= 30 frames/s {"met" if 1e3 / wall >= 30.0 else "NOT met"}; '
           f'<= 3x ArUco: wall {wall / ref_wall:.2f}x '
           f'{"met" if wall / ref_wall <= 3.0 else "NOT met"}, CPU {cpu / ref_cpu:.2f}x '
@@ -258,17 +294,25 @@ def main(argv=None) -> int:
     """Parse the subcommand and run it (``real``: the options of ``landmarks_real``)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     ap, sub = subcommand_parser(__doc__)
-    p = sub.add_parser('detector', help='the detector against ArUco on rendered frames')
-    p.add_argument('--frames', type=int, default=60, help='frames of each kind')
+    p = sub.add_parser('detector', help='the detector against ArUco on rendered frames or '
+                                        'on images of --data DIR')
+    p.add_argument('--frames', type=int, default=None,
+                   help='frames of each kind (default 60), or images spread over --data DIR '
+                        '(default all)')
     p.add_argument('--repeat', type=int, default=5, help='timing repeats per frame (best)')
     p.add_argument('--seed', type=int, default=1)
     p.add_argument('--threads', type=int, default=None,
                    help='OpenCV threads (cv2.setNumThreads) for both detectors; default: '
                         "OpenCV's choice")
+    p.add_argument('--data', default=None, metavar='DIR',
+                   help='time both detectors on these images instead: a folder of png / jpg '
+                        'images or a bag with /camera/image_raw(/compressed)')
     p.set_defaults(run=run_detector)
     sub.add_parser('real', add_help=False,
                    help='against AprilTag and ArUco on real photographs (real --help: options)')
-    p = sub.add_parser('camera-sim', help='the camera simulator per frame')
+    p = sub.add_parser('camera-sim', help='the camera simulator per frame (synthetic scenes: '
+                                          'what it times is their rendering, so it takes no '
+                                          'data; detector --data DIR times recorded images)')
     p.add_argument('--frames', type=int, default=100)
     p.set_defaults(run=run_camera_sim)
     if argv[:1] == ['real']:

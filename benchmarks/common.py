@@ -155,3 +155,57 @@ def run_subcommand(parser: argparse.ArgumentParser, argv=None) -> int:
     """Parse ``argv`` and run the chosen subcommand's ``run`` function; return its status."""
     args = parser.parse_args(argv)
     return args.run(args)
+
+
+IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg')
+IMAGE_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed')
+
+
+def load_images(path: str, count: Optional[int] = None) -> List[Tuple[str, Any]]:
+    """Return ``(name, grey uint8 image)`` of ``count`` images spread over ``path`` (all: None).
+
+    ``path`` is a folder of images (``*.png``, ``*.jpg``, ``*.jpeg``, sorted by name; colour
+    images are converted to grey) or a rosbag2 folder with ``/camera/image_raw`` (mono8,
+    bgr8, rgb8 or mono16) or ``/camera/image_raw/compressed``. Stops with a message naming
+    the folder when it holds no image, and naming the file or message that cannot be read.
+    """
+    folder = data_folder(path)
+    if (folder / 'metadata.yaml').is_file():
+        return _bag_images(folder, count)
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        sys.exit(f'error: {folder} holds no image ({", ".join(IMAGE_SUFFIXES)}) and is not '
+                 'a bag')
+    import cv2
+    out = []
+    for p in files if count is None else spread(files, count):
+        img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            sys.exit(f'error: cannot read the image {p}')
+        out.append((p.name, img))
+    return out
+
+
+def _bag_images(folder: Path, count: Optional[int]) -> List[Tuple[str, Any]]:
+    """Return ``(name, grey image)`` of the camera images of a bag (see :func:`load_images`)."""
+    from landmark_nav.bag.reader import BagReader
+    from landmark_nav.conversions import ConversionError
+    from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
+    with BagReader(folder) as bag:
+        topics = [t for t in IMAGE_TOPICS if t in bag.topics()]
+        if not topics:
+            sys.exit(f'error: bag {folder} has none of the image topics '
+                     f'{", ".join(IMAGE_TOPICS)}')
+        msgs = list(bag.messages(topics=topics[:1]))
+        if count is not None:
+            msgs = spread(msgs, count)
+        out = []
+        for m in msgs:
+            try:
+                msg = m.decode()
+                img = (compressed_to_gray(msg) if m.topic.endswith('compressed')
+                       else image_to_gray(msg))
+            except ConversionError as e:
+                sys.exit(f'error: bag {folder}, {m.topic} at {m.log_time_ns} ns: {e}')
+            out.append((f'{m.topic}@{m.log_time_ns}', img))
+    return out
