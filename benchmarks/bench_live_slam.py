@@ -34,6 +34,12 @@ driver's lost-scan warnings and what the emulator could not send.
 ``--rate 10`` runs the devices at ten times their data rates (``emulate robot --rate 10``:
 400 scans/s and 100 Hz odometry, ``base_driver.cycle_time`` 0.01 s) with the robot moving
 as at rate 1: the 10x soak, where the nodes cannot keep up and must say how much they drop.
+
+Data: none. The run is a closed loop through the live drivers: the emulated devices answer
+the drivers' serial commands and the robot moves as ``drive`` commands it from ekf_slam's
+estimate, which a recording cannot do. The same pipeline on recorded data is
+``bench_node_cpu.py BAG`` (CPU per scan through DDS) and ``bench_soak.py --bag BAG``
+(latency, CPU and memory).
 """
 
 import argparse
@@ -78,7 +84,12 @@ def node_cpu_s(log: Path) -> dict:
 
 def main() -> int:
     """Run the emulator, the pipeline and the driver; print the figures."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split('\n')[0],
+        epilog='No data argument: the run is a closed loop through the live drivers (the '
+               "emulated devices answer the drivers' commands, the robot moves as drive "
+               "commands it from ekf_slam's estimate), which a recording cannot replace. On "
+               'recorded data: bench_node_cpu.py BAG and bench_soak.py --bag BAG.')
     parser.add_argument('--seconds', type=float, default=120.0)
     parser.add_argument('--route', default='office')
     parser.add_argument('--laser', default='urg', choices=('urg', 'lms200'))

@@ -4,6 +4,7 @@ Run from the repository root::
 
     python benchmarks/bench_localization.py sonar [--runs 500] [--bag DIR]
     python benchmarks/bench_localization.py model [--frames N] [--seeds S] [--first-seed K]
+        [--bag DIR]
 
 ``sonar``: one EKF / UKF update and the ray-cast time per beam. Targets (issue 6): one UKF
 measurement update with 16 sonars <= 3 ms, one EKF update <= 1 ms. Medians over ``--runs``
@@ -30,6 +31,14 @@ matching and the EKF update), end-to-end frames/s (image lines + filter, the nod
 per image) and the ratio of that end-to-end time to LSD's on the same frames, since
 absolute times vary between machines and with load.
 Target (issue): >= 10 frames/s end to end at 320 x 240.
+
+``model --bag DIR``: the line sources on recorded images instead: a bag with
+``/camera/image_raw`` or ``/camera/image_raw/compressed`` (or a folder of png / jpg
+images), the first ``--frames`` images (default all). Printed per source: the median time
+per frame of the line detector, the median number of segments, frames/s and the ratio to
+LSD's time on the same frames; the sources take turns on each frame, as above. The
+localization errors and the filter's time need the map's line model and the true poses,
+which a recording does not carry: those columns are the rendered run's only.
 """
 
 import math
@@ -38,7 +47,7 @@ import sys
 import time
 from typing import Callable, List
 
-from common import run_subcommand, subcommand_parser
+from common import load_images, run_subcommand, subcommand_parser
 from landmark_nav.evaluation.localization import LocalizationInput
 from landmark_nav.evaluation.localization_bags import load_bag_input, world_map
 from landmark_nav.evaluation.model_localization import (HallwayRunConfig, run_hallway_methods,
@@ -48,7 +57,7 @@ from landmark_nav.localization.grid import rasterize_world, raycast_grid
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.nodes.common import limit_threads
 from landmark_nav.sim import run_scenario
-from landmark_nav.vision.rwrht import MODEL_LINE_METHODS
+from landmark_nav.vision.rwrht import detect_model_lines, MODEL_LINE_METHODS
 import numpy as np
 from scipy.stats import chi2
 
@@ -107,9 +116,37 @@ def run_sonar(args) -> int:
     return 0
 
 
+def run_model_bag(args) -> int:
+    """Run ``model --bag DIR``: the line sources' time per recorded frame."""
+    images = [img for _, img in load_images(args.bag)][:args.frames]
+    ms = {m: [] for m in MODEL_LINE_METHODS}
+    count = {m: [] for m in MODEL_LINE_METHODS}
+    n = len(MODEL_LINE_METHODS)
+    rngs = {m: np.random.default_rng(2000) for m in MODEL_LINE_METHODS}
+    for frame, img in enumerate(images):
+        for k in range(n):
+            method = MODEL_LINE_METHODS[(frame + k) % n]   # rotating order, as in the run
+            tic = time.perf_counter()
+            lines = detect_model_lines(img, method, rng=rngs[method])
+            ms[method].append(1e3 * (time.perf_counter() - tic))
+            count[method].append(len(lines))
+    sizes = sorted({f'{img.shape[1]} x {img.shape[0]}' for img in images})
+    lsd = float(np.median(ms['lsd']))
+    print(f'{args.bag}: {len(images)} frames at {", ".join(sizes)}; line sources only (the '
+          'filter needs the map\'s line model)')
+    print(f'{"lines":>16} {"lines ms":>9} {"segments":>9} {"frames/s":>9} {"x LSD":>6}')
+    for method in MODEL_LINE_METHODS:
+        t = float(np.median(ms[method]))
+        print(f'{method:>16} {t:9.1f} {float(np.median(count[method])):9.0f} {1e3 / t:9.1f} '
+              f'{t / lsd:6.2f}')
+    return 0
+
+
 def run_model(args) -> int:
     """Run the ``model`` subcommand: one row per line source."""
     limit_threads()                      # as in the node
+    if args.bag:
+        return run_model_bag(args)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     by_seed = [run_hallway_methods(s, MODEL_LINE_METHODS, HallwayRunConfig(max_frames=args.frames))
                for s in seeds]
@@ -149,10 +186,16 @@ def main(argv=None) -> int:
                    help='a recorded simulator bag (with ground_truth.yaml) instead of the '
                         'simulated hallway run')
     p.set_defaults(run=run_sonar)
-    p = sub.add_parser('model', help='the model localizer by line source on rendered frames')
-    p.add_argument('--frames', type=int, default=150, help='frames per seed')
+    p = sub.add_parser('model', help='the model localizer by line source on rendered frames '
+                                     '(--bag DIR: the line sources on recorded images)')
+    p.add_argument('--frames', type=int, default=150,
+                   help='frames per seed (with --bag: the first N images)')
     p.add_argument('--seeds', type=int, default=1, help='number of seeds')
     p.add_argument('--first-seed', type=int, default=0)
+    p.add_argument('--bag', default=None, metavar='DIR',
+                   help='time the line sources on the images of this bag '
+                        '(/camera/image_raw or /camera/image_raw/compressed) or folder '
+                        '(png / jpg) instead of the rendered run')
     p.set_defaults(run=run_model)
     return run_subcommand(ap, argv)
 

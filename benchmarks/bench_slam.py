@@ -3,11 +3,12 @@
 Run from the repository root::
 
     python benchmarks/bench_slam.py step-time [--landmarks 50 100 200] [--steps 200]
-        [--threads 1] [--seed 0]
+        [--threads 1] [--seed 0] [--bag DIR]
     python benchmarks/bench_slam.py ambiguous [--seeds 0-9]
 
-Both run on generated input: a random map (``--seed``) and the simulator's ``ambiguous``
-scenario (``--seeds``).
+Both run on generated input by default: a random map (``--seed``) and the simulator's
+``ambiguous`` scenario (``--seeds``); ``step-time --bag DIR`` times the steps of a
+recorded bag.
 
 ``step-time``: one EKF-SLAM step (prediction + ICNN association + update). For each map
 size N a filter is built with N landmarks scattered over a 40 m x 40 m area (augmented with
@@ -24,6 +25,18 @@ BLAS threads: ``--threads`` (default 1) is exported as ``OPENBLAS_NUM_THREADS`` 
 small and threading costs more than it gives. Targets: <= 1 ms (N = 50), <= 2 ms (100),
 <= 6 ms (200).
 
+``step-time --bag DIR``: the filter steps of a recorded bag with ``/scan`` and ``/odom``
+(e.g. ``bags/office``, or a log imported with ``landmark_nav import``), the first
+``--steps`` scans (default all). Each scan's corners (:func:`scan_features`, not timed) go
+to :class:`SlamFrontend` with the odometry, as the ``ekf_slam`` node feeds it, default
+:class:`SlamParams`; the time of a step is that of the front end's call that made it
+(odometry interpolation, de-skew, prediction, association and update, the filter's checks):
+a step made while the front end takes an odometry sample (the one that lets a waiting scan
+through) or a scan is timed in that call (shared among the steps it made). Here the map
+grows as the robot explores, so ``--landmarks`` and ``--seed`` do not apply: the steps are
+printed in four consecutive quarters, each with the median map size N, the state size n,
+the median and 90th percentile step time and the median corners per scan.
+
 ``ambiguous``: the ``ambiguous`` scenario
 (:func:`landmark_nav.sim.scenarios.ambiguous_world`): the robot maps an irregular row of
 0.3 m posts whose corners of the same kind are 0.45-0.77 m apart, then drives a 72 m loop
@@ -34,7 +47,9 @@ filter with the default :class:`SlamParams` once per method: ``ICNN`` (the chapt
 default: ICNN whose hypothesis, when jointly incompatible at a gross-error level, is
 decided by JCBB) (nothing else differs), and is scored by
 :func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth
-corner ids). Printed per seed: the odometry error accumulated over the blackout (position,
+corner ids; a recording has no such truth, which is why this subcommand is synthetic
+only: the wrong associations can only be counted where the true landmark of each
+observation is known). Printed per seed: the odometry error accumulated over the blackout (position,
 heading), then per method the wrong associations out of all associations, the ATE RMSE over
 the scans after the blackout, the mapped landmarks against the true visible corners,
 duplicated and ghost landmarks and the filter time. The last line sums the wrong
@@ -47,7 +62,7 @@ from pathlib import Path
 import statistics
 import sys
 import time
-from typing import Dict, List
+from typing import Dict, List, Optional, Tuple
 
 
 def _threads_from_argv() -> str:
@@ -65,10 +80,12 @@ for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import run_subcommand, subcommand_parser  # noqa: E402
-from landmark_nav.evaluation.slam import run_slam, score_run  # noqa: E402
+from landmark_nav.evaluation.slam import run_slam, scan_features, score_run  # noqa: E402
 from landmark_nav.geometry import compose, inverse_transform_points, wrap_angle  # noqa: E402
-from landmark_nav.sim import run_scenario  # noqa: E402
+from landmark_nav.sim import OdometrySample, run_scenario, ScanSample  # noqa: E402
 from landmark_nav.slam import EkfSlam, SlamParams  # noqa: E402
+from landmark_nav.slam.frontend import Corners, SlamFrontend  # noqa: E402
+from landmark_nav.slam.visibility import ScanGeometry  # noqa: E402
 from landmark_nav.slam.ekf_slam import (do_data_association, ekf_predict,  # noqa: E402
                                         ekf_update, is_psd, observation_model,
                                         odometry_noise)
@@ -223,8 +240,72 @@ def run_ambiguous(args) -> int:
     return 0
 
 
+def bag_steps(bag: str, max_scans: Optional[int]) -> List[Tuple[float, int, int]]:
+    """Return ``(step ms, landmarks after the step, corners)`` of each step over a bag."""
+    from landmark_nav.evaluation.bags import load_bag
+    if not Path(bag, 'metadata.yaml').is_file():
+        sys.exit(f'error: bag {bag} not found (a rosbag2 folder with metadata.yaml)')
+    scenario = load_bag(bag, require_reference=False)
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    made: List[Tuple[int, int]] = []      # (landmarks after the step, scan index)
+    fe = SlamFrontend(SlamParams(), mount,
+                      on_step=lambda st: made.append((st.slam.num_landmarks, st.tag)))
+    sigma = float(getattr(scenario.laser, 'sigma_range', fe.params.sigma_range))
+    out: List[Tuple[float, int, int]] = []
+    corners_of: List[int] = []
+
+    def timed(call, *a) -> None:
+        """Call the front end; share its time among the steps it made."""
+        done = len(made)
+        tic = time.perf_counter()
+        call(*a)
+        ms = 1e3 * (time.perf_counter() - tic)
+        for size, scan in made[done:]:
+            out.append((ms / (len(made) - done), size, corners_of[scan]))
+
+    for ev in scenario.events:
+        if isinstance(ev, OdometrySample):
+            timed(fe.add_odometry, ev.stamp_ns, ev.pose, ev.covariance)
+        elif isinstance(ev, ScanSample):
+            if max_scans is not None and len(corners_of) >= max_scans:
+                break
+            corners, segs = scan_features(ev)
+            geometry = ScanGeometry(np.asarray(ev.ranges, dtype=float), ev.angle_min,
+                                    ev.angle_increment, ev.range_min, ev.range_max, mount,
+                                    sigma)
+            corners_of.append(len(corners))
+            timed(fe.add_features, Corners.from_corners(
+                ev.stamp_ns, corners, ev.time_increment, segs, None, geometry),
+                len(corners_of) - 1)
+    timed(fe.flush)
+    scans = len(corners_of)
+    if not out:
+        sys.exit(f'error: bag {bag}: no filter step ({scans} scans; are /scan and /odom '
+                 'there?)')
+    return out
+
+
+def run_step_time_bag(args) -> int:
+    """Run ``step-time --bag DIR``: the steps in four consecutive quarters."""
+    steps = bag_steps(args.bag, args.steps)
+    print(f'{args.bag}: {len(steps)} EKF-SLAM steps through SlamFrontend, default SlamParams '
+          f'(BLAS threads: {os.environ["OPENBLAS_NUM_THREADS"]})')
+    print(f'{"N":>4} {"n":>4} {"step ms":>8} {"p90":>6} {"corners":>7} {"steps":>5}')
+    for part in np.array_split(np.array(steps, dtype=float), 4):
+        if not len(part):
+            continue
+        n_lm = int(np.median(part[:, 1]))
+        print(f'{n_lm:>4} {3 + 2 * n_lm:>4} {np.median(part[:, 0]):>8.3f} '
+              f'{np.quantile(part[:, 0], 0.9):>6.2f} {np.median(part[:, 2]):>7.1f} '
+              f'{len(part):>5}')
+    return 0
+
+
 def run_step_time(args) -> int:
     """Run the ``step-time`` subcommand: one line per map size."""
+    if args.bag:
+        return run_step_time_bag(args)
+    args.steps = args.steps or 200
     print(f'EKF-SLAM step = predict + ICNN + update with {OBS} observations '
           f'(BLAS threads: {os.environ["OPENBLAS_NUM_THREADS"]})')
     head = (f'{"N":>4} {"n":>4} {"step ms":>8} {"p90":>6} {"target":>6} {"pred":>6} '
@@ -252,11 +333,18 @@ def main(argv=None) -> int:
     ap, sub = subcommand_parser(__doc__)
     p = sub.add_parser('step-time', help='time of one filter step against the map size')
     p.add_argument('--landmarks', type=int, nargs='+', default=[50, 100, 200])
-    p.add_argument('--steps', type=int, default=200, help='timed steps per map size')
+    p.add_argument('--steps', type=int, default=None,
+                   help='timed steps per map size (default 200); with --bag: the first N '
+                        'scans (default all)')
     p.add_argument('--threads', default='1', help='BLAS threads (exported before numpy)')
     p.add_argument('--seed', type=int, default=0, help='seed of the random map')
+    p.add_argument('--bag', default=None, metavar='DIR',
+                   help="time the steps over a recorded bag's /scan and /odom instead (e.g. "
+                        'bags/office or an imported log); --landmarks and --seed do not apply')
     p.set_defaults(run=run_step_time)
-    p = sub.add_parser('ambiguous', help='ICNN against JCBB on the ambiguous scenario')
+    p = sub.add_parser('ambiguous', help='ICNN against JCBB on the ambiguous scenario (synthetic '
+                                         'only: counting wrong associations needs the true '
+                                         'landmark of each observation)')
     p.add_argument('--seeds', default='0-9', help="simulator seeds, e.g. '0-9' or '1,4,7'")
     p.set_defaults(run=run_ambiguous)
     return run_subcommand(ap, argv)
