@@ -36,14 +36,15 @@ heading <= 0.5 deg and lateral <= 3 cm median; fused lateral <= 1.5 cm and headi
 
 ``loop``: the corridor follower in closed loop over DDS, three lengths of the corridor back
 and forth. It takes no data argument: a closed loop needs a world that answers the node's
-``cmd_vel``, which a recording cannot; it is the simulated corridor's. Starts the ``corridor_follower`` node in a process of its own (its shipped parameters,
-with the rendered corridor's camera mount and geometry, ``stamped_cmd_vel: true`` and
-``speed`` 0.5 m/s) on a private DDS domain (localhost only), and drives the simulated robot
-of :mod:`landmark_nav.sim.corridor_loop` with the node's ``cmd_vel``: 320 x 240 frames at
-5 Hz, odometry at 20 Hz with Kleeman noise and a 1 % right-wheel scale error, start 15 cm
-off the centre line and 4 deg off the corridor axis, 2 m into the 30 m corridor, legs of
-26 m (to 2 m before the far end and back), turning on the spot at the ends with the
-follower disabled.
+``cmd_vel``, which a recording cannot; it is the simulated corridor's. Starts the
+``corridor_follower`` node in a process of its own (its shipped parameters, with the
+rendered corridor's camera mount and geometry, ``stamped_cmd_vel: true`` and ``speed`` 0.5
+m/s) on a private DDS domain (localhost only), and drives the simulated robot of
+:mod:`landmark_nav.sim.corridor_loop` with the node's ``cmd_vel``: 320 x 240 frames at 5
+Hz, odometry at 20 Hz with Kleeman noise and a 1 % right-wheel scale error, start 15 cm off
+the centre line and 4 deg off the corridor axis, 2 m into the 30 m corridor, legs of 26 m
+(to 2 m before the far end and back), turning on the spot at the ends with the follower
+disabled.
 
 Acceptance (issue): within 5 cm of the centre line on 3 lengths, never touching a wall
 (robot radius 0.25 m). The lateral figures are taken after the first 2 m of path (the

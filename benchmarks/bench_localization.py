@@ -133,7 +133,7 @@ def run_model_bag(args) -> int:
     sizes = sorted({f'{img.shape[1]} x {img.shape[0]}' for img in images})
     lsd = float(np.median(ms['lsd']))
     print(f'{args.bag}: {len(images)} frames at {", ".join(sizes)}; line sources only (the '
-          'filter needs the map\'s line model)')
+          "filter needs the map's line model)")
     print(f'{"lines":>16} {"lines ms":>9} {"segments":>9} {"frames/s":>9} {"x LSD":>6}')
     for method in MODEL_LINE_METHODS:
         t = float(np.median(ms[method]))

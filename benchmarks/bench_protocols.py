@@ -6,12 +6,12 @@ Run from the repository root::
     python benchmarks/bench_protocols.py --capture FILE --protocol scip2|lms2xx|p2os
         [--repeat R]
 
-By default, frames are built with the emulator-side encoders (fixed seed): one 1081-step SCIP 2.0 ``MD``
-scan (3-character values, 51 data lines), one 361-value SICK LMS2xx ``B0`` telegram and one
-P2OS status packet with 4 sonar readings. Each is decoded both by the one-shot decoder and by
-a stream decoder fed the whole frame. The script prints the median time per frame. Targets:
-<= 0.5 ms for the SCIP scan and the ``B0`` telegram, <= 0.05 ms for the P2OS packet; the
-exit status is 1 when one is missed (0 with ``--no-fail``).
+By default, frames are built with the emulator-side encoders (fixed seed): one 1081-step
+SCIP 2.0 ``MD`` scan (3-character values, 51 data lines), one 361-value SICK LMS2xx ``B0``
+telegram and one P2OS status packet with 4 sonar readings. Each is decoded both by the
+one-shot decoder and by a stream decoder fed the whole frame. The script prints the median
+time per frame. Targets: <= 0.5 ms for the SCIP scan and the ``B0`` telegram, <= 0.05 ms
+for the P2OS packet; the exit status is 1 when one is missed (0 with ``--no-fail``).
 
 ``--capture FILE``: the raw bytes a device sent, captured to a file (e.g. ``cat
 /dev/ttyACM0 > cap.bin`` while the driver talks to it, or a serial sniffer's dump), decoded

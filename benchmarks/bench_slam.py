@@ -47,9 +47,9 @@ filter with the default :class:`SlamParams` once per method: ``ICNN`` (the chapt
 default: ICNN whose hypothesis, when jointly incompatible at a gross-error level, is
 decided by JCBB) (nothing else differs), and is scored by
 :func:`landmark_nav.evaluation.slam.score_run` (wrong associations via the ground-truth
-corner ids; a recording has no such truth, which is why this subcommand is synthetic
-only: the wrong associations can only be counted where the true landmark of each
-observation is known). Printed per seed: the odometry error accumulated over the blackout (position,
+corner ids; a recording has no such truth, which is why this subcommand is synthetic only:
+the wrong associations can only be counted where the true landmark of each observation is
+known). Printed per seed: the odometry error accumulated over the blackout (position,
 heading), then per method the wrong associations out of all associations, the ATE RMSE over
 the scans after the blackout, the mapped landmarks against the true visible corners,
 duplicated and ghost landmarks and the filter time. The last line sums the wrong
@@ -84,11 +84,11 @@ from landmark_nav.evaluation.slam import run_slam, scan_features, score_run  # n
 from landmark_nav.geometry import compose, inverse_transform_points, wrap_angle  # noqa: E402
 from landmark_nav.sim import OdometrySample, run_scenario, ScanSample  # noqa: E402
 from landmark_nav.slam import EkfSlam, SlamParams  # noqa: E402
-from landmark_nav.slam.frontend import Corners, SlamFrontend  # noqa: E402
-from landmark_nav.slam.visibility import ScanGeometry  # noqa: E402
 from landmark_nav.slam.ekf_slam import (do_data_association, ekf_predict,  # noqa: E402
                                         ekf_update, is_psd, observation_model,
                                         odometry_noise)
+from landmark_nav.slam.frontend import Corners, SlamFrontend  # noqa: E402
+from landmark_nav.slam.visibility import ScanGeometry  # noqa: E402
 import numpy as np  # noqa: E402
 
 TARGET_MS = {50: 1.0, 100: 2.0, 200: 6.0}

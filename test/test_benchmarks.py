@@ -51,7 +51,9 @@ TINY_RUNS = {
         (['corner-repeatability', '--data', '{carmen}', 'tiny'],
          r'\| tiny \| [\d.]+ \(\d+/\d+\) \|')],
     'bench_slam.py': [
-        (['step-time', '--landmarks', '10', '--steps', '3'], r'\n\s+10\s+23\s+[\d.]+')],
+        (['step-time', '--landmarks', '10', '--steps', '3'], r'\n\s+10\s+23\s+[\d.]+'),
+        (['step-time', '--bag', '{small_bag}', '--steps', '8'],
+         r'\d+ EKF-SLAM steps through SlamFrontend.*\n.*\n\s+\d+\s+\d+\s+[\d.]+\s+[\d.]+')],
     'bench_slam_real.py': [
         (['evaluate', '--data', '{carmen}', 'tiny', '--landmarks', 'both'],
          r'tiny 0 both 0 \d+ \d+ [\d.]+'),
@@ -64,9 +66,13 @@ TINY_RUNS = {
         (['defaults', '--data', '{carmen}', 'tiny'], r'\ntiny \| [\d.]+ / [\d.]+ \([\d.]+\) \|')],
     'bench_localization.py': [
         (['sonar', '--bag', '{hallway}', '--runs', '3'], r'EKF update\s+[\d.]+'),
-        (['model', '--frames', '3'], r'lsd\s+[\d.]+\s+[\d.]+')],
+        (['model', '--frames', '3'], r'lsd\s+[\d.]+\s+[\d.]+'),
+        (['model', '--bag', '{corridor}', '--frames', '2'],
+         r'2 frames at 320 x 240.*(\n.*)+\n\s+rwrht\s+[\d.]+\s+\d+')],
     'bench_landmarks.py': [
         (['detector', '--frames', '2', '--repeat', '1'], r'landmark detector\s+[\d.]+'),
+        (['detector', '--data', '{photos}', '--frames', '1', '--repeat', '1'],
+         r'1 images of .*\n(.*\n)+landmark detector\s+[\d.]+'),
         (['real', 'all', '--data', '{photos}', '--per-size', '1', '--sizes', '5',
           '--per-distance', '1', '--false-frames', '2', '--detectors', 'landmark', 'aruco'],
          r'\| 5 px \| 1 \| [\d.]+ \|'),
@@ -80,10 +86,14 @@ TINY_RUNS = {
     'bench_corridor.py': [
         (['frames', '--frames', '2', '--repeat', '1', '--speed-only'],
          r'segmented_hough\s+[\d.]+\s+[\d.]+'),
+        (['frames', '--data', '{corridor}', '--frames', '2', '--repeat', '1'],
+         r'2 images at 320 x 240.*(\n.*)+\n\s+lsd\s+[\d.]+\s+[\d.]+'),
         (['loop', '--distance', '2.5', '--lengths', '1', '--domain', '{domain}'],
          r'lateral after the first 2 m: max [\d.]+ cm')],
     'bench_protocols.py': [
-        (['--repeat', '3', '--no-fail'], r'P2OS status packet, P2osDecoder.feed\s+[\d.]+')],
+        (['--repeat', '3', '--no-fail'], r'P2OS status packet, P2osDecoder.feed\s+[\d.]+'),
+        (['--capture', '{capture}', '--protocol', 'scip2', '--repeat', '3'],
+         r'Scip2Decoder.feed of the whole capture: 3 frames, 0 errors\n.*\n\s+[\d.]+\s+[\d.]+')],
     'bench_node_cpu.py': [
         (['{bag}', '--seconds', '2', '--rate', '2', '--domain', '{domain}'],
          r'ekf_slam node CPU / core = [\d.]+')],
@@ -145,10 +155,12 @@ def inputs(tmp_path_factory):
     (tmp / 'photos').mkdir()
     for p in (tmp / 'photos_src' / 'images').glob('*.png'):
         p.rename(tmp / 'photos' / p.name)
+    tiny_logs.write_scip2_capture(tmp / 'capture.bin', frames=3)
     return {'carmen': str(tmp / 'carmen'), 'wean': str(tmp / 'wean'),
             'york': str(tmp / 'york'), 'camvid': str(tmp / 'camvid'),
             'photos': str(tmp / 'photos'), 'small_bag': str(tmp / 'small_bag'),
             'bag': str(REPO / 'bags' / 'office'), 'hallway': str(REPO / 'bags' / 'hallway'),
+            'corridor': str(REPO / 'bags' / 'corridor'), 'capture': str(tmp / 'capture.bin'),
             'tmp': str(tmp), 'domain': os.environ.get('ROS_DOMAIN_ID', '0')}
 
 

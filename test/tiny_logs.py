@@ -4,7 +4,7 @@ A rectangular room (8 x 5 m) with a pillar, ray cast for a robot driving along i
 log (``FLASER``, 361 beams over 180 deg, the pose as the corrected pose), a CMU Wean log
 (``O`` and ``L`` lines, cm, 180 beams, the laser 25 cm ahead) and the room as a beesoft
 occupancy map (``wean.dat.gz``, 10 cm cells, the value the probability of free space as in
-the Wean data).
+the Wean data). Also a raw byte capture of a SCIP 2.0 laser (:func:`write_scip2_capture`).
 """
 
 import gzip
@@ -156,3 +156,19 @@ def write_camvid(folder: Path, frames: int = 2, seed: int = 0) -> Path:
         cv2.imwrite(str(folder / 'images' / f'f{n:03d}.png'), rgb[..., ::-1])
         cv2.imwrite(str(folder / 'labels_camvid11' / f'f{n:03d}.png'), label)
     return folder
+
+
+def write_scip2_capture(path: Path, frames: int = 3) -> Path:
+    """Write the bytes a URG laser sends for ``frames`` ``MD`` scans of the room (a capture).
+
+    1081 steps over 270 deg at 0.25 deg, ranges ray cast in mm along the path, encoded by
+    the emulator's encoder as ``cat /dev/ttyACM0 > FILE`` would record them.
+    """
+    from landmark_nav.drivers import scip2
+    angles = np.radians(np.arange(-540, 541) * 0.25)
+    out = b''
+    for k, pose in enumerate(poses(frames)):
+        mm = np.rint(1000.0 * ray_cast(pose, angles)).astype(int)
+        out += scip2.encode_scan_reply_raw(b'MD0000108001000', mm, 1000 + 25 * k)
+    path.write_bytes(out)
+    return path
