@@ -94,7 +94,8 @@ def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json,
               reference=args.reference, mount=args.mount, sensor_sigma_r=args.sensor_sigma_r,
               scans=args.scans, seed=args.seed, truth_free=args.truth_free,
-              progress=sys.stderr.isatty()))
+              progress=sys.stderr.isatty(), params_files=args.params_file,
+              settings=args.set))
     return 0
 
 
@@ -369,7 +370,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('evaluate-features',
                        help='score corner and line extractors on a bag: against the ground '
                             'truth of a simulator bag, else with truth-free metrics (PLE ray '
-                            'metric, false-surface beams, fit, repeatability)')
+                            'metric, false-surface beams, fit, repeatability)',
+                       epilog="Each method runs with its node's configuration (corner_extractor "
+                       'or line_extractor; the parameter method is set per row): the '
+                       'defaults, then the --params-file files, then what the bag states (a '
+                       "simulator bag's laser noise; on other bags the range noise estimated "
+                       'from the scans unless --set gives sigma_r), then --set, then '
+                       '--sigma-r. max_beams has no effect here.')
     p.add_argument('bag', help='rosbag2 directory with /scan (simulator or imported)')
     p.add_argument('--every', type=int, default=1, help='use every n-th scan')
     p.add_argument('--sigma-r', type=_sigma_or_auto, default=None, metavar='METRES|auto',
@@ -393,6 +400,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--seed', type=int, default=0,
                    help='truth-free: seed of numpy.random.default_rng for the draw (default 0)')
     p.add_argument('--json', default=None, help='also write the figures to this JSON file')
+    p.add_argument('--params-file', action='append', default=[], metavar='FILE',
+                   help='corner_extractor and line_extractor parameter file (ROS 2 YAML, as '
+                        'ros2 run --params-file: /** and each node\'s section; repeatable, a '
+                        'later file wins; e.g. "$(landmark_nav config line_extractor)")')
+    p.add_argument('--set', action='append', default=[], metavar='NODE.NAME=VALUE',
+                   help='one parameter, after the files: corner_extractor.NAME=VALUE, '
+                        'line_extractor.NAME=VALUE, or NAME=VALUE for each node declaring it '
+                        '(the value as YAML, as -p NAME:=VALUE; repeatable)')
     p.set_defaults(func=_cmd_evaluate_features)
 
     p = sub.add_parser('calibrate-odometry',
