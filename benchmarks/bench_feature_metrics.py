@@ -59,11 +59,11 @@ from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repe
                                                   Repeatability, segments_of)
 from landmark_nav.geometry import transform_points
 from landmark_nav.importers.carmen import read_carmen_scans
-from landmark_nav.tools.evaluate_features import format_scan_metrics
 from landmark_nav.importers.writer import import_log
 from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.lines import extract_lines, LineParams
 from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.tools.evaluate_features import format_scan_metrics
 import numpy as np
 
 # The order of the README's feature tables.

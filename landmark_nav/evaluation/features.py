@@ -465,9 +465,10 @@ def score_scan(run: FeatureRun, world, sensor_pose_at: Callable[[np.ndarray], np
     """Extract features from one simulated scan and add their scores to ``run``.
 
     The one scoring path of the simulator figures (``landmark_nav evaluate-features`` and
-    the office tests): valid beams per REP 117, the segmentation, each extractor, then :func:`score_corners` against
-    :func:`corner_truth` and :func:`score_lines` against :func:`wall_truth` (true laser
-    pose at the middle of the sweep; each line compared in the pose of its middle beam).
+    the office tests): valid beams per REP 117, the segmentation, each extractor, then
+    :func:`score_corners` against :func:`corner_truth` and :func:`score_lines` against
+    :func:`wall_truth` (true laser pose at the middle of the sweep; each line compared in
+    the pose of its middle beam).
     Each extractor runs on its node's segmentation (``run.segmenters``:
     :func:`segment_per_extractor`) at its node's range noise of the scan.
 
