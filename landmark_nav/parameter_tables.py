@@ -45,7 +45,7 @@ def field_value(parameter: Parameter, value: Any) -> Any:
 
 
 _TYPE_NAMES = {bool: 'a bool (true / false)', int: 'an integer', float: 'a double',
-               str: 'a string', list: 'a list of doubles'}
+               str: 'a string', list: 'a list of doubles', 'strings': 'a list of strings'}
 
 
 def check_value(name: str, value: Any, param: Parameter) -> Any:
@@ -59,9 +59,10 @@ def check_value(name: str, value: Any, param: Parameter) -> Any:
     """
     kind = type(param.default)
     ok = isinstance(value, kind) and (kind is not int or not isinstance(value, bool))
-    if kind is list:
-        ok = isinstance(value, list) and all(
-            isinstance(v, float) for v in value)
+    if kind is list:  # a list of doubles, or of strings when the default is
+        item = str if param.default and isinstance(param.default[0], str) else float
+        ok = isinstance(value, list) and all(isinstance(v, item) for v in value)
+        kind = 'strings' if item is str else list
     if not ok:
         hint = '; write {}.0 for a double'.format(value) if (
             kind is float and isinstance(value, int) and not isinstance(value, bool)) else ''

@@ -229,13 +229,21 @@ def _cmd_evaluate_localization(args: argparse.Namespace) -> int:
     import math
     from landmark_nav.evaluation.localization_bags import (evaluate_localization,
                                                            format_evaluation)
-    sx, sy, syaw_deg = args.initial_std
-    filters = ['ekf', 'ukf'] if args.filter == 'both' else [args.filter]
-    for filt in filters:
-        result = evaluate_localization(args.bag, filt, map_path=args.map,
-                                       seed_for_initial=args.seed,
-                                       initial_std=(sx, sy, math.radians(syaw_deg)),
-                                       out_dir=args.out, odometry_source=args.odometry_source)
+    from landmark_nav.localization.configuration import localizer_configuration
+    from landmark_nav.tools.node_parameters import given_parameters
+    files = given_parameters(args.params_file, [], 'sonar_localizer')
+    settings = given_parameters([], args.set, 'sonar_localizer')
+    values = localizer_configuration({**files, **settings}).values
+    std = ((args.initial_std[0], args.initial_std[1], math.radians(args.initial_std[2]))
+           if args.initial_std else tuple(values[f'initial_pose.std_{n}'] for n in 'xy')
+           + (values['initial_pose.std_yaw'],))
+    chosen = args.filter or settings.get('filter', 'both')
+    for filt in ['ekf', 'ukf'] if chosen == 'both' else [chosen]:
+        result = evaluate_localization(
+            args.bag, filt, map_path=args.map or values['map_file'] or None,
+            seed_for_initial=args.seed, initial_std=std, out_dir=args.out,
+            odometry_source=args.odometry_source or settings.get('odometry_source'),
+            files=files, settings=settings)
         print(format_evaluation(result))
     return 0
 
@@ -402,7 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--json', default=None, help='also write the figures to this JSON file')
     p.add_argument('--params-file', action='append', default=[], metavar='FILE',
                    help='corner_extractor and line_extractor parameter file (ROS 2 YAML, as '
-                        'ros2 run --params-file: /** and each node\'s section; repeatable, a '
+                        "ros2 run --params-file: /** and each node's section; repeatable, a "
                         'later file wins; e.g. "$(landmark_nav config line_extractor)")')
     p.add_argument('--set', action='append', default=[], metavar='NODE.NAME=VALUE',
                    help='one parameter, after the files: corner_extractor.NAME=VALUE, '
@@ -493,21 +501,31 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser('evaluate-localization',
                        help='run the sonar EKF / UKF offline on a simulator bag against its '
-                            'ground truth; writes JSON + PNGs')
+                            'ground truth; writes JSON + PNGs',
+                       epilog="The filter runs sonar_localizer's configuration: its defaults, "
+                       'then the --params-file files, then what the bag and the map state '
+                       '(the odometry source, wheel radius, axle length and k1..k3 of the '
+                       'bag; unknown: free on a map file with unknown cells), then --set, '
+                       'then the options above. Every filter is evaluated unless --set '
+                       'filter or --filter chooses one. The initial pose is drawn around the '
+                       "ground truth; the sonar topics and mounts are the bag's; the frames, "
+                       'sync_timeout, stale_cycles and sonar_timeout have no effect here.')
     p.add_argument('bag', help='rosbag2 directory recorded by `simulate` (e.g. bags/hallway)')
-    p.add_argument('--filter', choices=['ekf', 'ukf', 'both'], default='both',
-                   help='filter to evaluate (default both)')
+    p.add_argument('--filter', choices=['ekf', 'ukf', 'both'], default=None,
+                   help='filter to evaluate (default both, or --set filter=...)')
     p.add_argument('--map', default=None, metavar='YAML',
                    help='map_server YAML (default: the world of ground_truth.yaml rasterised '
                         'at 0.1 m)')
     p.add_argument('--seed', type=_seed, default=None,
                    help='seed of the initial estimate (default 1000 + the bag seed)')
-    p.add_argument('--initial-std', type=float, nargs=3, default=[0.055, 0.055, 5.0],
+    p.add_argument('--initial-std', type=float, nargs=3, default=None,
                    metavar=('X_M', 'Y_M', 'YAW_DEG'),
-                   help='std of the initial estimate and covariance (default 0.055 0.055 5)')
+                   help='std of the initial estimate and covariance (default the '
+                        'parameters initial_pose.std_*: 0.055 0.055 5)')
     p.add_argument('--odometry-source', choices=['joint_states', 'odom'], default=None,
                    help='motion input (default joint_states if recorded)')
     p.add_argument('--out', default='out/localization', help='output directory')
+    add_parameter_arguments(p, 'sonar_localizer')
     p.set_defaults(func=_cmd_evaluate_localization)
 
     p = sub.add_parser('build-sonar-map',
