@@ -611,7 +611,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
     """
     from landmark_nav.laser.corners import detect_corners
     from landmark_nav.laser.extractor_configuration import (extractor_configuration,
-                                                             ScanSegmenter)
+                                                            ScanSegmenter)
     from landmark_nav.laser.lines import extract_lines
 
     nodes = ('corner_extractor', 'line_extractor')

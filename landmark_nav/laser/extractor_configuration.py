@@ -6,9 +6,9 @@ and ``landmark_nav evaluate-features --params-file / --set``, so that both run o
 configuration: :func:`parameters` lists a node's parameters with their defaults and
 :func:`extractor_configuration` turns parameter values into what the node runs (the
 segmentation's settings and the extractor's :class:`~.corners.CornerParams` or
-:class:`~.lines.LineParams`), checking names, types, limits and choices as the node does. :class:`ScanSegmenter` is
-what the node does to each scan before its extractor: the range noise (tracked with
-``sigma_r_from_data``) and the segmentation.
+:class:`~.lines.LineParams`), checking names, types, limits and choices as the node does.
+:class:`ScanSegmenter` is what the node does to each scan before its extractor: the range
+noise (tracked with ``sigma_r_from_data``) and the segmentation.
 """
 
 from dataclasses import dataclass, replace
@@ -18,9 +18,9 @@ from landmark_nav.laser.corners import CORNER_PARAMETERS, CornerParams
 from landmark_nav.laser.lines import LINE_PARAMETERS, LineParams
 from landmark_nav.laser.range_noise import RangeNoiseTracker
 from landmark_nav.laser.segmentation import Cluster, segment_scan
-import numpy as np
 from landmark_nav.parameter_tables import (dataclass_parameters, field_value, Parameter,
                                            parameter_values)
+import numpy as np
 
 #: The parameters every laser feature node declares besides its extractor's.
 SCAN_PARAMETERS = {
@@ -143,8 +143,9 @@ class ScanSegmenter:
 
     def at_scan_noise(self, params):
         """Return extractor ``params`` with ``sigma_r`` the range noise of the latest scan."""
-        return params if params.sigma_r == self.sigma_r else replace(params,
-                                                                      sigma_r=self.sigma_r)
+        if params.sigma_r == self.sigma_r:
+            return params
+        return replace(params, sigma_r=self.sigma_r)
 
 
 __all__ = ['EXTRACTORS', 'extractor_configuration', 'ExtractorConfiguration', 'parameters',

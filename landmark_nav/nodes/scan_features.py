@@ -6,15 +6,14 @@ Subscribes ``scan`` (sensor_msgs/LaserScan) best effort with a queue of 20 (0.5 
 warning naming the value (throttled per kind of problem), and segments the rest
 (parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``; these and the
 range noise's are :data:`~landmark_nav.laser.extractor_configuration.SCAN_PARAMETERS`)
-before handing
-the clusters to :meth:`ScanFeatureNode.process`. With ``sigma_r_from_data`` the range noise
-of the segmentation and the extractor is estimated from the latest ``sigma_r_scans`` scans
-(:class:`landmark_nav.laser.range_noise.RangeNoiseTracker`: local line fits and the range
-step), the node's ``sigma_r`` being its lower bound (the noise and the segmentation:
-:class:`~landmark_nav.laser.extractor_configuration.ScanSegmenter`, as offline); :meth:`ScanFeatureNode.at_scan_noise`
-gives the extractor's parameters with it. Finite negative ranges (no laser
-measures them; REP 117 reserves -inf for "too close") are treated as invalid beams, with a
-warning naming the first one. Processed and dropped scans and the latency are on
+before handing the clusters to :meth:`ScanFeatureNode.process`. With ``sigma_r_from_data``
+the range noise of the segmentation and the extractor is estimated from the latest
+``sigma_r_scans`` scans (:class:`landmark_nav.laser.range_noise.RangeNoiseTracker`: local
+line fits and the range step), the node's ``sigma_r`` being its lower bound (the noise and
+the segmentation: :class:`~landmark_nav.laser.extractor_configuration.ScanSegmenter`, as
+offline); :meth:`ScanFeatureNode.at_scan_noise` gives the extractor's parameters with it.
+Finite negative ranges (no laser measures them; REP 117 reserves -inf for "too close") are
+treated as invalid beams, with a warning naming the first one. Processed and dropped scans and the latency are on
 ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
