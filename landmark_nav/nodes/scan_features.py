@@ -13,8 +13,8 @@ line fits and the range step), the node's ``sigma_r`` being its lower bound (the
 the segmentation: :class:`~landmark_nav.laser.extractor_configuration.ScanSegmenter`, as
 offline); :meth:`ScanFeatureNode.at_scan_noise` gives the extractor's parameters with it.
 Finite negative ranges (no laser measures them; REP 117 reserves -inf for "too close") are
-treated as invalid beams, with a warning naming the first one. Processed and dropped scans and the latency are on
-``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
+treated as invalid beams, with a warning naming the first one. Processed and dropped scans
+and the latency are on ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
 import math
