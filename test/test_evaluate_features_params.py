@@ -7,8 +7,8 @@ from landmark_nav.laser.extractor_configuration import extractor_configuration, 
 from landmark_nav.testing import declared_parameters, RosHarness
 from landmark_nav.tools.cli import main
 from landmark_nav.tools.config_files import config_path
-from rclpy.parameter import Parameter
 import pytest
+from rclpy.parameter import Parameter
 from test_evaluate_features import write_room_bag
 
 REPO = Path(__file__).resolve().parents[1]

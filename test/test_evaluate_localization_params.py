@@ -8,8 +8,8 @@ from landmark_nav.localization.configuration import localizer_configuration, par
 from landmark_nav.testing import declared_parameters, RosHarness
 from landmark_nav.tools.cli import main
 from landmark_nav.tools.config_files import config_path
-from rclpy.parameter import Parameter
 import pytest
+from rclpy.parameter import Parameter
 
 REPO = Path(__file__).resolve().parents[1]
 HALLWAY = REPO / 'bags' / 'hallway'
