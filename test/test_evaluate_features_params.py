@@ -29,7 +29,7 @@ def figures(bag, tmp_path, *options, every='40'):
 
 @pytest.fixture(scope='module')
 def room(tmp_path_factory):
-    """A truth-free bag (noise-free scans of a room, laser noise stated 2 cm)."""
+    """Write a truth-free bag (noise-free scans of a room, laser noise stated 2 cm)."""
     path = tmp_path_factory.mktemp('room') / 'b'
     write_room_bag(path)
     return path

@@ -26,7 +26,7 @@ def figures(tmp_path, *options, filt='ekf'):
 
 @pytest.fixture(scope='module')
 def default(tmp_path_factory):
-    """The figures of the EKF without options."""
+    """Return the figures of the EKF without options."""
     return figures(tmp_path_factory.mktemp('default'), '--filter', 'ekf')
 
 
