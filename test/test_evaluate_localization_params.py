@@ -75,7 +75,7 @@ def test_a_params_file_sets_the_filter(tmp_path, default):
     ('gatee=0.1', "sonar_localizer has no parameter 'gatee' (did you mean gate?)"),
     ('sonar_localizer.process_noise.kd=0.1',
      "sonar_localizer has no parameter 'process_noise.kd' (did you mean process_noise.k_d?)"),
-    ('filter=pf', 'parameter filter = \'pf\' is not one of ekf, ukf'),
+    ('filter=pf', "parameter filter = 'pf' is not one of ekf, ukf"),
 ])
 def test_a_bad_setting_exits_2_naming_it(tmp_path, capsys, option, needle):
     assert main(['evaluate-localization', str(HALLWAY), '--out', str(tmp_path),
