@@ -221,7 +221,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_evaluate_corridor(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.corridor_bag import (evaluate_corridor_bag,
                                                       format_corridor_evaluation)
-    print(format_corridor_evaluation(evaluate_corridor_bag(args.bag, args.out)))
+    from landmark_nav.tools.node_parameters import given_parameters
+    files = given_parameters(args.params_file, [], 'corridor_follower')
+    settings = given_parameters([], args.set, 'corridor_follower')
+    print(format_corridor_evaluation(evaluate_corridor_bag(args.bag, args.out, files=files,
+                                                           settings=settings)))
     return 0
 
 
@@ -493,10 +497,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser('evaluate-corridor',
                        help="run the corridor follower offline on a corridor bag (the node's "
-                            'estimation loop) against its ground truth; writes corridor.json')
+                            'estimation loop) against its ground truth; writes corridor.json',
+                       epilog="The loop runs corridor_follower's configuration: its defaults, "
+                       'then the --params-file files, then what the bag states (corridor '
+                       'width and height, centre line, camera mount), then --set. The '
+                       'controller and interface parameters have no effect here.')
     p.add_argument('bag', help='rosbag2 directory recorded by `simulate corridor` (e.g. '
                                'bags/corridor)')
     p.add_argument('--out', default='out/corridor', help='output directory')
+    add_parameter_arguments(p, 'corridor_follower')
     p.set_defaults(func=_cmd_evaluate_corridor)
 
     p = sub.add_parser('evaluate-localization',
