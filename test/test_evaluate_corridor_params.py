@@ -15,7 +15,7 @@ CORRIDOR = REPO / 'bags' / 'corridor'
 
 
 def figures(tmp_path, *options):
-    """Run the command on the corridor bag; return its figures (without the bag path)."""
+    """Run the command on the corridor bag; return what it scores, without the bag path."""
     out = tmp_path / f'run{len(list(tmp_path.iterdir()))}'
     assert main(['evaluate-corridor', str(CORRIDOR), '--out', str(out), *options]) == 0
     result = json.loads((out / 'corridor.json').read_text())
