@@ -55,15 +55,15 @@ from common import (add_logs_argument, log_paths, parse_set, run_subcommand,
 from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_truth_free,
                                                   sensor_facts)
 from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repeatability,
-                                                  evaluate_scans, format_scan_metrics,
-                                                  MetricScan, ray_metrics, Repeatability,
-                                                  segments_of)
+                                                  evaluate_scans, MetricScan, ray_metrics,
+                                                  Repeatability, segments_of)
 from landmark_nav.geometry import transform_points
 from landmark_nav.importers.carmen import read_carmen_scans
 from landmark_nav.importers.writer import import_log
 from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.lines import extract_lines, LineParams
 from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.tools.evaluate_features import format_scan_metrics
 import numpy as np
 
 # The order of the README's feature tables.

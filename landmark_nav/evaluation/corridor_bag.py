@@ -10,20 +10,21 @@ against ``/ground_truth/odom`` at their stamps: lateral and heading errors, RMS 
 over every pose except the first ``skip_poses`` (20: the filter's first 0.8 s at 5 frames
 and 20 odometry steps per second), and writes ``corridor.json``.
 
-Parameters: the node's defaults (:class:`~landmark_nav.corridor.follower.FollowerConfig`)
-with the corridor width and height, centre line and camera mount of the bag's
-``ground_truth.yaml``; images from its ``image_topic`` (raw ``sensor_msgs/Image`` or, when
-the topic ends in ``/compressed``, JPEG).
+Parameters: the node's configuration (:func:`follower_config`: its defaults, the parameter
+files, the corridor width and height, centre line and camera mount of the bag's
+``ground_truth.yaml``, then ``--set``); images from its ``image_topic`` (raw
+``sensor_msgs/Image`` or, when the topic ends in ``/compressed``, JPEG).
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import json
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import (camera_info_to_model, ConversionError,
                                       odometry_to_pose, stamp_to_ns)
+from landmark_nav.corridor.configuration import follower_configuration
 from landmark_nav.corridor.follower import CorridorTracker, FollowerConfig
 from landmark_nav.geometry import wrap_angle
 from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
@@ -54,15 +55,21 @@ class CorridorReplay:
     steps: List[str]
 
 
-def follower_config(meta: Dict[str, Any]) -> FollowerConfig:
-    """Return the node's default configuration with the geometry of ``ground_truth.yaml``."""
+def follower_config(meta: Dict[str, Any], files: Optional[Mapping[str, Any]] = None,
+                    settings: Optional[Mapping[str, Any]] = None) -> FollowerConfig:
+    """Return the node's configuration with the geometry of ``ground_truth.yaml``.
+
+    ``corridor_follower``'s defaults, then ``files`` (parameter values), then what the bag
+    states (corridor width, height, centre line, camera mount), then ``settings``
+    (:func:`landmark_nav.corridor.configuration.follower_configuration`).
+    """
     corridor = meta.get('corridor') or {}
-    base = FollowerConfig()
-    return replace(base, corridor_width=float(corridor.get('width', base.corridor_width)),
-                   corridor_height=float(corridor.get('height', base.corridor_height)),
-                   centre_line=bool(corridor.get('centre_line', base.centre_line)),
-                   camera_mount=tuple(float(v) for v in meta.get('camera_mount',
-                                                                 base.camera_mount)))
+    stated = {name: cast(corridor[key]) for name, key, cast in (
+        ('corridor_width', 'width', float), ('corridor_height', 'height', float),
+        ('centre_line', 'centre_line', bool)) if key in corridor}
+    if 'camera_mount' in meta:
+        stated['camera_mount'] = [float(v) for v in meta['camera_mount']]
+    return follower_configuration({**(files or {}), **stated, **(settings or {})}).follower
 
 
 def replay_corridor_bag(bag: Any, config: Optional[FollowerConfig] = None) -> CorridorReplay:
@@ -132,9 +139,13 @@ def pose_errors(replay: CorridorReplay, truth: Dict[int, np.ndarray]
     return err_y, err_th
 
 
-def evaluate_corridor_bag(bag: Any, out_dir: Any = None,
-                          skip_poses: int = SKIP_POSES) -> Dict[str, Any]:
+def evaluate_corridor_bag(bag: Any, out_dir: Any = None, skip_poses: int = SKIP_POSES,
+                          files: Optional[Mapping[str, Any]] = None,
+                          settings: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
     """Score the follower's poses on a bag; write ``<out_dir>/corridor.json`` if given.
+
+    ``files`` and ``settings``: ``corridor_follower`` parameter values under and over what
+    the bag states (:func:`follower_config`).
 
     Returns:
         ``{'bag', 'frames', 'frames_measured', 'frames_lost', 'frames_rejected',
@@ -147,7 +158,7 @@ def evaluate_corridor_bag(bag: Any, out_dir: Any = None,
             pose left after ``skip_poses``.
     """
     bag = Path(bag)
-    replay = replay_corridor_bag(bag)
+    replay = replay_corridor_bag(bag, follower_config(load_ground_truth(bag), files, settings))
     err_y, err_th = pose_errors(replay, read_truth(bag))
     err_y, err_th = err_y[skip_poses:], err_th[skip_poses:]
     if not err_y.size:

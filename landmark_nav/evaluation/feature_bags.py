@@ -21,10 +21,10 @@ Runs the extractors directly on the bag's scans (no DDS). Two kinds of bag:
 :func:`evaluate_bag_features` picks one of the two as the command does and writes the JSON.
 """
 
-from dataclasses import asdict
+from dataclasses import asdict, replace
 import json
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import scan_to_data
@@ -38,6 +38,8 @@ import numpy as np
 
 CORNER_METHODS = ('minus_cosine', 'sliding_window', 'split_merge')
 LINE_METHODS = ('split_merge', 'alfa')
+#: Parameter values by node name (``corner_extractor``, ``line_extractor``).
+NodeValues = Mapping[str, Mapping[str, Any]]
 
 
 def _truth_track(bag):
@@ -50,28 +52,62 @@ def _truth_track(bag):
     return stamps, poses
 
 
+def feature_configurations(files: Optional[NodeValues] = None,
+                           settings: Optional[NodeValues] = None,
+                           stated: Optional[Mapping[str, Any]] = None,
+                           sigma_r: Optional[float] = None) -> Dict[str, object]:
+    """Return each feature node's configuration by node name, in the command's order.
+
+    The node's defaults, then its values of ``files`` (the ``--params-file`` files), then
+    ``stated`` (what the bag states: the simulated laser's noise), then its values of
+    ``settings`` (``--set``), then ``sigma_r`` (``--sigma-r``) for both nodes
+    (:func:`landmark_nav.laser.extractor_configuration.extractor_configuration`).
+
+    Raises:
+        ValueError: A name the node does not declare (naming the nearest one) or a value it
+            refuses.
+    """
+    from landmark_nav.laser.extractor_configuration import EXTRACTORS, extractor_configuration
+    out = {}
+    for node in EXTRACTORS:
+        values = {**(files or {}).get(node, {}), **(stated or {}),
+                  **(settings or {}).get(node, {})}
+        if sigma_r is not None:
+            values['sigma_r'] = float(sigma_r)
+        out[node] = extractor_configuration(node, values)
+    return out
+
+
 def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
                       line_methods: Sequence[str] = LINE_METHODS,
                       sigma_r: Optional[Union[float, str]] = None, every: int = 1,
-                      progress: bool = False) -> Dict[str, dict]:
+                      progress: bool = False, files: Optional[NodeValues] = None,
+                      settings: Optional[NodeValues] = None) -> Dict[str, dict]:
     """Score every method on every ``every``-th scan of a simulator bag.
 
     Args:
         bag: rosbag2 directory recorded by ``landmark_nav simulate``.
         corner_methods: Corner detectors to run.
         line_methods: Line extractors to run.
-        sigma_r: Range noise the extractors assume [m]; default: the simulated laser's;
-            ``'auto'``: estimated from the scans used, at least the simulated one
+        sigma_r: Range noise the extractors assume [m], after ``settings``; default: the
+            simulated laser's (what the bag states, after ``files``); ``'auto'``:
+            estimated from the scans used, at least the simulated one
             (:func:`landmark_nav.laser.range_noise.estimate_range_noise`).
         every: Use every n-th scan.
         progress: Show a progress bar.
+        files: ``corner_extractor`` / ``line_extractor`` parameter values by node name,
+            under the bag's statements (the simulated range and bearing noise).
+        settings: The same, over the bag's statements
+            (:func:`feature_configurations`). Each method runs with its node's
+            configuration, ``method`` set per row.
 
     Returns:
-        {'corners': {method: figures}, 'lines': {method: figures}, 'scans': n}.
+        {'corners': {method: figures}, 'lines': {method: figures}, 'scans': n,
+        'sigma_r': the line extractor's range noise, 'corner_sigma_r': the corner
+        extractor's}.
 
     """
-    from landmark_nav.laser.corners import CornerParams
-    from landmark_nav.laser.lines import LineParams
+    from landmark_nav.laser.extractor_configuration import ScanSegmenter
     from landmark_nav.sim.world import World
 
     if every < 1:
@@ -82,21 +118,21 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
     world = World.from_dict(meta['world'])
     mount = np.asarray(meta['laser']['mount'], dtype=float)
     true_sigma = float(meta['laser']['sigma_range'])  # the simulated noise (for the bound)
+    sigma_phi = float(meta['laser'].get('sigma_angle', 0.0))
     estimate = None
     if sigma_r == 'auto':
         estimate = bag_range_noise(bag, every, stated=true_sigma)
-        sigma = estimate.sigma_r
-    else:
-        sigma = true_sigma if sigma_r is None else float(sigma_r)
-    sigma_phi = float(meta['laser'].get('sigma_angle', 0.0))
+        sigma_r = estimate.sigma_r
+    configs = feature_configurations(files, settings, {'sigma_r': true_sigma,
+                                                       'sigma_phi': sigma_phi}, sigma_r)
+    corner, line = configs['corner_extractor'], configs['line_extractor']
     t_truth, truth = _truth_track(bag)
     t_rel = (t_truth - t_truth[0]).astype(float)
     run = FeatureRun(
-        corner_params={m: CornerParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
-                       for m in corner_methods},
-        line_params={m: LineParams(method=m, sigma_r=sigma, sigma_phi=sigma_phi)
-                     for m in line_methods},
-        segment_sigma_r=sigma, truth_sigma_r=true_sigma, truth_sigma_phi=sigma_phi)
+        corner_params={m: replace(corner.params, method=m) for m in corner_methods},
+        line_params={m: replace(line.params, method=m) for m in line_methods},
+        truth_sigma_r=true_sigma, truth_sigma_phi=sigma_phi,
+        segmenters={'corners': ScanSegmenter.of(corner), 'lines': ScanSegmenter.of(line)})
 
     def sensor_pose_at(stamps):
         rel = (np.asarray(stamps, dtype=np.int64) - t_truth[0]).astype(float)
@@ -118,7 +154,8 @@ def evaluate_features(bag, corner_methods: Sequence[str] = CORNER_METHODS,
                 continue
             score_scan(run, world, sensor_pose_at, scan)
             n_used += 1
-    result = {'scans': n_used, 'sigma_r': sigma, 'corners': {}, 'lines': {},
+    result = {'scans': n_used, 'sigma_r': line.params.sigma_r,
+              'corner_sigma_r': corner.params.sigma_r, 'corners': {}, 'lines': {},
               'sigma_r_estimate': None if estimate is None else asdict(estimate)}
     for m, s in run.corners.items():
         times = run.corner_times[m]
@@ -255,14 +292,17 @@ def evaluate_truth_free(bag, reference: Optional[str] = None,
                         mount: Optional[Sequence[float]] = None,
                         sigma_r: Optional[float] = None,
                         extractor_sigma_r: Optional[Union[float, str]] = None,
-                        scans: int = 20, seed: int = 0, every: int = 1, progress: bool = False
+                        scans: int = 20, seed: int = 0, every: int = 1, progress: bool = False,
+                        configs: Optional[Mapping[str, object]] = None
                         ) -> Tuple[dict, List[str]]:
     """Score every method on a bag with the truth-free metrics (module docstring).
 
-    ``extractor_sigma_r``: the range noise the extractors assume [m], None for the node
-    default (0.01 m), or ``'auto'`` (the command's default, :func:`evaluate_bag_features`):
-    estimated from the bag's scans, at least the sensor's stated noise
-    (:func:`landmark_nav.evaluation.scan_metrics.evaluate_scans`).
+    ``extractor_sigma_r``: the range noise the extractors assume [m] (one value or one per
+    node name), None for the configuration's (the node default 0.01 m), or ``'auto'`` (the
+    command's default, :func:`evaluate_bag_features`): estimated from the bag's scans, at
+    least the sensor's stated noise. ``configs``: the nodes' configurations by node name
+    (:func:`feature_configurations`; default the node defaults). See
+    :func:`landmark_nav.evaluation.scan_metrics.evaluate_scans`.
 
     Returns:
         (figures of :func:`landmark_nav.evaluation.scan_metrics.evaluate_scans` plus
@@ -275,7 +315,7 @@ def evaluate_truth_free(bag, reference: Optional[str] = None,
     items, more = bag_metric_scans(bag, m, reference, every)
     result = evaluate_scans(items, sigma_r=s, ple_scans=scans, seed=seed,
                             extractor_sigma_r=extractor_sigma_r,
-                            progress=Path(bag).name if progress else None)
+                            progress=Path(bag).name if progress else None, configs=configs)
     result['laser_mount'] = [float(v) for v in m]
     return result, notes + more
 
@@ -284,7 +324,9 @@ def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[Union[float, st
                           json_out=None, reference: Optional[str] = None,
                           mount: Optional[Sequence[float]] = None,
                           sensor_sigma_r: Optional[float] = None, scans: int = 20,
-                          seed: int = 0, truth_free: bool = False, progress: bool = False
+                          seed: int = 0, truth_free: bool = False, progress: bool = False,
+                          files: Optional[NodeValues] = None,
+                          settings: Optional[NodeValues] = None
                           ) -> Tuple[dict, List[str], bool]:
     """Evaluate a bag as ``landmark_nav evaluate-features`` does; optionally write the JSON.
 
@@ -292,19 +334,27 @@ def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[Union[float, st
     :func:`evaluate_features`; otherwise :func:`evaluate_truth_free`, ``sigma_r`` then being
     the range noise the extractors assume (default ``'auto'``: estimated from the scans, at
     least the sensor's stated noise) and ``sensor_sigma_r`` the sensor's. ``progress``: a
-    tqdm bar.
+    tqdm bar. ``files`` and ``settings``: the nodes' parameter values
+    (:func:`feature_configurations`): defaults, then ``files``, then what the bag states
+    (the simulated noise; on other bags the estimated one unless ``settings`` give
+    ``sigma_r``), then ``settings``, then ``sigma_r``.
 
     Returns:
         (figures, notes, whether the figures are the truth-free ones).
 
     """
     if not truth_free and (Path(bag) / GROUND_TRUTH_FILE).is_file():
-        result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=progress)
+        result = evaluate_features(bag, sigma_r=sigma_r, every=every, progress=progress,
+                                   files=files, settings=settings)
         notes, free = [], False
     else:
-        result, notes = evaluate_truth_free(bag, reference, mount, sensor_sigma_r,
-                                            'auto' if sigma_r is None else sigma_r,
-                                            scans, seed, every, progress=progress)
+        configs = feature_configurations(files, settings)
+        spec = sigma_r if sigma_r is not None else {
+            node: None if 'sigma_r' in (settings or {}).get(node, {}) else 'auto'
+            for node in configs}
+        result, notes = evaluate_truth_free(bag, reference, mount, sensor_sigma_r, spec,
+                                            scans, seed, every, progress=progress,
+                                            configs=configs)
         free = True
     if json_out:
         Path(json_out).write_text(json.dumps(result, indent=2))
@@ -312,4 +362,5 @@ def evaluate_bag_features(bag, every: int = 1, sigma_r: Optional[Union[float, st
 
 
 __all__ = ['bag_metric_scans', 'bag_range_noise', 'CORNER_METHODS', 'evaluate_bag_features',
-           'evaluate_features', 'evaluate_truth_free', 'LINE_METHODS', 'sensor_facts']
+           'evaluate_features', 'evaluate_truth_free', 'feature_configurations',
+           'LINE_METHODS', 'NodeValues', 'sensor_facts']

@@ -402,9 +402,12 @@ class FeatureRun:
     Attributes:
         corner_params: Corner detector settings by name.
         line_params: Line extractor settings by name.
-        segment_sigma_r: Range noise the segmentation assumes [m].
+        segment_sigma_r: Range noise the segmentation assumes [m] (without ``segmenters``).
         truth_sigma_r: The sensor's true range noise [m] (Cramer-Rao floor of the walls).
         truth_sigma_phi: The sensor's true bearing noise [rad].
+        segmenters: ``{'corners': ..., 'lines': ...}``: the range noise and segmentation of
+            each node (:class:`~landmark_nav.laser.extractor_configuration.ScanSegmenter`);
+            default: the node defaults at ``segment_sigma_r``.
 
     """
 
@@ -413,19 +416,48 @@ class FeatureRun:
     segment_sigma_r: float = 0.01
     truth_sigma_r: Optional[float] = None
     truth_sigma_phi: float = 0.0
+    segmenters: Dict[str, object] = field(default_factory=dict)
     corners: Dict[str, CornerScore] = field(default_factory=dict)
     lines: Dict[str, LineScore] = field(default_factory=dict)
     corner_times: Dict[str, List[float]] = field(default_factory=dict)
     line_times: Dict[str, List[float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        """Create an empty score and time list per method."""
+        """Create an empty score and time list per method and the default segmenters."""
+        from landmark_nav.laser.extractor_configuration import SCAN_PARAMETERS, ScanSegmenter
         for m in self.corner_params:
             self.corners.setdefault(m, CornerScore())
             self.corner_times.setdefault(m, [])
         for m in self.line_params:
             self.lines.setdefault(m, LineScore())
             self.line_times.setdefault(m, [])
+        for kind in ('corners', 'lines'):
+            self.segmenters.setdefault(kind, ScanSegmenter(
+                SCAN_PARAMETERS['segmentation.incidence_deg'].default,
+                SCAN_PARAMETERS['segmentation.min_points'].default, self.segment_sigma_r))
+
+
+def segment_per_extractor(segmenters: Dict[str, object], ranges: np.ndarray,
+                          angles: np.ndarray, valid: np.ndarray, angle_increment: float
+                          ) -> Dict[str, Tuple[list, float]]:
+    """Return each segmenter's clusters of one scan and the seconds they took.
+
+    Each segmenter takes the scan into its range noise first (as the node does); those
+    with the same settings at this scan share one segmentation.
+    """
+    shared: Dict[tuple, Tuple[list, float]] = {}
+    out = {}
+    for kind, segmenter in segmenters.items():
+        t0 = time.perf_counter()
+        segmenter.track(ranges, angles, valid)
+        t_track = time.perf_counter() - t0
+        key = segmenter.key()
+        if key not in shared:
+            t0 = time.perf_counter()
+            shared[key] = (segmenter.segment(ranges, angles, valid, angle_increment),
+                           time.perf_counter() - t0)
+        out[kind] = (shared[key][0], shared[key][1] + t_track)
+    return out
 
 
 def score_scan(run: FeatureRun, world, sensor_pose_at: Callable[[np.ndarray], np.ndarray],
@@ -433,10 +465,12 @@ def score_scan(run: FeatureRun, world, sensor_pose_at: Callable[[np.ndarray], np
     """Extract features from one simulated scan and add their scores to ``run``.
 
     The one scoring path of the simulator figures (``landmark_nav evaluate-features`` and
-    the office tests): valid beams per REP 117, the segmentation with
-    ``run.segment_sigma_r``, each extractor, then :func:`score_corners` against
-    :func:`corner_truth` and :func:`score_lines` against :func:`wall_truth` (true laser
-    pose at the middle of the sweep; each line compared in the pose of its middle beam).
+    the office tests): valid beams per REP 117, the segmentation, each extractor, then
+    :func:`score_corners` against :func:`corner_truth` and :func:`score_lines` against
+    :func:`wall_truth` (true laser pose at the middle of the sweep; each line compared in
+    the pose of its middle beam).
+    Each extractor runs on its node's segmentation (``run.segmenters``:
+    :func:`segment_per_extractor`) at its node's range noise of the scan.
 
     Args:
         run: Settings and accumulated scores.
@@ -450,32 +484,32 @@ def score_scan(run: FeatureRun, world, sensor_pose_at: Callable[[np.ndarray], np
     from landmark_nav.conversions import classify_ranges
     from landmark_nav.laser.corners import detect_corners
     from landmark_nav.laser.lines import extract_lines
-    from landmark_nav.laser.segmentation import segment_scan
 
     r = np.asarray(scan.ranges, dtype=float)
     angles = scan.angle_min + scan.angle_increment * np.arange(r.size)
     valid = classify_ranges(r, scan.range_min, scan.range_max)[0]
-    t0 = time.perf_counter()
-    clusters = segment_scan(r, angles, valid, scan.angle_increment,
-                            sigma_r=run.segment_sigma_r)
-    t_seg = time.perf_counter() - t0
+    segmented = segment_per_extractor(run.segmenters, r, angles, valid, scan.angle_increment)
     if run.corner_params:
+        clusters, t_seg = segmented['corners']
+        at_noise = run.segmenters['corners'].at_scan_noise
         truth = corner_truth(world, sensor_pose_at, scan.stamp_ns, angles,
                              scan.time_increment)
         for m, params in run.corner_params.items():
             t0 = time.perf_counter()
-            corners = detect_corners(clusters, params)
+            corners = detect_corners(clusters, at_noise(params))
             run.corner_times[m].append(t_seg + time.perf_counter() - t0)
             xy = np.array([c.position for c in corners]).reshape(-1, 2)
             score_corners(run.corners[m], xy, truth, corner_gate)
     if run.line_params:
+        clusters, t_seg = segmented['lines']
+        at_noise = run.segmenters['lines'].at_scan_noise
         t_mid = scan.stamp_ns + int(0.5 * r.size * scan.time_increment * 1e9)
         walls = wall_truth(world, np.reshape(sensor_pose_at(np.array([t_mid])), 3), angles,
                            scan.range_max, sigma_r=run.truth_sigma_r,
                            sigma_phi=run.truth_sigma_phi)
         for m, params in run.line_params.items():
             t0 = time.perf_counter()
-            lines = extract_lines(clusters, params)
+            lines = extract_lines(clusters, at_noise(params))
             run.line_times[m].append(t_seg + time.perf_counter() - t0)
             mid = np.array([0.5 * (ln.first_index + ln.last_index) for ln in lines])
             stamps = scan.stamp_ns + np.rint(mid * scan.time_increment * 1e9).astype(np.int64)

@@ -16,10 +16,11 @@ Bad input (missing bag, bag without sonar or ground truth, unknown filter or sce
 raises :class:`~landmark_nav.bag.BagError` or ``ValueError`` with a one-line message.
 """
 
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 from landmark_nav.bag import BagReader
 from landmark_nav.conversions import stamp_to_ns
@@ -30,6 +31,7 @@ from landmark_nav.evaluation.localization import (draw_initial_pose, first_motio
                                                   odometry_trajectory, TARGETS)
 from landmark_nav.geometry import interpolate_pose, wrap_angle
 from landmark_nav.hardware import SONAR_MOUNTS
+from landmark_nav.localization.configuration import localizer_configuration
 from landmark_nav.localization.grid import GridMap, load_map_yaml, rasterize_world
 from landmark_nav.localization.odometry import control_from_poses
 from landmark_nav.localization.params import LocalizationParams
@@ -198,9 +200,16 @@ def run_bag_localization(bag: Any, filter: str,  # noqa: A002 (name from the API
 
 
 def _map_and_params(meta: Dict[str, Any], map_path: Any,
-                    params: Optional[LocalizationParams]
+                    params: Optional[LocalizationParams],
+                    files: Optional[Mapping[str, Any]] = None,
+                    settings: Optional[Mapping[str, Any]] = None
                     ) -> Tuple[GridMap, LocalizationParams]:
-    """Return the evaluation map and the filter parameters for it (sets ``meta['map']``)."""
+    """Return the evaluation map and the filter parameters for it (sets ``meta['map']``).
+
+    Without ``params``: ``sonar_localizer``'s configuration of the defaults, ``files``,
+    ``unknown: free`` when the map file has unknown cells (a sonar-built map), then
+    ``settings`` (:func:`landmark_nav.localization.configuration.localizer_configuration`).
+    """
     if map_path is None:
         grid = world_map(meta)
         meta['map'] = 'rasterised world of ground_truth.yaml (0.1 m)'
@@ -210,8 +219,9 @@ def _map_and_params(meta: Dict[str, Any], map_path: Any,
         grid = load_map_yaml(map_path)
         meta['map'] = str(map_path)
     if params is None:
-        params = LocalizationParams(unknown='free') if (
-            map_path is not None and grid.unknown.any()) else LocalizationParams()
+        stated = {'unknown': 'free'} if map_path is not None and grid.unknown.any() else {}
+        params = localizer_configuration({**(files or {}), **stated,
+                                          **(settings or {})}).params
     return grid, params
 
 
@@ -225,8 +235,9 @@ def _with_degrees(err: Dict[str, float]) -> Dict[str, float]:
 def evaluate_localization(bag: Any, filter: str,  # noqa: A002 (name from the API spec)
                           map_path: Any = None, seed_for_initial: Optional[int] = None,
                           initial_std: Sequence[float] = INITIAL_STD,
-                          out_dir: Any = None,
-                          odometry_source: Optional[str] = None) -> Dict[str, Any]:
+                          out_dir: Any = None, odometry_source: Optional[str] = None,
+                          files: Optional[Mapping[str, Any]] = None,
+                          settings: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
     """Evaluate sonar localization with the EKF or UKF on a simulator bag, offline.
 
     Args:
@@ -242,6 +253,12 @@ def evaluate_localization(bag: Any, filter: str,  # noqa: A002 (name from the AP
         out_dir: if given, write ``localization_<filter>.json``,
             ``localization_<filter>_trajectory.png`` and ``localization_<filter>_heading.png``.
         odometry_source: ``'joint_states'`` or ``'odom'`` (see :func:`load_bag_input`).
+        files: ``sonar_localizer`` parameter values of parameter files: the filter's
+            parameters and process noise (under the map's ``unknown: free``, see
+            :func:`_map_and_params`).
+        settings: Values over what the bag and the map state (``--set``): also the
+            odometry's ``wheel_radius``, ``axle_length`` and ``k1``..``k3`` (default the
+            bag's).
 
     Returns:
         The figures (also the JSON): ``filter``, ``odometry_calibrated`` and
@@ -259,12 +276,19 @@ def evaluate_localization(bag: Any, filter: str,  # noqa: A002 (name from the AP
     if std.shape != (3,) or not (np.isfinite(std).all() and (std > 0.0).all()):
         raise ValueError(f'initial_std must be three positive numbers, got {initial_std!r}')
     inp, meta = load_bag_input(bag, odometry_source)
-    grid, params = _map_and_params(meta, map_path, None)
+    grid, params = _map_and_params(meta, map_path, None, files, settings)
+    settings = settings or {}
+    robot = {name: settings[name] for name in ('wheel_radius', 'axle_length')
+             if name in settings}
+    k = None
+    if any(f'k{i}' in settings for i in (1, 2, 3)):
+        stated = inp.true_k if inp.true_k is not None else (1.0, 1.0, 1.0)
+        k = tuple(settings.get(f'k{i}', stated[i - 1]) for i in (1, 2, 3))
     seed = int(1000 + int(meta.get('seed', 0)) if seed_for_initial is None
                else seed_for_initial)
     cov0 = np.diag(std ** 2)
     x0 = draw_initial_pose(inp.truth[0], cov0, seed)
-    run = localize(inp, filter, grid, x0, cov0, params)
+    run = localize(replace(inp, **robot), filter, grid, x0, cov0, params, k=k)
     truth = inp.truth
     i0 = first_motion_index(truth)
     odo_cal = odometry_trajectory(inp, truth[0], inp.true_k)

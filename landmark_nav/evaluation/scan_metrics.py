@@ -43,12 +43,12 @@ Choices stated (the paper leaves them open or its script differs from its text):
   metric); 20 cm keeps beams of a neighbouring object out.
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import math
 import time
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
-from landmark_nav.evaluation.features import normal_form
+from landmark_nav.evaluation.features import normal_form, segment_per_extractor
 from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
 import numpy as np
 
@@ -564,13 +564,17 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                    corner_methods: Sequence[str] = ('minus_cosine', 'sliding_window',
                                                     'split_merge'),
                    line_methods: Sequence[str] = ('split_merge', 'alfa'),
-                   extractor_sigma_r: Optional[Union[float, str]] = None,
-                   progress: Optional[str] = None) -> dict:
+                   extractor_sigma_r: Union[None, float, str, Mapping] = None,
+                   progress: Optional[str] = None,
+                   configs: Optional[Mapping[str, object]] = None) -> dict:
     """Score the extractors and the baseline on real scans with the truth-free metrics.
 
-    Every method runs on every scan with the node defaults (``LineParams`` /
-    ``CornerParams`` with ``extractor_sigma_r``, the segmentation's defaults), one
-    segmentation per scan shared by all methods and counted in each method's time. The
+    Every method runs on every scan with its node's configuration (``configs``: the
+    ``corner_extractor`` and ``line_extractor``
+    :class:`~landmark_nav.laser.extractor_configuration.ExtractorConfiguration`, default
+    the node defaults; ``method`` and ``sigma_r`` set per row and by
+    ``extractor_sigma_r``) on its node's segmentation, shared by the nodes whose settings
+    agree and counted in each method's time. The
     PLE figures (f, ray RMSE mean and median over scans, f_no_return, fit residual) come
     from ``ple_scans`` scans drawn by :func:`sample_scans` with ``seed``; false-surface
     beams are counted on every scan (and on the sample); repeatability is over every
@@ -585,16 +589,19 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         seed: Seed of the draw.
         corner_methods: Corner detectors.
         line_methods: Line extractors.
-        extractor_sigma_r: Range noise the extractors and the segmentation assume [m];
-            None: the node default (0.01 m); ``'auto'``: estimated from the scans with
+        extractor_sigma_r: Range noise the extractors and the segmentation assume [m]
+            (one value, or one per node name); None: the configuration's ``sigma_r``
+            (the node default 0.01 m); ``'auto'``: estimated from the scans with
             ``sigma_r`` as its lower bound
             (:func:`landmark_nav.laser.range_noise.estimate_range_noise`, stated in the
             result's ``extractor_sigma_r_estimate``); the false-surface margin then uses
             the estimate too (the sensor's noise as its data shows it).
         progress: Label of a tqdm progress bar, or None for none.
+        configs: The nodes' configurations by node name (see above).
 
     Returns:
-        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r',
+        {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r' (the line
+        extractor's), 'corner_sigma_r',
         (corner figures per class: ``corner_repeatability_structural`` / ``_other``, with
         their opportunities and re-detections, and ``structural_share``),
         'extractor_sigma_r_estimate' (the estimate's figures, or None), 'repeat_pairs',
@@ -602,23 +609,33 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         consecutive scans with poses (no reference) the repeatability figures are None.
 
     """
-    from landmark_nav.laser.corners import CornerParams, detect_corners
-    from landmark_nav.laser.lines import extract_lines, LineParams
-    from landmark_nav.laser.segmentation import segment_scan
+    from landmark_nav.laser.corners import detect_corners
+    from landmark_nav.laser.extractor_configuration import (extractor_configuration,
+                                                            ScanSegmenter)
+    from landmark_nav.laser.lines import extract_lines
 
+    nodes = ('corner_extractor', 'line_extractor')
+    configs = {n: (configs or {}).get(n) or extractor_configuration(n) for n in nodes}
+    spec = (dict(extractor_sigma_r) if isinstance(extractor_sigma_r, Mapping)
+            else dict.fromkeys(nodes, extractor_sigma_r))
     estimate = None
-    if extractor_sigma_r == 'auto':
+    if 'auto' in spec.values():
         from landmark_nav.laser.range_noise import estimate_range_noise
         estimate = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans),
                                         stated=sigma_r)
-        ext_sigma = sigma_r = estimate.sigma_r  # the noise the data shows, for the margin too
-    elif extractor_sigma_r is None:
-        ext_sigma = LineParams().sigma_r
-    else:
-        ext_sigma = float(extractor_sigma_r)
-    line_params = {m: LineParams(method=m, sigma_r=ext_sigma) for m in line_methods}
-    corner_params = {m: CornerParams(method=m, sigma_r=ext_sigma) for m in corner_methods}
-    min_points, min_length = LineParams().min_points, LineParams().min_length
+        sigma_r = estimate.sigma_r  # the noise the data shows, for the margin too
+    ext = {n: (configs[n].params.sigma_r if spec.get(n) is None else estimate.sigma_r
+               if spec[n] == 'auto' else float(spec[n])) for n in nodes}
+    segmenters = {kind: ScanSegmenter(c.incidence_deg, c.min_points, ext[c.node],
+                                      c.sigma_r_from_data, c.sigma_r_scans)
+                  for kind, c in (('corners', configs['corner_extractor']),
+                                  ('lines', configs['line_extractor']))}
+    line_base = configs['line_extractor'].params
+    line_params = {m: replace(line_base, method=m, sigma_r=ext['line_extractor'])
+                   for m in line_methods}
+    corner_params = {m: replace(configs['corner_extractor'].params, method=m,
+                                sigma_r=ext['corner_extractor']) for m in corner_methods}
+    min_points, min_length = line_base.min_points, line_base.min_length
     sample = {int(i) for i in sample_scans(len(scans), ple_scans, seed)}
     tallies = {m: _LineTally() for m in (*line_methods, BASELINE, BASELINE_MIN)}
     c_repeat = {m: Repeatability() for m in corner_methods}
@@ -633,14 +650,13 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         from tqdm import tqdm
         items = tqdm(items, total=len(scans), unit='scan', desc=progress)
     for k, scan in items:
-        t0 = time.perf_counter()
-        clusters = segment_scan(scan.ranges, scan.angles, scan.valid, scan.angle_increment,
-                                sigma_r=ext_sigma)
-        t_seg = time.perf_counter() - t0
+        segmented = segment_per_extractor(segmenters, scan.ranges, scan.angles, scan.valid,
+                                          scan.angle_increment)
+        clusters, t_seg = segmented['lines']
         segs: Dict[str, np.ndarray] = {}
         for m, params in line_params.items():
             t0 = time.perf_counter()
-            lines = extract_lines(clusters, params)
+            lines = extract_lines(clusters, segmenters['lines'].at_scan_noise(params))
             tallies[m].times.append(t_seg + time.perf_counter() - t0)
             segs[m] = segments_of(lines)
         t0 = time.perf_counter()
@@ -652,10 +668,11 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                    & (np.hypot(*(base[:, 1] - base[:, 0]).T) >= min_length))
         segs[BASELINE_MIN] = base[size_ok]
         corners: Dict[str, Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        c_clusters, c_seg = segmented['corners']
         for m, params in corner_params.items():
             t0 = time.perf_counter()
-            found = detect_corners(clusters, params)
-            c_times[m].append(t_seg + time.perf_counter() - t0)
+            found = detect_corners(c_clusters, segmenters['corners'].at_scan_noise(params))
+            c_times[m].append(c_seg + time.perf_counter() - t0)
             corners[m] = (np.array([c.position for c in found]).reshape(-1, 2),
                           np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2),
                           np.array([c.structural for c in found], dtype=bool))
@@ -684,7 +701,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             f['line_repeatability'] = None
     return {
         'scans': n, 'ple_scans': len(sample), 'sample': sorted(sample), 'seed': seed,
-        'sigma_r': sigma_r, 'extractor_sigma_r': ext_sigma, 'repeat_pairs': pairs,
+        'sigma_r': sigma_r, 'extractor_sigma_r': ext['line_extractor'],
+        'corner_sigma_r': ext['corner_extractor'], 'repeat_pairs': pairs,
         'extractor_sigma_r_estimate': None if estimate is None else asdict(estimate),
         'false_surface_margin_m': max(3.0 * sigma_r, FALSE_SURFACE_MIN),
         'lines': lines,
@@ -707,65 +725,3 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             'median_ms_per_scan': 1e3 * float(np.median(c_times[m])) if c_times[m] else None,
             'mean_ms_per_scan': 1e3 * float(np.mean(c_times[m])) if c_times[m] else None}
             for m in corner_methods}}
-
-
-def _repeat_text(figures: dict, kind: str) -> str:
-    """Render the ``kind`` ('line' or 'corner') repeatability of one method's figures."""
-    fraction = figures[f'{kind}_repeatability']
-    if fraction is None:
-        return 'n/a (no reference poses)'
-    return (f'{fraction:.3f} ({figures[f"{kind}_redetected"]}/'
-            f'{figures[f"{kind}_opportunities"]})')
-
-
-def _estimate_text(result: dict) -> str:
-    """Return ' (estimated: ...)' when the extractors' sigma_r was estimated, else ''."""
-    est = result.get('extractor_sigma_r_estimate')
-    if not est:
-        return ''
-    from landmark_nav.laser.range_noise import RangeNoise
-    return f' ({RangeNoise(**est).describe()})'
-
-
-def format_scan_metrics(result: dict, title: str = '') -> str:
-    """Render :func:`evaluate_scans` figures as two Markdown tables."""
-    out = [f'{title}scans: {result["scans"]} ({result["ple_scans"]} drawn with seed '
-           f'{result["seed"]} for f / ray RMSE / fit), {result["repeat_pairs"]} consecutive '
-           f'pairs with reference poses; false-surface margin '
-           f'{100 * result["false_surface_margin_m"]:.1f} cm (sigma_r '
-           f'{100 * result["sigma_r"]:.1f} cm); extractors at sigma_r '
-           f'{100 * result["extractor_sigma_r"]:.2f} cm' + _estimate_text(result), '',
-           '| line method | f | ray RMSE mean / median | without occluders (occluder beams '
-           '/ hits) | f no-return | false-surface beams (scans) [sample] {> 30 cm (scans)} | '
-           'fit RMS (beams) | lines >= 1 m re-detected | segments/scan | ms/scan median |',
-           '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |']
-    for m, f in result['lines'].items():
-        out.append(
-            f'| {m} | {f["f"]:.3f} | {100 * f["ray_rmse_mean_m"]:.2f} / '
-            f'{100 * f["ray_rmse_median_m"]:.2f} cm | '
-            f'{100 * f["ray_rmse_no_occluders_mean_m"]:.2f} / '
-            f'{100 * f["ray_rmse_no_occluders_median_m"]:.2f} cm ({f["occluder_beams_sample"]} / '
-            f'{f["hit_beams_sample"]}) | {f["f_no_return"]:.3f} | '
-            f'{f["false_surface_beams"]} ({f["false_surface_scans"]}) '
-            f'[{f["false_surface_beams_sample"]}] {{{f["false_surface_beams_over_30cm"]} '
-            f'({f["false_surface_scans_over_30cm"]})}} | '
-            f'{100 * f["fit_rms_m"]:.2f} cm '
-            f'({f["fit_beams"]}) | {_repeat_text(f, "line")} | '
-            f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
-    out += ['', '| corner method | corners re-detected within 10 cm | counting the '
-            'unobserved | structural (both arms >= 0.5 m) re-detected | others re-detected '
-            '| structural share | corners/scan | ms/scan median |',
-            '| --- | --- | --- | --- | --- | --- | --- | --- |']
-    for m, f in result['corners'].items():
-        former = 'n/a'
-        if f['corner_repeatability_with_unobserved'] is not None:
-            former = (f'{f["corner_repeatability_with_unobserved"]:.3f} '
-                      f'({f["corner_redetected"] + f["corner_unobserved_redetected"]}/'
-                      f'{f["corner_opportunities"] + f["corner_unobserved"]})')
-        classes = ' | '.join(_repeat_text({k.replace(f'_{c}', ''): v for k, v in f.items()
-                                           if k.endswith(f'_{c}')}, 'corner')
-                             for c in ('structural', 'other'))
-        out.append(f'| {m} | {_repeat_text(f, "corner")} | {former} | {classes} | '
-                   f'{f["structural_share"]:.2f} | {f["corners_per_scan"]:.2f} | '
-                   f'{f["median_ms_per_scan"]:.2f} |')
-    return '\n'.join(out)

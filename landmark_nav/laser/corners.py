@@ -103,7 +103,7 @@ eqs. 5-10, and their noise from eq. 7), ``corner`` (:class:`Corner`), ``params``
 from typing import List, Optional, Sequence
 
 from landmark_nav.laser.corner_detection.corner import Corner
-from landmark_nav.laser.corner_detection.params import CornerParams, METHODS
+from landmark_nav.laser.corner_detection.params import CORNER_PARAMETERS, CornerParams, METHODS
 from landmark_nav.laser.corner_detection.scan_stack import _stack
 from landmark_nav.laser.corner_detection.split_merge import _split_merge
 from landmark_nav.laser.corner_detection.tls_lines import point_covariance
@@ -111,8 +111,8 @@ from landmark_nav.laser.corner_detection.windows import _minus_cosine, _sliding_
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 import numpy as np
 
-__all__ = ['Corner', 'CornerParams', 'detect_corners', 'extract_corners', 'METHODS',
-           'point_covariance']
+__all__ = ['Corner', 'CORNER_PARAMETERS', 'CornerParams', 'detect_corners', 'extract_corners',
+           'METHODS', 'point_covariance']
 
 
 # ---------------------------------------------------------------------------- public API

@@ -20,15 +20,14 @@ no CameraInfo, CameraInfo that does not convert, e.g. zero focal length, frames 
 corridor, odometry going back in time) gives a warning throttled per kind of problem.
 """
 
-import math
-
 import cv2
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Twist, TwistStamped
 from landmark_nav.conversions import (array_to_image, camera_info_to_model, ConversionError,
                                       make_pose_with_covariance_stamped, odometry_to_pose,
                                       stamp_to_ns)
-from landmark_nav.corridor.controller import ControllerParams, CorridorController
-from landmark_nav.corridor.follower import CorridorTracker, FollowerConfig
+from landmark_nav.corridor.configuration import follower_configuration, parameters
+from landmark_nav.corridor.controller import CorridorController
+from landmark_nav.corridor.follower import CorridorTracker
 from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
 from landmark_nav.nodes.common import declare, ParameterError, ProblemWarner, run_node, \
     SENSOR_QOS
@@ -37,10 +36,6 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_srvs.srv import SetBool
-
-
-#: The node's parameter defaults for the estimation (shared with the offline evaluation).
-DEFAULTS = FollowerConfig()
 
 
 class CorridorFollower(Node):
@@ -52,66 +47,16 @@ class CorridorFollower(Node):
     def __init__(self, **kwargs) -> None:
         """Declare and validate parameters and create the interfaces."""
         super().__init__('corridor_follower', **kwargs)
-
-        def d(*args, **kwargs):
-            return declare(self, *args, **kwargs)
-
-        def e(name, *args, **kwargs):               # an estimation parameter
-            default = getattr(DEFAULTS, name)
-            default = list(default) if isinstance(default, tuple) else default
-            return declare(self, name, default, *args, **kwargs)
-
-        width = e('corridor_width', 'wall-to-wall width [m]', (0.3, 20.0))
-        height = e('corridor_height', 'floor-to-ceiling height [m]; 0: ceiling edges not used',
-                   (0.0, 20.0))
-        centre = e('centre_line', 'the floor has a line along the corridor centre')
-        mount = e('camera_mount', 'camera_link pose in base_link: x, y, z [m] (z = height '
-                  'above the floor), roll, pitch, yaw [rad]')
-        method = e('line_method', 'image lines: segmented_hough (the chapter), hough_p or lsd',
-                   choices=['segmented_hough', 'hough_p', 'lsd'])
-        sigma = e('sigma_px', 'end-point noise of image line segments [px]', (0.05, 5.0))
-        h_floor = e('heading_std_floor_deg', 'added to the visual heading std [deg]',
-                    (0.0, 20.0))
-        y_floor = e('lateral_std_floor', 'added to the visual lateral std [m]', (0.0, 2.0))
-        max_axis = e('max_axis_angle_deg', 'the corridor VP must lie within this angle of the '
-                     'optical axis [deg]', (1.0, 89.0))
-        b = e('wheel_separation', 'effective wheel separation [m]', (0.01, 5.0))
-        k_l = e('k_left', 'left wheel distance variance per metre [m^2/m]', (0.0, 1.0))
-        k_r = e('k_right', 'right wheel distance variance per metre [m^2/m]', (0.0, 1.0))
-        sb = e('sigma_separation', 'std of the wheel separation per step [m]', (0.0, 1.0))
-        gate = e('gate_chi2', 'NIS outlier gate (chi-square 2 dof; 13.8 = 99.9 %)',
-                 (1.0, 1000.0))
-        self.stale = d('stale_timeout', 1.0, 'stop when no visual update was accepted for '
-                       'this long [s]', (0.05, 60.0))
-        self.compressed = d('compressed', False, 'subscribe camera/image_raw/compressed')
-        self.frame_id = d('corridor_frame', 'corridor', 'frame of corridor/pose')
-        self.debug = d('publish_debug_image', False, 'publish corridor/debug_image')
-        stamped = d('stamped_cmd_vel', False, 'publish geometry_msgs/TwistStamped on cmd_vel')
-        enabled = d('enabled', False, 'drive at start-up (else wait for ~/enable)')
-        ctrl = {k: d(k, v, doc, lim) for k, v, doc, lim in (
-            ('speed', 0.3, 'forward speed set-point [m/s]', (0.01, 3.0)),
-            ('lateral_offset', 0.0, 'lateral set-point [m], left of the direction of travel '
-             'positive', (-10.0, 10.0)),
-            ('gain_lateral', 4.0, 'turn per m driven per m of lateral error [1/m^2]',
-             (0.01, 100.0)),
-            ('gain_heading', 4.0, 'turn per m driven per rad of heading error [1/m] '
-             '(critically damped: 2 sqrt(gain_lateral))', (0.01, 100.0)),
-            ('max_accel', 0.3, 'forward acceleration limit [m/s^2]', (0.01, 10.0)),
-            ('max_angular_speed', 0.5, 'angular speed limit [rad/s]', (0.01, 10.0)))}
-        if len(mount) != 6 or not all(math.isfinite(v) for v in mount):
-            raise ParameterError(f'parameter camera_mount must be 6 finite numbers; got {mount}')
-        if not mount[2] > 0.0 or (height > 0.0 and mount[2] >= height):
-            raise ParameterError(f'parameter camera_mount: camera height {mount[2]} m must lie '
-                                 f'between floor and ceiling ({height} m)')
-        if abs(ctrl['lateral_offset']) >= width / 2:
-            raise ParameterError('parameter lateral_offset must lie inside the corridor')
-        self.tracker = CorridorTracker(FollowerConfig(
-            corridor_width=width, corridor_height=height, centre_line=centre,
-            camera_mount=tuple(mount), line_method=method, sigma_px=sigma,
-            heading_std_floor_deg=h_floor, lateral_std_floor=y_floor,
-            max_axis_angle_deg=max_axis, wheel_separation=b, k_left=k_l, k_right=k_r,
-            sigma_separation=sb, gate_chi2=gate))
-        self.controller = CorridorController(ControllerParams(**ctrl))
+        values = {name: declare(self, name, *p[:4]) for name, p in parameters().items()}
+        try:
+            config = follower_configuration(values)
+        except ValueError as err:
+            raise ParameterError(str(err)) from None
+        self.stale, self.compressed = values['stale_timeout'], values['compressed']
+        self.frame_id, self.debug = values['corridor_frame'], values['publish_debug_image']
+        stamped, enabled = values['stamped_cmd_vel'], values['enabled']
+        self.tracker = CorridorTracker(config.follower)
+        self.controller = CorridorController(config.controller)
         self.enabled = enabled
         self.warner = ProblemWarner(self)
         self.camera = None

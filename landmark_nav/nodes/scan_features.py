@@ -4,23 +4,23 @@ Subscribes ``scan`` (sensor_msgs/LaserScan) best effort with a queue of 20 (0.5 
 40 Hz laser: :data:`~landmark_nav.nodes.common.SCAN_QOS`), converts it
 (REP 117 aware), drops malformed scans and scans of more than ``max_beams`` beams with a
 warning naming the value (throttled per kind of problem), and segments the rest
-(parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``) before handing
-the clusters to :meth:`ScanFeatureNode.process`. With ``sigma_r_from_data`` the range noise
-of the segmentation and the extractor is estimated from the latest ``sigma_r_scans`` scans
-(:class:`landmark_nav.laser.range_noise.RangeNoiseTracker`: local line fits and the range
-step), the node's ``sigma_r`` being its lower bound; :meth:`ScanFeatureNode.at_scan_noise`
-gives the extractor's parameters with it. Finite negative ranges (no laser
-measures them; REP 117 reserves -inf for "too close") are treated as invalid beams, with a
-warning naming the first one. Processed and dropped scans and the latency are on
-``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
+(parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``; these and the
+range noise's are :data:`~landmark_nav.laser.extractor_configuration.SCAN_PARAMETERS`)
+before handing the clusters to :meth:`ScanFeatureNode.process`. With ``sigma_r_from_data``
+the range noise of the segmentation and the extractor is estimated from the latest
+``sigma_r_scans`` scans (:class:`landmark_nav.laser.range_noise.RangeNoiseTracker`: local
+line fits and the range step), the node's ``sigma_r`` being its lower bound (the noise and
+the segmentation: :class:`~landmark_nav.laser.extractor_configuration.ScanSegmenter`, as
+offline); :meth:`ScanFeatureNode.at_scan_noise` gives the extractor's parameters with it.
+Finite negative ranges (no laser measures them; REP 117 reserves -inf for "too close") are
+treated as invalid beams, with a warning naming the first one. Processed and dropped scans
+and the latency are on ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
-from dataclasses import replace
 import math
 
 from landmark_nav.conversions import ConversionError, scan_to_data, ScanData
-from landmark_nav.laser.range_noise import RangeNoiseTracker
-from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.laser.extractor_configuration import SCAN_PARAMETERS, ScanSegmenter
 from landmark_nav.nodes.common import declare, InputStats, ProblemWarner, SCAN_QOS
 import numpy as np
 from rclpy.node import Node
@@ -33,40 +33,25 @@ class ScanFeatureNode(Node):
     def __init__(self, name: str, **kwargs) -> None:
         """Declare the segmentation parameters (subscribe with :meth:`subscribe_scans`)."""
         super().__init__(name, **kwargs)
-        self.sigma_r = 0.01
-        self.incidence_deg = declare(
-            self, 'segmentation.incidence_deg', 10.0,
-            'smallest surface incidence angle still treated as continuous [deg] '
-            '(adaptive breakpoint threshold)', (1.0, 89.0))
-        self.min_cluster_points = declare(
-            self, 'segmentation.min_points', 5, 'smallest cluster kept [points]', (1, 10000))
-        self.max_beams = declare(
-            self, 'max_beams', 20000, 'scans with more beams are dropped with a warning '
-            '(real 2-D lasers have up to a few thousand)', (1, 100000000))
-        self.from_data = declare(
-            self, 'sigma_r_from_data', False,
-            'estimate the range noise from the scans (local line fits, range step / sqrt(12)); '
-            'sigma_r is then its lower bound')
-        self.noise_scans = declare(
-            self, 'sigma_r_scans', 50, 'scans the range noise is estimated over (the latest)',
-            (1, 100000))
-        self.noise = None  # RangeNoiseTracker when from_data
-        self.scan_sigma_r = self.sigma_r  # the range noise of the scan being processed
+        self.values = {key: declare(self, key, *p[:4]) for key, p in SCAN_PARAMETERS.items()}
+        self.incidence_deg = self.values['segmentation.incidence_deg']
+        self.min_cluster_points = self.values['segmentation.min_points']
+        self.max_beams = self.values['max_beams']
+        self.segmenter = None  # ScanSegmenter, from subscribe_scans
         self.warner = ProblemWarner(self)
         self.stats = InputStats(self, self.warner)
 
     def subscribe_scans(self, sigma_r: float) -> None:
         """Start receiving scans; ``sigma_r`` is the range noise (its lower bound if estimated)."""
-        self.sigma_r = self.scan_sigma_r = sigma_r
-        if self.from_data:
-            self.noise = RangeNoiseTracker(self.noise_scans, stated=sigma_r)
+        v = self.values
+        self.segmenter = ScanSegmenter(v['segmentation.incidence_deg'],
+                                       v['segmentation.min_points'], sigma_r,
+                                       v['sigma_r_from_data'], v['sigma_r_scans'])
         self.stats.subscribe(LaserScan, 'scan', self.on_scan, SCAN_QOS)
 
     def at_scan_noise(self, params):
         """Return ``params`` with ``sigma_r`` the range noise of the current scan."""
-        if params.sigma_r == self.scan_sigma_r:
-            return params
-        return replace(params, sigma_r=self.scan_sigma_r)
+        return self.segmenter.at_scan_noise(params)
 
     def on_scan(self, msg: LaserScan) -> None:
         """Validate and segment one scan, then process it."""
@@ -89,10 +74,9 @@ class ScanFeatureNode(Node):
             i = int(negative[0])
             self.warner.warn(f'LaserScan: {negative.size} negative ranges treated as invalid '
                              f'(first: ranges[{i}]={scan.ranges[i]:g})')
-        if self.noise is not None:
-            self.scan_sigma_r = self.noise.add(scan.ranges, scan.angles, scan.valid).sigma_r
-        clusters = segment_scan(scan.ranges, scan.angles, scan.valid, scan.angle_increment,
-                                self.incidence_deg, self.scan_sigma_r, self.min_cluster_points)
+        self.segmenter.track(scan.ranges, scan.angles, scan.valid)
+        clusters = self.segmenter.segment(scan.ranges, scan.angles, scan.valid,
+                                          scan.angle_increment)
         self.process(scan, clusters)
         self.stats.processed()
 

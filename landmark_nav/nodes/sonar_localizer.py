@@ -46,7 +46,8 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, grid_to_data, make_odometry,
                                       make_pose_with_covariance_stamped, odometry_to_pose,
                                       range_to_value, stamp_to_ns)
-from landmark_nav.hardware import SONAR_MOUNTS
+from landmark_nav.localization.configuration import (FILTER_PARAMETERS, NODE_PARAMETERS,
+                                                     NOISE_PARAMETERS)
 from landmark_nav.localization.grid import GridMap, load_map_yaml
 from landmark_nav.localization.odometry import ProcessNoise
 from landmark_nav.localization.params import LocalizationParams
@@ -63,52 +64,6 @@ from sensor_msgs.msg import JointState, Range
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-FILTER_PARAMETERS = {
-    'sigma_r0': ('measurement noise: constant range std [m] (eq. 28)', (0.0, 1.0), None),
-    'sigma_r1': ('measurement noise: range-proportional std [-] (eq. 28)', (0.0, 1.0), None),
-    'min_range': ('shortest usable sonar reading [m]', (0.0, 100.0), None),
-    'max_range': ('longest usable sonar reading [m]', (0.0, 100.0), None),
-    'max_predict': ('predicted readings beyond this are discarded [m] (section 4.1)',
-                    (0.1, 100.0), None),
-    'gate': ('acceptance threshold on |z - zhat| [m] (sections 4.1, 4.3)', (0.001, 10.0),
-             None),
-    'gate_sigmas': ('optional normalised gate [innovation std devs]; 0 = off', (0.0, 100.0),
-                    None),
-    'cone_rays': ('rays per sonar lobe in the prediction; 1 = the centre beam only',
-                  (1, 101), None),
-    'theta0': ('half lobe angle Theta_0 [rad] (eq. 10; used when cone_rays > 1)',
-               (0.0, 1.5), None),
-    'specular_angle': ('largest angle of incidence that still echoes [rad]; 0 = no specular '
-                       'model', (0.0, 1.5708), None, 0.0),
-    'jacobian': ('EKF measurement Jacobian: raycast (differences of the ray-cast range) or '
-                 'point (eq. 27 literally)', None, ['raycast', 'point']),
-    'jac_step_xy': ('EKF Jacobian position step [m]', (1e-4, 1.0), None),
-    'jac_step_theta': ('EKF Jacobian heading step [rad]', (1e-4, 1.0), None),
-    'jac_max_jump': ('EKF and UKF: readings whose perturbed predictions jump more than this '
-                     'are not used [m]', (0.0, 10.0), None),
-    'jac_central': ('EKF: central (true) or forward (false) differences', None, None),
-    'jac_active_ray': ('EKF with cone_rays > 1: differentiate only the echoing ray', None,
-                       None),
-    'ukf_alpha': ('UKF sigma-point spread alpha (eq. 40)', (1e-4, 1.0), None),
-    'ukf_beta': ('UKF beta (eq. 47), 2 for Gaussians', (0.0, 10.0), None),
-    'ukf_kappa': ('UKF kappa (eq. 40)', (-4.0, 100.0), None),
-    'map_sigma': ('UKF: std of the map surface positions in x and y [m], augmented '
-                  'measurement noise; -1 = map resolution / sqrt(12); 0 = off',
-                  (-1.0, 1.0), None, -1.0),
-    'midpoint': ('motion model moves along the mean heading (eqs. 1-3); false = eq. 25 as '
-                 'printed', None, None),
-    'unknown': ('unknown map cells: invalid (no prediction through them), occupied or free '
-                '(use free on sonar-built maps)', None, ['invalid', 'occupied', 'free']),
-}
-NOISE_PARAMETERS = {
-    'sigma_d': ('std of the travelled distance per step [m] (eq. 26)', (0.0, 1.0), None),
-    'sigma_dtheta': ('relative std of the rotation per step [-] (eq. 26)', (0.0, 10.0),
-                     None),
-    'k_d': ('distance std per metre travelled [-] (extension of eq. 26)', (0.0, 10.0), None),
-    'k_theta': ('heading std per metre travelled [rad/m] (extension of eq. 26)', (0.0, 10.0),
-                None),
-}
-
 
 class SonarLocalizer(Node):
     """Thin node: odometry + Range cycles + map -> SonarTracker -> pose messages."""
@@ -116,38 +71,17 @@ class SonarLocalizer(Node):
     def __init__(self, **kwargs) -> None:
         """Declare and validate parameters, create the subscriptions and publishers."""
         super().__init__('sonar_localizer', **kwargs)
-        d = declare
-        filt = d(self, 'filter', 'ekf', 'pose filter: ekf or ukf', choices=['ekf', 'ukf'])
-        source = d(self, 'odometry_source', 'odom', 'motion input: odom (nav_msgs/Odometry '
-                   'poses) or joint_states (wheel angles)', choices=['odom', 'joint_states'])
-        radius = d(self, 'wheel_radius', 0.0955, 'nominal wheel radius R [m] (joint_states)',
-                   (0.001, 10.0))
-        axle = d(self, 'axle_length', 0.33, 'nominal axle length b [m]', (0.001, 10.0))
-        k = [d(self, f'k{i}', 1.0, f'odometry calibration factor k{i} (eqs. 17-18; '
-               '1 = nominal)', (0.5, 1.5)) for i in (1, 2, 3)]
-        self.wheel_joints = declare_strings(self, 'wheel_joints',
-                                            ['left_wheel_joint', 'right_wheel_joint'],
-                                            'left and right wheel joint names (joint_states)')
-        self.topics = declare_strings(self, 'sonar_topics',
-                                      [f'/sonar/range_{i}' for i in range(16)],
-                                      'sensor_msgs/Range topics, one per sonar, mount order')
-        mounts = d(self, 'sonar_mounts', [float(v) for v in SONAR_MOUNTS.ravel()],
-                   'x [m], y [m], yaw [rad] of each sonar in base_link (the transforms '
-                   'base_link -> sonar_<i>), in sonar_topics order; default Pioneer 2-DX')
-        map_file = d(self, 'map_file', '', 'map_server YAML to load; empty = subscribe to map')
-        self.global_frame = d(self, 'global_frame', 'map', 'frame of the map and the output')
-        self.base_frame = d(self, 'base_frame', 'base_link', 'child frame of the output')
-        pose0 = [d(self, f'initial_pose.{n}', 0.0, f'initial {n} in global_frame [{u}]',
-                   (-1e6, 1e6)) for n, u in (('x', 'm'), ('y', 'm'), ('yaw', 'rad'))]
-        std0 = [d(self, f'initial_pose.std_{n}', v, f'initial std of {n} [{u}]', (1e-6, 1e3))
-                for n, v, u in (('x', 0.055, 'm'), ('y', 0.055, 'm'),
-                                ('yaw', math.radians(5.0), 'rad'))]
-        sync = d(self, 'sync_timeout', 0.15, 'process an incomplete sonar cycle once a stamp '
-                 'this much newer arrived [s]', (0.0, 10.0))
-        stale = d(self, 'stale_cycles', 3, 'cycles a sonar may miss before it is no longer '
-                  'waited for', (1, 1000))
-        sonar_timeout = d(self, 'sonar_timeout', 1.0, 'dead reckoning at every odometry '
-                          'sample after this long without sonar readings [s]', (0.1, 60.0))
+        v = {name: (declare_strings(self, name, p.default, p.description)
+                    if p.default and isinstance(p.default, list) and isinstance(p.default[0], str)
+                    else declare(self, name, *p[:4])) for name, p in NODE_PARAMETERS.items()}
+        filt, source, map_file = v['filter'], v['odometry_source'], v['map_file']
+        radius, axle, mounts = v['wheel_radius'], v['axle_length'], v['sonar_mounts']
+        k = [v[f'k{i}'] for i in (1, 2, 3)]
+        self.wheel_joints, self.topics = v['wheel_joints'], v['sonar_topics']
+        self.global_frame, self.base_frame = v['global_frame'], v['base_frame']
+        pose0 = [v[f'initial_pose.{n}'] for n in ('x', 'y', 'yaw')]
+        std0 = [v[f'initial_pose.std_{n}'] for n in ('x', 'y', 'yaw')]
+        sync, stale, sonar_timeout = v['sync_timeout'], v['stale_cycles'], v['sonar_timeout']
         params = declare_dataclass(self, LocalizationParams, FILTER_PARAMETERS)
         noise = declare_dataclass(self, ProcessNoise, NOISE_PARAMETERS, 'process_noise.')
         self._check(source, mounts, params)

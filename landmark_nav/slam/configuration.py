@@ -24,16 +24,14 @@ import math
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from landmark_nav.laser.lines import LINE_PARAMETERS, LineParams
-from landmark_nav.parameter_names import unknown_parameter
-from landmark_nav.parameter_tables import dataclass_parameters, field_value, Parameter
+from landmark_nav.parameter_tables import (check_value, dataclass_parameters, field_value,
+                                           Parameter, parameter_values)
 from landmark_nav.slam.features import LANDMARK_TYPES
 from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
                                         ODOMETRY_NOISE_MODELS)
 from landmark_nav.slam.slam_params import JACOBIANS, OdometryNoise, SlamParams
 
 NODE = 'ekf_slam'
-#: The parameters rclpy declares in every node (accepted, no effect on the configuration).
-RCLPY_PARAMETERS = ('use_sim_time', 'start_type_description_service')
 
 #: SlamParams fields -> (description, limits, choices[, value standing for None]).
 SLAM_PARAMETERS = {
@@ -210,39 +208,6 @@ def default_values() -> Dict[str, Any]:
     return {name: p.default for name, p in parameters().items()}
 
 
-_TYPE_NAMES = {bool: 'a bool (true / false)', int: 'an integer', float: 'a double',
-               str: 'a string', list: 'a list of doubles'}
-
-
-def check_value(name: str, value: Any, param: Parameter) -> Any:
-    """Check one parameter value as the node's declaration does; return it.
-
-    The value must have the default's type (an integer for a double is refused, as ROS 2
-    refuses it), lie within the limits and be one of the choices.
-
-    Raises:
-        ValueError: One line naming the parameter, what it expects and what it got.
-    """
-    kind = type(param.default)
-    ok = isinstance(value, kind) and (kind is not int or not isinstance(value, bool))
-    if kind is list:
-        ok = isinstance(value, list) and all(
-            isinstance(v, float) for v in value)
-    if not ok:
-        hint = '; write {}.0 for a double'.format(value) if (
-            kind is float and isinstance(value, int) and not isinstance(value, bool)) else ''
-        raise ValueError(f'parameter {name}: expected {_TYPE_NAMES[kind]}, got {value!r}'
-                         f'{hint}')
-    if param.limits is not None and kind in (int, float) and not (
-            param.limits[0] <= value <= param.limits[1]):
-        raise ValueError(f'parameter {name} = {value!r} is outside [{param.limits[0]}, '
-                         f'{param.limits[1]}]')
-    if param.choices is not None and value not in param.choices:
-        raise ValueError(f'parameter {name} = {value!r} is not one of '
-                         f'{", ".join(param.choices)}')
-    return value
-
-
 @dataclass(frozen=True)
 class SlamConfiguration:
     """What the ``ekf_slam`` parameters configure (:func:`slam_configuration`).
@@ -286,14 +251,7 @@ def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamCon
             type, out of its limits or not a choice, or values the filter refuses
             together (one line naming the parameter).
     """
-    table = parameters()
-    values = {name: p.default for name, p in table.items()}
-    for name, value in (overrides or {}).items():
-        if name in RCLPY_PARAMETERS:
-            continue  # every node has them; nothing here depends on them
-        if name not in table:
-            raise ValueError(unknown_parameter(NODE, name, table))
-        values[name] = check_value(name, value, table[name])
+    values = parameter_values(NODE, parameters(), overrides)
     model = values['odometry.model'].strip()
     try:
         noise = (odometry_noise_model(model) if model else OdometryNoise(**{

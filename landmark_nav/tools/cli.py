@@ -94,7 +94,8 @@ def _cmd_evaluate_features(args: argparse.Namespace) -> int:
     print(run(args.bag, every=args.every, sigma_r=args.sigma_r, json_out=args.json,
               reference=args.reference, mount=args.mount, sensor_sigma_r=args.sensor_sigma_r,
               scans=args.scans, seed=args.seed, truth_free=args.truth_free,
-              progress=sys.stderr.isatty()))
+              progress=sys.stderr.isatty(), params_files=args.params_file,
+              settings=args.set))
     return 0
 
 
@@ -220,7 +221,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_evaluate_corridor(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.corridor_bag import (evaluate_corridor_bag,
                                                       format_corridor_evaluation)
-    print(format_corridor_evaluation(evaluate_corridor_bag(args.bag, args.out)))
+    from landmark_nav.tools.node_parameters import given_parameters
+    files = given_parameters(args.params_file, [], 'corridor_follower')
+    settings = given_parameters([], args.set, 'corridor_follower')
+    print(format_corridor_evaluation(evaluate_corridor_bag(args.bag, args.out, files=files,
+                                                           settings=settings)))
     return 0
 
 
@@ -228,13 +233,21 @@ def _cmd_evaluate_localization(args: argparse.Namespace) -> int:
     import math
     from landmark_nav.evaluation.localization_bags import (evaluate_localization,
                                                            format_evaluation)
-    sx, sy, syaw_deg = args.initial_std
-    filters = ['ekf', 'ukf'] if args.filter == 'both' else [args.filter]
-    for filt in filters:
-        result = evaluate_localization(args.bag, filt, map_path=args.map,
-                                       seed_for_initial=args.seed,
-                                       initial_std=(sx, sy, math.radians(syaw_deg)),
-                                       out_dir=args.out, odometry_source=args.odometry_source)
+    from landmark_nav.localization.configuration import localizer_configuration
+    from landmark_nav.tools.node_parameters import given_parameters
+    files = given_parameters(args.params_file, [], 'sonar_localizer')
+    settings = given_parameters([], args.set, 'sonar_localizer')
+    values = localizer_configuration({**files, **settings}).values
+    std = ((args.initial_std[0], args.initial_std[1], math.radians(args.initial_std[2]))
+           if args.initial_std else tuple(values[f'initial_pose.std_{n}'] for n in 'xy')
+           + (values['initial_pose.std_yaw'],))
+    chosen = args.filter or settings.get('filter', 'both')
+    for filt in ['ekf', 'ukf'] if chosen == 'both' else [chosen]:
+        result = evaluate_localization(
+            args.bag, filt, map_path=args.map or values['map_file'] or None,
+            seed_for_initial=args.seed, initial_std=std, out_dir=args.out,
+            odometry_source=args.odometry_source or settings.get('odometry_source'),
+            files=files, settings=settings)
         print(format_evaluation(result))
     return 0
 
@@ -369,7 +382,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('evaluate-features',
                        help='score corner and line extractors on a bag: against the ground '
                             'truth of a simulator bag, else with truth-free metrics (PLE ray '
-                            'metric, false-surface beams, fit, repeatability)')
+                            'metric, false-surface beams, fit, repeatability)',
+                       epilog="Each method runs with its node's configuration (corner_extractor "
+                       'or line_extractor; the parameter method is set per row): the '
+                       'defaults, then the --params-file files, then what the bag states (a '
+                       "simulator bag's laser noise; on other bags the range noise estimated "
+                       'from the scans unless --set gives sigma_r), then --set, then '
+                       '--sigma-r. max_beams has no effect here.')
     p.add_argument('bag', help='rosbag2 directory with /scan (simulator or imported)')
     p.add_argument('--every', type=int, default=1, help='use every n-th scan')
     p.add_argument('--sigma-r', type=_sigma_or_auto, default=None, metavar='METRES|auto',
@@ -393,6 +412,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--seed', type=int, default=0,
                    help='truth-free: seed of numpy.random.default_rng for the draw (default 0)')
     p.add_argument('--json', default=None, help='also write the figures to this JSON file')
+    p.add_argument('--params-file', action='append', default=[], metavar='FILE',
+                   help='corner_extractor and line_extractor parameter file (ROS 2 YAML, as '
+                        "ros2 run --params-file: /** and each node's section; repeatable, a "
+                        'later file wins; e.g. "$(landmark_nav config line_extractor)")')
+    p.add_argument('--set', action='append', default=[], metavar='NODE.NAME=VALUE',
+                   help='one parameter, after the files: corner_extractor.NAME=VALUE, '
+                        'line_extractor.NAME=VALUE, or NAME=VALUE for each node declaring it '
+                        '(the value as YAML, as -p NAME:=VALUE; repeatable)')
     p.set_defaults(func=_cmd_evaluate_features)
 
     p = sub.add_parser('calibrate-odometry',
@@ -470,29 +497,44 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser('evaluate-corridor',
                        help="run the corridor follower offline on a corridor bag (the node's "
-                            'estimation loop) against its ground truth; writes corridor.json')
+                            'estimation loop) against its ground truth; writes corridor.json',
+                       epilog="The loop runs corridor_follower's configuration: its defaults, "
+                       'then the --params-file files, then what the bag states (corridor '
+                       'width and height, centre line, camera mount), then --set. The '
+                       'controller and interface parameters have no effect here.')
     p.add_argument('bag', help='rosbag2 directory recorded by `simulate corridor` (e.g. '
                                'bags/corridor)')
     p.add_argument('--out', default='out/corridor', help='output directory')
+    add_parameter_arguments(p, 'corridor_follower')
     p.set_defaults(func=_cmd_evaluate_corridor)
 
     p = sub.add_parser('evaluate-localization',
                        help='run the sonar EKF / UKF offline on a simulator bag against its '
-                            'ground truth; writes JSON + PNGs')
+                            'ground truth; writes JSON + PNGs',
+                       epilog="The filter runs sonar_localizer's configuration: its defaults, "
+                       'then the --params-file files, then what the bag and the map state '
+                       '(the odometry source, wheel radius, axle length and k1..k3 of the '
+                       'bag; unknown: free on a map file with unknown cells), then --set, '
+                       'then the options above. Every filter is evaluated unless --set '
+                       'filter or --filter chooses one. The initial pose is drawn around the '
+                       "ground truth; the sonar topics and mounts are the bag's; the frames, "
+                       'sync_timeout, stale_cycles and sonar_timeout have no effect here.')
     p.add_argument('bag', help='rosbag2 directory recorded by `simulate` (e.g. bags/hallway)')
-    p.add_argument('--filter', choices=['ekf', 'ukf', 'both'], default='both',
-                   help='filter to evaluate (default both)')
+    p.add_argument('--filter', choices=['ekf', 'ukf', 'both'], default=None,
+                   help='filter to evaluate (default both, or --set filter=...)')
     p.add_argument('--map', default=None, metavar='YAML',
                    help='map_server YAML (default: the world of ground_truth.yaml rasterised '
                         'at 0.1 m)')
     p.add_argument('--seed', type=_seed, default=None,
                    help='seed of the initial estimate (default 1000 + the bag seed)')
-    p.add_argument('--initial-std', type=float, nargs=3, default=[0.055, 0.055, 5.0],
+    p.add_argument('--initial-std', type=float, nargs=3, default=None,
                    metavar=('X_M', 'Y_M', 'YAW_DEG'),
-                   help='std of the initial estimate and covariance (default 0.055 0.055 5)')
+                   help='std of the initial estimate and covariance (default the '
+                        'parameters initial_pose.std_*: 0.055 0.055 5)')
     p.add_argument('--odometry-source', choices=['joint_states', 'odom'], default=None,
                    help='motion input (default joint_states if recorded)')
     p.add_argument('--out', default='out/localization', help='output directory')
+    add_parameter_arguments(p, 'sonar_localizer')
     p.set_defaults(func=_cmd_evaluate_localization)
 
     p = sub.add_parser('build-sonar-map',
