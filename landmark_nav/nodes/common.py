@@ -378,7 +378,8 @@ class InputStats:
     ``before_match.<topic>``: messages its publisher sent before this subscription matched
     it (the first received sequence number minus one; DDS does not deliver them to a
     volatile subscription, so they were never received: reported once in an info line, not
-    counted as drops). Level WARN while inputs were
+    counted as drops), and the counts of :meth:`event`: inputs used, but not as they came
+    (``odometry.jump``, ``odometry.covariance_replaced``, ...). Level WARN while inputs were
     dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
     by the node's :class:`ProblemWarner`) ends with the drop rate, of the current period and
     since start with the reasons: a node that cannot keep up says how much it loses.
@@ -395,6 +396,7 @@ class InputStats:
         self.latencies = deque(maxlen=window)
         self.run_latency = LatencyHistogram()
         self.before_match = Counter()
+        self.events = Counter()
         self.received_ns = 0
         self._last_seq = {}
         self._reported_drops = 0
@@ -456,6 +458,11 @@ class InputStats:
         self.dropped[reason] += count
         self.warner.warn(message, self.drop_rate_text())
 
+    def event(self, key: str, message: str) -> None:
+        """Count an input used other than as it came (e.g. ``odometry.jump``); warn (throttled)."""
+        self.events[key] += 1
+        self.warner.warn(message)
+
     def status(self) -> DiagnosticStatus:
         """Return the DiagnosticStatus of the inputs so far."""
         lat = list(self.latencies)
@@ -471,6 +478,7 @@ class InputStats:
                        'latency_run_p95_ms': f'{self.run_latency.percentile_ms(95):.2f}',
                        'latency_run_max_ms': f'{1e3 * self.run_latency.max:.2f}'})
         values.update({f'before_match.{k}': v for k, v in sorted(self.before_match.items())})
+        values.update(sorted(self.events.items()))
         level = DiagnosticStatus.WARN if recent else DiagnosticStatus.OK
         message = (f'{recent} inputs dropped in the last period' if recent else
                    f'{self.processed_count} inputs processed, {dropped} dropped')
@@ -498,6 +506,13 @@ class InputStats:
         msg.header.stamp = self._node.get_clock().now().to_msg()
         msg.status = [status]
         self._pub.publish(msg)
+
+
+def require_stamp(stamp_ns: int, what: str) -> int:
+    """Return a message's stamp [ns]; stamp 0 (an unset header) is a :class:`ConversionError`."""
+    if stamp_ns <= 0:
+        raise ConversionError(f'{what}: stamp {stamp_ns} ns is not a time (an unset header)')
+    return stamp_ns
 
 
 def ros_home() -> Path:

@@ -70,8 +70,15 @@ the previous step's scan where it agrees with the odometry (``scan_matching_nois
 ``FrontendParams``, as ``landmark_nav evaluate --scan-matching`` offline).
 
 Bad input is reported with a warning throttled per kind of problem and counted on
-``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry that is not
-finite, repeated, older than the last sample or a jump (front-end events); corners with NaN
+``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): dropped odometry that
+cannot be read, is not finite or has stamp 0 (``dropped.malformed``), older than the last
+sample (``dropped.out_of_order``) or repeated (``dropped.repeated``); odometry used but not
+as it came: a jump beyond the motion model's bound, whatever covariance the message states
+(bridged, ``odometry.jump``), a covariance that is not finite, symmetric, with a
+non-negative diagonal and PSD (replaced by the ``odometry.*`` model,
+``odometry.covariance_replaced``), a restart (``odometry.restart``: ``restart_messages``
+samples in a row far back) or a withdrawn future stamp (``odometry.retracted``); scans and
+corner clouds with stamp 0 are ``dropped.malformed``; corners with NaN
 or with a covariance that is not positive semi-definite are dropped; corner sets older than
 the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
 wait for odometry (before the first step: when the waiting sets take more than
@@ -100,8 +107,8 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.laser.lines import LineParams
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats,
-                                       output_path, ParameterError, ProblemWarner, run_node,
-                                       SCAN_DEPTH, SCAN_QOS)
+                                       output_path, ParameterError, ProblemWarner,
+                                       require_stamp, run_node, SCAN_DEPTH, SCAN_QOS)
 from landmark_nav.nodes.line_extractor import LINE_PARAMETERS
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.ekf_slam import CORNER, JACOBIANS, LINE, OdometryNoise, SlamParams
@@ -175,15 +182,17 @@ ODOMETRY_PARAMETERS = {
 FRONTEND_PARAMETERS = {
     'deskew': ('move each corner through the odometry motion up to its beam time', None,
                None),
-    'max_speed': ('fastest plausible translation of the base [m/s] (odometry check)',
-                  (1e-3, 100.0), None),
-    'max_turn_rate': ('fastest plausible rotation of the base [rad/s] (odometry check)',
-                      (1e-3, 100.0), None),
+    'max_speed': ('fastest plausible translation of the base [m/s] (odometry check; '
+                  'Pioneer 3-DX: 1.2)', (1e-3, 100.0), None),
+    'max_turn_rate': ('fastest plausible rotation of the base [rad/s] (odometry check; '
+                      'Pioneer 3-DX: 5.2)', (1e-3, 100.0), None),
     'jump_sigmas': ('odometry noise stds allowed on top of the speed limits', (0.1, 100.0),
                     None),
     'min_step_s': ('smallest elapsed time the odometry check uses [s]', (1e-6, 10.0), None),
-    'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
-                       (1e-3, 1e6), None),
+    'max_backward_s': ('odometry older than this, restart_messages times in a row, restarts '
+                       'the filter (a restarted source) [s]', (1e-3, 1e6), None),
+    'restart_messages': ('consecutive odometry samples older than max_backward_s that restart '
+                         'the filter (one stamp never does)', (1, 1000), None),
     'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
     'scan_matching': ("predict with the scan's point-to-line ICP motion against the previous "
                       'scan where it agrees with the odometry (needs scan, visibility: true)',
@@ -216,8 +225,16 @@ MAX_START_BYTES = 32 * 2 ** 20
 MAX_JOIN = 50
 DISCOVERY_S = 10.0  # a part without a publisher is waited for this long (discovery)
 CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
-#: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
-_FEATURE_DROPS = {'out_of_order': 'out_of_order'}
+#: Front-end events -> /diagnostics drop reason (the input is not used).
+_DROPS = {'out_of_order': ('out_of_order', 'Skipping corners'),
+          'invalid': ('malformed', 'Dropping odometry'),
+          'backward': ('out_of_order', 'Dropping odometry'),
+          'repeated': ('repeated', 'Dropping odometry'),
+          'conflicting': ('repeated', 'Dropping odometry')}
+#: Front-end events -> /diagnostics count of an input used, but not as it came.
+_EVENTS = {'jump': 'odometry.jump', 'covariance': 'odometry.covariance_replaced',
+           'restart': 'odometry.restart', 'retracted': 'odometry.retracted',
+           'held': 'corners.held'}
 
 
 class SlamInputStats(InputStats):
@@ -400,8 +417,9 @@ class EkfSlamNode(Node):
 
     def _on_event(self, kind: str, message: str) -> None:
         """Report a front-end event (an input not used as it came)."""
-        if kind in _FEATURE_DROPS:
-            self.stats.drop(_FEATURE_DROPS[kind], f'Skipping corners: {message}')
+        if kind in _DROPS:
+            reason, what = _DROPS[kind]
+            self.stats.drop(reason, f'{what}: {message}')
             return
         if kind == 'before_odometry':  # not a drop (module docstring); logged at a step
             self.stats.before_odometry += 1
@@ -410,7 +428,7 @@ class EkfSlamNode(Node):
             self.resets += 1
             self._clear_path()
             self._first_set_ns = None
-        self.warner.warn(f'Odometry ({kind}): {message}')
+        self.stats.event(_EVENTS[kind], f'Odometry ({kind}): {message}')
 
     def on_odom(self, msg: Odometry) -> None:
         """Give one odometry sample to the front end; publish the steps it completes."""
@@ -419,7 +437,7 @@ class EkfSlamNode(Node):
         try:
             t, pose, cov = odometry_pose_covariance(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping odometry: {err}')
+            self.stats.drop('malformed', f'Dropping odometry: {err}')
             return
         _, steps = self.frontend.add_odometry(t, pose, cov)
         self._publish_steps(steps, self.stats.received_ns)
@@ -432,13 +450,14 @@ class EkfSlamNode(Node):
             missing = [n for n in CORNER_NAMES if n not in a]
             if missing:
                 raise ConversionError(f'PointCloud2: missing fields {", ".join(missing)}')
+            t = require_stamp(stamp_to_ns(msg.header.stamp), 'PointCloud2')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping corners: {err}')
             return
         cols = np.column_stack([a[n] for n in CORNER_NAMES]
                                + [a.get('time', np.zeros(len(a['x'])))])
         cols = self._valid_corners(cols.reshape(-1, len(CORNER_NAMES) + 1))
-        self._offer('corners', stamp_to_ns(msg.header.stamp), cols)
+        self._offer('corners', t, cols)
 
     def on_scan(self, msg: LaserScan) -> None:
         """Validate one scan (lines, visibility) and join it to its corner set."""
@@ -447,6 +466,7 @@ class EkfSlamNode(Node):
             scan = scan_to_data(msg)
             if scan.ranges.size == 0:
                 raise ConversionError('LaserScan: empty scan (no ranges)')
+            require_stamp(scan.stamp_ns, 'LaserScan')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping scan: {err}')
             return
