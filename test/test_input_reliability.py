@@ -83,7 +83,7 @@ class Feeder:
         self.odom_pub.publish(msg)
 
     def step(self, t, x):
-        """Publish the odometry at ``t`` and ``t + 10 ms``, then the set at ``t``; wait for its pose."""
+        """Publish odometry at ``t`` and ``t + 10 ms``, the set at ``t``; wait for its pose."""
         n = len(self.poses)
         self.odom(t, x)
         self.odom(t + 10 * MS, x)

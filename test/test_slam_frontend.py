@@ -119,14 +119,17 @@ def test_one_stamp_never_resets_only_a_persistent_backward_run_does():
     fe.add_features(corners(T0 + 100 * MS))
     assert fe.slam.num_landmarks == 1
     assert fe.add_odometry(0, [0.02, 0, 0])[0] == 'invalid'  # stamp 0: an unset header
-    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'backward'  # one: dropped
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'far_back'  # one: held
     assert fe.add_odometry(T0 + 200 * MS, [0.02, 0, 0])[0] == 'accepted'  # the run is over
-    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'backward'
-    assert fe.add_odometry(T0 - 1900 * MS, [5.0, 0, 0])[0] == 'backward'
+    assert fe.events['backward'] == 1  # ... and the held sample dropped
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.add_odometry(T0 - 2100 * MS, [5.0, 0, 0])[0] == 'far_back'  # not a forward run
+    assert fe.add_odometry(T0 - 1900 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.events['backward'] == 2 and fe.events['far_back'] == 4
     assert fe.restarts == 0 and fe.slam.num_landmarks == 1
     kind, _ = fe.add_odometry(T0 - 1800 * MS, [5.01, 0, 0])  # the third in a row
     assert kind == 'restart' and fe.restarts == 1 and fe.slam.num_landmarks == 0
-    assert fe.odometry_span == (T0 - 2000 * MS, T0 - 1800 * MS)  # the run is the new start
+    assert fe.odometry_span == (T0 - 2100 * MS, T0 - 1800 * MS)  # the run is the new start
 
 
 def test_a_stamp_in_the_future_is_withdrawn_not_a_restart():
@@ -137,7 +140,7 @@ def test_a_stamp_in_the_future_is_withdrawn_not_a_restart():
     fe.add_odometry(T0 + 3600_000 * MS, [0.02, 0, 0])  # an hour ahead: plausible by time
     kinds = [fe.add_odometry(T0 + (200 + 100 * i) * MS, [0.02 + 0.01 * i, 0, 0])[0]
              for i in range(3)]
-    assert kinds == ['backward', 'backward', 'retracted']
+    assert kinds == ['far_back', 'far_back', 'retracted']
     assert fe.restarts == 0 and fe.slam.num_landmarks == 1
     # The future sample trimmed the buffer to the sample before it (buffer_s behind it).
     assert fe.odometry_span == (T0 + 100 * MS, T0 + 400 * MS)
@@ -157,8 +160,8 @@ def test_repeated_backward_and_restart():
     (step,) = fe.add_features(corners(T0 + 125 * MS))
     np.testing.assert_allclose(step.odometry, [0.0125, 0, 0], atol=1e-15)
     assert fe.restarts == 0
-    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'backward'
-    assert fe.add_odometry(T0 - 1990 * MS, [5.0, 0, 0])[0] == 'backward'
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.add_odometry(T0 - 1990 * MS, [5.0, 0, 0])[0] == 'far_back'
     assert fe.add_odometry(T0 - 1980 * MS, [5.0, 0, 0])[0] == 'restart'
     assert fe.restarts == 1 and fe.slam.num_landmarks == 0
     np.testing.assert_allclose(fe.slam.pose, [5.0, 0, 0])

@@ -76,8 +76,9 @@ sample (``dropped.out_of_order``) or repeated (``dropped.repeated``); odometry u
 as it came: a jump beyond the motion model's bound, whatever covariance the message states
 (bridged, ``odometry.jump``), a covariance that is not finite, symmetric, with a
 non-negative diagonal and PSD (replaced by the ``odometry.*`` model,
-``odometry.covariance_replaced``), a restart (``odometry.restart``: ``restart_messages``
-samples in a row far back) or a withdrawn future stamp (``odometry.retracted``); scans and
+``odometry.covariance_replaced``), held far back in time (``odometry.far_back``: dropped
+as out of order unless ``restart_messages`` of them in a row restart, ``odometry.restart``)
+or a withdrawn future stamp (``odometry.retracted``); scans and
 corner clouds with stamp 0 are ``dropped.malformed``; corners with NaN
 or with a covariance that is not positive semi-definite are dropped; corner sets older than
 the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
@@ -233,6 +234,7 @@ _DROPS = {'out_of_order': ('out_of_order', 'Skipping corners'),
           'conflicting': ('repeated', 'Dropping odometry')}
 #: Front-end events -> /diagnostics count of an input used, but not as it came.
 _EVENTS = {'jump': 'odometry.jump', 'covariance': 'odometry.covariance_replaced',
+           'far_back': 'odometry.far_back',
            'restart': 'odometry.restart', 'retracted': 'odometry.retracted',
            'held': 'corners.held'}
 

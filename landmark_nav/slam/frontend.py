@@ -15,11 +15,12 @@ the checks of :mod:`.odometry_checks`, which never trust the sample itself:
   by the noise model (``'covariance'``; ``U`` always comes from the model);
 * the same stamp again: dropped (``'repeated'`` when the pose is the same, ``'conflicting'``
   when it differs: the first one stays);
-* an older stamp: dropped (``'backward'``). Only a persistent condition restarts: when
-  ``restart_messages`` samples in a row each lie more than ``max_backward_s`` back (and
-  move forward among themselves), the odometry source restarted (a replayed bag looping, a
-  driver restart) and the front end starts over with an empty map from those samples
-  (``'restart'``, the only reset). If instead those samples continue the odometry before
+* an older stamp: dropped (``'backward'``). Only a persistent condition restarts: samples
+  more than ``max_backward_s`` back are held (``'far_back'``; dropped as ``'backward'``
+  when the run ends); when ``restart_messages`` of them come in a row (moving forward among
+  themselves), the odometry source restarted (a replayed bag looping, a driver restart) and
+  the front end starts over with an empty map from them (``'restart'``, the only reset).
+  If instead those samples continue the odometry before
   the last accepted sample, and that one had jumped more than ``max_backward_s`` ahead, it
   was a stamp in the future: it is withdrawn and the samples accepted (``'retracted'``);
 * a newer stamp: the increment ``u = (-)o_prev (+) o`` (eq. 13) must be reachable in the
@@ -110,93 +111,35 @@ scans then give the landmark observations: the scan-matched motion and the updat
 their data, so the filter's pose is somewhat overconfident (the Carmen figures in the README
 measure how much). The ICP runs on the raw scan (no de-skew).
 
-Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
---------------------------------------------------------------------------------------
-The filter's ``U`` (:func:`.ekf_slam.odometry_noise`) is distance- and rotation-driven:
-``sigma_xy = s_xy sqrt(d)`` on each axis, ``sigma_psi^2 = s_yd^2 d + s_yr^2 |dpsi|``.
-
-* ``pioneer`` (the default of the node and of bags that state nothing): ``s_xy`` 0.05
-  m/sqrt(m), ``s_yd`` 0.05 rad/sqrt(m), ``s_yr`` 0.1 rad/sqrt(rad): an uncalibrated
-  Pioneer-class base, 16 cm and 9 deg of spread after 10 m straight and 14 deg per turn on
-  the spot (the self-localization chapter's calibration factors alone give 8 deg per 10 m
-  and 3.4 deg per turn; real floors add slip). The same numbers as the importer's default
-  drift model, whose gains ``k_d, k_theta, k_dtheta`` map one to one onto ``s_xy, s_yd,
-  s_yr`` (the importer's distance error lies along the motion; the filter spreads it on both
-  axes, which is conservative across the motion).
-* ``simulator``: :class:`~.ekf_slam.OdometryNoise` defaults (1.5 mm/sqrt(m), 0.01
-  rad/sqrt(m), 0.01 rad/sqrt(rad)), the random wheel noise of the package's simulated
-  Pioneer; used for the simulator's bags.
-* ``'k_d=.. k_theta=.. k_dtheta=..'``: the gains an imported bag states in its
-  ``custom_data`` key ``landmark_nav.drift_model`` (the imported-bag contract).
+Odometry noise per robot: :mod:`.odometry_noise_models` (``pioneer``, the default;
+``simulator``; an imported bag's drift gains).
 """
 
 import bisect
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
-import re
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import compose, interpolate_pose, inverse, relative
 import numpy as np
 
 from .consistency import chi2_gate
-from .ekf_slam import EkfSlam, odometry_noise, OdometryNoise, SlamParams, UpdateResult
+from .ekf_slam import EkfSlam, odometry_noise, SlamParams, UpdateResult
 from .line_landmarks import lines_to_observations
-from .odometry_checks import BackwardRun, covariance_problem, implausible_motion
 from .observations import corner_descriptors, corners_to_observations
+from .odometry_checks import BackwardRun, covariance_problem, implausible_motion
+from .odometry_noise_models import odometry_noise_model, ODOMETRY_NOISE_MODELS
 from .scan_matching import fused_scan_motion, scan_motion, scan_points
 from .slam_map import SlamMap
 from .visibility import ScanGeometry
 
-#: Named odometry noise models (module docstring).
-ODOMETRY_NOISE_MODELS: Dict[str, OdometryNoise] = {
-    'pioneer': OdometryNoise(sigma_xy_per_sqrt_m=0.05, sigma_yaw_per_sqrt_m=0.05,
-                             sigma_yaw_per_sqrt_rad=0.1),
-    'simulator': OdometryNoise(),
-}
 #: Odometry events counted by :attr:`SlamFrontend.events`.
 ODOMETRY_EVENTS = ('accepted', 'invalid', 'covariance', 'repeated', 'conflicting', 'backward',
-                   'restart', 'retracted', 'jump')
+                   'far_back', 'restart', 'retracted', 'jump')
 #: Feature-set events counted by :attr:`SlamFrontend.events`.
 FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held')
 #: What a step predicted with (:attr:`SlamFrontend.motions`, :attr:`Step.motion`).
 MOTION_SOURCES = ('odometry', 'scan_matching')
-_GAIN = re.compile(r'^(k_d|k_theta|k_dtheta)=(\S+)$')
-_GAIN_FIELD = {'k_d': 'sigma_xy_per_sqrt_m', 'k_theta': 'sigma_yaw_per_sqrt_m',
-               'k_dtheta': 'sigma_yaw_per_sqrt_rad'}
-
-
-def odometry_noise_model(text: str) -> OdometryNoise:
-    """Return the odometry noise of a model name or of drift gains (module docstring).
-
-    Args:
-        text: ``'pioneer'``, ``'simulator'`` or ``'k_d=0.05 k_theta=0.05 k_dtheta=0.1'``
-            (the importer's ``landmark_nav.drift_model``; gains not given keep the
-            ``pioneer`` values).
-
-    Returns:
-        The noise model.
-
-    Raises:
-        ValueError: Unknown name or malformed gain (one line naming it).
-    """
-    text = str(text).strip()
-    if text in ODOMETRY_NOISE_MODELS:
-        return ODOMETRY_NOISE_MODELS[text]
-    gains = {}
-    for token in text.replace(',', ' ').split():
-        m = _GAIN.match(token)
-        try:
-            value = float(m.group(2)) if m else math.nan
-        except ValueError:
-            value = math.nan
-        if not m or not math.isfinite(value) or value < 0.0:
-            raise ValueError(f'odometry noise model: expected {" or ".join(ODOMETRY_NOISE_MODELS)}'
-                             f' or k_d=.. k_theta=.. k_dtheta=.. (numbers >= 0), got {token!r}')
-        gains[_GAIN_FIELD[m.group(1)]] = value
-    if not gains:
-        raise ValueError('odometry noise model: empty')
-    return replace(ODOMETRY_NOISE_MODELS['pioneer'], **gains)
 
 
 @dataclass(frozen=True)
@@ -577,7 +520,7 @@ class SlamFrontend:
                                f'{b.raw_last.tolist()})'), []
         if stamp_ns < last:
             return self._backward(stamp_ns, pose, cov)
-        self._back_run.clear()
+        self._drop_back_run()
         dt = (stamp_ns - last) * 1e-9
         u = relative(b.raw_last, pose)  # eq. 13
         f = self.frontend
@@ -600,14 +543,16 @@ class SlamFrontend:
         """Drop an older sample; restart (or withdraw a future stamp) when persistent."""
         b, f = self._buf, self.frontend
         back = (b.t[-1] - t) * 1e-9
-        if back <= f.max_backward_s or not self._back_run.add(t, pose, cov):
-            more = ('' if back <= f.max_backward_s else
-                    f' ({len(self._back_run.samples)} of {f.restart_messages} in a row '
-                    'needed for a restart)')
+        if back <= f.max_backward_s:
             return self._event('backward', f'odometry stamp {t} ns is {back:.3f} s older '
-                               f'than the last one ({b.t[-1]} ns): dropped{more}'), []
-        run = self._back_run.samples
-        self._back_run.clear()
+                               f'than the last one ({b.t[-1]} ns): dropped'), []
+        if not self._back_run.continues(t):
+            self._drop_back_run()
+        if not self._back_run.add(t, pose, cov):
+            return self._event('far_back', f'odometry stamp {t} ns is {back:.3f} s older than '
+                               f'the last one ({b.t[-1]} ns): held, {len(self._back_run.samples)}'
+                               f' of {f.restart_messages} in a row restart'), []
+        run = self._back_run.clear()
         if (len(b.t) >= 2 and b.previous is not None and run[0][0] > b.t[-2]
                 and (b.t[-1] - b.t[-2]) * 1e-9 > f.max_backward_s):
             kind = self._event('retracted', f'odometry stamp {b.t[-1]} ns lay '
@@ -626,6 +571,13 @@ class SlamFrontend:
         for sample in run:
             steps += self.add_odometry(*sample)[1]
         return kind, steps
+
+    def _drop_back_run(self) -> None:
+        """Drop the far-back samples held: the run ended before it restarted anything."""
+        for t, _, _ in self._back_run.clear():
+            self._event('backward', f'odometry stamp {t} ns lay more than '
+                        f'{self.frontend.max_backward_s:g} s back, too few in a row for a '
+                        'restart: dropped')
 
     def _accept(self, t: int, raw: np.ndarray, bridged: np.ndarray,
                 cov: Optional[np.ndarray], extra: np.ndarray,

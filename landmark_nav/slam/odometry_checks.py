@@ -83,18 +83,20 @@ class BackwardRun:
         self.needed = int(needed)
         self.samples: List[Tuple[int, np.ndarray, Optional[np.ndarray]]] = []
 
-    def clear(self) -> None:
-        """Forget the run (a sample was accepted: the old time base goes on)."""
-        self.samples = []
+    def clear(self) -> List[Tuple[int, np.ndarray, Optional[np.ndarray]]]:
+        """Forget the run and return its samples (e.g. dropped: the old time base goes on)."""
+        samples, self.samples = self.samples, []
+        return samples
+
+    def continues(self, stamp_ns: int) -> bool:
+        """Whether a far-back sample continues the run (none yet, or newer than its last).
+
+        A restarted source's clock moves forward; a sample that does not starts a new run.
+        """
+        return not self.samples or stamp_ns > self.samples[-1][0]
 
     def add(self, stamp_ns: int, pose: np.ndarray, cov: Optional[np.ndarray]) -> bool:
-        """Add a far-back sample; return True when the run is complete (restart).
-
-        A sample not newer than the previous one of the run starts a new run: a restarted
-        source's clock moves forward.
-        """
-        if self.samples and stamp_ns <= self.samples[-1][0]:
-            self.samples = []
+        """Add a far-back sample that continues the run; return True when it is complete."""
         self.samples.append((int(stamp_ns), pose, cov))
         return len(self.samples) >= self.needed
 
