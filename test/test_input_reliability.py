@@ -177,3 +177,38 @@ def test_stamp_zero_and_malformed_odometry_are_dropped_and_leave_the_map(process
     for what in ('odometry', 'scan', 'corners'):
         assert f'Dropping {what}: ' in text, text
     assert 'stamp 0 ns is not a time' in text and 'restarting' not in text
+
+
+def input_status(diagnostics, name: str) -> dict:
+    """Return the latest ``<name>: input`` values among the collected DiagnosticArrays."""
+    for arr in reversed(list(diagnostics)):
+        for s in arr.status:
+            if s.name == f'{name}: input':
+                return {kv.key: kv.value for kv in s.values}
+    return {}
+
+
+@pytest.mark.dds
+def test_scan_drops_have_their_true_reason():
+    """A scan of 2e5 beams is ``oversized`` (it was counted as ``lost``); stamp 0 ``malformed``."""
+    from landmark_nav.nodes.corner_extractor import CornerExtractor
+    with RosHarness() as ros:
+        node = ros.add_node(CornerExtractor(context=ros.context))
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        pub = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub])
+        said = []
+        warn = node.warner.warn
+        node.warner.warn = lambda message, detail='': (said.append(message),
+                                                       warn(message, detail))
+        big = make_scan(T0, 'laser', -math.pi / 2, math.pi / 200_000, np.full(200_000, 4.0),
+                        0.1, 30.0)
+        for msg in (scan(T0), big, scan(0), scan(T0 + 100 * MS)):
+            pub.publish(msg)
+        want = {'processed': '2', 'dropped.oversized': '1', 'dropped.malformed': '1'}
+        assert ros.wait_until(lambda: all(input_status(diagnostics, 'corner_extractor').get(k)
+                                          == v for k, v in want.items()), 30.0), \
+            input_status(diagnostics, 'corner_extractor')
+        assert 'dropped.lost' not in input_status(diagnostics, 'corner_extractor')
+        assert said == ['Dropping scan: 200000 beams, more than max_beams 20000',
+                        'Dropping scan: LaserScan: stamp 0 ns is not a time (an unset header)']

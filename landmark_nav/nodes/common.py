@@ -363,9 +363,10 @@ class InputStats:
     """Count a node's processed and dropped inputs and its latency; report them.
 
     Subscriptions made with :meth:`subscribe` record when DDS received each message and
-    detect messages lost before the callback (gaps in the publisher's sequence numbers,
-    e.g. a full queue when the node is slower than its input) while the topic has one
-    publisher. The node calls :meth:`processed` when an input has produced its output and
+    detect messages lost before the callback (gaps in the publisher's sequence numbers:
+    a full queue when the node is slower than its input, or a message DDS did not deliver,
+    e.g. one too large for best-effort delivery between processes; the node cannot tell
+    which) while the topic has one publisher. The node calls :meth:`processed` when an input has produced its output and
     :meth:`drop` (with a warning naming the problem) when it skips one. Every
     ``period_s`` a diagnostic_msgs/DiagnosticArray goes out on ``/diagnostics`` with one
     DiagnosticStatus ``<node>: input``: the counts ``processed``, ``dropped`` and
@@ -441,8 +442,9 @@ class InputStats:
             return
         lost = seq - last - 1
         if self._node.count_publishers(topic) == 1:  # one sequence: a gap is a loss
-            self.drop('lost', f'Lost {lost} messages on {topic} before processing (the '
-                      'queue overflowed: input faster than the node)', lost)
+            self.drop('lost', f'Lost {lost} messages on {topic}: published but never '
+                      'received (the queue overflowed while the node was busy, or a message '
+                      'too large for best-effort delivery between processes)', lost)
 
     def processed(self, received_ns: Optional[int] = None) -> None:
         """Count one processed input; its latency runs from ``received_ns`` (wall clock)."""

@@ -79,7 +79,8 @@ non-negative diagonal and PSD (replaced by the ``odometry.*`` model,
 ``odometry.covariance_replaced``), held far back in time (``odometry.far_back``: dropped
 as out of order unless ``restart_messages`` of them in a row restart, ``odometry.restart``)
 or a withdrawn future stamp (``odometry.retracted``); scans and
-corner clouds with stamp 0 are ``dropped.malformed``; corners with NaN
+corner clouds with stamp 0 are ``dropped.malformed``, scans of more than ``max_beams`` beams
+``dropped.oversized``; corners with NaN
 or with a covariance that is not positive semi-definite are dropped; corner sets older than
 the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
 wait for odometry (before the first step: when the waiting sets take more than
@@ -290,6 +291,9 @@ class EkfSlamNode(Node):
         if self.frontend_params.scan_matching and not self.visibility:
             raise ParameterError('parameter scan_matching needs the scan geometry: set '
                                  'visibility: true')
+        self.max_beams = declare(self, 'max_beams', 20000, 'scans with more beams are dropped '
+                                 'as oversized (real 2-D lasers have up to a few thousand)',
+                                 (1, 100000000))
         self.laser_sigma_range = declare(self, 'laser_sigma_range', 0.01, "the laser's stated "
                                          '1-sigma range noise [m] (visibility tolerance)',
                                          (0.0, 10.0))
@@ -464,6 +468,10 @@ class EkfSlamNode(Node):
     def on_scan(self, msg: LaserScan) -> None:
         """Validate one scan (lines, visibility) and join it to its corner set."""
         self.scan_count += 1
+        if len(msg.ranges) > self.max_beams:
+            self.stats.drop('oversized', f'Dropping scan: {len(msg.ranges)} beams, more than '
+                            f'max_beams {self.max_beams}')
+            return
         try:
             scan = scan_to_data(msg)
             if scan.ranges.size == 0:
