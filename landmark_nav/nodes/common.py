@@ -366,8 +366,9 @@ class InputStats:
     detect messages lost before the callback (gaps in the publisher's sequence numbers:
     a full queue when the node is slower than its input, or a message DDS did not deliver,
     e.g. one too large for best-effort delivery between processes; the node cannot tell
-    which) while the topic has one publisher. The node calls :meth:`processed` when an input has produced its output and
-    :meth:`drop` (with a warning naming the problem) when it skips one. Every
+    which) while the topic has one publisher. The node calls :meth:`processed` when an
+    input has produced its output and :meth:`drop` (with a warning naming the problem) when
+    it skips one. Every
     ``period_s`` a diagnostic_msgs/DiagnosticArray goes out on ``/diagnostics`` with one
     DiagnosticStatus ``<node>: input``: the counts ``processed``, ``dropped`` and
     ``dropped.<reason>`` since start, ``drop_rate_percent`` (dropped of processed plus
