@@ -93,8 +93,10 @@ def main() -> int:
             started = time.monotonic()
             print(f'logs in {out}; {args.minutes:g} min, load average at start '
                   f'{os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)', flush=True)
-            while procs['drive'].poll() is None:
+            while True:
                 time.sleep(SAMPLE_S)
+                if procs['drive'].poll() is not None:  # the run is over: sample no more
+                    break
                 pids = {name: p.pid for name, p in procs.items()}
                 pids.update(pipeline_pids(out / 'pipeline.log'))
                 samples.append((time.monotonic() - started,

@@ -241,10 +241,13 @@ _EVENTS = {'jump': 'odometry.jump', 'covariance': 'odometry.covariance_replaced'
 
 
 class SlamInputStats(InputStats):
-    """:class:`InputStats` plus the count ``before_odometry``.
+    """:class:`InputStats` plus the counts ``before_odometry``, ``received.*`` and ``waiting``.
 
-    The corner sets stamped before the first odometry sample: not processed, and not drops
-    (no odometry pose exists for them).
+    ``before_odometry``: the corner sets stamped before the first odometry sample: not
+    processed, and not drops (no odometry pose exists for them). ``received.corners`` /
+    ``received.scan``: the messages received on each feature topic; ``waiting``: the feature
+    sets not yet processed (waiting for their other part or for odometry), so that a replay
+    can tell when the node has processed what it received.
     """
 
     def __init__(self, node: Node, warner: ProblemWarner) -> None:
@@ -255,7 +258,11 @@ class SlamInputStats(InputStats):
     def status(self) -> DiagnosticStatus:
         """Return the input status with the ``before_odometry`` count."""
         status = super().status()
-        status.values.append(KeyValue(key='before_odometry', value=str(self.before_odometry)))
+        node = self._node
+        values = {'before_odometry': self.before_odometry,
+                  'received.corners': node.corner_count, 'received.scan': node.scan_count,
+                  'waiting': len(node.join) + len(node.frontend.pending)}
+        status.values += [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return status
 
 
