@@ -380,7 +380,8 @@ class InputStats:
     ``before_match.<topic>``: messages its publisher sent before this subscription matched
     it (the first received sequence number minus one; DDS does not deliver them to a
     volatile subscription, so they were never received: reported once in an info line, not
-    counted as drops), and the counts of :meth:`event`: inputs used, but not as they came
+    counted as drops), ``lost.<topic>``: the ``dropped.lost`` messages per topic, and the
+    counts of :meth:`event`: inputs used, but not as they came
     (``odometry.jump``, ``odometry.covariance_replaced``, ...). Level WARN while inputs were
     dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
     by the node's :class:`ProblemWarner`) ends with the drop rate, of the current period and
@@ -399,6 +400,7 @@ class InputStats:
         self.run_latency = LatencyHistogram()
         self.before_match = Counter()
         self.events = Counter()
+        self.lost = Counter()  # messages lost per topic (also in dropped['lost'])
         self.received_ns = 0
         self._last_seq = {}
         self._reported_drops = 0
@@ -443,6 +445,7 @@ class InputStats:
             return
         lost = seq - last - 1
         if self._node.count_publishers(topic) == 1:  # one sequence: a gap is a loss
+            self.lost[topic] += lost
             self.drop('lost', f'Lost {lost} messages on {topic}: published but never '
                       'received (the queue overflowed while the node was busy, or a message '
                       'too large for best-effort delivery between processes)', lost)
@@ -481,6 +484,7 @@ class InputStats:
                        'latency_run_p95_ms': f'{self.run_latency.percentile_ms(95):.2f}',
                        'latency_run_max_ms': f'{1e3 * self.run_latency.max:.2f}'})
         values.update({f'before_match.{k}': v for k, v in sorted(self.before_match.items())})
+        values.update({f'lost.{k}': v for k, v in sorted(self.lost.items())})
         values.update(sorted(self.events.items()))
         level = DiagnosticStatus.WARN if recent else DiagnosticStatus.OK
         message = (f'{recent} inputs dropped in the last period' if recent else

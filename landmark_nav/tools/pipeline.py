@@ -20,7 +20,7 @@ Pipelines:
   the user's; ``--set landmark_detector.landmark_map=/path/landmarks.yaml`` for robot fixes);
 * ``replay``: a bag's ``/scan`` and ``/odom`` through the SLAM nodes, bag_player +
   corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
-  subscribed, so no scan is lost to the nodes' start-up). ``ekf_slam`` gets what the bag
+  subscribed by every node that takes them, so no scan is lost to the nodes' start-up). ``ekf_slam`` gets what the bag
   states, as ``landmark_nav evaluate`` uses it (:func:`bag_slam_settings`): the laser mount
   and the odometry noise model (an ``--set`` wins).
 """
@@ -121,12 +121,23 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
             if not bag:
                 raise ValueError(f'pipeline {name} needs --bag')
             cmd += [bag, '--rate', repr(float(rate)), '--topics', '/scan', '/odom',
-                    '--wait-for-subscribers', '30'] + (['--loop'] if loop else [])
+                    '--wait-for-subscribers', '30', '--min-subscribers',
+                    f'/scan={_scan_subscribers(settings)}', '/odom=1'] + (
+                        ['--loop'] if loop else [])
         else:
             stated = bag_slam_settings(bag) if (node == 'ekf_slam' and bag) else []
             cmd += ['--ros-args', '--params-file', str(config_path(node))] + stated + extra[node]
         commands[node] = cmd
     return commands
+
+
+def _scan_subscribers(settings: Sequence[str]) -> int:
+    """Return the replay nodes subscribing ``/scan``: corner_extractor, and ekf_slam unless
+    its visibility is off and it maps corners only."""
+    values = dict(s.partition('=')[::2] for s in settings)
+    slam = (values.get('ekf_slam.visibility', 'true').lower() not in ('false', '0')
+            or values.get('ekf_slam.landmarks', 'corners').strip('\'"') != 'corners')
+    return 1 + int(slam)
 
 
 def add_parser(sub, parser_class) -> None:

@@ -46,14 +46,26 @@ def drained(status: Dict[str, Dict[str, str]], scans: int) -> Optional[str]:
     handled = int(ce.get('processed', 0)) + int(ce.get('dropped', 0))
     sets = int(ce.get('processed', 0))
     received, waiting = int(ek.get('received.corners', 0)), int(ek.get('waiting', 0))
+    lost = sum(int(ek.get(f'{k}.corners/features', 0)) for k in ('lost', 'before_match'))
     missing = []
     if handled < scans:
         missing.append(f'corner_extractor handled {handled} of {scans} scans')
-    if received < sets:
-        missing.append(f'ekf_slam received {received} of {sets} corner sets')
+    if received + lost < sets:
+        missing.append(f'ekf_slam received {received} of {sets} corner sets ({lost} lost)')
     if waiting:
         missing.append(f'ekf_slam has {waiting} feature sets waiting')
     return '; '.join(missing) or None
+
+
+def summary(status: Dict[str, Dict[str, str]]) -> str:
+    """Return each node's processed and dropped counts (with the reasons), one line."""
+    parts = []
+    for name, values in sorted(status.items()):
+        reasons = ', '.join(f'{k[8:]} {v}' for k, v in sorted(values.items())
+                            if k.startswith('dropped.'))
+        parts.append(f'{name} processed {values.get("processed", "?")}, dropped '
+                     f'{values.get("dropped", "?")}' + (f' ({reasons})' if reasons else ''))
+    return '; '.join(parts)
 
 
 def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None]) -> bool:
@@ -62,12 +74,16 @@ def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None])
     Returns:
         True when every scan was processed (or dropped with a reason) by the nodes.
     """
+    from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
     from rclpy.context import Context
-    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
     context = Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('pipeline_drain', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
     latest: Dict[str, Dict[str, str]] = {}
 
     def on_status(msg: DiagnosticArray) -> None:
@@ -81,17 +97,19 @@ def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None])
     left = 'no input status yet'
     try:
         while time.monotonic() - start < timeout_s:
-            rclpy.spin_once(node, timeout_sec=0.2)
+            executor.spin_once(timeout_sec=0.2)
             left = drained(latest, scans)
             if left is None:
-                say(f'replay drained: the nodes processed all {scans} scans of the bag '
-                    f'({time.monotonic() - start:.1f} s after the player ended)')
+                say(f'replay drained: the nodes handled all {scans} scans of the bag '
+                    f'({time.monotonic() - start:.1f} s after the player ended): '
+                    + summary(latest))
                 return True
     finally:
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     say(f'replay not drained after {timeout_s:g} s, stopping the nodes: {left} '
-        '(the rest is discarded)')
+        f'(the rest is discarded); {summary(latest)}')
     return False
 
 
@@ -144,5 +162,5 @@ class DrainingManager(Manager):
             super().kill()
 
 
-__all__ = ['drained', 'DrainingManager', 'scans_in_bag',
+__all__ = ['drained', 'summary', 'DrainingManager', 'scans_in_bag',
            'wait_until_drained']
