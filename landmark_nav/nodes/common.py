@@ -380,7 +380,8 @@ class InputStats:
     ``before_match.<topic>``: messages its publisher sent before this subscription matched
     it (the first received sequence number minus one; DDS does not deliver them to a
     volatile subscription, so they were never received: reported once in an info line, not
-    counted as drops), ``lost.<topic>``: the ``dropped.lost`` messages per topic, and the
+    counted as drops), ``lost.<topic>``: the ``dropped.lost`` messages per topic,
+    ``matched.<topic>``: the publishers each subscription is matched with, and the
     counts of :meth:`event`: inputs used, but not as they came
     (``odometry.jump``, ``odometry.covariance_replaced``, ...). Level WARN while inputs were
     dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
@@ -401,6 +402,7 @@ class InputStats:
         self.before_match = Counter()
         self.events = Counter()
         self.lost = Counter()  # messages lost per topic (also in dropped['lost'])
+        self._subscriptions = {}
         self.received_ns = 0
         self._last_seq = {}
         self._reported_drops = 0
@@ -426,8 +428,10 @@ class InputStats:
             self.received_ns = int(info.get('received_timestamp') or time.time_ns())
             self._check_sequence(topic, info.get('publication_sequence_number'))
             callback(msg)
-        return self._node.create_subscription(msg_type, topic, on_message, qos,
-                                              event_callbacks=event_callbacks)
+        sub = self._node.create_subscription(msg_type, topic, on_message, qos,
+                                             event_callbacks=event_callbacks)
+        self._subscriptions[topic] = sub
+        return sub
 
     def _check_sequence(self, topic: str, seq: Optional[int]) -> None:
         """Count the messages lost between two of one publisher (sequence number gap)."""
@@ -485,6 +489,8 @@ class InputStats:
                        'latency_run_max_ms': f'{1e3 * self.run_latency.max:.2f}'})
         values.update({f'before_match.{k}': v for k, v in sorted(self.before_match.items())})
         values.update({f'lost.{k}': v for k, v in sorted(self.lost.items())})
+        values.update({f'matched.{k}': sub.get_publisher_count()
+                       for k, sub in sorted(self._subscriptions.items())})
         values.update(sorted(self.events.items()))
         level = DiagnosticStatus.WARN if recent else DiagnosticStatus.OK
         message = (f'{recent} inputs dropped in the last period' if recent else

@@ -11,13 +11,23 @@ last ones when the odometry ends, after its ``odometry_timeout``). The wait is b
 (``--drain-timeout``); either way one line says what happened: everything processed, or how
 many scans and sets were discarded when the nodes were stopped. A signal (Ctrl-C) stops at
 once, as before.
+
+At the start, the player is started only once the nodes run and ekf_slam's
+``corners/features`` subscription is matched with the corner extractor (``matched.*`` on
+``/diagnostics``; at most ``READY_TIMEOUT_S``): the player already waits for the subscribers
+of its own topics, but the first corner clouds went out before that match, and their
+feature sets went on without them (the trajectory then differed from the offline one).
 """
 
+import multiprocessing
 import threading
 import time
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Optional, Tuple
 
 from honcho.manager import KILL_WAIT, Manager
+
+#: Seconds the replay waits for its nodes to start and connect before starting the player.
+READY_TIMEOUT_S = 60.0
 
 
 def scans_in_bag(bag: str) -> Optional[int]:
@@ -68,11 +78,12 @@ def summary(status: Dict[str, Dict[str, str]]) -> str:
     return '; '.join(parts)
 
 
-def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None]) -> bool:
-    """Watch ``/diagnostics`` until :func:`drained` holds or ``timeout_s`` passes; say which.
+def watch_inputs(until: Callable[[Dict[str, Dict[str, str]]], bool], timeout_s: float
+                 ) -> Tuple[bool, Dict[str, Dict[str, str]], float]:
+    """Watch the nodes' ``/diagnostics`` input status until ``until(status)`` or a timeout.
 
     Returns:
-        True when every scan was processed (or dropped with a reason) by the nodes.
+        ``(held, the latest values by node name, seconds waited)``.
     """
     from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
@@ -81,7 +92,7 @@ def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None])
     from rclpy.signals import SignalHandlerOptions
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('pipeline_drain', context=context)
+    node = rclpy.create_node('pipeline_watch', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     latest: Dict[str, Dict[str, str]] = {}
@@ -94,23 +105,38 @@ def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None])
 
     node.create_subscription(DiagnosticArray, '/diagnostics', on_status, 100)
     start = time.monotonic()
-    left = 'no input status yet'
     try:
         while time.monotonic() - start < timeout_s:
             executor.spin_once(timeout_sec=0.2)
-            left = drained(latest, scans)
-            if left is None:
-                say(f'replay drained: the nodes handled all {scans} scans of the bag '
-                    f'({time.monotonic() - start:.1f} s after the player ended): '
-                    + summary(latest))
-                return True
+            if until(latest):
+                return True, latest, time.monotonic() - start
     finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-    say(f'replay not drained after {timeout_s:g} s, stopping the nodes: {left} '
-        f'(the rest is discarded); {summary(latest)}')
-    return False
+    return False, latest, time.monotonic() - start
+
+
+def ready(status: Dict[str, Dict[str, str]]) -> bool:
+    """Whether the replay nodes run and ekf_slam is matched with the corner extractor."""
+    ek = status.get('ekf_slam', {})
+    return 'corner_extractor' in status and int(ek.get('matched.corners/features', 0)) > 0
+
+
+def wait_until_drained(scans: int, timeout_s: float, say: Callable[[str], None]) -> bool:
+    """Watch ``/diagnostics`` until :func:`drained` holds or ``timeout_s`` passes; say which.
+
+    Returns:
+        True when every scan was processed (or dropped with a reason) by the nodes.
+    """
+    done, latest, waited = watch_inputs(lambda s: drained(s, scans) is None, timeout_s)
+    if done:
+        say(f'replay drained: the nodes handled all {scans} scans of the bag '
+            f'({waited:.1f} s after the player ended): ' + summary(latest))
+    else:
+        say(f'replay not drained after {timeout_s:g} s, stopping the nodes: '
+            f'{drained(latest, scans)} (the rest is discarded); {summary(latest)}')
+    return done
 
 
 class DrainingManager(Manager):
@@ -131,6 +157,27 @@ class DrainingManager(Manager):
         self._draining = False
         self._term_at: Optional[float] = None
         self._guard = threading.Lock()
+
+    def _start(self) -> None:
+        """Start the nodes; the player once they are up and connected (bounded wait).
+
+        The player already waits for its topics' subscribers; this also waits until ekf_slam
+        is matched with the corner extractor's ``corners/features`` (else the first corner
+        clouds went out before the match, and their feature sets on without them).
+        """
+        if self.scans is None or 'bag_player' not in self._processes:
+            super()._start()
+            return
+        player = self._processes.pop('bag_player')
+        super()._start()
+        ok, _, waited = watch_inputs(ready, READY_TIMEOUT_S)
+        self._system_print(f'replay nodes {"ready" if ok else "not ready"} after '
+                           f'{waited:.1f} s: starting bag_player\n')
+        self._processes['bag_player'] = player
+        player['process'] = multiprocessing.Process(name='bag_player',
+                                                    target=player['obj'].run,
+                                                    args=(self.events, True))
+        player['process'].start()
 
     def terminate(self) -> None:
         """Stop the nodes: after the drain when the player ended with 0, else at once."""
@@ -162,5 +209,5 @@ class DrainingManager(Manager):
             super().kill()
 
 
-__all__ = ['drained', 'summary', 'DrainingManager', 'scans_in_bag',
-           'wait_until_drained']
+__all__ = ['drained', 'DrainingManager', 'ready', 'READY_TIMEOUT_S', 'scans_in_bag',
+           'summary', 'wait_until_drained', 'watch_inputs']
