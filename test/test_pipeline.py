@@ -72,9 +72,10 @@ def test_replay_gives_ekf_slam_what_the_bag_states():
 
 @pytest.mark.dds
 def test_replay_ends_when_the_nodes_have_processed_every_scan(processes):
-    """The player's end stopped ekf_slam 1 s later: under load at 3x, 1,482 of 1,988 scans
-    reached its output. Now the pipeline waits for the nodes: one pose per scan, equal to
-    the offline run of the same front end.
+    """A replay at 3x: one pose per scan, equal to the offline run of the same front end.
+
+    The player's end stopped ekf_slam 1 s later: under load at 3x, 1,482 of 1,988 scans
+    reached its output. Now the pipeline waits for the nodes to process what they received.
     """
     from landmark_nav.conversions import stamp_to_ns
     from landmark_nav.evaluation.bags import load_bag

@@ -20,9 +20,10 @@ Pipelines:
   the user's; ``--set landmark_detector.landmark_map=/path/landmarks.yaml`` for robot fixes);
 * ``replay``: a bag's ``/scan`` and ``/odom`` through the SLAM nodes, bag_player +
   corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
-  subscribed by every node that takes them, so no scan is lost to the nodes' start-up). ``ekf_slam`` gets what the bag
-  states, as ``landmark_nav evaluate`` uses it (:func:`bag_slam_settings`): the laser mount
-  and the odometry noise model (an ``--set`` wins).
+  subscribed by every node that takes them, so no scan is lost to the nodes' start-up).
+  ``ekf_slam`` gets what the bag states, as ``landmark_nav evaluate`` uses it
+  (:func:`bag_slam_settings`): the laser mount and the odometry noise model (an ``--set``
+  wins).
 """
 
 import argparse
@@ -132,8 +133,10 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
 
 
 def _scan_subscribers(settings: Sequence[str]) -> int:
-    """Return the replay nodes subscribing ``/scan``: corner_extractor, and ekf_slam unless
-    its visibility is off and it maps corners only."""
+    """Return the number of replay nodes subscribing ``/scan``.
+
+    corner_extractor, and ekf_slam unless its visibility is off and it maps corners only.
+    """
     values = dict(s.partition('=')[::2] for s in settings)
     slam = (values.get('ekf_slam.visibility', 'true').lower() not in ('false', '0')
             or values.get('ekf_slam.landmarks', 'corners').strip('\'"') != 'corners')
