@@ -93,6 +93,14 @@ class Feeder:
         assert self.ros.wait_until(lambda: len(self.poses) > n, 30.0), 'no pose'
         return self.poses[-1].pose.pose.position.x
 
+    def map_three_steps(self):
+        """Make three steps 1 cm apart; return the last pose's x and the landmarks mapped."""
+        for k in range(3):
+            x = self.step(T0 + k * 100 * MS, 0.01 * k)
+        mapped = self.landmarks()
+        assert mapped >= 1
+        return x, mapped
+
     def status(self, wait_for=None) -> dict:
         """Return the latest ``ekf_slam: input`` values (waiting until ``wait_for`` holds)."""
         def latest():
@@ -119,11 +127,7 @@ def test_teleport_with_huge_covariance_is_refused_and_bad_covariances_counted(
     err = start_slam(processes, tmp_path, 'visibility:=false')
     with RosHarness() as ros:
         feed = Feeder(ros, with_scan=False)
-        for k in range(3):
-            x = feed.step(T0 + k * 100 * MS, 0.01 * k)
-        mapped = feed.landmarks()
-        assert mapped >= 1
-        before = x
+        before, mapped = feed.map_three_steps()
         # +5 m in 0.1 s, claiming a covariance of 1e6 m^2, and back 0.1 s later.
         feed.odom(T0 + 300 * MS, 5.02, np.diag([1e6, 1e6, 1e6]))
         feed.odom(T0 + 400 * MS, 0.02)
@@ -153,10 +157,7 @@ def test_stamp_zero_and_malformed_odometry_are_dropped_and_leave_the_map(process
     err = start_slam(processes, tmp_path)
     with RosHarness() as ros:
         feed = Feeder(ros, with_scan=True)
-        for k in range(3):
-            x = feed.step(T0 + k * 100 * MS, 0.01 * k)
-        mapped = feed.landmarks()
-        assert mapped >= 1
+        x, mapped = feed.map_three_steps()
         feed.odom(0, 0.0)  # stamp 0 (unset header): used to wipe the map
         feed.scan_pub.publish(scan(0))
         feed.corner_pub.publish(corner_cloud(0))
