@@ -29,18 +29,19 @@ from visualization_msgs.msg import Marker, MarkerArray
 GRAY_ENCODINGS = ('mono8', 'bgr8', 'rgb8', 'mono16')
 
 
-def image_to_gray(msg: Image) -> np.ndarray:
+def image_to_gray(msg: Image, reader: str = 'this node') -> np.ndarray:
     """Return a sensor_msgs/Image as a 2-D uint8 grey image.
 
     mono8 as is; bgr8/rgb8 converted with OpenCV's luma weights; mono16 scaled by 1/257.
+    ``reader`` (e.g. the node's name) is named in the error of an unsupported encoding.
 
     Raises:
         ConversionError: an encoding other than mono8, bgr8, rgb8, mono16, or a malformed
             message (see :func:`landmark_nav.conversions.image_to_array`).
     """
     if msg.encoding not in GRAY_ENCODINGS:
-        raise ConversionError(f'Image: encoding {msg.encoding!r} is not supported by the '
-                              f'landmark detector; use one of {", ".join(GRAY_ENCODINGS)}')
+        raise ConversionError(f'Image: encoding {msg.encoding!r} is not supported by '
+                              f'{reader}; use one of {", ".join(GRAY_ENCODINGS)}')
     arr = image_to_array(msg)
     if msg.encoding == 'bgr8':
         return cv2.cvtColor(arr, cv2.COLOR_BGR2GRAY)

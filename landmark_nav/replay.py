@@ -26,6 +26,9 @@ class ReplayOptions:
             when ``topics`` names them) and every subscriber in the ROS graph on a played
             topic is matched (for 0.2 s in a row,
             so a late-discovered node is not missed); 0 = start at once.
+        min_subscribers: ``((topic, n), ...)``: the wait also needs at least ``n`` matched
+            subscribers on each of these topics (nodes still starting are not yet in the
+            graph; a pipeline knows how many will subscribe).
 
     """
 
@@ -36,6 +39,7 @@ class ReplayOptions:
     clock_hz: float = 0.0
     delay_s: float = 0.0
     wait_for_subscribers_s: float = 5.0
+    min_subscribers: Tuple[Tuple[str, int], ...] = ()
 
     def __post_init__(self) -> None:
         """Validate the options.
@@ -54,7 +58,8 @@ class ReplayOptions:
              f'delay must be >= 0 s, got {self.delay_s}'),
             (self.wait_for_subscribers_s >= 0 and math.isfinite(self.wait_for_subscribers_s),
              f'wait for subscribers must be >= 0 s, got {self.wait_for_subscribers_s}'),
-        ]
+        ] + [(isinstance(n, int) and n >= 0, f'subscribers on {t} must be >= 0, got {n!r}')
+             for t, n in self.min_subscribers]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)

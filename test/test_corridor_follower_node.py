@@ -303,3 +303,43 @@ def test_closed_loop_through_cmd_vel():
     assert s['rms_lateral_after_2m'] < 0.01
     assert s['min_wall_clearance'] > 0.55
     assert node.frames > 90
+
+
+def test_drops_and_events_are_counted_on_diagnostics_under_its_own_name():
+    """The node published no input status, and its image warnings named the landmark detector."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    with RosHarness() as ros:
+        node = ros.add_node(CorridorFollower(context=ros.context,
+                                             parameter_overrides=node_params()))
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        pub_img = ros._helper.create_publisher(Image, 'camera/image_raw', 10)
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        assert ros.wait_for_subscribers([pub_img, pub_odom])
+        said = []
+        warn = node.warner.warn
+        node.warner.warn = lambda message, detail='': (said.append(message),
+                                                       warn(message, detail))
+        grey = np.zeros((CAM.height, CAM.width), np.uint8)
+        pub_img.publish(array_to_image(grey, 'mono8', 1_000_000_000, 'camera'))  # no info
+        yuv = array_to_image(grey, 'mono8', 1_100_000_000, 'camera')
+        yuv.encoding = 'yuv422'
+        pub_img.publish(yuv)
+        nan = make_odometry(1_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0])
+        nan.pose.pose.position.x = math.nan
+        pub_odom.publish(nan)
+        pub_odom.publish(make_odometry(1_100_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        pub_odom.publish(make_odometry(1_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+
+        def status():
+            for arr in reversed(list(diagnostics)):
+                for s in arr.status:
+                    if s.name == 'corridor_follower: input':
+                        return {kv.key: kv.value for kv in s.values}
+            return {}
+        want = {'dropped.no_camera_info': '1', 'dropped.malformed': '2',
+                'odometry.back_in_time': '1', 'processed': '2'}
+        assert ros.wait_until(lambda: all(status().get(k) == v for k, v in want.items()),
+                              30.0), status()
+        assert any("encoding 'yuv422' is not supported by corridor_follower" in m
+                   for m in said), said
+        assert not any('landmark detector' in m for m in said)

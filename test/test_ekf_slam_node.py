@@ -322,8 +322,13 @@ def test_bad_input():
         assert slam.resets == 0 and slam.frontend.events['jump'] == 1
         assert abs(poses[1].pose.pose.position.x - 0.01) < 1e-9  # no motion across the jump
         assert poses[1].pose.covariance[0] > 0.1 ** 2  # ... but its uncertainty
-        odom(t0 - 2_000_000_000, 0.0)  # 2.2 s back: the source restarted, so does the filter
+        filt = slam.slam
+        odom(t0 - 2_000_000_000, 0.0)  # 2.2 s back: one sample is held, never a reset ...
         assert ros.wait_until(lambda: slam.odom_count == 5, 5)
+        assert slam.resets == 0 and slam.slam is filt
+        odom(t0 - 1_900_000_000, 0.0)  # ... three in a row: the source restarted, so does
+        odom(t0 - 1_800_000_000, 0.0)  # the filter
+        assert ros.wait_until(lambda: slam.odom_count == 7, 5)
         assert slam.resets == 1 and slam.slam.num_landmarks == 0
 
 

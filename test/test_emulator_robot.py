@@ -189,3 +189,36 @@ def test_scans_and_status_packets_a_late_host_loses_are_counted():
     assert (len(frames), base.packets_not_sent) == (10, 0)
     frames = base.poll(0.405)  # 300 ms late: those of the last 150 ms go out
     assert (len(frames), base.packets_not_sent) == (15, 15) and base.seq == 40
+
+
+def test_the_base_records_are_bounded_on_a_long_run():
+    """The base keeps the last ``record_s`` seconds of its records (60 s by default).
+
+    The live emulator grew 3.2 MB a minute: every status packet (with its sonar values,
+    about 5 kB) and every command was kept. Once the records are full, further cycles leave
+    no more of them alive.
+    """
+    import gc
+
+    from landmark_nav.emulators.p2os import ReceivedCommand, SentStatus
+    assert make_robot('urg')[0].sent.size == 600  # 60 s of 10 Hz cycles
+    base, _ = make_robot('urg', start_pose=(1.2, 1.2, 0.0), record_s=10.0)
+    _open(base, 0.0)
+    t = 0.0
+
+    def alive_after(n):
+        """Run ``n`` cycles turning on the spot; return the live records of each kind."""
+        nonlocal t
+        for _ in range(n):
+            t += base.cycle_s
+            for c in (cmd('VEL', 0), cmd('RVEL', 20), cmd('PULSE')):
+                base.receive(c, t)
+            base.poll(t)
+        gc.collect()
+        objects = gc.get_objects()
+        return (sum(isinstance(o, SentStatus) for o in objects),
+                sum(isinstance(o, ReceivedCommand) for o in objects), len(base._path))
+
+    assert alive_after(300) == (100, 400, 300)
+    assert alive_after(600) == (100, 400, 600)  # one minute more: the true path's 60 s
+    assert alive_after(600) == (100, 400, 600)

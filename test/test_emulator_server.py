@@ -165,3 +165,33 @@ def test_frames_leave_when_the_device_says_not_on_the_loop_tick(tmp_path):
     print('reply delays [ms]', [round(d * 1e3, 2) for d in delays])
     assert min(delays) >= 0.005
     assert sorted(delays)[2] < 0.1  # median: the deadline's wake-up, not the 1 s tick
+
+
+@pytest.mark.parametrize('device, option, extra', [
+    ('robot', '--tcp', []), ('robot', '--laser-tcp', ['--tcp', '0']), ('urg', '--tcp', [])])
+def test_a_port_in_use_is_named_with_its_option(tmp_path, processes, device, option, extra):
+    """``emulate robot`` with its TCP port taken said ``[Errno 98] Address already in use``."""
+    import socket
+    import subprocess
+    import sys
+    taken = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    taken.bind(('127.0.0.1', 0))
+    taken.listen(1)
+    port = taken.getsockname()[1]
+    link = tmp_path / 'link'
+    link.symlink_to(tmp_path)  # another emulator's link: left as it is
+    args = [sys.executable, '-m', 'landmark_nav.tools.cli', 'emulate', device, '--link',
+            str(link), *extra, option, str(port)]
+    if device == 'robot':
+        args += ['--laser-link', str(tmp_path / 'laser')]
+    try:
+        proc = processes.start(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        taken.close()
+    assert proc.returncode == 2, err
+    assert err.strip().splitlines()[-1] == (f'landmark_nav: error: TCP port {port} is in use; '
+                                            f'choose another with {option} PORT')
+    assert 'Traceback' not in err
+    if option == '--tcp':  # the first port opened: nothing was touched before it failed
+        assert os.readlink(link) == str(tmp_path)

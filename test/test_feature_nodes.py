@@ -154,7 +154,7 @@ def test_scan_problems_are_warned_with_their_values():
         assert ros.wait_until(lambda: any('1000000 beams' in m.msg for m in logs), 30)
         pub.publish(good[1])  # the node keeps running
         assert ros.wait_until(lambda: len(poses) == 2, 10)
-        assert node.stats.dropped['malformed'] == 1 and node.stats.processed_count == 2
+        assert node.stats.dropped['oversized'] == 1 and node.stats.processed_count == 2
 
 
 @pytest.mark.dds

@@ -72,16 +72,80 @@ def test_implausible_step_is_bridged_keeping_the_map():
     assert fe.events['jump'] == 1
 
 
-def test_turn_limit_and_odometry_covariance_widen_the_check():
+def test_turn_limit_and_the_stated_covariance_does_not_widen_the_check():
     fe = SlamFrontend(SlamParams(odometry=OdometryNoise(0.0, 0.0, 0.0)))
     fe.add_odometry(T0, [0, 0, 0], np.zeros((3, 3)))
     # 0.6 rad in 0.1 s is above 5.3 rad/s ...
     assert fe.add_odometry(T0 + 100 * MS, [0, 0, 0.6], np.zeros((3, 3)))[0] == 'jump'
-    # ... unless the odometry's own covariance grew enough (5 sigma of 0.05 rad = 0.25 rad).
+    # ... whatever covariance the sample claims: the check does not trust the suspect sample.
     fe = SlamFrontend(SlamParams(odometry=OdometryNoise(0.0, 0.0, 0.0)))
     fe.add_odometry(T0, [0, 0, 0], np.zeros((3, 3)))
     assert fe.add_odometry(T0 + 100 * MS, [0, 0, 0.6],
-                           np.diag([0.0, 0.0, 0.05 ** 2]))[0] == 'accepted'
+                           np.diag([0.0, 0.0, 0.05 ** 2]))[0] == 'jump'
+
+
+def test_teleport_with_a_huge_covariance_is_bridged_not_motion():
+    """+5 m in 0.1 s claiming 1e6 m^2 (issue: accepted as motion); then back: pose kept."""
+    fe = SlamFrontend(SlamParams(odometry=ODOMETRY_NOISE_MODELS['pioneer']))
+    small, huge = np.diag([1e-4, 1e-4, 1e-4]), np.diag([1e6, 1e6, 1e6])
+    fe.add_odometry(T0, [0, 0, 0], small)
+    fe.add_odometry(T0 + 100 * MS, [0.01, 0, 0], small)
+    assert fe.add_odometry(T0 + 200 * MS, [5.01, 0, 0], huge)[0] == 'jump'
+    assert fe.add_odometry(T0 + 300 * MS, [0.02, 0, 0], small)[0] == 'jump'  # and back
+    fe.add_odometry(T0 + 400 * MS, [0.03, 0, 0], small)
+    (step,) = fe.add_features(corners(T0 + 400 * MS))
+    assert abs(step.odometry[0] - 0.02) < 1e-12 and abs(fe.slam.pose[0]) < 0.03
+
+
+@pytest.mark.parametrize('cov, problem', [
+    (np.diag([-1e-4, 1e-4, 1e-4]), 'negative variance'),
+    (np.diag([np.nan, 1e-4, 1e-4]), 'not finite'),
+    (np.array([[1e-4, 1e-2, 0], [1e-2, 1e-4, 0], [0, 0, 1e-4]]), 'not positive semi-definite'),
+    (np.array([[1e-4, 1e-5, 0], [0, 1e-4, 0], [0, 0, 1e-4]]), 'not symmetric'),
+])
+def test_bad_stated_covariances_are_replaced_and_reported(cov, problem):
+    events = []
+    fe = SlamFrontend(on_event=lambda kind, message: events.append((kind, message)))
+    fe.add_odometry(T0, [0, 0, 0], np.eye(3) * 1e-4)
+    assert fe.add_odometry(T0 + 100 * MS, [0.01, 0, 0], cov)[0] == 'accepted'
+    assert [k for k, _ in events] == ['covariance'] and problem in events[0][1]
+    assert fe.events['covariance'] == 1 and fe._buf.cov_last is None
+
+
+def test_one_stamp_never_resets_only_a_persistent_backward_run_does():
+    fe = SlamFrontend(SlamParams(confirm_hits=1, confirm_window=1))
+    fe.add_odometry(T0, [0, 0, 0])
+    fe.add_odometry(T0 + 100 * MS, [0.01, 0, 0])
+    fe.add_features(corners(T0 + 100 * MS))
+    assert fe.slam.num_landmarks == 1
+    assert fe.add_odometry(0, [0.02, 0, 0])[0] == 'invalid'  # stamp 0: an unset header
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'far_back'  # one: held
+    assert fe.add_odometry(T0 + 200 * MS, [0.02, 0, 0])[0] == 'accepted'  # the run is over
+    assert fe.events['backward'] == 1  # ... and the held sample dropped
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.add_odometry(T0 - 2100 * MS, [5.0, 0, 0])[0] == 'far_back'  # not a forward run
+    assert fe.add_odometry(T0 - 1900 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.events['backward'] == 2 and fe.events['far_back'] == 4
+    assert fe.restarts == 0 and fe.slam.num_landmarks == 1
+    kind, _ = fe.add_odometry(T0 - 1800 * MS, [5.01, 0, 0])  # the third in a row
+    assert kind == 'restart' and fe.restarts == 1 and fe.slam.num_landmarks == 0
+    assert fe.odometry_span == (T0 - 2100 * MS, T0 - 1800 * MS)  # the run is the new start
+
+
+def test_a_stamp_in_the_future_is_withdrawn_not_a_restart():
+    fe = SlamFrontend(SlamParams(confirm_hits=1, confirm_window=1))
+    fe.add_odometry(T0, [0, 0, 0])
+    fe.add_odometry(T0 + 100 * MS, [0.01, 0, 0])
+    fe.add_features(corners(T0 + 100 * MS))
+    fe.add_odometry(T0 + 3600_000 * MS, [0.02, 0, 0])  # an hour ahead: plausible by time
+    kinds = [fe.add_odometry(T0 + (200 + 100 * i) * MS, [0.02 + 0.01 * i, 0, 0])[0]
+             for i in range(3)]
+    assert kinds == ['far_back', 'far_back', 'retracted']
+    assert fe.restarts == 0 and fe.slam.num_landmarks == 1
+    # The future sample trimmed the buffer to the sample before it (buffer_s behind it).
+    assert fe.odometry_span == (T0 + 100 * MS, T0 + 400 * MS)
+    (step,) = fe.add_features(corners(T0 + 350 * MS))
+    np.testing.assert_allclose(step.odometry, [0.035, 0, 0], atol=1e-12)
 
 
 def test_repeated_backward_and_restart():
@@ -96,7 +160,9 @@ def test_repeated_backward_and_restart():
     (step,) = fe.add_features(corners(T0 + 125 * MS))
     np.testing.assert_allclose(step.odometry, [0.0125, 0, 0], atol=1e-15)
     assert fe.restarts == 0
-    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'restart'
+    assert fe.add_odometry(T0 - 2000 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.add_odometry(T0 - 1990 * MS, [5.0, 0, 0])[0] == 'far_back'
+    assert fe.add_odometry(T0 - 1980 * MS, [5.0, 0, 0])[0] == 'restart'
     assert fe.restarts == 1 and fe.slam.num_landmarks == 0
     np.testing.assert_allclose(fe.slam.pose, [5.0, 0, 0])
 

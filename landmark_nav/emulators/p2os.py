@@ -147,6 +147,10 @@ class P2osDevice(Device):
         start_open: Start already open and streaming (a client crashed without CLOSE).
         cycle_s: SIP period [s].
         seed: Random seed of the noise.
+        record_s: The records (``sent``: the status packets with the true pose and sonar
+            values, about 5 kB a cycle; ``commands``) keep the last ``record_s`` seconds of
+            cycles and four commands per cycle of them: bounded memory on a long live run
+            (they kept 20000 packets and every command: 3.2 MB a minute at 10 Hz).
     """
 
     def __init__(self, world: Optional[World] = None, robot: RobotParams = RobotParams(),
@@ -157,7 +161,8 @@ class P2osDevice(Device):
                  battery_drain_v_per_h: float = 0.0, watchdog_s: float = 2.0,
                  position_bits: int = 15, max_speed: float = 0.75,
                  max_rot_speed: float = math.radians(100.0), robot_radius: float = 0.25,
-                 start_open: bool = False, cycle_s: float = 0.1, seed: int = 1) -> None:
+                 start_open: bool = False, cycle_s: float = 0.1, seed: int = 1,
+                 record_s: float = 60.0) -> None:
         """Build the robot at rest in ``world``."""
         if model not in ROBOT_MODELS:
             raise ValueError(f'unknown robot model {model!r}; one of {", ".join(ROBOT_MODELS)}')
@@ -165,8 +170,8 @@ class P2osDevice(Device):
             raise ValueError(f'position_bits must be 12 or 15, got {position_bits}')
         if not 1 <= sonars_per_cycle <= sonar.num_sonars:
             raise ValueError(f'sonars_per_cycle must be in [1, {sonar.num_sonars}]')
-        if not cycle_s > 0.0 or watchdog_s < 0.0:
-            raise ValueError('need cycle_s > 0 and watchdog_s >= 0')
+        if not cycle_s > 0.0 or watchdog_s < 0.0 or not record_s > 0.0:
+            raise ValueError('need cycle_s > 0, watchdog_s >= 0 and record_s > 0')
         pose = np.asarray(start_pose, dtype=float).reshape(3)
         if not np.all(np.isfinite(pose)):
             raise ValueError(f'start pose {start_pose!r} must be finite')
@@ -195,8 +200,9 @@ class P2osDevice(Device):
         self.true_pose = pose.copy()
         self.firmware_pose = np.zeros(3)  # x mm, y mm, yaw rad (SETO zeroes it)
         # records
-        self.commands: List[ReceivedCommand] = []
-        self.sent: List[SentStatus] = _Ring(20000)
+        cycles = int(math.ceil(record_s / cycle_s))
+        self.commands: List[ReceivedCommand] = _Ring(4 * cycles)
+        self.sent: List[SentStatus] = _Ring(cycles)
         self.events: List[Tuple[float, str]] = []
         self.bad_packets = 0
         self.seq = 0

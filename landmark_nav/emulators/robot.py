@@ -369,7 +369,8 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
                      faults=FaultInjector(seed=args.seed, rate=args.fault_rate)),
         DeviceServer(laser, link=laser_link or None, tcp_port=args.laser_tcp,
                      tcp_host=args.tcp_host,
-                     faults=FaultInjector(seed=args.seed + 1, rate=args.fault_rate)),
+                     faults=FaultInjector(seed=args.seed + 1, rate=args.fault_rate),
+                     options=('--laser-link', '--laser-tcp')),
     ]
     truth_file = None
     if args.truth:

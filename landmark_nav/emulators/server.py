@@ -24,12 +24,16 @@ import socket
 import threading
 import time
 import tty
-from typing import Callable, List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence, Tuple
 
 from landmark_nav.stop_signals import stop_on_signals
 import numpy as np
 
 FAULT_KINDS = ('garbage', 'corrupt', 'truncate', 'drop', 'silence', 'vanish')
+
+
+class EndpointError(OSError):
+    """A pty link or TCP port cannot be opened; the message names it and its option."""
 
 
 class Device:
@@ -170,7 +174,8 @@ class DeviceServer:
     def __init__(self, device: Device, link: Optional[str] = None,
                  tcp_port: Optional[int] = None, tcp_host: str = '127.0.0.1',
                  faults: Optional[FaultInjector] = None, period: float = 0.002,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 options: Tuple[str, str] = ('--link', '--tcp')) -> None:
         """Configure; nothing is opened until :meth:`start`.
 
         Args:
@@ -181,6 +186,8 @@ class DeviceServer:
             faults: Fault injector (default: one that injects nothing by itself).
             period: Loop period [s] for polling the device.
             clock: Monotonic clock [s].
+            options: The command-line options that set ``link`` and ``tcp_port``, named
+                in the error when an endpoint cannot be opened.
 
         """
         if link is None and tcp_port is None:
@@ -192,6 +199,8 @@ class DeviceServer:
         self.faults = faults or FaultInjector()
         self.period = period
         self._clock = clock
+        self.options = options
+        self._linked = False  # the link is ours (made by _open_endpoints)
         self._master: Optional[int] = None
         self._slave: Optional[int] = None
         self._listener: Optional[socket.socket] = None
@@ -207,6 +216,19 @@ class DeviceServer:
     # --- endpoints -------------------------------------------------------------------
 
     def _open_endpoints(self) -> None:
+        # the TCP port first: a port in use leaves the pty link (maybe another's) untouched
+        if self.tcp_port is not None:
+            listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                listener.bind((self.tcp_host, self.tcp_port))
+            except OSError as err:
+                listener.close()
+                raise EndpointError(self._bind_problem(err)) from None
+            listener.listen(1)
+            listener.setblocking(False)
+            self._listener = listener
+            self.tcp_port = listener.getsockname()[1]
         if self.link is not None:
             master, slave = os.openpty()
             tty.setraw(slave)
@@ -215,23 +237,32 @@ class DeviceServer:
             self._master, self._slave = master, slave
             self.pty_path = os.ttyname(slave)
             tmp = f'{self.link}.{os.getpid()}.tmp'
-            if os.path.lexists(tmp):
-                os.unlink(tmp)
-            os.symlink(self.pty_path, tmp)
-            os.replace(tmp, self.link)
-        if self.tcp_port is not None:
-            listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-            listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            listener.bind((self.tcp_host, self.tcp_port))
-            listener.listen(1)
-            listener.setblocking(False)
-            self._listener = listener
-            self.tcp_port = listener.getsockname()[1]
+            try:
+                if os.path.lexists(tmp):
+                    os.unlink(tmp)
+                os.symlink(self.pty_path, tmp)
+                os.replace(tmp, self.link)
+                self._linked = True
+            except OSError as err:
+                raise EndpointError(f'cannot create the pty link {self.link}: {err.strerror}; '
+                                    f'choose another with {self.options[0]} PATH') from None
+
+    def _bind_problem(self, err: OSError) -> str:
+        """Return the one-line error of a TCP port that cannot be bound."""
+        port, option = self.tcp_port, self.options[1]
+        if err.errno == errno.EADDRINUSE:
+            return f'TCP port {port} is in use; choose another with {option} PORT'
+        if err.errno == errno.EACCES:
+            return (f'TCP port {port} needs privileges to bind (ports below 1024); choose '
+                    f'another with {option} PORT')
+        return (f'cannot listen on TCP {self.tcp_host}:{port} ({option}): '
+                f'{err.strerror or err}')
 
     def _close_endpoints(self) -> None:
         # the link goes first: a driver that sees the port break must not find it still there
-        if self.link is not None and os.path.islink(self.link):
+        if self._linked and os.path.islink(self.link):
             os.unlink(self.link)
+        self._linked = False
         for fd in (self._master, self._slave):
             if fd is not None:
                 try:
@@ -255,8 +286,16 @@ class DeviceServer:
     # --- loop -------------------------------------------------------------------------
 
     def start(self) -> 'DeviceServer':
-        """Open the endpoints and start the serving thread; return self."""
-        self._open_endpoints()
+        """Open the endpoints and start the serving thread; return self.
+
+        Raises:
+            EndpointError: A pty link or TCP port cannot be opened (nothing is left open).
+        """
+        try:
+            self._open_endpoints()
+        except OSError:
+            self._close_endpoints()
+            raise
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name='device-server', daemon=True)
         self._thread.start()

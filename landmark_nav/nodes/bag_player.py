@@ -48,6 +48,9 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
                         help='wait up to this long (default 5) until the running subscribers '
                         'of the played topics are connected, so the first messages are not '
                         'lost; 0 = start at once like ros2 bag play')
+    parser.add_argument('--min-subscribers', nargs='+', default=[], metavar='TOPIC=N',
+                        help='the wait also needs N matched subscribers on TOPIC (nodes '
+                        'still starting are not in the graph yet)')
 
 
 def options_from_args(args: argparse.Namespace) -> ReplayOptions:
@@ -55,7 +58,16 @@ def options_from_args(args: argparse.Namespace) -> ReplayOptions:
     return ReplayOptions(rate=args.rate, start_offset_s=args.start_offset,
                          topics=tuple(args.topics) if args.topics else None,
                          loop=args.loop, clock_hz=args.clock, delay_s=args.delay,
-                         wait_for_subscribers_s=args.wait_for_subscribers)
+                         wait_for_subscribers_s=args.wait_for_subscribers,
+                         min_subscribers=tuple(_topic_count(t) for t in args.min_subscribers))
+
+
+def _topic_count(text: str):
+    """Parse ``TOPIC=N`` (``--min-subscribers``)."""
+    topic, sep, n = text.rpartition('=')
+    if not (sep and topic and n.isdigit()):
+        raise ValueError(f'--min-subscribers {text!r}: expected TOPIC=N')
+    return topic, int(n)
 
 
 class BagPlayer(Node):
@@ -103,7 +115,8 @@ class BagPlayer(Node):
         matched = {t: p.get_subscription_count() for t, p in self._topic_publishers.items()}
         wanted = all if self.options.topics else any
         return wanted(matched.values()) and all(
-            matched[t] >= self.count_subscribers(t) for t in matched)
+            matched[t] >= self.count_subscribers(t) for t in matched) and all(
+            matched.get(t, 0) >= n for t, n in self.options.min_subscribers)
 
     def wait_for_subscribers(self, settle_s: float = 0.2) -> bool:
         """Wait until the running subscribers are connected, up to the configured time.

@@ -380,10 +380,12 @@ class InputStats:
     """Count a node's processed and dropped inputs and its latency; report them.
 
     Subscriptions made with :meth:`subscribe` record when DDS received each message and
-    detect messages lost before the callback (gaps in the publisher's sequence numbers,
-    e.g. a full queue when the node is slower than its input) while the topic has one
-    publisher. The node calls :meth:`processed` when an input has produced its output and
-    :meth:`drop` (with a warning naming the problem) when it skips one. Every
+    detect messages lost before the callback (gaps in the publisher's sequence numbers:
+    a full queue when the node is slower than its input, or a message DDS did not deliver,
+    e.g. one too large for best-effort delivery between processes; the node cannot tell
+    which) while the topic has one publisher. The node calls :meth:`processed` when an
+    input has produced its output and :meth:`drop` (with a warning naming the problem) when
+    it skips one. Every
     ``period_s`` a diagnostic_msgs/DiagnosticArray goes out on ``/diagnostics`` with one
     DiagnosticStatus ``<node>: input``: the counts ``processed``, ``dropped`` and
     ``dropped.<reason>`` since start, ``drop_rate_percent`` (dropped of processed plus
@@ -395,7 +397,10 @@ class InputStats:
     ``before_match.<topic>``: messages its publisher sent before this subscription matched
     it (the first received sequence number minus one; DDS does not deliver them to a
     volatile subscription, so they were never received: reported once in an info line, not
-    counted as drops). Level WARN while inputs were
+    counted as drops), ``lost.<topic>``: the ``dropped.lost`` messages per topic,
+    ``matched.<topic>``: the publishers each subscription is matched with, and the
+    counts of :meth:`event`: inputs used, but not as they came
+    (``odometry.jump``, ``odometry.covariance_replaced``, ...). Level WARN while inputs were
     dropped in the last period, else OK. Each drop's warning (throttled per kind of problem
     by the node's :class:`ProblemWarner`) ends with the drop rate, of the current period and
     since start with the reasons: a node that cannot keep up says how much it loses.
@@ -412,6 +417,9 @@ class InputStats:
         self.latencies = deque(maxlen=window)
         self.run_latency = LatencyHistogram()
         self.before_match = Counter()
+        self.events = Counter()
+        self.lost = Counter()  # messages lost per topic (also in dropped['lost'])
+        self._subscriptions = {}
         self.received_ns = 0
         self._last_seq = {}
         self._reported_drops = 0
@@ -437,8 +445,10 @@ class InputStats:
             self.received_ns = int(info.get('received_timestamp') or time.time_ns())
             self._check_sequence(topic, info.get('publication_sequence_number'))
             callback(msg)
-        return self._node.create_subscription(msg_type, topic, on_message, qos,
-                                              event_callbacks=event_callbacks)
+        sub = self._node.create_subscription(msg_type, topic, on_message, qos,
+                                             event_callbacks=event_callbacks)
+        self._subscriptions[topic] = sub
+        return sub
 
     def _check_sequence(self, topic: str, seq: Optional[int]) -> None:
         """Count the messages lost between two of one publisher (sequence number gap)."""
@@ -456,8 +466,10 @@ class InputStats:
             return
         lost = seq - last - 1
         if self._node.count_publishers(topic) == 1:  # one sequence: a gap is a loss
-            self.drop('lost', f'Lost {lost} messages on {topic} before processing (the '
-                      'queue overflowed: input faster than the node)', lost)
+            self.lost[topic] += lost
+            self.drop('lost', f'Lost {lost} messages on {topic}: published but never '
+                      'received (the queue overflowed while the node was busy, or a message '
+                      'too large for best-effort delivery between processes)', lost)
 
     def processed(self, received_ns: Optional[int] = None) -> None:
         """Count one processed input; its latency runs from ``received_ns`` (wall clock)."""
@@ -472,6 +484,11 @@ class InputStats:
         """Count ``count`` dropped inputs for ``reason``; warn with the drop rate (throttled)."""
         self.dropped[reason] += count
         self.warner.warn(message, self.drop_rate_text())
+
+    def event(self, key: str, message: str) -> None:
+        """Count an input used other than as it came (e.g. ``odometry.jump``); warn (throttled)."""
+        self.events[key] += 1
+        self.warner.warn(message)
 
     def status(self) -> DiagnosticStatus:
         """Return the DiagnosticStatus of the inputs so far."""
@@ -488,6 +505,10 @@ class InputStats:
                        'latency_run_p95_ms': f'{self.run_latency.percentile_ms(95):.2f}',
                        'latency_run_max_ms': f'{1e3 * self.run_latency.max:.2f}'})
         values.update({f'before_match.{k}': v for k, v in sorted(self.before_match.items())})
+        values.update({f'lost.{k}': v for k, v in sorted(self.lost.items())})
+        values.update({f'matched.{k}': sub.get_publisher_count()
+                       for k, sub in sorted(self._subscriptions.items())})
+        values.update(sorted(self.events.items()))
         level = DiagnosticStatus.WARN if recent else DiagnosticStatus.OK
         message = (f'{recent} inputs dropped in the last period' if recent else
                    f'{self.processed_count} inputs processed, {dropped} dropped')
@@ -515,6 +536,13 @@ class InputStats:
         msg.header.stamp = self._node.get_clock().now().to_msg()
         msg.status = [status]
         self._pub.publish(msg)
+
+
+def require_stamp(stamp_ns: int, what: str) -> int:
+    """Return a message's stamp [ns]; stamp 0 (an unset header) is a :class:`ConversionError`."""
+    if stamp_ns <= 0:
+        raise ConversionError(f'{what}: stamp {stamp_ns} ns is not a time (an unset header)')
+    return stamp_ns
 
 
 def ros_home() -> Path:

@@ -15,9 +15,15 @@ Visual navigation chapter §3. Subscribes (sensor-data QoS) ``camera/image_raw``
   every odometry message while enabled (service ``~/enable``, std_srvs/SetBool).
 
 The robot is stopped (zero twist) while the estimate is lost (no accepted visual update
-for ``stale_timeout`` seconds of message time, or none yet). Bad input (undecodable images,
-no CameraInfo, CameraInfo that does not convert, e.g. zero focal length, frames without a
-corridor, odometry going back in time) gives a warning throttled per kind of problem.
+for ``stale_timeout`` seconds of message time, or none yet). Bad input gives a warning
+throttled per kind of problem and a count on ``/diagnostics``
+(:class:`~landmark_nav.nodes.common.InputStats`, ``corridor_follower: input``): images and
+odometry that cannot be read (``dropped.malformed``, also an image whose size disagrees with
+the CameraInfo), images before a valid CameraInfo (``dropped.no_camera_info``), messages
+lost before the callback (``dropped.lost``); frames without a corridor
+(``image.corridor_lost``), visual estimates the gate rejects (``image.rejected``) and
+odometry going back in time (``odometry.back_in_time``). A CameraInfo that does not
+convert (e.g. zero focal length) is ignored with a warning.
 """
 
 import cv2
@@ -29,8 +35,8 @@ from landmark_nav.corridor.configuration import follower_configuration, paramete
 from landmark_nav.corridor.controller import CorridorController
 from landmark_nav.corridor.follower import CorridorTracker
 from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
-from landmark_nav.nodes.common import declare, ParameterError, ProblemWarner, run_node, \
-    SENSOR_QOS
+from landmark_nav.nodes.common import declare, InputStats, ParameterError, ProblemWarner, \
+    run_node, SENSOR_QOS
 from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.node import Node
@@ -59,6 +65,7 @@ class CorridorFollower(Node):
         self.controller = CorridorController(config.controller)
         self.enabled = enabled
         self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner)
         self.camera = None
         self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'corridor/pose', 10)
         self.pub_vp = self.create_publisher(PointStamped, 'corridor/vanishing_point', 10)
@@ -68,12 +75,12 @@ class CorridorFollower(Node):
         self.pub_cmd = self.create_publisher(self.twist_type, 'cmd_vel', 10)
         self.create_service(SetBool, '~/enable', self.on_enable)
         self.create_subscription(CameraInfo, 'camera/camera_info', self.on_info, SENSOR_QOS)
-        self.create_subscription(Odometry, 'odom', self.on_odom, SENSOR_QOS)
+        self.stats.subscribe(Odometry, 'odom', self.on_odom, SENSOR_QOS)
         if self.compressed:
-            self.create_subscription(CompressedImage, 'camera/image_raw/compressed',
-                                     self.on_compressed, SENSOR_QOS)
+            self.stats.subscribe(CompressedImage, 'camera/image_raw/compressed',
+                                 self.on_compressed, SENSOR_QOS)
         else:
-            self.create_subscription(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+            self.stats.subscribe(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
 
     @property
     def ekf(self):
@@ -110,30 +117,37 @@ class CorridorFollower(Node):
     def on_image(self, msg: Image) -> None:
         """Convert and process one raw image."""
         try:
-            self.process(msg.header, image_to_gray(msg))
+            gray = image_to_gray(msg, 'corridor_follower')
         except ConversionError as err:
-            self.warner.warn(f'Dropping image: {err}')
+            self.stats.drop('malformed', f'Dropping image: {err}')
+            return
+        self.process(msg.header, gray)
 
     def on_compressed(self, msg: CompressedImage) -> None:
         """Decode and process one compressed image."""
         try:
-            self.process(msg.header, compressed_to_gray(msg))
+            gray = compressed_to_gray(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping image: {err}')
+            self.stats.drop('malformed', f'Dropping image: {err}')
+            return
+        self.process(msg.header, gray)
 
     def process(self, header, gray: np.ndarray) -> None:
         """Measure heading and lateral position in one frame and update the filter."""
         stamp = stamp_to_ns(header.stamp)
         step = self.tracker.frame(gray, self.camera, stamp)
         if step.status == 'dropped':
-            self.warner.warn(f'Dropping image: {step.message}')
+            reason = 'no_camera_info' if self.camera is None else 'malformed'
+            self.stats.drop(reason, f'Dropping image: {step.message}')
             return
+        self.stats.processed()
         if step.status == 'lost':
-            self.warner.warn(f'Corridor lost: {step.message}')
+            self.stats.event('image.corridor_lost', f'Corridor lost: {step.message}')
             self._debug(gray, None, stamp, header.frame_id)
             return
         if step.status == 'rejected':
-            self.warner.warn(f'Visual estimate rejected by the gate (NIS {step.nis:.1f})')
+            self.stats.event('image.rejected', 'Visual estimate rejected by the gate (NIS '
+                             f'{step.nis:.1f})')
         m = step.measurement
         px = m.vp.pixel
         if px is not None:
@@ -149,12 +163,14 @@ class CorridorFollower(Node):
         try:
             pose = odometry_to_pose(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping odometry: {err}')
+            self.stats.drop('malformed', f'Dropping odometry: {err}')
             return
         stamp = pose.stamp_ns
         status, dt = self.tracker.odometry(stamp, pose.pose)
+        self.stats.processed()
         if status == 'back_in_time':
-            self.warner.warn('Odometry went back in time; restarting the increments')
+            self.stats.event('odometry.back_in_time', 'Odometry went back in time; restarting '
+                             'the increments')
         elif status == 'predicted':
             self._publish_pose(stamp)
         if not self.enabled:

@@ -81,8 +81,17 @@ the previous step's scan where it agrees with the odometry (``scan_matching_nois
 ``FrontendParams``, as ``landmark_nav evaluate --scan-matching`` offline).
 
 Bad input is reported with a warning throttled per kind of problem and counted on
-``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): odometry that is not
-finite, repeated, older than the last sample or a jump (front-end events); corners with NaN
+``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`): dropped odometry that
+cannot be read, is not finite or has stamp 0 (``dropped.malformed``), older than the last
+sample (``dropped.out_of_order``) or repeated (``dropped.repeated``); odometry used but not
+as it came: a jump beyond the motion model's bound, whatever covariance the message states
+(bridged, ``odometry.jump``), a covariance that is not finite, symmetric, with a
+non-negative diagonal and PSD (replaced by the ``odometry.*`` model,
+``odometry.covariance_replaced``), held far back in time (``odometry.far_back``: dropped
+as out of order unless ``restart_messages`` of them in a row restart, ``odometry.restart``)
+or a withdrawn future stamp (``odometry.retracted``); scans and
+corner clouds with stamp 0 are ``dropped.malformed``, scans of more than ``max_beams`` beams
+``dropped.oversized``; corners with NaN
 or with a covariance that is not positive semi-definite are dropped; corner sets older than
 the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
 wait for odometry (before the first step: when the waiting sets take more than
@@ -108,9 +117,9 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
                                       odometry_pose_covariance, scan_to_data, set_covariance3,
                                       set_pose_2d, set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
-from landmark_nav.nodes.common import (declare, InputStats,
-                                       output_path, ParameterError, ProblemWarner, run_node,
-                                       SCAN_DEPTH, SCAN_QOS)
+from landmark_nav.nodes.common import (declare, InputStats, output_path, ParameterError,
+                                       ProblemWarner, require_stamp, run_node, SCAN_DEPTH,
+                                       SCAN_QOS)
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import CORNER, LINE
@@ -139,15 +148,27 @@ MAX_START_BYTES = 32 * 2 ** 20
 MAX_JOIN = 50
 DISCOVERY_S = 10.0  # a part without a publisher is waited for this long (discovery)
 CORNER_NAMES = ('x', 'y', 'bisector', 'opening', 'cov_xx', 'cov_xy', 'cov_yy')
-#: Front-end events -> diagnostics drop kind (feature sets) or None (odometry warnings).
-_FEATURE_DROPS = {'out_of_order': 'out_of_order'}
+#: Front-end events -> /diagnostics drop reason (the input is not used).
+_DROPS = {'out_of_order': ('out_of_order', 'Skipping corners'),
+          'invalid': ('malformed', 'Dropping odometry'),
+          'backward': ('out_of_order', 'Dropping odometry'),
+          'repeated': ('repeated', 'Dropping odometry'),
+          'conflicting': ('repeated', 'Dropping odometry')}
+#: Front-end events -> /diagnostics count of an input used, but not as it came.
+_EVENTS = {'jump': 'odometry.jump', 'covariance': 'odometry.covariance_replaced',
+           'far_back': 'odometry.far_back',
+           'restart': 'odometry.restart', 'retracted': 'odometry.retracted',
+           'held': 'corners.held'}
 
 
 class SlamInputStats(InputStats):
-    """:class:`InputStats` plus the count ``before_odometry``.
+    """:class:`InputStats` plus the counts ``before_odometry``, ``received.*`` and ``waiting``.
 
-    The corner sets stamped before the first odometry sample: not processed, and not drops
-    (no odometry pose exists for them).
+    ``before_odometry``: the corner sets stamped before the first odometry sample: not
+    processed, and not drops (no odometry pose exists for them). ``received.corners`` /
+    ``received.scan``: the messages received on each feature topic; ``waiting``: the feature
+    sets not yet processed (waiting for their other part or for odometry), so that a replay
+    can tell when the node has processed what it received.
     """
 
     def __init__(self, node: Node, warner: ProblemWarner) -> None:
@@ -158,7 +179,11 @@ class SlamInputStats(InputStats):
     def status(self) -> DiagnosticStatus:
         """Return the input status with the ``before_odometry`` count."""
         status = super().status()
-        status.values.append(KeyValue(key='before_odometry', value=str(self.before_odometry)))
+        node = self._node
+        values = {'before_odometry': self.before_odometry,
+                  'received.corners': node.corner_count, 'received.scan': node.scan_count,
+                  'waiting': len(node.join) + len(node.frontend.pending)}
+        status.values += [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return status
 
 
@@ -189,6 +214,7 @@ class EkfSlamNode(Node):
         self.frontend_params = config.frontend
         self.landmarks = config.landmarks
         self.structural_only = values['structural_corners_only']
+        self.max_beams = values['max_beams']
         self.visibility = config.visibility
         self.laser_sigma_range = config.laser_sigma_range
         self.line_params = config.line_params
@@ -294,8 +320,9 @@ class EkfSlamNode(Node):
 
     def _on_event(self, kind: str, message: str) -> None:
         """Report a front-end event (an input not used as it came)."""
-        if kind in _FEATURE_DROPS:
-            self.stats.drop(_FEATURE_DROPS[kind], f'Skipping corners: {message}')
+        if kind in _DROPS:
+            reason, what = _DROPS[kind]
+            self.stats.drop(reason, f'{what}: {message}')
             return
         if kind == 'before_odometry':  # not a drop (module docstring); logged at a step
             self.stats.before_odometry += 1
@@ -304,7 +331,7 @@ class EkfSlamNode(Node):
             self.resets += 1
             self._clear_path()
             self._first_set_ns = None
-        self.warner.warn(f'Odometry ({kind}): {message}')
+        self.stats.event(_EVENTS[kind], f'Odometry ({kind}): {message}')
 
     def on_odom(self, msg: Odometry) -> None:
         """Give one odometry sample to the front end; publish the steps it completes."""
@@ -313,7 +340,7 @@ class EkfSlamNode(Node):
         try:
             t, pose, cov = odometry_pose_covariance(msg)
         except ConversionError as err:
-            self.warner.warn(f'Dropping odometry: {err}')
+            self.stats.drop('malformed', f'Dropping odometry: {err}')
             return
         _, steps = self.frontend.add_odometry(t, pose, cov)
         self._publish_steps(steps, self.stats.received_ns)
@@ -326,6 +353,7 @@ class EkfSlamNode(Node):
             missing = [n for n in CORNER_NAMES if n not in a]
             if missing:
                 raise ConversionError(f'PointCloud2: missing fields {", ".join(missing)}')
+            t = require_stamp(stamp_to_ns(msg.header.stamp), 'PointCloud2')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping corners: {err}')
             return
@@ -339,15 +367,20 @@ class EkfSlamNode(Node):
         cols = np.column_stack([a[n] for n in CORNER_NAMES]
                                + [a.get('time', np.zeros(len(a['x'])))])
         cols = self._valid_corners(cols.reshape(-1, len(CORNER_NAMES) + 1))
-        self._offer('corners', stamp_to_ns(msg.header.stamp), cols)
+        self._offer('corners', t, cols)
 
     def on_scan(self, msg: LaserScan) -> None:
         """Validate one scan (lines, visibility) and join it to its corner set."""
         self.scan_count += 1
+        if len(msg.ranges) > self.max_beams:
+            self.stats.drop('oversized', f'Dropping scan: {len(msg.ranges)} beams, more than '
+                            f'max_beams {self.max_beams}')
+            return
         try:
             scan = scan_to_data(msg)
             if scan.ranges.size == 0:
                 raise ConversionError('LaserScan: empty scan (no ranges)')
+            require_stamp(scan.stamp_ns, 'LaserScan')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping scan: {err}')
             return

@@ -175,7 +175,7 @@ class LandmarkDetector(Node):
     def on_image(self, msg: Image) -> None:
         """Convert and process one raw image."""
         try:
-            gray = image_to_gray(msg)
+            gray = image_to_gray(msg, 'landmark_detector')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping image: {err}')
             return

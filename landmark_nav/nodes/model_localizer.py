@@ -164,7 +164,7 @@ class ModelLocalizerNode(Node):
                             'yet')
             return
         try:
-            gray = image_to_gray(msg)
+            gray = image_to_gray(msg, 'model_localizer')
         except ConversionError as err:
             self.stats.drop('malformed', f'Dropping image: {err}')
             return

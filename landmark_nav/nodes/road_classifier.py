@@ -144,7 +144,7 @@ class RoadClassifier(Node):
         try:
             self.pose = np.asarray(odometry_to_pose(msg).pose, dtype=float)
         except ConversionError as err:
-            self.warner.warn(f'Dropping odometry: {err}')
+            self.stats.drop('malformed', f'Dropping odometry: {err}')
 
     def on_scan(self, msg: LaserScan) -> None:
         """Classify one scan, fuse, publish grid, markers, route and widths."""

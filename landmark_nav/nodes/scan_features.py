@@ -2,8 +2,9 @@
 
 Subscribes ``scan`` (sensor_msgs/LaserScan) best effort with a queue of 20 (0.5 s of a
 40 Hz laser: :data:`~landmark_nav.nodes.common.SCAN_QOS`), converts it
-(REP 117 aware), drops malformed scans and scans of more than ``max_beams`` beams with a
-warning naming the value (throttled per kind of problem), and segments the rest
+(REP 117 aware), drops malformed scans (``malformed``: unreadable, empty, stamp 0) and
+scans of more than ``max_beams`` beams (``oversized``) with a warning naming the value
+(throttled per kind of problem), and segments the rest
 (parameters ``segmentation.incidence_deg`` and ``segmentation.min_points``; these and the
 range noise's are :data:`~landmark_nav.laser.extractor_configuration.SCAN_PARAMETERS`)
 before handing the clusters to :meth:`ScanFeatureNode.process`. With ``sigma_r_from_data``
@@ -21,7 +22,8 @@ import math
 
 from landmark_nav.conversions import ConversionError, scan_to_data, ScanData
 from landmark_nav.laser.extractor_configuration import SCAN_PARAMETERS, ScanSegmenter
-from landmark_nav.nodes.common import declare, InputStats, ProblemWarner, SCAN_QOS
+from landmark_nav.nodes.common import (declare, InputStats, ProblemWarner, require_stamp,
+                                       SCAN_QOS)
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
@@ -55,11 +57,13 @@ class ScanFeatureNode(Node):
 
     def on_scan(self, msg: LaserScan) -> None:
         """Validate and segment one scan, then process it."""
+        if len(msg.ranges) > self.max_beams:
+            self.stats.drop('oversized', f'Dropping scan: {len(msg.ranges)} beams, more than '
+                            f'max_beams {self.max_beams}')
+            return
         try:
-            if len(msg.ranges) > self.max_beams:
-                raise ConversionError(f'LaserScan: {len(msg.ranges)} beams, more than '
-                                      f'max_beams {self.max_beams}')
             scan = scan_to_data(msg)
+            require_stamp(scan.stamp_ns, 'LaserScan')
             if len(scan.ranges) == 0:
                 raise ConversionError('LaserScan: empty scan (no ranges)')
             if math.degrees(scan.angle_increment) >= self.incidence_deg:

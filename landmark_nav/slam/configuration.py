@@ -90,15 +90,17 @@ ODOMETRY_PARAMETERS = {
 FRONTEND_PARAMETERS = {
     'deskew': ('move each corner through the odometry motion up to its beam time', None,
                None),
-    'max_speed': ('fastest plausible translation of the base [m/s] (odometry check)',
-                  (1e-3, 100.0), None),
-    'max_turn_rate': ('fastest plausible rotation of the base [rad/s] (odometry check)',
-                      (1e-3, 100.0), None),
+    'max_speed': ('fastest plausible translation of the base [m/s] (odometry check; '
+                  'Pioneer 3-DX: 1.2)', (1e-3, 100.0), None),
+    'max_turn_rate': ('fastest plausible rotation of the base [rad/s] (odometry check; '
+                      'Pioneer 3-DX: 5.2)', (1e-3, 100.0), None),
     'jump_sigmas': ('odometry noise stds allowed on top of the speed limits', (0.1, 100.0),
                     None),
     'min_step_s': ('smallest elapsed time the odometry check uses [s]', (1e-6, 10.0), None),
-    'max_backward_s': ('odometry older than this restarts the filter (a restarted source) [s]',
-                       (1e-3, 1e6), None),
+    'max_backward_s': ('odometry older than this, restart_messages times in a row, restarts '
+                       'the filter (a restarted source) [s]', (1e-3, 1e6), None),
+    'restart_messages': ('consecutive odometry samples older than max_backward_s that restart '
+                         'the filter (one stamp never does)', (1, 1000), None),
     'buffer_s': ('odometry kept behind the newest sample [s]', (0.1, 3600.0), None),
     'scan_matching': ("predict with the scan's point-to-line ICP motion against the previous "
                       'scan where it agrees with the odometry (needs scan, visibility: true)',
@@ -126,6 +128,8 @@ NODE_PARAMETERS = {
                        "'k_d=.. k_theta=.. k_dtheta=..' (replace them)", None, None),
     'landmarks': ('both', 'landmark types mapped: corners (corners/features), lines (extracted '
                   'from scan) or both', None, list(LANDMARK_TYPES)),
+    'max_beams': (20000, 'scans with more beams are dropped as oversized (real 2-D lasers '
+                  'have up to a few thousand)', (1, 100000000), None),
     'structural_corners_only': (False, 'map only the corners the extractor labels structural '
                                 '(both arms >= 0.5 m; field structural of corners/features)',
                                 None, None),

@@ -7,30 +7,38 @@ arrive and get the same filter steps, to the last bit, whenever the same message
 
 Odometry buffer (:meth:`SlamFrontend.add_odometry`)
 ---------------------------------------------------
-Each sample ``(stamp, pose, covariance)`` is judged against the previous accepted one:
+Each sample ``(stamp, pose, covariance)`` is judged against the previous accepted one, by
+the checks of :mod:`.odometry_checks`, which never trust the sample itself:
 
-* not finite: dropped (``'invalid'``);
+* a pose that is not finite, or stamp 0 (an unset header): dropped (``'invalid'``);
+* a stated covariance not finite, symmetric, with a non-negative diagonal and PSD: replaced
+  by the noise model (``'covariance'``; ``U`` always comes from the model);
 * the same stamp again: dropped (``'repeated'`` when the pose is the same, ``'conflicting'``
   when it differs: the first one stays);
-* an older stamp: dropped (``'backward'``), unless it lies more than ``max_backward_s``
-  back: the odometry source restarted (a replayed bag looping, a driver restart) and the
-  front end starts over with an empty map (``'restart'``, the only reset);
+* an older stamp: dropped (``'backward'``). Only a persistent condition restarts: samples
+  more than ``max_backward_s`` back are held (``'far_back'``; dropped as ``'backward'``
+  when the run ends); when ``restart_messages`` of them come in a row (moving forward among
+  themselves), the odometry source restarted (a replayed bag looping, a driver restart) and
+  the front end starts over with an empty map from them (``'restart'``, the only reset).
+  If instead those samples continue the odometry before
+  the last accepted sample, and that one had jumped more than ``max_backward_s`` ahead, it
+  was a stamp in the future: it is withdrawn and the samples accepted (``'retracted'``);
 * a newer stamp: the increment ``u = (-)o_prev (+) o`` (eq. 13) must be reachable in the
   elapsed time ``dt`` plus the odometry noise::
 
       |(u_x, u_y)| <= v_max dt + k sigma_xy,   |u_psi| <= w_max dt + k sigma_psi
 
   with ``dt`` at least ``min_step_s`` (stamp jitter), ``k = jump_sigmas`` and ``sigma`` the
-  larger of the noise model's (:class:`~landmark_nav.slam.ekf_slam.OdometryNoise` at the
-  increment: ``sigma_xy^2 = s_xy^2 d``, ``sigma_psi^2 = s_yd^2 d + s_yr^2 |u_psi|``) and
-  the growth of the sample's own covariance since the previous one (position: the largest
-  eigenvalue of the difference of the x-y blocks). A long gap in ``/odom`` is therefore no
-  jump: the robot had time to move, and the motion across the gap is interpolated. An
+  noise model's (:class:`~landmark_nav.slam.ekf_slam.OdometryNoise` at the increment:
+  ``sigma_xy^2 = s_xy^2 d``, ``sigma_psi^2 = s_yd^2 d + s_yr^2 |u_psi|``), whatever
+  covariance the message claims. A long gap in ``/odom`` is no jump: the robot had time
+  to move, and the motion across the gap is interpolated. An
   increment that fails is a discontinuity of the odometry frame (a driver re-zeroing its
-  pose), not a motion: it is *bridged* (``'jump'``), i.e. the odometry after it is
-  re-expressed so that it continues from the pose before it (zero motion across the step),
-  and the prediction over that step gets the variance of the largest plausible motion,
-  ``diag((v_max dt)^2, (v_max dt)^2, (w_max dt)^2)``, on top of ``U``. The map is kept.
+  pose, a teleport), not a motion: it is *bridged* (``'jump'``), i.e. the odometry after
+  it is re-expressed so that it continues from the pose before it (zero motion across the
+  step), and the prediction over that step gets the variance of the largest plausible
+  motion, ``diag((v_max dt)^2, (v_max dt)^2, (w_max dt)^2)``, on top of ``U``. The map is
+  kept.
 
 Feature sets (:meth:`SlamFrontend.add_features`)
 ------------------------------------------------
@@ -48,16 +56,13 @@ Start-up: the filter starts at the first accepted odometry sample. A step needs 
 odometry at its stamp, so a set stamped at or after the first sample waits, however long the
 odometry takes to come (the node bounds the waiting sets by their memory, not by a time: when
 the base's driver or its DDS match comes seconds after the laser, no set stamped after the
-first odometry sample is lost), and a
-set stamped before it has no odometry pose and is not processed (``'before_odometry'``,
-when the first sample comes for the sets waiting, on arrival for later ones). This is what a
-ROS user knows from slam_toolbox and AMCL: their scans go through a tf message filter that
-holds each scan until the odom -> base_link transform at its stamp exists and discards
-those stamped before the transform's first sample. Such sets are not drops: no step exists
-for them (the node counts them apart on ``/diagnostics``). On the live pipeline they are the
-sets of the laser's first seconds while ``/odom`` is not yet matched, plus 1 to 6 sets (up to
-126 ms) stamped before the first sample that arrive after it (the laser's path to the front
-end is slower than the odometry's).
+first odometry sample is lost), and a set stamped before it has no odometry pose and is not
+processed (``'before_odometry'``, when the first sample comes for the sets waiting, on
+arrival for later ones), as slam_toolbox and AMCL discard scans stamped before the odom ->
+base_link transform's first sample in their tf message filter. Such sets are not drops (the
+node counts them apart on ``/diagnostics``): on the live pipeline, the sets of the laser's
+first seconds while ``/odom`` is not yet matched, plus 1 to 6 sets (up to 126 ms) stamped
+before the first sample that arrive after it.
 
 Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
 (:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
@@ -107,92 +112,35 @@ scans then give the landmark observations: the scan-matched motion and the updat
 their data, so the filter's pose is somewhat overconfident (the Carmen figures in the README
 measure how much). The ICP runs on the raw scan (no de-skew).
 
-Odometry noise per robot (:data:`ODOMETRY_NOISE_MODELS`, :func:`odometry_noise_model`)
---------------------------------------------------------------------------------------
-The filter's ``U`` (:func:`.ekf_slam.odometry_noise`) is distance- and rotation-driven:
-``sigma_xy = s_xy sqrt(d)`` on each axis, ``sigma_psi^2 = s_yd^2 d + s_yr^2 |dpsi|``.
-
-* ``pioneer`` (the default of the node and of bags that state nothing): ``s_xy`` 0.05
-  m/sqrt(m), ``s_yd`` 0.05 rad/sqrt(m), ``s_yr`` 0.1 rad/sqrt(rad): an uncalibrated
-  Pioneer-class base, 16 cm and 9 deg of spread after 10 m straight and 14 deg per turn on
-  the spot (the self-localization chapter's calibration factors alone give 8 deg per 10 m
-  and 3.4 deg per turn; real floors add slip). The same numbers as the importer's default
-  drift model, whose gains ``k_d, k_theta, k_dtheta`` map one to one onto ``s_xy, s_yd,
-  s_yr`` (the importer's distance error lies along the motion; the filter spreads it on both
-  axes, which is conservative across the motion).
-* ``simulator``: :class:`~.ekf_slam.OdometryNoise` defaults (1.5 mm/sqrt(m), 0.01
-  rad/sqrt(m), 0.01 rad/sqrt(rad)), the random wheel noise of the package's simulated
-  Pioneer; used for the simulator's bags.
-* ``'k_d=.. k_theta=.. k_dtheta=..'``: the gains an imported bag states in its
-  ``custom_data`` key ``landmark_nav.drift_model`` (the imported-bag contract).
+Odometry noise per robot: :mod:`.odometry_noise_models` (``pioneer``, the default;
+``simulator``; an imported bag's drift gains).
 """
 
 import bisect
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
-import re
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from landmark_nav.geometry import compose, interpolate_pose, inverse, relative
 import numpy as np
 
 from .consistency import chi2_gate
-from .ekf_slam import EkfSlam, odometry_noise, OdometryNoise, SlamParams, UpdateResult
+from .ekf_slam import EkfSlam, odometry_noise, SlamParams, UpdateResult
 from .line_landmarks import lines_to_observations
 from .observations import corner_descriptors, corners_to_observations
+from .odometry_checks import BackwardRun, covariance_problem, implausible_motion
+from .odometry_noise_models import odometry_noise_model, ODOMETRY_NOISE_MODELS
 from .scan_matching import fused_scan_motion, scan_motion, scan_points
 from .slam_map import SlamMap
 from .visibility import ScanGeometry
 
-#: Named odometry noise models (module docstring).
-ODOMETRY_NOISE_MODELS: Dict[str, OdometryNoise] = {
-    'pioneer': OdometryNoise(sigma_xy_per_sqrt_m=0.05, sigma_yaw_per_sqrt_m=0.05,
-                             sigma_yaw_per_sqrt_rad=0.1),
-    'simulator': OdometryNoise(),
-}
 #: Odometry events counted by :attr:`SlamFrontend.events`.
-ODOMETRY_EVENTS = ('accepted', 'invalid', 'repeated', 'conflicting', 'backward', 'restart',
-                   'jump')
+ODOMETRY_EVENTS = ('accepted', 'invalid', 'covariance', 'repeated', 'conflicting', 'backward',
+                   'far_back', 'restart', 'retracted', 'jump')
 #: Feature-set events counted by :attr:`SlamFrontend.events`.
 FEATURE_EVENTS = ('processed', 'out_of_order', 'before_odometry', 'held')
 #: What a step predicted with (:attr:`SlamFrontend.motions`, :attr:`Step.motion`).
 MOTION_SOURCES = ('odometry', 'scan_matching')
-_GAIN = re.compile(r'^(k_d|k_theta|k_dtheta)=(\S+)$')
-_GAIN_FIELD = {'k_d': 'sigma_xy_per_sqrt_m', 'k_theta': 'sigma_yaw_per_sqrt_m',
-               'k_dtheta': 'sigma_yaw_per_sqrt_rad'}
-
-
-def odometry_noise_model(text: str) -> OdometryNoise:
-    """Return the odometry noise of a model name or of drift gains (module docstring).
-
-    Args:
-        text: ``'pioneer'``, ``'simulator'`` or ``'k_d=0.05 k_theta=0.05 k_dtheta=0.1'``
-            (the importer's ``landmark_nav.drift_model``; gains not given keep the
-            ``pioneer`` values).
-
-    Returns:
-        The noise model.
-
-    Raises:
-        ValueError: Unknown name or malformed gain (one line naming it).
-    """
-    text = str(text).strip()
-    if text in ODOMETRY_NOISE_MODELS:
-        return ODOMETRY_NOISE_MODELS[text]
-    gains = {}
-    for token in text.replace(',', ' ').split():
-        m = _GAIN.match(token)
-        try:
-            value = float(m.group(2)) if m else math.nan
-        except ValueError:
-            value = math.nan
-        if not m or not math.isfinite(value) or value < 0.0:
-            raise ValueError(f'odometry noise model: expected {" or ".join(ODOMETRY_NOISE_MODELS)}'
-                             f' or k_d=.. k_theta=.. k_dtheta=.. (numbers >= 0), got {token!r}')
-        gains[_GAIN_FIELD[m.group(1)]] = value
-    if not gains:
-        raise ValueError('odometry noise model: empty')
-    return replace(ODOMETRY_NOISE_MODELS['pioneer'], **gains)
 
 
 @dataclass(frozen=True)
@@ -207,7 +155,10 @@ class FrontendParams:
         max_turn_rate: Fastest plausible rotation [rad/s] (Pioneer 3-DX: 300 deg/s).
         jump_sigmas: Odometry noise standard deviations allowed on top of the speed limits.
         min_step_s: Smallest elapsed time the check uses (stamp jitter) [s].
-        max_backward_s: A stamp further back than this restarts the front end [s].
+        max_backward_s: Odometry further back than this, ``restart_messages`` times in a
+            row, restarts the front end [s].
+        restart_messages: Consecutive far-back odometry samples that restart it (a
+            single stamp never does).
         buffer_s: Odometry kept behind the newest sample [s] (bounded memory when no
             feature sets come; a set older than the buffer is dropped as out of order).
         scan_matching: Predict with the scan's motion against the previous step's scan
@@ -238,6 +189,7 @@ class FrontendParams:
     jump_sigmas: float = 5.0
     min_step_s: float = 0.02
     max_backward_s: float = 1.0
+    restart_messages: int = 3
     buffer_s: float = 60.0
     scan_matching: bool = False
     scan_matching_noise: str = 'k_d=0.05 k_theta=0.03 k_dtheta=0.06'
@@ -254,6 +206,9 @@ class FrontendParams:
             if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
                     or v <= 0.0):
                 raise ValueError(f'FrontendParams.{name} must be a finite number > 0, got {v!r}')
+        r = self.restart_messages
+        if not isinstance(r, int) or isinstance(r, bool) or r < 1:
+            raise ValueError(f'FrontendParams.restart_messages must be an integer >= 1, got {r!r}')
         for name in ('deskew', 'descriptors', 'scan_matching'):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f'FrontendParams.{name} must be a bool')
@@ -430,6 +385,7 @@ class _Buffer:
     raw_last: Optional[np.ndarray] = None
     cov_last: Optional[np.ndarray] = None
     offset: Optional[np.ndarray] = None  # bridged = offset (+) raw (None: bridged = raw)
+    previous: Optional[tuple] = None  # (raw_last, cov_last, offset) before the last sample
 
 
 class SlamFrontend:
@@ -489,6 +445,7 @@ class SlamFrontend:
         self.slam: Optional[EkfSlam] = None
         self.t0: Optional[int] = None
         self._buf = _Buffer()
+        self._back_run = BackwardRun(self.frontend.restart_messages)
         self._pending: List[_Pending] = []
         self._pending_bytes = 0
         self.last_step: Optional[Tuple[int, np.ndarray]] = None
@@ -525,7 +482,7 @@ class SlamFrontend:
         Args:
             stamp_ns: Stamp [ns].
             pose: (3,) odometry pose ``[x, y, psi]`` (odom frame).
-            covariance: Optional (3, 3) covariance of the pose (used by the jump check).
+            covariance: Optional (3, 3) stated covariance of the pose (checked only).
 
         Returns:
             ``(event, steps)``: one of :data:`ODOMETRY_EVENTS` and the steps made.
@@ -535,11 +492,17 @@ class SlamFrontend:
         cov = None if covariance is None else np.asarray(covariance, dtype=float).reshape(3, 3)
         if not np.all(np.isfinite(pose)):
             return self._event('invalid', f'odometry pose {pose.tolist()} is not finite'), []
-        if cov is not None and not np.all(np.isfinite(cov)):
+        if stamp_ns <= 0:
+            return self._event('invalid', f'odometry stamp {stamp_ns} ns is not a time (an '
+                               'unset header)'), []
+        problem = None if cov is None else covariance_problem(cov)
+        if problem is not None:
             cov = None
+            self._event('covariance', f'odometry covariance at {stamp_ns} ns is {problem}: '
+                        'using the odometry noise model')
         b = self._buf
         if not b.t:
-            self._accept(stamp_ns, pose, pose.copy(), cov, np.zeros(3))
+            self._accept(stamp_ns, pose, pose.copy(), cov, np.zeros(3), b.offset)
             if self.slam is None:
                 self.slam = EkfSlam(self.params, initial_pose=pose)
                 if self.slam_map is not None:
@@ -557,64 +520,79 @@ class SlamFrontend:
                                f'another pose {pose.tolist()} (kept the first '
                                f'{b.raw_last.tolist()})'), []
         if stamp_ns < last:
-            back = (last - stamp_ns) * 1e-9
-            if back > self.frontend.max_backward_s:
-                self.restarts += 1
-                self.clear()
-                kind = self._event('restart', f'odometry went {back:.3f} s back in time '
-                                   f'({last} -> {stamp_ns} ns): restarting with an empty map')
-                return kind, self.add_odometry(stamp_ns, pose, covariance)[1]
-            return self._event('backward', f'odometry stamp {stamp_ns} ns is {back:.3f} s '
-                               f'older than the last one ({last} ns): dropped'), []
+            return self._backward(stamp_ns, pose, cov)
+        self._drop_back_run()
         dt = (stamp_ns - last) * 1e-9
         u = relative(b.raw_last, pose)  # eq. 13
-        why = self._implausible(u, dt, cov)
+        f = self.frontend
+        why = implausible_motion(u, dt, self.params.odometry, f.max_speed, f.max_turn_rate,
+                                 f.jump_sigmas, f.min_step_s)
         if why is None:
             bridged = pose if b.offset is None else compose(b.offset, pose)
-            self._accept(stamp_ns, pose, bridged, cov, np.zeros(3))
+            self._accept(stamp_ns, pose, bridged, cov, np.zeros(3), b.offset)
             return self._event('accepted'), self.process()
-        f = self.frontend
         span = max(dt, f.min_step_s)
         extra = np.array([(f.max_speed * span) ** 2, (f.max_speed * span) ** 2,
                           (f.max_turn_rate * span) ** 2])
-        b.offset = compose(b.pose[-1], inverse(pose))  # bridged(pose) == last bridged pose
-        self._accept(stamp_ns, pose, b.pose[-1].copy(), cov, extra)
+        offset = compose(b.pose[-1], inverse(pose))  # bridged(pose) == last bridged pose
+        self._accept(stamp_ns, pose, b.pose[-1].copy(), cov, extra, offset)
         return self._event('jump', f'odometry {why} in {dt:.3f} s: bridged as a '
                            f'discontinuity of the odometry frame (map kept)'), self.process()
 
+    def _backward(self, t: int, pose: np.ndarray, cov: Optional[np.ndarray]
+                  ) -> Tuple[str, List[Step]]:
+        """Drop an older sample; restart (or withdraw a future stamp) when persistent."""
+        b, f = self._buf, self.frontend
+        back = (b.t[-1] - t) * 1e-9
+        if back <= f.max_backward_s:
+            return self._event('backward', f'odometry stamp {t} ns is {back:.3f} s older '
+                               f'than the last one ({b.t[-1]} ns): dropped'), []
+        if not self._back_run.continues(t):
+            self._drop_back_run()
+        if not self._back_run.add(t, pose, cov):
+            return self._event('far_back', f'odometry stamp {t} ns is {back:.3f} s older than '
+                               f'the last one ({b.t[-1]} ns): held, {len(self._back_run.samples)}'
+                               f' of {f.restart_messages} in a row restart'), []
+        run = self._back_run.clear()
+        if (len(b.t) >= 2 and b.previous is not None and run[0][0] > b.t[-2]
+                and (b.t[-1] - b.t[-2]) * 1e-9 > f.max_backward_s):
+            kind = self._event('retracted', f'odometry stamp {b.t[-1]} ns lay '
+                               f'{(b.t[-1] - b.t[-2]) * 1e-9:.3f} s ahead of the samples '
+                               'around it: withdrawn')
+            del b.t[-1], b.pose[-1], b.extra[-1]
+            b.raw_last, b.cov_last, b.offset = b.previous
+            b.previous = None
+        else:
+            self.restarts += 1
+            self.clear()
+            kind = self._event('restart', f'odometry went {back:.3f} s back in time '
+                               f'({len(run)} samples in a row, {b.t[-1]} -> {t} ns): '
+                               'restarting with an empty map')
+        steps = []
+        for sample in run:
+            steps += self.add_odometry(*sample)[1]
+        return kind, steps
+
+    def _drop_back_run(self) -> None:
+        """Drop the far-back samples held: the run ended before it restarted anything."""
+        for t, _, _ in self._back_run.clear():
+            self._event('backward', f'odometry stamp {t} ns lay more than '
+                        f'{self.frontend.max_backward_s:g} s back, too few in a row for a '
+                        'restart: dropped')
+
     def _accept(self, t: int, raw: np.ndarray, bridged: np.ndarray,
-                cov: Optional[np.ndarray], extra: np.ndarray) -> None:
+                cov: Optional[np.ndarray], extra: np.ndarray,
+                offset: Optional[np.ndarray]) -> None:
         b = self._buf
+        b.previous = (b.raw_last, b.cov_last, b.offset)
         b.t.append(t)
         b.pose.append(bridged)
         b.extra.append(extra)
-        b.raw_last, b.cov_last = raw, cov
+        b.raw_last, b.cov_last, b.offset = raw, cov, offset
         keep_from = t - int(self.frontend.buffer_s * 1e9)
         drop = bisect.bisect_left(b.t, keep_from) - 1  # keep one sample before keep_from
         if drop > 0:
             del b.t[:drop], b.pose[:drop], b.extra[:drop]
-
-    def _implausible(self, u: np.ndarray, dt: float, cov: Optional[np.ndarray]
-                     ) -> Optional[str]:
-        """Return why an increment cannot be a motion in ``dt`` (module docstring) or None."""
-        f, n = self.frontend, self.params.odometry
-        d, turn = math.hypot(u[0], u[1]), abs(float(u[2]))
-        var_xy = n.sigma_xy_per_sqrt_m ** 2 * d
-        var_psi = n.sigma_yaw_per_sqrt_m ** 2 * d + n.sigma_yaw_per_sqrt_rad ** 2 * turn
-        prev = self._buf.cov_last
-        if cov is not None and prev is not None:
-            grow = cov - prev
-            sym = 0.5 * (grow[:2, :2] + grow[:2, :2].T)
-            var_xy = max(var_xy, float(np.linalg.eigvalsh(sym)[-1]))
-            var_psi = max(var_psi, float(grow[2, 2]))
-        span = max(dt, f.min_step_s)
-        lim_xy = f.max_speed * span + f.jump_sigmas * math.sqrt(var_xy)
-        lim_psi = f.max_turn_rate * span + f.jump_sigmas * math.sqrt(var_psi)
-        if d > lim_xy:
-            return f'moved {d:.3f} m (> {lim_xy:.3f} m plausible)'
-        if turn > lim_psi:
-            return f'turned {turn:.3f} rad (> {lim_psi:.3f} rad plausible)'
-        return None
 
     # ------------------------------------------------------------------ features
     def add_features(self, corners: Corners, tag: object = None) -> List[Step]:

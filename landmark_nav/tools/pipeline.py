@@ -6,7 +6,9 @@ Each node runs as its own process with its shipped parameter file
 ``--set NODE.PARAMETER=VALUE``; honcho (a Python port of Foreman) starts them, prefixes
 every output line with the node's name and, on Ctrl-C or SIGTERM, stops them all with
 SIGTERM (every node shuts down cleanly on it). When one process ends, the others are
-stopped too (so a replay pipeline ends with its bag, unless ``--loop``). Stopped by a
+stopped too (so a replay pipeline ends with its bag, unless ``--loop``; when the player
+ended by itself, first it waits up to ``--drain-timeout`` seconds until the nodes have
+processed every scan, :mod:`~landmark_nav.tools.pipeline_drain`). Stopped by a
 signal, the command exits 0 if every node did (honcho alone would give 130 / 143), else
 with the first node's non-zero status.
 
@@ -19,9 +21,10 @@ Pipelines:
   the user's; ``--set landmark_detector.landmark_map=/path/landmarks.yaml`` for robot fixes);
 * ``replay``: a bag's ``/scan`` and ``/odom`` through the SLAM nodes, bag_player +
   corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
-  subscribed, so no scan is lost to the nodes' start-up). ``ekf_slam`` gets what the bag
-  states, as ``landmark_nav evaluate`` uses it (:func:`bag_slam_settings`): the laser mount
-  and the odometry noise model (an ``--set`` wins).
+  subscribed by every node that takes them, so no scan is lost to the nodes' start-up).
+  ``ekf_slam`` gets what the bag states, as ``landmark_nav evaluate`` uses it
+  (:func:`bag_slam_settings`): the laser mount and the odometry noise model (an ``--set``
+  wins).
 """
 
 import argparse
@@ -32,6 +35,8 @@ from typing import Dict, List, Optional, Sequence
 from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.tools.config_files import config_path
 
+#: Seconds a replay waits for its nodes after the player ended (``--drain-timeout``).
+DRAIN_TIMEOUT_S = 120.0
 PIPELINES = {
     'slam': ('laser_driver', 'base_driver', 'corner_extractor', 'ekf_slam'),
     'sonar': ('base_driver', 'sonar_localizer'),
@@ -127,13 +132,26 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
             if not bag:
                 raise ValueError(f'pipeline {name} needs --bag')
             cmd += [bag, '--rate', repr(float(rate)), '--topics', '/scan', '/odom',
-                    '--wait-for-subscribers', '30'] + (['--loop'] if loop else [])
+                    '--wait-for-subscribers', '30', '--min-subscribers',
+                    f'/scan={_scan_subscribers(settings)}', '/odom=1'] + (
+                        ['--loop'] if loop else [])
         else:
             stated = bag_slam_settings(bag) if (node == 'ekf_slam' and bag) else []
             cmd += (['--ros-args', '--params-file', str(config_path(node))] + files[node]
                     + stated + extra[node])
         commands[node] = cmd
     return commands
+
+
+def _scan_subscribers(settings: Sequence[str]) -> int:
+    """Return the number of replay nodes subscribing ``/scan``.
+
+    corner_extractor, and ekf_slam unless its visibility is off and it maps corners only.
+    """
+    values = dict(s.partition('=')[::2] for s in settings)
+    slam = (values.get('ekf_slam.visibility', 'true').lower() not in ('false', '0')
+            or values.get('ekf_slam.landmarks', 'corners').strip('\'"') != 'corners')
+    return 1 + int(slam)
 
 
 def add_parser(sub, parser_class) -> None:
@@ -145,6 +163,10 @@ def add_parser(sub, parser_class) -> None:
     p.add_argument('--bag', help='bag to replay (pipeline replay)')
     p.add_argument('--rate', type=float, default=1.0, help='replay speed factor')
     p.add_argument('--loop', action='store_true', help='replay the bag in a loop')
+    p.add_argument('--drain-timeout', type=float, default=DRAIN_TIMEOUT_S, metavar='SECONDS',
+                   help='replay: when the bag has been played, wait up to this long until the '
+                   f'nodes have processed every scan (default {DRAIN_TIMEOUT_S:g}; 0: stop at '
+                   'once), then stop them and say what was discarded')
     p.add_argument('--set', action='append', default=[], metavar='NODE.PARAMETER=VALUE',
                    help='override a parameter, e.g. laser_driver.port=/dev/ttyUSB0 '
                    '(repeatable)')
@@ -163,10 +185,12 @@ def run(args: argparse.Namespace) -> int:
         for node, cmd in commands.items():
             print(f'{node}: {shlex.join(cmd)}')
         return 0
-    from honcho.manager import Manager
     from honcho.printer import Printer
-    manager = Manager(Printer(sys.stdout, colour=sys.stdout.isatty(),
-                              width=max(len(n) for n in commands)))
+    from landmark_nav.tools.pipeline_drain import DrainingManager, scans_in_bag
+    scans = scans_in_bag(args.bag) if args.name == 'replay' and not args.loop else None
+    manager = DrainingManager(Printer(sys.stdout, colour=sys.stdout.isatty(),
+                                      width=max(len(n) for n in commands)),
+                              scans, args.drain_timeout)
     for node, cmd in commands.items():
         manager.add_process(node, 'exec ' + shlex.join(cmd))  # no shell between
     manager.loop()
