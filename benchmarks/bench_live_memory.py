@@ -50,7 +50,11 @@ def pipeline_pids(log: Path) -> dict:
 
 def main() -> int:
     """Run the live system; sample and judge every process's RSS."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split('\n')[0],
+        epilog='No data argument: the run is a closed loop through the emulated robot and the '
+               'live drivers (for a recorded bag: bench_node_cpu.py BAG, bench_soak.py --bag '
+               'BAG).')
     parser.add_argument('--minutes', type=float, default=10.0, help='length of the run')
     parser.add_argument('--warmup', type=float, default=1.0,
                         help='minutes before the reference RSS is taken (default 1)')
@@ -93,8 +97,9 @@ def main() -> int:
             started = time.monotonic()
             print(f'logs in {out}; {args.minutes:g} min, load average at start '
                   f'{os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)', flush=True)
+            period = min(SAMPLE_S, 60.0 * args.minutes / 8.0)   # >= 8 samples a run
             while True:
-                time.sleep(SAMPLE_S)
+                time.sleep(period)
                 if procs['drive'].poll() is not None:  # the run is over: sample no more
                     break
                 pids = {name: p.pid for name, p in procs.items()}

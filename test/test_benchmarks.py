@@ -97,6 +97,9 @@ TINY_RUNS = {
     'bench_node_cpu.py': [
         (['{bag}', '--seconds', '2', '--rate', '2', '--domain', '{domain}'],
          r'ekf_slam node CPU / core = [\d.]+')],
+    'bench_live_memory.py': [
+        (['--minutes', '0.25', '--warmup', '0.05', '--limit-mb', '50', '--domain', '{domain}',
+          '--out', '{tmp}/live_memory'], r'OK: every process grew by at most 50 MB')],
     'bench_live_slam.py': [
         (['--seconds', '5', '--domain', '{domain}', '--out', '{tmp}/live_slam'],
          r'ekf_slam\s+ATE \(start frame, unaligned\): RMSE [\d.]+ cm')],
@@ -106,6 +109,7 @@ TINY_RUNS = {
 }
 # Entry points that start ROS nodes (one process each, this worker's DDS domain).
 DDS_RUNS = {('bench_corridor.py', 'loop'), ('bench_node_cpu.py', None),
+            ('bench_live_memory.py', None),
             ('bench_live_slam.py', None), ('bench_soak.py', None)}
 
 # Runs each (script, argv) of a JSON list as ``__main__`` in this interpreter; writes
