@@ -98,8 +98,9 @@ TINY_RUNS = {
         (['{bag}', '--seconds', '2', '--rate', '2', '--domain', '{domain}'],
          r'ekf_slam node CPU / core = [\d.]+')],
     'bench_live_memory.py': [
-        (['--minutes', '0.25', '--warmup', '0.05', '--limit-mb', '50', '--domain', '{domain}',
-          '--out', '{tmp}/live_memory'], r'OK: every process grew by at most 50 MB')],
+        # a smoke run: 15 s, the nodes still loading in the warm-up, so no memory bound
+        (['--minutes', '0.25', '--warmup', '0.05', '--limit-mb', '1000', '--domain', '{domain}',
+          '--out', '{tmp}/live_memory'], r'ekf_slam +[\d.]+ MB +[\d.]+ MB +[+-][\d.]+ MB')],
     'bench_live_slam.py': [
         (['--seconds', '5', '--domain', '{domain}', '--out', '{tmp}/live_slam'],
          r'ekf_slam\s+ATE \(start frame, unaligned\): RMSE [\d.]+ cm')],

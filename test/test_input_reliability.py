@@ -42,10 +42,15 @@ def scan(t):
 
 
 def start_slam(processes, tmp_path, *params):
-    """Start ekf_slam as a process (stderr to a file); return the file."""
+    """Start ekf_slam as a process (stderr to a file); return the file.
+
+    The chapter profile (corners only, no scan matching): the corner sets alone make steps,
+    so a test can feed odometry without scans.
+    """
     err = tmp_path / 'ekf_slam.err'
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
-    args = ['-p', f'map_file:={tmp_path / "map.yaml"}', '-p', 'confirm_hits:=1',
+    args = ['--params-file', str(REPO / 'config' / 'ekf_slam_chapter.yaml'),
+            '-p', f'map_file:={tmp_path / "map.yaml"}', '-p', 'confirm_hits:=1',
             '-p', 'confirm_window:=1']
     for p in params:
         args += ['-p', p]

@@ -91,6 +91,7 @@ def test_replay_ends_when_the_nodes_have_processed_every_scan(processes):
 
     The player's end stopped ekf_slam 1 s later: under load at 3x, 1,482 of 1,988 scans
     reached its output. Now the pipeline waits for the nodes to process what they received.
+    The chapter profile on both sides (the offline reference is the chapter's filter).
     """
     from landmark_nav.conversions import stamp_to_ns
     from landmark_nav.evaluation.bags import load_bag
@@ -104,7 +105,8 @@ def test_replay_ends_when_the_nodes_have_processed_every_scan(processes):
         poses = ros.collect('/pose', PoseWithCovarianceStamped)
         proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.tools.cli', 'pipeline', 'replay', '--bag',
-             str(bag), '--rate', '3'], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+             str(bag), '--rate', '3', '--profile', 'ekf_slam_chapter'],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             text=True)
         out, _ = proc.communicate(timeout=600)  # ends by itself: 40 s of bag, then the drain
         time.sleep(0.5)
