@@ -378,11 +378,12 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
             and the model misfit is at most ``unblur_residual`` of the contrast.
         unblur_margin: see ``unblur``.
         unblur_residual: see ``unblur``.
-        error_rate: if > 0, a code is accepted only when it is resolved (see
-            :func:`resolvability_bound`): a threshold reading needs a margin above
-            ``1 - 2 w`` with ``w`` the cell self weight measured on the grid
-            (:func:`cell_self_weight`), an unmixed or pixel reading a log-likelihood ratio
-            of every code cell's colour of at least ``log(cells / error_rate)``.
+        error_rate: if > 0, a code is accepted only when it is resolved: a threshold
+            reading needs the cell self weight ``w`` measured on the grid
+            (:func:`cell_self_weight`) above 1/2 (:func:`threshold_resolves`; otherwise the
+            code is read by unmixing), an unmixed or pixel reading a log-likelihood ratio of
+            every code cell's colour (:func:`cell_evidence`) of at least ``log(cells /
+            error_rate)``.
 
     Returns:
         :class:`CodeReading`; ``code`` is None with a ``reason`` when the grid is
@@ -426,7 +427,13 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
     method, evidence, w_self = 'threshold', math.inf, math.nan
     # smallest log-likelihood ratio that keeps the chance of any wrong cell under error_rate
     need = math.log(m2 * m2 / error_rate) if error_rate > 0 else -math.inf
-    if code_margin < min_margin:
+    resolved = code_margin >= min_margin
+    if resolved and error_rate > 0:
+        # thresholding reads a cell's own colour only where it outweighs its neighbours';
+        # otherwise the code is read by unmixing, with its evidence test
+        w_self = cell_self_weight(cells, design, bits, parity)
+        resolved = threshold_resolves(w_self)
+    if not resolved:
         unmixed = unmix_cells(cells, design, parity, with_std=True) if deblur_margin > 0 \
             else None
         white = None
@@ -443,13 +450,10 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
                 if m >= unblur_margin and e >= need:
                     white, margin, method, evidence = pixel[0], m, 'pixel', e
         if white is None:
-            return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
+            reason = 'ambiguous code cell' if code_margin < min_margin else \
+                'code not resolved'
+            return CodeReading(None, 0, bits, contrast, margin, reason, method, w_self)
         bits = white < 0.5
-    else:
-        w_self = cell_self_weight(cells, design, bits, parity)
-        if error_rate > 0 and not margin > resolvability_bound(w_self):
-            return CodeReading(None, 0, bits, contrast, margin, 'code not resolved', method,
-                               w_self)
     got = design.decode_with_rotation(bits)
     if got is None:
         return CodeReading(None, 0, bits, contrast, margin, 'no valid code')
@@ -460,17 +464,19 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
                        evidence)
 
 
-def resolvability_bound(self_weight: float) -> float:
-    """Largest threshold margin that the blur of the neighbours can give a cell.
+def threshold_resolves(self_weight: float) -> bool:
+    """Return whether thresholding the cell means reads every cell's own colour.
 
     With the cell blur model of :func:`cell_self_weight` a cell's mean is ``w x + (1 - w)
     x_n`` of its own whiteness ``x`` and the mean whiteness ``x_n`` of its neighbours (in
-    units of the contrast above black). A black cell (``x = 0``) among white neighbours
-    then reads ``1 - w``, a margin of ``2 (1 - w) - 1 = 1 - 2 w`` of half the contrast on
-    the white side: any margin up to that can be a cell of the other colour at this blur
-    and block spacing. 1 (nothing accepted) if ``w`` is not a number.
+    units of the contrast above black). Only for ``w > 1/2`` is every cell on the side of
+    the threshold of its own colour whatever its neighbours (a black cell among white ones
+    reads ``1 - w < 1/2``). For ``w <= 1/2`` the side is set by the neighbourhood: a cell of
+    the other colour than its neighbours reads as theirs, with a margin up to ``1 - 2 w``
+    of half the contrast, and a code read by thresholding can be another valid code at
+    any margin that blur and block spacing allow. False if ``w`` is not a number.
     """
-    return 1.0 - 2.0 * self_weight if math.isfinite(self_weight) else 1.0
+    return bool(math.isfinite(self_weight) and self_weight > 0.5)
 
 
 def cell_evidence(whiteness: np.ndarray, std: np.ndarray) -> float:
@@ -489,4 +495,4 @@ def cell_evidence(whiteness: np.ndarray, std: np.ndarray) -> float:
 
 
 __all__ = ['cell_evidence', 'cell_self_weight', 'CodeReading', 'read_code',
-           'resolvability_bound', 'sample_cells', 'unblur_code', 'unmix_cells', 'whiteness_std']
+           'threshold_resolves', 'sample_cells', 'unblur_code', 'unmix_cells', 'whiteness_std']
