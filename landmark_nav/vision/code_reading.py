@@ -329,7 +329,13 @@ def unblur_code(image: np.ndarray, grid: np.ndarray, design: LandmarkDesign,
 
 @dataclass(frozen=True, eq=False)
 class CodeReading:
-    """Result of :func:`read_code` for one frame grid."""
+    """Result of :func:`read_code` for one frame grid.
+
+    ``method`` is how the bits were read (``'threshold'``, ``'unmixed'`` or ``'pixel'``),
+    ``self_weight`` the cell self weight of a threshold reading (:func:`cell_self_weight`,
+    NaN when not measured) and ``evidence`` the smallest log-likelihood ratio of a code
+    cell's colour of an unmixed or pixel reading (:func:`cell_evidence`; inf otherwise).
+    """
 
     code: Optional[int]
     rotation: int
