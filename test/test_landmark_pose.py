@@ -13,7 +13,8 @@ from landmark_nav.vision.localize import (camera_mount_matrix, FixCorrectedOdome
                                           landmark_in_optical, LandmarkMapError,
                                           load_landmark_map, matrix_to_pose6, parse_landmark_map,
                                           planar, pose6_to_matrix, robot_pose_from_landmark)
-from landmark_nav.vision.pose import (angles_from_rotation, CHI2_6_999, estimate_pose, LandmarkPose,
+from landmark_nav.vision.pose import (angles_from_rotation, CHI2_6_999, estimate_pose,
+                                      LandmarkPose,
                                       pose_from_optical, PoseError, PoseParams,
                                       project_corners, rotation_matrix, solve_pnp)
 import numpy as np
