@@ -15,6 +15,7 @@ from landmark_nav.vision.detector import (chain_edges, corner_groups, corner_nei
                                           edge_points, find_frames, frame_edges,
                                           image_problem, read_code, saddle_corners,
                                           sample_cells, smooth, unblur_code, unmix_cells)
+from landmark_nav.vision.code_reading import cell_evidence
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 import pytest
@@ -493,3 +494,67 @@ def test_edge_points_of_large_blocks_beyond_the_remap_limit():
     pts, seg = edge_points(img, starts, ends, np.full(40, 400.0))
     assert len(pts) == 240 and np.array_equal(np.unique(seg), np.arange(40))
     np.testing.assert_allclose(pts[:, 0], 299.5, atol=1e-3)    # between columns 299 and 300
+
+
+def _mixed_cells(code, self_weight, noise=0.0, rng=None):
+    """Cell means of the frame ring and code area, each cell mixed with its 8 neighbours.
+
+    A cell keeps ``self_weight`` of its own whiteness and takes the rest equally from its
+    neighbours (black 40, white 200 grey levels), plus Gaussian noise.
+    """
+    colour = np.repeat(np.repeat(DESIGN_3X3.block_colours(), 2, axis=0), 2, axis=1)
+    white = np.where(colour == 0, 1.0, 0.0)
+    white[4:10, 4:10] = 1.0 - DESIGN_3X3.encode(code)
+    kernel = np.full((3, 3), (1.0 - self_weight) / 8.0)
+    kernel[1, 1] = self_weight
+    cells = 40.0 + 160.0 * cv2.filter2D(white, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+    cells = cells[2:-2, 2:-2]
+    return cells if noise == 0 else cells + rng.normal(0.0, noise, cells.shape)
+
+
+DESIGN_3X3 = LandmarkDesign('3x3')
+
+
+def test_code_at_the_resolvability_edge_is_not_read_as_another_code():
+    # an isolated black code cell keeping 0.3 of its contrast reads white at a margin of
+    # 0.46: thresholding reads the valid code 0 instead of 1 << 24; the cell self weight
+    # measured on the grid (0.31 < 1/2) sends the grid to unmixing, whose evidence test
+    # reads the right code or nothing
+    code = 1 << 24
+    cells = _mixed_cells(code, 0.3)
+    before = read_code(cells, DESIGN_3X3, min_margin=0.2, block_ring=True, deblur_margin=0.35)
+    assert before.code == 0 and before.margin > 0.45          # the failure guarded against
+    after = read_code(cells, DESIGN_3X3, min_margin=0.2, block_ring=True, deblur_margin=0.35,
+                      error_rate=1e-3)
+    assert after.code == code and after.method == 'unmixed'
+    assert 0.28 < after.self_weight < 0.35                    # measured 0.31
+    rng = np.random.default_rng(3)
+    wrong_before = right = wrong = 0
+    for _ in range(40):              # noise of 4 grey levels: 1/40 of the contrast
+        noisy = _mixed_cells(code, 0.3, 4.0, rng)
+        r0 = read_code(noisy, DESIGN_3X3, min_margin=0.2, block_ring=True, deblur_margin=0.35)
+        r1 = read_code(noisy, DESIGN_3X3, min_margin=0.2, block_ring=True, deblur_margin=0.35,
+                       error_rate=1e-3)
+        wrong_before += r0.code is not None and r0.code != code
+        right += r1.code == code
+        wrong += r1.code is not None and r1.code != code
+    assert wrong_before >= 30                  # measured 38 of 40
+    assert wrong == 0 and right >= 5           # measured 11 right, 29 dropped
+
+
+def test_clear_code_is_read_by_threshold_as_before():
+    cells = _mixed_cells(1 << 24, 0.8)
+    before = read_code(cells, DESIGN_3X3, min_margin=0.2, block_ring=True, deblur_margin=0.35)
+    after = read_code(cells, DESIGN_3X3, min_margin=0.2, block_ring=True, deblur_margin=0.35,
+                      error_rate=1e-3)
+    assert before.code == after.code == 1 << 24
+    assert after.method == 'threshold' and after.margin == before.margin
+    assert after.self_weight == pytest.approx(0.8, abs=0.02)
+
+
+def test_cell_evidence_is_the_log_likelihood_ratio_of_the_colour():
+    x = np.array([0.9, 0.2, 0.5])
+    s = np.array([0.1, 0.2, 0.1])
+    # (x - 1/2) / s^2: 40, 7.5, 0
+    assert cell_evidence(x[:2], s[:2]) == pytest.approx(7.5)
+    assert cell_evidence(x, s) == 0.0

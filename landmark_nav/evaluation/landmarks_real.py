@@ -66,7 +66,7 @@ from landmark_nav.evaluation.marker_trials import (detection_trials, draw_trial,
                                                    pose_trials, render_trial, run_trials,
                                                    score, TAG_IDS, Trial)
 from landmark_nav.vision.detector import DetectorParams
-from landmark_nav.vision.pose import PoseParams
+from landmark_nav.vision.pose import CHI2_6_999, PoseParams
 import numpy as np
 
 
@@ -89,6 +89,8 @@ class Row:
     max_angle_deg: float = math.nan
     over_5_deg: int = 0
     poses: int = 0
+    over_5_uncovered: int = 0
+    ambiguous: int = 0
 
 
 def summarise(outcomes: Sequence[Outcome], key) -> List[Row]:
@@ -106,7 +108,10 @@ def summarise(outcomes: Sequence[Outcome], key) -> List[Row]:
                         1000.0 * float(np.median(pos)) if len(pos) else math.nan,
                         float(np.median(ang)) if len(ang) else math.nan,
                         float(ang.max()) if len(ang) else math.nan,
-                        int(np.sum(ang > 5.0)), len(ang)))
+                        int(np.sum(ang > 5.0)), len(ang),
+                        sum(1 for o in os_ if o.angle_error_deg > 5.0
+                            and not o.nees <= CHI2_6_999),
+                        sum(1 for o in os_ if o.ambiguous)))
     return rows
 
 
@@ -130,9 +135,11 @@ def format_table(rows: Sequence[Row], title: str, pose: bool = False) -> str:
             if r is None:
                 cells.append('')
             elif pose:
+                cov = (f' ({r.over_5_uncovered} not covered, {r.ambiguous} ambiguous)'
+                       if r.detector == 'landmark' else '')
                 cells.append(f'{r.p_detect:.2f}; {r.median_position_mm:.2f} mm / '
                              f'{r.median_angle_deg:.2f} deg, max {r.max_angle_deg:.1f} deg, '
-                             f'{r.over_5_deg} > 5 deg')
+                             f'{r.over_5_deg} > 5 deg{cov}')
             else:
                 bad = r.wrong_codes or r.false_detections
                 extra = f' (wrong {r.wrong_codes}, false {r.false_detections})' if bad else ''
@@ -253,7 +260,9 @@ def main(argv: Optional[Sequence[str]] = None,
         print(format_table(summarise(res, lambda o: f'{MODULE * CAMERA.fx / o.px_per_module:g}'
                                                     ' m'),
                            'Pose (tilt 0-60 deg): p_detect; median position / angle error, '
-                           'worst angle', pose=True))
+                           'worst angle; landmark: poses > 5 deg off whose covariance does not '
+                           'cover them (NEES above the chi2_6 99.9 % bound), poses reported '
+                           'ambiguous', pose=True))
         print()
     if args.what in ('false', 'all'):
         boards: List[np.ndarray] = []

@@ -32,12 +32,19 @@ def marker_family(detector: str) -> str:
 
 @dataclass(frozen=True, eq=False)
 class Found:
-    """One detection of any detector: code, (4, 2) corners, optional (R, t) optical pose."""
+    """One detection of any detector: code, (4, 2) corners, optional (R, t) optical pose.
+
+    The landmark detector's poses also carry their parameters ``v`` and 6 x 6 covariance
+    and whether they were reported as ambiguous (:class:`~landmark_nav.vision.pose.LandmarkPose`).
+    """
 
     code: int
     corners: np.ndarray
     rotation: Optional[np.ndarray] = None
     translation: Optional[np.ndarray] = None
+    v: Optional[np.ndarray] = None
+    covariance: Optional[np.ndarray] = None
+    ambiguous: bool = False
 
 
 def release_apriltags(detectors: Sequence[object]) -> None:
@@ -122,15 +129,18 @@ class Detectors:
                 replace(self.landmark_params, decimate=2)
             out = []
             for d in detect_landmarks(gray, params):
-                rot = tr = None
+                p = None
                 if pose:
                     try:
                         p = estimate_pose(d.corners, cam, self.design, self.pose_params,
                                           edge_corners_px=d.edge_corners)
-                        rot, tr = p.rotation_optical, p.translation_optical
                     except PoseError:
                         pass
-                out.append(Found(d.code, d.corners, rot, tr))
+                if p is None:
+                    out.append(Found(d.code, d.corners))
+                else:
+                    out.append(Found(d.code, d.corners, p.rotation_optical,
+                                     p.translation_optical, p.v, p.covariance, p.ambiguous))
             return out
         if name in self._april:
             # AprilTag's own estimate_tag_pose corrupted the heap here (an abort in a later

@@ -106,6 +106,18 @@ class Outcome:
     seconds: float
     position_error: float = math.nan
     angle_error_deg: float = math.nan
+    nees: float = math.nan
+    ambiguous: bool = False
+
+
+def pose_nees(v_est: np.ndarray, covariance: np.ndarray, v_true: np.ndarray) -> float:
+    """Normalised estimation error squared ``d^T P^-1 d`` of a pose ``v`` (angles wrapped)."""
+    d = np.asarray(v_est, dtype=float) - np.asarray(v_true, dtype=float)
+    d[3:] = (d[3:] + math.pi) % (2.0 * math.pi) - math.pi
+    try:
+        return float(d @ np.linalg.solve(covariance, d))
+    except np.linalg.LinAlgError:
+        return math.inf
 
 
 def score(name: str, trial: Trial, found: List[Found], seconds: float,
@@ -127,6 +139,9 @@ def score(name: str, trial: Trial, found: List[Found], seconds: float,
                 out.position_error = float(np.linalg.norm(f.translation - t_opt))
                 if fam == 'landmark':
                     out.angle_error_deg = _rotation_error_deg(f.rotation, r_opt, False)
+                    if f.covariance is not None:
+                        out.nees = pose_nees(f.v, f.covariance, trial.v)
+                        out.ambiguous = f.ambiguous
                 else:
                     out.angle_error_deg = _rotation_error_deg(
                         f.rotation, r_opt @ _ARUCO_FROM_LANDMARK.T, True)
@@ -182,5 +197,6 @@ def pose_trials(distances: Sequence[float] = (1.0, 2.2), per_distance: int = 150
     return out
 
 
-__all__ = ['detection_trials', 'draw_trial', 'Outcome', 'pose_trials', 'render_trial',
+__all__ = ['detection_trials', 'draw_trial', 'Outcome', 'pose_nees', 'pose_trials',
+           'render_trial',
            'run_trials', 'score', 'TAG_IDS', 'Trial']

@@ -11,7 +11,10 @@ the image's stamp and frame (the camera optical frame):
   markers;
 * ``landmark_pose`` (geometry_msgs/PoseWithCovarianceStamped, frame ``map_frame``): when a
   ``landmark_map`` is configured, the pose of ``base_link`` implied by each mapped landmark
-  (camera mount from ``camera_mount``), with its 6 x 6 covariance;
+  (camera mount from ``camera_mount``), with its 6 x 6 covariance. An ambiguous landmark pose
+  (a second pose minimum, the planar flip, that the pixels cannot reject; see
+  :func:`~landmark_nav.vision.pose.estimate_pose`) is published with an inflated covariance
+  that covers both minima, never as a precise pose;
 * ``landmarks/debug_image`` (sensor_msgs/Image, bgr8) with ``publish_debug_image: true``.
 
 Bad input (unsupported encoding, undecodable data, size disagreeing with CameraInfo, no
@@ -96,6 +99,9 @@ DETECTOR_PARAMETERS = {
                          (0.0, 1e6), None),
     'saddle_kappa': ('saddle method: weight of the squared Hessian trace subtracted from the '
                      'strength (suppresses saddles along strong edges)', (0.0, 1.0), None),
+    'decode_error_rate': ('publish a code only when it is resolved at the frame\'s blur and '
+                          'block spacing, with about this chance of a wrong cell (0: off)',
+                          (0.0, 0.5), None),
 }
 POSE_PARAMETERS = {
     'pixel_sigma': ('frame corner noise for the pose covariance [px]', (1e-4, 10.0), None),

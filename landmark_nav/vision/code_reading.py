@@ -103,7 +103,7 @@ def _blur_operators(kind: str, parity: int) -> Tuple[np.ndarray, np.ndarray, np.
 
 
 def unmix_cells(cells: np.ndarray, design: LandmarkDesign, parity: int = 0,
-                iterations: int = 3) -> Optional[Tuple[np.ndarray, float]]:
+                iterations: int = 3, with_std: bool = False) -> Optional[tuple]:
     """Read the code cells with the blur between neighbouring cells unmixed (extension).
 
     At 2-3 px per half-block cell, blur and JPEG mix every cell with its neighbours, and
@@ -121,11 +121,15 @@ def unmix_cells(cells: np.ndarray, design: LandmarkDesign, parity: int = 0,
         design: the landmark design.
         parity: 1 if the frame colouring is inverted (a quarter turn of the 2x2 design).
         iterations: fit/solve rounds.
+        with_std: also return the standard errors of the whiteness.
 
     Returns:
         ``(whiteness, residual)``: the (2m, 2m) unmixed code-cell whiteness and the RMS
-        misfit of the model over the contrast ``p1 + 4 p2 + 4 p3``; None if the fitted
-        mixing is not centre-weighted (``p1`` the largest weight) or the solve fails.
+        misfit of the model over the contrast ``p1 + 4 p2 + 4 p3``; with ``with_std`` a third
+        (2m, 2m) array, the least-squares standard error of each whiteness (the residual
+        variance propagated through the unmixing, :func:`whiteness_std`); None if the
+        fitted mixing is not centre-weighted (``p1`` the largest weight) or the solve
+        fails.
     """
     known, unknown, _ = _blur_operators(design.kind, int(parity))
     y = np.asarray(cells, dtype=float).ravel()
@@ -152,7 +156,54 @@ def unmix_cells(cells: np.ndarray, design: LandmarkDesign, parity: int = 0,
     if not contrast > 0:
         return None
     res = y - base - mix @ x
-    return x.reshape(m2, m2), float(np.sqrt(np.mean(res * res))) / contrast
+    out = (x.reshape(m2, m2), float(np.sqrt(np.mean(res * res))) / contrast)
+    if with_std:
+        out += (whiteness_std(mix, res, 1.0).reshape(m2, m2),)
+    return out
+
+
+def whiteness_std(design_matrix: np.ndarray, residuals: np.ndarray, scale: float,
+                  columns: slice = slice(None)) -> np.ndarray:
+    """Standard errors of least-squares coefficients, divided by ``scale``.
+
+    ``sqrt(diag((A^T A)^-1) RSS / (N - P))`` for the ``columns`` of the (N, P) design
+    matrix ``A`` (the covariance of a linear least-squares solution); inf where the
+    system is singular or has no redundancy.
+    """
+    a = np.asarray(design_matrix, dtype=float)
+    n, p = a.shape
+    if n <= p:
+        return np.full(len(range(p)[columns]), np.inf)
+    s2 = float(np.dot(residuals, residuals)) / (n - p)
+    try:
+        inv = np.linalg.inv(a.T @ a)
+    except np.linalg.LinAlgError:
+        return np.full(len(range(p)[columns]), np.inf)
+    var = np.diag(inv)[columns] * s2
+    return np.sqrt(np.maximum(var, 0.0)) / scale
+
+
+def cell_self_weight(cells: np.ndarray, design: LandmarkDesign, bits: np.ndarray,
+                     parity: int = 0) -> float:
+    """Return the weight of a cell's own colour in its mean, measured on the grid.
+
+    The cell means of the frame and of the code as read (``bits``, image orientation, True
+    black) are fitted by the blur model of :func:`unmix_cells`, ``y = p0 + p1 x + p2 sum(x
+    of the 4 edge neighbours) + p3 sum(x of the 4 diagonal ones)``; the returned
+    ``p1 / (p1 + 4 p2 + 4 p3)`` is the share of the contrast that a cell takes from itself
+    (1 for a sharp image on an exact grid, less with blur, small cells or a misregistered
+    grid). NaN if the fit fails or the contrast is not positive.
+    """
+    known, unknown, _ = _blur_operators(design.kind, int(parity))
+    y = np.asarray(cells, dtype=float).ravel()
+    x = 1.0 - np.asarray(bits, dtype=float).ravel()
+    feats = np.column_stack([np.ones_like(y), *(known + unknown @ x)])
+    try:
+        p = np.linalg.lstsq(feats, y, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return math.nan
+    contrast = float(p[1] + 4.0 * p[2] + 4.0 * p[3])
+    return float(p[1]) / contrast if contrast > 0 else math.nan
 
 
 def _known_pattern(kind: str, parity: int, quiet: int = 2) -> np.ndarray:
@@ -170,7 +221,7 @@ def _known_pattern(kind: str, parity: int, quiet: int = 2) -> np.ndarray:
 
 def unblur_code(image: np.ndarray, grid: np.ndarray, design: LandmarkDesign,
                 parity: int = 0, sigmas: Sequence[float] = (0.7, 1.0, 1.3, 1.6),
-                supersample: int = 4) -> Optional[Tuple[np.ndarray, float, float]]:
+                supersample: int = 4, with_std: bool = False) -> Optional[tuple]:
     """Read the code cells from the pixels with a model of the printed pattern and the blur.
 
     Extension for 4-5 px per block, where a half-block code cell covers 2 x 2 pixels or
@@ -194,11 +245,14 @@ def unblur_code(image: np.ndarray, grid: np.ndarray, design: LandmarkDesign,
         parity: 1 if the frame colouring is inverted (a quarter turn of the 2x2 design).
         sigmas: point-spread standard deviations tried [px].
         supersample: sample points per pixel and axis.
+        with_std: also return the standard errors of the whiteness.
 
     Returns:
         ``(whiteness, residual, sigma)``: the (2m, 2m) code-cell whiteness (1 white, 0
-        black), the RMS misfit over the contrast and the blur chosen; None if the patch
-        leaves the image, the contrast is not positive or the solve fails.
+        black), the RMS misfit over the contrast and the blur chosen; with ``with_std`` a
+        fourth (2m, 2m) array, the least-squares standard error of each whiteness
+        (:func:`whiteness_std`); None if the patch leaves the image, the contrast is not
+        positive or the solve fails.
     """
     k = grid.shape[0] - 1                               # code grid cells per side
     quiet = 2
@@ -262,17 +316,26 @@ def unblur_code(image: np.ndarray, grid: np.ndarray, design: LandmarkDesign,
         res = y[use] - feats @ coef
         rms = float(np.sqrt(np.mean(res * res)))
         if best is None or rms < best[0]:
-            best = (rms, coef, sig)
-    rms, coef, sig = best
+            best = (rms, coef, sig, feats, res)
+    rms, coef, sig, feats, res = best
     d = float(coef[1])
     if not d > 0:
         return None
-    return (coef[2:] / d).reshape(m2, m2), rms / d, float(sig)
+    out = ((coef[2:] / d).reshape(m2, m2), rms / d, float(sig))
+    if with_std:
+        out += (whiteness_std(feats, res, d, slice(2, None)).reshape(m2, m2),)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
 class CodeReading:
-    """Result of :func:`read_code` for one frame grid."""
+    """Result of :func:`read_code` for one frame grid.
+
+    ``method`` is how the bits were read (``'threshold'``, ``'unmixed'`` or ``'pixel'``),
+    ``self_weight`` the cell self weight of a threshold reading (:func:`cell_self_weight`,
+    NaN when not measured) and ``evidence`` the smallest log-likelihood ratio of a code
+    cell's colour of an unmixed or pixel reading (:func:`cell_evidence`; inf otherwise).
+    """
 
     code: Optional[int]
     rotation: int
@@ -280,13 +343,17 @@ class CodeReading:
     contrast: float
     margin: float
     reason: str
+    method: str = 'threshold'
+    self_weight: float = math.nan
+    evidence: float = math.inf
 
 
 def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 20.0,
               min_margin: float = 0.2, deblur_margin: float = 0.0,
               deblur_residual: float = 0.12, block_ring: bool = False,
               unblur: Optional[Callable[[int], Optional[Tuple[np.ndarray, float, float]]]] = None,
-              unblur_margin: float = 0.3, unblur_residual: float = 0.08) -> CodeReading:
+              unblur_margin: float = 0.3, unblur_residual: float = 0.08,
+              error_rate: float = 0.0) -> CodeReading:
     """Classify the cells of a frame grid and decode them (§2.2.3).
 
     ``cells`` covers the inner ring and the code area in half-block cells. Half of the frame
@@ -317,6 +384,12 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
             and the model misfit is at most ``unblur_residual`` of the contrast.
         unblur_margin: see ``unblur``.
         unblur_residual: see ``unblur``.
+        error_rate: if > 0, a code is accepted only when it is resolved: a threshold
+            reading needs the cell self weight ``w`` measured on the grid
+            (:func:`cell_self_weight`) above 1/2 (:func:`threshold_resolves`; otherwise the
+            code is read by unmixing), an unmixed or pixel reading a log-likelihood ratio of
+            every code cell's colour (:func:`cell_evidence`) of at least ``log(cells /
+            error_rate)``.
 
     Returns:
         :class:`CodeReading`; ``code`` is None with a ``reason`` when the grid is
@@ -357,21 +430,35 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
     if ring_margin < min_margin:
         return CodeReading(None, 0, empty, contrast, margin, 'frame cells inconsistent')
     bits = code_cells < thr
-    if code_margin < min_margin:
-        unmixed = unmix_cells(cells, design, parity) if deblur_margin > 0 else None
+    method, evidence, w_self = 'threshold', math.inf, math.nan
+    # smallest log-likelihood ratio that keeps the chance of any wrong cell under error_rate
+    need = math.log(m2 * m2 / error_rate) if error_rate > 0 else -math.inf
+    resolved = code_margin >= min_margin
+    if resolved and error_rate > 0:
+        # thresholding reads a cell's own colour only where it outweighs its neighbours';
+        # otherwise the code is read by unmixing, with its evidence test
+        w_self = cell_self_weight(cells, design, bits, parity)
+        resolved = threshold_resolves(w_self)
+    if not resolved:
+        unmixed = unmix_cells(cells, design, parity, with_std=True) if deblur_margin > 0 \
+            else None
         white = None
         if unmixed is not None and unmixed[1] <= deblur_residual:
             m = min(ring_margin, float(np.abs(unmixed[0] - 0.5).min()) * 2.0)
-            if m >= deblur_margin:
-                white, margin = unmixed[0], m
+            e = cell_evidence(unmixed[0], unmixed[2])
+            if m >= deblur_margin and e >= need:
+                white, margin, method, evidence = unmixed[0], m, 'unmixed', e
         if white is None and unblur is not None:
             pixel = unblur(parity)
             if pixel is not None and pixel[1] <= unblur_residual:
                 m = min(ring_margin, float(np.abs(pixel[0] - 0.5).min()) * 2.0)
-                if m >= unblur_margin:
-                    white, margin = pixel[0], m
+                e = cell_evidence(pixel[0], pixel[3]) if len(pixel) > 3 else math.inf
+                if m >= unblur_margin and e >= need:
+                    white, margin, method, evidence = pixel[0], m, 'pixel', e
         if white is None:
-            return CodeReading(None, 0, bits, contrast, margin, 'ambiguous code cell')
+            reason = 'ambiguous code cell' if code_margin < min_margin else \
+                'code not resolved'
+            return CodeReading(None, 0, bits, contrast, margin, reason, method, w_self)
         bits = white < 0.5
     got = design.decode_with_rotation(bits)
     if got is None:
@@ -379,7 +466,39 @@ def read_code(cells: np.ndarray, design: LandmarkDesign, min_contrast: float = 2
     code, rot = got
     if len(parities) == 2 and rot % 2 != parity:
         return CodeReading(None, 0, bits, contrast, margin, 'orientation disagrees with frame')
-    return CodeReading(code, rot, np.rot90(bits, rot), contrast, margin, '')
+    return CodeReading(code, rot, np.rot90(bits, rot), contrast, margin, '', method, w_self,
+                       evidence)
 
 
-__all__ = ['CodeReading', 'read_code', 'sample_cells', 'unblur_code', 'unmix_cells']
+def threshold_resolves(self_weight: float) -> bool:
+    """Return whether thresholding the cell means reads every cell's own colour.
+
+    With the cell blur model of :func:`cell_self_weight` a cell's mean is ``w x + (1 - w)
+    x_n`` of its own whiteness ``x`` and the mean whiteness ``x_n`` of its neighbours (in
+    units of the contrast above black). Only for ``w > 1/2`` is every cell on the side of
+    the threshold of its own colour whatever its neighbours (a black cell among white ones
+    reads ``1 - w < 1/2``). For ``w <= 1/2`` the side is set by the neighbourhood: a cell of
+    the other colour than its neighbours reads as theirs, with a margin up to ``1 - 2 w``
+    of half the contrast, and a code read by thresholding can be another valid code at
+    any margin that blur and block spacing allow. False if ``w`` is not a number.
+    """
+    return bool(math.isfinite(self_weight) and self_weight > 0.5)
+
+
+def cell_evidence(whiteness: np.ndarray, std: np.ndarray) -> float:
+    """Smallest log-likelihood ratio of a code cell's colour over the other colour.
+
+    A cell estimated at whiteness ``x`` with Gaussian standard error ``s`` is white (1)
+    rather than black (0) with log-likelihood ratio ``((x - 0)^2 - (x - 1)^2) / (2 s^2) =
+    (x - 1/2) / s^2``; its magnitude is the evidence for the colour read. The chance of a
+    wrong colour is about ``exp(-evidence)``; ``inf`` if ``std`` is zero.
+    """
+    x = np.asarray(whiteness, dtype=float)
+    s2 = np.asarray(std, dtype=float) ** 2
+    with np.errstate(divide='ignore', invalid='ignore'):
+        llr = np.where(s2 > 0, np.abs(x - 0.5) / s2, np.inf)
+    return float(np.nan_to_num(llr, nan=0.0).min())
+
+
+__all__ = ['cell_evidence', 'cell_self_weight', 'CodeReading', 'read_code',
+           'threshold_resolves', 'sample_cells', 'unblur_code', 'unmix_cells', 'whiteness_std']

@@ -97,7 +97,12 @@ def robot_pose_from_landmark(pose: LandmarkPose, landmark_in_map: np.ndarray,
 
     Returns:
         (pose6, cov6): ``[x, y, z, roll, pitch, yaw]`` of ``base_link`` in ``map`` and the
-        6 x 6 covariance (``J cov_v J^T``, J by central differences).
+        6 x 6 covariance (``J cov_v J^T``, J by central differences). For an ambiguous
+        landmark pose (``pose.ambiguous``) the covariance also holds half the outer product
+        of the difference to the robot pose of the other minimum (``pose.alternative``),
+        computed exactly rather than through J, so that it covers that pose too (the
+        mixture covariance of :func:`.pose.estimate_pose` mapped without linearising a
+        difference of tens of degrees).
     """
     t_opt_base = _invert(camera_mount)
     v = np.asarray(pose.v, dtype=float)
@@ -112,6 +117,11 @@ def robot_pose_from_landmark(pose: LandmarkPose, landmark_in_map: np.ndarray,
         diff[3:] = (diff[3:] + math.pi) % (2 * math.pi) - math.pi
         jac[:, k] = diff / (2 * steps[k])
     cov = jac @ pose.covariance @ jac.T
+    if pose.ambiguous and pose.alternative is not None:
+        gap = _base_pose6(np.asarray(pose.alternative, dtype=float), landmark_in_map,
+                          t_opt_base) - p0
+        gap[3:] = (gap[3:] + math.pi) % (2 * math.pi) - math.pi
+        cov = cov + 0.5 * np.outer(gap, gap)
     return p0, 0.5 * (cov + cov.T)
 
 
