@@ -10,12 +10,12 @@ import cv2
 from landmark_nav.sim.camera import Photometry
 from landmark_nav.sim.camera_scenarios import default_camera, landmark_view, ViewOptions
 from landmark_nav.vision.camera import CameraModel
+from landmark_nav.vision.code_reading import cell_evidence
 from landmark_nav.vision.detector import (chain_edges, corner_groups, corner_neighbours,
                                           corner_pixels, detect_landmarks, DetectorParams,
                                           edge_points, find_frames, frame_edges,
                                           image_problem, read_code, saddle_corners,
                                           sample_cells, smooth, unblur_code, unmix_cells)
-from landmark_nav.vision.code_reading import cell_evidence
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 import pytest

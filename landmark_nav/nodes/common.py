@@ -211,7 +211,9 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ParameterError as err:
-        print(f'error: {err}', file=sys.stderr)
+        # one write: a driver's I/O thread may be logging to stderr at the same moment
+        sys.stderr.write(f'error: {err}\n')
+        sys.stderr.flush()
         return 2
     except Exception:
         if rclpy.ok():

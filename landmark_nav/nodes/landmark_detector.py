@@ -99,7 +99,7 @@ DETECTOR_PARAMETERS = {
                          (0.0, 1e6), None),
     'saddle_kappa': ('saddle method: weight of the squared Hessian trace subtracted from the '
                      'strength (suppresses saddles along strong edges)', (0.0, 1.0), None),
-    'decode_error_rate': ('publish a code only when it is resolved at the frame\'s blur and '
+    'decode_error_rate': ("publish a code only when it is resolved at the frame's blur and "
                           'block spacing, with about this chance of a wrong cell (0: off)',
                           (0.0, 0.5), None),
 }

@@ -164,7 +164,7 @@ def unmix_cells(cells: np.ndarray, design: LandmarkDesign, parity: int = 0,
 
 def whiteness_std(design_matrix: np.ndarray, residuals: np.ndarray, scale: float,
                   columns: slice = slice(None)) -> np.ndarray:
-    """Standard errors of least-squares coefficients, divided by ``scale``.
+    """Return the standard errors of least-squares coefficients, divided by ``scale``.
 
     ``sqrt(diag((A^T A)^-1) RSS / (N - P))`` for the ``columns`` of the (N, P) design
     matrix ``A`` (the covariance of a linear least-squares solution); inf where the
