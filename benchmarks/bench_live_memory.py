@@ -24,10 +24,10 @@ import re
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 
-REPO = Path(__file__).resolve().parents[1]
+from common import live_run
+
 SAMPLE_S = 10.0
 
 
@@ -67,12 +67,7 @@ def main() -> int:
     if not 0.0 < args.warmup < args.minutes:
         parser.error('need 0 < --warmup < --minutes')
 
-    from landmark_nav.testing import isolate_dds
-    isolate_dds(args.domain)
-    out = Path(args.out or tempfile.mkdtemp(prefix='live_memory_'))
-    out.mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
-    cli = [sys.executable, '-m', 'landmark_nav.tools.cli']
+    out, env, cli = live_run(args.domain, args.out, 'live_memory_')
     base_link, laser_link = out / 'p2os', out / 'laser'
     procs = {}
     samples = []  # (seconds since start, {process: RSS MB})

@@ -48,10 +48,9 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 
-REPO = Path(__file__).resolve().parents[1]
+from common import live_run
 
 
 def node_rss(log: Path) -> dict:
@@ -113,15 +112,11 @@ def main() -> int:
     import numpy as np
     from landmark_nav.conversions import odometry_to_pose
     from landmark_nav.evaluation.trajectory import ate, position_errors_at, read_tum, Trajectory
-    from landmark_nav.testing import isolate_dds, RosHarness
+    from landmark_nav.testing import RosHarness
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
 
-    isolate_dds(args.domain)
-    out = Path(args.out or tempfile.mkdtemp(prefix='live_slam_'))
-    out.mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
-    cli = [sys.executable, '-m', 'landmark_nav.tools.cli']
+    out, env, cli = live_run(args.domain, args.out, 'live_slam_')
     base_link, laser_link = out / 'p2os', out / 'laser'
     laser_set = ['--set', f'laser_driver.port={laser_link}']
     if args.laser == 'urg' and args.skip:

@@ -10,10 +10,12 @@ with a message naming it (exit status 1).
 import argparse
 import ast
 import math
+import os
 from pathlib import Path
 import sys
+import tempfile
 import time
-from typing import Any, Callable, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
@@ -209,3 +211,18 @@ def _bag_images(folder: Path, count: Optional[int]) -> List[Tuple[str, Any]]:
                 sys.exit(f'error: bag {folder}, {m.topic} at {m.log_time_ns} ns: {e}')
             out.append((f'{m.topic}@{m.log_time_ns}', img))
     return out
+
+
+def live_run(domain: int, out: Optional[str], prefix: str) -> Tuple[Path, Dict[str, str], list]:
+    """Prepare a live run on the emulated robot: DDS isolated on ``domain``.
+
+    Returns the run's folder (``out``, else a new temporary one named ``prefix...``), the
+    environment of its processes (this repository first on ``PYTHONPATH``) and the command
+    that starts ``landmark_nav``.
+    """
+    from landmark_nav.testing import isolate_dds
+    isolate_dds(domain)
+    folder = Path(out or tempfile.mkdtemp(prefix=prefix))
+    folder.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    return folder, env, [sys.executable, '-m', 'landmark_nav.tools.cli']
