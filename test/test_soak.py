@@ -74,7 +74,10 @@ def test_live_slam_nodes_at_40_hz_process_or_count_every_scan(tmp_path, processe
         player = processes.start(
             [sys.executable, '-m', 'landmark_nav.nodes.bag_player', str(REPO / 'bags/office'),
              '--topics', '/scan', '/odom', '--rate', '4', '--loop',
-             '--wait-for-subscribers', '30'], env=env, stdout=subprocess.DEVNULL,
+             # both nodes and this test on /scan, ekf_slam on /odom: a node still starting
+             # is not in the graph yet, and what it missed would be before_match, not counted
+             '--wait-for-subscribers', '30', '--min-subscribers', '/scan=3', '/odom=1'],
+            env=env, stdout=subprocess.DEVNULL,
             stderr=subprocess.STDOUT)
         assert ros.wait_until(lambda: any(
             int(s['processed']) > 0 for s in _statuses(diagnostics, 'ekf_slam')), timeout=60.0)
