@@ -7,9 +7,10 @@ Encodings (documented in docs/laser_features.md, Topics):
   float64 fields ``x y z bisector opening cov_xx cov_xy cov_yy time structural`` (z = 0;
   covariance of the position in m^2; ``time`` = the corner beam's time after the header
   stamp [s], beam index times the scan's ``time_increment``, 0 when the scan has none;
-  ``structural`` 1 when both arms are at least 0.5 m long, else 0: ``Corner.structural``) -- the
-  PointCloud2 carries what a PoseArray cannot. Float64, so that the SLAM node sees the
-  same numbers as the offline evaluation (float32 would move a corner by up to 0.1 um).
+  ``structural`` 1 when both arms are at least 0.2 m long and 6 beams wide, else 0:
+  ``Corner.structural``) -- the PointCloud2 carries what a PoseArray cannot. Float64, so
+  that the SLAM node sees the same numbers as the offline evaluation (float32 would move a
+  corner by up to 0.1 um).
 * Lines: ``sensor_msgs/PointCloud2`` with one point per line and the float32 fields
   ``x y z rho alpha x1 y1 x2 y2 cov_rr cov_ra cov_aa num_points rmse``: (x, y) is the
   segment midpoint (so RViz shows it), (rho, alpha) the Hessian normal form

@@ -320,15 +320,34 @@ def test_a_corner_the_next_scan_sees_past_is_no_opportunity():
     assert not in_view(near, c - 0.2 * toward, surface=True).any()
 
 
-def test_structural_corners_have_two_long_arms():
-    from landmark_nav.laser.corner_detection.corner import Corner, STRUCTURAL_ARM
+def test_structural_corners_have_two_arms_long_and_wide_in_beams():
+    from landmark_nav.laser.corner_detection.corner import (Corner, STRUCTURAL_ARM,
+                                                            STRUCTURAL_BEAM_STEPS)
 
-    def corner(a, b):
-        arms = np.array([[[0.0, 0.0], [a, 0.0]], [[0.0, 0.0], [0.0, b]]])
-        return Corner(np.zeros(2), 0.0, math.pi / 2, np.eye(2), 0, 0.0, arms)
+    def corner(end1, end2, step=0.01):
+        c = [3.0, 0.0]  # 3 m ahead of the laser
+        arms = np.array([[c, end1], [c, end2]], dtype=float)
+        return Corner(np.array(c), 0.0, math.pi / 2, np.eye(2), 0, 0.0, arms, step)
 
-    assert corner(0.6, 1.2).structural and corner(STRUCTURAL_ARM, STRUCTURAL_ARM).structural
-    assert not corner(0.6, 0.3).structural and not corner(0.2, 0.9).structural
-    np.testing.assert_allclose(corner(0.6, 0.3).arm_lengths, [0.6, 0.3])
+    wall = corner([3.0, 0.6], [2.5, -0.5])  # 0.197 rad each side: 20 beam steps at 0.01
+    np.testing.assert_allclose(wall.arm_beam_steps, [20, 20])
+    np.testing.assert_allclose(wall.arm_lengths, [0.6, math.hypot(0.5, 0.5)])
+    assert wall.structural
+    # the same corner on a laser with 5x coarser beams: 4 steps per arm, too few to refit
+    assert corner([3.0, 0.6], [2.5, -0.5], step=0.05).arm_beam_steps.tolist() == [4, 4]
+    assert not corner([3.0, 0.6], [2.5, -0.5], step=0.05).structural
+    # a long arm along the beam (grazing incidence) spans no beam
+    assert not corner([3.0, 0.6], [3.8, 0.0]).structural
+    # arms at the bounds are structural; a shorter arm is not
+    short = STRUCTURAL_ARM - 0.05
+    assert not corner([3.0, short], [2.5, -0.5]).structural
+
+    def steps(n):  # an arm of n beam steps of 0.02 rad, longer than STRUCTURAL_ARM
+        return corner([3.0, 3.0 * math.tan(n * 0.02)], [2.5, -0.5], step=0.02)
+
+    assert min(steps(STRUCTURAL_BEAM_STEPS - 0.6).arm_lengths) > STRUCTURAL_ARM
+    assert steps(STRUCTURAL_BEAM_STEPS + 0.2).structural
+    assert not steps(STRUCTURAL_BEAM_STEPS - 0.6).structural
     bare = Corner(np.zeros(2), 0.0, math.pi / 2, np.eye(2), 0, 0.0)
     assert not bare.structural and np.isnan(bare.arm_lengths).all()
+    assert np.isnan(bare.arm_beam_steps).all()

@@ -25,7 +25,8 @@ reference pose of each scan (e.g. the corrected pose of a Carmen log).
   the next scan could re-detect: a line's midpoint in view (:func:`in_view`), a corner's
   place and a point 15 cm along each arm seen (:func:`corner_observable`). Corner
   repeatability is also given per class of the corner in scan k: structural (both arms at
-  least ``STRUCTURAL_ARM`` = 0.5 m, ``Corner.structural``) and the others.
+  least ``STRUCTURAL_ARM`` = 0.2 m and ``STRUCTURAL_BEAM_STEPS`` + 1 = 6 beams,
+  ``Corner.structural``) and the others.
 * **Baseline** line extractor: iterative end-point fit (Douglas-Peucker) per breakpoint
   cluster, OpenCV ``approxPolyDP``: :func:`approx_poly_segments`.
 

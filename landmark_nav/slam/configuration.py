@@ -131,7 +131,8 @@ NODE_PARAMETERS = {
     'max_beams': (20000, 'scans with more beams are dropped as oversized (real 2-D lasers '
                   'have up to a few thousand)', (1, 100000000), None),
     'structural_corners_only': (False, 'map only the corners the extractor labels structural '
-                                '(both arms >= 0.5 m; field structural of corners/features)',
+                                '(both arms >= 0.2 m and 6 beams; field structural of '
+                                'corners/features)',
                                 None, None),
     'visibility': (True, 'visibility-aware pruning: a landmark the scan sees through is '
                    'missed (needs scan)', None, None),

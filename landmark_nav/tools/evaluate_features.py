@@ -86,7 +86,8 @@ def format_scan_metrics(result: dict, title: str = '') -> str:
             f'({f["fit_beams"]}) | {_repeat_text(f, "line")} | '
             f'{f["segments_per_scan"]:.1f} | {f["median_ms_per_scan"]:.2f} |')
     out += ['', '| corner method | corners re-detected within 10 cm | counting the '
-            'unobserved | structural (both arms >= 0.5 m) re-detected | others re-detected '
+            'unobserved | structural (both arms >= 0.2 m, 6 beams) re-detected | others '
+            're-detected '
             '| structural share | corners/scan | ms/scan median |',
             '| --- | --- | --- | --- | --- | --- | --- | --- |']
     for m, f in result['corners'].items():

@@ -132,7 +132,7 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
         x, y, w, lines, arms = x[sel], y[sel], w[sel], lines.take(sel), arms[sel]
         cx, cy, g, bis, opening, fg = cx[sel], cy[sel], g[sel], bis[sel], opening[sel], fg[sel]
     cov = _corner_covariance(x, y, w, lines, cx, cy, p.sigma_r, p.sigma_phi)
-    return _make(cx, cy, bis, opening, cov, st.beam[g], fg, arms)
+    return _make(cx, cy, bis, opening, cov, st.beam[g], fg, arms, st.dphi[g])
 
 
 def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,

@@ -101,4 +101,4 @@ def _split_merge(clusters: Sequence[Cluster], st: _Stack, p: CornerParams) -> Li
     cov = _corner_covariance(x[sel], y[sel], w[sel], lines.take(sel), cx[sel], cy[sel],
                              p.sigma_r, p.sigma_phi)
     return _make(cx[sel], cy[sel], bis[sel], opening[sel], cov, st.beam[jt[sel]],
-                 np.full(sel.size, math.nan), arms[sel])
+                 np.full(sel.size, math.nan), arms[sel], st.dphi[jt[sel]])

@@ -132,7 +132,7 @@ def _raw_corners(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, f: n
     arms[:, :, 0, 0], arms[:, :, 0, 1] = cx[:, None], cy[:, None]
     arms[:, 0, 1, 0], arms[:, 0, 1, 1], arms[:, 1, 1, 0], arms[:, 1, 1, 1] = (
         st.x[lo], st.y[lo], st.x[hi], st.y[hi])
-    return _make(cx, cy, bis, opening, cov, st.beam[g], f, arms)
+    return _make(cx, cy, bis, opening, cov, st.beam[g], f, arms, st.dphi[g])
 
 
 def _minus_cosine(st: _Stack, p: CornerParams) -> List[Corner]:
