@@ -104,14 +104,14 @@ TINY_RUNS = {
           '--domain', '{domain}', '--out', '{tmp}/live_emulator'],
          r'ekf_slam\s+ATE \(start frame, unaligned\): RMSE [\d.]+ cm, max [\d.]+ cm\n'
          r'ekf_slam\s+ATE SE\(2\)-aligned \(evo\): RMSE [\d.]+ cm(.|\n)*'
-         r'\nekf_slam: input: processed [1-9]\d*(.|\n)*\nemulator +[\d.]+ MB(.|\n)*'
+         r'\nekf_slam: input: processed [1-9]\d*(.|\n)*\nemulator +\d+ +[\d.]+ MB(.|\n)*'
          r'\nOK: every process grew'),
         # a recorded bag replayed through the nodes
         (['--bag', '{bag}', '--seconds', '4', '--warmup', '1', '--domain', '{domain}',
           '--out', '{tmp}/live_bag'],
          r'ekf_slam\s+ATE SE\(2\)-aligned \(evo\): RMSE [\d.]+ cm, max [\d.]+ cm\n'
          r'odometry\s+ATE SE\(2\)-aligned \(evo\): RMSE [\d.]+ cm(.|\n)*'
-         r'\nekf_slam: input: processed [1-9]\d*(.|\n)*\nbag_player +[\d.]+ MB')],
+         r'\nekf_slam: input: processed [1-9]\d*(.|\n)*\nbag_player +\d+ +[\d.]+ MB')],
     'bench_soak.py': [
         (['--bag', '{small_bag}', '--seconds', '3', '--rate', '1', '--record', '1',
           '--results', '{tmp}/soak.json'], r'ekf_slam.latency_p95_ratio\s+[\d.]+')],
