@@ -97,22 +97,28 @@ TINY_RUNS = {
     'bench_node_cpu.py': [
         (['{bag}', '--seconds', '2', '--rate', '2', '--domain', '{domain}'],
          r'ekf_slam node CPU / core = [\d.]+')],
-    'bench_live_memory.py': [
-        # a smoke run: 15 s, the nodes may still be loading (on a busy machine not yet listed
-        # at the warm-up), so no memory bound and no node's row required
-        (['--minutes', '0.25', '--warmup', '0.05', '--limit-mb', '1000', '--domain', '{domain}',
-          '--out', '{tmp}/live_memory'], r'emulator +[\d.]+ MB(.|\n)*\nOK: every process grew')],
-    'bench_live_slam.py': [
-        (['--seconds', '5', '--domain', '{domain}', '--out', '{tmp}/live_slam'],
-         r'ekf_slam\s+ATE \(start frame, unaligned\): RMSE [\d.]+ cm')],
+    'bench_live.py': [
+        # the emulated robot, the memory run: a smoke run of 8 s (no memory bound: the nodes
+        # may still be loading at the warm-up on a busy machine)
+        (['--memory', '--seconds', '8', '--warmup', '2', '--limit-mb', '1000',
+          '--domain', '{domain}', '--out', '{tmp}/live_emulator'],
+         r'ekf_slam\s+ATE \(start frame, unaligned\): RMSE [\d.]+ cm, max [\d.]+ cm\n'
+         r'ekf_slam\s+ATE SE\(2\)-aligned \(evo\): RMSE [\d.]+ cm(.|\n)*'
+         r'\nekf_slam: input: processed [1-9]\d*(.|\n)*\nemulator +\d+ +[\d.]+ MB(.|\n)*'
+         r'\nOK: every process grew'),
+        # a recorded bag replayed through the nodes
+        (['--bag', '{bag}', '--seconds', '4', '--warmup', '1', '--domain', '{domain}',
+          '--out', '{tmp}/live_bag'],
+         r'ekf_slam\s+ATE SE\(2\)-aligned \(evo\): RMSE [\d.]+ cm, max [\d.]+ cm\n'
+         r'odometry\s+ATE SE\(2\)-aligned \(evo\): RMSE [\d.]+ cm(.|\n)*'
+         r'\nekf_slam: input: processed [1-9]\d*(.|\n)*\nbag_player +\d+ +[\d.]+ MB')],
     'bench_soak.py': [
         (['--bag', '{small_bag}', '--seconds', '3', '--rate', '1', '--record', '1',
           '--results', '{tmp}/soak.json'], r'ekf_slam.latency_p95_ratio\s+[\d.]+')],
 }
 # Entry points that start ROS nodes (one process each, this worker's DDS domain).
 DDS_RUNS = {('bench_corridor.py', 'loop'), ('bench_node_cpu.py', None),
-            ('bench_live_memory.py', None),
-            ('bench_live_slam.py', None), ('bench_soak.py', None)}
+            ('bench_live.py', None), ('bench_soak.py', None)}
 
 # Runs each (script, argv) of a JSON list as ``__main__`` in this interpreter; writes
 # [[exit status, output], ...] to the file named by argv[2].

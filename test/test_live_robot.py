@@ -7,7 +7,7 @@ measured with) run as processes; this test drives the robot
 by ``cmd_vel`` (``landmark_nav.tools.drive``, closed on ekf_slam's ``/odometry``) along the
 first leg of the ``short`` route (2 m, to its end) and scores ekf_slam's poses against the
 emulator's truth.
-The two-minute office run of the README is ``benchmarks/bench_live_slam.py``.
+The two-minute office run of the README is ``benchmarks/bench_live.py``.
 """
 
 import os
@@ -74,6 +74,6 @@ def test_slam_on_the_emulated_robot_follows_its_true_path(tmp_path, processes):
     # the emulated base has the simulator's wheels, hence odometry.model=simulator (with the
     # node's default 'pioneer' model: RMSE 0.31-0.65 cm). Measured over 5 runs, loaded and
     # quiet machine: RMSE 0.03-0.16 cm, max 0.07-0.30 cm (the
-    # 2-minute office loop of benchmarks/bench_live_slam.py: 0.43 / 0.82 cm)
+    # 2-minute office loop of benchmarks/bench_live.py: 0.43 / 0.82 cm)
     assert float(np.sqrt(np.mean(err ** 2))) < 0.005
     assert float(err.max()) < 0.01

@@ -8,7 +8,7 @@ reached the corner extractor's counts (processed or dropped), every drop was war
 its drop rate, ekf_slam processed the corner sets it was sent, and both nodes stop cleanly.
 The timed figures (latency p95, CPU per scan as ratios against the core's time in the
 same run, memory growth) are ``benchmarks/bench_soak.py``'s (``make bench``), checked
-against stored results; the 10-minute soaks are ``benchmarks/bench_live_slam.py --loop
+against stored results; the 10-minute soaks are ``benchmarks/bench_live.py --loop
 --seconds 600 --skip 0`` and ``benchmarks/bench_node_cpu.py --rate 4 --soak 600``.
 """
 

@@ -17,19 +17,22 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence
 
+from landmark_nav.road.configuration import road_configuration, RoadConfiguration
 from landmark_nav.road.fusion import (choose_route, Corridor, extend_with_outline,
-                                      FusionParams, ground_to_pixels, MIN_VISION_LINES,
+                                      ground_to_pixels, MIN_VISION_LINES,
                                       pixels_to_ground, plan_routes, road_widths, Route,
                                       segment_interval, vision_lines)
-from landmark_nav.road.outline import OutlineParams, polyline_seed, road_outline, SeedError
-from landmark_nav.road.terrain import classify_scan, LaserMount
+from landmark_nav.road.outline import polyline_seed, road_outline, SeedError
+from landmark_nav.road.terrain import classify_scan
 from landmark_nav.sim.park_road import cast_scan, Lighting, ParkRoad, render_view
 from landmark_nav.vision.camera import CameraModel
 import numpy as np
 
 ANGLES = np.radians(np.arange(-90.0, 90.25, 0.5))
 CAMERA = CameraModel.from_fov(320, 240, math.radians(70.0))
-CAMERA_MOUNT = (0.2, 0.0, 1.0, 0.0, math.radians(12.0), 0.0)
+#: road_classifier's defaults (camera_mount: the rendered camera's pose in base_link).
+DEFAULT = road_configuration()
+CAMERA_MOUNT = DEFAULT.camera_mount
 MIN_LINES = MIN_VISION_LINES
 FAIL_WIDTH = 1.0
 #: Lighting of the evaluation: overcast; soft and hard shadows of a row of trees across the
@@ -55,26 +58,30 @@ class FusedFrame:
 
 def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Lighting(),
                markings: bool = False, rng: Optional[np.random.Generator] = None,
-               mount: LaserMount = LaserMount(), fusion: FusionParams = FusionParams(),
-               outline: OutlineParams = OutlineParams()) -> FusedFrame:
-    """Run laser, vision and fusion on one simulated frame at robot pose (x, y, yaw)."""
+               config: RoadConfiguration = DEFAULT) -> FusedFrame:
+    """Run laser, vision and fusion on one simulated frame at robot pose (x, y, yaw).
+
+    ``config``: the ``road_classifier`` configuration (laser and camera mounts, terrain,
+    fusion and outline parameters), as the node runs it.
+    """
+    mount, camera_mount, fusion = config.laser, config.camera_mount, config.fusion
     sc = cast_scan(road, pose, mount, ANGLES, rng=rng)
-    ts = classify_scan(sc.ranges, sc.angles, mount)
-    img = render_view(road, pose, CAMERA, CAMERA_MOUNT, lighting, markings, rng,
+    ts = classify_scan(sc.ranges, sc.angles, mount, config.terrain)
+    img = render_view(road, pose, CAMERA, camera_mount, lighting, markings, rng,
                       gravel=road.crown > 0.1)
     seg = ts.best_segment()
     if seg is None:
         return FusedFrame(None, None, None, None, 0, img)
     corridor = Corridor((segment_interval(seg.start, seg.end),))
     pts = ts.points[seg.first:seg.last + 1]
-    px = ground_to_pixels(CAMERA, CAMERA_MOUNT, pts[np.isfinite(pts).all(axis=1)])
-    seed = polyline_seed(img.shape, px[np.isfinite(px).all(axis=1)], 9)
+    px = ground_to_pixels(CAMERA, camera_mount, pts[np.isfinite(pts).all(axis=1)])
+    seed = polyline_seed(img.shape, px[np.isfinite(px).all(axis=1)], config.seed_px)
     ground = mask = None
     if seed is not None:
         try:
-            out = road_outline(img, seed, outline)
+            out = road_outline(img, seed, config.outline)
             mask = out.mask
-            ground = pixels_to_ground(CAMERA, CAMERA_MOUNT, out.polygon, fusion.max_distance)
+            ground = pixels_to_ground(CAMERA, camera_mount, out.polygon, fusion.max_distance)
             ground = ground[np.isfinite(ground).all(axis=1)]
         except SeedError:
             ground = None
@@ -103,7 +110,7 @@ class VisionRoadScore:
 
 
 def route_open(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
-               robot_width: float = FusionParams().robot_width) -> bool:
+               robot_width: float = DEFAULT.fusion.robot_width) -> bool:
     """Whether a frame's route exists, reaches the laser line and keeps the robot on the road.
 
     The laser line is the farthest laser interval of the corridor; on the road: every route
@@ -122,15 +129,19 @@ def route_open(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
 
 
 def evaluate_vision_road(kind: str, lighting: str = 'overcast', frames: int = 250,
-                         seed: int = 0, markings: bool = False) -> VisionRoadScore:
-    """Score the vision road width on ``frames`` simulated frames (Table 3 style)."""
+                         seed: int = 0, markings: bool = False,
+                         config: RoadConfiguration = DEFAULT) -> VisionRoadScore:
+    """Score the vision road width on ``frames`` simulated frames (Table 3 style).
+
+    ``config``: the ``road_classifier`` configuration (:func:`fuse_frame`).
+    """
     road = ParkRoad.of_kind(kind, seed=seed)
     rng = np.random.default_rng(seed)
     widths, failures, opened, reach = [], 0, 0, []
     for i in range(frames):
         pose = (0.2 * i, float(rng.normal(0.0, 0.3)), float(rng.normal(0.0, 0.05)))
-        f = fuse_frame(road, pose, LIGHTING[lighting], markings, rng)
-        opened += route_open(road, pose, f)
+        f = fuse_frame(road, pose, LIGHTING[lighting], markings, rng, config)
+        opened += route_open(road, pose, f, config.fusion.robot_width)
         reach.append(float(f.route.points[-1, 0]) if f.route is not None else 0.0)
         if f.vision_width is None or f.vision_lines < MIN_LINES or \
                 abs(f.vision_width * math.cos(pose[2]) - road.width) > FAIL_WIDTH:
@@ -154,7 +165,7 @@ OVERLAY_CASES = (('asphalt, overcast', 'asphalt', 'overcast', False, False),
 
 
 def sim_overlay(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
-                title: str = '') -> np.ndarray:
+                title: str = '', camera_mount: Sequence[float] = CAMERA_MOUNT) -> np.ndarray:
     """Return a BGR overlay of one fused frame.
 
     Vision outline green, seed (the laser segment) blue, the true road edges red, the
@@ -170,13 +181,13 @@ def sim_overlay(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
     for edge in road.edges():             # world (x, edge) -> base_link
         dy = edge - pose[1]
         pts = np.column_stack([c * dx + s * dy, -s * dx + c * dy])
-        px = ground_to_pixels(CAMERA, CAMERA_MOUNT, pts)
+        px = ground_to_pixels(CAMERA, camera_mount, pts)
         px = px[np.isfinite(px).all(axis=1)].round().astype(np.int32)
         cv2.polylines(vis, [px], False, (0, 0, 255), 1)
     if frame.seed is not None:
         vis[frame.seed] = (255, 60, 0)
     if frame.route is not None:
-        px = ground_to_pixels(CAMERA, CAMERA_MOUNT, frame.route.points)
+        px = ground_to_pixels(CAMERA, camera_mount, frame.route.points)
         px = px[np.isfinite(px).all(axis=1)].round().astype(np.int32)
         cv2.polylines(vis, [px], False, (0, 230, 255), 2)
     if title:
@@ -184,8 +195,9 @@ def sim_overlay(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
     return vis
 
 
-def write_sim_overlays(out, seed: int = 0, scale: float = 0.75, quality: int = 70):
-    """Write the five overlays (:data:`OVERLAY_CASES`) as one JPEG montage.
+def write_sim_overlays(out, seed: int = 0, scale: float = 0.75, quality: int = 70,
+                       config: RoadConfiguration = DEFAULT):
+    """Write the five overlays (:data:`OVERLAY_CASES`) as one JPEG montage (``config``).
 
     They are the overlays of docs/road_following.md.
 
@@ -199,8 +211,9 @@ def write_sim_overlays(out, seed: int = 0, scale: float = 0.75, quality: int = 7
         road = ParkRoad.of_kind(kind, seed=seed,
                                 cylinders=((7.0, 0.6, 0.25, 1.75),) if pedestrian else ())
         pose = (1.0, 0.2, math.radians(2.0))
-        frame = fuse_frame(road, pose, LIGHTING[light], markings, np.random.default_rng(seed))
-        vis = sim_overlay(road, pose, frame, title)
+        frame = fuse_frame(road, pose, LIGHTING[light], markings, np.random.default_rng(seed),
+                           config)
+        vis = sim_overlay(road, pose, frame, title, config.camera_mount)
         tiles.append(cv2.resize(vis, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA))
     top = np.hstack(tiles[:3])
     bottom = np.hstack(tiles[3:] + [np.zeros_like(tiles[0])])

@@ -36,30 +36,18 @@ from landmark_nav.conversions import (array_to_image, camera_info_to_model, Conv
 from landmark_nav.geometry import transform_points
 from landmark_nav.nodes.common import (declare, InputStats, ParameterError, ProblemWarner,
                                        run_node, SENSOR_QOS)
-from landmark_nav.road.fusion import (choose_route, extend_with_outline, FusionParams,
+from landmark_nav.road.configuration import parameters, road_configuration
+from landmark_nav.road.fusion import (choose_route, extend_with_outline,
                                       ground_to_pixels, laser_corridors, MIN_VISION_LINES,
                                       pixels_to_ground, plan_routes, road_widths,
                                       vision_lines)
-from landmark_nav.road.outline import OutlineParams, polyline_seed, road_outline, SeedError
-from landmark_nav.road.terrain import (classify_scan, LaserMount, NOT_TRAVERSABLE,
-                                       TerrainParams)
+from landmark_nav.road.outline import polyline_seed, road_outline, SeedError
+from landmark_nav.road.terrain import classify_scan, NOT_TRAVERSABLE
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
-
-_TERRAIN_DOCS = {
-    'window': ('roughness window along the scan (about a wheel base) [m]', (0.05, 5.0)),
-    'roughness_max': ('largest roughness of a traversable reading [m]', (1e-4, 1.0)),
-    'step_max': ('largest height step inside a segment [m]', (1e-3, 1.0)),
-    'height_max': ('largest |height| of a ground reading [m]', (1e-3, 5.0)),
-    'min_width': ('narrowest traversable segment (the robot width) [m]', (0.05, 10.0)),
-    'obstacle_height': ('readings higher than this above the ground are obstacles [m]',
-                        (1e-3, 5.0)),
-    'range_sigma': ("the laser's 1-sigma range noise: floor of a piece's height noise [m]",
-                    (1e-5, 1.0)),
-}
 
 
 class RoadClassifier(Node):
@@ -68,47 +56,19 @@ class RoadClassifier(Node):
     def __init__(self, **kwargs) -> None:
         """Declare and validate parameters and create the interfaces."""
         super().__init__('road_classifier', **kwargs)
-
-        def d(*args, **kw):
-            return declare(self, *args, **kw)
-
-        scan_topic = d('scan_topic', 'tilted_scan', 'topic of the tilted laser scan')
-        laser = d('laser_mount', [0.3, 0.0, 0.6, 0.0, math.radians(14.0), 0.0],
-                  'laser pose in base_link: x, y, z [m] (z above the ground), roll, pitch '
-                  '(> 0 tilts down), yaw [rad]')
-        camera = d('camera_mount', [0.2, 0.0, 1.0, 0.0, math.radians(12.0), 0.0],
-                   'camera_link pose in base_link: x, y, z [m], roll, pitch, yaw [rad]')
-        defaults = TerrainParams()
-        terrain = {k: d(k, getattr(defaults, k), doc, lim)
-                   for k, (doc, lim) in _TERRAIN_DOCS.items()}
-        width = d('robot_width', 0.5, 'robot width: corridors overlap by more [m]',
-                  (0.05, 10.0))
-        self.max_distance = d('max_distance', 12.0, 'farthest intersection line and grid '
-                              'extent ahead [m]', (1.0, 100.0))
-        history = d('history', 10, 'scans kept for the corridors (eq. 29)', (1, 1000))
-        self.k_limit = d('k_limit', OutlineParams().k_limit, 'road where P_c + P_e exceeds '
-                         'this (eq. 26)', (0.0, 2.0))
-        self.seed_px = d('seed_thickness_px', 9, 'thickness of the seed band [px]', (1, 200))
-        self.outline_timeout = d('outline_timeout', 0.5, 'an outline older than this (scan '
-                                 'time) is not fused [s]', (0.0, 60.0))
-        self.resolution = d('grid_resolution', 0.1, 'cell size of road/grid [m]',
-                            (0.01, 2.0))
-        self.half_width = d('grid_half_width', 6.0, 'road/grid extends this far left and '
-                            'right [m]', (0.5, 100.0))
-        self.base_frame = d('base_frame', 'base_link', 'frame of the outputs')
-        self.debug = d('publish_debug_image', False, 'publish road/debug_image')
+        values = {name: declare(self, name, *p[:4]) for name, p in parameters().items()}
         try:
-            self.laser = LaserMount.from_sequence(laser)
-            self.terrain = TerrainParams(min_width=terrain.pop('min_width'), **terrain)
-            self.fusion = FusionParams(robot_width=width, max_distance=self.max_distance,
-                                       history=history)
-            self.outline_params = OutlineParams(k_limit=self.k_limit)
+            config = road_configuration(values)
         except ValueError as err:
             raise ParameterError(f'road_classifier: {err}') from err
-        if len(camera) != 6 or not all(math.isfinite(v) for v in camera) or camera[2] <= 0:
-            raise ParameterError(f'parameter camera_mount must be 6 finite numbers with z > 0;'
-                                 f' got {camera}')
-        self.camera_mount = camera
+        self.laser, self.terrain = config.laser, config.terrain
+        self.fusion, self.outline_params = config.fusion, config.outline
+        self.camera_mount = list(config.camera_mount)
+        self.max_distance, self.seed_px = config.fusion.max_distance, config.seed_px
+        self.outline_timeout = values['outline_timeout']
+        self.resolution, self.half_width = values['grid_resolution'], values['grid_half_width']
+        self.base_frame, self.debug = values['base_frame'], values['publish_debug_image']
+        scan_topic = values['scan_topic']
         self.warner = ProblemWarner(self)
         self.stats = InputStats(self, self.warner)
         self.camera = None

@@ -6,6 +6,14 @@
   simulator (per-reading accuracy, road width as in Table 3).
 * ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
   frames (road width in the robot's ground plane, failures per lighting).
+
+Each takes the ``road_classifier`` node's parameter files (``--params-file FILE``,
+repeatable, then ``--set NAME=VALUE``; :mod:`landmark_nav.tools.node_parameters`) and runs
+the configuration the node would run with them (:mod:`landmark_nav.road.configuration`):
+the outline's parameters for ``evaluate-road-outline``; the laser mount and the terrain
+parameters for ``evaluate-road-laser``; all of them (laser and camera mounts, terrain,
+fusion, outline, seed band) for ``evaluate-road-vision``. A name the node does not declare
+stops the command (exit status 2) naming the nearest declared one.
 """
 
 import argparse
@@ -13,14 +21,22 @@ import json
 from pathlib import Path
 
 
+def _configuration(args: argparse.Namespace):
+    """Return the ``road_classifier`` configuration of ``--params-file`` and ``--set``."""
+    from landmark_nav.road.configuration import NODE, road_configuration
+    from landmark_nav.tools.node_parameters import given_parameters
+    return road_configuration(given_parameters(args.params_file, args.set, NODE))
+
+
 def _cmd_evaluate_road_outline(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.road_outline import (evaluate_folder, format_summary,
                                                       frame_names, summarize, write_overlays)
+    params = _configuration(args).outline
     folder = Path(args.folder)
     names = frame_names(folder)
     if args.every > 1:
         names = names[args.offset::args.every]
-    scores = evaluate_folder(folder, names=names)
+    scores = evaluate_folder(folder, params, names=names)
     summary = summarize(scores)
     print(format_summary(summary))
     if args.json:
@@ -30,13 +46,15 @@ def _cmd_evaluate_road_outline(args: argparse.Namespace) -> int:
         ranked = sorted(scores, key=lambda s: s.iou)
         k = len(ranked) - 1
         picks = [ranked[round(k * q)].name for q in (0.0, 0.25, 0.5, 0.75, 1.0)]
-        path = write_overlays(folder, picks, args.overlays)
+        path = write_overlays(folder, picks, args.overlays, params)
         print(f'overlays (min, quartiles, max IoU): {path}')
     return 0
 
 
 def add_parsers(sub, parser_class) -> None:
     """Add the road subcommands to the ``landmark_nav`` command line."""
+    from landmark_nav.road.configuration import NODE
+    from landmark_nav.tools.node_parameters import add_arguments
     p = sub.add_parser('evaluate-road-outline', help='score the vision road outline on a '
                        'folder of labelled street frames (images/, labels_camvid11/)')
     p.add_argument('folder', help='e.g. ../shared/data/camvid_road')
@@ -45,6 +63,7 @@ def add_parsers(sub, parser_class) -> None:
     p.add_argument('--json', help='write the per-frame scores and the summary here')
     p.add_argument('--overlays', help='write a montage of five overlays (min, quartiles, '
                    'max IoU) to this image file')
+    add_arguments(p, NODE)
     p.set_defaults(func=_cmd_evaluate_road_outline)
 
     p = sub.add_parser('evaluate-road-laser', help='score the tilted-laser terrain '
@@ -53,6 +72,7 @@ def add_parsers(sub, parser_class) -> None:
                    choices=['asphalt', 'gravel'], help='road kinds (Table 3)')
     p.add_argument('--scans', type=int, default=1000, help='scans per road (default 1000)')
     p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    add_arguments(p, NODE)
     p.set_defaults(func=_cmd_evaluate_road_laser)
 
     p = sub.add_parser('evaluate-road-vision', help='score the vision road width on simulated '
@@ -68,15 +88,17 @@ def add_parsers(sub, parser_class) -> None:
     p.add_argument('--markings', action='store_true', help='paint a dashed centre line')
     p.add_argument('--overlays', help='also write the five rendered overlays (overcast, soft '
                    'and hard shadows, gravel, markings + pedestrian) to this image file')
+    add_arguments(p, NODE)
     p.set_defaults(func=_cmd_evaluate_road_vision)
 
 
 def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.road_laser import evaluate_laser_road
+    config = _configuration(args)
     print(f'{"road":8s} {"true m":>6s} {"scans":>5s} {"acc %":>6s} {"min %":>6s} '
           f'{"width":>6s} {"sigma":>6s} {"N":>5s} {"fail":>4s}')
     for kind in args.kinds:
-        s = evaluate_laser_road(kind, args.scans, args.seed)
+        s = evaluate_laser_road(kind, args.scans, args.seed, config.laser, config.terrain)
         print(f'{kind:8s} {s.true_width:6.2f} {s.scans:5d} {100 * s.accuracy:6.2f} '
               f'{100 * s.accuracy_min:6.2f} {s.width_mean:6.3f} {s.width_std:6.3f} '
               f'{s.widths:5d} {s.failures:4d}')
@@ -85,17 +107,19 @@ def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.road_fusion import evaluate_vision_road, write_sim_overlays
+    config = _configuration(args)
     print(f'{"road":8s} {"lighting":13s} {"true m":>6s} {"frames":>6s} {"width":>6s} '
           f'{"sigma":>6s} {"N":>5s} {"fail %":>6s} {"open %":>6s} {"reach":>5s}')
     if args.frames < 0:
         raise SystemExit(f'evaluate-road-vision: --frames must be >= 0; got {args.frames}')
     for kind in args.kinds if args.frames else ():
         for light in args.lighting:
-            s = evaluate_vision_road(kind, light, args.frames, args.seed, args.markings)
+            s = evaluate_vision_road(kind, light, args.frames, args.seed, args.markings,
+                                     config)
             print(f'{kind:8s} {light:13s} {s.true_width:6.2f} {s.frames:6d} '
                   f'{s.width_mean:6.3f} {s.width_std:6.3f} {s.widths:5d} '
                   f'{100 * s.failures / s.frames:6.1f} {100 * s.routes_open / s.frames:6.1f} '
                   f'{s.reach_median:5.2f}')
     if args.overlays:
-        print(f'overlays: {write_sim_overlays(args.overlays, args.seed)}')
+        print(f'overlays: {write_sim_overlays(args.overlays, args.seed, config=config)}')
     return 0
