@@ -6,6 +6,8 @@ Run from the repository root (needs ``../shared/data/carmen`` or ``--data DIR``)
         [--json out.json] [--direct] [LOG ...]
     python benchmarks/bench_feature_metrics.py corner-repeatability [--data DIR]
         [--method minus_cosine] [--set NAME=VALUE ...] [LOG ...]
+    python benchmarks/bench_feature_metrics.py structural-rule [--data DIR]
+        [--min-share 0.3] [LOG ...]
 
 A LOG is a log name in ``--data DIR`` (``aces`` -> ``DIR/aces-corrected.log.gz``; default
 the six Carmen logs) or a path to a Carmen log.
@@ -42,8 +44,18 @@ detector time (segmentation included). ``--set NAME=VALUE`` (repeatable) changes
 scan: corners with no corner of the defaults within 5 cm in the same scan) and the share
 of those new corners that are re-detected in the next scan themselves (``new: per scan,
 re-detected / opportunities``).
+
+``structural-rule``: how ``Corner.structural``'s bounds were chosen. Each log is imported and
+its corners found as ``landmark_nav evaluate-features`` does (node defaults, range noise
+estimated from the scans); for every rule "both arms >= L m and >= N beam steps"
+(``--lengths``, ``--steps``) the re-detection of the corners it marks (as
+``evaluate-features``' structural column) and the share of corners it marks. Leaving one
+log out, the rule with the best worst-log re-detection among those marking at least
+``--min-share`` of the corners of every other log is chosen and scored on the log left
+out; then the same choice over all logs (the shipped rule).
 """
 
+from dataclasses import replace
 import json
 from pathlib import Path
 import sys
@@ -54,6 +66,7 @@ from common import (add_logs_argument, log_paths, parse_set, run_subcommand,
                     subcommand_parser)
 from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_truth_free,
                                                   sensor_facts)
+from landmark_nav.evaluation.features import segment_per_extractor
 from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repeatability,
                                                   evaluate_scans, MetricScan, ray_metrics,
                                                   Repeatability, segments_of)
@@ -61,7 +74,10 @@ from landmark_nav.geometry import transform_points
 from landmark_nav.importers.carmen import read_carmen_scans
 from landmark_nav.importers.writer import import_log
 from landmark_nav.laser.corners import CornerParams, detect_corners
+from landmark_nav.laser.extractor_configuration import (extractor_configuration,
+                                                        ScanSegmenter)
 from landmark_nav.laser.lines import extract_lines, LineParams
+from landmark_nav.laser.range_noise import estimate_range_noise
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.tools.evaluate_features import format_scan_metrics
 import numpy as np
@@ -241,6 +257,72 @@ def run_corner_repeatability(args) -> int:
     return 0
 
 
+def structural_rule_records(bag: Path, rules: list) -> tuple:
+    """Return per rule the Repeatability of the corners it marks, and the share it marks."""
+    mount, _, _ = sensor_facts(bag)
+    scans, _ = bag_metric_scans(bag, mount)
+    noise = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans), stated=0.01)
+    config = extractor_configuration('corner_extractor')
+    params = replace(config.params, sigma_r=noise.sigma_r)
+    segmenter = ScanSegmenter(config.incidence_deg, config.min_points, noise.sigma_r,
+                              config.sigma_r_from_data, config.sigma_r_scans)
+    scores = [Repeatability() for _ in rules]
+    marked = np.zeros(len(rules))
+    total, prev = 0, None
+    for s in scans:
+        clusters = segment_per_extractor({'corners': segmenter}, s.ranges, s.angles, s.valid,
+                                         s.angle_increment)['corners'][0]
+        found = detect_corners(clusters, segmenter.at_scan_noise(params))
+        pos = np.array([c.position for c in found]).reshape(-1, 2)
+        wedge = np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2)
+        arms = np.array([[min(c.arm_lengths), min(c.arm_beam_steps)] for c in found]
+                        ).reshape(-1, 2)
+        masks = [(arms[:, 0] >= length) & (arms[:, 1] >= steps) for length, steps in rules]
+        total += len(found)
+        marked += [m.sum() for m in masks]
+        if prev is not None and prev[0].pose is not None and s.pose is not None:
+            for score, m in zip(scores, prev[3]):
+                corner_repeatability(score, prev[1][m], prev[0].pose, pos, s,
+                                     wedges_k=prev[2][m])
+        prev = (s, pos, wedge, masks)
+    return scores, marked / max(total, 1)
+
+
+def run_structural_rule(args) -> int:
+    """Run ``structural-rule``: the leave-one-log-out choice of the structural bounds."""
+    rules = [(length, steps) for length in args.lengths for steps in args.steps]
+    fig = {}
+    for name, path in log_paths(args.data, args.logs):
+        with tempfile.TemporaryDirectory() as tmp:
+            import_log(path, Path(tmp) / name)
+            scores, share = structural_rule_records(Path(tmp) / name, rules)
+        fig[name] = [(sc.fraction, sh) for sc, sh in zip(scores, share)]
+        print(f'{name}: {scores[0].opportunities} opportunities of the corners with both '
+              f'arms >= {rules[0][0]:g} m and {rules[0][1]:g} beam steps', flush=True)
+
+    def choose(logs):
+        ok = [i for i in range(len(rules)) if min(fig[g][i][1] for g in logs) >= args.min_share]
+        return max(ok, key=lambda i: min(fig[g][i][0] for g in logs), default=None)
+
+    print('| log left out | rule chosen on the others (arms >= L m, >= N beam steps) | '
+          'their worst re-detection | re-detection on the log left out | its share |')
+    print('| --- | --- | --- | --- | --- |')
+    for out in fig if len(fig) > 1 else ():
+        rest = [g for g in fig if g != out]
+        i = choose(rest)
+        if i is None:
+            print(f'| {out} | no rule marks {args.min_share} of every log | | | |')
+            continue
+        worst = min(fig[g][i][0] for g in rest)
+        print(f'| {out} | L {rules[i][0]:g}, N {rules[i][1]:g} | {worst:.3f} | '
+              f'{fig[out][i][0]:.3f} | {fig[out][i][1]:.2f} |')
+    i = choose(list(fig))
+    if i is not None:
+        print(f'\nall logs: L {rules[i][0]:g} m, N {rules[i][1]:g} beam steps: ' + ', '.join(
+            f'{g} {fig[g][i][0]:.3f} ({fig[g][i][1]:.2f} marked)' for g in fig))
+    return 0
+
+
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
     ap, sub = subcommand_parser(__doc__)
@@ -262,6 +344,16 @@ def main(argv=None) -> int:
     p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                    help='a CornerParams field (the value a Python literal)')
     p.set_defaults(run=run_corner_repeatability)
+    p = sub.add_parser('structural-rule',
+                       help="how Corner.structural's bounds were chosen (leave one log out)")
+    add_logs_argument(p, 'carmen', LOGS)
+    p.add_argument('--lengths', type=float, nargs='+', default=[0.2, 0.3, 0.4, 0.5, 0.6],
+                   help='arm length bounds L [m]')
+    p.add_argument('--steps', type=float, nargs='+', default=[0, 3, 4, 5, 6, 7, 8, 10, 12],
+                   help='arm beam-step bounds N')
+    p.add_argument('--min-share', type=float, default=0.3,
+                   help='a rule must mark at least this share of the corners of each log')
+    p.set_defaults(run=run_structural_rule)
     return run_subcommand(ap, argv)
 
 

@@ -199,12 +199,13 @@ from bench_node_cpu import params_file_options, split_frontend
 from common import (add_logs_argument, CARMEN_LOGS, data_folder, log_paths, parse_set,
                     run_subcommand, subcommand_parser)
 from landmark_nav.evaluation.bags import load_bag
-from landmark_nav.evaluation.occupancy_check import (check_run, landmark_diagnosis,
-                                                     load_occupancy_grid, run_segments,
-                                                     wall_pose_diagnosis)
+from landmark_nav.evaluation.occupancy_check import (check_run, corner_wall_check,
+                                                     landmark_diagnosis, load_occupancy_grid,
+                                                     run_segments, wall_pose_diagnosis)
 from landmark_nav.evaluation.odometry_drift import odometry_window_nees
 from landmark_nav.evaluation.slam import (bag_odometry_noise, ellipse_share, evaluate_bag,
                                           run_slam, scan_features, update_corrections)
+from landmark_nav.evaluation.slam_plots import plot_corner_wall_check
 from landmark_nav.evaluation.trajectory import ate, planar_alignment, rpe, Trajectory
 from landmark_nav.geometry import compose, interpolate_pose, inverse, relative, wrap_angle
 from landmark_nav.importers.writer import import_log
@@ -663,9 +664,10 @@ def run_wean(args) -> int:
                 scale_odometry(sc, args.odometry_scale)
             prm = SlamParams(odometry=bag_odometry_noise(sc)[0],
                              establish_hits=args.establish_hits, **extra)
-            run = run_slam(sc, prm, CornerParams(sigma_r=sc.laser.sigma_range,
-                                                 sigma_phi=sc.laser.sigma_angle),
-                           landmarks=args.landmarks, frontend=frontend)
+            corner_params = CornerParams(sigma_r=sc.laser.sigma_range,
+                                         sigma_phi=sc.laser.sigma_angle)
+            run = run_slam(sc, prm, corner_params, landmarks=args.landmarks,
+                           frontend=frontend)
             parts = run_segments(run)
             named = [(name, run)] + ([(f'{name}#{k}', p) for k, p in enumerate(parts)]
                                      if len(parts) > 1 else [])
@@ -688,7 +690,22 @@ def run_wean(args) -> int:
                       f'{fit["odometry"]["point_share"]:.3f} '
                       + ' '.join(str(count.get(c, 0)) for c in CATEGORIES)
                       + f' {run.stats.get("retired", 0)} {depth} {seen} {cells}', flush=True)
+                if args.corners or args.plot:
+                    corners_on_walls(grid, sc, part, s['transform'], corner_params, label, args)
     return 0
+
+
+def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args) -> None:
+    """Print (and with --plot draw) where every scan's corners fall on the grid."""
+    cw = corner_wall_check(grid, sc, run, transform, corner_params)
+    print(f'{label} corners within 10 cm of a wall cell ({cw["seen_through"]} cells seen '
+          f'through: corners near them left out): structural {cw["structural_share"]:.3f} of '
+          f'{cw["structural_count"]} (left out {cw["structural_left_out"]}), other '
+          f'{cw["other_share"]:.3f} of {cw["other_count"]} (left out {cw["other_left_out"]})')
+    if args.plot:
+        out = Path(args.plot) / f'{label.replace("#", "_")}_structural_corners.png'
+        plot_corner_wall_check(grid, cw, f'{label}: structural corners on wean.dat', out)
+        print(f'wrote {out}')
 
 
 def main(argv=None) -> int:
@@ -782,6 +799,13 @@ def main(argv=None) -> int:
     p.add_argument('--odometry-scale', type=float, default=1.0,
                    help='scale the raw odometry translations before the filter (a test of '
                         'the odometry scale against the grid; default 1)')
+    p.add_argument('--corners', action='store_true',
+                   help="also place every scan's corner detections with the SLAM path: "
+                        'the share of structural and other corners within 10 cm of a wall '
+                        'cell the log does not see through')
+    p.add_argument('--plot', default=None, metavar='DIR',
+                   help='with --corners: draw them over the grid into DIR/<log>_structural_'
+                        'corners.png')
     p.set_defaults(run=run_wean)
     return run_subcommand(ap, argv)
 

@@ -411,8 +411,6 @@ def wall_pose_diagnosis(grid: OccupancyGrid, scenario, run, transform: np.ndarra
         ``wall_crossings``: the count of every wall cell that any ray crossed (for
         comparison).
     """
-    from landmark_nav.conversions import classify_ranges
-    from landmark_nav.sim import ScanSample
     t = np.asarray(transform, dtype=float).reshape(3)
     v, res = grid.values, grid.resolution
     wall = (v >= 0.0) & (v <= wall_max)
@@ -424,11 +422,32 @@ def wall_pose_diagnosis(grid: OccupancyGrid, scenario, run, transform: np.ndarra
     hit = np.zeros(ij.shape[0], dtype=bool)
     hit[inside] = wall[ij[inside, 0], ij[inside, 1]]
     steps = np.flatnonzero(hit)
+    crossed = ray_crossings(grid, scenario, run, t, every, max_range, margin)
+    return {'steps': steps, 'depth': depth[ij[steps, 0], ij[steps, 1]],
+            'crossings': crossed[ij[steps, 0], ij[steps, 1]],
+            'wall_crossings': crossed[wall & (crossed > 0)]}
+
+
+def ray_crossings(grid: OccupancyGrid, scenario, run, transform: np.ndarray, every: int = 2,
+                  max_range: float = 8.0, margin: float = 0.3) -> np.ndarray:
+    """Count, per grid cell, the run's scans with a ray through the cell.
+
+    Every ``every``-th step's scan, placed with the filter's pose of that step and
+    ``transform`` (map frame -> grid frame), returns up to ``max_range``; a ray crosses a
+    cell from ``margin`` beyond the laser to ``margin`` before its return. A wall cell
+    crossed is one this log saw through (an open door, an object moved since the grid was
+    made). Returns an int array of the grid's shape.
+    """
+    from landmark_nav.conversions import classify_ranges
+    from landmark_nav.sim import ScanSample
+    t = np.asarray(transform, dtype=float).reshape(3)
+    v, res = grid.values, grid.resolution
+    shape = np.array(v.shape)
     crossed = np.zeros(v.size, dtype=np.int64)
     scans = scenario.of_type(ScanSample)
     mount = np.asarray(scenario.laser.mount, dtype=float)
     along = np.arange(0.0, max_range, 0.5 * res)
-    for k in range(0, ij.shape[0], every):
+    for k in range(0, len(run.poses), every):
         s = scans[int(run.scan_index[k])]
         r = np.asarray(s.ranges, dtype=float)
         ok = classify_ranges(r, s.range_min, s.range_max)[0]
@@ -444,10 +463,69 @@ def wall_pose_diagnosis(grid: OccupancyGrid, scenario, run, transform: np.ndarra
         g = g[np.all((g >= 0) & (g < shape), axis=1)]
         cells = np.unique(g[:, 0] * shape[1] + g[:, 1])
         crossed[cells] += 1
-    crossed = crossed.reshape(v.shape)
-    return {'steps': steps, 'depth': depth[ij[steps, 0], ij[steps, 1]],
-            'crossings': crossed[ij[steps, 0], ij[steps, 1]],
-            'wall_crossings': crossed[wall & (crossed > 0)]}
+    return crossed.reshape(v.shape)
+
+
+def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
+                      corner_params=None, every: int = 1, tolerance: float = 0.1,
+                      wall_max: float = 0.1) -> Dict[str, object]:
+    """Place every scan's corner detections with the run's poses; how many lie on a wall.
+
+    Each ``every``-th step's scan is run through the corner extractor
+    (:func:`landmark_nav.evaluation.slam_run.scan_corners` with ``corner_params``), its
+    corners placed with the filter's pose of that step and the laser mount, then with
+    ``transform`` (map frame -> grid frame, an :func:`occupancy_check` result's). A corner
+    is on a wall when it lies within ``tolerance`` of the square of a wall cell. Where the
+    log's own scans see through wall cells (:func:`ray_crossings` over every step: an open
+    door, an object moved since the grid was made) the grid does not show the building as
+    the log saw it: corners within ``tolerance`` of such a cell are left out of the shares.
+
+    Returns:
+        ``points`` (K, 2) grid frame, ``structural`` (K,) bool (``Corner.structural``),
+        ``on_wall`` (K,) bool, ``left_out`` (K,) bool (near a wall cell seen through),
+        ``path`` (P, 2) the run's positions in the grid frame, and per class
+        (``structural``, ``other``) the count judged and the share of it on a wall
+        (``<class>_count``, ``<class>_share``) and the count left out
+        (``<class>_left_out``); ``seen_through`` the number of wall cells seen through.
+    """
+    from landmark_nav.evaluation.slam_run import scan_corners
+    from landmark_nav.sim import ScanSample
+    t = np.asarray(transform, dtype=float).reshape(3)
+    v, res = grid.values, grid.resolution
+    crossed = ray_crossings(grid, scenario, run, t, every=1)
+    wall = (v >= 0.0) & (v <= wall_max)
+    seen = wall & (crossed > 0)
+    scans = scenario.of_type(ScanSample)
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    pts, label = [], []
+    for k in range(0, len(run.poses), every):
+        found = scan_corners(scans[int(run.scan_index[k])], corner_params)
+        if not found:
+            continue
+        lp = compose(np.asarray(run.poses[k], dtype=float), mount)
+        c = np.array([f.position for f in found])
+        pts.append(c @ _rot(lp[2]).T + lp[:2])
+        label.extend(f.structural for f in found)
+    points = _transform(np.concatenate(pts), t) if pts else np.zeros((0, 2))
+    structural = np.array(label, dtype=bool)
+
+    def near(cells):
+        if not cells.any():
+            return np.zeros(len(points), dtype=bool)
+        tree = cKDTree((np.argwhere(cells) + 0.5) * res)
+        return _square_distance(points, tree, res, tolerance) <= tolerance
+
+    on_wall, left_out = near(wall), near(seen)
+    out: Dict[str, object] = {
+        'points': points, 'structural': structural, 'on_wall': on_wall, 'left_out': left_out,
+        'path': _transform(np.asarray(run.poses, dtype=float)[:, :2], t),
+        'seen_through': int(np.count_nonzero(seen))}
+    for name, m in (('structural', structural), ('other', ~structural)):
+        judged = m & ~left_out
+        out[f'{name}_count'] = int(judged.sum())
+        out[f'{name}_left_out'] = int((m & left_out).sum())
+        out[f'{name}_share'] = float(on_wall[judged].mean()) if judged.any() else float('nan')
+    return out
 
 
 def scan_end_points(poses: np.ndarray, mount: np.ndarray, ranges: np.ndarray,
@@ -531,7 +609,8 @@ def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: flo
     return out
 
 
-__all__ = ['check_run', 'landmark_diagnosis', 'load_occupancy_grid', 'occupancy_check',
+__all__ = ['check_run', 'corner_wall_check', 'landmark_diagnosis', 'load_occupancy_grid',
+           'occupancy_check',
            'occupancy_check_files', 'run_segments',
-           'OccupancyGrid',
+           'OccupancyGrid', 'ray_crossings',
            'scan_end_points', 'wall_pose_diagnosis']

@@ -118,3 +118,36 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
 
 
 __all__ = ['plot_run']
+
+
+def plot_corner_wall_check(grid, check: dict, title: str, path: Path) -> None:
+    """Draw the grid, the path and the structural corners on / off the walls.
+
+    ``check``: :func:`landmark_nav.evaluation.occupancy_check.corner_wall_check`'s result
+    (its ``path`` drawn in the grid frame). The view is cropped to the path
+    and the corners.
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    v, res = grid.values, grid.resolution
+    poses_grid = check['path']
+    fig, ax = plt.subplots(figsize=(8, 8))
+    shade = np.where(v < 0.0, 0.75, v)  # free 1 white, wall 0 black, unknown grey
+    ax.imshow(shade.T, origin='lower', cmap='gray', vmin=0.0, vmax=1.0,
+              extent=(0.0, v.shape[0] * res, 0.0, v.shape[1] * res), interpolation='nearest')
+    ax.plot(poses_grid[:, 0], poses_grid[:, 1], '-', color='tab:blue', lw=0.8, label='path')
+    pts, on, out = check['points'], check['on_wall'], check['left_out']
+    s = check['structural'] & ~out
+    ax.plot(*pts[s & on].T, '.', color='tab:green', ms=2,
+            label=f'structural corner within 10 cm of a wall ({int((s & on).sum())})')
+    ax.plot(*pts[s & ~on].T, 'x', color='tab:red', ms=4,
+            label=f'structural corner off the walls ({int((s & ~on).sum())})')
+    ax.plot(*pts[check['structural'] & out].T, '+', color='tab:orange', ms=4,
+            label='structural corner near a wall cell the log sees through (left out, '
+            f'{int((check["structural"] & out).sum())})')
+    both = np.concatenate([pts[s], poses_grid]) if s.any() else poses_grid
+    lo, hi = both.min(axis=0) - 1.0, both.max(axis=0) + 1.0
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    _save_plan(fig, ax, title, path)
