@@ -24,11 +24,16 @@ first. Per direction this module states:
   out); otherwise the wrong mode, ``sigma_wrong`` (the RMS error of the wrong directions of
   the calibration set). Its 95 % radius solves
   ``p (1 - exp(-r^2 / 2 sigma^2)) + (1 - p) (1 - exp(-r^2 / 2 sigma_wrong^2)) = 0.95``
-  (capped at 90 deg), and its covariance (moment-matched, rank 2, tangent at ``d``) is
-  ``p (a^2 C_cov + b^2 P) + (1 - p) sigma_wrong^2 P`` with ``P = I - d d^T``: a weakly
-  supported direction gets the wrong mode's spread, so a filter using it as measurement
-  noise hardly moves.
-* ``confident``: ``p >= p_confident``.
+  (capped at 90 deg). Covariances (rank 2, tangent at ``d``, ``P = I - d d^T``): the
+  correct mode's ``a^2 C_cov + b^2 P`` and the mixture's (moment-matched)
+  ``p (a^2 C_cov + b^2 P) + (1 - p) sigma_wrong^2 P``.
+* ``confident``: ``p >= p_confident``. A filter (:attr:`DirectionConfidence.
+  measurement_covariance`) takes for a confident direction the first-order covariance, to
+  which it adds the floor of its own camera (the fitted ``b`` holds what York's camera adds:
+  its lens distortion is not given, so its images are not undistorted), and leaves the rare
+  wrong confident ones to its innovation gate; otherwise it takes the mixture's covariance:
+  a weakly supported direction gets about the wrong mode's spread and hardly moves the
+  estimate.
 
 The constants (:data:`CALIBRATION`) are fitted on the York Urban training half (both
 640 x 480 and 320 x 240, all three directions of each image) by :func:`fit_calibration`:
@@ -96,7 +101,9 @@ class DirectionConfidence:
         p_correct: probability of being within 2 deg of the truth.
         sigma: spread of the correct mode [rad].
         radius95: 95 % radius of the error mixture [rad].
-        covariance: (3, 3) moment-matched covariance of the direction (rank 2).
+        first_order: (3, 3) first-order covariance ``C_cov`` (end-point noise only).
+        covariance: (3, 3) calibrated covariance of the correct mode (rank 2).
+        mixture_covariance: (3, 3) moment-matched covariance of the error mixture.
         confident: ``p_correct >= p_confident``.
     """
 
@@ -107,8 +114,20 @@ class DirectionConfidence:
     p_correct: float
     sigma: float
     radius95: float
+    first_order: np.ndarray
     covariance: np.ndarray
+    mixture_covariance: np.ndarray
     confident: bool
+
+    @property
+    def measurement_covariance(self) -> np.ndarray:
+        """Return the covariance a filter should use (see the module docstring).
+
+        Confident: the first-order covariance (the filter adds its own camera's floor);
+        otherwise the mixture's, so that a weakly supported direction moves the estimate
+        little.
+        """
+        return self.first_order if self.confident else self.mixture_covariance
 
 
 def features(sigma_cov: float, ambiguity: float) -> np.ndarray:
@@ -192,7 +211,8 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         out.append(DirectionConfidence(
             inliers=int(np.count_nonzero(vp.inliers)), support=vp.support, sigma_cov=s_cov,
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
-            covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
+            first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
+            mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
             confident=p >= c.p_confident))
     return tuple(out)
 
