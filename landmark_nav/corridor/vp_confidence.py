@@ -27,7 +27,12 @@ first. Per direction this module states:
   (capped at 90 deg). Covariances (rank 2, tangent at ``d``, ``P = I - d d^T``): the
   correct mode's ``a^2 C_cov + b^2 P`` and the mixture's (moment-matched)
   ``p (a^2 C_cov + b^2 P) + (1 - p) sigma_wrong^2 P``.
-* ``confident``: ``p >= p_confident``. A filter (:attr:`DirectionConfidence.
+* ``confident``: ``p >= p_confident``. A direction with fewer than ``MIN_INLIERS`` (5)
+  inlier segments gets ``p = 0`` (the wrong mode alone): two lines meet somewhere whatever
+  their directions, so a direction needs three more to be checked at all (a rule, not
+  fitted: a frontal view with two or three receding lines gives a tight first-order
+  covariance around wherever they happen to meet, and York's calibration set has almost
+  no such direction to learn it from). A filter (:attr:`DirectionConfidence.
   measurement_covariance`) takes for a confident direction the first-order covariance, to
   which it adds the floor of its own camera (the fitted ``b`` holds what York's camera adds:
   its lens distortion is not given, so its images are not undistorted), and leaves the rare
@@ -37,11 +42,12 @@ first. Per direction this module states:
 
 The constants (:data:`CALIBRATION`) are fitted on the York Urban training half (both
 640 x 480 and 320 x 240, all three directions of each image) by :func:`fit_calibration`:
-the logistic weights by ridge-regularised Newton iterations (ridge ``1`` on the non-constant
-weights), ``a`` and ``b`` by maximum likelihood of the Rayleigh model on the directions
-within 2 deg, ``sigma_wrong`` as the RMS error of the others, and ``p_confident`` as the
-smallest threshold at which the corridor directions (the one closest to the optical axis
-in each frame, what the follower steers on) called confident are >= 98 % within 2 deg.
+the logistic weights by ridge-regularised Newton iterations (ridge ``1`` on the
+non-constant weights), ``a`` and ``b`` by maximum likelihood of the Rayleigh model
+truncated at 2 deg on the directions within 2 deg, ``sigma_wrong`` as the RMS error of the
+others, and ``p_confident`` as the smallest threshold at which the corridor directions (the
+one closest to the optical axis in each frame, what the follower steers on) called
+confident are >= 98 % within 2 deg.
 Refit (and print) them with::
 
     python benchmarks/bench_vanishing_points.py --calibrate
@@ -60,6 +66,8 @@ import numpy as np
 SAME_DIRECTION_DEG = 2.0
 #: A direction is "correct" for the calibration when within this of the truth [deg].
 CORRECT_DEG = 2.0
+#: Fewer inlier segments: p_correct = 0 (module docstring).
+MIN_INLIERS = 5
 #: chi-square quantile used for the radius (2 dof, 95 %) of a single Gaussian mode.
 COVERAGE = 0.95
 
@@ -85,7 +93,7 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(0.8261, -1.1039, -0.4348), scale=0.6521, floor_deg=0.4753,
+CALIBRATION = VPCalibration(weights=(0.8261, -1.1039, -0.4348), scale=1.1650, floor_deg=0.3741,
                             sigma_wrong_deg=5.5204, p_confident=0.9270)
 
 
@@ -170,12 +178,12 @@ def direction_ambiguities(frame: ManhattanFrame) -> np.ndarray:
     return out
 
 
-def assess_direction(sigma_cov: float, ambiguity: float,
+def assess_direction(sigma_cov: float, ambiguity: float, inliers: int,
                      calibration: VPCalibration = CALIBRATION) -> Tuple[float, float, float]:
     """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features."""
     c = calibration
     s_wrong = math.radians(c.sigma_wrong_deg)
-    if not math.isfinite(sigma_cov):
+    if not math.isfinite(sigma_cov) or inliers < MIN_INLIERS:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
     z = float(np.asarray(c.weights, dtype=float) @ features(sigma_cov, ambiguity))
     p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
@@ -205,11 +213,12 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         cov = direction_covariance(segments, K, d, vp.inliers, sigma_px)
         finite = bool(np.all(np.isfinite(cov)))
         s_cov = math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)) if finite else math.inf
-        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), c)
+        n_in = int(np.count_nonzero(vp.inliers))
+        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), n_in, c)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
-            inliers=int(np.count_nonzero(vp.inliers)), support=vp.support, sigma_cov=s_cov,
+            inliers=n_in, support=vp.support, sigma_cov=s_cov,
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
             first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
             mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
@@ -234,26 +243,34 @@ def _logistic(X: np.ndarray, y: np.ndarray, ridge: float = 1.0,
     return w
 
 
-def _rayleigh_fit(s: np.ndarray, e: np.ndarray) -> Tuple[float, float]:
-    """ML ``(a, b)`` of ``e ~ Rayleigh(sqrt((a s)^2 + b^2))`` (s, e in the same unit)."""
+def _rayleigh_fit(s: np.ndarray, e: np.ndarray, limit: float) -> Tuple[float, float]:
+    """ML ``(a, b)`` of ``e ~ Rayleigh(sqrt((a s)^2 + b^2))`` truncated to ``e <= limit``.
+
+    The directions of the correct mode are those within ``limit`` of the truth, so each
+    density is divided by its mass below ``limit``, ``1 - exp(-limit^2 / 2 v)`` (s, e and
+    limit in the same unit).
+    """
     from scipy.optimize import minimize
 
     def nll(t: np.ndarray) -> float:
         v = (math.exp(t[0]) * s) ** 2 + math.exp(t[1]) ** 2
-        return float(np.sum(np.log(v) + e ** 2 / (2.0 * v)))
+        mass = -np.expm1(-limit ** 2 / (2.0 * v))
+        return float(np.sum(np.log(v) + e ** 2 / (2.0 * v) + np.log(mass)))
     t0 = np.array([0.0, math.log(max(float(np.median(e)), 1e-3))])
     t = minimize(nll, t0, method='Nelder-Mead', options={'xatol': 1e-6, 'fatol': 1e-9}).x
     return math.exp(t[0]), math.exp(t[1])
 
 
 def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
-                    error_deg: Sequence[float], precision: float = 0.98,
+                    inliers: Sequence[int], error_deg: Sequence[float],
+                    precision: float = 0.98,
                     threshold_on: Optional[Sequence[bool]] = None) -> VPCalibration:
     """Fit the confidence model on directions with known errors (module docstring).
 
     Args:
         sigma_cov: first-order spreads [rad].
         ambiguity: competing hypotheses' relative scores.
+        inliers: inlier segment counts (fewer than ``MIN_INLIERS``: p = 0).
         error_deg: the true angular errors [deg].
         precision: fraction within 2 deg wanted among the confident directions.
         threshold_on: the directions ``p_confident`` is chosen on (default: all), e.g. the
@@ -264,19 +281,22 @@ def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
     """
     s = np.asarray(sigma_cov, dtype=float)
     a = np.asarray(ambiguity, dtype=float)
+    n = np.asarray(inliers, dtype=int)
     e = np.asarray(error_deg, dtype=float)
-    if not (s.shape == a.shape == e.shape):
-        raise ValueError(f'inputs differ in length: {s.shape}, {a.shape}, {e.shape}')
+    if not (s.shape == a.shape == n.shape == e.shape):
+        raise ValueError(f'inputs differ in length: {s.shape}, {a.shape}, {n.shape}, '
+                         f'{e.shape}')
     good = e <= CORRECT_DEG
     if good.all() or not good.any():
         raise ValueError('calibration needs directions both within and beyond 2 deg')
     X = np.array([features(si, ai) for si, ai in zip(s, a)])
     w = _logistic(X, good.astype(float))
     ok = good & np.isfinite(s)
-    scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok])
+    scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok], CORRECT_DEG)
     sigma_wrong = float(np.sqrt(np.mean(e[~good] ** 2)))
     sel = np.ones(e.shape, dtype=bool) if threshold_on is None else \
         np.asarray(threshold_on, dtype=bool)
+    sel = sel & (n >= MIN_INLIERS)
     p = (1.0 / (1.0 + np.exp(-X @ w)))[sel]
     good = good[sel]
     thr = float(np.max(p))

@@ -244,6 +244,7 @@ class DirectionSample:
     column: int
     sigma_cov: float
     ambiguity: float
+    inliers: int
     error: float
 
 
@@ -260,7 +261,8 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
                      for i in range(3)])
     r, c = linear_sum_assignment(cost)
     return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity,
-                            float(cost[k, c[list(r).index(k)]])) for k in range(3)]
+                            conf[k].inliers, float(cost[k, c[list(r).index(k)]]))
+            for k in range(3)]
 
 
 @dataclass(frozen=True)
@@ -281,7 +283,7 @@ def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
     directions (column 0).
     """
     return fit_calibration([s.sigma_cov for s in samples], [s.ambiguity for s in samples],
-                           [s.error for s in samples],
+                           [s.inliers for s in samples], [s.error for s in samples],
                            threshold_on=[s.column == 0 for s in samples])
 
 
@@ -300,7 +302,7 @@ def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
         cals.append(cal)
         for s in samples:
             if fold_of[s.image] == f:
-                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, cal)
+                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, s.inliers, cal)
                 out.append(HeldOut(s, f, p, float(np.degrees(r95)), p >= cal.p_confident))
     return out, cals
 
