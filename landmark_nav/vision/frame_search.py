@@ -108,6 +108,21 @@ def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
     return out.astype(np.int64)
 
 
+def _first_rows(a: np.ndarray) -> np.ndarray:
+    """Return the indices of the first occurrence of each distinct row of ``a``, ascending.
+
+    The same as ``np.sort(np.unique(a, axis=0, return_index=True)[1])`` (a stable
+    lexicographic sort puts the first of equal rows first), several times faster.
+    """
+    if not len(a):
+        return np.zeros(0, dtype=np.int64)
+    order = np.lexsort(a.T[::-1])
+    srt = a[order]
+    new = np.ones(len(a), dtype=bool)
+    new[1:] = np.any(srt[1:] != srt[:-1], axis=1)
+    return np.sort(order[new])
+
+
 def frame_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
                 k_lim: float = 0.37, k_g: float = 0.5, tree: Optional[cKDTree] = None,
                 filters: Optional[np.ndarray] = None) -> np.ndarray:
@@ -219,8 +234,7 @@ def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
     complete = edges[full]
     # every edge in both directions, once each (a chain may be found from one end only)
     both = np.vstack([complete, complete[:, ::-1]])
-    _, first = np.unique(both, axis=0, return_index=True)
-    out = both[np.sort(first)]
+    out = both[_first_rows(both)]
     if full.all():
         return out, np.zeros((0, 2))
     # bridged edges: one per unordered end-corner pair, none where a complete edge exists
@@ -308,8 +322,7 @@ def find_frames(points: np.ndarray, edges: np.ndarray, k_p: float = 0.5) -> List
         return []
     # frames with the same corner set are one frame: keep the first (the shared corners
     # appear twice in every frame, so equal sets have equal sorted id lists)
-    _, first_of = np.unique(flat[good], axis=0, return_index=True)
-    return [ids[i] for i in good[np.sort(first_of)]]
+    return [ids[i] for i in good[_first_rows(flat[good])]]
 
 
 __all__ = ['chain_edges', 'corner_neighbours', 'find_frames', 'frame_edges']
