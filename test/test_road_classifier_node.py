@@ -81,7 +81,9 @@ def _settle(ros, node, before):
 def test_scans_and_frames_give_grid_route_width_and_outline():
     rng = np.random.default_rng(3)
     with RosHarness() as ros:
-        node = ros.add_node(RoadClassifier(context=ros.context))
+        # rendered frames: the chapter's criterion (the learned model knows real streets)
+        node = ros.add_node(RoadClassifier(context=ros.context, parameter_overrides=[
+            Parameter('outline_method', value='chapter')]))
         rig = _Rig(ros)
         for k in range(6):
             stamp = 1_000_000_000 + k * 100_000_000

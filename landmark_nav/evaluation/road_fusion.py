@@ -11,6 +11,9 @@ frame by :attr:`FusedFrame.vision_lines`). The route stays *open* when it exists
 at least the laser line (where vision fails, the laser corridor carries it: the chapter's
 "the laser scanner data is used only") and keeps the robot on the true road; a hard shadow
 or a painted marking taken for the end of the road or for an obstacle would close it.
+
+The outline here is the chapter's (eqs. 26-28, ``SIM_OUTLINE``): the learned road
+probability is trained on real street photographs, and rendered frames are another domain.
 """
 
 from dataclasses import dataclass
@@ -32,6 +35,7 @@ CAMERA = CameraModel.from_fov(320, 240, math.radians(70.0))
 CAMERA_MOUNT = (0.2, 0.0, 1.0, 0.0, math.radians(12.0), 0.0)
 MIN_LINES = MIN_VISION_LINES
 FAIL_WIDTH = 1.0
+SIM_OUTLINE = OutlineParams(method='chapter')
 #: Lighting of the evaluation: overcast; soft and hard shadows of a row of trees across the
 #: road (bands of 1.5 m and 1 m every 8 m).
 LIGHTING = {'overcast': Lighting(),
@@ -56,7 +60,7 @@ class FusedFrame:
 def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Lighting(),
                markings: bool = False, rng: Optional[np.random.Generator] = None,
                mount: LaserMount = LaserMount(), fusion: FusionParams = FusionParams(),
-               outline: OutlineParams = OutlineParams()) -> FusedFrame:
+               outline: Optional[OutlineParams] = None) -> FusedFrame:
     """Run laser, vision and fusion on one simulated frame at robot pose (x, y, yaw)."""
     sc = cast_scan(road, pose, mount, ANGLES, rng=rng)
     ts = classify_scan(sc.ranges, sc.angles, mount)
@@ -72,7 +76,7 @@ def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Light
     ground = mask = None
     if seed is not None:
         try:
-            out = road_outline(img, seed, outline)
+            out = road_outline(img, seed, SIM_OUTLINE if outline is None else outline)
             mask = out.mask
             ground = pixels_to_ground(CAMERA, CAMERA_MOUNT, out.polygon, fusion.max_distance)
             ground = ground[np.isfinite(ground).all(axis=1)]

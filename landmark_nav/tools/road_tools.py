@@ -2,6 +2,8 @@
 
 * ``landmark_nav evaluate-road-outline FOLDER``: the vision road outline on labelled street
   frames (IoU, precision, recall per frame set; overlays).
+* ``landmark_nav train-road-outline --data DIR [DIR ...] --out FILE``: fit the outline's
+  road-probability model to labelled street frames.
 * ``landmark_nav evaluate-road-laser``: tilted-laser terrain classification on the park-road
   simulator (per-reading accuracy, road width as in Table 3).
 * ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
@@ -47,6 +49,15 @@ def add_parsers(sub, parser_class) -> None:
                    'max IoU) to this image file')
     p.set_defaults(func=_cmd_evaluate_road_outline)
 
+    p = sub.add_parser('train-road-outline', help='fit the road-probability model of the road '
+                       'outline to folders of labelled street frames (images/, '
+                       'labels_camvid11/)')
+    p.add_argument('--data', nargs='+', required=True, metavar='DIR',
+                   help='e.g. ../shared/data/camvid_train')
+    p.add_argument('--out', required=True, help='model file to write (.npz)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    p.set_defaults(func=_cmd_train_road_outline)
+
     p = sub.add_parser('evaluate-road-laser', help='score the tilted-laser terrain '
                        'classification on simulated park roads (accuracy, road width)')
     p.add_argument('--kinds', nargs='+', default=['asphalt', 'gravel'],
@@ -69,6 +80,19 @@ def add_parsers(sub, parser_class) -> None:
     p.add_argument('--overlays', help='also write the five rendered overlays (overcast, soft '
                    'and hard shadows, gravel, markings + pedestrian) to this image file')
     p.set_defaults(func=_cmd_evaluate_road_vision)
+
+
+def _cmd_train_road_outline(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.road_cross_drive import sample_frames, train
+    import numpy as np
+    data = sample_frames([Path(d) for d in args.data], seed=args.seed)
+    model = train(data, seed=args.seed)
+    path = model.save(args.out)
+    drives = ', '.join(f'{d} {n}' for d, n in zip(*np.unique(data.drive, return_counts=True)))
+    print(f'{len(data.y)} pixels (drive: pixels {drives}); {len(data.skipped)} frames '
+          f'skipped, their seed band not road: {" ".join(data.skipped) or "none"}')
+    print(f'model: {path} ({path.stat().st_size} bytes)')
+    return 0
 
 
 def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
