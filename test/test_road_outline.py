@@ -3,8 +3,8 @@
 import cv2
 from landmark_nav.evaluation.road_outline import (evaluate_folder, format_summary, FrameScore,
                                                   summarize)
-from landmark_nav.road.outline import (band_seed, chromaticity, OutlineParams,
-                                       outline_confidence, polyline_seed, road_outline,
+from landmark_nav.road.outline import (band_seed, chromaticity, outline_confidence,
+                                       OutlineParams, polyline_seed, road_outline,
                                        SeedError)
 from landmark_nav.road.road_probability import FEATURE_NAMES, pixel_features, RoadModel
 from landmark_nav.road.road_training import fit_road_model
@@ -39,8 +39,10 @@ def test_chromaticity_eq25():
 
 
 def _street(rng):
-    """Return a 240 x 320 perspective view: sky above row 100, a grey road narrowing to
-    (160, 100) between grass verges, with noise; and the road mask."""
+    """Return a 240 x 320 perspective street view and its road mask.
+
+    Sky above row 100, a grey road narrowing to (160, 100) between grass verges, noise.
+    """
     img = np.empty((240, 320, 3))
     img[:] = (150, 160, 175)
     img[100:] = (95, 110, 60)
@@ -164,9 +166,9 @@ def test_real_street_frames_camvid_chapter():
 
 @pytest.mark.slow
 def test_real_street_frames_camvid_learned():
-    """The packaged model (trained on camvid_train: its 0016E5 frames are other frames of
-    this drive) on the 101 frames; measured: median IoU 0.832, min 0.693, 0 failures.
+    """The packaged model on the 101 frames; measured: median IoU 0.832, min 0.693.
 
+    Trained on camvid_train, whose 0016E5 frames are other frames of this drive; 0 failures.
     ``landmark_nav evaluate-road-outline ../shared/data/camvid_road``; hard-shadow frames
     27, median IoU 0.765 (the seed-relative brightness marks deep shadow as not road).
     """
