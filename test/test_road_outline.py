@@ -170,7 +170,7 @@ def test_real_street_frames_camvid_learned():
 
     Trained on camvid_train, whose 0016E5 frames are other frames of this drive; 0 failures.
     ``landmark_nav evaluate-road-outline ../shared/data/camvid_road``; hard-shadow frames
-    27, median IoU 0.765 (the seed-relative brightness marks deep shadow as not road).
+    27, median IoU 0.765 (the chapter's criterion: 0.853).
     """
     summary = summarize(evaluate_folder(shared_data('camvid_road')))
     s = summary['all']
