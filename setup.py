@@ -28,7 +28,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    package_data={'landmark_nav.monocular': ['hallway_model.yaml']},
+    package_data={'landmark_nav.monocular': ['hallway_model.yaml'],
+                  'landmark_nav.road': ['road_model.npz']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

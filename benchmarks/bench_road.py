@@ -3,31 +3,43 @@
 Run from the repository root::
 
     python benchmarks/bench_road.py [--scans N] [--frames N] [--seed S] [--data DIR]
+    python benchmarks/bench_road.py --cross-drive DIR [DIR ...] [--json FILE]
 
 * :func:`landmark_nav.road.terrain.classify_scan` on simulated 361-beam tilted scans of the
   asphalt and gravel park roads; reference in the same run: one ``np.polyfit`` of degree 2
   over the scan's valid points (a floor any per-scan fit pays). Target (issue): <= 2 ms.
-* :func:`landmark_nav.road.outline.road_outline` on 320 x 240 rendered park-road frames and
+* :func:`landmark_nav.road.outline.road_outline` on 320 x 240 rendered park-road frames (the
+  chapter's criterion, as in the simulator evaluation) and
   on the real CamVid frames (480 x 360, resampled to 320 x 240 inside) of ``--data DIR``
   (``images/*.png`` and ``labels_camvid11/*.png``; default ``../shared/data/camvid_road``,
   left out when that default is not there);
   reference in the same run: a full-frame OpenCV Sobel 3 x 3 + 5 x 5 and a Mahalanobis pass
   on the eq. 25 chromaticity at 320 x 240. Target (issue): <= 20 ms.
-Times are medians of single-threaded calls.
+Times are medians of single-threaded calls; the real frames are timed with the packaged
+learned criterion (the default) and with the chapter's (eqs. 26-28).
+
+``--cross-drive DIR ...`` instead scores the outline leaving one drive out
+(:func:`landmark_nav.evaluation.road_cross_drive.leave_one_drive_out`): per drive, the
+road-probability model fitted on the other drives' frames, the drive's frames scored; the
+chapter's criterion (no training) on the same frames for comparison. Frames whose seed band
+is not road are counted and listed apart.
 """
 
 import argparse
+import json
+from pathlib import Path
 import statistics
 import sys
 import time
 
 from common import data_folder, SHARED_DATA
 import cv2
-from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT
+from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out
+from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT, SIM_CONFIG
 from landmark_nav.evaluation.road_laser import ANGLES
-from landmark_nav.evaluation.road_outline import (frame_names, load_frame, SEED_COLS,
-                                                  SEED_ROWS)
-from landmark_nav.road.outline import band_seed, chromaticity, road_outline
+from landmark_nav.evaluation.road_outline import (FAIL_IOU, frame_names, load_frame,
+                                                  SEED_COLS, SEED_ROWS)
+from landmark_nav.road.outline import band_seed, chromaticity, OutlineParams, road_outline
 from landmark_nav.road.terrain import classify_scan, LaserMount
 from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view
 import numpy as np
@@ -67,7 +79,13 @@ def main(argv=None) -> int:
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--data', default=None, metavar='DIR',
                     help='CamVid-format frames (default: ../shared/data/camvid_road if there)')
+    ap.add_argument('--cross-drive', nargs='+', metavar='DIR', help='score the outline '
+                    'leaving one drive out over these CamVid-format folders (e.g. '
+                    '../shared/data/camvid_train ../shared/data/camvid_road)')
+    ap.add_argument('--json', help='with --cross-drive: write the per-frame scores here')
     args = ap.parse_args(argv)
+    if args.cross_drive:
+        return cross_drive([data_folder(d) for d in args.cross_drive], args.json)
     cv2.setNumThreads(1)
     rng = np.random.default_rng(args.seed)
     mount = LaserMount()
@@ -87,7 +105,7 @@ def main(argv=None) -> int:
     frames = [render_view(road, (0.2 * i, rng.normal(0, 0.3), rng.normal(0, 0.05)), CAMERA,
                           CAMERA_MOUNT, rng=rng) for i in range(args.frames)]
     seed = band_seed(frames[0].shape, (0.8, 0.84), (0.3, 0.7))
-    t = median_ms(lambda f: road_outline(f, seed), frames)
+    t = median_ms(lambda f: road_outline(f, seed, SIM_CONFIG.outline), frames)
     r = median_ms(reference_pass, frames)
     print(f'{"vision rendered 320x240":34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
     if args.data is None and not (SHARED_DATA / 'camvid_road').is_dir():
@@ -99,9 +117,37 @@ def main(argv=None) -> int:
                  'labels_camvid11/NAME.png')
     real = [load_frame(folder, n)[0] for n in frame_names(folder)[:args.frames]]
     seed = band_seed(real[0].shape, SEED_ROWS, SEED_COLS)
-    t = median_ms(lambda f: road_outline(f, seed), real)
     r = median_ms(reference_pass, real)
-    print(f'{"vision CamVid 480x360 -> 320x240":34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+    for name, params in (('learned', OutlineParams()),
+                         ('chapter', OutlineParams(method='chapter'))):
+        t = median_ms(lambda f: road_outline(f, seed, params), real)
+        print(f'{"vision CamVid 480x360 " + name:34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+    return 0
+
+
+def cross_drive(folders, json_path=None) -> int:
+    """Print the leave-one-drive-out table (learned criterion, then the chapter's)."""
+    print(f'{"criterion":9s} {"held out":8s} {"frames":>6s} {"IoU med":>7s} {"prec":>6s} '
+          f'{"recall":>6s} {"fail<0.6":>9s} {"flagged":>7s} {"fail&flag":>9s} '
+          f'{"seed not road":>13s}')
+    results = {}
+    for name, params in (('learned', OutlineParams()),
+                         ('chapter', OutlineParams(method='chapter'))):
+        results[name] = leave_one_drive_out(folders, params)
+        for drive, res in results[name].items():
+            s, frames = res['summary'], res['frames']
+            a = s['all']
+            hit = sum(1 for f in frames if f.seed_is_road and not f.reliable
+                      and f.iou < FAIL_IOU)
+            bad = s['seed_not_road']
+            print(f'{name:9s} {drive:8s} {a["frames"]:6d} {a["iou_median"]:7.3f} '
+                  f'{a["precision_median"]:6.3f} {a["recall_median"]:6.3f} '
+                  f'{a["failures"]:4d} ({100 * a["failure_rate"]:2.0f}%) {a["unreliable"]:7d} '
+                  f'{hit:9d} {bad["frames"]:13d} {" ".join(bad.get("names", []))}')
+    if json_path:
+        Path(json_path).write_text(json.dumps(
+            {k: {d: {'summary': r['summary'], 'frames': [f.__dict__ for f in r['frames']]}
+                 for d, r in v.items()} for k, v in results.items()}, indent=1))
     return 0
 
 

@@ -45,7 +45,8 @@ def test_the_node_and_the_offline_configuration_agree():
     from landmark_nav.nodes.road_classifier import RoadClassifier
     given = {'laser_mount': [0.2, 0.0, 0.7, 0.0, 0.3, 0.0], 'roughness_max': 0.02,
              'history': 4, 'k_limit': 1.1, 'seed_thickness_px': 5, 'robot_width': 0.8,
-             'camera_mount': [0.1, 0.0, 1.2, 0.0, 0.25, 0.0]}
+             'camera_mount': [0.1, 0.0, 1.2, 0.0, 0.25, 0.0], 'outline_method': 'chapter',
+             'min_outline_confidence': 0.3}
     with RosHarness() as ros:
         node = RoadClassifier(context=ros.context,
                               parameter_overrides=[Parameter(k, value=v)
@@ -61,7 +62,7 @@ def test_the_node_and_the_offline_configuration_agree():
 
 
 @pytest.mark.parametrize('name, setting', [
-    ('outline', 'k_limit: 0.9'), ('laser', 'roughness_max: 0.004'),
+    ('outline', 'outline_method: chapter'), ('laser', 'roughness_max: 0.004'),
     ('vision', 'k_limit: 0.9')])
 def test_a_params_file_changes_the_result_as_a_set_does(
         tmp_path, capsys, camvid, name, setting):

@@ -11,6 +11,10 @@ frame by :attr:`FusedFrame.vision_lines`). The route stays *open* when it exists
 at least the laser line (where vision fails, the laser corridor carries it: the chapter's
 "the laser scanner data is used only") and keeps the robot on the true road; a hard shadow
 or a painted marking taken for the end of the road or for an obstacle would close it.
+
+The outline here is the chapter's (eqs. 26-28, ``SIM_OUTLINE`` in ``SIM_CONFIG``): the
+learned road probability is trained on real street photographs, and rendered frames are
+another domain.
 """
 
 from dataclasses import dataclass
@@ -35,6 +39,10 @@ DEFAULT = road_configuration()
 CAMERA_MOUNT = DEFAULT.camera_mount
 MIN_LINES = MIN_VISION_LINES
 FAIL_WIDTH = 1.0
+#: The configuration of the simulated roads: the defaults with the chapter's outline
+#: criterion (``outline_method: chapter``; the learned model is trained on photographs).
+SIM_OUTLINE = {'outline_method': 'chapter'}
+SIM_CONFIG = road_configuration(SIM_OUTLINE)
 #: Lighting of the evaluation: overcast; soft and hard shadows of a row of trees across the
 #: road (bands of 1.5 m and 1 m every 8 m).
 LIGHTING = {'overcast': Lighting(),
@@ -58,11 +66,11 @@ class FusedFrame:
 
 def fuse_frame(road: ParkRoad, pose: Sequence[float], lighting: Lighting = Lighting(),
                markings: bool = False, rng: Optional[np.random.Generator] = None,
-               config: RoadConfiguration = DEFAULT) -> FusedFrame:
+               config: RoadConfiguration = SIM_CONFIG) -> FusedFrame:
     """Run laser, vision and fusion on one simulated frame at robot pose (x, y, yaw).
 
     ``config``: the ``road_classifier`` configuration (laser and camera mounts, terrain,
-    fusion and outline parameters), as the node runs it.
+    fusion and outline parameters), as the node runs it (default :data:`SIM_CONFIG`).
     """
     mount, camera_mount, fusion = config.laser, config.camera_mount, config.fusion
     sc = cast_scan(road, pose, mount, ANGLES, rng=rng)
@@ -130,7 +138,7 @@ def route_open(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
 
 def evaluate_vision_road(kind: str, lighting: str = 'overcast', frames: int = 250,
                          seed: int = 0, markings: bool = False,
-                         config: RoadConfiguration = DEFAULT) -> VisionRoadScore:
+                         config: RoadConfiguration = SIM_CONFIG) -> VisionRoadScore:
     """Score the vision road width on ``frames`` simulated frames (Table 3 style).
 
     ``config``: the ``road_classifier`` configuration (:func:`fuse_frame`).
@@ -196,7 +204,7 @@ def sim_overlay(road: ParkRoad, pose: Sequence[float], frame: FusedFrame,
 
 
 def write_sim_overlays(out, seed: int = 0, scale: float = 0.75, quality: int = 70,
-                       config: RoadConfiguration = DEFAULT):
+                       config: RoadConfiguration = SIM_CONFIG):
     """Write the five overlays (:data:`OVERLAY_CASES`) as one JPEG montage (``config``).
 
     They are the overlays of docs/road_following.md.

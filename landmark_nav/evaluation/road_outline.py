@@ -6,8 +6,16 @@ outline (:func:`landmark_nav.road.outline.road_outline`) is seeded from a fixed 
 the image where a tilted laser's traversable segment would fall on the road in front of the
 vehicle -- rows ``SEED_ROWS`` and columns ``SEED_COLS`` as fractions of the image (about
 2-3 m ahead, the width of a lane); the label is never used to place it -- and scored
-against the label: IoU, precision and recall of the road pixels. A failure is a frame with
-an IoU below ``FAIL_IOU``.
+against the label: IoU, precision and recall of the road pixels, leaving out the pixels
+labelled unlabelled (``UNLABELLED_CLASS``; e.g. the car's own bonnet at the bottom of the
+0001TP frames), as CamVid's void class is usually left out. A failure is a frame with an IoU
+below ``FAIL_IOU``.
+
+The seed is checked against the label: a frame whose seed band is less than
+``SEED_ROAD_SHARE`` road (a car close ahead, a junction) is reported apart (``seed_not_road``,
+listed by name), not scored with the others. Each frame also carries the outline's own
+confidence and ``reliable`` flag (:func:`landmark_nav.road.outline.road_outline`); the
+summary counts the frames flagged unreliable and the failures among them.
 
 Hard-shadow frames are reported separately: a frame counts as one when the road label holds
 a large dark region (more than ``SHADOW_FRACTION`` of its pixels darker than half the
@@ -21,9 +29,12 @@ from typing import Dict, List, Optional, Sequence
 
 import cv2
 from landmark_nav.road.outline import band_seed, OutlineParams, road_outline
+from landmark_nav.road.road_probability import RoadModel
 import numpy as np
 
 ROAD_CLASS = 3
+UNLABELLED_CLASS = 11
+SEED_ROAD_SHARE = 0.5
 SEED_ROWS = (0.86, 0.92)
 SEED_COLS = (0.38, 0.62)
 FAIL_IOU = 0.6
@@ -38,9 +49,16 @@ class FrameScore:
     iou: float
     precision: float
     recall: float
-    seed_purity: float        # fraction of the seed band on labelled road (reported only)
+    seed_purity: float        # fraction of the seed band on labelled road
     hard_shadow: bool
     seconds: float
+    confidence: float = 1.0   # the outline's own confidence
+    reliable: bool = True     # the outline's flag: confidence >= min_confidence
+
+    @property
+    def seed_is_road(self) -> bool:
+        """The seed band is mostly labelled road (``SEED_ROAD_SHARE``)."""
+        return self.seed_purity >= SEED_ROAD_SHARE
 
 
 def load_frame(folder: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -78,26 +96,29 @@ def is_hard_shadow(rgb: np.ndarray, road: np.ndarray) -> bool:
 
 
 def score_frame(rgb: np.ndarray, label: np.ndarray, params: OutlineParams,
-                name: str = '') -> tuple[FrameScore, np.ndarray]:
+                name: str = '', model: Optional[RoadModel] = None
+                ) -> tuple[FrameScore, np.ndarray]:
     """Run the outline on one frame and score it; returns (score, road mask)."""
     truth = label == ROAD_CLASS
     seed = band_seed(rgb.shape, SEED_ROWS, SEED_COLS)
     t0 = time.perf_counter()
-    out = road_outline(rgb, seed, params)
+    out = road_outline(rgb, seed, params, model)
     dt = time.perf_counter() - t0
-    pred = out.mask
+    pred = out.mask & (label != UNLABELLED_CLASS)    # unlabelled pixels are not scored
     inter = float(np.sum(pred & truth))
     union = float(np.sum(pred | truth))
     iou = inter / union if union else 1.0
     precision = inter / float(pred.sum()) if pred.any() else 0.0
     recall = inter / float(truth.sum()) if truth.any() else 1.0
     return FrameScore(name, iou, precision, recall, float(truth[seed].mean()),
-                      is_hard_shadow(rgb, truth), dt), pred
+                      is_hard_shadow(rgb, truth), dt, float(out.confidence),
+                      bool(out.reliable)), pred
 
 
 def evaluate_folder(folder: Path, params: OutlineParams = OutlineParams(),
-                    names: Optional[Sequence[str]] = None) -> List[FrameScore]:
-    """Score every frame of a folder (or the ``names`` given)."""
+                    names: Optional[Sequence[str]] = None,
+                    model: Optional[RoadModel] = None) -> List[FrameScore]:
+    """Score every frame of a folder (or the ``names`` given; ``model``: the packaged one)."""
     folder = Path(folder)
     names = frame_names(folder) if names is None else list(names)
     if not names:
@@ -106,14 +127,22 @@ def evaluate_folder(folder: Path, params: OutlineParams = OutlineParams(),
     scores = []
     for name in names:
         rgb, label = load_frame(folder, name)
-        scores.append(score_frame(rgb, label, params, name)[0])
+        scores.append(score_frame(rgb, label, params, name, model)[0])
     return scores
 
 
 def summarize(scores: Sequence[FrameScore]) -> Dict[str, Dict[str, float]]:
-    """Median / mean IoU, precision, recall and the failure rate per frame set."""
-    sets = {'all': list(scores), 'hard_shadow': [s for s in scores if s.hard_shadow],
-            'no_hard_shadow': [s for s in scores if not s.hard_shadow]}
+    """Median / mean IoU, precision, recall and the failure rate per frame set.
+
+    ``all`` and the shadow sets hold the frames whose seed is road; ``seed_not_road`` the
+    others (with their names in ``names``); ``unreliable`` the frames with a road seed the
+    outline flagged.
+    """
+    road = [s for s in scores if s.seed_is_road]
+    sets = {'all': road, 'hard_shadow': [s for s in road if s.hard_shadow],
+            'no_hard_shadow': [s for s in road if not s.hard_shadow],
+            'unreliable': [s for s in road if not s.reliable],
+            'seed_not_road': [s for s in scores if not s.seed_is_road]}
     out = {}
     for key, group in sets.items():
         if not group:
@@ -127,14 +156,17 @@ def summarize(scores: Sequence[FrameScore]) -> Dict[str, Dict[str, float]]:
                     'failures': int(np.sum(iou < FAIL_IOU)),
                     'failure_rate': float(np.mean(iou < FAIL_IOU)),
                     'seed_purity_min': float(min(s.seed_purity for s in group)),
+                    'unreliable': int(sum(not s.reliable for s in group)),
                     'ms_median': 1e3 * float(np.median([s.seconds for s in group]))}
+    if out['seed_not_road']['frames']:
+        out['seed_not_road']['names'] = [s.name for s in sets['seed_not_road']]
     return out
 
 
 def format_summary(summary: Dict[str, Dict[str, float]]) -> str:
     """Render :func:`summarize` as a small text table."""
     lines = [f'{"set":16s} {"frames":>6s} {"IoU med":>8s} {"mean":>6s} {"min":>6s} '
-             f'{"prec":>6s} {"recall":>6s} {"fail<0.6":>8s} {"ms":>6s}']
+             f'{"prec":>6s} {"recall":>6s} {"fail<0.6":>8s} {"flagged":>7s} {"ms":>6s}']
     for key, s in summary.items():
         if not s['frames']:
             lines.append(f'{key:16s} {0:6d}')
@@ -142,7 +174,13 @@ def format_summary(summary: Dict[str, Dict[str, float]]) -> str:
         lines.append(f'{key:16s} {s["frames"]:6d} {s["iou_median"]:8.3f} {s["iou_mean"]:6.3f} '
                      f'{s["iou_min"]:6.3f} {s["precision_median"]:6.3f} '
                      f'{s["recall_median"]:6.3f} {s["failures"]:4d} '
-                     f'({100 * s["failure_rate"]:.0f}%) {s["ms_median"]:6.1f}')
+                     f'({100 * s["failure_rate"]:.0f}%) {s["unreliable"]:7d} '
+                     f'{s["ms_median"]:6.1f}')
+    bad = summary.get('seed_not_road', {}).get('names', [])
+    lines.append(f'seed band rows {SEED_ROWS} cols {SEED_COLS} of the image; '
+                 + (f'{len(bad)} frames whose seed is not road (< {SEED_ROAD_SHARE:.0%} road, '
+                    f'scored apart above): {" ".join(bad)}' if bad else
+                    f'the seed is road (>= {SEED_ROAD_SHARE:.0%}) on every frame'))
     return '\n'.join(lines)
 
 

@@ -16,8 +16,10 @@ in ``base_frame`` with the scan's stamp after every scan with valid readings:
   vision (in the robot's ground plane), z = number of corridors; NaN where not measured;
 
 and after every camera frame with a usable seed: ``road/outline`` (geometry_msgs/
-PolygonStamped, the outline on the ground plane, z = 0) and, with
-``publish_debug_image``, ``road/debug_image`` (sensor_msgs/Image bgr8).
+PolygonStamped, the outline on the ground plane, z = 0), ``road/outline_confidence``
+(geometry_msgs/Vector3Stamped: x = the outline's confidence in [0, 1], y = 1 when reliable,
+0 when flagged: below ``min_outline_confidence``, then not fused, the route follows the
+laser) and, with ``publish_debug_image``, ``road/debug_image`` (sensor_msgs/Image bgr8).
 
 The seed area of the vision outline is the newest laser's traversable segment under the
 robot projected through the camera model (a band ``seed_thickness_px`` thick). Bad input
@@ -42,6 +44,7 @@ from landmark_nav.road.fusion import (choose_route, extend_with_outline,
                                       pixels_to_ground, plan_routes, road_widths,
                                       vision_lines)
 from landmark_nav.road.outline import polyline_seed, road_outline, SeedError
+from landmark_nav.road.road_probability import default_model
 from landmark_nav.road.terrain import classify_scan, NOT_TRAVERSABLE
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
@@ -59,7 +62,9 @@ class RoadClassifier(Node):
         values = {name: declare(self, name, *p[:4]) for name, p in parameters().items()}
         try:
             config = road_configuration(values)
-        except ValueError as err:
+            if config.outline.method == 'learned':
+                default_model()
+        except (ValueError, OSError) as err:
             raise ParameterError(f'road_classifier: {err}') from err
         self.laser, self.terrain = config.laser, config.terrain
         self.fusion, self.outline_params = config.fusion, config.outline
@@ -84,6 +89,9 @@ class RoadClassifier(Node):
         self.pub_route = self.create_publisher(Path, 'road/route', 2)
         self.pub_width = self.create_publisher(Vector3Stamped, 'road/width', 10)
         self.pub_outline = self.create_publisher(PolygonStamped, 'road/outline', 2)
+        self.pub_confidence = self.create_publisher(Vector3Stamped, 'road/outline_confidence',
+                                                    10)
+        self.unreliable = 0              # outlines flagged unreliable (not fused)
         self.pub_debug = self.create_publisher(Image, 'road/debug_image', 2) \
             if self.debug else None
         self.stats.subscribe(LaserScan, scan_topic, self.on_scan, SENSOR_QOS)
@@ -200,7 +208,20 @@ class RoadClassifier(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         ground = pixels_to_ground(cam, self.camera_mount, out.polygon, self.max_distance)
         ground = ground[np.isfinite(ground).all(axis=1)]
-        self.outline = (stamp, ground)
+        conf = Vector3Stamped()
+        conf.header.stamp = msg.header.stamp
+        conf.header.frame_id = self.base_frame
+        conf.vector.x, conf.vector.y = float(out.confidence), float(out.reliable)
+        self.pub_confidence.publish(conf)
+        if out.reliable:
+            self.outline = (stamp, ground)
+        else:
+            # A doubtful seed or no clear border: the fusion leans on the laser alone.
+            self.outline = None
+            self.unreliable += 1
+            self.warner.warn(f'vision outline confidence {out.confidence:.2f} < '
+                             f'{self.outline_params.min_confidence:.2f} (seed not road-like '
+                             f'or no clear border): not fused ({self.unreliable} frames so far)')
         self.frames += 1
         poly = PolygonStamped()
         poly.header.stamp = msg.header.stamp

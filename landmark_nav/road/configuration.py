@@ -54,8 +54,16 @@ def parameters() -> Dict[str, Parameter]:
                                   'and grid extent ahead [m]', (1.0, 100.0)),
         'history': Parameter(FusionParams().history, 'scans kept for the corridors (eq. 29)',
                              (1, 1000)),
+        'outline_method': Parameter(OutlineParams().method, 'road criterion of the vision '
+                                    "outline: 'learned' (road probability of the packaged "
+                                    "model) or 'chapter' (eqs. 26-28)", None,
+                                    ['learned', 'chapter']),
         'k_limit': Parameter(OutlineParams().k_limit, 'road where P_c + P_e exceeds this '
-                             '(eq. 26)', (0.0, 2.0)),
+                             "(eq. 26; outline_method 'chapter')", (0.0, 2.0)),
+        'min_outline_confidence': Parameter(OutlineParams().min_confidence, 'an outline of '
+                                            'lower confidence (seed road probability, border '
+                                            'contrast) is flagged and not fused '
+                                            "(outline_method 'learned')", (0.0, 1.0)),
         'seed_thickness_px': Parameter(9, 'thickness of the seed band [px]', (1, 200)),
         'outline_timeout': Parameter(0.5, 'an outline older than this (scan time) is not '
                                      'fused [s]', (0.0, 60.0)),
@@ -108,7 +116,9 @@ def road_configuration(overrides: Optional[Mapping[str, Any]] = None) -> RoadCon
         terrain=TerrainParams(**{k: v[k] for k in TERRAIN_PARAMETERS}),
         fusion=FusionParams(robot_width=v['robot_width'], max_distance=v['max_distance'],
                             history=v['history']),
-        outline=OutlineParams(k_limit=v['k_limit']), seed_px=v['seed_thickness_px'],
+        outline=OutlineParams(k_limit=v['k_limit'], method=v['outline_method'],
+                              min_confidence=v['min_outline_confidence']),
+        seed_px=v['seed_thickness_px'],
         values=v)
 
 

@@ -34,6 +34,19 @@ Beyond the chapter, on its stated weaknesses:
   illuminant-colour direction ``invariant_angle`` (a camera constant), paired with the
   eq. 25 ``g`` -- which did not improve the real street frames (README.md at commit
   67eb6cc, Road following).
+
+On drives it was not tuned on, eqs. 26-28 flood across low kerbs onto pavement of the road's
+grey and, on overcast frames, over walls and parked cars. The default criterion
+(``method='learned'``) replaces eq. 26 by a learned road probability
+(:mod:`landmark_nav.road.road_probability`: colour relative to the seed, texture, image
+position) above ``p_road``, evaluated at 160 x 120 and interpolated to the working size;
+the seed's connected region, the closing and the hole filling are the same.
+``method='chapter'`` keeps eqs. 26-28.
+
+Each outline carries a confidence in [0, 1]: the smaller of the model's mean road
+probability on the seed (is the seed road at all?) and the contrast of that probability
+across the region's border (mean inside minus mean in a band ``ring_px`` wide outside: is
+the border clear?); ``reliable`` when it reaches ``min_confidence``.
 """
 
 from dataclasses import dataclass
@@ -41,6 +54,8 @@ import math
 from typing import Optional
 
 import cv2
+from landmark_nav.road.road_probability import (FEATURE_SIZE, road_probability,
+                                                RoadModel)
 import numpy as np
 
 #: Processing size of the chapter (columns, rows).
@@ -69,6 +84,10 @@ class OutlineParams:
     regularization: float = 1e-5
     chroma_noise: float = 1.0
     min_seed_pixels: int = 20
+    method: str = 'learned'
+    p_road: float = 0.5
+    ring_px: int = 6
+    min_confidence: float = 0.5
 
     def __post_init__(self) -> None:
         """Check the ranges."""
@@ -81,6 +100,15 @@ class OutlineParams:
             raise ValueError(f"outline chroma must be 'rg' or 'invariant'; got {self.chroma!r}")
         if self.close_px < 0 or self.min_seed_pixels < 1:
             raise ValueError('outline close_px must be >= 0 and min_seed_pixels >= 1')
+        if self.method not in ('learned', 'chapter'):
+            raise ValueError(f"outline method must be 'learned' or 'chapter'; got "
+                             f'{self.method!r}')
+        for name in ('p_road', 'min_confidence'):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f'outline {name} must be in [0, 1]; got {value!r}')
+        if self.ring_px < 1:
+            raise ValueError(f'outline ring_px must be >= 1; got {self.ring_px!r}')
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,15 +120,23 @@ class RoadOutline:
         polygon: (K, 2) float pixel (u, v) of the outer border of the road region (empty
             when there is none).
         seed: (H, W) bool, the seed area used.
-        p_c: (240, 320) float32 eq. 27 at the working size (for debugging).
-        p_e: (240, 320) float32 eq. 28 at the working size.
+        p_c: (240, 320) float32 eq. 27 at the working size (for debugging; None with the
+            learned criterion).
+        p_e: (240, 320) float32 eq. 28 at the working size (None with the learned one).
+        probability: (120, 160) float32 learned road probability (None with eqs. 26-28).
+        confidence: In [0, 1]: min(seed road probability, border contrast); 1.0 with
+            eqs. 26-28, which have no such measure.
+        reliable: ``confidence >= min_confidence``.
     """
 
     mask: np.ndarray
     polygon: np.ndarray
     seed: np.ndarray
-    p_c: np.ndarray
-    p_e: np.ndarray
+    p_c: Optional[np.ndarray]
+    p_e: Optional[np.ndarray]
+    probability: Optional[np.ndarray] = None
+    confidence: float = 1.0
+    reliable: bool = True
 
 
 def chromaticity(rgb: np.ndarray, kind: str = 'rg',
@@ -154,13 +190,15 @@ def _fill_marking_holes(mask: np.ndarray, intensity: np.ndarray, road_level: flo
 
 
 def road_outline(rgb: np.ndarray, seed: np.ndarray,
-                 params: OutlineParams = OutlineParams()) -> RoadOutline:
-    """Find the road region connected to a seed area (eqs. 25-28).
+                 params: OutlineParams = OutlineParams(),
+                 model: Optional[RoadModel] = None) -> RoadOutline:
+    """Find the road region connected to a seed area (eqs. 25-28 or the learned criterion).
 
     Args:
         rgb: (H, W, 3) uint8 image in RGB order.
         seed: (H, W) bool mask of the seed area (the laser's traversable segment).
         params: Weights and limits.
+        model: Road-probability model of the learned criterion (default: the packaged one).
 
     Returns:
         The road mask and outline at the input resolution.
@@ -183,6 +221,50 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
     if n_seed < params.min_seed_pixels:
         raise SeedError(f'seed area has {n_seed} pixels at {WORK_SIZE[0]}x{WORK_SIZE[1]} '
                         f'(needs {params.min_seed_pixels})')
+    if params.method == 'learned':
+        prob = road_probability(img, seed, model)
+        road = (_work_size(prob) > params.p_road) | seed_s
+        p_c = p_e = None
+    else:
+        prob = None
+        p_c, p_e = _chapter_criterion(small, seed_s, params)
+        road = ((p_c + p_e) > params.k_limit) | seed_s                      # eq. 26
+    region = _seed_region(road, seed_s)
+    if params.close_px > 0:
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.close_px, params.close_px))
+        region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, k) > 0
+    if params.fill_holes:
+        grey = small.astype(np.float32).mean(axis=2)
+        region = _fill_marking_holes(region, grey, float(grey[seed_s].mean()),
+                                     params.marking_contrast, params.small_hole)
+    mask = cv2.resize(region.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_SIMPLE)
+    if contours:
+        polygon = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(float)
+    else:
+        polygon = np.zeros((0, 2))
+    if prob is None:
+        return RoadOutline(mask, polygon, seed, p_c, p_e)
+    confidence = outline_confidence(prob, region, seed_s, params.ring_px)
+    return RoadOutline(mask, polygon, seed, None, None, prob, confidence,
+                       confidence >= params.min_confidence)
+
+
+def _work_size(prob: np.ndarray) -> np.ndarray:
+    return cv2.resize(prob, WORK_SIZE, interpolation=cv2.INTER_LINEAR)
+
+
+def _seed_region(road: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Return the connected (4-neighbour) parts of ``road`` that touch the seed."""
+    _, labels = cv2.connectedComponents(road.astype(np.uint8), connectivity=4)
+    keep = np.unique(labels[seed])
+    return np.isin(labels, keep[keep > 0])
+
+
+def _chapter_criterion(small: np.ndarray, seed_s: np.ndarray,
+                       params: OutlineParams) -> tuple[np.ndarray, np.ndarray]:
+    """P_c (eq. 27) and P_e (eq. 28) at the working size."""
     c = chromaticity(small, params.chroma, params.invariant_angle)
     cs = c[seed_s].astype(np.float64)
     mean = cs.mean(axis=0)
@@ -200,25 +282,26 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
     if params.log_gradient:
         intensity = 64.0 * np.log1p(intensity)
     p_e = 1.0 / (1.0 + params.w_e * _gradient_squared(intensity))           # eq. 28
-    road = ((p_c + p_e) > params.k_limit) | seed_s                          # eq. 26
-    _, labels = cv2.connectedComponents(road.astype(np.uint8), connectivity=4)
-    keep = np.unique(labels[seed_s])
-    region = np.isin(labels, keep[keep > 0])
-    if params.close_px > 0:
-        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.close_px, params.close_px))
-        region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, k) > 0
-    if params.fill_holes:
-        grey = small.astype(np.float32).mean(axis=2)
-        region = _fill_marking_holes(region, grey, float(grey[seed_s].mean()),
-                                     params.marking_contrast, params.small_hole)
-    mask = cv2.resize(region.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
-    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL,
-                                   cv2.CHAIN_APPROX_SIMPLE)
-    if contours:
-        polygon = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(float)
-    else:
-        polygon = np.zeros((0, 2))
-    return RoadOutline(mask, polygon, seed, p_c.astype(np.float32), p_e.astype(np.float32))
+    return p_c.astype(np.float32), p_e.astype(np.float32)
+
+
+def outline_confidence(prob: np.ndarray, region: np.ndarray, seed: np.ndarray,
+                       ring_px: int) -> float:
+    """Confidence of an outline in [0, 1]: min(seed road probability, border contrast).
+
+    ``prob`` is the (120, 160) road probability, ``region`` and ``seed`` masks at the
+    working size; the contrast is the mean probability inside the region minus its mean in
+    a band ``ring_px`` (at 160 x 120) wide around it.
+    """
+    size = FEATURE_SIZE
+    reg = cv2.resize(region.astype(np.uint8), size, interpolation=cv2.INTER_AREA) > 0
+    sd = cv2.resize(seed.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1,) * 2)
+    ring = (cv2.dilate(reg.astype(np.uint8), k) > 0) & ~reg
+    seed_p = float(prob[sd].mean()) if sd.any() else 0.0
+    inside = float(prob[reg].mean()) if reg.any() else 0.0
+    outside = float(prob[ring].mean()) if ring.any() else 0.0
+    return max(0.0, min(seed_p, inside - outside))
 
 
 def band_seed(shape: tuple, rows: tuple, cols: tuple) -> np.ndarray:

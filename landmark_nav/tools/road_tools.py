@@ -2,6 +2,8 @@
 
 * ``landmark_nav evaluate-road-outline FOLDER``: the vision road outline on labelled street
   frames (IoU, precision, recall per frame set; overlays).
+* ``landmark_nav train-road-outline --data DIR [DIR ...] --out FILE``: fit the outline's
+  road-probability model to labelled street frames.
 * ``landmark_nav evaluate-road-laser``: tilted-laser terrain classification on the park-road
   simulator (per-reading accuracy, road width as in Table 3).
 * ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
@@ -19,13 +21,20 @@ stops the command (exit status 2) naming the nearest declared one.
 import argparse
 import json
 from pathlib import Path
+from typing import Optional
 
 
-def _configuration(args: argparse.Namespace):
-    """Return the ``road_classifier`` configuration of ``--params-file`` and ``--set``."""
+def _configuration(args: argparse.Namespace, scene: Optional[dict] = None):
+    """Return the ``road_classifier`` configuration of ``--params-file`` and ``--set``.
+
+    ``scene``: values between the files and ``--set`` (the simulated roads'
+    ``SIM_OUTLINE``: the chapter's criterion on rendered frames, whatever a node file says;
+    ``--set`` still overrides it).
+    """
     from landmark_nav.road.configuration import NODE, road_configuration
     from landmark_nav.tools.node_parameters import given_parameters
-    return road_configuration(given_parameters(args.params_file, args.set, NODE))
+    return road_configuration({**given_parameters(args.params_file, [], NODE), **(scene or {}),
+                               **given_parameters([], args.set, NODE)})
 
 
 def _cmd_evaluate_road_outline(args: argparse.Namespace) -> int:
@@ -66,6 +75,15 @@ def add_parsers(sub, parser_class) -> None:
     add_arguments(p, NODE)
     p.set_defaults(func=_cmd_evaluate_road_outline)
 
+    p = sub.add_parser('train-road-outline', help='fit the road-probability model of the road '
+                       'outline to folders of labelled street frames (images/, '
+                       'labels_camvid11/)')
+    p.add_argument('--data', nargs='+', required=True, metavar='DIR',
+                   help='e.g. ../shared/data/camvid_train')
+    p.add_argument('--out', required=True, help='model file to write (.npz)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    p.set_defaults(func=_cmd_train_road_outline)
+
     p = sub.add_parser('evaluate-road-laser', help='score the tilted-laser terrain '
                        'classification on simulated park roads (accuracy, road width)')
     p.add_argument('--kinds', nargs='+', default=['asphalt', 'gravel'],
@@ -92,6 +110,19 @@ def add_parsers(sub, parser_class) -> None:
     p.set_defaults(func=_cmd_evaluate_road_vision)
 
 
+def _cmd_train_road_outline(args: argparse.Namespace) -> int:
+    from landmark_nav.evaluation.road_cross_drive import sample_frames, train
+    import numpy as np
+    data = sample_frames([Path(d) for d in args.data], seed=args.seed)
+    model = train(data, seed=args.seed)
+    path = model.save(args.out)
+    drives = ', '.join(f'{d} {n}' for d, n in zip(*np.unique(data.drive, return_counts=True)))
+    print(f'{len(data.y)} pixels (drive: pixels {drives}); {len(data.skipped)} frames '
+          f'skipped, their seed band not road: {" ".join(data.skipped) or "none"}')
+    print(f'model: {path} ({path.stat().st_size} bytes)')
+    return 0
+
+
 def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.road_laser import evaluate_laser_road
     config = _configuration(args)
@@ -106,8 +137,9 @@ def _cmd_evaluate_road_laser(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate_road_vision(args: argparse.Namespace) -> int:
-    from landmark_nav.evaluation.road_fusion import evaluate_vision_road, write_sim_overlays
-    config = _configuration(args)
+    from landmark_nav.evaluation.road_fusion import (evaluate_vision_road, SIM_OUTLINE,
+                                                     write_sim_overlays)
+    config = _configuration(args, SIM_OUTLINE)
     print(f'{"road":8s} {"lighting":13s} {"true m":>6s} {"frames":>6s} {"width":>6s} '
           f'{"sigma":>6s} {"N":>5s} {"fail %":>6s} {"open %":>6s} {"reach":>5s}')
     if args.frames < 0:
