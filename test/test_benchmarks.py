@@ -88,7 +88,7 @@ TINY_RUNS = {
          r'segmented_hough manhattan\s+[\d.]+')],
     'bench_road.py': [
         (['--scans', '3', '--frames', '2', '--data', '{camvid}'],
-         r'vision CamVid 480x360 -> 320x240\s+[\d.]+')],
+         r'vision CamVid 480x360 learned\s+[\d.]+')],
     'bench_corridor.py': [
         (['frames', '--frames', '2', '--repeat', '1', '--speed-only'],
          r'segmented_hough\s+[\d.]+\s+[\d.]+'),
