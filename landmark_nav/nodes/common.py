@@ -562,14 +562,16 @@ def output_path(name: str) -> Path:
     return path if path.is_absolute() else ros_home() / 'landmark_nav' / path
 
 
-def initial_pose(msg, frame_id: str, warner: 'ProblemWarner', fallback_cov: np.ndarray,
+def initial_pose(msg, frame_id: str, stats: 'InputStats', fallback_cov: np.ndarray,
                  fallback_name: str):
     """Read an ``initialpose`` message (RViz "2D Pose Estimate") for a localizer's reset.
 
     A message that cannot be read, or is in another frame than ``frame_id`` (an empty frame
-    is taken as it), is dropped with a warning; a covariance that is not finite, symmetric
-    and positive definite is replaced by ``fallback_cov`` with a warning naming
-    ``fallback_name`` (the parameters it comes from).
+    is taken as it), is dropped with a warning and counted by ``stats``
+    (``dropped.initialpose_malformed``, ``dropped.initialpose_frame``); a covariance that is
+    not finite, symmetric and positive definite is replaced by ``fallback_cov`` with a
+    warning naming ``fallback_name`` (the parameters it comes from), counted as
+    ``initialpose.covariance_replaced``.
 
     Returns:
         ``((x, y, yaw), (3, 3) covariance)``, or None when the message is dropped.
@@ -577,14 +579,16 @@ def initial_pose(msg, frame_id: str, warner: 'ProblemWarner', fallback_cov: np.n
     try:
         data = pose_with_covariance_to_pose(msg)
     except ConversionError as err:
-        warner.warn(f'Dropping initial pose: {err}')
+        stats.drop('initialpose_malformed', f'Dropping initial pose: {err}')
         return None
     if data.frame_id not in ('', frame_id):
-        warner.warn(f'Dropping initial pose in frame {data.frame_id!r}: expected {frame_id!r}')
+        stats.drop('initialpose_frame',
+                   f'Dropping initial pose in frame {data.frame_id!r}: expected {frame_id!r}')
         return None
     cov = np.asarray(data.covariance, dtype=float)
     if not (np.isfinite(cov).all() and np.allclose(cov, cov.T)
             and np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() > 0.0):
-        warner.warn(f'initial pose covariance is not positive definite: using {fallback_name}')
+        stats.event('initialpose.covariance_replaced',
+                    f'initial pose covariance is not positive definite: using {fallback_name}')
         cov = fallback_cov
     return data.pose, cov

@@ -176,7 +176,7 @@ class LandmarkDetector(Node):
             self.camera = camera_info_to_model(msg)
             self.info_frame = msg.header.frame_id
         except ConversionError as err:
-            self.warner.warn(f'Ignoring camera_info: {err}')
+            self.stats.drop('camera_info_malformed', f'Ignoring camera_info: {err}')
 
     def on_image(self, msg: Image) -> None:
         """Convert and process one raw image."""
