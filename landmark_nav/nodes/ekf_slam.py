@@ -92,7 +92,9 @@ as out of order unless ``restart_messages`` of them in a row restart, ``odometry
 or a withdrawn future stamp (``odometry.retracted``); scans and
 corner clouds with stamp 0 are ``dropped.malformed``, scans of more than ``max_beams`` beams
 ``dropped.oversized``; corners with NaN
-or with a covariance that is not positive semi-definite are dropped; corner sets older than
+or with a covariance that is not positive semi-definite are dropped from their set (sets
+counted as ``corners.nonfinite`` / ``corners.covariance_not_psd``); a feature set whose scan
+or corners were lost goes on without them (``features.incomplete``); corner sets older than
 the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
 wait for odometry (before the first step: when the waiting sets take more than
 ``MAX_START_BYTES``; the odometry may start seconds after the laser). Corner sets stamped
@@ -412,8 +414,9 @@ class EkfSlamNode(Node):
                     self._handed.discard(self._handed_order.popleft())
             lost = [p for p in missing if self._has_publisher(p)]
             if lost:
-                self.warner.warn(f'Feature set at {stamp} ns without its {" and ".join(lost)} '
-                                 f'(lost: a later one came): using what came')
+                self.stats.event('features.incomplete', f'Feature set at {stamp} ns without its '
+                                 f'{" and ".join(lost)} (lost: a later one came): using what '
+                                 'came')
             for p in set(missing) - set(lost) - self._absent_noted:
                 self._absent_noted.add(p)
                 self.get_logger().info(f'No publisher on {self._topics[p]}: feature sets go '
@@ -512,17 +515,17 @@ class EkfSlamNode(Node):
         finite = np.all(np.isfinite(cols), axis=1)
         if not np.all(finite):
             bad = cols[~finite][0]
-            self.warner.warn(f'Dropping {int(np.sum(~finite))} corners with NaN or inf '
-                             f'(first: {bad.tolist()})')
+            self.stats.event('corners.nonfinite', f'Dropping {int(np.sum(~finite))} corners '
+                             f'with NaN or inf (first: {bad.tolist()})')
         with np.errstate(invalid='ignore'):
             psd = (cols[:, 4] >= 0) & (cols[:, 6] >= 0) & (
                 cols[:, 4] * cols[:, 6] - cols[:, 5] ** 2 >= 0)
         bad = finite & ~psd
         if np.any(bad):
             c = cols[bad][0]
-            self.warner.warn(f'Dropping {int(np.sum(bad))} corners whose covariance is not '
-                             f'positive semi-definite (first: cov_xx={c[4]:g}, '
-                             f'cov_xy={c[5]:g}, cov_yy={c[6]:g})')
+            self.stats.event('corners.covariance_not_psd', f'Dropping {int(np.sum(bad))} '
+                             'corners whose covariance is not positive semi-definite (first: '
+                             f'cov_xx={c[4]:g}, cov_xy={c[5]:g}, cov_yy={c[6]:g})')
         return cols[finite & psd]
 
     def _publish_steps(self, steps: list, odometry_received_ns: int = 0) -> None:
