@@ -33,7 +33,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ns_to_stamp
 from landmark_nav.drivers.errors import ProtocolError
 from landmark_nav.drivers.transport import SerialTransport, TransportError
-from landmark_nav.nodes.common import declare, ParameterError
+from landmark_nav.nodes.common import declare, ParameterError, release_free_heap
 from rclpy.node import Node
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -259,7 +259,8 @@ class DiagnosticsPublisher:
         self.last: Optional[Status] = None
 
     def publish(self) -> None:
-        """Publish the current state now."""
+        """Publish the current state now (and return free heap, :func:`release_free_heap`)."""
+        release_free_heap()
         status = self.health.status()
         self.last = status
         entries = [(self.name, self.hardware_id, status)]
