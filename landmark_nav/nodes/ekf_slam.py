@@ -109,7 +109,6 @@ in that queue in its first 15 s).
 """
 
 from collections import deque
-import itertools
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -316,8 +315,13 @@ class EkfSlamNode(Node):
         self._newest_part_ns = None
 
     def _clear_path(self) -> None:
-        self.path_steps = deque(maxlen=self.path_max_poses)  # (stamp_ns, pose) per step
-        self.path_poses = deque(maxlen=self.path_max_poses)  # PoseStamped, built at display
+        # The last path_max_poses steps in a ring written in place (np.full touches every
+        # page now: the memory of a long run does not grow with it), 32 bytes a pose.
+        n = self.path_max_poses
+        self._path_t = np.full(n, 0, dtype=np.int64)  # stamp [ns] of step k at k % n
+        self._path_pose = np.full((n, 3), 0.0)  # its pose
+        self._path_count = 0  # steps since the clear
+        self.path_poses = deque(maxlen=n)  # PoseStamped, built at display
         self._path_new = 0  # steps not yet in path_poses
 
     def _on_event(self, kind: str, message: str) -> None:
@@ -558,18 +562,21 @@ class EkfSlamNode(Node):
             p.covariance = set_covariance3(p.covariance, cov)
         self.pub_pose.publish(self._pose_msg)
         self.pub_odom.publish(self._odom_msg)
-        self.path_steps.append((t, pose))
+        k = self._path_count % self.path_max_poses
+        self._path_t[k], self._path_pose[k] = t, pose
+        self._path_count += 1
         self._path_new += 1
         self.display_stamp = t
 
     def path_message(self) -> PathMsg:
         """Return the path of the last ``path_max_poses`` steps."""
-        n = min(self._path_new, len(self.path_steps))
-        for t, pose in itertools.islice(self.path_steps, len(self.path_steps) - n, None):
+        n = min(self._path_new, self.path_max_poses, self._path_count)
+        for i in range(self._path_count - n, self._path_count):
+            k = i % self.path_max_poses
             ps = PoseStamped()  # built once per step: the path message only lists them
-            set_stamp(ps.header, t)
+            set_stamp(ps.header, int(self._path_t[k]))
             ps.header.frame_id = self.map_frame
-            set_pose_2d(ps.pose, pose)
+            set_pose_2d(ps.pose, self._path_pose[k])
             self.path_poses.append(ps)
         self._path_new = 0
         path = PathMsg()
