@@ -3,8 +3,9 @@
 from pathlib import Path
 from types import SimpleNamespace
 
-from landmark_nav.nodes import common
-from landmark_nav.nodes.common import output_path, problem_kind, ProblemWarner, release_free_heap
+from landmark_nav import heap
+from landmark_nav.heap import release_free_heap
+from landmark_nav.nodes.common import output_path, problem_kind, ProblemWarner
 
 
 def warner(period=5.0):
@@ -47,11 +48,11 @@ def test_output_path_puts_relative_names_under_ros_home(monkeypatch, tmp_path):
 
 def test_free_heap_is_released_at_most_every_period(monkeypatch):
     calls = []
-    monkeypatch.setitem(common._heap, 'trim', calls.append)
-    monkeypatch.setitem(common._heap, 'last', -common.HEAP_RELEASE_S)
-    period = common.HEAP_RELEASE_S
+    monkeypatch.setitem(heap._heap, 'trim', calls.append)
+    monkeypatch.setitem(heap._heap, 'last', -heap.HEAP_RELEASE_S)
+    period = heap.HEAP_RELEASE_S
     assert release_free_heap(now=0.0) and calls == [0]  # malloc_trim(0): every free page
     assert not release_free_heap(now=0.5 * period) and calls == [0]
     assert release_free_heap(now=period) and calls == [0, 0]
-    monkeypatch.setitem(common._heap, 'trim', False)  # not glibc: nothing to call
+    monkeypatch.setitem(heap._heap, 'trim', False)  # not glibc: nothing to call
     assert not release_free_heap(now=3.0 * period)

@@ -6,15 +6,14 @@
 * :class:`InputStats`: processed / dropped inputs and latency percentiles of a node, on
   ``/diagnostics`` and in throttled warnings.
 * :func:`limit_threads`: numerical libraries single-threaded unless configured.
-* :func:`release_free_heap`: the C heap's free pages back to the OS every
-  :data:`HEAP_RELEASE_S` (called by the nodes' 1 Hz diagnostics timers).
+* :func:`~landmark_nav.heap.release_free_heap` runs from the nodes' 1 Hz diagnostics timers
+  (:class:`InputStats`, the drivers' ``DiagnosticsPublisher``).
 * :func:`run_node`: the standard main (threads, undeclared parameter names refused
   (:func:`reject_undeclared`), spin, clean shutdown on SIGINT / SIGTERM);
   :func:`destroy_and_shutdown` its bounded shutdown.
 """
 
 from collections import Counter, deque
-import ctypes
 import faulthandler
 import math
 import os
@@ -26,6 +25,7 @@ from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ConversionError, pose_with_covariance_to_pose
+from landmark_nav.heap import release_free_heap
 from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.parameter_tables import dataclass_parameters, field_value
 import numpy as np
@@ -125,42 +125,6 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
                              f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
     except InvalidParameterValueException as err:
         raise ParameterError(f'parameter {name}: {err}') from err
-
-
-#: Seconds between two calls of :func:`release_free_heap` that return memory to the OS.
-HEAP_RELEASE_S = 10.0
-_heap = {'trim': None, 'last': -math.inf}  # glibc's malloc_trim (False: none), last call
-
-
-def release_free_heap(now: Optional[float] = None) -> bool:
-    """Give the C heap's free pages back to the OS, at most every :data:`HEAP_RELEASE_S`.
-
-    A node allocates and frees numpy arrays of many sizes at every input (scans, line fits,
-    the filter's matrices); glibc keeps the freed chunks between live ones and returns
-    only the top of its heaps, so the resident size of a long run creeps up while the live
-    data stays flat (ekf_slam on the emulated robot: malloc's bytes in use flat at
-    36.5 MB, its free bytes 2.7 -> 4.7 MB in 4 minutes). ``malloc_trim(0)`` returns every
-    whole free page (Linux ``madvise``). Without glibc (another C library) nothing happens.
-
-    Args:
-        now: Monotonic time [s] (default: now).
-
-    Returns:
-        Whether the heap was trimmed.
-    """
-    now = time.monotonic() if now is None else now
-    if now - _heap['last'] < HEAP_RELEASE_S:
-        return False
-    _heap['last'] = now
-    if _heap['trim'] is None:
-        try:
-            _heap['trim'] = ctypes.CDLL(None).malloc_trim  # the process's own C library
-        except (OSError, AttributeError):
-            _heap['trim'] = False
-    if not _heap['trim']:
-        return False
-    _heap['trim'](0)
-    return True
 
 
 def limit_threads(default: int = 1) -> Optional[int]:

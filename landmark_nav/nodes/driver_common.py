@@ -33,7 +33,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ns_to_stamp
 from landmark_nav.drivers.errors import ProtocolError
 from landmark_nav.drivers.transport import SerialTransport, TransportError
-from landmark_nav.nodes.common import declare, ParameterError, release_free_heap
+from landmark_nav.heap import release_free_heap
+from landmark_nav.nodes.common import declare, ParameterError
 from rclpy.node import Node
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
