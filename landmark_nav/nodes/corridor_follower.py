@@ -23,7 +23,7 @@ the CameraInfo), images before a valid CameraInfo (``dropped.no_camera_info``), 
 lost before the callback (``dropped.lost``); frames without a corridor
 (``image.corridor_lost``), visual estimates the gate rejects (``image.rejected``) and
 odometry going back in time (``odometry.back_in_time``). A CameraInfo that does not
-convert (e.g. zero focal length) is ignored with a warning.
+convert (e.g. zero focal length) is ignored with a warning (``dropped.camera_info_malformed``).
 """
 
 import cv2

@@ -15,7 +15,9 @@ Publishes, stamped with the image: ``pose`` (geometry_msgs/PoseWithCovarianceSta
 ``tracking`` or ``lost``) when it changes, and with ``publish_debug_image`` the image with
 the model lines rendered at the prior pose (red), the matched image lines (green) and the
 other image lines (blue) on ``model_localizer/debug_image`` (bgr8). Inputs processed and
-dropped and the latency are on ``/diagnostics``.
+dropped (with the reasons: ``dropped.camera_info_malformed``, ``dropped.initialpose_frame``
+...) and the latency are on ``/diagnostics``; odometry older than the last sample restarts
+the increments (``odometry.back_in_time``).
 
 Bad input -- undecodable images, no CameraInfo yet or one without a focal length, an image
 whose size disagrees with it, frames without lines, an empty model, a pose outside the

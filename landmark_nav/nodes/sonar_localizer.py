@@ -35,7 +35,8 @@ for ``sonar_timeout`` it publishes dead reckoning at every odometry sample. Odom
 back in time (a looped bag) resets the time bookkeeping. Bad messages (NaN or out-of-limit
 ranges, a field of view that is not finite and >= 0, malformed odometry, joint states or
 maps) are dropped with a warning throttled per kind of problem; the node keeps running.
-Estimates published, inputs dropped and the latency are on ``/diagnostics``
+Estimates published, inputs dropped (with the reasons, e.g. ``dropped.map_malformed``,
+``dropped.initialpose_frame``) and the latency are on ``/diagnostics``
 (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
