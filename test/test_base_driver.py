@@ -330,8 +330,18 @@ def test_bad_parameters_are_refused(tmp_path):
                            parameter_overrides=[Parameter(name, value=value)])
 
 
+def input_counts(diag):
+    """Return the values of the latest ``base_driver: input`` status ({} before one)."""
+    for array in reversed(diag):
+        entry = level(array, 'base_driver: input')
+        if entry:
+            return entry[2]
+    return {}
+
+
 def test_nan_cmd_vel_is_ignored(tmp_path):
     with rig(tmp_path) as r:
+        diag = r.ros.collect('/diagnostics', DiagnosticArray)
         assert r.ros.wait_until(lambda: r.node.client.is_open, 5.0)
         r.twist(math.nan, 0.0)
         r.twist(0.1, math.inf)
@@ -339,6 +349,20 @@ def test_nan_cmd_vel_is_ignored(tmp_path):
         assert not r.device.commands_named('VEL', 'RVEL')
         r.twist(0.1, 0.0)
         assert r.ros.wait_until(lambda: r.device.commands_named('VEL'), 2.0)
+        assert r.ros.wait_until(lambda: input_counts(diag).get('processed') == '1', 2.0)
+        counts = input_counts(diag)
+        assert counts['dropped.malformed'] == '2' and counts['dropped'] == '2'
+
+
+def test_cmd_vel_without_robot_is_counted_as_not_connected(tmp_path):
+    with rig(tmp_path, url=str(tmp_path / 'no_robot')) as r:
+        diag = r.ros.collect('/diagnostics', DiagnosticArray)
+        r.twist(0.1, 0.0)
+        r.twist(0.2, 0.0)
+        assert r.ros.wait_until(lambda: input_counts(diag).get('dropped') == '2', 3.0)
+        counts = input_counts(diag)
+        assert counts['dropped.not_connected'] == '2' and counts['processed'] == '0'
+        assert not r.node.client.is_open
 
 
 # ------------------------------------------------------------------------- shutdown

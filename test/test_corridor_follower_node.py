@@ -143,6 +143,7 @@ def test_lost_estimate_stops_the_robot_and_bad_camera_info_is_survived():
         before = node.warner.count
         pub.publish(bad)
         assert ros.wait_until(lambda: node.warner.count > before, 10)
+        assert node.stats.dropped['camera_info_malformed'] == 1  # counted on /diagnostics
         said = []
         warn = node.warner.warn
         node.warner.warn = lambda message: (said.append(message), warn(message))

@@ -549,6 +549,7 @@ def test_negative_corner_covariance_is_warned_with_its_value():
         slam.on_corners(corner_cloud(t0 + 50_000_000, [good, bad]))
         assert updates == [1]  # the good corner only
         assert len(warnings) == 1 and 'cov_xx=-0.0001' in warnings[0], warnings
+        assert slam.stats.events['corners.covariance_not_psd'] == 1  # on /diagnostics
         slam.destroy_node()
 
 

@@ -222,3 +222,13 @@ def test_the_base_records_are_bounded_on_a_long_run():
     assert alive_after(300) == (100, 400, 300)
     assert alive_after(600) == (100, 400, 600)  # one minute more: the true path's 60 s
     assert alive_after(600) == (100, 400, 600)
+
+
+def test_the_command_keeps_records_of_a_few_seconds():
+    """``emulate robot`` kept a minute of records nobody reads (growing after the warm-up)."""
+    from landmark_nav.emulators import robot
+    from landmark_nav.tools.cli import build_parser
+    base, laser = robot.make_from_args(build_parser().parse_args(['emulate', 'robot']))
+    assert base.sent.size == round(robot.CLI_RECORD_S / base.cycle_s) == 20
+    assert base.commands.size == 4 * base.sent.size
+    assert laser.sent.maxlen == robot.CLI_RECORD_SCANS

@@ -209,12 +209,16 @@ def test_scan_drops_have_their_true_reason():
                                                        warn(message, detail))
         big = make_scan(T0, 'laser', -math.pi / 2, math.pi / 200_000, np.full(200_000, 4.0),
                         0.1, 30.0)
-        for msg in (scan(T0), big, scan(0), scan(T0 + 100 * MS)):
+        negative = scan(T0 + 200 * MS)
+        negative.ranges[7] = -0.5  # a beam no laser measures: invalid, the scan is used
+        for msg in (scan(T0), big, scan(0), scan(T0 + 100 * MS), negative):
             pub.publish(msg)
-        want = {'processed': '2', 'dropped.oversized': '1', 'dropped.malformed': '1'}
+        want = {'processed': '3', 'dropped.oversized': '1', 'dropped.malformed': '1',
+                'scan.negative_ranges': '1'}
         assert ros.wait_until(lambda: all(input_status(diagnostics, 'corner_extractor').get(k)
                                           == v for k, v in want.items()), 30.0), \
             input_status(diagnostics, 'corner_extractor')
         assert 'dropped.lost' not in input_status(diagnostics, 'corner_extractor')
         assert said == ['Dropping scan: 200000 beams, more than max_beams 20000',
-                        'Dropping scan: LaserScan: stamp 0 ns is not a time (an unset header)']
+                        'Dropping scan: LaserScan: stamp 0 ns is not a time (an unset header)',
+                        'LaserScan: 1 negative ranges treated as invalid (first: ranges[7]=-0.5)']

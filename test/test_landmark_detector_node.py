@@ -229,6 +229,9 @@ def test_bad_input_warns_and_the_next_good_frame_is_processed(views_bag):
         info_pub.publish(bad_info)
         assert ros.wait_until(lambda: node.warner.count > count, 5)
         assert any('Ignoring camera_info' in t for t in _warnings(logs))
+        assert node.stats.dropped['camera_info_malformed'] == 1
+        assert {'dropped.camera_info_malformed': '1'}.items() <= {
+            v.key: v.value for v in node.stats.status().values}.items()
         # the same problem again (all black) is throttled: counted, not logged, and dropped
         n_logs, count, n_out = len(logs), node.warner.count, len(poses)
         img_pub.publish(array_to_image(np.zeros_like(gray), 'mono8', stamp, 'cam'))

@@ -502,6 +502,12 @@ def test_link_health_levels():
     h.on_connected(6.0)
     values = h.status(6.0)[2]
     assert values['reconnects'] == '1' and values['errors'] == '1' and values['frames'] == '11'
+    assert not any(k.startswith('dropped') for k in values)
+    h.on_drop('malformed', 'Dropping scan: angle_increment 0', 6.1)
+    h.on_drop('malformed', 'Dropping scan: angle_increment 0', 6.2)
+    level, message, values = h.status(6.3)
+    assert (level, message) == (WARN, 'Dropping scan: angle_increment 0')
+    assert values['dropped.malformed'] == '2' and values['problems'] == '2'
 
 
 # ---------------------------------------------------------------------------- sessions

@@ -123,6 +123,7 @@ def test_bad_input_and_initial_pose():
         assert ros.wait_until(lambda: node.warner.count > n_warn, 10)
         assert node.camera is None
         assert logged[-1].startswith('Ignoring camera_info: ') and 'focal' in logged[-1]
+        assert node.stats.dropped['camera_info_malformed'] == 1
         pub_info.publish(make_camera_info(cam, 0, 'camera'))
         assert ros.wait_until(lambda: node.camera is not None, 10)
         # frames without lines: a pose (prediction only) each, one warning (throttled)

@@ -3,6 +3,8 @@
 from pathlib import Path
 from types import SimpleNamespace
 
+from landmark_nav import heap
+from landmark_nav.heap import release_free_heap
 from landmark_nav.nodes.common import output_path, problem_kind, ProblemWarner
 
 
@@ -42,3 +44,15 @@ def test_output_path_puts_relative_names_under_ros_home(monkeypatch, tmp_path):
     assert output_path('/abs/a.yaml') == Path('/abs/a.yaml')
     monkeypatch.delenv('ROS_HOME')
     assert output_path('a.yaml') == Path.home() / '.ros' / 'landmark_nav' / 'a.yaml'
+
+
+def test_free_heap_is_released_at_most_every_period(monkeypatch):
+    calls = []
+    monkeypatch.setitem(heap._heap, 'trim', calls.append)
+    monkeypatch.setitem(heap._heap, 'last', -heap.HEAP_RELEASE_S)
+    period = heap.HEAP_RELEASE_S
+    assert release_free_heap(now=0.0) and calls == [0]  # malloc_trim(0): every free page
+    assert not release_free_heap(now=0.5 * period) and calls == [0]
+    assert release_free_heap(now=period) and calls == [0, 0]
+    monkeypatch.setitem(heap._heap, 'trim', False)  # not glibc: nothing to call
+    assert not release_free_heap(now=3.0 * period)

@@ -176,6 +176,7 @@ def test_bad_input_warns_and_keeps_tracking(hallway):
         feed.initialpose.publish(make_pose_with_covariance_stamped(
             0, 'odom', [5.0, 5.0, 1.0], np.eye(3)))
         _wait_for_warning(ros, logs, "Dropping initial pose in frame 'odom'")
+        assert node.stats.dropped['initialpose_frame'] == 1
         reset_cov = np.diag([0.04, 0.09, 0.01])
         feed.initialpose.publish(make_pose_with_covariance_stamped(
             0, 'map', [1.0, 0.5, 0.3], reset_cov))

@@ -42,6 +42,7 @@ from landmark_nav.emulators.laser_scene import LaserScene, SceneConfig
 from landmark_nav.emulators.p2os import OPEN, P2osDevice
 from landmark_nav.emulators.server import Device, DeviceServer, FaultInjector
 from landmark_nav.geometry import relative
+from landmark_nav.heap import release_free_heap
 from landmark_nav.sim.laser import compose
 from landmark_nav.sim.robot import step_pose, wheel_to_twist
 from landmark_nav.sim.scenarios import office_world
@@ -51,6 +52,10 @@ import numpy as np
 LASERS = ('urg', 'lms200')
 #: Default ``base_link -> laser`` mount [m, m, rad] (the shipped ekf_slam.yaml's laser_pose).
 DEFAULT_MOUNT = (0.0, 0.0, 0.0)
+#: Seconds of status packets and commands the command's base keeps (:func:`make_from_args`).
+CLI_RECORD_S = 2.0
+#: Scans sent the command's laser keeps.
+CLI_RECORD_SCANS = 20
 
 
 class RobotBase(P2osDevice):
@@ -348,10 +353,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def make_from_args(args: argparse.Namespace) -> Tuple[RobotBase, Device]:
-    """Build the base and its laser from the parsed options."""
-    kwargs = p2os_emulator.device_kwargs(args)
+    """Build the base and its laser from the parsed options.
+
+    The devices' records (status packets and commands, :data:`CLI_RECORD_S`; scans sent,
+    :data:`CLI_RECORD_SCANS`) are short: nothing reads them in the command (the tests build
+    the devices in-process), and full within seconds they keep a live run's memory flat.
+    """
+    kwargs = dict(p2os_emulator.device_kwargs(args), record_s=CLI_RECORD_S)
     scene = SceneConfig(p_error=args.p_error, p_close=args.p_close, seed=args.seed + 1)
-    laser_kwargs = {'jitter': args.jitter_ms / 1000.0, 'seed': args.seed}
+    laser_kwargs = {'jitter': args.jitter_ms / 1000.0, 'seed': args.seed,
+                    'history': CLI_RECORD_SCANS}
     if args.laser_baud is not None:
         laser_kwargs['baud'] = args.laser_baud
     return make_robot(args.laser, args.laser_model, args.laser_mount, scene, laser_kwargs,
@@ -398,7 +409,7 @@ def serve(args: argparse.Namespace, announce: Callable[[str], None] = print,
             threading.Thread(target=_schedule, args=(servers, args.fault, stop),
                              daemon=True).start()
         while not stop.wait(0.5):
-            pass
+            release_free_heap()  # at most every HEAP_RELEASE_S
     finally:
         for server in servers:
             server.stop()

@@ -27,8 +27,13 @@ arrival delays, as the laser driver does with the sensor's counter; arrival time
 
 Subscribes ``cmd_vel`` (geometry_msgs/Twist: linear.x, angular.z) -> VEL + RVEL or VEL2,
 clamped to the speed limits (the robot ramps with the SETA / SETRA limits sent at connect);
-STOP after ``cmd_vel_timeout`` without a command. Service ``~/enable_motors``
-(std_srvs/SetBool). STOP and CLOSE on shutdown (also on Ctrl-C: :meth:`destroy_node` runs
+STOP after ``cmd_vel_timeout`` without a command. A command is dropped, with a throttled
+warning and a count on ``/diagnostics`` (``base_driver: input``,
+:class:`~landmark_nav.nodes.common.InputStats`), when it is not finite (``malformed``) or
+arrives while the robot is not connected (``not_connected``: it is not sent later); device
+data that cannot be used (a sonar number outside the ring) is counted on the connection
+status (``dropped.<reason>``). Service ``~/enable_motors`` (std_srvs/SetBool). STOP and
+CLOSE on shutdown (also on Ctrl-C: :meth:`destroy_node` runs
 in :func:`~landmark_nav.nodes.common.run_node`'s shutdown path and needs no ROS context).
 """
 
@@ -45,8 +50,8 @@ from landmark_nav.drivers.p2os import P2osDecoder
 from landmark_nav.drivers.p2os_client import ClientConfig, P2osClient, SipUpdate
 from landmark_nav.hardware import SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE
 from landmark_nav.localization.wheel_odometry import WheelOdometry
-from landmark_nav.nodes.common import (declare, declare_strings, ParameterError, ProblemWarner,
-                                       run_node)
+from landmark_nav.nodes.common import (declare, declare_strings, InputStats, ParameterError,
+                                       ProblemWarner, run_node)
 from landmark_nav.nodes.driver_common import (declare_link_parameters, DeviceLink,
                                               DiagnosticsPublisher, ERROR, LinkHealth,
                                               make_transport, OK, Status, WARN)
@@ -170,6 +175,7 @@ class BaseDriver(Node):
         self._cycles = 0
         self._robot_origin = self._robot_base = (0.0, 0.0, 0.0)
         self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner, link['diagnostics_period'])
 
         self.pub_odom = self.create_publisher(Odometry, 'odom', 10)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', 10)
@@ -178,7 +184,7 @@ class BaseDriver(Node):
                           for i in range(NUM_SONARS)]
         self.tf = (TransformBroadcaster(self) if publish_tf and TransformBroadcaster
                    else None)
-        self.create_subscription(Twist, 'cmd_vel', self.on_cmd_vel, 10)
+        self.stats.subscribe(Twist, 'cmd_vel', self.on_cmd_vel, 10)
         self.create_service(SetBool, '~/enable_motors', self.on_enable_motors)
 
         self.health = LinkHealth(link['port'], link['stale_warn'], link['stale_error'],
@@ -291,7 +297,9 @@ class BaseDriver(Node):
                     stamp, f'{self.sonar_prefix}{number}', value, self.sonar_fov,
                     self.sonar_min, self.sonar_max))
             else:
-                self.warner.warn(f'sonar number {number} outside 0..{NUM_SONARS - 1}')
+                text = f'Dropping sonar reading: number {number} outside 0..{NUM_SONARS - 1}'
+                self.health.on_drop('sonar_number', text)
+                self.warner.warn(text)
         if arrival - self._last_battery >= self.battery_period:
             self._last_battery = arrival
             self.pub_battery.publish(self._battery(stamp, status.battery_v))
@@ -379,10 +387,16 @@ class BaseDriver(Node):
             with self._lock:
                 data = self.client.velocity(float(msg.linear.x), float(msg.angular.z),
                                             time.monotonic())
+                is_open = self.client.is_open
         except ValueError as err:
-            self.warner.warn(f'cmd_vel ignored: {err}')
+            self.stats.drop('malformed', f'Dropping cmd_vel: {err}')
+            return
+        if not is_open:
+            self.stats.drop('not_connected', 'Dropping cmd_vel: the robot is not connected '
+                            f'({self.link.transport.url}); send it again once connected')
             return
         self._send(data)
+        self.stats.processed()
 
     def on_enable_motors(self, request: SetBool.Request,
                          response: SetBool.Response) -> SetBool.Response:

@@ -6,6 +6,8 @@
 * :class:`InputStats`: processed / dropped inputs and latency percentiles of a node, on
   ``/diagnostics`` and in throttled warnings.
 * :func:`limit_threads`: numerical libraries single-threaded unless configured.
+* :func:`~landmark_nav.heap.release_free_heap` runs from the nodes' 1 Hz diagnostics timers
+  (:class:`InputStats`, the drivers' ``DiagnosticsPublisher``).
 * :func:`run_node`: the standard main (threads, undeclared parameter names refused
   (:func:`reject_undeclared`), spin, clean shutdown on SIGINT / SIGTERM);
   :func:`destroy_and_shutdown` its bounded shutdown.
@@ -23,6 +25,7 @@ from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ConversionError, pose_with_covariance_to_pose
+from landmark_nav.heap import release_free_heap
 from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.parameter_tables import dataclass_parameters, field_value
 import numpy as np
@@ -530,7 +533,8 @@ class InputStats:
                 f'since start ({_percent(dropped, processed):.3g} %: {reasons})')
 
     def publish(self) -> None:
-        """Publish the status on ``/diagnostics``."""
+        """Publish the status on ``/diagnostics`` (and free heap: :func:`release_free_heap`)."""
+        release_free_heap()
         status = self.status()
         self._reported_drops = self.dropped_count
         self._reported_processed = self.processed_count
@@ -562,14 +566,16 @@ def output_path(name: str) -> Path:
     return path if path.is_absolute() else ros_home() / 'landmark_nav' / path
 
 
-def initial_pose(msg, frame_id: str, warner: 'ProblemWarner', fallback_cov: np.ndarray,
+def initial_pose(msg, frame_id: str, stats: 'InputStats', fallback_cov: np.ndarray,
                  fallback_name: str):
     """Read an ``initialpose`` message (RViz "2D Pose Estimate") for a localizer's reset.
 
     A message that cannot be read, or is in another frame than ``frame_id`` (an empty frame
-    is taken as it), is dropped with a warning; a covariance that is not finite, symmetric
-    and positive definite is replaced by ``fallback_cov`` with a warning naming
-    ``fallback_name`` (the parameters it comes from).
+    is taken as it), is dropped with a warning and counted by ``stats``
+    (``dropped.initialpose_malformed``, ``dropped.initialpose_frame``); a covariance that is
+    not finite, symmetric and positive definite is replaced by ``fallback_cov`` with a
+    warning naming ``fallback_name`` (the parameters it comes from), counted as
+    ``initialpose.covariance_replaced``.
 
     Returns:
         ``((x, y, yaw), (3, 3) covariance)``, or None when the message is dropped.
@@ -577,14 +583,16 @@ def initial_pose(msg, frame_id: str, warner: 'ProblemWarner', fallback_cov: np.n
     try:
         data = pose_with_covariance_to_pose(msg)
     except ConversionError as err:
-        warner.warn(f'Dropping initial pose: {err}')
+        stats.drop('initialpose_malformed', f'Dropping initial pose: {err}')
         return None
     if data.frame_id not in ('', frame_id):
-        warner.warn(f'Dropping initial pose in frame {data.frame_id!r}: expected {frame_id!r}')
+        stats.drop('initialpose_frame',
+                   f'Dropping initial pose in frame {data.frame_id!r}: expected {frame_id!r}')
         return None
     cov = np.asarray(data.covariance, dtype=float)
     if not (np.isfinite(cov).all() and np.allclose(cov, cov.T)
             and np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() > 0.0):
-        warner.warn(f'initial pose covariance is not positive definite: using {fallback_name}')
+        stats.event('initialpose.covariance_replaced',
+                    f'initial pose covariance is not positive definite: using {fallback_name}')
         cov = fallback_cov
     return data.pose, cov

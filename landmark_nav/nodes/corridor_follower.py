@@ -23,7 +23,7 @@ the CameraInfo), images before a valid CameraInfo (``dropped.no_camera_info``), 
 lost before the callback (``dropped.lost``); frames without a corridor
 (``image.corridor_lost``), visual estimates the gate rejects (``image.rejected``) and
 odometry going back in time (``odometry.back_in_time``). A CameraInfo that does not
-convert (e.g. zero focal length) is ignored with a warning.
+convert (e.g. zero focal length) is ignored with a warning (``dropped.camera_info_malformed``).
 """
 
 import cv2
@@ -112,7 +112,7 @@ class CorridorFollower(Node):
         try:
             self.camera = camera_info_to_model(msg)
         except ConversionError as err:
-            self.warner.warn(f'Ignoring camera_info: {err}')
+            self.stats.drop('camera_info_malformed', f'Ignoring camera_info: {err}')
 
     def on_image(self, msg: Image) -> None:
         """Convert and process one raw image."""

@@ -7,7 +7,8 @@
   problem (a lost scan, a missing ACK, a hardware warning), else OK.
 * :class:`DiagnosticsPublisher` publishes that state as diagnostic_msgs/DiagnosticArray on
   ``/diagnostics`` (one DiagnosticStatus, about 1 Hz) with the key/values connection, port,
-  reconnects, frames, errors, bytes, publish rate, seconds since the last frame, last error
+  reconnects, frames, errors, bytes, publish rate, seconds since the last frame, last error,
+  ``dropped.<reason>`` (device data received but not published, :meth:`LinkHealth.on_drop`)
   and whatever the driver adds (model, firmware, hardware status ...).
 * :class:`DeviceLink` runs a thread that keeps the port open
   (:meth:`SerialTransport.ensure_open`, with back-off; a missing port is retried forever),
@@ -21,7 +22,7 @@ Levels are the byte values of diagnostic_msgs/DiagnosticStatus (OK 0, WARN 1, ER
 STALE 3).
 """
 
-from collections import deque
+from collections import Counter, deque
 import math
 import threading
 import time
@@ -32,6 +33,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from landmark_nav.conversions import ns_to_stamp
 from landmark_nav.drivers.errors import ProtocolError
 from landmark_nav.drivers.transport import SerialTransport, TransportError
+from landmark_nav.heap import release_free_heap
 from landmark_nav.nodes.common import declare, ParameterError
 from rclpy.node import Node
 
@@ -78,6 +80,7 @@ class LinkHealth:
         self.reconnects = 0
         self.bytes = 0
         self.published = 0
+        self.dropped: Counter = Counter()  # device data not published, per reason
         self._publish_times: deque = deque()
         self.hardware: Tuple[int, str] = (OK, '')
         self.values: Dict[str, str] = {}
@@ -128,6 +131,12 @@ class LinkHealth:
             self.problems += 1
             self.last_problem = now
             self.problem = text
+
+    def on_drop(self, reason: str, text: str, now: Optional[float] = None) -> None:
+        """Count device data that was received but not published (``dropped.<reason>``)."""
+        self.on_problem(text, now)
+        with self._lock:
+            self.dropped[reason] += 1
 
     def on_published(self, now: Optional[float] = None) -> None:
         """Count one published output message (for the publish rate)."""
@@ -207,6 +216,7 @@ class LinkHealth:
                 'last error': self.last_error,
                 'hardware status': hw_message or 'OK',
             }
+            values.update({f'dropped.{k}': str(v) for k, v in sorted(self.dropped.items())})
             values.update(self.values)
         return level, message, values
 
@@ -250,7 +260,8 @@ class DiagnosticsPublisher:
         self.last: Optional[Status] = None
 
     def publish(self) -> None:
-        """Publish the current state now."""
+        """Publish the current state now (and return free heap, :func:`release_free_heap`)."""
+        release_free_heap()
         status = self.health.status()
         self.last = status
         entries = [(self.name, self.hardware_id, status)]

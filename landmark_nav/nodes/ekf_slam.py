@@ -92,7 +92,9 @@ as out of order unless ``restart_messages`` of them in a row restart, ``odometry
 or a withdrawn future stamp (``odometry.retracted``); scans and
 corner clouds with stamp 0 are ``dropped.malformed``, scans of more than ``max_beams`` beams
 ``dropped.oversized``; corners with NaN
-or with a covariance that is not positive semi-definite are dropped; corner sets older than
+or with a covariance that is not positive semi-definite are dropped from their set (sets
+counted as ``corners.nonfinite`` / ``corners.covariance_not_psd``); a feature set whose scan
+or corners were lost goes on without them (``features.incomplete``); corner sets older than
 the last step are skipped; the oldest waiting set is dropped when more than ``MAX_PENDING``
 wait for odometry (before the first step: when the waiting sets take more than
 ``MAX_START_BYTES``; the odometry may start seconds after the laser). Corner sets stamped
@@ -107,7 +109,6 @@ in that queue in its first 15 s).
 """
 
 from collections import deque
-import itertools
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -314,8 +315,13 @@ class EkfSlamNode(Node):
         self._newest_part_ns = None
 
     def _clear_path(self) -> None:
-        self.path_steps = deque(maxlen=self.path_max_poses)  # (stamp_ns, pose) per step
-        self.path_poses = deque(maxlen=self.path_max_poses)  # PoseStamped, built at display
+        # The last path_max_poses steps in a ring written in place (np.full touches every
+        # page now: the memory of a long run does not grow with it), 32 bytes a pose.
+        n = self.path_max_poses
+        self._path_t = np.full(n, 0, dtype=np.int64)  # stamp [ns] of step k at k % n
+        self._path_pose = np.full((n, 3), 0.0)  # its pose
+        self._path_count = 0  # steps since the clear
+        self.path_poses = deque(maxlen=n)  # PoseStamped, built at display
         self._path_new = 0  # steps not yet in path_poses
 
     def _on_event(self, kind: str, message: str) -> None:
@@ -412,8 +418,9 @@ class EkfSlamNode(Node):
                     self._handed.discard(self._handed_order.popleft())
             lost = [p for p in missing if self._has_publisher(p)]
             if lost:
-                self.warner.warn(f'Feature set at {stamp} ns without its {" and ".join(lost)} '
-                                 f'(lost: a later one came): using what came')
+                self.stats.event('features.incomplete', f'Feature set at {stamp} ns without its '
+                                 f'{" and ".join(lost)} (lost: a later one came): using what '
+                                 'came')
             for p in set(missing) - set(lost) - self._absent_noted:
                 self._absent_noted.add(p)
                 self.get_logger().info(f'No publisher on {self._topics[p]}: feature sets go '
@@ -512,17 +519,17 @@ class EkfSlamNode(Node):
         finite = np.all(np.isfinite(cols), axis=1)
         if not np.all(finite):
             bad = cols[~finite][0]
-            self.warner.warn(f'Dropping {int(np.sum(~finite))} corners with NaN or inf '
-                             f'(first: {bad.tolist()})')
+            self.stats.event('corners.nonfinite', f'Dropping {int(np.sum(~finite))} corners '
+                             f'with NaN or inf (first: {bad.tolist()})')
         with np.errstate(invalid='ignore'):
             psd = (cols[:, 4] >= 0) & (cols[:, 6] >= 0) & (
                 cols[:, 4] * cols[:, 6] - cols[:, 5] ** 2 >= 0)
         bad = finite & ~psd
         if np.any(bad):
             c = cols[bad][0]
-            self.warner.warn(f'Dropping {int(np.sum(bad))} corners whose covariance is not '
-                             f'positive semi-definite (first: cov_xx={c[4]:g}, '
-                             f'cov_xy={c[5]:g}, cov_yy={c[6]:g})')
+            self.stats.event('corners.covariance_not_psd', f'Dropping {int(np.sum(bad))} '
+                             'corners whose covariance is not positive semi-definite (first: '
+                             f'cov_xx={c[4]:g}, cov_xy={c[5]:g}, cov_yy={c[6]:g})')
         return cols[finite & psd]
 
     def _publish_steps(self, steps: list, odometry_received_ns: int = 0) -> None:
@@ -555,18 +562,21 @@ class EkfSlamNode(Node):
             p.covariance = set_covariance3(p.covariance, cov)
         self.pub_pose.publish(self._pose_msg)
         self.pub_odom.publish(self._odom_msg)
-        self.path_steps.append((t, pose))
+        k = self._path_count % self.path_max_poses
+        self._path_t[k], self._path_pose[k] = t, pose
+        self._path_count += 1
         self._path_new += 1
         self.display_stamp = t
 
     def path_message(self) -> PathMsg:
         """Return the path of the last ``path_max_poses`` steps."""
-        n = min(self._path_new, len(self.path_steps))
-        for t, pose in itertools.islice(self.path_steps, len(self.path_steps) - n, None):
+        n = min(self._path_new, self.path_max_poses, self._path_count)
+        for i in range(self._path_count - n, self._path_count):
+            k = i % self.path_max_poses
             ps = PoseStamped()  # built once per step: the path message only lists them
-            set_stamp(ps.header, t)
+            set_stamp(ps.header, int(self._path_t[k]))
             ps.header.frame_id = self.map_frame
-            set_pose_2d(ps.pose, pose)
+            set_pose_2d(ps.pose, self._path_pose[k])
             self.path_poses.append(ps)
         self._path_new = 0
         path = PathMsg()

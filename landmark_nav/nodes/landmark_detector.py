@@ -20,7 +20,8 @@ the image's stamp and frame (the camera optical frame):
 Bad input (unsupported encoding, undecodable data, size disagreeing with CameraInfo, no
 CameraInfo yet, an image without contrast) is dropped with a warning throttled per kind of
 problem; saturated images are processed with a warning. Processed and dropped images and
-the latency are on ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
+the latency are on ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`); a
+CameraInfo that does not convert is ignored, counted as ``dropped.camera_info_malformed``.
 """
 
 from dataclasses import replace
@@ -176,7 +177,7 @@ class LandmarkDetector(Node):
             self.camera = camera_info_to_model(msg)
             self.info_frame = msg.header.frame_id
         except ConversionError as err:
-            self.warner.warn(f'Ignoring camera_info: {err}')
+            self.stats.drop('camera_info_malformed', f'Ignoring camera_info: {err}')
 
     def on_image(self, msg: Image) -> None:
         """Convert and process one raw image."""

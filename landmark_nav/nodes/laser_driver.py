@@ -136,6 +136,7 @@ class LaserDriver(Node):
                             scan.ranges, scan.range_min, scan.range_max, scan.time_increment,
                             scan.scan_time, scan.intensities)
         except ConversionError as err:
+            self.health.on_drop('malformed', f'Dropping scan: {err}')
             self.warner.warn(f'Dropping scan: {err}')
             return
         if not self.context.ok():

@@ -15,7 +15,9 @@ Publishes, stamped with the image: ``pose`` (geometry_msgs/PoseWithCovarianceSta
 ``tracking`` or ``lost``) when it changes, and with ``publish_debug_image`` the image with
 the model lines rendered at the prior pose (red), the matched image lines (green) and the
 other image lines (blue) on ``model_localizer/debug_image`` (bgr8). Inputs processed and
-dropped and the latency are on ``/diagnostics``.
+dropped (with the reasons: ``dropped.camera_info_malformed``, ``dropped.initialpose_frame``
+...) and the latency are on ``/diagnostics``; odometry older than the last sample restarts
+the increments (``odometry.back_in_time``).
 
 Bad input -- undecodable images, no CameraInfo yet or one without a focal length, an image
 whose size disagrees with it, frames without lines, an empty model, a pose outside the
@@ -135,7 +137,7 @@ class ModelLocalizerNode(Node):
             intr = Intrinsics(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]),
                               cam.width, cam.height)
         except (ConversionError, ValueError) as err:
-            self.warner.warn(f'Ignoring camera_info: {err}')
+            self.stats.drop('camera_info_malformed', f'Ignoring camera_info: {err}')
             return
         self.camera = cam
         self.loc.set_intrinsics(intr)
@@ -149,7 +151,8 @@ class ModelLocalizerNode(Node):
             return
         last = self.last_odom
         if last is not None and data.stamp_ns < last[0]:
-            self.warner.warn('Odometry went back in time; restarting the increments')
+            self.stats.event('odometry.back_in_time', 'Odometry went back in time; restarting '
+                             'the increments')
         elif last is not None:
             u = calibrate_control(control_from_poses(last[1], data.pose), self.axle, self.k)
             self.loc.predict(u)
@@ -193,7 +196,7 @@ class ModelLocalizerNode(Node):
 
     def on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """Reset the estimate (e.g. RViz "2D Pose Estimate")."""
-        given = initial_pose(msg, self.frame_id, self.warner, self.initial_cov, 'initial_std')
+        given = initial_pose(msg, self.frame_id, self.stats, self.initial_cov, 'initial_std')
         if given is None:
             return
         self.loc.reset(*given)

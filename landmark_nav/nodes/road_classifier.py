@@ -105,7 +105,7 @@ class RoadClassifier(Node):
         try:
             self.camera = camera_info_to_model(msg)
         except ConversionError as err:
-            self.warner.warn(f'Ignoring camera_info: {err}')
+            self.stats.drop('camera_info_malformed', f'Ignoring camera_info: {err}')
 
     def on_odom(self, msg: Odometry) -> None:
         """Keep the latest odometry pose."""

@@ -14,7 +14,8 @@ line fits and the range step), the node's ``sigma_r`` being its lower bound (the
 the segmentation: :class:`~landmark_nav.laser.extractor_configuration.ScanSegmenter`, as
 offline); :meth:`ScanFeatureNode.at_scan_noise` gives the extractor's parameters with it.
 Finite negative ranges (no laser measures them; REP 117 reserves -inf for "too close") are
-treated as invalid beams, with a warning naming the first one. Processed and dropped scans
+treated as invalid beams, with a warning naming the first one (scans counted as
+``scan.negative_ranges``). Processed and dropped scans
 and the latency are on ``/diagnostics`` (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
@@ -76,8 +77,8 @@ class ScanFeatureNode(Node):
         negative = np.flatnonzero(np.isfinite(scan.ranges) & (scan.ranges < 0.0))
         if negative.size:  # below range_min: already invalid (too close), but not a reading
             i = int(negative[0])
-            self.warner.warn(f'LaserScan: {negative.size} negative ranges treated as invalid '
-                             f'(first: ranges[{i}]={scan.ranges[i]:g})')
+            self.stats.event('scan.negative_ranges', f'LaserScan: {negative.size} negative '
+                             f'ranges treated as invalid (first: ranges[{i}]={scan.ranges[i]:g})')
         self.segmenter.track(scan.ranges, scan.angles, scan.valid)
         clusters = self.segmenter.segment(scan.ranges, scan.angles, scan.valid,
                                           scan.angle_increment)

@@ -35,7 +35,8 @@ for ``sonar_timeout`` it publishes dead reckoning at every odometry sample. Odom
 back in time (a looped bag) resets the time bookkeeping. Bad messages (NaN or out-of-limit
 ranges, a field of view that is not finite and >= 0, malformed odometry, joint states or
 maps) are dropped with a warning throttled per kind of problem; the node keeps running.
-Estimates published, inputs dropped and the latency are on ``/diagnostics``
+Estimates published, inputs dropped (with the reasons, e.g. ``dropped.map_malformed``,
+``dropped.initialpose_frame``) and the latency are on ``/diagnostics``
 (:class:`~landmark_nav.nodes.common.InputStats`).
 """
 
@@ -177,18 +178,18 @@ class SonarLocalizer(Node):
             grid = GridMap(occupancy=data.data, resolution=data.resolution,
                            origin=tuple(data.origin))
         except (ConversionError, ValueError) as err:
-            self.warner.warn(f'Dropping map: {err}')
+            self.stats.drop('map_malformed', f'Dropping map: {err}')
             return
         if data.frame_id not in ('', self.global_frame):
-            self.warner.warn(f'map frame {data.frame_id!r} is not {self.global_frame!r}: using '
-                             'it as that frame')
+            self.stats.event('map.frame', f'map frame {data.frame_id!r} is not '
+                             f'{self.global_frame!r}: using it as that frame')
         if self.tracker.set_map(grid):
             self.get_logger().info(f'map: {data.width} x {data.height} cells of '
                                    f'{data.resolution} m')
 
     def on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """Reset the estimate to a pose given by the user (e.g. RViz "2D Pose Estimate")."""
-        given = initial_pose(msg, self.global_frame, self.warner, self.initial_cov,
+        given = initial_pose(msg, self.global_frame, self.stats, self.initial_cov,
                              'the initial_pose.std_* parameters')
         if given is None:
             return
