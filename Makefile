@@ -45,8 +45,11 @@ test: $(STAMP)
 
 # Timing, soak and long evaluations: figures as ratios against an in-run reference,
 # compared with the stored results (exit 1 on a regression). Run on an idle machine.
+# The landmark rates and shuttle: the full samples of two unit tests, against stored bounds.
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_soak.py
+	$(BIN)/python benchmarks/bench_landmarks.py rates
+	$(BIN)/python benchmarks/bench_landmarks.py shuttle
 
 # Regenerate the committed recordings (fixed seeds) with the package's own simulator.
 bags: $(STAMP)

@@ -7,6 +7,8 @@ Run from the repository root::
     python benchmarks/bench_landmarks.py real [detection|pose|false|stages|all]
         [--data DIR] [--per-size N] ...
     python benchmarks/bench_landmarks.py camera-sim [--frames N]
+    python benchmarks/bench_landmarks.py rates [--results benchmarks/results/landmarks.json]
+    python benchmarks/bench_landmarks.py shuttle [--trips 40] [--results ...]
 
 ``detector``: the landmark detector against OpenCV ArUco on rendered frames of the same
 size. Frames: 640 x 480 mono8, rendered by the camera simulator (f = 525 px, noise 2 DN,
@@ -62,9 +64,29 @@ Three figures (median ms per frame over N frames, after one warm-up frame):
 
 Target: render <= 20 ms per frame. As an in-run reference it also times
 ``cv2.warpPerspective`` of one 640 x 480 uint8 image (the cost of a single full-frame warp).
+
+``rates``: the detection rates of visual navigation §2.3 (Table 2) on the full samples of
+their acceptance -- at least 2000 error-free reads from 5 px per block up (rotations 0,
+22.5 and 45 deg, 223 frames per cell, seed 11) and 500 landmark-free frames with
+distractors (300 ``views``, seed 12, and 200 ``scattered``, seed 13), through
+:func:`~landmark_nav.evaluation.vision.detection_vs_size` and
+:func:`~landmark_nav.evaluation.vision.false_detections`. The bounds are stored in
+``--results`` (``benchmarks/results/landmarks.json``, key ``rates``: reads, P(detect) per
+cell, wrong codes, share of correct reads, false detections); a figure outside its bound
+(``min_*`` / ``max_*``, inclusive) is a regression and the script exits 1 naming it.
+``test/test_landmark_detection_rates.py`` checks the same bounds on a smaller sample.
+
+``shuttle``: the landmark shuttle (§2.3.3) with fixes also on the approach over 40 round
+trips (seed 15, :func:`~landmark_nav.evaluation.vision.shuttle`), against the same trips
+with fixes at the stops only; bounds under the key ``shuttle``: every arrival, >= 12
+approach frames per trip, >= 95 % of them fixes, arrival error <= 5 cm, and max / mean
+arrival error below those of the stop-only run (max) and half of them (mean).
+``test/test_landmark_shuttle.py`` checks the same bounds over 20 trips.
 """
 
+import json
 import math
+from pathlib import Path
 import statistics
 import sys
 import time
@@ -73,7 +95,9 @@ from typing import Callable, Tuple
 from common import load_images, run_subcommand, subcommand_parser
 import cv2
 from landmark_nav.evaluation import landmarks_real
-from landmark_nav.evaluation.vision import (backdrop, landmark_in_view, random_code,
+from landmark_nav.evaluation.vision import (backdrop, detection_vs_size, false_detections,
+                                            format_detection, format_false, format_shuttle,
+                                            landmark_in_view, random_code, shuttle,
                                             VGA_CAMERA)
 from landmark_nav.sim.camera import CameraSimulator, Photometry, Plane
 from landmark_nav.sim.camera_scenarios import (CameraFrame, default_camera,
@@ -290,6 +314,67 @@ def run_camera_sim(args) -> int:
     return 0
 
 
+RESULTS = Path(__file__).resolve().parent / 'results' / 'landmarks.json'
+
+
+def rates_figures(frames: int, false_frames: Tuple[int, int]) -> dict:
+    """Return the Table 2 and false-detection figures of the ``rates`` subcommand."""
+    rows = detection_vs_size(block_pixels=(5.0, 6.0, 8.0), frames=frames, seed=11)
+    print(format_detection(rows), flush=True)
+    reads = sum(r.detected for r in rows)
+    figures = {'reads': reads, 'min_p_detect': min(r.p_detect for r in rows),
+               'wrong_codes': sum(r.wrong for r in rows),
+               'correct_share': sum(r.correct for r in rows) / reads if reads else 0.0,
+               'false_detections': 0, 'landmark_free_frames': 0}
+    for source, n, seed in (('views', false_frames[0], 12), ('scattered', false_frames[1], 13)):
+        res = false_detections(frames=n, seed=seed, source=source)
+        print(f'[{source}] ' + format_false(res), flush=True)
+        figures['false_detections'] += res.false_detections
+        figures['landmark_free_frames'] += res.frames
+    return figures
+
+
+def shuttle_figures(trips: int) -> dict:
+    """Return the figures of the ``shuttle`` subcommand: approach fixes against stop fixes."""
+    res = shuttle(trips=trips, seed=15, correction='ekf', procedure='approach')
+    stop = shuttle(trips=trips, seed=15, correction='ekf', procedure='stop')
+    print(format_shuttle(res) + '\n' + format_shuttle(stop), flush=True)
+    return {'arrivals': res.arrivals if res.fixes == trips + 1 else 0,
+            'approach_frames_per_trip': res.approach_frames / trips,
+            'approach_fix_share': res.approach_fixes / max(1, res.approach_frames),
+            'approach_max_error': res.max_error,
+            'max_error_ratio': res.max_error / stop.max_error,
+            'mean_error_ratio': res.mean_error / stop.mean_error}
+
+
+def regressions(figures: dict, bounds: dict) -> list:
+    """Return a message per figure outside its stored bound (``min_*`` / ``max_*`` keys)."""
+    out = []
+    for key, bound in bounds.items():
+        kind, name = key.split('_', 1)
+        value = figures[name]
+        if (kind == 'min' and value < bound) or (kind == 'max' and value > bound):
+            out.append(f'{name} = {value} ({kind}imum {bound})')
+    return out
+
+
+def run_checked(args) -> int:
+    """Run ``rates`` or ``shuttle``: the figures, checked against the stored bounds."""
+    path = Path(args.results)
+    if not path.is_file():
+        print(f'error: no stored results at {path}')
+        return 1
+    bounds = json.loads(path.read_text())[args.command]
+    figures = (rates_figures(args.frames, (args.views, args.scattered))
+               if args.command == 'rates' else shuttle_figures(args.trips))
+    print('figures: ' + ', '.join(f'{k} {v:.4g}' for k, v in figures.items()))
+    failed = regressions(figures, bounds)
+    for msg in failed:
+        print(f'REGRESSION: {msg}')
+    print(f'{args.command}: ' + ('FAILED' if failed else 'all figures within their stored bounds'))
+    return 1 if failed else 0
+
+
 def main(argv=None) -> int:
     """Parse the subcommand and run it (``real``: the options of ``landmarks_real``)."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -315,6 +400,21 @@ def main(argv=None) -> int:
                                           'data; detector --data DIR times recorded images)')
     p.add_argument('--frames', type=int, default=100)
     p.set_defaults(run=run_camera_sim)
+    p = sub.add_parser('rates', help='detection rates and false detections on the full '
+                                     'samples of their acceptance, against stored bounds')
+    p.add_argument('--frames', type=int, default=223,
+                   help='frames per (rotation, block size) cell (default 223: 9 cells, '
+                        '>= 2000 reads)')
+    p.add_argument('--views', type=int, default=300, help='landmark-free views (default 300)')
+    p.add_argument('--scattered', type=int, default=200,
+                   help='landmark-free frames of scattered distractors (default 200)')
+    p.add_argument('--results', default=str(RESULTS), help='stored bounds (JSON)')
+    p.set_defaults(run=run_checked)
+    p = sub.add_parser('shuttle', help='the shuttle with fixes on the approach against fixes '
+                                       'at the stops, against stored bounds')
+    p.add_argument('--trips', type=int, default=40, help='round trips (default 40)')
+    p.add_argument('--results', default=str(RESULTS), help='stored bounds (JSON)')
+    p.set_defaults(run=run_checked)
     if argv[:1] == ['real']:
         return landmarks_real.main(argv[1:], prog=f'{ap.prog} real')
     return run_subcommand(ap, argv)
