@@ -293,6 +293,7 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
               'frontend_events': dict(run.events),
               'motions': dict(run.motions),
               'icp_restarts': dict(run.icp_restarts),
+              'keyframes': dict(run.keyframes),
               'odometry_noise': {**asdict(prm.odometry), 'source': noise_source},
               'reference': scenario.reference, 'simulator_truth': scenario.world is not None,
               'laser_mount': [float(v) for v in scenario.laser.mount],
@@ -387,6 +388,10 @@ def format_summary(r: dict) -> str:
                      f'{motions.get("odometry", 0)} odometry (ICP restarted from other '
                      f'headings on {restarts.get("restarted", 0)} steps, usable after '
                      f'{restarts.get("recovered", 0)})')
+    keyframes = r.get('keyframes', {})
+    if keyframes.get('skipped'):
+        lines.append(f'keyframes: {keyframes["keyframes"]} steps updated the map, '
+                     f'{keyframes["skipped"]} between keyframes (pose from the odometry)')
     lines += [f'note: {n}' for n in r.get('notes', [])]
     if r['reference'] is None:
         return '\n'.join(lines + _lines_without_reference(r))

@@ -107,6 +107,7 @@ in that queue in its first 15 s).
 """
 
 from collections import deque
+from functools import partial
 import itertools
 import time
 
@@ -123,7 +124,7 @@ from landmark_nav.nodes.common import (declare, InputStats, output_path, Paramet
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import CORNER, LINE
-from landmark_nav.slam.features import extract_scan_features
+from landmark_nav.slam.features import scan_lines
 from landmark_nav.slam.frontend import Corners, line_beam_times, SlamFrontend, Step
 from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.slam.visibility import ScanGeometry
@@ -162,13 +163,15 @@ _EVENTS = {'jump': 'odometry.jump', 'covariance': 'odometry.covariance_replaced'
 
 
 class SlamInputStats(InputStats):
-    """:class:`InputStats` plus the counts ``before_odometry``, ``received.*`` and ``waiting``.
+    """:class:`InputStats` plus ``before_odometry``, ``received.*``, ``waiting``, ``keyframes``.
 
     ``before_odometry``: the corner sets stamped before the first odometry sample: not
     processed, and not drops (no odometry pose exists for them). ``received.corners`` /
     ``received.scan``: the messages received on each feature topic; ``waiting``: the feature
     sets not yet processed (waiting for their other part or for odometry), so that a replay
-    can tell when the node has processed what it received.
+    can tell when the node has processed what it received. ``keyframes`` /
+    ``between_keyframes``: the processed sets that reached the filter and those between
+    keyframes (their pose from the odometry).
     """
 
     def __init__(self, node: Node, warner: ProblemWarner) -> None:
@@ -182,7 +185,9 @@ class SlamInputStats(InputStats):
         node = self._node
         values = {'before_odometry': self.before_odometry,
                   'received.corners': node.corner_count, 'received.scan': node.scan_count,
-                  'waiting': len(node.join) + len(node.frontend.pending)}
+                  'waiting': len(node.join) + len(node.frontend.pending),
+                  'keyframes': node.frontend.keyframes['keyframes'],
+                  'between_keyframes': node.frontend.keyframes['skipped']}
         status.values += [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return status
 
@@ -446,13 +451,14 @@ class EkfSlamNode(Node):
         """Build the front end's feature set from corner rows and / or a scan."""
         if cols is None:
             cols = np.zeros((0, len(CORNER_NAMES) + 1))
-        lines, time_increment, geometry = (), 0.0, None
+        lines, time_increment, geometry, lazy = (), 0.0, None, None
         if scan is not None:
             if self.landmarks != 'corners':
-                lines = extract_scan_features(scan.ranges, scan.angles, scan.valid,
-                                              scan.angle_increment, 'lines', None,
-                                              self.line_params)[1]
                 time_increment = scan.time_increment
+                lazy = partial(scan_lines, scan.ranges, scan.angles, scan.valid,
+                               scan.angle_increment, time_increment, self.line_params)
+                if not self.frontend_params.keyframe.enabled:
+                    lines, lazy = lazy()[0], None
             if self.visibility:
                 geometry = ScanGeometry(scan.ranges, scan.angle_min, scan.angle_increment,
                                         scan.range_min, scan.range_max, self.laser_pose,
@@ -460,7 +466,8 @@ class EkfSlamNode(Node):
         return Corners(t, cols[:, :2], np.stack([cols[:, [4, 5]], cols[:, [5, 6]]], axis=1),
                        cols[:, 2], cols[:, 3], cols[:, 7], tuple(lines),
                        line_beam_times(lines, time_increment),
-                       self.line_params.sigma_r if lines else None, geometry)
+                       self.line_params.sigma_r if lines or lazy else None, geometry,
+                       lazy, time_increment * max(scan.ranges.size - 1, 0) if lazy else 0.0)
 
     def _add_features(self, corners: Corners) -> None:
         """Give one feature set to the front end; publish the steps it completes."""
