@@ -99,11 +99,10 @@ wait for odometry (before the first step: when the waiting sets take more than
 before the first odometry sample are not drops: no odometry pose exists for them (the front
 end's ``before_odometry``; slam_toolbox and AMCL discard such scans in their tf message
 filter); they are counted as ``before_odometry`` on ``/diagnostics`` and stated in one info
-line when the first step is made. The scan is received best effort with a queue of
-``SCAN_DEPTH`` = 20 (:data:`landmark_nav.nodes.common.SCAN_QOS`; the sensor-data QoS keeps
-5: at start-up, while the first steps run, that lost scans at 40 Hz); the corner cloud is
-reliable with the same depth (it was 10: a 10-minute live soak at load 4 lost 18 corner sets
-in that queue in its first 15 s).
+line when the first step is made. The scan is received best effort and the corner cloud
+reliable, each with a queue of ``FEATURE_DEPTH`` = 80 (2 s at 40 Hz; the sensor-data QoS
+keeps 5: at start-up, while the first steps run, that lost scans at 40 Hz, and a keyframe's
+update on a loaded machine takes several scan periods).
 """
 
 from collections import deque
@@ -118,8 +117,8 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
                                       odometry_pose_covariance, scan_to_data, set_covariance3,
                                       set_pose_2d, set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
-from landmark_nav.nodes.common import (declare, InputStats, output_path, ParameterError,
-                                       ProblemWarner, require_stamp, run_node, SCAN_DEPTH,
+from landmark_nav.nodes.common import (declare, FEATURE_DEPTH, InputStats, output_path,
+                                       ParameterError, ProblemWarner, require_stamp, run_node,
                                        SCAN_QOS)
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
@@ -142,6 +141,9 @@ import yaml
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
 MAX_PENDING = 100
+#: The scan's QoS with a queue of FEATURE_DEPTH (the corner cloud has the same depth).
+FEATURE_SCAN_QOS = QoSProfile(depth=FEATURE_DEPTH, reliability=SCAN_QOS.reliability,
+                              history=HistoryPolicy.KEEP_LAST)
 #: Before the first step the waiting sets are bounded by their memory (Corners.nbytes): 32 MiB
 #: hold about 90 s of a 40 Hz laser with 1081 beams, however late the odometry starts.
 MAX_START_BYTES = 32 * 2 ** 20
@@ -256,11 +258,11 @@ class EkfSlamNode(Node):
         parts = []
         if self.landmarks in ('corners', 'both'):
             parts.append('corners')
-            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, SCAN_DEPTH,
+            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, FEATURE_DEPTH,
                                  self._sub_events('corners/features'))
         if self.landmarks in ('lines', 'both') or self.visibility:
             parts.append('scan')
-            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SCAN_QOS,
+            self.stats.subscribe(LaserScan, 'scan', self.on_scan, FEATURE_SCAN_QOS,
                                  self._sub_events('scan'))
         self.join = StampJoin(parts, MAX_JOIN)
         self._topics = {'corners': 'corners/features', 'scan': 'scan'}
