@@ -100,3 +100,19 @@ def test_configuration_thresholds_and_the_chapter_profile():
         d['keyframe.min_travel_m'], d['keyframe.min_turn_rad'])
     with pytest.raises(ValueError, match='keyframe.min_turn_rad'):
         slam_configuration({'keyframe.min_turn_rad': -1.0})
+
+
+def test_update_corrections_are_zero_between_keyframes():
+    """What an update moved the pose: predicted from the last keyframe's pose."""
+    from types import SimpleNamespace
+    from landmark_nav.evaluation.slam import update_corrections
+    fe, steps = _run(KeyframeParams(min_travel_m=0.29))
+    run = SimpleNamespace(poses=np.array([st.pose for st in steps]),
+                          increments=np.array([st.increment for st in steps]),
+                          keyframe=np.array([st.keyframe for st in steps]))
+    moved = update_corrections(run)
+    np.testing.assert_allclose(moved[~run.keyframe], 0.0, atol=1e-12)
+    # A keyframe's correction is its update's: pose after it against kf pose (+) increment.
+    k = 3
+    np.testing.assert_allclose(moved[k], relative(compose(steps[0].pose, steps[k].increment),
+                                                  steps[k].pose), atol=1e-12)

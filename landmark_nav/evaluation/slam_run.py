@@ -86,6 +86,9 @@ class SlamRun:
     #: poses[k])`` is what step k's update moved the pose (eq. 25; after a restart the
     #: first pose is the odometry's).
     increments: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: (S,) whether the step was a keyframe (``Step.keyframe``: else ``increments`` is the
+    #: odometry's since the last keyframe and the filter did not change).
+    keyframe: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def scan_angles(scan: ScanSample) -> np.ndarray:
@@ -178,7 +181,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     scan_k = 0
     o_scan, o_world, o_status, o_lm, o_est = [], [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
-    bridged, incs = [], []
+    bridged, incs, keyframe = [], [], []
     lazy_lines = fp.keyframe.enabled and landmarks != 'corners'
 
     def record(st: Step) -> None:  # right after the step (several may come at once)
@@ -193,6 +196,7 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         covs.append(st.covariance)
         odo_at.append(st.odometry)
         incs.append(st.increment)
+        keyframe.append(st.keyframe)
         bridged.append(bool(np.any(np.asarray(st.bridged_variance) > 0.0)))
         nis_v.append(st.result.nis)
         nis_d.append(st.result.nis_dof)
@@ -269,7 +273,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool),
                    motions=dict(fe.motions), icp_restarts=dict(fe.icp_restarts),
                    keyframes=dict(fe.keyframes),
-                   increments=np.array(incs, dtype=float).reshape(-1, 3))
+                   increments=np.array(incs, dtype=float).reshape(-1, 3),
+                   keyframe=np.array(keyframe, dtype=bool))
 
 
 __all__ = ['run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'SlamRun']
