@@ -625,7 +625,7 @@ REAL_DATA_OPTIONS = {'jacobians': 'observability_gain', 'line_residual_factor': 
                      'spurious_limit': 0.05}
 REAL_DATA_FRONTEND = {'scan_matching': True, 'scan_matching_fit_pairs': 0.3,
                       'scan_matching_side_starts': 2.5}
-REAL_DATA_KEYFRAME = {'min_travel_m': 0.25, 'min_turn_rad': 0.25}
+REAL_DATA_KEYFRAME = {'min_travel_m': 0.1, 'min_turn_rad': 0.1}
 
 
 def test_chapter_profile_names_the_options_measured_on_real_logs():

@@ -181,8 +181,8 @@ REAL_DATA: Dict[str, Any] = {
     'scan_matching': True,
     'scan_matching_fit_pairs': 0.3,
     'scan_matching_side_starts': 2.5,
-    'keyframe.min_travel_m': 0.25,
-    'keyframe.min_turn_rad': 0.25,
+    'keyframe.min_travel_m': 0.1,
+    'keyframe.min_turn_rad': 0.1,
 }
 
 
