@@ -19,6 +19,7 @@ from landmark_nav.nodes.ekf_slam import EkfSlamNode
 from landmark_nav.slam.configuration import CHAPTER, default_values, slam_configuration
 from landmark_nav.slam.ekf_slam import LINE, SlamParams
 from landmark_nav.slam.frontend import FrontendParams, ODOMETRY_NOISE_MODELS
+from landmark_nav.slam.keyframes import KeyframeParams
 from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.testing import declared_parameters, parameter_file, RosHarness, shared_data
 from nav_msgs.msg import Odometry, Path as PathMsg
@@ -625,12 +626,14 @@ REAL_DATA_OPTIONS = {'jacobians': 'observability_gain', 'line_residual_factor': 
                      'spurious_limit': 0.05}
 REAL_DATA_FRONTEND = {'scan_matching': True, 'scan_matching_fit_pairs': 0.3,
                       'scan_matching_side_starts': 2.5}
+REAL_DATA_KEYFRAME = {'min_travel_m': 0.1, 'min_turn_rad': 0.1}
 
 
 def test_chapter_profile_names_the_options_measured_on_real_logs():
     """The profile sets landmarks corners and those options off, nothing else."""
     profile = chapter_profile()
-    assert set(profile) == set(REAL_DATA_OPTIONS) | set(REAL_DATA_FRONTEND) | {'landmarks'}
+    assert set(profile) == (set(REAL_DATA_OPTIONS) | set(REAL_DATA_FRONTEND) | {'landmarks'}
+                            | {f'keyframe.{k}' for k in REAL_DATA_KEYFRAME})
     assert profile == CHAPTER
     default = parameter_file(OFFICE.parents[1], 'ekf_slam')
     assert all(default[k] != v for k, v in profile.items())
@@ -649,7 +652,8 @@ def test_defaults_are_the_real_data_options_and_the_chapter_profile_the_chapter_
         node.destroy_node()
     assert landmarks == 'corners' and default_landmarks == 'both'
     assert frontend == FrontendParams() and not frontend.scan_matching
-    assert default_frontend == FrontendParams(**REAL_DATA_FRONTEND)
+    assert default_frontend == FrontendParams(**REAL_DATA_FRONTEND,
+                                              keyframe=KeyframeParams(**REAL_DATA_KEYFRAME))
     assert params == SlamParams(odometry=params.odometry)  # the chapter's filter
     assert (params.free_space_check, params.recovery_probability, params.spurious_limit,
             params.jacobians) == (None, None, None, 'standard')

@@ -13,6 +13,7 @@ The record (:class:`SlamRun`) is scored by :mod:`landmark_nav.evaluation.slam_sc
 """
 
 from dataclasses import dataclass, field, replace
+from functools import partial
 import time
 from typing import Callable, Dict, Optional, Tuple
 
@@ -24,7 +25,7 @@ from landmark_nav.laser.lines import LineParams
 from landmark_nav.sim import OdometrySample, ScanSample, ScenarioResult
 from landmark_nav.sim.laser import compose as sensor_pose
 from landmark_nav.slam.ekf_slam import CORNER, EkfSlam, LINE, SlamParams, UpdateResult
-from landmark_nav.slam.features import check_landmarks, extract_scan_features
+from landmark_nav.slam.features import check_landmarks, extract_scan_features, scan_lines
 from landmark_nav.slam.frontend import Corners, FrontendParams, SlamFrontend, Step
 from landmark_nav.slam.slam_map import SlamMap
 from landmark_nav.slam.visibility import ScanGeometry
@@ -77,11 +78,17 @@ class SlamRun:
     #: ``SlamFrontend.icp_restarts``: steps whose first ICP solution failed or was rejected
     #: (``restarted``) and those a restart from other headings made usable (``recovered``).
     icp_restarts: Dict[str, int] = field(default_factory=dict)
+    #: ``SlamFrontend.keyframes``: steps that reached the filter (``keyframes``) and steps
+    #: between keyframes (``skipped``: pose from the odometry, no update).
+    keyframes: Dict[str, int] = field(default_factory=dict)
     #: (S, 3) the motion each step predicted with (the odometry increment, or the
     #: scan-matched / fused motion), so ``relative(compose(poses[k-1], increments[k]),
     #: poses[k])`` is what step k's update moved the pose (eq. 25; after a restart the
     #: first pose is the odometry's).
     increments: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: (S,) whether the step was a keyframe (``Step.keyframe``: else ``increments`` is the
+    #: odometry's since the last keyframe and the filter did not change).
+    keyframe: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def scan_angles(scan: ScanSample) -> np.ndarray:
@@ -174,7 +181,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
     scan_k = 0
     o_scan, o_world, o_status, o_lm, o_est = [], [], [], [], []
     poses, covs, nis_v, nis_d, odo_at, stamps, index = [], [], [], [], [], [], []
-    bridged, incs = [], []
+    bridged, incs, keyframe = [], [], []
+    lazy_lines = fp.keyframe.enabled and landmarks != 'corners'
 
     def record(st: Step) -> None:  # right after the step (several may come at once)
         nonlocal record_s
@@ -188,11 +196,12 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         covs.append(st.covariance)
         odo_at.append(st.odometry)
         incs.append(st.increment)
+        keyframe.append(st.keyframe)
         bridged.append(bool(np.any(np.asarray(st.bridged_variance) > 0.0)))
         nis_v.append(st.result.nis)
         nis_d.append(st.result.nis_dof)
         scan, corners = pending.pop(k)
-        if len(corners):
+        if len(corners) and st.keyframe:  # a set between keyframes went to no update
             lp = np.array([c.position for c in corners]).reshape(-1, 2)
             beam_ns = scan.stamp_ns + np.rint(np.array([c.index for c in corners])
                                               * scan.time_increment * 1e9).astype(np.int64)
@@ -212,7 +221,12 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             fe.add_odometry(ev.stamp_ns, ev.pose, ev.covariance)
             seconds += time.perf_counter() - tic
         elif isinstance(ev, ScanSample):
-            corners, segs = scan_features(ev, landmarks, corner_params, line_params)
+            if lazy_lines:  # extracted for the keyframes only
+                corners = (scan_features(ev, 'corners', corner_params)[0]
+                           if landmarks == 'both' else [])
+                segs = ()
+            else:
+                corners, segs = scan_features(ev, landmarks, corner_params, line_params)
             pending[scan_k] = (ev, corners)
             geometry = None
             if visibility:
@@ -220,9 +234,16 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                                         ev.angle_increment, ev.range_min, ev.range_max,
                                         mount, sigma_laser)
             tic = time.perf_counter()
-            fe.add_features(Corners.from_corners(
+            features = Corners.from_corners(
                 ev.stamp_ns, corners, ev.time_increment, segs,
-                None if line_params is None else line_params.sigma_r, geometry), scan_k)
+                None if line_params is None else line_params.sigma_r, geometry)
+            if lazy_lines:
+                features = replace(features, lines_from=partial(
+                    scan_lines, ev.ranges, scan_angles(ev), classify_ranges(
+                        ev.ranges, ev.range_min, ev.range_max)[0], ev.angle_increment,
+                    ev.time_increment, line_params),
+                    lines_until=ev.time_increment * max(len(ev.ranges) - 1, 0))
+            fe.add_features(features, scan_k)
             scan_k += 1
             seconds += time.perf_counter() - tic
     tic = time.perf_counter()
@@ -251,7 +272,9 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    line_ends=slam.line_ends[ln], final_map=slam.export_map(),
                    obs_world=cat(o_est, (0, 2)), bridged=np.array(bridged, dtype=bool),
                    motions=dict(fe.motions), icp_restarts=dict(fe.icp_restarts),
-                   increments=np.array(incs, dtype=float).reshape(-1, 3))
+                   keyframes=dict(fe.keyframes),
+                   increments=np.array(incs, dtype=float).reshape(-1, 3),
+                   keyframe=np.array(keyframe, dtype=bool))
 
 
 __all__ = ['run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'SlamRun']

@@ -116,8 +116,9 @@ def update_corrections(run: SlamRun) -> np.ndarray:
     """Return what each step's update moved the pose: ``(-)(x_{k-1} (+) u_k) (+) x_k``.
 
     ``x_k`` the filter's pose after step k, ``u_k`` the motion step k predicted with
-    (:attr:`SlamRun.increments`; eq. 25 composes it onto ``x_{k-1}``): the difference
-    between the prediction and the estimate, in the predicted pose's frame. A filter that
+    (:attr:`SlamRun.increments`; eq. 25 composes it onto ``x_{k-1}``, with keyframes onto
+    the last keyframe's pose): the difference between the prediction and the estimate, in
+    the predicted pose's frame (0 between keyframes). A filter that
     closes a loop moves the pose by the drift accumulated since the landmark was last
     seen; that move shows in the RPE of its trajectory, as the poses before it stay.
 
@@ -127,9 +128,13 @@ def update_corrections(run: SlamRun) -> np.ndarray:
     Returns:
         (S, 3) ``[dx, dy, dpsi]`` per step (zeros for the first).
     """
-    out = np.zeros((len(run.poses), 3))
-    if len(run.poses) > 1:
-        out[1:] = relative(compose(run.poses[:-1], run.increments[1:]), run.poses[1:])
+    n = len(run.poses)
+    out = np.zeros((n, 3))
+    if n > 1:
+        key = run.keyframe if len(run.keyframe) == n else np.ones(n, dtype=bool)
+        # The step each one predicted from: the previous step's keyframe (itself or earlier).
+        last = np.maximum.accumulate(np.where(key, np.arange(n), 0))
+        out[1:] = relative(compose(run.poses[last[:-1]], run.increments[1:]), run.poses[1:])
     return out
 
 

@@ -17,7 +17,7 @@ from landmark_nav.conversions import ScanData
 from landmark_nav.feature_msgs import (make_corner_cloud, make_corner_markers,
                                        make_corner_pose_array)
 from landmark_nav.laser.corners import CORNER_PARAMETERS, CornerParams, detect_corners
-from landmark_nav.nodes.common import declare_dataclass, run_node
+from landmark_nav.nodes.common import declare_dataclass, FEATURE_DEPTH, run_node
 from landmark_nav.nodes.scan_features import ScanFeatureNode
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
@@ -31,7 +31,7 @@ class CornerExtractor(ScanFeatureNode):
         super().__init__('corner_extractor', **kwargs)
         self.params = declare_dataclass(self, CornerParams, CORNER_PARAMETERS)
         self.pub_corners = self.create_publisher(PoseArray, 'corners', 10)
-        self.pub_features = self.create_publisher(PointCloud2, 'corners/features', 10)
+        self.pub_features = self.create_publisher(PointCloud2, 'corners/features', FEATURE_DEPTH)
         self.pub_markers = self.create_publisher(MarkerArray, 'corners/markers', 10)
         self.subscribe_scans(self.params.sigma_r)
         self.get_logger().info(f'corner_extractor: method {self.params.method}')

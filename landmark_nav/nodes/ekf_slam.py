@@ -101,14 +101,14 @@ wait for odometry (before the first step: when the waiting sets take more than
 before the first odometry sample are not drops: no odometry pose exists for them (the front
 end's ``before_odometry``; slam_toolbox and AMCL discard such scans in their tf message
 filter); they are counted as ``before_odometry`` on ``/diagnostics`` and stated in one info
-line when the first step is made. The scan is received best effort with a queue of
-``SCAN_DEPTH`` = 20 (:data:`landmark_nav.nodes.common.SCAN_QOS`; the sensor-data QoS keeps
-5: at start-up, while the first steps run, that lost scans at 40 Hz); the corner cloud is
-reliable with the same depth (it was 10: a 10-minute live soak at load 4 lost 18 corner sets
-in that queue in its first 15 s).
+line when the first step is made. The scan is received best effort and the corner cloud
+reliable, each with a queue of ``FEATURE_DEPTH`` = 80 (2 s at 40 Hz; the sensor-data QoS
+keeps 5: at start-up, while the first steps run, that lost scans at 40 Hz, and a keyframe's
+update on a loaded machine takes several scan periods).
 """
 
 from collections import deque
+from functools import partial
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -118,13 +118,13 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
                                       odometry_pose_covariance, scan_to_data, set_covariance3,
                                       set_pose_2d, set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
-from landmark_nav.nodes.common import (declare, InputStats, output_path, ParameterError,
-                                       ProblemWarner, require_stamp, run_node, SCAN_DEPTH,
+from landmark_nav.nodes.common import (declare, FEATURE_DEPTH, InputStats, output_path,
+                                       ParameterError, ProblemWarner, require_stamp, run_node,
                                        SCAN_QOS)
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import CORNER, LINE
-from landmark_nav.slam.features import extract_scan_features
+from landmark_nav.slam.features import scan_lines
 from landmark_nav.slam.frontend import Corners, line_beam_times, SlamFrontend, Step
 from landmark_nav.slam.slam_map import load_map, save_map
 from landmark_nav.slam.visibility import ScanGeometry
@@ -142,6 +142,9 @@ import yaml
 ODOM_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
 MAX_PENDING = 100
+#: The scan's QoS with a queue of FEATURE_DEPTH (the corner cloud has the same depth).
+FEATURE_SCAN_QOS = QoSProfile(depth=FEATURE_DEPTH, reliability=SCAN_QOS.reliability,
+                              history=HistoryPolicy.KEEP_LAST)
 #: Before the first step the waiting sets are bounded by their memory (Corners.nbytes): 32 MiB
 #: hold about 90 s of a 40 Hz laser with 1081 beams, however late the odometry starts.
 MAX_START_BYTES = 32 * 2 ** 20
@@ -163,13 +166,15 @@ _EVENTS = {'jump': 'odometry.jump', 'covariance': 'odometry.covariance_replaced'
 
 
 class SlamInputStats(InputStats):
-    """:class:`InputStats` plus the counts ``before_odometry``, ``received.*`` and ``waiting``.
+    """:class:`InputStats` plus ``before_odometry``, ``received.*``, ``waiting``, ``keyframes``.
 
     ``before_odometry``: the corner sets stamped before the first odometry sample: not
     processed, and not drops (no odometry pose exists for them). ``received.corners`` /
     ``received.scan``: the messages received on each feature topic; ``waiting``: the feature
     sets not yet processed (waiting for their other part or for odometry), so that a replay
-    can tell when the node has processed what it received.
+    can tell when the node has processed what it received. ``keyframes`` /
+    ``between_keyframes``: the processed sets that reached the filter and those between
+    keyframes (their pose from the odometry).
     """
 
     def __init__(self, node: Node, warner: ProblemWarner) -> None:
@@ -183,7 +188,9 @@ class SlamInputStats(InputStats):
         node = self._node
         values = {'before_odometry': self.before_odometry,
                   'received.corners': node.corner_count, 'received.scan': node.scan_count,
-                  'waiting': len(node.join) + len(node.frontend.pending)}
+                  'waiting': len(node.join) + len(node.frontend.pending),
+                  'keyframes': node.frontend.keyframes['keyframes'],
+                  'between_keyframes': node.frontend.keyframes['skipped']}
         status.values += [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return status
 
@@ -252,11 +259,11 @@ class EkfSlamNode(Node):
         parts = []
         if self.landmarks in ('corners', 'both'):
             parts.append('corners')
-            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, SCAN_DEPTH,
+            self.stats.subscribe(PointCloud2, 'corners/features', self.on_corners, FEATURE_DEPTH,
                                  self._sub_events('corners/features'))
         if self.landmarks in ('lines', 'both') or self.visibility:
             parts.append('scan')
-            self.stats.subscribe(LaserScan, 'scan', self.on_scan, SCAN_QOS,
+            self.stats.subscribe(LaserScan, 'scan', self.on_scan, FEATURE_SCAN_QOS,
                                  self._sub_events('scan'))
         self.join = StampJoin(parts, MAX_JOIN)
         self._topics = {'corners': 'corners/features', 'scan': 'scan'}
@@ -453,13 +460,14 @@ class EkfSlamNode(Node):
         """Build the front end's feature set from corner rows and / or a scan."""
         if cols is None:
             cols = np.zeros((0, len(CORNER_NAMES) + 1))
-        lines, time_increment, geometry = (), 0.0, None
+        lines, time_increment, geometry, lazy = (), 0.0, None, None
         if scan is not None:
             if self.landmarks != 'corners':
-                lines = extract_scan_features(scan.ranges, scan.angles, scan.valid,
-                                              scan.angle_increment, 'lines', None,
-                                              self.line_params)[1]
                 time_increment = scan.time_increment
+                lazy = partial(scan_lines, scan.ranges, scan.angles, scan.valid,
+                               scan.angle_increment, time_increment, self.line_params)
+                if not self.frontend_params.keyframe.enabled:
+                    lines, lazy = lazy()[0], None
             if self.visibility:
                 geometry = ScanGeometry(scan.ranges, scan.angle_min, scan.angle_increment,
                                         scan.range_min, scan.range_max, self.laser_pose,
@@ -467,7 +475,8 @@ class EkfSlamNode(Node):
         return Corners(t, cols[:, :2], np.stack([cols[:, [4, 5]], cols[:, [5, 6]]], axis=1),
                        cols[:, 2], cols[:, 3], cols[:, 7], tuple(lines),
                        line_beam_times(lines, time_increment),
-                       self.line_params.sigma_r if lines else None, geometry)
+                       self.line_params.sigma_r if lines or lazy else None, geometry,
+                       lazy, time_increment * max(scan.ranges.size - 1, 0) if lazy else 0.0)
 
     def _add_features(self, corners: Corners) -> None:
         """Give one feature set to the front end; publish the steps it completes."""

@@ -29,6 +29,7 @@ from landmark_nav.parameter_tables import (check_value, dataclass_parameters, fi
 from landmark_nav.slam.features import LANDMARK_TYPES
 from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
                                         ODOMETRY_NOISE_MODELS)
+from landmark_nav.slam.keyframes import KeyframeParams
 from landmark_nav.slam.slam_params import JACOBIANS, OdometryNoise, SlamParams
 
 NODE = 'ekf_slam'
@@ -122,6 +123,14 @@ FRONTEND_PARAMETERS = {
                                   'heading stds on every step, the solution with the most '
                                   'pairs first (3 ICPs a step); 0: off', (0.0, 100.0), None),
 }
+#: KeyframeParams fields (parameters ``keyframe.*``) -> (description, limits, choices).
+KEYFRAME_PARAMETERS = {
+    'min_travel_m': ('a scan is a keyframe (landmark update, map management) once the '
+                     'odometry travelled this far since the last one; the scans between only '
+                     'move the pose; 0 (with min_turn_rad 0) = every scan [m]',
+                     (0.0, 100.0), None),
+    'min_turn_rad': ('...or turned this much since it [rad]', (0.0, 10.0), None),
+}
 #: The other parameters: name -> (default, description, limits, choices).
 NODE_PARAMETERS = {
     'odometry.model': ('', "'' = the odometry.* values; else pioneer, simulator or drift gains "
@@ -173,6 +182,8 @@ REAL_DATA: Dict[str, Any] = {
     'scan_matching': True,
     'scan_matching_fit_pairs': 0.3,
     'scan_matching_side_starts': 2.5,
+    'keyframe.min_travel_m': 0.1,
+    'keyframe.min_turn_rad': 0.1,
 }
 
 
@@ -183,11 +194,18 @@ def _as_parameter(name: str, value: Any) -> Any:
     return value
 
 
+def _chapter_value(name: str) -> Any:
+    """Return the dataclasses' (the chapter's) default of a :data:`REAL_DATA` option."""
+    if name == 'landmarks':
+        return 'corners'
+    if name.startswith('keyframe.'):
+        return getattr(KeyframeParams(), name[len('keyframe.'):])
+    return _as_parameter(name, getattr(
+        SlamParams() if name in SLAM_PARAMETERS else FrontendParams(), name))
+
+
 #: The chapter profile: the :data:`REAL_DATA` options at the dataclasses' defaults.
-CHAPTER: Dict[str, Any] = {
-    name: ('corners' if name == 'landmarks' else _as_parameter(name, getattr(
-        SlamParams() if name in SLAM_PARAMETERS else FrontendParams(), name)))
-    for name in REAL_DATA}
+CHAPTER: Dict[str, Any] = {name: _chapter_value(name) for name in REAL_DATA}
 
 
 def parameters() -> Dict[str, Parameter]:
@@ -195,14 +213,17 @@ def parameters() -> Dict[str, Parameter]:
     options = {k: v for k, v in REAL_DATA.items() if k != 'landmarks'}
     slam = SlamParams(**{k: (None if v == 0.0 and SLAM_PARAMETERS[k][3:] else v)
                          for k, v in options.items() if k in SLAM_PARAMETERS})
-    frontend = FrontendParams(**{k: v for k, v in options.items()
-                                 if k in FRONTEND_PARAMETERS})
+    keyframe = KeyframeParams(**{k[len('keyframe.'):]: v for k, v in options.items()
+                                 if k.startswith('keyframe.')})
+    frontend = FrontendParams(keyframe=keyframe, **{k: v for k, v in options.items()
+                                                    if k in FRONTEND_PARAMETERS})
     out = dataclass_parameters(SLAM_PARAMETERS, slam)
     pioneer = ODOMETRY_NOISE_MODELS['pioneer']
     for name, description in ODOMETRY_PARAMETERS.items():
         out[f'odometry.{name}'] = Parameter(float(getattr(pioneer, name)), description,
                                             (0.0, 10.0))
     out.update(dataclass_parameters(FRONTEND_PARAMETERS, frontend))
+    out.update(dataclass_parameters(KEYFRAME_PARAMETERS, keyframe, 'keyframe.'))
     out.update(dataclass_parameters(SLAM_LINE_PARAMETERS, LineParams(), 'lines.'))
     out.update({k: Parameter(*v) for k, v in NODE_PARAMETERS.items()})
     return out
@@ -265,7 +286,10 @@ def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamCon
         raise ValueError(f'parameter odometry.model: {err}') from None
     try:
         params = SlamParams(odometry=noise, **_fields(SLAM_PARAMETERS, values, SlamParams()))
-        frontend = FrontendParams(**_fields(FRONTEND_PARAMETERS, values, FrontendParams()))
+        keyframe = KeyframeParams(**_fields(KEYFRAME_PARAMETERS, values, KeyframeParams(),
+                                            'keyframe.'))
+        frontend = FrontendParams(keyframe=keyframe,
+                                  **_fields(FRONTEND_PARAMETERS, values, FrontendParams()))
         line_params = replace(LineParams(), **_fields(SLAM_LINE_PARAMETERS, values,
                                                       LineParams(), 'lines.'))
     except (TypeError, ValueError) as err:
@@ -291,6 +315,6 @@ def chapter_configuration() -> SlamConfiguration:
 
 
 __all__ = ['CHAPTER', 'chapter_configuration', 'check_value', 'default_values',
-           'FRONTEND_PARAMETERS', 'NODE_PARAMETERS', 'ODOMETRY_PARAMETERS',
+           'FRONTEND_PARAMETERS', 'KEYFRAME_PARAMETERS', 'NODE_PARAMETERS', 'ODOMETRY_PARAMETERS',
            'Parameter', 'parameters', 'REAL_DATA', 'SLAM_LINE_PARAMETERS', 'SLAM_PARAMETERS',
            'slam_configuration', 'SlamConfiguration']

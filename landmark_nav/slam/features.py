@@ -15,6 +15,7 @@ from typing import List, Optional, Tuple
 from landmark_nav.laser.corners import CornerParams, extract_corners
 from landmark_nav.laser.lines import extract_lines, LineParams
 from landmark_nav.laser.segmentation import segment_scan
+from landmark_nav.slam.frontend import line_beam_times
 import numpy as np
 
 #: Values of the ``landmarks`` parameter.
@@ -67,4 +68,18 @@ def extract_scan_features(ranges: np.ndarray, angles: np.ndarray, valid: np.ndar
     return corners, lines
 
 
-__all__ = ['check_landmarks', 'extract_scan_features', 'LANDMARK_TYPES']
+def scan_lines(ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
+               angle_increment: float, time_increment: float,
+               line_params: Optional[LineParams] = None) -> Tuple[list, np.ndarray]:
+    """Return ``(lines, beam_time)``: a scan's lines and their middle beams' times [s].
+
+    :func:`extract_scan_features` with ``landmarks='lines'``; what a keyframe's
+    ``Corners.lines_from`` extracts (:mod:`.keyframes`). Arguments as there, plus the
+    scan's time between beams [s].
+    """
+    lines = extract_scan_features(ranges, angles, valid, angle_increment, 'lines', None,
+                                  line_params)[1]
+    return lines, line_beam_times(lines, time_increment)
+
+
+__all__ = ['check_landmarks', 'extract_scan_features', 'LANDMARK_TYPES', 'scan_lines']

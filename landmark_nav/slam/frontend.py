@@ -52,17 +52,15 @@ older than the last processed step is dropped (``'out_of_order'``).
 the last odometry pose for beams after it (end of a recording; the node calls it when
 odometry stops coming).
 
-Start-up: the filter starts at the first accepted odometry sample. A step needs the
-odometry at its stamp, so a set stamped at or after the first sample waits, however long the
-odometry takes to come (the node bounds the waiting sets by their memory, not by a time: when
-the base's driver or its DDS match comes seconds after the laser, no set stamped after the
-first odometry sample is lost), and a set stamped before it has no odometry pose and is not
-processed (``'before_odometry'``, when the first sample comes for the sets waiting, on
-arrival for later ones), as slam_toolbox and AMCL discard scans stamped before the odom ->
-base_link transform's first sample in their tf message filter. Such sets are not drops (the
-node counts them apart on ``/diagnostics``): on the live pipeline, the sets of the laser's
-first seconds while ``/odom`` is not yet matched, plus 1 to 6 sets (up to 126 ms) stamped
-before the first sample that arrive after it.
+Start-up: the filter starts at the first accepted odometry sample. A set stamped at or
+after it waits for the odometry at its stamp, however long it takes (the node bounds the
+waiting sets by their memory, not by a time); a set stamped before it has no odometry pose
+and is not processed (``'before_odometry'``; not a drop: slam_toolbox and AMCL likewise
+discard scans stamped before the odom -> base_link transform's first sample).
+
+Keyframes (``FrontendParams.keyframe``, :mod:`.keyframes`): with a travel or turn threshold,
+only the sets that far from the last keyframe reach the filter; a set in between gets its
+pose from the odometry since the last keyframe (``Step.keyframe`` False).
 
 Per step (one iteration of Fig. 17): the odometry is linearly interpolated to the stamp
 (:func:`landmark_nav.geometry.interpolate_pose`, times in seconds since the first odometry
@@ -112,12 +110,11 @@ scans then give the landmark observations: the scan-matched motion and the updat
 their data, so the filter's pose is somewhat overconfident (the Carmen figures in the README
 measure how much). The ICP runs on the raw scan (no de-skew).
 
-Odometry noise per robot: :mod:`.odometry_noise_models` (``pioneer``, the default;
-``simulator``; an imported bag's drift gains).
+Odometry noise per robot: :mod:`.odometry_noise_models`.
 """
 
 import bisect
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -126,6 +123,7 @@ import numpy as np
 
 from .consistency import chi2_gate
 from .ekf_slam import EkfSlam, odometry_noise, SlamParams, UpdateResult
+from .keyframes import KeyframeParams, NO_UPDATE, pose_between_keyframes
 from .line_landmarks import lines_to_observations
 from .observations import corner_descriptors, corners_to_observations
 from .odometry_checks import BackwardRun, covariance_problem, implausible_motion
@@ -180,6 +178,7 @@ class FrontendParams:
         scan_matching_side_starts: k > 0: ICP also starts from the odometry's heading
             ``+- k`` heading stds on every step, the solution with the most pairs first
             (:func:`.scan_matching.scan_motion`); 0: off.
+        keyframe: Which sets reach the filter (:mod:`.keyframes`; default: every set).
     """
 
     deskew: bool = True
@@ -197,6 +196,7 @@ class FrontendParams:
     scan_matching_accept: float = 0.999
     scan_matching_fit_pairs: float = 0.0
     scan_matching_side_starts: float = 0.0
+    keyframe: KeyframeParams = KeyframeParams()
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad field."""
@@ -222,6 +222,8 @@ class FrontendParams:
                     or f < 0.0):
                 raise ValueError(f'FrontendParams.{name} must be a finite number >= 0 '
                                  f'(0 = off), got {f!r}')
+        if not isinstance(self.keyframe, KeyframeParams):
+            raise ValueError('FrontendParams.keyframe must be a KeyframeParams')
         if not isinstance(self.scan_matching_noise, str):
             raise ValueError('FrontendParams.scan_matching_noise must be a string, got '
                              f'{self.scan_matching_noise!r}')
@@ -265,6 +267,10 @@ class Corners:
         line_sigma_r: The laser's stated range noise for the lines' a-posteriori variance
             factor (:func:`.line_landmarks.lines_to_observations`); None: not applied.
         scan: The scan's geometry for visibility-aware pruning (None: no pruning evidence).
+        lines_from: Extracts ``(lines, line_beam_time)`` when the set reaches the filter
+            (:meth:`with_lines`; a set between keyframes needs none); None: ``lines``.
+        lines_until: With ``lines_from``: the scan's last beam time after ``stamp_ns`` [s]
+            (the set waits for the odometry up to it).
     """
 
     stamp_ns: int
@@ -277,6 +283,15 @@ class Corners:
     line_beam_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
     line_sigma_r: Optional[float] = None
     scan: Optional[ScanGeometry] = None
+    lines_from: Optional[Callable[[], Tuple[Tuple, np.ndarray]]] = None
+    lines_until: float = 0.0
+
+    def with_lines(self) -> 'Corners':
+        """Return the set with the lines of ``lines_from`` extracted (else itself)."""
+        if self.lines_from is None:
+            return self
+        lines, beam_time = self.lines_from()
+        return replace(self, lines=tuple(lines), line_beam_time=beam_time, lines_from=None)
 
     @classmethod
     def from_corners(cls, stamp_ns: int, corners: Sequence, time_increment: float = 0.0,
@@ -352,6 +367,9 @@ class Step:
         tag: The ``tag`` given to :meth:`SlamFrontend.add_features`.
         motion: What ``increment`` is: ``odometry`` or ``scan_matching``
             (:data:`MOTION_SOURCES`).
+        keyframe: False for a set between keyframes (:mod:`.keyframes`): ``increment`` is
+            the odometry's since the last keyframe, ``pose`` / ``covariance`` predicted
+            from it on a copy, ``result`` empty; the filter did not change.
     """
 
     stamp_ns: int
@@ -364,6 +382,7 @@ class Step:
     slam: EkfSlam
     tag: object = None
     motion: str = 'odometry'
+    keyframe: bool = True
 
 
 @dataclass
@@ -433,6 +452,8 @@ class SlamFrontend:
         #: a restart from other headings made usable (``recovered``):
         #: :func:`.scan_matching.scan_motion`.
         self.icp_restarts: Dict[str, int] = {'restarted': 0, 'recovered': 0}
+        #: Sets that went to the filter (``keyframes``) and sets in between (``skipped``).
+        self.keyframes: Dict[str, int] = {'keyframes': 0, 'skipped': 0}
         self._scan_noise = odometry_noise_model(self.frontend.scan_matching_noise)
         self._scan_accept = chi2_gate(3, self.frontend.scan_matching_accept)
         self.restarts = 0
@@ -448,7 +469,9 @@ class SlamFrontend:
         self._back_run = BackwardRun(self.frontend.restart_messages)
         self._pending: List[_Pending] = []
         self._pending_bytes = 0
-        self.last_step: Optional[Tuple[int, np.ndarray]] = None
+        self.last_step: Optional[Tuple[int, np.ndarray]] = None  # the last keyframe's
+        self.last_stamp: Optional[int] = None  # the last set processed
+        self._keyframed = False  # a keyframe was processed since the start
         self._stepped = False  # a set was processed since the start
         self._extra_since = np.zeros(3)  # bridged variance already predicted with
         self._scan_points: Optional[np.ndarray] = None  # the last step's scan (matching)
@@ -611,11 +634,12 @@ class SlamFrontend:
             if t < self.t0:  # no odometry pose for it (module docstring), even after steps
                 self._before_odometry(t)
                 return []
-            if self._stepped and t < self.last_step[0] or first != self.t0 and t < first:
+            if self._stepped and t < self.last_stamp or first != self.t0 and t < first:
                 self._event('out_of_order', f'corners at {t} ns are older than the last step '
-                            f'({self.last_step[0]} ns) or the buffered odometry: skipped')
+                            f'({self.last_stamp} ns) or the buffered odometry: skipped')
                 return []
-        bt = np.concatenate([corners.beam_time, corners.line_beam_time])
+        bt = np.concatenate([corners.beam_time, corners.line_beam_time,
+                             [corners.lines_until] if corners.lines_from else []])
         need = t + (int(math.ceil(float(np.max(bt)) * 1e9))
                     if self.frontend.deskew and bt.size and np.max(bt) > 0 else 0)
         self._seq += 1
@@ -680,6 +704,11 @@ class SlamFrontend:
         u_cov = None
         if np.any(extra > 0.0):
             u_cov = odometry_noise(u, self.params.odometry) + np.diag(extra)
+        elif self._keyframed and not self.frontend.keyframe.is_keyframe(u):
+            return self._between_keyframes(p, odo, u)
+        self.last_stamp = t
+        self._keyframed = True
+        c = c.with_lines()
         source = 'odometry'
         if self.frontend.scan_matching:
             # Across a bridged jump the increment is unknown (bridged as no motion): no
@@ -707,9 +736,27 @@ class SlamFrontend:
         self.last_step = (t, odo)
         self._stepped = True
         self._event('processed')
-        step = Step(stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
-                    pose=self.slam.pose, covariance=self.slam.pose_covariance, slam=self.slam,
-                    tag=p.tag, motion=source)
+        return self._stepped_with(Step(
+            stamp_ns=t, odometry=odo, increment=u, bridged_variance=extra, result=res,
+            pose=self.slam.pose, covariance=self.slam.pose_covariance, slam=self.slam,
+            tag=p.tag, motion=source))
+
+    def _between_keyframes(self, p: _Pending, odo: np.ndarray, u: np.ndarray) -> Step:
+        """Step a set between keyframes: its pose from the odometry, the filter unchanged."""
+        self.last_stamp = p.stamp_ns
+        self._stepped = True
+        self._event('processed')
+        self.keyframes['skipped'] += 1
+        pose, cov = pose_between_keyframes(self.slam.pose, self.slam.pose_covariance, u,
+                                           odometry_noise(u, self.params.odometry))
+        return self._stepped_with(Step(
+            stamp_ns=p.stamp_ns, odometry=odo, increment=u, bridged_variance=np.zeros(3),
+            result=NO_UPDATE, pose=pose, covariance=cov, slam=self.slam, tag=p.tag,
+            keyframe=False))
+
+    def _stepped_with(self, step: Step) -> Step:
+        if step.keyframe:
+            self.keyframes['keyframes'] += 1
         if self.on_step is not None:
             self.on_step(step)
         return step

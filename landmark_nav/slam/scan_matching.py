@@ -18,7 +18,7 @@ the sum of squared residuals; the gate may shrink over stages (coarse to fine).
 
 from dataclasses import dataclass
 import math
-from typing import Callable, Dict, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence
 
 from landmark_nav.geometry import compose, compose_jacobians, inverse, wrap_angle
 import numpy as np
@@ -53,6 +53,33 @@ class IcpResult:
     hessian: np.ndarray
 
 
+@dataclass(frozen=True, eq=False)
+class IcpTarget:
+    """A target scan prepared for :func:`point_to_line_icp`: its k-d tree and normals.
+
+    Built once per target and shared by every ICP start on it (:func:`icp_target`).
+    """
+
+    points: np.ndarray
+    tree: cKDTree
+    normals: np.ndarray
+
+
+def icp_target(target: np.ndarray, neighbours: int = 5) -> IcpTarget:
+    """Return ``target`` (M, 2) prepared: its k-d tree and each point's normal.
+
+    The normal of a point is the smallest-eigenvalue direction of the scatter of its
+    ``neighbours`` nearest target points (Censi's point-to-line metric).
+    """
+    q = np.asarray(target, dtype=float).reshape(-1, 2)
+    tree = cKDTree(q)
+    if len(q) < neighbours:
+        return IcpTarget(q, tree, np.zeros((0, 2)))
+    _, nb = tree.query(q, k=neighbours)
+    nbh = q[nb] - q[nb].mean(axis=1, keepdims=True)
+    return IcpTarget(q, tree, np.linalg.eigh(np.einsum('kni,knj->kij', nbh, nbh))[1][:, :, 0])
+
+
 def point_to_line_icp(source: np.ndarray, target: np.ndarray,
                       guess: Sequence[float] = (0.0, 0.0, 0.0),
                       gates: Sequence[float] = (0.15,), iterations: int = 15,
@@ -62,7 +89,7 @@ def point_to_line_icp(source: np.ndarray, target: np.ndarray,
 
     Args:
         source: (N, 2) points [m].
-        target: (M, 2) points [m].
+        target: (M, 2) points [m], or an :class:`IcpTarget` (built with ``neighbours``).
         guess: Initial pose ``[x, y, yaw]``.
         gates: Pairing distances [m], one stage each, in order.
         iterations: Most Gauss-Newton steps per stage.
@@ -76,32 +103,67 @@ def point_to_line_icp(source: np.ndarray, target: np.ndarray,
     Raises:
         ValueError: No gate.
     """
+    return point_to_line_icp_starts(source, target, [guess], gates, iterations, min_matches,
+                                    neighbours, tolerance)[0]
+
+
+def point_to_line_icp_starts(source: np.ndarray, target, guesses: Sequence[Sequence[float]],
+                             gates: Sequence[float] = (0.15,), iterations: int = 15,
+                             min_matches: int = 20, neighbours: int = 5,
+                             tolerance: float = 1e-5) -> List[Optional[IcpResult]]:
+    """Return :func:`point_to_line_icp` from each of ``guesses``, run in lockstep.
+
+    Every start takes exactly the steps it takes alone (same pairs, same Gauss-Newton steps,
+    same result to the last bit); the starts share one k-d tree query per iteration (the
+    moved source points of all active starts at once, searched within the stage's gate:
+    a pair farther than it is not used) and one target preparation.
+    """
     if len(gates) == 0:
         raise ValueError('point_to_line_icp: gates must hold at least one distance')
     p = np.asarray(source, dtype=float).reshape(-1, 2)
-    q = np.asarray(target, dtype=float).reshape(-1, 2)
+    prepared = target if isinstance(target, IcpTarget) else None
+    q = prepared.points if prepared is not None else np.asarray(target, dtype=float).reshape(-1, 2)
     if len(p) < min_matches or len(q) < max(min_matches, neighbours):
-        return None
-    tree = cKDTree(q)
-    _, nb = tree.query(q, k=neighbours)
-    nbh = q[nb] - q[nb].mean(axis=1, keepdims=True)
-    normals = np.linalg.eigh(np.einsum('kni,knj->kij', nbh, nbh))[1][:, :, 0]
-    t = np.array(guess, dtype=float)
+        return [None] * len(guesses)
+    prepared = prepared or icp_target(q, neighbours)
+    tree, normals = prepared.tree, prepared.normals
+    ts = [np.array(g, dtype=float) for g in guesses]
+    failed = [False] * len(ts)
+    last = [None] * len(ts)  # (r, jac) of each start's last iteration
+    n_p = len(p)
     for gate in gates:
+        active = [k for k in range(len(ts)) if not failed[k]]
         for _ in range(iterations):
-            c, s = math.cos(t[2]), math.sin(t[2])
-            pt = p @ np.array([[c, s], [-s, c]]) + t[:2]
-            dist, j = tree.query(pt)
-            m = dist < gate
-            if m.sum() < min_matches:
-                return None
-            n = normals[j[m]]
-            r = np.einsum('ij,ij->i', pt[m] - q[j[m]], n)
-            jac = np.column_stack([n, -pt[m, 1] * n[:, 0] + pt[m, 0] * n[:, 1]])
-            step = np.linalg.lstsq(jac, -r, rcond=None)[0]
-            t += step
-            if np.abs(step).max() < tolerance:
+            if not active:
                 break
+            moved = []
+            for k in active:
+                t = ts[k]
+                c, s = math.cos(t[2]), math.sin(t[2])
+                moved.append(p @ np.array([[c, s], [-s, c]]) + t[:2])
+            dist_all, j_all = tree.query(np.concatenate(moved), distance_upper_bound=gate)
+            still = []
+            for i, k in enumerate(active):
+                pt = moved[i]
+                dist, j = dist_all[i * n_p:(i + 1) * n_p], j_all[i * n_p:(i + 1) * n_p]
+                m = dist < gate
+                if m.sum() < min_matches:
+                    failed[k] = True
+                    continue
+                n = normals[j[m]]
+                r = np.einsum('ij,ij->i', pt[m] - q[j[m]], n)
+                jac = np.column_stack([n, -pt[m, 1] * n[:, 0] + pt[m, 0] * n[:, 1]])
+                step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+                ts[k] += step
+                last[k] = (r, jac)
+                if np.abs(step).max() >= tolerance:
+                    still.append(k)
+            active = still
+    return [None if failed[k] else _icp_result(ts[k], *last[k]) for k in range(len(ts))]
+
+
+def _icp_result(t: np.ndarray, r: np.ndarray, jac: np.ndarray) -> IcpResult:
+    """Return the :class:`IcpResult` of a converged start (its last iteration's pairs)."""
     s2 = float(np.mean(r ** 2))
     hessian = jac.T @ jac
     try:
@@ -128,7 +190,7 @@ def scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
     return np.column_stack([r[m] * np.cos(a[m]), r[m] * np.sin(a[m])])
 
 
-def base_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
+def base_motion(previous, current: np.ndarray, u: Sequence[float],
                 mount: Sequence[float]) -> Optional[tuple]:
     """Return the base's motion between two scans by ICP, and the laser-frame ICP result.
 
@@ -138,7 +200,8 @@ def base_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
     result is moved back to the base (``M v M^-1``).
 
     Args:
-        previous: (N, 2) the previous scan's points (laser frame) [m].
+        previous: (N, 2) the previous scan's points (laser frame) [m], or them prepared
+            (:func:`icp_target`).
         current: (M, 2) this scan's points [m].
         u: (3,) the odometry increment between the two scans (base frame).
         mount: (3,) laser pose in base_link.
@@ -147,14 +210,20 @@ def base_motion(previous: np.ndarray, current: np.ndarray, u: Sequence[float],
         ``(v, fit)``: (3,) the base's motion and the :class:`IcpResult`; None when the ICP
         found no solution.
     """
+    return base_motions(previous, current, [u], mount)[0]
+
+
+def base_motions(previous, current: np.ndarray, guesses: Sequence[Sequence[float]],
+                 mount: Sequence[float]) -> List[Optional[tuple]]:
+    """Return :func:`base_motion` from each odometry guess (ICP starts in lockstep)."""
     mount = np.asarray(mount, dtype=float)
     unmount = inverse(mount)
-    fit = point_to_line_icp(current, previous,
-                            compose(compose(unmount, np.asarray(u, dtype=float)), mount),
-                            gates=SCAN_MOTION_GATES, iterations=SCAN_MOTION_ITERATIONS)
-    if fit is None or not np.all(np.isfinite(fit.pose)):
-        return None
-    return compose(compose(mount, fit.pose), unmount), fit
+    fits = point_to_line_icp_starts(
+        current, previous, [compose(compose(unmount, np.asarray(u, dtype=float)), mount)
+                            for u in guesses],
+        gates=SCAN_MOTION_GATES, iterations=SCAN_MOTION_ITERATIONS)
+    return [None if fit is None or not np.all(np.isfinite(fit.pose)) else
+            (compose(compose(mount, fit.pose), unmount), fit) for fit in fits]
 
 
 def larger_motion(u: Sequence[float], v: Sequence[float]) -> np.ndarray:
@@ -245,13 +314,15 @@ def _search(previous: np.ndarray, current: np.ndarray, u: np.ndarray, u_cov,
             restarts: Optional[Dict[str, int]], side_starts: float = 0.0) -> Optional[tuple]:
     """Return the :func:`base_motion` result that ``agreed`` accepts, restarting (above)."""
     restarts = {} if restarts is None else restarts
-    found = base_motion(previous, current, u, mount)
+    previous = icp_target(previous)  # one k-d tree and normals for every start
     u_at_u = np.asarray(u_cov(u) if callable(u_cov) else u_cov, dtype=float)
     s = math.sqrt(max(float(u_at_u[2, 2]), 0.0))
     if side_starts > 0.0 and s > 0.0 and math.isfinite(s):
         # Two more starts beyond the basin of the odometry's guess: a guess in its tail
         # leads ICP into a nearby wrong minimum that may pass the test.
-        found = _most_pairs(previous, current, u, mount, (side_starts * s,), found)
+        found = _most_pairs(previous, current, u, mount, (side_starts * s,), None, True)
+    else:
+        found = base_motion(previous, current, u, mount)
     if found is not None and agreed(found):
         return found
     if not (s > 0.0 and math.isfinite(s)):
@@ -265,21 +336,24 @@ def _search(previous: np.ndarray, current: np.ndarray, u: np.ndarray, u_cov,
     return best
 
 
-def _most_pairs(previous: np.ndarray, current: np.ndarray, u: np.ndarray,
+def _most_pairs(previous, current: np.ndarray, u: np.ndarray,
                 mount: Sequence[float], turns: Sequence[float],
-                best: Optional[tuple]) -> Optional[tuple]:
+                best: Optional[tuple], from_u: bool = False) -> Optional[tuple]:
     """Return the :func:`base_motion` result with the most pairs.
 
-    The candidates: ``best``, then ICP from ``u`` turned by ``+t`` and ``-t`` for each ``t``
-    of ``turns`` in order; a tie keeps the earlier.
+    The candidates: ``best`` (or, with ``from_u``, ICP from ``u``), then ICP from ``u``
+    turned by ``+t`` and ``-t`` for each ``t`` of ``turns`` in order; a tie keeps the
+    earlier. All starts run in lockstep (:func:`base_motions`).
     """
+    guesses = [u] if from_u else []
     for t in turns:
         for sign in (1.0, -1.0):
             guess = u.copy()
             guess[2] += sign * t
-            other = base_motion(previous, current, guess, mount)
-            if other is not None and (best is None or other[1].matches > best[1].matches):
-                best = other
+            guesses.append(guess)
+    for other in base_motions(previous, current, guesses, mount):
+        if other is not None and (best is None or other[1].matches > best[1].matches):
+            best = other
     return best
 
 
