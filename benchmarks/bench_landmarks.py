@@ -7,8 +7,8 @@ Run from the repository root::
     python benchmarks/bench_landmarks.py real [detection|pose|false|stages|all]
         [--data DIR] [--per-size N] ...
     python benchmarks/bench_landmarks.py camera-sim [--frames N]
-    python benchmarks/bench_landmarks.py rates [--results benchmarks/results/landmarks.json]
-    python benchmarks/bench_landmarks.py shuttle [--trips 40] [--results ...]
+    python benchmarks/bench_landmarks.py rates [--results FILE] [--no-fail]
+    python benchmarks/bench_landmarks.py shuttle [--trips 40] [--results ...] [--no-fail]
 
 ``detector``: the landmark detector against OpenCV ArUco on rendered frames of the same
 size. Frames: 640 x 480 mono8, rendered by the camera simulator (f = 525 px, noise 2 DN,
@@ -372,7 +372,7 @@ def run_checked(args) -> int:
     for msg in failed:
         print(f'REGRESSION: {msg}')
     print(f'{args.command}: ' + ('FAILED' if failed else 'all figures within their stored bounds'))
-    return 1 if failed else 0
+    return 1 if failed and not args.no_fail else 0
 
 
 def main(argv=None) -> int:
@@ -409,11 +409,15 @@ def main(argv=None) -> int:
     p.add_argument('--scattered', type=int, default=200,
                    help='landmark-free frames of scattered distractors (default 200)')
     p.add_argument('--results', default=str(RESULTS), help='stored bounds (JSON)')
+    p.add_argument('--no-fail', action='store_true',
+                   help='report regressions but exit 0 (a run on a small sample)')
     p.set_defaults(run=run_checked)
     p = sub.add_parser('shuttle', help='the shuttle with fixes on the approach against fixes '
                                        'at the stops, against stored bounds')
     p.add_argument('--trips', type=int, default=40, help='round trips (default 40)')
     p.add_argument('--results', default=str(RESULTS), help='stored bounds (JSON)')
+    p.add_argument('--no-fail', action='store_true',
+                   help='report regressions but exit 0 (a run on a small sample)')
     p.set_defaults(run=run_checked)
     if argv[:1] == ['real']:
         return landmarks_real.main(argv[1:], prog=f'{ap.prog} real')

@@ -9,14 +9,8 @@ or ``--data DIR``)::
         [--position-floor M] [--jacobians J] [--joint-probability P]
         [--out DIR] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py diagnose [--landmarks both]
-        [--seed 0] [--line-floor M] [--line-residual-factor K] [--line-beam-width RAD]
-        [--reject-ambiguous]
-        [--jacobians standard|observability|observability_gain|first_estimates]
-        [--gate-probability P] [--joint-probability P] [--association icnn|jcbb]
-        [--cartesian-gate F]
-        [--free-space-check P] [--line-extent-sigmas K]
-        [--recovery-probability P [--recovery-pairs N]] [--spurious-limit L] [--drift MODEL]
-        [--filter-noise MODEL] [--data DIR] [LOG ...]
+        [--seed 0] [--drift MODEL] [--filter-noise MODEL] [filter options, see --help]
+        [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py grid [--seeds 0 1]
         [--params-file YAML] [--set NAME=VALUE ...] [--landmarks corners|lines|both]
         [--procs 2] [--cache DIR] [--data DIR] [LOG ...]
@@ -36,17 +30,10 @@ LOG a name in ``--data DIR`` (default ``../shared/data/wean``; ``robotdata1`` ->
 
 ``evaluate``:
 
-Each log is imported with ``landmark_nav import`` defaults (synthetic ``pioneer`` drift,
-seed 0; ``--seed`` other drift draws, one row per seed) into a temporary directory and
-evaluated as ``landmark_nav evaluate BAG`` does
-(:func:`landmark_nav.evaluation.slam.evaluate_bag`) with the default front end
-(:mod:`landmark_nav.slam.frontend`: odometry checks against elapsed time and noise, no
-absolute jump limit) and the filter's odometry noise model taken from the bag's stated
-drift model (the importer's ``pioneer`` gains ``k_d = 0.05 m/sqrt(m)``, ``k_theta = 0.05
-rad/sqrt(m)``, ``k_dtheta = 0.1 rad/sqrt(rad)``); ``--prune-misses``, ``--line-floor``,
-``--line-residual-factor``, ``--reject-ambiguous``, ``--position-floor``, ``--jacobians``
-and ``--joint-probability`` set those :class:`SlamParams` fields on top of the same noise
-model (the consistency options of :mod:`landmark_nav.slam.ekf_slam`).
+Each log is imported with ``landmark_nav import`` defaults (``pioneer`` drift, seed 0;
+``--seed``: one row per drift draw) and evaluated as ``landmark_nav evaluate BAG`` does
+(:func:`landmark_nav.evaluation.slam.evaluate_bag`), the filter's odometry noise from the
+bag's stated drift model; the other options set those :class:`SlamParams` fields.
 
 Printed per log and landmark type: filter resets, corner and line landmarks at the end,
 the SE(2)-aligned ATE RMSE of EKF-SLAM and of the odometry and their ratio (issue 14 asks
@@ -70,13 +57,9 @@ log:
   odometry's relative motion against the reference's, in the window's start frame, with the
   filter's ``U`` propagated along the window; 3 expected).
 * ``line_m2``: median squared Mahalanobis distance (2 expected) of each line observation
-  put in the map with the reference pose, from the mean of the observations the filter
-  associated with the same landmark (landmarks seen at least 5 times), under the stated
-  covariance moved to the map (the extractor's through the mount plus the segment-wide
-  terms of ``line_floor``, ``line_residual_factor`` and ``line_beam_width``, as the filter
-  gets it, :func:`landmark_nav.slam.ekf_slam.line_noise_covariance`; the sweep
-  motion is left out). The reference poses are
-  scan-matched, a few cm, so this overstates the error a little.
+  put in the map with the reference pose, from the mean of the observations associated with
+  the same landmark (seen >= 5 times), under the covariance the filter gets
+  (:func:`landmark_nav.slam.ekf_slam.line_noise_covariance`).
 * ``nis95``: share of updates whose joint NIS exceeds its chi-square 95 % bound (0.05
   expected) and ``d2``: mean individual d2 of the accepted pairs (1.6 for a 95 % gate).
 * ``nees_med``: median robot NEES (3 dof, unaligned), ``psi_err`` / ``psi_sd``: RMS heading
