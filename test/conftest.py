@@ -10,6 +10,7 @@ import fcntl
 import os
 from pathlib import Path
 import pickle
+import resource
 from typing import Any, Callable, Tuple
 
 from landmark_nav.testing import isolate_dds
@@ -78,6 +79,26 @@ def office_demo(run_once) -> Tuple[str, Path]:
     """Return the summary and the folder of ``run_demo`` on bags/office, once per test run."""
     from landmark_nav.tools.demo import run_demo
     return run_once('office_demo', lambda out: run_demo(REPO / 'bags' / 'office', out))
+
+
+_CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
+
+
+def _cpu_seconds() -> float:
+    """Return the CPU time of this process and of its reaped children [s]."""
+    me, children = (resource.getrusage(w) for w in (
+        resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    return me.ru_utime + me.ru_stime + children.ru_utime + children.ru_stime
+
+
+if _CPU_LOG:  # where the suite's CPU goes: LANDMARK_NAV_TEST_CPU=FILE make test
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        """Append the test's id and its CPU seconds (fixtures included) to the file."""
+        start = _cpu_seconds()
+        yield
+        with open(_CPU_LOG, 'a') as log:
+            log.write(f'{item.nodeid}\t{_cpu_seconds() - start:.3f}\n')
 
 
 #: the files that cost the most CPU, most first (``pytest -n 4 --dist loadfile
