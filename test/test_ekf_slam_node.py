@@ -260,11 +260,19 @@ T0 = 1_700_000_000_000_000_000
 GOOD_CORNER = [2.0, 1.0, 0.0, 3.0, 1.57, 1e-4, 0.0, 1e-4]  # corner_cloud row
 
 
-def recording_node(ros):
-    """Return an ekf_slam node whose published steps' stamps go to the returned list."""
+def recording_node(ros, poses=None):
+    """Return an ekf_slam node whose published steps' stamps go to the returned list.
+
+    With ``poses`` (a dict), each published step's pose goes there too, by stamp.
+    """
     slam = EkfSlamNode(context=ros.context)
     stamps = []
-    slam._publish = lambda t, pose, cov: stamps.append(t)
+
+    def publish(t, pose, cov):
+        stamps.append(t)
+        if poses is not None:
+            poses[t] = np.array(pose, dtype=float)
+    slam._publish = publish
     return slam, stamps
 
 
@@ -335,9 +343,9 @@ def test_bad_input():
 
 def test_out_of_order_corner_sets_are_processed_in_stamp_order():
     """A corner set older than one already queued used to crash the node (extrapolation)."""
-    t0, good = T0, GOOD_CORNER
+    t0, good, poses = T0, GOOD_CORNER, {}
     with RosHarness() as ros:
-        slam, stamps = recording_node(ros)
+        slam, stamps = recording_node(ros, poses)
         slam.on_odom(make_odometry(t0, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         slam.on_odom(make_odometry(t0 + 100_000_000, 'odom', 'base_link', [0.01, 0.0, 0.0]))
         slam.on_corners(corner_cloud(t0 + 200_000_000, [good]))  # waits for odometry
@@ -348,7 +356,12 @@ def test_out_of_order_corner_sets_are_processed_in_stamp_order():
         assert stamps == [t0 + 50_000_000] and slam.stats.dropped['out_of_order'] == 1
         slam.on_odom(make_odometry(t0 + 300_000_000, 'odom', 'base_link', [0.03, 0.0, 0.0]))
         assert stamps == [t0 + 50_000_000, t0 + 200_000_000] and not slam.pending
-        assert abs(slam.slam.pose[0] - 0.02) < 1e-12
+        # each set at the odometry interpolated to its stamp (between keyframes too)
+        assert abs(poses[t0 + 50_000_000][0] - 0.005) < 1e-12
+        assert abs(poses[t0 + 200_000_000][0] - 0.02) < 1e-12
+        # 1.5 cm from the last keyframe (the default keyframe.min_travel_m is 0.1 m): the
+        # filter stays at the first set's step
+        assert abs(slam.slam.pose[0] - 0.005) < 1e-12
         slam.destroy_node()
 
 

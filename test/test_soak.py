@@ -83,6 +83,10 @@ def test_live_slam_nodes_at_40_hz_process_or_count_every_scan(tmp_path, processe
             int(s['processed']) > 0 for s in _statuses(diagnostics, 'ekf_slam')), timeout=60.0)
         time.sleep(SOAK_S)
         assert processes.stop(player, signal.SIGINT, timeout=30.0) == 0
+        seen = -1
+        while seen != len(scans):  # the scans still in flight reach this test too
+            seen = len(scans)
+            time.sleep(1.0)
         # the player starts once the nodes subscribe and may publish before this test's
         # subscription is discovered: what it published is every bag scan up to the last
         # one seen (15 s at rate 4 is half the bag: no loop)
