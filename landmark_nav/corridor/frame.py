@@ -6,10 +6,13 @@ Manhattan direction closest to the optical axis), heading and tilt (eq. 21,
 :mod:`.orientation`) and the lateral position from the corridor lines (eqs. 22-23,
 :mod:`.lateral`). The node and the offline evaluation call :func:`measure_frame`.
 
-Standard deviations: the heading's from the VP direction covariance
-(:func:`~.vanishing_point.direction_covariance`, end-point noise), the lateral position's
-from :mod:`.lateral`; both are floored by :attr:`FrameParams.heading_std_floor` and
-:attr:`FrameParams.lateral_std_floor` for what the line noise model leaves out (the
+Standard deviations: the heading's from the calibrated covariance of the VP direction
+(:attr:`~.vp_confidence.DirectionConfidence.measurement_covariance`: for a confident
+direction the end-point noise covariance; otherwise the calibrated one mixed with the
+spread of a wrong direction by the probability that it is wrong, so a weakly supported
+frame moves the filter little), the lateral
+position's from :mod:`.lateral`; both are floored by :attr:`FrameParams.heading_std_floor`
+and :attr:`FrameParams.lateral_std_floor` for what the line noise model leaves out (the
 chapter: single frames off by 10-15 cm now and then, "a higher standard deviation for the
 assumed measured error").
 
@@ -23,9 +26,8 @@ from typing import Optional, Sequence, Tuple
 
 from landmark_nav.corridor.lateral import CorridorModel, lateral_position, LateralEstimate
 from landmark_nav.corridor.orientation import corridor_orientation, CorridorOrientation
-from landmark_nav.corridor.vanishing_point import (corridor_vanishing_point,
-                                                   direction_covariance, VanishingPoint,
-                                                   VPParams)
+from landmark_nav.corridor.vanishing_point import manhattan_frame, VanishingPoint, VPParams
+from landmark_nav.corridor.vp_confidence import assess_frame, DirectionConfidence
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.image_lines import (detect_lines, ImageLines, LineParams,
                                              undistort_segments)
@@ -71,6 +73,7 @@ class CorridorMeasurement:
         y: lateral position of base_link [m] (``y_v``).
         y_std: its standard deviation [m].
         vp: the corridor vanishing point (ideal pixels).
+        confidence: its support, calibrated uncertainty and confident flag.
         orientation: heading, tilt and elevation (eq. 21, mount).
         lateral: the line matching and lateral estimate.
         lines: the undistorted image lines.
@@ -81,6 +84,7 @@ class CorridorMeasurement:
     y: float
     y_std: float
     vp: VanishingPoint
+    confidence: DirectionConfidence
     orientation: CorridorOrientation
     lateral: LateralEstimate
     lines: ImageLines
@@ -91,9 +95,8 @@ class CorridorMeasurement:
         return np.diag([self.heading_std ** 2, self.y_std ** 2])
 
 
-def _heading_std(vp: VanishingPoint, lines: ImageLines, K: np.ndarray,
-                 mount: Sequence[float], sigma_px: float) -> float:
-    cov = direction_covariance(lines.segments, K, vp.direction, vp.inliers, sigma_px)
+def _heading_std(vp: VanishingPoint, cov: np.ndarray, mount: Sequence[float]) -> float:
+    """Propagate a (3, 3) direction covariance to the heading (numerical gradient)."""
     if not np.all(np.isfinite(cov)):
         return math.inf
     h0 = corridor_orientation(vp.direction, mount).heading
@@ -133,9 +136,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
         raise CorridorLost(f'{len(lines)} image lines')
     K = camera.K
     try:
-        vp = corridor_vanishing_point(lines.segments, K, lines.weights, params.vp)
+        frame = manhattan_frame(lines.segments, K, lines.weights, params.vp)
     except ValueError as err:
         raise CorridorLost(f'no vanishing point: {err}') from None
+    vp = frame.points[0]            # the corridor: the direction closest to the optical axis
     axis = math.degrees(math.acos(min(1.0, abs(float(vp.direction[2])))))
     if axis > params.max_axis_angle_deg:
         raise CorridorLost(f'vanishing point {axis:.0f} deg off the optical axis '
@@ -149,8 +153,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
                                prior, params.vp.sigma_px)
     except ValueError as err:
         raise CorridorLost(f'no lateral position: {err}') from None
-    h_std = _heading_std(vp, lines, K, mount, params.vp.sigma_px)
+    conf = assess_frame(frame, lines.segments, K, params.vp.sigma_px)[0]
+    h_std = _heading_std(vp, conf.measurement_covariance, mount)
     return CorridorMeasurement(
         heading=orient.heading, heading_std=math.hypot(h_std, params.heading_std_floor),
         y=lat.y, y_std=math.hypot(lat.std, params.lateral_std_floor), vp=vp,
-        orientation=orient, lateral=lat, lines=lines)
+        confidence=conf, orientation=orient, lateral=lat, lines=lines)
