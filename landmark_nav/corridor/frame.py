@@ -6,11 +6,12 @@ Manhattan direction closest to the optical axis), heading and tilt (eq. 21,
 :mod:`.orientation`) and the lateral position from the corridor lines (eqs. 22-23,
 :mod:`.lateral`). The node and the offline evaluation call :func:`measure_frame`.
 
-Standard deviations: the heading's from the calibrated covariance of the VP direction
-(:attr:`~.vp_confidence.DirectionConfidence.measurement_covariance`: for a confident
-direction the end-point noise covariance; otherwise the calibrated one mixed with the
-spread of a wrong direction by the probability that it is wrong, so a weakly supported
-frame moves the filter little), the lateral
+Standard deviations: the heading's from the VP direction, in two modes
+(:mod:`.vp_confidence`): correct, with the first-order covariance of the direction
+(end-point noise), and wrong, with the spread of wrong directions; the filter weighs the two
+(:meth:`.fusion.CorridorEKF.update`) by the probability that the direction is correct: 1 for
+a confident direction (its rare errors are left to the filter's innovation gate),
+``p_correct`` otherwise. The lateral
 position's from :mod:`.lateral`; both are floored by :attr:`FrameParams.heading_std_floor`
 and :attr:`FrameParams.lateral_std_floor` for what the line noise model leaves out (the
 chapter: single frames off by 10-15 cm now and then, "a higher standard deviation for the
@@ -74,6 +75,9 @@ class CorridorMeasurement:
         y_std: its standard deviation [m].
         vp: the corridor vanishing point (ideal pixels).
         confidence: its support, calibrated uncertainty and confident flag.
+        p_correct: probability the filter gives the VP direction of being correct: 1 when
+            confident, else ``confidence.p_correct`` (module docstring).
+        heading_std_wrong: the heading's std if it is not (the wrong mode's spread) [rad].
         orientation: heading, tilt and elevation (eq. 21, mount).
         lateral: the line matching and lateral estimate.
         lines: the undistorted image lines.
@@ -85,6 +89,8 @@ class CorridorMeasurement:
     y_std: float
     vp: VanishingPoint
     confidence: DirectionConfidence
+    p_correct: float
+    heading_std_wrong: float
     orientation: CorridorOrientation
     lateral: LateralEstimate
     lines: ImageLines
@@ -93,6 +99,17 @@ class CorridorMeasurement:
     def covariance(self) -> np.ndarray:
         """Return the (2, 2) covariance of ``(heading, y)`` (taken as uncorrelated)."""
         return np.diag([self.heading_std ** 2, self.y_std ** 2])
+
+    @property
+    def wrong_covariance(self) -> np.ndarray:
+        """Return the (2, 2) covariance of ``(heading, y)`` if the direction is wrong."""
+        return np.diag([self.heading_std_wrong ** 2, self.y_std ** 2])
+
+    @property
+    def mixture_covariance(self) -> np.ndarray:
+        """Return the moment-matched (2, 2) covariance of the two modes."""
+        p = self.p_correct
+        return p * self.covariance + (1.0 - p) * self.wrong_covariance
 
 
 def _heading_std(vp: VanishingPoint, cov: np.ndarray, mount: Sequence[float]) -> float:
@@ -153,9 +170,11 @@ def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
                                prior, params.vp.sigma_px)
     except ValueError as err:
         raise CorridorLost(f'no lateral position: {err}') from None
-    conf = assess_frame(frame, lines.segments, K, params.vp.sigma_px)[0]
-    h_std = _heading_std(vp, conf.measurement_covariance, mount)
+    conf = assess_frame(frame, lines.segments, K, params.vp.sigma_px, gate=params.vp.gate)[0]
+    h_std = _heading_std(vp, conf.first_order, mount)
     return CorridorMeasurement(
         heading=orient.heading, heading_std=math.hypot(h_std, params.heading_std_floor),
         y=lat.y, y_std=math.hypot(lat.std, params.lateral_std_floor), vp=vp,
-        confidence=conf, orientation=orient, lateral=lat, lines=lines)
+        confidence=conf, p_correct=1.0 if conf.confident else conf.p_correct,
+        heading_std_wrong=_heading_std(vp, conf.wrong_covariance, mount),
+        orientation=orient, lateral=lat, lines=lines)

@@ -27,18 +27,32 @@ first. Per direction this module states:
   (capped at 90 deg). Covariances (rank 2, tangent at ``d``, ``P = I - d d^T``): the
   correct mode's ``a^2 C_cov + b^2 P`` and the mixture's (moment-matched)
   ``p (a^2 C_cov + b^2 P) + (1 - p) sigma_wrong^2 P``.
-* ``confident``: ``p >= p_confident``. A direction with fewer than ``MIN_INLIERS`` (5)
-  inlier segments gets ``p = 0`` (the wrong mode alone): two lines meet somewhere whatever
-  their directions, so a direction needs three more to be checked at all (a rule, not
-  fitted: a frontal view with two or three receding lines gives a tight first-order
-  covariance around wherever they happen to meet, and York's calibration set has almost
-  no such direction to learn it from). A filter (:attr:`DirectionConfidence.
-  measurement_covariance`) takes for a confident direction the first-order covariance, to
-  which it adds the floor of its own camera (the fitted ``b`` holds what York's camera adds:
-  its lens distortion is not given, so its images are not undistorted), and leaves the rare
-  wrong confident ones to its innovation gate; otherwise it takes the mixture's covariance:
-  a weakly supported direction gets about the wrong mode's spread and hardly moves the
-  estimate.
+* ``log10_nfa``: whether the inlier segments meet at the direction by more than chance, an
+  a-contrario test (Desolneux, Moisan, Morel 2000; for vanishing points Almansa,
+  Desolneux, Vamech 2003). Two segments meet somewhere whatever their directions, so only
+  the others check a direction; a segment of length ``L`` whose orientation were random
+  would pass the consistency gate (``|z| <= gate``, the direction of a segment with
+  end-point noise ``sigma_px`` has the std ``sqrt(2) sigma_px / L``) with probability
+  ``P = min(1, 2 gate sqrt(2) sigma_px / (pi L))``, and the number of false alarms over
+  the ``N (N - 1) / 2`` candidate points of ``N`` segments is::
+
+      NFA = N (N - 1) / 2 * prod_{i >= 3} P_i
+
+  (the product over the inliers but the two longest, the ones that fix the point). A
+  direction with ``NFA >= 1`` (the test's usual threshold, not fitted) gets ``p = 0``,
+  the wrong mode alone: a frontal view with two or three short receding lines gives a
+  tight first-order covariance around wherever they happen to meet, and York's calibration
+  set has almost no such direction to learn it from; four long corridor edges meeting
+  within their noise pass (a long line is a sharp check, a short one a weak check).
+* ``confident``: ``p >= p_confident``.
+
+A filter takes the two modes as they are (:meth:`.fusion.CorridorEKF.update`, a Gaussian-sum
+update): the correct one with the first-order covariance, to which it adds the floor of its
+own camera (the fitted ``b`` holds what York's camera adds: its lens distortion is not
+given, so its images are not undistorted), the wrong one with
+:attr:`DirectionConfidence.wrong_covariance`, weighted by ``p`` (by 1 for a confident
+direction, whose rare errors are left to the filter's innovation gate). A weakly supported
+direction then moves the estimate little unless it agrees with the prediction.
 
 The constants (:data:`CALIBRATION`) are fitted on the York Urban training half (both
 640 x 480 and 320 x 240, all three directions of each image) by :func:`fit_calibration`:
@@ -66,8 +80,8 @@ import numpy as np
 SAME_DIRECTION_DEG = 2.0
 #: A direction is "correct" for the calibration when within this of the truth [deg].
 CORRECT_DEG = 2.0
-#: Fewer inlier segments: p_correct = 0 (module docstring).
-MIN_INLIERS = 5
+#: ``log10 NFA`` at or above which a direction is not checked by its lines: p_correct = 0.
+MAX_LOG10_NFA = 0.0
 #: chi-square quantile used for the radius (2 dof, 95 %) of a single Gaussian mode.
 COVERAGE = 0.95
 
@@ -104,6 +118,7 @@ class DirectionConfidence:
     Attributes:
         inliers: number of segments labelled with this direction.
         support: their summed weight.
+        log10_nfa: a-contrario number of false alarms of the inliers (module docstring).
         sigma_cov: first-order spread (largest std of the direction covariance) [rad].
         ambiguity: best competing hypothesis' score over the frame's (see the module).
         p_correct: probability of being within 2 deg of the truth.
@@ -112,11 +127,13 @@ class DirectionConfidence:
         first_order: (3, 3) first-order covariance ``C_cov`` (end-point noise only).
         covariance: (3, 3) calibrated covariance of the correct mode (rank 2).
         mixture_covariance: (3, 3) moment-matched covariance of the error mixture.
+        wrong_covariance: (3, 3) covariance of the wrong mode, ``sigma_wrong^2 P``.
         confident: ``p_correct >= p_confident``.
     """
 
     inliers: int
     support: float
+    log10_nfa: float
     sigma_cov: float
     ambiguity: float
     p_correct: float
@@ -125,17 +142,8 @@ class DirectionConfidence:
     first_order: np.ndarray
     covariance: np.ndarray
     mixture_covariance: np.ndarray
+    wrong_covariance: np.ndarray
     confident: bool
-
-    @property
-    def measurement_covariance(self) -> np.ndarray:
-        """Return the covariance a filter should use (see the module docstring).
-
-        Confident: the first-order covariance (the filter adds its own camera's floor);
-        otherwise the mixture's, so that a weakly supported direction moves the estimate
-        little.
-        """
-        return self.first_order if self.confident else self.mixture_covariance
 
 
 def features(sigma_cov: float, ambiguity: float) -> np.ndarray:
@@ -178,12 +186,35 @@ def direction_ambiguities(frame: ManhattanFrame) -> np.ndarray:
     return out
 
 
-def assess_direction(sigma_cov: float, ambiguity: float, inliers: int,
+def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
+              gate: float = 3.0) -> float:
+    """Return ``log10 NFA`` of a direction's inlier segments (module docstring).
+
+    Args:
+        segments: (N, 4) all segments of the frame [px]; ``N`` counts the candidate points.
+        inliers: (N,) mask of the direction's segments.
+        sigma_px: end-point noise [px].
+        gate: the consistency gate on ``|z|``.
+    """
+    seg = np.asarray(segments, dtype=float).reshape(-1, 4)
+    n = len(seg)
+    sel = seg[np.asarray(inliers, dtype=bool)]
+    length = np.hypot(sel[:, 2] - sel[:, 0], sel[:, 3] - sel[:, 1])
+    p = np.minimum(1.0, 2.0 * gate * math.sqrt(2.0) * sigma_px
+                   / (math.pi * np.maximum(length, 1e-9)))
+    checks = np.sort(np.log10(p))[2:]           # all but the two longest segments
+    return math.log10(max(0.5 * n * (n - 1), 1.0)) + float(np.sum(checks))
+
+
+def assess_direction(sigma_cov: float, ambiguity: float, nfa: float,
                      calibration: VPCalibration = CALIBRATION) -> Tuple[float, float, float]:
-    """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features."""
+    """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
+
+    ``nfa`` is the direction's ``log10 NFA`` (:func:`log10_nfa`).
+    """
     c = calibration
     s_wrong = math.radians(c.sigma_wrong_deg)
-    if not math.isfinite(sigma_cov) or inliers < MIN_INLIERS:
+    if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
     z = float(np.asarray(c.weights, dtype=float) @ features(sigma_cov, ambiguity))
     p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
@@ -192,7 +223,7 @@ def assess_direction(sigma_cov: float, ambiguity: float, inliers: int,
 
 
 def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
-                 sigma_px: float, calibration: VPCalibration = CALIBRATION
+                 sigma_px: float, calibration: VPCalibration = CALIBRATION, gate: float = 3.0
                  ) -> Tuple[DirectionConfidence, DirectionConfidence, DirectionConfidence]:
     """Return the support and calibrated uncertainty of each direction of ``frame``.
 
@@ -202,6 +233,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         K: (3, 3) intrinsics.
         sigma_px: end-point noise used for the estimate [px].
         calibration: the model's constants.
+        gate: the consistency gate the estimate used (``VPParams.gate``).
     """
     amb = direction_ambiguities(frame)
     c = calibration
@@ -214,14 +246,16 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         finite = bool(np.all(np.isfinite(cov)))
         s_cov = math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)) if finite else math.inf
         n_in = int(np.count_nonzero(vp.inliers))
-        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), n_in, c)
+        nfa = log10_nfa(segments, vp.inliers, sigma_px, gate)
+        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), nfa, c)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
-            inliers=n_in, support=vp.support, sigma_cov=s_cov,
+            inliers=n_in, support=vp.support, log10_nfa=nfa, sigma_cov=s_cov,
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
             first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
             mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
+            wrong_covariance=s_wrong ** 2 * tangent,
             confident=p >= c.p_confident))
     return tuple(out)
 
@@ -262,7 +296,7 @@ def _rayleigh_fit(s: np.ndarray, e: np.ndarray, limit: float) -> Tuple[float, fl
 
 
 def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
-                    inliers: Sequence[int], error_deg: Sequence[float],
+                    nfa: Sequence[float], error_deg: Sequence[float],
                     precision: float = 0.98,
                     threshold_on: Optional[Sequence[bool]] = None) -> VPCalibration:
     """Fit the confidence model on directions with known errors (module docstring).
@@ -270,7 +304,7 @@ def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
     Args:
         sigma_cov: first-order spreads [rad].
         ambiguity: competing hypotheses' relative scores.
-        inliers: inlier segment counts (fewer than ``MIN_INLIERS``: p = 0).
+        nfa: their ``log10 NFA`` (``>= MAX_LOG10_NFA``: p = 0, left out of the threshold).
         error_deg: the true angular errors [deg].
         precision: fraction within 2 deg wanted among the confident directions.
         threshold_on: the directions ``p_confident`` is chosen on (default: all), e.g. the
@@ -281,7 +315,7 @@ def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
     """
     s = np.asarray(sigma_cov, dtype=float)
     a = np.asarray(ambiguity, dtype=float)
-    n = np.asarray(inliers, dtype=int)
+    n = np.asarray(nfa, dtype=float)
     e = np.asarray(error_deg, dtype=float)
     if not (s.shape == a.shape == n.shape == e.shape):
         raise ValueError(f'inputs differ in length: {s.shape}, {a.shape}, {n.shape}, '
@@ -296,7 +330,7 @@ def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
     sigma_wrong = float(np.sqrt(np.mean(e[~good] ** 2)))
     sel = np.ones(e.shape, dtype=bool) if threshold_on is None else \
         np.asarray(threshold_on, dtype=bool)
-    sel = sel & (n >= MIN_INLIERS)
+    sel = sel & (n < MAX_LOG10_NFA)
     p = (1.0 / (1.0 + np.exp(-X @ w)))[sel]
     good = good[sel]
     thr = float(np.max(p))

@@ -245,6 +245,7 @@ class DirectionSample:
     sigma_cov: float
     ambiguity: float
     inliers: int
+    log10_nfa: float
     error: float
 
 
@@ -255,13 +256,14 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     img, K = _load_scaled(item, scale)
     lines = detect_lines(img, line_method)
     frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
-    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px)
+    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate)
     D = frame.directions
     cost = np.array([[angular_error_deg(D[:, i], item.directions[:, j]) for j in range(3)]
                      for i in range(3)])
     r, c = linear_sum_assignment(cost)
     return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity,
-                            conf[k].inliers, float(cost[k, c[list(r).index(k)]]))
+                            conf[k].inliers, conf[k].log10_nfa,
+                            float(cost[k, c[list(r).index(k)]]))
             for k in range(3)]
 
 
@@ -283,7 +285,7 @@ def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
     directions (column 0).
     """
     return fit_calibration([s.sigma_cov for s in samples], [s.ambiguity for s in samples],
-                           [s.inliers for s in samples], [s.error for s in samples],
+                           [s.log10_nfa for s in samples], [s.error for s in samples],
                            threshold_on=[s.column == 0 for s in samples])
 
 
@@ -302,7 +304,7 @@ def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
         cals.append(cal)
         for s in samples:
             if fold_of[s.image] == f:
-                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, s.inliers, cal)
+                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, s.log10_nfa, cal)
                 out.append(HeldOut(s, f, p, float(np.degrees(r95)), p >= cal.p_confident))
     return out, cals
 
