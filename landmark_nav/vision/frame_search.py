@@ -80,30 +80,35 @@ def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
     ang = np.arctan2(d[..., 1], d[..., 0])
     sector = np.floor((ang + math.pi) / (2 * math.pi) * k)
     sector = np.where(valid, np.clip(sector.astype(np.int64), 0, k - 1), k)   # k: none
-    rows = np.arange(n)
     # the columns of a row are in order of distance: writing them from the farthest to the
     # nearest leaves each sector's nearest corner in it (column k collects the missing
-    # ones); the corner a write replaces is the sector's next nearest, its second
-    out = np.full((n, k + 1), n, dtype=np.int64)
-    first_ang = np.zeros((n, k + 1))
+    # ones); the corner a write replaces is the sector's next nearest, its second. The
+    # (n, k + 1) tables are written through flat indices, column by column (one write per
+    # row each)
+    flat = (sector + (k + 1) * np.arange(n)[:, None]).T.copy()
+    idx_t, ang_t = idx.T.copy(), ang.T.copy()
+    out = np.full(n * (k + 1), n, dtype=np.int64)
+    first_ang = np.zeros(n * (k + 1))
     extra = second_ang = None
     if second_angle > 0:
-        extra = np.full((n, k + 1), n, dtype=np.int64)
-        second_ang = np.zeros((n, k + 1))
+        extra = np.full(n * (k + 1), n, dtype=np.int64)
+        second_ang = np.zeros(n * (k + 1))
     for c in range(idx.shape[1] - 1, -1, -1):
-        s = sector[:, c]
+        f = flat[c]
         if extra is not None:
-            extra[rows, s] = out[rows, s]
-            second_ang[rows, s] = first_ang[rows, s]
-        out[rows, s] = idx[:, c]
-        first_ang[rows, s] = ang[:, c]
-    out = out[:, :k]
+            extra[f] = out[f]
+            second_ang[f] = first_ang[f]
+        out[f] = idx_t[c]
+        first_ang[f] = ang_t[c]
+    out = out.reshape(n, k + 1)[:, :k]
     if extra is not None:
         # extension: also the second nearest corner of a sector when its direction differs
         # from the nearest one's by more than second_angle (two frame edges seen at an
         # acute angle share a sector)
-        da = np.abs((second_ang - first_ang + math.pi) % (2 * math.pi) - math.pi)[:, :k]
-        extra = np.where((extra[:, :k] < n) & (da > second_angle), extra[:, :k], n)
+        da = np.abs((second_ang - first_ang + math.pi) % (2 * math.pi) - math.pi)
+        da = da.reshape(n, k + 1)[:, :k]
+        extra = extra.reshape(n, k + 1)[:, :k]
+        extra = np.where((extra < n) & (da > second_angle), extra, n)
         out = np.hstack([out, extra])
     return out.astype(np.int64)
 
