@@ -4,6 +4,8 @@ Run from the repository root::
 
     python benchmarks/bench_landmarks.py detector [--frames N] [--repeat R] [--threads T]
         [--seed S] [--data DIR]
+    python benchmarks/bench_landmarks.py detector --versus-apriltag [--data DIR] [--frames N]
+        [--repeat R]
     python benchmarks/bench_landmarks.py real [detection|pose|false|stages|all]
         [--data DIR] [--per-size N] ...
     python benchmarks/bench_landmarks.py camera-sim [--frames N]
@@ -38,6 +40,13 @@ Before/after the vectorisation of the corner stage (eqs. 1-2): the same frames t
 direct numpy (float64) + ``scipy.ndimage`` implementation of the chapter's filters and
 8-connected groups, against :func:`corner_pixels` + :func:`corner_groups` (OpenCV 8-bit
 array operations, one sparse scan, grouping of the sparse pixels only).
+
+``detector --versus-apriltag`` (needs ``pupil-apriltags``): CPU time per frame on sharp
+photographs without a landmark (default: the 51 York Urban training images, 640 x 480, as
+they are; or the images of ``--data DIR``) of the landmark detector (default and fast mode,
+``decimate=2``) and AprilTag tag36h11 (``pupil_apriltags``, one thread, decimate 1 and 2)
+on the same images in one run, best of ``--repeat`` per frame, medians and their ratios.
+Targets: default <= 1.0x AprilTag decimate 1, fast <= 1.0x decimate 2.
 
 ``real`` (needs the test extra ``pupil-apriltags``, see requirements-test.txt, and the York
 Urban photographs in ``../shared/data/york_urban_train`` or any folder of photographs given
@@ -92,7 +101,7 @@ import sys
 import time
 from typing import Callable, Tuple
 
-from common import load_images, run_subcommand, subcommand_parser
+from common import load_images, run_subcommand, SHARED_DATA, subcommand_parser
 import cv2
 from landmark_nav.evaluation import landmarks_real
 from landmark_nav.evaluation.vision import (backdrop, detection_vs_size, false_detections,
@@ -265,6 +274,33 @@ def run_detector(args) -> int:
     return 0
 
 
+def run_versus_apriltag(args) -> int:
+    """Run ``detector --versus-apriltag``: CPU time on landmark-free photos, ratios."""
+    from landmark_nav.evaluation.marker_detectors import Detectors
+    folder = args.data or str(SHARED_DATA / 'york_urban_train')
+    frames = [img for _, img in load_images(folder, args.frames)]
+    names = ('landmark', 'landmark_fast', 'apriltag1', 'apriltag2')
+    cpu = {k: [] for k in names}
+    found = dict.fromkeys(names, 0)
+    with Detectors(names) as det:
+        for img in frames:
+            for name in names:
+                cpu[name].append(best_ms(lambda: det.detect(name, img), args.repeat)[1])
+                found[name] += len(det.detect(name, img))
+    med = {k: statistics.median(v) for k, v in cpu.items()}
+    sizes = sorted({f'{img.shape[1]}x{img.shape[0]}' for img in frames})
+    print(f'{len(frames)} images of {folder} ({", ".join(sizes)}), CPU ms per frame '
+          f'(median of the best of {args.repeat}), one thread each')
+    print(f'  {"detector":28s}{"cpu ms":>8s}{"detections":>12s}')
+    for name in names:
+        print(f'  {name:28s}{med[name]:8.2f}{found[name]:12d}')
+    r1 = med['landmark'] / med['apriltag1']
+    r2 = med['landmark_fast'] / med['apriltag2']
+    print(f'  default / AprilTag decimate 1: {r1:.2f}x ({"met" if r1 <= 1.0 else "NOT met"}: '
+          f'<= 1.0x); fast / decimate 2: {r2:.2f}x ({"met" if r2 <= 1.0 else "NOT met"})')
+    return 0
+
+
 def _median_ms(fn, n: int) -> float:
     fn()
     times = []
@@ -392,7 +428,11 @@ def main(argv=None) -> int:
     p.add_argument('--data', default=None, metavar='DIR',
                    help='time both detectors on these images instead: a folder of png / jpg '
                         'images or a bag with /camera/image_raw(/compressed)')
-    p.set_defaults(run=run_detector)
+    p.add_argument('--versus-apriltag', action='store_true',
+                   help='CPU time against AprilTag decimate 1 and 2 on landmark-free photos '
+                        '(--data DIR, default the York Urban training images)')
+    p.set_defaults(run=lambda a: (run_versus_apriltag if a.versus_apriltag else
+                                  run_detector)(a))
     sub.add_parser('real', add_help=False,
                    help='against AprilTag and ArUco on real photographs (real --help: options)')
     p = sub.add_parser('camera-sim', help='the camera simulator per frame (synthetic scenes: '

@@ -3,7 +3,7 @@
 Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
-        [--scales 1,0.5]
+        [--scales 1,0.5] [--confidence | --calibrate]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -18,6 +18,16 @@ in the same run (machines differ).
 
 Acceptance (640 x 480, segmented Hough): axis error <= 2 deg on >= 90 % and median <= 1 deg;
 median over all three directions <= 1.3 deg.
+
+``--confidence``: the confidence of each Manhattan direction
+(:mod:`landmark_nav.corridor.vp_confidence`), 5-fold over the images (the model fitted on
+the other folds' images at every size in ``--scales``, applied to the held-out fold); per
+size, held-out figures only: fraction of images whose corridor direction is confident,
+fraction within 2 deg among the confident directions, fraction of images whose stated 95 %
+radius covers the error; and the per-fold constants. Acceptance per size: >= 98 % within
+2 deg among the confident, confident on >= 85 % of the images, 95 % radius covering the
+error on >= 90 % of the images. ``--calibrate``: fit on all images and print the constants
+for ``landmark_nav/corridor/vp_confidence.py``.
 """
 
 import argparse
@@ -25,7 +35,9 @@ import statistics
 import sys
 
 from common import add_data_argument, data_folder
-from landmark_nav.evaluation.vanishing_points import (evaluate_image, load_york_urban,
+from landmark_nav.evaluation.vanishing_points import (calibrate, confidence_samples,
+                                                      confidence_summary, cross_validate,
+                                                      evaluate_image, load_york_urban,
                                                       summarize)
 from landmark_nav.vision.image_lines import METHODS
 
@@ -40,9 +52,19 @@ def main(argv=None) -> int:
                     help='only the first N images (default: all)')
     ap.add_argument('--repeat', type=int, default=3, help='timing repeats per image (best)')
     ap.add_argument('--scales', default='1,0.5', help='image scales (1 = 640 x 480)')
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument('--confidence', action='store_true',
+                      help='held-out (5-fold) figures of the direction confidence')
+    mode.add_argument('--calibrate', action='store_true',
+                      help='fit the confidence constants on all images and print them')
     args = ap.parse_args(argv)
     items = load_york_urban(data_folder(args.data))[:args.images]
-    for scale in (float(s) for s in args.scales.split(',')):
+    scales = [float(s) for s in args.scales.split(',')]
+    if args.confidence or args.calibrate:
+        samples = [s for scale in scales for it in items
+                   for s in confidence_samples(it, scale)]
+        return (_calibrate if args.calibrate else _confidence)(samples, scales)
+    for scale in scales:
         w, h = round(640 * scale), round(480 * scale)
         rows = {}
         for run in RUNS:
@@ -74,6 +96,47 @@ def main(argv=None) -> int:
                   and s['all_median'] <= 1.3)
             print(f'  acceptance (segmented Hough + Manhattan): {"met" if ok else "NOT met"}')
         print()
+    return 0
+
+
+def _calibrate(samples, scales) -> int:
+    cal = calibrate(samples)
+    n_img = len({s.image for s in samples})
+    print(f'# fitted on {n_img} images x {len(scales)} sizes x 3 directions')
+    print(f'CALIBRATION = VPCalibration(weights=({", ".join(f"{w:.4f}" for w in cal.weights)}),'
+          f' scale={cal.scale:.4f}, floor_deg={cal.floor_deg:.4f},')
+    print(f'                            sigma_wrong_deg={cal.sigma_wrong_deg:.4f}, '
+          f'p_confident={cal.p_confident:.4f})')
+    return 0
+
+
+def _confidence(samples, scales) -> int:
+    held, cals = cross_validate(samples)
+    print('Per-fold constants (fitted on the other four folds):')
+    print(f'  {"fold":>4s}{"w0":>8s}{"w1":>8s}{"w2":>8s}{"a":>7s}{"b deg":>7s}'
+          f'{"wrong":>7s}{"p conf":>8s}')
+    for f, c in enumerate(cals):
+        print(f'  {f:4d}' + ''.join(f'{w:8.3f}' for w in c.weights)
+              + f'{c.scale:7.3f}{c.floor_deg:7.3f}{c.sigma_wrong_deg:7.2f}{c.p_confident:8.3f}')
+    for scale in scales:
+        w, h = round(640 * scale), round(480 * scale)
+        rows = [x for x in held if x.sample.scale == scale]
+        print(f'York Urban at {w} x {h}, held-out (5-fold over {len(rows) // 3} images):')
+        print(f'  {"fold":>4s}{"images":>7s}{"confident":>10s}{"<=2 among":>10s}'
+              f'{"covered":>8s}')
+        for f in range(len(cals)):
+            s = confidence_summary([x for x in rows if x.fold == f])
+            print(f'  {f:4d}{s["axis_n"]:7.0f}{100 * s["axis_confident"]:9.1f}%'
+                  f'{100 * s["axis_precision"]:9.1f}%{100 * s["axis_coverage"]:7.1f}%')
+        s = confidence_summary(rows)
+        for key, what in (('axis', 'corridor direction (column 0)'), ('all', 'all directions')):
+            print(f'  {what}: within 2 deg {100 * s[key + "_within_2deg"]:.1f} %, confident '
+                  f'{100 * s[key + "_confident"]:.1f} %, within 2 deg among the confident '
+                  f'{100 * s[key + "_precision"]:.1f} %, 95 % radius covers '
+                  f'{100 * s[key + "_coverage"]:.1f} %')
+        ok = (s['axis_precision'] >= 0.98 and s['axis_confident'] >= 0.85
+              and s['axis_coverage'] >= 0.90)
+        print(f'  acceptance (corridor direction): {"met" if ok else "NOT met"}')
     return 0
 
 

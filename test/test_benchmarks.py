@@ -77,6 +77,8 @@ TINY_RUNS = {
         (['detector', '--frames', '2', '--repeat', '1'], r'landmark detector\s+[\d.]+'),
         (['detector', '--data', '{photos}', '--frames', '1', '--repeat', '1'],
          r'1 images of .*\n(.*\n)+landmark detector\s+[\d.]+'),
+        (['detector', '--versus-apriltag', '--data', '{photos}', '--frames', '1', '--repeat',
+          '1'], r'default / AprilTag decimate 1: [\d.]+x'),
         (['real', 'all', '--data', '{photos}', '--per-size', '1', '--sizes', '5',
           '--per-distance', '1', '--false-frames', '2', '--detectors', 'landmark', 'aruco'],
          r'\| 5 px \| 1 \| [\d.]+ \|'),

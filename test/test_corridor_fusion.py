@@ -113,6 +113,66 @@ def test_outlier_is_gated_and_state_kept():
     assert res.accepted and res.nis < 5
 
 
+def mixture_posterior_by_sampling(ekf, z, r, p, r_w, n=150000, seed=5):
+    """Return the posterior mean, std and their standard errors by importance sampling."""
+    rng = np.random.default_rng(seed)
+    x = rng.multivariate_normal(ekf.s, ekf.p, n)
+    nu = np.column_stack([z[0] - x[:, 0], z[1] - x[:, 2]])
+
+    def density(cov):
+        q = np.einsum('ni,ij,nj->n', nu, np.linalg.inv(cov), nu)
+        return np.exp(-0.5 * q) / math.sqrt(np.linalg.det(2 * math.pi * cov))
+    w = p * density(r) + (1 - p) * density(r_w)
+    w /= w.sum()
+    mean = w @ x
+    d2 = (x - mean) ** 2
+    var = w @ d2
+    se_mean = np.sqrt((w * w) @ d2)                 # delta method, self-normalised weights
+    se_var = np.sqrt((w * w) @ (d2 - var) ** 2)
+    return mean, np.sqrt(var), se_mean, se_var / (2 * np.sqrt(var))
+
+
+@pytest.mark.parametrize('z_deg, p', [(0.2, 0.3), (4.0, 0.3), (2.0, 0.8), (1.0, 0.0)])
+def test_two_mode_measurement_gives_the_bayes_posterior(z_deg, p):
+    # a weak heading (p = 0.3) agreeing with the prediction, the same disagreeing by 4 deg,
+    # a likely one 2 deg off, a certainly wrong one: the Gaussian-sum update collapsed to
+    # its moments is the exact posterior's mean and covariance
+    p0 = np.diag([math.radians(1.0) ** 2, 1e-2, 0.01 ** 2])
+    r = np.diag([math.radians(0.3) ** 2, 0.02 ** 2])
+    r_w = np.diag([math.radians(5.5) ** 2, 0.02 ** 2])
+    ekf = CorridorEKF([0.0, 0.0, 0.0], p0, NOISE)
+    z = (math.radians(z_deg), 0.01)
+    mean, std, se_mean, se_std = mixture_posterior_by_sampling(ekf, z, r, p, r_w)
+    assert ekf.update(z[0], z[1], r, p, r_w).accepted
+    # within 4 Monte Carlo standard errors (1e-3 to 1e-2 of the prior std)
+    assert np.all(np.abs(ekf.s - mean) <= 4 * se_mean)
+    assert np.all(np.abs(np.sqrt(np.diag(ekf.p)) - std) <= 4 * se_std)
+
+
+def test_weak_measurement_moves_the_estimate_only_where_it_agrees():
+    p0 = np.diag([math.radians(1.0) ** 2, 1e-2, 0.01 ** 2])
+    r = np.diag([math.radians(0.3) ** 2, 0.02 ** 2])
+    r_w = np.diag([math.radians(5.5) ** 2, 0.02 ** 2])
+    moved, accepted = {}, {}
+    for p in (1.0, 0.3, 0.0):
+        for z_deg in (0.5, 4.0):
+            ekf = CorridorEKF([0.0, 0.0, 0.0], p0, NOISE)
+            accepted[p, z_deg] = ekf.update(math.radians(z_deg), 0.0, r, p, r_w).accepted
+            moved[p, z_deg] = math.degrees(ekf.s[0])
+    # agreeing (0.5 deg, within the 1 deg prior): measured 0.31 deg for the weak frame,
+    # 0.46 for a sure one, 0.016 for a certainly wrong one
+    assert moved[0.3, 0.5] > 0.6 * moved[1.0, 0.5] and moved[0.3, 0.5] > 10 * moved[0.0, 0.5]
+    # 4 deg off: a sure frame is gated out; the weak one moves the estimate about as much as
+    # a certainly wrong one (measured 0.135 and 0.128 deg)
+    assert not accepted[1.0, 4.0] and accepted[0.3, 4.0]
+    assert moved[0.3, 4.0] < 1.1 * moved[0.0, 4.0]
+    ekf = CorridorEKF([0.0, 0.0, 0.0], p0, NOISE)
+    with pytest.raises(ValueError, match='wrong_covariance'):
+        ekf.update(0.0, 0.0, r, 0.5)
+    with pytest.raises(ValueError, match='p_correct'):
+        ekf.update(0.0, 0.0, r, 1.5, r_w)
+
+
 def test_bad_input():
     with pytest.raises(ValueError, match='finite'):
         CorridorEKF([math.nan, 0, 0], np.eye(3))

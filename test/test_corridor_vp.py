@@ -5,6 +5,8 @@ import math
 from landmark_nav.corridor.vanishing_point import (chapter_vanishing_point, consistency,
                                                    corridor_vanishing_point, manhattan_frame,
                                                    vanishing_point, VPParams)
+from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CALIBRATION,
+                                                 fit_calibration, log10_nfa, mixture_radius)
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -191,3 +193,88 @@ def test_parameters_are_used():
     loose = vanishing_point(seg, K, params=VPParams(sigma_px=2.0))
     tight = vanishing_point(seg, K, params=VPParams(sigma_px=0.2))
     assert np.count_nonzero(loose.inliers) > np.count_nonzero(tight.inliers) + 10
+
+
+# ------------------------------------------------------------------ confidence (vp_confidence)
+@pytest.mark.parametrize('seed', [0, 1, 3])
+def test_confidence_flags_a_frontal_view_as_weak_and_a_good_frame_as_confident(seed):
+    rng = np.random.default_rng(seed)
+    sigma = VPParams().sigma_px
+    # a corridor seen along its axis: 25 lines per direction, 0.5 px end-point noise
+    R = corridor_frame(8.0, 4.0)
+    seg = np.vstack([lines_along(rng, R[:, k], 25, 0.5) for k in range(3)]
+                    + [random_segments(rng, 15)])
+    mf = manhattan_frame(seg, K)
+    good = assess_frame(mf, seg, K, sigma)[0]
+    err = math.radians(angle_deg(mf.directions[:, 0], R[:, 2]))
+    assert good.confident and good.p_correct >= CALIBRATION.p_confident
+    assert good.inliers >= 20 and err <= good.radius95
+    # a frontal facade: 40 lines along each of x and y, 3 short receding ones
+    R = corridor_frame(2.0, 1.0)
+    seg = np.vstack([lines_along(rng, R[:, 0], 40, 0.5), lines_along(rng, R[:, 1], 40, 0.5),
+                     lines_along(rng, R[:, 2], 3, 0.5), random_segments(rng, 15)])
+    mf = manhattan_frame(seg, K)
+    weak = assess_frame(mf, seg, K, sigma)[0]
+    assert not weak.confident and weak.p_correct < CALIBRATION.p_confident
+    # its error is mostly the wrong mode's (5.5 deg) where the good frame's is its own
+    assert math.degrees(math.sqrt(np.trace(weak.mixture_covariance) / 2)) > 4.0
+    assert math.degrees(math.sqrt(np.trace(good.first_order) / 2)) < 0.2
+    assert math.degrees(math.sqrt(np.trace(good.wrong_covariance) / 2)) == pytest.approx(
+        CALIBRATION.sigma_wrong_deg)
+    assert weak.radius95 > math.radians(13.0)        # Rayleigh(5.5 deg) 95 %: 13.5 deg
+
+
+def test_mixture_radius_and_calibration_fit():
+    s = math.radians(0.5)
+    # one mode: the Rayleigh 95 % quantile sqrt(-2 ln 0.05) sigma
+    assert mixture_radius(1.0, s, 0.1) == pytest.approx(math.sqrt(-2 * math.log(0.05)) * s)
+    assert mixture_radius(0.0, s, 0.1) == pytest.approx(math.sqrt(-2 * math.log(0.05)) * 0.1)
+    assert mixture_radius(0.0, s, 1.0) == pytest.approx(math.pi / 2)      # capped
+    # errors drawn from the model are fitted back: 3000 directions, a = 0.7, b = 0.4 deg,
+    # 10 % wrong at 6 deg RMS; p falls with sigma_cov
+    rng = np.random.default_rng(2)
+    n = 3000
+    s_cov = np.radians(np.exp(rng.uniform(np.log(0.05), np.log(3.0), n)))
+    wrong = rng.random(n) < 0.1 * (1 + np.log(np.degrees(s_cov) / 0.05))
+    spread = np.where(wrong, 6.0 / math.sqrt(2), np.hypot(0.7 * np.degrees(s_cov), 0.4))
+    err = spread * np.sqrt(-2 * np.log(rng.random(n)))
+    wrong |= err > 2.0
+    err = np.where(wrong, np.maximum(err, 2.01), err)
+    cal = fit_calibration(s_cov, np.zeros(n), np.full(n, -10.0), err)
+    # truncated ML from ~1900 correct ones: measured a 0.70 b 0.397 (seeds 2-7: a 0.70-0.78,
+    # b 0.387-0.402)
+    assert 0.63 < cal.scale < 0.8 and 0.36 < cal.floor_deg < 0.44
+    assert cal.weights[1] < 0                       # a larger spread, a smaller p
+    p = [assess_direction(x, 0.0, -10.0, cal)[0] for x in s_cov]
+    conf = np.array(p) >= cal.p_confident
+    assert np.mean(err[conf] <= 2.0) >= 0.98
+    assert assess_direction(s_cov[0], 0.0, 0.0, cal)[0] == 0.0   # NFA 1: not checked
+    with pytest.raises(ValueError, match='differ in length'):
+        fit_calibration(s_cov, np.zeros(3), np.full(n, -10.0), err)
+
+
+def test_nfa_counts_long_consistent_lines_not_their_number():
+    rng = np.random.default_rng(4)
+    sigma, gate = VPParams().sigma_px, VPParams().gate
+    v = np.array([330.0, 250.0])                 # the vanishing point [px]
+
+    def through_v(lengths):
+        ang = rng.uniform(0, 2 * np.pi, len(lengths))
+        u = np.column_stack([np.cos(ang), np.sin(ang)])
+        near = v + 30.0 * u
+        return np.column_stack([near, near + u * np.asarray(lengths)[:, None]])
+    others = random_segments(rng, 96)            # N = 100: 4950 candidate points
+    inl = np.r_[np.ones(4, bool), np.zeros(96, bool)]
+    # four corridor edges of 300 px: two fix the point, two long ones check it
+    edges = np.vstack([through_v([300.0] * 4), others])
+    p = 2 * gate * math.sqrt(2) * sigma / (math.pi * 300.0)
+    assert log10_nfa(edges, inl, sigma, gate) == pytest.approx(math.log10(4950 * p * p))
+    assert log10_nfa(edges, inl, sigma, gate) < -0.8
+    # four short ones (25 px): as many lines, far less evidence (measured log10 NFA 1.3)
+    short = np.vstack([through_v([25.0] * 4), others])
+    assert log10_nfa(short, inl, sigma, gate) > 0.0
+    assert assess_direction(math.radians(0.1), 0.5, log10_nfa(short, inl, sigma, gate))[0] == 0
+    assert assess_direction(math.radians(0.1), 0.5, log10_nfa(edges, inl, sigma, gate))[0] > 0.9
+    # the two longest fix the point and do not count
+    mixed = np.vstack([through_v([400.0, 400.0, 300.0, 300.0]), others])
+    assert log10_nfa(mixed, inl, sigma, gate) == pytest.approx(math.log10(4950 * p * p))

@@ -121,11 +121,13 @@ class CorridorTracker:
         except CorridorLost as err:
             return FrameStep('lost', str(err))
         if self.ekf is None:
+            r = m.mixture_covariance
             self.ekf = CorridorEKF([m.heading, 0.0, m.y], np.diag(
-                [m.heading_std ** 2, 0.0, m.y_std ** 2]), self.noise, self.gate)
+                [r[0, 0], 0.0, r[1, 1]]), self.noise, self.gate)
             step = FrameStep('started', measurement=m)
         else:
-            res = self.ekf.update(m.heading, m.y, m.covariance)
+            res = self.ekf.update(m.heading, m.y, m.covariance, m.p_correct,
+                                  m.wrong_covariance)
             step = FrameStep('accepted' if res.accepted else 'rejected', measurement=m,
                              nis=res.nis)
         if step.status != 'rejected':

@@ -6,10 +6,14 @@ Manhattan direction closest to the optical axis), heading and tilt (eq. 21,
 :mod:`.orientation`) and the lateral position from the corridor lines (eqs. 22-23,
 :mod:`.lateral`). The node and the offline evaluation call :func:`measure_frame`.
 
-Standard deviations: the heading's from the VP direction covariance
-(:func:`~.vanishing_point.direction_covariance`, end-point noise), the lateral position's
-from :mod:`.lateral`; both are floored by :attr:`FrameParams.heading_std_floor` and
-:attr:`FrameParams.lateral_std_floor` for what the line noise model leaves out (the
+Standard deviations: the heading's from the VP direction, in two modes
+(:mod:`.vp_confidence`): correct, with the first-order covariance of the direction
+(end-point noise), and wrong, with the spread of wrong directions; the filter weighs the two
+(:meth:`.fusion.CorridorEKF.update`) by the probability that the direction is correct: 1 for
+a confident direction (its rare errors are left to the filter's innovation gate),
+``p_correct`` otherwise. The lateral
+position's from :mod:`.lateral`; both are floored by :attr:`FrameParams.heading_std_floor`
+and :attr:`FrameParams.lateral_std_floor` for what the line noise model leaves out (the
 chapter: single frames off by 10-15 cm now and then, "a higher standard deviation for the
 assumed measured error").
 
@@ -23,9 +27,8 @@ from typing import Optional, Sequence, Tuple
 
 from landmark_nav.corridor.lateral import CorridorModel, lateral_position, LateralEstimate
 from landmark_nav.corridor.orientation import corridor_orientation, CorridorOrientation
-from landmark_nav.corridor.vanishing_point import (corridor_vanishing_point,
-                                                   direction_covariance, VanishingPoint,
-                                                   VPParams)
+from landmark_nav.corridor.vanishing_point import manhattan_frame, VanishingPoint, VPParams
+from landmark_nav.corridor.vp_confidence import assess_frame, DirectionConfidence
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.image_lines import (detect_lines, ImageLines, LineParams,
                                              undistort_segments)
@@ -71,6 +74,10 @@ class CorridorMeasurement:
         y: lateral position of base_link [m] (``y_v``).
         y_std: its standard deviation [m].
         vp: the corridor vanishing point (ideal pixels).
+        confidence: its support, calibrated uncertainty and confident flag.
+        p_correct: probability the filter gives the VP direction of being correct: 1 when
+            confident, else ``confidence.p_correct`` (module docstring).
+        heading_std_wrong: the heading's std if it is not (the wrong mode's spread) [rad].
         orientation: heading, tilt and elevation (eq. 21, mount).
         lateral: the line matching and lateral estimate.
         lines: the undistorted image lines.
@@ -81,6 +88,9 @@ class CorridorMeasurement:
     y: float
     y_std: float
     vp: VanishingPoint
+    confidence: DirectionConfidence
+    p_correct: float
+    heading_std_wrong: float
     orientation: CorridorOrientation
     lateral: LateralEstimate
     lines: ImageLines
@@ -90,10 +100,20 @@ class CorridorMeasurement:
         """Return the (2, 2) covariance of ``(heading, y)`` (taken as uncorrelated)."""
         return np.diag([self.heading_std ** 2, self.y_std ** 2])
 
+    @property
+    def wrong_covariance(self) -> np.ndarray:
+        """Return the (2, 2) covariance of ``(heading, y)`` if the direction is wrong."""
+        return np.diag([self.heading_std_wrong ** 2, self.y_std ** 2])
 
-def _heading_std(vp: VanishingPoint, lines: ImageLines, K: np.ndarray,
-                 mount: Sequence[float], sigma_px: float) -> float:
-    cov = direction_covariance(lines.segments, K, vp.direction, vp.inliers, sigma_px)
+    @property
+    def mixture_covariance(self) -> np.ndarray:
+        """Return the moment-matched (2, 2) covariance of the two modes."""
+        p = self.p_correct
+        return p * self.covariance + (1.0 - p) * self.wrong_covariance
+
+
+def _heading_std(vp: VanishingPoint, cov: np.ndarray, mount: Sequence[float]) -> float:
+    """Propagate a (3, 3) direction covariance to the heading (numerical gradient)."""
     if not np.all(np.isfinite(cov)):
         return math.inf
     h0 = corridor_orientation(vp.direction, mount).heading
@@ -133,9 +153,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
         raise CorridorLost(f'{len(lines)} image lines')
     K = camera.K
     try:
-        vp = corridor_vanishing_point(lines.segments, K, lines.weights, params.vp)
+        frame = manhattan_frame(lines.segments, K, lines.weights, params.vp)
     except ValueError as err:
         raise CorridorLost(f'no vanishing point: {err}') from None
+    vp = frame.points[0]            # the corridor: the direction closest to the optical axis
     axis = math.degrees(math.acos(min(1.0, abs(float(vp.direction[2])))))
     if axis > params.max_axis_angle_deg:
         raise CorridorLost(f'vanishing point {axis:.0f} deg off the optical axis '
@@ -149,8 +170,11 @@ def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
                                prior, params.vp.sigma_px)
     except ValueError as err:
         raise CorridorLost(f'no lateral position: {err}') from None
-    h_std = _heading_std(vp, lines, K, mount, params.vp.sigma_px)
+    conf = assess_frame(frame, lines.segments, K, params.vp.sigma_px, gate=params.vp.gate)[0]
+    h_std = _heading_std(vp, conf.first_order, mount)
     return CorridorMeasurement(
         heading=orient.heading, heading_std=math.hypot(h_std, params.heading_std_floor),
         y=lat.y, y_std=math.hypot(lat.std, params.lateral_std_floor), vp=vp,
+        confidence=conf, p_correct=1.0 if conf.confident else conf.p_correct,
+        heading_std_wrong=_heading_std(vp, conf.wrong_covariance, mount),
         orientation=orient, lateral=lat, lines=lines)

@@ -27,11 +27,25 @@ pi / 2``) sees ``theta_v = theta - pi`` (wrapped) and ``y_v = -y`` (its left is 
 corridor's right): ``H`` then has ``-1`` in the ``y`` row. An update whose normalised
 innovation squared exceeds ``gate_chi2`` (chi-square, 2 degrees of freedom, 99.9 % by
 default) is rejected as an outlier.
+
+A measurement that may be wrong (the vanishing point's ``p_correct`` < 1,
+:mod:`.vp_confidence`) has a two-component noise: ``N(0, R)`` with probability ``p``,
+``N(0, R_w)`` (the spread of wrong directions) otherwise. The update is the Gaussian-sum
+update of that mixture (Sorenson and Alspach 1971), collapsed to one Gaussian by matching
+moments as in probabilistic data association (Bar-Shalom and Tse 1975)::
+
+    beta_j = pi_j N(nu; 0, S_j) / sum_k pi_k N(nu; 0, S_k),  S_j = H P H^T + R_j
+    s' = s + sum_j beta_j K_j nu,   P' = sum_j beta_j (P_j + (s_j - s') (s_j - s')^T)
+
+(``pi = (p, 1 - p)``, ``K_j``, ``s_j``, ``P_j`` the Kalman update with ``R_j``). A weak
+measurement that agrees with the prediction is thus believed about as much as its
+correct mode allows, one that disagrees moves the estimate as little as the wrong mode's
+spread allows. It is rejected when its NIS exceeds the gate under both components.
 """
 
 from dataclasses import dataclass
 import math
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 from landmark_nav.geometry import wrap_angle
 import numpy as np
@@ -132,32 +146,59 @@ class CorridorEKF:
         self.predict_wheels(ds - half, ds + half)
 
     # ------------------------------------------------------------------ measurement update
-    def update(self, theta_v: float, y_v: float, covariance: np.ndarray) -> UpdateResult:
+    def update(self, theta_v: float, y_v: float, covariance: np.ndarray,
+               p_correct: float = 1.0,
+               wrong_covariance: Optional[np.ndarray] = None) -> UpdateResult:
         """Measurement update with a visual heading and lateral position (eq. 24).
 
         Args:
             theta_v: heading relative to the VP direction ahead [rad], in (-pi/2, pi/2].
             y_v: lateral position in the frame whose x points at that VP [m].
-            covariance: (2, 2) measurement covariance R.
+            covariance: (2, 2) measurement covariance R (of a correct measurement).
+            p_correct: probability that the measurement is correct (module docstring).
+            wrong_covariance: (2, 2) covariance ``R_w`` of a wrong one (needed when
+                ``p_correct < 1``).
         """
         r = np.asarray(covariance, dtype=float).reshape(2, 2)
         if not (math.isfinite(theta_v) and math.isfinite(y_v)) or not np.all(np.isfinite(r)):
             raise ValueError('visual measurement and its covariance must be finite')
+        if not 0.0 <= p_correct <= 1.0:
+            raise ValueError(f'p_correct must be in [0, 1]; got {p_correct}')
+        modes = [(p_correct, r)]
+        if p_correct < 1.0:
+            if wrong_covariance is None:
+                raise ValueError('p_correct < 1 needs wrong_covariance')
+            r_w = np.asarray(wrong_covariance, dtype=float).reshape(2, 2)
+            if not np.all(np.isfinite(r_w)):
+                raise ValueError('wrong_covariance must be finite')
+            modes.append((1.0 - p_correct, r_w))
+        modes = [(w, rj) for w, rj in modes if w > 0.0]
         rev = abs(wrap_angle(self.s[0])) > math.pi / 2
         sign = -1.0 if rev else 1.0
         H = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, sign]])              # eq. 24
         pred_th = wrap_angle(self.s[0] - math.pi) if rev else self.s[0]
         innov = np.array([wrap_angle(theta_v - pred_th), y_v - sign * self.s[2]])
-        S = H @ self.p @ H.T + r
-        nis = float(innov @ np.linalg.solve(S, innov))
+        parts = []
+        for w, rj in modes:
+            S = H @ self.p @ H.T + rj
+            nis = float(innov @ np.linalg.solve(S, innov))
+            K = self.p @ H.T @ np.linalg.inv(S)
+            ik = np.eye(3) - K @ H
+            pj = ik @ self.p @ ik.T + K @ rj @ K.T                       # Joseph form
+            log_l = math.log(w) - 0.5 * nis - 0.5 * math.log(np.linalg.det(2 * math.pi * S))
+            parts.append((log_l, nis, K @ innov, pj))
+        nis = min(nis for _, nis, _, _ in parts)
         if not nis <= self.gate_chi2:
             return UpdateResult(False, nis, rev)
-        K = self.p @ H.T @ np.linalg.inv(S)
-        self.s = self.s + K @ innov
+        log_l = np.array([part[0] for part in parts])
+        beta = np.exp(log_l - log_l.max())
+        beta /= beta.sum()
+        mean = sum(b * part[2] for b, part in zip(beta, parts))
+        p_new = sum(b * (part[3] + np.outer(part[2] - mean, part[2] - mean))
+                    for b, part in zip(beta, parts))
+        self.s = self.s + mean
         self.s[0] = wrap_angle(self.s[0])
-        ik = np.eye(3) - K @ H
-        self.p = ik @ self.p @ ik.T + K @ r @ K.T                        # Joseph form
-        self.p = 0.5 * (self.p + self.p.T)
+        self.p = 0.5 * (p_new + p_new.T)
         return UpdateResult(True, nis, rev)
 
     @property

@@ -124,11 +124,17 @@ class ManhattanFrame:
             the one closest to the optical axis (largest ``|d_z|``).
         labels: (N,) index of the direction each segment belongs to, -1 for none.
         points: the three :class:`VanishingPoint` in the column order.
+        score: MSAC-scored segment support of the three directions (the triad score).
+        alternatives: ``(score, (3, 3) directions)`` of every triad hypothesis tried
+            (before the final relabelling), for the confidence of
+            :mod:`.vp_confidence`.
     """
 
     directions: np.ndarray
     labels: np.ndarray
     points: Tuple[VanishingPoint, VanishingPoint, VanishingPoint]
+    score: float = 0.0
+    alternatives: Tuple[Tuple[float, np.ndarray], ...] = ()
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -579,13 +585,9 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
         d2, d3, _ = _orthogonal_pair(geo, normals, d1, ~used, w, params)
         triads += [d1, d2, d3]
     refined = _refine_many(geo, np.array(triads), params)[0]
-    best = None
-    for h in range(len(hyps)):
-        D = refined[3 * h:3 * h + 3].T
-        score = _triad_support(geo, D, w, params)
-        if best is None or score > best[0]:
-            best = (score, D)
-    D = best[1]
+    scored = [(_triad_support(geo, refined[3 * h:3 * h + 3].T, w, params),
+               refined[3 * h:3 * h + 3].T) for h in range(len(hyps))]
+    D = max(scored, key=lambda sd: sd[0])[1]       # the first of equal scores
     for _ in range(params.refine_iterations):      # exclusive labels, then refine each
         lab = _labels(geo, D, params, exclusive=True)
         D_new = _refine_many(geo, D.T, params, lab[None, :] == np.arange(3)[:, None])[0].T
@@ -601,7 +603,8 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
         new_lab[lab == old] = new
     points = tuple(_make_vp(seg, K, D[:, k], new_lab == k, w) for k in range(3))
     return ManhattanFrame(directions=np.column_stack([p.direction for p in points]),
-                          labels=new_lab, points=points)
+                          labels=new_lab, points=points,
+                          score=_triad_support(geo, D, w, params), alternatives=tuple(scored))
 
 
 def corridor_vanishing_point(segments: np.ndarray, K: np.ndarray,

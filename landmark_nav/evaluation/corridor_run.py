@@ -168,7 +168,8 @@ def run_corridor(config: RunConfig = RunConfig(), seed: int = 0) -> RunResult:
         try:
             m = measure_frame(view.image, cam, model, c.mount, ekf.visual_prior(), c.frame)
             visual = (m.heading, m.y)
-            accepted = ekf.update(m.heading, m.y, m.covariance).accepted
+            accepted = ekf.update(m.heading, m.y, m.covariance, m.p_correct,
+                                  m.wrong_covariance).accepted
         except CorridorLost as err:
             lost.append(str(err))
         back = abs(wrap_angle(truth[2])) > math.pi / 2      # visual values in the truth frame

@@ -25,11 +25,13 @@ Metrics (angles between axial directions, ``acos |a . b|``, in degrees):
 from dataclasses import dataclass
 from pathlib import Path
 import time
-from typing import Callable, Dict, List, Tuple, Union
+from typing import Callable, Dict, List, Sequence, Tuple, Union
 
 import cv2
 from landmark_nav.corridor.vanishing_point import (chapter_vanishing_point, manhattan_frame,
                                                    VPParams)
+from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CORRECT_DEG,
+                                                 fit_calibration, VPCalibration)
 from landmark_nav.vision.image_lines import detect_lines, LineParams
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -141,6 +143,17 @@ def scaled_camera(K: np.ndarray, factor: float) -> np.ndarray:
     return S @ K
 
 
+def _load_scaled(item: YorkImage, scale: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the grey image resized by ``scale`` (INTER_AREA) and its K."""
+    img = cv2.imread(str(item.image_path), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise ValueError(f'{item.image_path}: cannot read the image')
+    if scale == 1.0:
+        return img, YORK_K
+    img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    return img, scaled_camera(YORK_K, scale)
+
+
 def evaluate_image(item: YorkImage, line_method: str = 'segmented_hough',
                    detector: str = 'manhattan', scale: float = 1.0,
                    line_params: LineParams = LineParams(),
@@ -164,13 +177,7 @@ def evaluate_image(item: YorkImage, line_method: str = 'segmented_hough',
     """
     if detector not in DETECTORS:
         raise ValueError(f'unknown detector {detector!r}; expected one of {DETECTORS}')
-    img = cv2.imread(str(item.image_path), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise ValueError(f'{item.image_path}: cannot read the image')
-    K = YORK_K
-    if scale != 1.0:
-        img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        K = scaled_camera(YORK_K, scale)
+    img, K = _load_scaled(item, scale)
     t0 = clock()
     lines = detect_lines(img, line_method, line_params)
     t1 = clock()
@@ -220,3 +227,104 @@ def evaluate_york(root: Union[str, Path], line_method: str = 'segmented_hough',
     """Score every image of a York Urban folder (see :func:`evaluate_image`)."""
     return [evaluate_image(item, line_method, detector, scale)
             for item in load_york_urban(root)]
+
+
+# ----------------------------------------------------------------------------- confidence
+@dataclass(frozen=True)
+class DirectionSample:
+    """One detected Manhattan direction with its confidence features and true error.
+
+    ``column`` 0 is the detected direction closest to the optical axis (the corridor
+    direction); ``error`` [deg] is against the true direction matched to it (one-to-one
+    assignment, :func:`matched_errors`).
+    """
+
+    image: str
+    scale: float
+    column: int
+    sigma_cov: float
+    ambiguity: float
+    inliers: int
+    log10_nfa: float
+    error: float
+
+
+def confidence_samples(item: YorkImage, scale: float = 1.0,
+                       line_method: str = 'segmented_hough',
+                       vp_params: VPParams = VPParams()) -> List[DirectionSample]:
+    """Return the three detected directions of one image with their features and errors."""
+    img, K = _load_scaled(item, scale)
+    lines = detect_lines(img, line_method)
+    frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
+    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate)
+    D = frame.directions
+    cost = np.array([[angular_error_deg(D[:, i], item.directions[:, j]) for j in range(3)]
+                     for i in range(3)])
+    r, c = linear_sum_assignment(cost)
+    return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity,
+                            conf[k].inliers, conf[k].log10_nfa,
+                            float(cost[k, c[list(r).index(k)]]))
+            for k in range(3)]
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """A direction scored by a calibration fitted without its image."""
+
+    sample: DirectionSample
+    fold: int
+    p_correct: float
+    radius95_deg: float
+    confident: bool
+
+
+def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
+    """Fit the confidence model on samples (:func:`~.vp_confidence.fit_calibration`).
+
+    All directions fit the model; the confidence threshold is chosen on the corridor
+    directions (column 0).
+    """
+    return fit_calibration([s.sigma_cov for s in samples], [s.ambiguity for s in samples],
+                           [s.log10_nfa for s in samples], [s.error for s in samples],
+                           threshold_on=[s.column == 0 for s in samples])
+
+
+def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
+                   ) -> Tuple[List[HeldOut], List[VPCalibration]]:
+    """Score every sample with a calibration fitted on the other folds of images.
+
+    Images are dealt to the folds in name order (image ``i`` to fold ``i mod folds``); all
+    sizes and directions of an image stay in its fold.
+    """
+    names = sorted({s.image for s in samples})
+    fold_of = {n: i % folds for i, n in enumerate(names)}
+    out, cals = [], []
+    for f in range(folds):
+        cal = calibrate([s for s in samples if fold_of[s.image] != f])
+        cals.append(cal)
+        for s in samples:
+            if fold_of[s.image] == f:
+                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, s.log10_nfa, cal)
+                out.append(HeldOut(s, f, p, float(np.degrees(r95)), p >= cal.p_confident))
+    return out, cals
+
+
+def confidence_summary(held: Sequence[HeldOut]) -> Dict[str, float]:
+    """Return the acceptance figures of held-out directions (fractions in [0, 1]).
+
+    ``axis_*``: the corridor direction (column 0) of each image; ``all_*``: every direction.
+    ``*_confident``: fraction reported confident; ``*_precision``: fraction within 2 deg
+    among those (nan when none); ``*_coverage``: fraction whose 95 % radius covers the error.
+    """
+    out = {}
+    for key, rows in (('axis', [h for h in held if h.sample.column == 0]), ('all', held)):
+        conf = [h for h in rows if h.confident]
+        out[f'{key}_n'] = float(len(rows))
+        out[f'{key}_confident'] = len(conf) / max(len(rows), 1)
+        out[f'{key}_precision'] = (float(np.mean([h.sample.error <= CORRECT_DEG for h in conf]))
+                                   if conf else float('nan'))
+        out[f'{key}_coverage'] = float(np.mean([h.sample.error <= h.radius95_deg
+                                                for h in rows]))
+        out[f'{key}_within_2deg'] = float(np.mean([h.sample.error <= CORRECT_DEG
+                                                   for h in rows]))
+    return out

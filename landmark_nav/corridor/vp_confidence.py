@@ -1,0 +1,343 @@
+"""Support, calibrated uncertainty and a confidence flag for each Manhattan direction.
+
+A vanishing direction estimated from image lines can be wrong in two ways: a little (the
+end-point noise of its lines, lens distortion, edges that are not quite straight) or by a
+lot (the wrong set of lines won: a frontal facade with few receding lines, clutter). The
+first-order covariance of :func:`~.vanishing_point.direction_covariance` only knows the
+first. Per direction this module states:
+
+* ``support``: the inlier segments (count, summed weight) and two features of the
+  evidence: ``sigma_cov``, the square root of the largest eigenvalue of the first-order
+  covariance [rad], and ``ambiguity``, the MSAC score of the best competing Manhattan
+  hypothesis that does *not* contain this direction (none of its columns within 2 deg)
+  divided by the chosen frame's score (near or above 1: another frame explains the lines
+  about as well; 0 when no hypothesis disagrees).
+* ``p_correct``: the probability that the direction is within 2 deg of the truth, a
+  logistic model of ``(1, ln(sigma_cov / 1 deg), min(ambiguity, 2))``::
+
+      p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov / 1 deg) + w2 min(ambiguity, 2))))
+
+* an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
+  the sphere (the angular error ``e`` of each component Rayleigh distributed): with
+  probability ``p`` the correct mode, ``sigma = sqrt((a sigma_cov)^2 + b^2)`` (the
+  first-order spread scaled by ``a`` plus a floor ``b`` for what the line noise model leaves
+  out); otherwise the wrong mode, ``sigma_wrong`` (the RMS error of the wrong directions of
+  the calibration set). Its 95 % radius solves
+  ``p (1 - exp(-r^2 / 2 sigma^2)) + (1 - p) (1 - exp(-r^2 / 2 sigma_wrong^2)) = 0.95``
+  (capped at 90 deg). Covariances (rank 2, tangent at ``d``, ``P = I - d d^T``): the
+  correct mode's ``a^2 C_cov + b^2 P`` and the mixture's (moment-matched)
+  ``p (a^2 C_cov + b^2 P) + (1 - p) sigma_wrong^2 P``.
+* ``log10_nfa``: whether the inlier segments meet at the direction by more than chance, an
+  a-contrario test (Desolneux, Moisan, Morel 2000; for vanishing points Almansa,
+  Desolneux, Vamech 2003). Two segments meet somewhere whatever their directions, so only
+  the others check a direction; a segment of length ``L`` whose orientation were random
+  would pass the consistency gate (``|z| <= gate``, the direction of a segment with
+  end-point noise ``sigma_px`` has the std ``sqrt(2) sigma_px / L``) with probability
+  ``P = min(1, 2 gate sqrt(2) sigma_px / (pi L))``, and the number of false alarms over
+  the ``N (N - 1) / 2`` candidate points of ``N`` segments is::
+
+      NFA = N (N - 1) / 2 * prod_{i >= 3} P_i
+
+  (the product over the inliers but the two longest, the ones that fix the point). A
+  direction with ``NFA >= 1`` (the test's usual threshold, not fitted) gets ``p = 0``,
+  the wrong mode alone: a frontal view with two or three short receding lines gives a
+  tight first-order covariance around wherever they happen to meet, and York's calibration
+  set has almost no such direction to learn it from; four long corridor edges meeting
+  within their noise pass (a long line is a sharp check, a short one a weak check).
+* ``confident``: ``p >= p_confident``.
+
+A filter takes the two modes as they are (:meth:`.fusion.CorridorEKF.update`, a Gaussian-sum
+update): the correct one with the first-order covariance, to which it adds the floor of its
+own camera (the fitted ``b`` holds what York's camera adds: its lens distortion is not
+given, so its images are not undistorted), the wrong one with
+:attr:`DirectionConfidence.wrong_covariance`, weighted by ``p`` (by 1 for a confident
+direction, whose rare errors are left to the filter's innovation gate). A weakly supported
+direction then moves the estimate little unless it agrees with the prediction.
+
+The constants (:data:`CALIBRATION`) are fitted on the York Urban training half (both
+640 x 480 and 320 x 240, all three directions of each image) by :func:`fit_calibration`:
+the logistic weights by ridge-regularised Newton iterations (ridge ``1`` on the
+non-constant weights), ``a`` and ``b`` by maximum likelihood of the Rayleigh model
+truncated at 2 deg on the directions within 2 deg, ``sigma_wrong`` as the RMS error of the
+others, and ``p_confident`` as the smallest threshold at which the corridor directions (the
+one closest to the optical axis in each frame, what the follower steers on) called
+confident are >= 98 % within 2 deg.
+Refit (and print) them with::
+
+    python benchmarks/bench_vanishing_points.py --calibrate
+
+Held-out (5-fold over images) figures of the same procedure: ``--confidence``.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Optional, Sequence, Tuple
+
+from landmark_nav.corridor.vanishing_point import direction_covariance, ManhattanFrame
+import numpy as np
+
+#: Two directions closer than this are the same hypothesis [deg].
+SAME_DIRECTION_DEG = 2.0
+#: A direction is "correct" for the calibration when within this of the truth [deg].
+CORRECT_DEG = 2.0
+#: ``log10 NFA`` at or above which a direction is not checked by its lines: p_correct = 0.
+MAX_LOG10_NFA = 0.0
+#: chi-square quantile used for the radius (2 dof, 95 %) of a single Gaussian mode.
+COVERAGE = 0.95
+
+
+@dataclass(frozen=True)
+class VPCalibration:
+    """Constants of the confidence model (see the module docstring).
+
+    Attributes:
+        weights: logistic weights ``(w0, w1, w2)`` of ``(1, ln sigma_cov [deg], ambiguity)``.
+        scale: ``a``, factor on the first-order spread.
+        floor_deg: ``b``, spread added in quadrature [deg].
+        sigma_wrong_deg: spread of the wrong mode [deg].
+        p_confident: ``p_correct`` at or above which a direction is confident.
+    """
+
+    weights: Tuple[float, float, float]
+    scale: float
+    floor_deg: float
+    sigma_wrong_deg: float
+    p_confident: float
+
+
+#: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
+#: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
+CALIBRATION = VPCalibration(weights=(0.8261, -1.1039, -0.4348), scale=1.1650, floor_deg=0.3741,
+                            sigma_wrong_deg=5.5204, p_confident=0.9270)
+
+
+@dataclass(frozen=True, eq=False)
+class DirectionConfidence:
+    """Support and uncertainty of one Manhattan direction.
+
+    Attributes:
+        inliers: number of segments labelled with this direction.
+        support: their summed weight.
+        log10_nfa: a-contrario number of false alarms of the inliers (module docstring).
+        sigma_cov: first-order spread (largest std of the direction covariance) [rad].
+        ambiguity: best competing hypothesis' score over the frame's (see the module).
+        p_correct: probability of being within 2 deg of the truth.
+        sigma: spread of the correct mode [rad].
+        radius95: 95 % radius of the error mixture [rad].
+        first_order: (3, 3) first-order covariance ``C_cov`` (end-point noise only).
+        covariance: (3, 3) calibrated covariance of the correct mode (rank 2).
+        mixture_covariance: (3, 3) moment-matched covariance of the error mixture.
+        wrong_covariance: (3, 3) covariance of the wrong mode, ``sigma_wrong^2 P``.
+        confident: ``p_correct >= p_confident``.
+    """
+
+    inliers: int
+    support: float
+    log10_nfa: float
+    sigma_cov: float
+    ambiguity: float
+    p_correct: float
+    sigma: float
+    radius95: float
+    first_order: np.ndarray
+    covariance: np.ndarray
+    mixture_covariance: np.ndarray
+    wrong_covariance: np.ndarray
+    confident: bool
+
+
+def features(sigma_cov: float, ambiguity: float) -> np.ndarray:
+    """Return the logistic model's feature vector ``(1, ln sigma_cov [deg], min(amb, 2))``."""
+    s = math.degrees(sigma_cov) if math.isfinite(sigma_cov) else 90.0
+    return np.array([1.0, math.log(min(max(s, 1e-4), 90.0)), min(max(ambiguity, 0.0), 2.0)])
+
+
+def mixture_radius(p: float, sigma: float, sigma_wrong: float,
+                   coverage: float = COVERAGE) -> float:
+    """Return the radius [rad] covering ``coverage`` of the two-mode error (module docstring).
+
+    Capped at pi / 2 (the largest angle between two axial directions).
+    """
+    def cdf(r: float) -> float:
+        return (p * (1.0 - math.exp(-0.5 * (r / sigma) ** 2))
+                + (1.0 - p) * (1.0 - math.exp(-0.5 * (r / sigma_wrong) ** 2)))
+    hi = math.pi / 2
+    if cdf(hi) < coverage:
+        return hi
+    lo = 0.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if cdf(mid) < coverage:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def direction_ambiguities(frame: ManhattanFrame) -> np.ndarray:
+    """Return, per direction of ``frame``, the competing hypotheses' best relative score."""
+    cos_same = math.cos(math.radians(SAME_DIRECTION_DEG))
+    out = np.zeros(3)
+    if frame.score <= 0:
+        return np.full(3, 2.0)
+    for score, D in frame.alternatives:
+        disagree = np.max(np.abs(D.T @ frame.directions), axis=0) < cos_same   # (3,)
+        out = np.where(disagree, np.maximum(out, score / frame.score), out)
+    return out
+
+
+def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
+              gate: float = 3.0) -> float:
+    """Return ``log10 NFA`` of a direction's inlier segments (module docstring).
+
+    Args:
+        segments: (N, 4) all segments of the frame [px]; ``N`` counts the candidate points.
+        inliers: (N,) mask of the direction's segments.
+        sigma_px: end-point noise [px].
+        gate: the consistency gate on ``|z|``.
+    """
+    seg = np.asarray(segments, dtype=float).reshape(-1, 4)
+    n = len(seg)
+    sel = seg[np.asarray(inliers, dtype=bool)]
+    length = np.hypot(sel[:, 2] - sel[:, 0], sel[:, 3] - sel[:, 1])
+    p = np.minimum(1.0, 2.0 * gate * math.sqrt(2.0) * sigma_px
+                   / (math.pi * np.maximum(length, 1e-9)))
+    checks = np.sort(np.log10(p))[2:]           # all but the two longest segments
+    return math.log10(max(0.5 * n * (n - 1), 1.0)) + float(np.sum(checks))
+
+
+def assess_direction(sigma_cov: float, ambiguity: float, nfa: float,
+                     calibration: VPCalibration = CALIBRATION) -> Tuple[float, float, float]:
+    """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
+
+    ``nfa`` is the direction's ``log10 NFA`` (:func:`log10_nfa`).
+    """
+    c = calibration
+    s_wrong = math.radians(c.sigma_wrong_deg)
+    if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
+        return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
+    z = float(np.asarray(c.weights, dtype=float) @ features(sigma_cov, ambiguity))
+    p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
+    sigma = math.hypot(c.scale * sigma_cov, math.radians(c.floor_deg))
+    return p, sigma, mixture_radius(p, sigma, s_wrong)
+
+
+def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
+                 sigma_px: float, calibration: VPCalibration = CALIBRATION, gate: float = 3.0
+                 ) -> Tuple[DirectionConfidence, DirectionConfidence, DirectionConfidence]:
+    """Return the support and calibrated uncertainty of each direction of ``frame``.
+
+    Args:
+        frame: the result of :func:`~.vanishing_point.manhattan_frame` on ``segments``.
+        segments: (N, 4) the segments it was estimated from [ideal px].
+        K: (3, 3) intrinsics.
+        sigma_px: end-point noise used for the estimate [px].
+        calibration: the model's constants.
+        gate: the consistency gate the estimate used (``VPParams.gate``).
+    """
+    amb = direction_ambiguities(frame)
+    c = calibration
+    s_wrong = math.radians(c.sigma_wrong_deg)
+    out = []
+    for k, vp in enumerate(frame.points):
+        d = vp.direction
+        tangent = np.eye(3) - np.outer(d, d)
+        cov = direction_covariance(segments, K, d, vp.inliers, sigma_px)
+        finite = bool(np.all(np.isfinite(cov)))
+        s_cov = math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)) if finite else math.inf
+        n_in = int(np.count_nonzero(vp.inliers))
+        nfa = log10_nfa(segments, vp.inliers, sigma_px, gate)
+        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), nfa, c)
+        good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
+                    if finite else s_wrong ** 2 * tangent)
+        out.append(DirectionConfidence(
+            inliers=n_in, support=vp.support, log10_nfa=nfa, sigma_cov=s_cov,
+            ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
+            first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
+            mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
+            wrong_covariance=s_wrong ** 2 * tangent,
+            confident=p >= c.p_confident))
+    return tuple(out)
+
+
+# ----------------------------------------------------------------------------- fitting
+def _logistic(X: np.ndarray, y: np.ndarray, ridge: float = 1.0,
+              iterations: int = 100) -> np.ndarray:
+    """Ridge-regularised logistic regression by Newton's method (no penalty on w0)."""
+    w = np.zeros(X.shape[1])
+    pen = np.r_[0.0, np.full(X.shape[1] - 1, ridge)]
+    for _ in range(iterations):
+        p = 1.0 / (1.0 + np.exp(-X @ w))
+        g = X.T @ (p - y) + pen * w
+        H = (X * (p * (1.0 - p))[:, None]).T @ X + np.diag(pen)
+        step = np.linalg.solve(H, g)
+        w -= step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    return w
+
+
+def _rayleigh_fit(s: np.ndarray, e: np.ndarray, limit: float) -> Tuple[float, float]:
+    """ML ``(a, b)`` of ``e ~ Rayleigh(sqrt((a s)^2 + b^2))`` truncated to ``e <= limit``.
+
+    The directions of the correct mode are those within ``limit`` of the truth, so each
+    density is divided by its mass below ``limit``, ``1 - exp(-limit^2 / 2 v)`` (s, e and
+    limit in the same unit).
+    """
+    from scipy.optimize import minimize
+
+    def nll(t: np.ndarray) -> float:
+        v = (math.exp(t[0]) * s) ** 2 + math.exp(t[1]) ** 2
+        mass = -np.expm1(-limit ** 2 / (2.0 * v))
+        return float(np.sum(np.log(v) + e ** 2 / (2.0 * v) + np.log(mass)))
+    t0 = np.array([0.0, math.log(max(float(np.median(e)), 1e-3))])
+    t = minimize(nll, t0, method='Nelder-Mead', options={'xatol': 1e-6, 'fatol': 1e-9}).x
+    return math.exp(t[0]), math.exp(t[1])
+
+
+def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
+                    nfa: Sequence[float], error_deg: Sequence[float],
+                    precision: float = 0.98,
+                    threshold_on: Optional[Sequence[bool]] = None) -> VPCalibration:
+    """Fit the confidence model on directions with known errors (module docstring).
+
+    Args:
+        sigma_cov: first-order spreads [rad].
+        ambiguity: competing hypotheses' relative scores.
+        nfa: their ``log10 NFA`` (``>= MAX_LOG10_NFA``: p = 0, left out of the threshold).
+        error_deg: the true angular errors [deg].
+        precision: fraction within 2 deg wanted among the confident directions.
+        threshold_on: the directions ``p_confident`` is chosen on (default: all), e.g. the
+            corridor directions only; the other constants use all.
+
+    Raises:
+        ValueError: inputs of different lengths, or no direction on either side of 2 deg.
+    """
+    s = np.asarray(sigma_cov, dtype=float)
+    a = np.asarray(ambiguity, dtype=float)
+    n = np.asarray(nfa, dtype=float)
+    e = np.asarray(error_deg, dtype=float)
+    if not (s.shape == a.shape == n.shape == e.shape):
+        raise ValueError(f'inputs differ in length: {s.shape}, {a.shape}, {n.shape}, '
+                         f'{e.shape}')
+    good = e <= CORRECT_DEG
+    if good.all() or not good.any():
+        raise ValueError('calibration needs directions both within and beyond 2 deg')
+    X = np.array([features(si, ai) for si, ai in zip(s, a)])
+    w = _logistic(X, good.astype(float))
+    ok = good & np.isfinite(s)
+    scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok], CORRECT_DEG)
+    sigma_wrong = float(np.sqrt(np.mean(e[~good] ** 2)))
+    sel = np.ones(e.shape, dtype=bool) if threshold_on is None else \
+        np.asarray(threshold_on, dtype=bool)
+    sel = sel & (n < MAX_LOG10_NFA)
+    p = (1.0 / (1.0 + np.exp(-X @ w)))[sel]
+    good = good[sel]
+    thr = float(np.max(p))
+    for t in np.sort(p):
+        if np.mean(good[p >= t]) >= precision:
+            thr = float(t)
+            break
+    return VPCalibration(weights=tuple(float(v) for v in w), scale=float(scale),
+                         floor_deg=float(floor), sigma_wrong_deg=sigma_wrong,
+                         p_confident=thr)
