@@ -53,7 +53,8 @@ class FrameScore:
     hard_shadow: bool
     seconds: float
     confidence: float = 1.0   # the outline's own confidence
-    reliable: bool = True     # the outline's flag: confidence >= min_confidence
+    reliable: bool = True     # the outline's flag: confidence and row fill above their limits
+    row_fill: float = 1.0     # the outline's row fill (share of its row spans it covers)
 
     @property
     def seed_is_road(self) -> bool:
@@ -112,7 +113,7 @@ def score_frame(rgb: np.ndarray, label: np.ndarray, params: OutlineParams,
     recall = inter / float(truth.sum()) if truth.any() else 1.0
     return FrameScore(name, iou, precision, recall, float(truth[seed].mean()),
                       is_hard_shadow(rgb, truth), dt, float(out.confidence),
-                      bool(out.reliable)), pred
+                      bool(out.reliable), float(out.row_fill)), pred
 
 
 def evaluate_folder(folder: Path, params: OutlineParams = OutlineParams(),
