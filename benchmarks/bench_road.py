@@ -133,7 +133,8 @@ def cross_drive(folders, json_path=None) -> int:
     """Print the leave-one-drive-out table (learned criterion, then the chapter's)."""
     print(f'{"criterion":9s} {"held out":8s} {"frames":>6s} {"IoU med":>7s} {"prec":>6s} '
           f'{"recall":>6s} {"fail<0.6":>9s} {"fill lim":>8s} {"fail&flag":>9s} '
-          f'{"good&flag":>9s} {"seed not road":>13s}')
+          f'{"good&flag":>9s} {"kept":>5s} {"IoU med":>7s} {"fail<0.6":>9s} '
+          f'{"seed not road":>13s}')
     results = {}
     for name, params in (('learned', OutlineParams(min_row_fill=0.0)),
                          ('chapter', OutlineParams(method='chapter'))):
@@ -144,13 +145,18 @@ def cross_drive(folders, json_path=None) -> int:
         for drive, res in results[name].items():
             s, frames = res['summary'], res['frames']
             a = s['all']
-            flagged = [f.iou < FAIL_IOU for f in frames if f.seed_is_road
-                       and (not f.reliable or f.row_fill < limits[drive])]
+            road = [f for f in frames if f.seed_is_road]
+            flag = [not f.reliable or f.row_fill < limits[drive] for f in road]
+            flagged = [f.iou < FAIL_IOU for f, g in zip(road, flag) if g]
+            kept = np.array([f.iou for f, g in zip(road, flag) if not g] or [np.nan])
             bad = s['seed_not_road']
             print(f'{name:9s} {drive:8s} {a["frames"]:6d} {a["iou_median"]:7.3f} '
                   f'{a["precision_median"]:6.3f} {a["recall_median"]:6.3f} '
                   f'{a["failures"]:4d} ({100 * a["failure_rate"]:2.0f}%) {limits[drive]:8.3f} '
                   f'{sum(flagged):9d} {len(flagged) - sum(flagged):9d} '
+                  f'{len(road) - len(flagged):5d} '
+                  f'{np.median(kept):7.3f} {int(np.sum(kept < FAIL_IOU)):4d} '
+                  f'({100 * np.mean(kept < FAIL_IOU):2.0f}%) '
                   f'{bad["frames"]:13d} {" ".join(bad.get("names", []))}')
         if name == 'learned':
             print(f'row-fill limit over all drives (min_row_fill): {limits["all"]:.3f}')
