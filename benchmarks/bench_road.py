@@ -41,8 +41,8 @@ import cv2
 from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out, row_fill_limits
 from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT, SIM_CONFIG
 from landmark_nav.evaluation.road_laser import ANGLES
-from landmark_nav.evaluation.road_outline import (FAIL_IOU, frame_names, load_frame,
-                                                  SEED_COLS, SEED_ROWS)
+from landmark_nav.evaluation.road_outline import (CLASS_NAMES, FAIL_IOU, frame_names,
+                                                  load_frame, SEED_COLS, SEED_ROWS)
 from landmark_nav.road.outline import band_seed, chromaticity, OutlineParams, road_outline
 from landmark_nav.road.terrain import classify_scan, LaserMount
 from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view
@@ -160,6 +160,11 @@ def cross_drive(folders, json_path=None) -> int:
                   f'{bad["frames"]:13d} {" ".join(bad.get("names", []))}')
         if name == 'learned':
             print(f'row-fill limit over all drives (min_row_fill): {limits["all"]:.3f}')
+        for drive, res in results[name].items():
+            wrong = np.sum([f.wrong_pixels for f in res['frames'] if f.seed_is_road], axis=0)
+            share = ', '.join(f'{CLASS_NAMES[i]} {100 * wrong[i] / wrong.sum():.0f} %'
+                              for i in np.argsort(wrong)[::-1][:4] if wrong[i])
+            print(f'{name} {drive}: pixels wrongly taken as road: {share}')
     if json_path:
         Path(json_path).write_text(json.dumps(
             {k: {d: {'summary': r['summary'], 'frames': [f.__dict__ for f in r['frames']]}
