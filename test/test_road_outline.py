@@ -2,7 +2,8 @@
 
 import cv2
 from landmark_nav.evaluation.road_cross_drive import row_fill_limits
-from landmark_nav.evaluation.road_outline import (evaluate_folder, format_summary, FrameScore,
+from landmark_nav.evaluation.road_outline import (CLASS_NAMES, evaluate_folder,
+                                                  format_summary, FrameScore, score_frame,
                                                   summarize)
 from landmark_nav.road.outline import (band_seed, chromaticity, outline_confidence,
                                        OutlineParams, polyline_seed, road_outline, row_fill,
@@ -127,6 +128,18 @@ def test_row_fill_is_the_share_of_row_spans_covered():
     region[220:, :] = True                           # rows below the seed are not counted
     assert row_fill(region, seed) == pytest.approx(1.0 - 50 * 40 / (110 * 200))
     assert row_fill(np.zeros_like(region), seed) == 0.0
+
+
+def test_score_counts_pixels_wrongly_taken_as_road_per_class():
+    img, truth = _street(np.random.default_rng(0))
+    label = np.where(truth, 3, 1).astype(np.uint8)       # road, buildings
+    label[150:170, 140:180] = 8                          # a 'car' the outline takes as road
+    score, pred = score_frame(img, label, OutlineParams())
+    wrong = np.array(score.wrong_pixels)
+    assert len(wrong) == len(CLASS_NAMES) and CLASS_NAMES[8] == 'car'
+    assert wrong[8] == np.sum(pred[150:170, 140:180]) > 0.9 * 20 * 40
+    assert wrong.sum() == np.sum(pred & (label != 3))
+    assert score.row_fill > 0.9
 
 
 def test_row_fill_limits_come_from_the_other_drives():
