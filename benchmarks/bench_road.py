@@ -22,7 +22,11 @@ learned criterion (the default) and with the chapter's (eqs. 26-28).
 (:func:`landmark_nav.evaluation.road_cross_drive.leave_one_drive_out`): per drive, the
 road-probability model fitted on the other drives' frames, the drive's frames scored; the
 chapter's criterion (no training) on the same frames for comparison. Frames whose seed band
-is not road are counted and listed apart.
+is not road are counted and listed apart. A frame is flagged when the outline's confidence is
+below ``min_confidence`` or its row fill below the limit calibrated on the other drives
+(:func:`landmark_nav.evaluation.road_cross_drive.row_fill_limits`); the table counts the
+failures flagged and the good frames (IoU >= 0.6) flagged, and prints the limit over all
+drives (the shipped ``min_row_fill``).
 """
 
 import argparse
@@ -34,11 +38,11 @@ import time
 
 from common import data_folder, SHARED_DATA
 import cv2
-from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out
+from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out, row_fill_limits
 from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT, SIM_CONFIG
 from landmark_nav.evaluation.road_laser import ANGLES
-from landmark_nav.evaluation.road_outline import (FAIL_IOU, frame_names, load_frame,
-                                                  SEED_COLS, SEED_ROWS)
+from landmark_nav.evaluation.road_outline import (CLASS_NAMES, FAIL_IOU, frame_names,
+                                                  load_frame, SEED_COLS, SEED_ROWS)
 from landmark_nav.road.outline import band_seed, chromaticity, OutlineParams, road_outline
 from landmark_nav.road.terrain import classify_scan, LaserMount
 from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view
@@ -128,22 +132,39 @@ def main(argv=None) -> int:
 def cross_drive(folders, json_path=None) -> int:
     """Print the leave-one-drive-out table (learned criterion, then the chapter's)."""
     print(f'{"criterion":9s} {"held out":8s} {"frames":>6s} {"IoU med":>7s} {"prec":>6s} '
-          f'{"recall":>6s} {"fail<0.6":>9s} {"flagged":>7s} {"fail&flag":>9s} '
+          f'{"recall":>6s} {"fail<0.6":>9s} {"fill lim":>8s} {"fail&flag":>9s} '
+          f'{"good&flag":>9s} {"kept":>5s} {"IoU med":>7s} {"fail<0.6":>9s} '
           f'{"seed not road":>13s}')
     results = {}
-    for name, params in (('learned', OutlineParams()),
+    for name, params in (('learned', OutlineParams(min_row_fill=0.0)),
                          ('chapter', OutlineParams(method='chapter'))):
         results[name] = leave_one_drive_out(folders, params)
+        # eqs. 26-28 have no row fill (1.0): nothing to calibrate
+        limits = row_fill_limits(results[name]) if name == 'learned' else \
+            dict.fromkeys(list(results[name]) + ['all'], 0.0)
         for drive, res in results[name].items():
             s, frames = res['summary'], res['frames']
             a = s['all']
-            hit = sum(1 for f in frames if f.seed_is_road and not f.reliable
-                      and f.iou < FAIL_IOU)
+            road = [f for f in frames if f.seed_is_road]
+            flag = [not f.reliable or f.row_fill < limits[drive] for f in road]
+            flagged = [f.iou < FAIL_IOU for f, g in zip(road, flag) if g]
+            kept = np.array([f.iou for f, g in zip(road, flag) if not g] or [np.nan])
             bad = s['seed_not_road']
             print(f'{name:9s} {drive:8s} {a["frames"]:6d} {a["iou_median"]:7.3f} '
                   f'{a["precision_median"]:6.3f} {a["recall_median"]:6.3f} '
-                  f'{a["failures"]:4d} ({100 * a["failure_rate"]:2.0f}%) {a["unreliable"]:7d} '
-                  f'{hit:9d} {bad["frames"]:13d} {" ".join(bad.get("names", []))}')
+                  f'{a["failures"]:4d} ({100 * a["failure_rate"]:2.0f}%) {limits[drive]:8.3f} '
+                  f'{sum(flagged):9d} {len(flagged) - sum(flagged):9d} '
+                  f'{len(road) - len(flagged):5d} '
+                  f'{np.median(kept):7.3f} {int(np.sum(kept < FAIL_IOU)):4d} '
+                  f'({100 * np.mean(kept < FAIL_IOU):2.0f}%) '
+                  f'{bad["frames"]:13d} {" ".join(bad.get("names", []))}')
+        if name == 'learned':
+            print(f'row-fill limit over all drives (min_row_fill): {limits["all"]:.3f}')
+        for drive, res in results[name].items():
+            wrong = np.sum([f.wrong_pixels for f in res['frames'] if f.seed_is_road], axis=0)
+            share = ', '.join(f'{CLASS_NAMES[i]} {100 * wrong[i] / wrong.sum():.0f} %'
+                              for i in np.argsort(wrong)[::-1][:4] if wrong[i])
+            print(f'{name} {drive}: pixels wrongly taken as road: {share}')
     if json_path:
         Path(json_path).write_text(json.dumps(
             {k: {d: {'summary': r['summary'], 'frames': [f.__dict__ for f in r['frames']]}

@@ -105,8 +105,9 @@ def test_scans_and_frames_give_grid_route_width_and_outline():
         assert ros.wait_until(lambda: len(rig.widths) == 6 and len(rig.outlines) == 6
                               and len(rig.confidences) == 6, 10)
         assert node.stats.dropped_count == 0
-        # the chapter's criterion has no confidence measure: 1.0, reliable
-        assert all(c.vector.x == 1.0 and c.vector.y == 1.0 for c in rig.confidences)
+        # the chapter's criterion has no confidence measure nor row fill: 1.0, reliable
+        assert all(c.vector.x == 1.0 and c.vector.y == 1.0 and c.vector.z == 1.0
+                   for c in rig.confidences)
         # The asphalt road is 4.9 m wide: measured here laser 4.88, 4.85, 4.76, 4.86, 4.85,
         # 4.92 m (mean 4.85; one scan's sigma is 0.09 m, see docs/road_following.md; 5.09 ...
         # 5.23 m, mean 5.00, before the edges were re-placed by a continuous fit), vision 4.82 m

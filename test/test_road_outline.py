@@ -1,10 +1,12 @@
 """Vision road outline (road.outline, eqs. 25-28) on synthetic images and real street frames."""
 
 import cv2
-from landmark_nav.evaluation.road_outline import (evaluate_folder, format_summary, FrameScore,
+from landmark_nav.evaluation.road_cross_drive import row_fill_limits
+from landmark_nav.evaluation.road_outline import (CLASS_NAMES, evaluate_folder,
+                                                  format_summary, FrameScore, score_frame,
                                                   summarize)
 from landmark_nav.road.outline import (band_seed, chromaticity, outline_confidence,
-                                       OutlineParams, polyline_seed, road_outline,
+                                       OutlineParams, polyline_seed, road_outline, row_fill,
                                        SeedError)
 from landmark_nav.road.road_probability import FEATURE_NAMES, pixel_features, RoadModel
 from landmark_nav.road.road_training import fit_road_model
@@ -95,6 +97,7 @@ def test_learned_outline_of_a_perspective_street():
     assert out.p_c is None and out.probability.shape == (120, 160)
     assert np.sum(out.mask & truth) / np.sum(out.mask | truth) > 0.97
     assert out.reliable and out.confidence > 0.85
+    assert out.row_fill > OutlineParams().min_row_fill      # one interval per row
     # a seed in the sky is less road-like: lower confidence (measured 0.56)
     sky = road_outline(img, band_seed(img.shape, (0.1, 0.16), (0.4, 0.6)))
     assert sky.confidence < out.confidence - 0.25
@@ -112,6 +115,41 @@ def test_outline_confidence_is_seed_probability_and_border_contrast():
     assert outline_confidence(prob, region, seed, 6) == pytest.approx(0.3, abs=1e-6)
     flat = np.full((120, 160), 0.9, np.float32)      # no border: no contrast
     assert outline_confidence(flat, region, seed, 6) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_row_fill_is_the_share_of_row_spans_covered():
+    seed = np.zeros((240, 320), bool)
+    seed[200:210, 140:180] = True
+    region = np.zeros((240, 320), bool)
+    region[100:, 60:260] = True                      # one interval per row
+    assert row_fill(region, seed) == 1.0
+    region[100:150, 100:140] = False                 # a car: 40 of 200 px of 50 of 110 rows
+    assert row_fill(region, seed) == pytest.approx(1.0 - 50 * 40 / (110 * 200))
+    region[220:, :] = True                           # rows below the seed are not counted
+    assert row_fill(region, seed) == pytest.approx(1.0 - 50 * 40 / (110 * 200))
+    assert row_fill(np.zeros_like(region), seed) == 0.0
+
+
+def test_score_counts_pixels_wrongly_taken_as_road_per_class():
+    img, truth = _street(np.random.default_rng(0))
+    label = np.where(truth, 3, 1).astype(np.uint8)       # road, buildings
+    label[150:170, 140:180] = 8                          # a 'car' the outline takes as road
+    score, pred = score_frame(img, label, OutlineParams())
+    wrong = np.array(score.wrong_pixels)
+    assert len(wrong) == len(CLASS_NAMES) and CLASS_NAMES[8] == 'car'
+    assert wrong[8] == np.sum(pred[150:170, 140:180]) > 0.9 * 20 * 40
+    assert wrong.sum() == np.sum(pred & (label != 3))
+    assert score.row_fill > 0.9
+
+
+def test_row_fill_limits_come_from_the_other_drives():
+    def frames(fills):
+        return {'frames': [FrameScore(f'x_{i}', 0.9, 1, 1, 1.0, False, 0.0, 1.0, True, f)
+                           for i, f in enumerate(fills)]}
+    results = {'a': frames([0.5, 0.6]), 'b': frames([0.9, 1.0]), 'c': frames([0.7, 0.8])}
+    limits = row_fill_limits(results, 0.0)
+    assert limits == {'a': 0.7, 'b': 0.5, 'c': 0.5, 'all': 0.5}
+    assert row_fill_limits(results, 1.0)['c'] == 1.0
 
 
 def test_road_model_fit_save_load(tmp_path):

@@ -7,6 +7,11 @@ band is road (road share of the band >= ``SEED_ROAD_SHARE``; the others would te
 seed-relative features a wrong reference), skipping unlabelled pixels, with each drive
 weighted equally. Leave one drive out: for every drive, a model fitted on the other drives
 scores that drive's frames.
+
+The outline's row-fill limit (:func:`landmark_nav.road.outline.row_fill`) is calibrated the
+same way: for a held-out drive, the ``ROW_FILL_QUANTILE`` quantile of the row fill of the other
+drives' held-out frames (:func:`row_fill_limits`); the shipped ``min_row_fill`` is that
+quantile over all drives' held-out frames.
 """
 
 from dataclasses import dataclass
@@ -24,6 +29,7 @@ from landmark_nav.road.road_training import fit_road_model
 import numpy as np
 
 SAMPLES_PER_FRAME = 600
+ROW_FILL_QUANTILE = 0.1
 
 
 def drive_of(name: str) -> str:
@@ -109,4 +115,19 @@ def leave_one_drive_out(folders: Sequence[Path], params: OutlineParams = Outline
             if names:
                 scores += evaluate_folder(folder, params, names, model)
         out[held] = {'summary': summarize(scores), 'frames': scores}
+    return out
+
+
+def row_fill_limits(results: Dict[str, dict], quantile: float = ROW_FILL_QUANTILE
+                    ) -> Dict[str, float]:
+    """Per drive of :func:`leave_one_drive_out`'s result: the row-fill limit from the others.
+
+    The ``quantile`` of the row fill of the other drives' frames whose seed is road; under
+    ``'all'``, the quantile over every drive's frames (the shipped ``min_row_fill``).
+    """
+    def fills(drives):
+        return [f.row_fill for d in drives for f in results[d]['frames'] if f.seed_is_road]
+    out = {d: float(np.quantile(fills([o for o in results if o != d]), quantile))
+           for d in results}
+    out['all'] = float(np.quantile(fills(list(results)), quantile))
     return out

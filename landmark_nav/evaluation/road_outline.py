@@ -34,6 +34,9 @@ import numpy as np
 
 ROAD_CLASS = 3
 UNLABELLED_CLASS = 11
+#: Names of the CamVid 11-class label indices (``labels_camvid11``).
+CLASS_NAMES = ('sky', 'building', 'pole', 'road', 'pavement', 'tree', 'sign', 'fence', 'car',
+               'pedestrian', 'cyclist', 'unlabelled')
 SEED_ROAD_SHARE = 0.5
 SEED_ROWS = (0.86, 0.92)
 SEED_COLS = (0.38, 0.62)
@@ -53,7 +56,9 @@ class FrameScore:
     hard_shadow: bool
     seconds: float
     confidence: float = 1.0   # the outline's own confidence
-    reliable: bool = True     # the outline's flag: confidence >= min_confidence
+    reliable: bool = True     # the outline's flag: confidence and row fill above their limits
+    row_fill: float = 1.0     # the outline's row fill (share of its row spans it covers)
+    wrong_pixels: tuple = ()  # pixels outside the road taken as road, per label class
 
     @property
     def seed_is_road(self) -> bool:
@@ -110,9 +115,11 @@ def score_frame(rgb: np.ndarray, label: np.ndarray, params: OutlineParams,
     iou = inter / union if union else 1.0
     precision = inter / float(pred.sum()) if pred.any() else 0.0
     recall = inter / float(truth.sum()) if truth.any() else 1.0
+    wrong = np.bincount(label[pred & ~truth], minlength=len(CLASS_NAMES))
     return FrameScore(name, iou, precision, recall, float(truth[seed].mean()),
                       is_hard_shadow(rgb, truth), dt, float(out.confidence),
-                      bool(out.reliable)), pred
+                      bool(out.reliable), float(out.row_fill),
+                      tuple(int(n) for n in wrong[:len(CLASS_NAMES)])), pred
 
 
 def evaluate_folder(folder: Path, params: OutlineParams = OutlineParams(),

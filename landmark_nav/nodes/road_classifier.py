@@ -18,8 +18,9 @@ in ``base_frame`` with the scan's stamp after every scan with valid readings:
 and after every camera frame with a usable seed: ``road/outline`` (geometry_msgs/
 PolygonStamped, the outline on the ground plane, z = 0), ``road/outline_confidence``
 (geometry_msgs/Vector3Stamped: x = the outline's confidence in [0, 1], y = 1 when reliable,
-0 when flagged: below ``min_outline_confidence``, then not fused, the route follows the
-laser) and, with ``publish_debug_image``, ``road/debug_image`` (sensor_msgs/Image bgr8).
+0 when flagged: below ``min_outline_confidence`` or its row fill, z, below
+``min_outline_row_fill``, then not fused, the route follows the laser) and, with
+``publish_debug_image``, ``road/debug_image`` (sensor_msgs/Image bgr8).
 
 The seed area of the vision outline is the newest laser's traversable segment under the
 robot projected through the camera model (a band ``seed_thickness_px`` thick). Bad input
@@ -212,6 +213,7 @@ class RoadClassifier(Node):
         conf.header.stamp = msg.header.stamp
         conf.header.frame_id = self.base_frame
         conf.vector.x, conf.vector.y = float(out.confidence), float(out.reliable)
+        conf.vector.z = float(out.row_fill)
         self.pub_confidence.publish(conf)
         if out.reliable:
             self.outline = (stamp, ground)
@@ -219,9 +221,11 @@ class RoadClassifier(Node):
             # A doubtful seed or no clear border: the fusion leans on the laser alone.
             self.outline = None
             self.unreliable += 1
-            self.warner.warn(f'vision outline confidence {out.confidence:.2f} < '
-                             f'{self.outline_params.min_confidence:.2f} (seed not road-like '
-                             f'or no clear border): not fused ({self.unreliable} frames so far)')
+            self.warner.warn(f'vision outline confidence {out.confidence:.2f} (limit '
+                             f'{self.outline_params.min_confidence:.2f}: seed road-like, '
+                             f'clear border), row fill {out.row_fill:.3f} (limit '
+                             f'{self.outline_params.min_row_fill:.3f}: no gaps in its rows): '
+                             f'not fused ({self.unreliable} frames so far)')
         self.frames += 1
         poly = PolygonStamped()
         poly.header.stamp = msg.header.stamp

@@ -64,6 +64,10 @@ def parameters() -> Dict[str, Parameter]:
                                             'lower confidence (seed road probability, border '
                                             'contrast) is flagged and not fused '
                                             "(outline_method 'learned')", (0.0, 1.0)),
+        'min_outline_row_fill': Parameter(OutlineParams().min_row_fill, 'an outline covering '
+                                          "less of its rows' spans (gaps around cars, along "
+                                          'pavement) is flagged and not fused '
+                                          "(outline_method 'learned')", (0.0, 1.0)),
         'seed_thickness_px': Parameter(9, 'thickness of the seed band [px]', (1, 200)),
         'outline_timeout': Parameter(0.5, 'an outline older than this (scan time) is not '
                                      'fused [s]', (0.0, 60.0)),
@@ -117,7 +121,8 @@ def road_configuration(overrides: Optional[Mapping[str, Any]] = None) -> RoadCon
         fusion=FusionParams(robot_width=v['robot_width'], max_distance=v['max_distance'],
                             history=v['history']),
         outline=OutlineParams(k_limit=v['k_limit'], method=v['outline_method'],
-                              min_confidence=v['min_outline_confidence']),
+                              min_confidence=v['min_outline_confidence'],
+                              min_row_fill=v['min_outline_row_fill']),
         seed_px=v['seed_thickness_px'],
         values=v)
 

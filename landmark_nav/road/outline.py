@@ -46,7 +46,13 @@ the seed's connected region, the closing and the hole filling are the same.
 Each outline carries a confidence in [0, 1]: the smaller of the model's mean road
 probability on the seed (is the seed road at all?) and the contrast of that probability
 across the region's border (mean inside minus mean in a band ``ring_px`` wide outside: is
-the border clear?); ``reliable`` when it reaches ``min_confidence``.
+the border clear?); and a row fill (:func:`row_fill`): the share of each row's span, from the
+region's leftmost to its rightmost pixel, that the region covers, over the rows from its top
+down to the seed. A road seen from above its ground plane is one interval per row; an outline
+that floods around parked cars, along pavement and up walls leaves gaps inside the rows it
+spans. ``reliable`` when the confidence reaches ``min_confidence`` and the row fill
+``min_row_fill`` (the 10 % quantile of the row fill of held-out frames, leave one drive out;
+``benchmarks/bench_road.py --cross-drive``).
 """
 
 from dataclasses import dataclass
@@ -88,6 +94,7 @@ class OutlineParams:
     p_road: float = 0.5
     ring_px: int = 6
     min_confidence: float = 0.5
+    min_row_fill: float = 0.912
 
     def __post_init__(self) -> None:
         """Check the ranges."""
@@ -103,7 +110,7 @@ class OutlineParams:
         if self.method not in ('learned', 'chapter'):
             raise ValueError(f"outline method must be 'learned' or 'chapter'; got "
                              f'{self.method!r}')
-        for name in ('p_road', 'min_confidence'):
+        for name in ('p_road', 'min_confidence', 'min_row_fill'):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f'outline {name} must be in [0, 1]; got {value!r}')
@@ -126,7 +133,9 @@ class RoadOutline:
         probability: (120, 160) float32 learned road probability (None with eqs. 26-28).
         confidence: In [0, 1]: min(seed road probability, border contrast); 1.0 with
             eqs. 26-28, which have no such measure.
-        reliable: ``confidence >= min_confidence``.
+        row_fill: In [0, 1]: share of the region's row spans it covers (:func:`row_fill`);
+            1.0 with eqs. 26-28.
+        reliable: ``confidence >= min_confidence`` and ``row_fill >= min_row_fill``.
     """
 
     mask: np.ndarray
@@ -137,6 +146,7 @@ class RoadOutline:
     probability: Optional[np.ndarray] = None
     confidence: float = 1.0
     reliable: bool = True
+    row_fill: float = 1.0
 
 
 def chromaticity(rgb: np.ndarray, kind: str = 'rg',
@@ -247,8 +257,10 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
     if prob is None:
         return RoadOutline(mask, polygon, seed, p_c, p_e)
     confidence = outline_confidence(prob, region, seed_s, params.ring_px)
+    fill = row_fill(region, seed_s)
     return RoadOutline(mask, polygon, seed, None, None, prob, confidence,
-                       confidence >= params.min_confidence)
+                       confidence >= params.min_confidence and fill >= params.min_row_fill,
+                       fill)
 
 
 def _work_size(prob: np.ndarray) -> np.ndarray:
@@ -302,6 +314,24 @@ def outline_confidence(prob: np.ndarray, region: np.ndarray, seed: np.ndarray,
     inside = float(prob[reg].mean()) if reg.any() else 0.0
     outside = float(prob[ring].mean()) if ring.any() else 0.0
     return max(0.0, min(seed_p, inside - outside))
+
+
+def row_fill(region: np.ndarray, seed: np.ndarray) -> float:
+    """Share of the region's row spans that the region covers, in [0, 1].
+
+    Over the rows from the region's top down to the seed's lowest row: the number of region
+    pixels divided by the summed spans (leftmost to rightmost region pixel, inclusive) of
+    those rows. 1.0 when every row is one interval; 0.0 for an empty region.
+    """
+    seed_rows = np.flatnonzero(seed.any(axis=1))
+    rows = region[:seed_rows[-1] + 1] if seed_rows.size else region
+    rows = rows[rows.any(axis=1)]
+    if not rows.size:
+        return 0.0
+    w = rows.shape[1]
+    first = rows.argmax(axis=1)
+    last = w - 1 - rows[:, ::-1].argmax(axis=1)
+    return float(rows.sum() / np.sum(last - first + 1))
 
 
 def band_seed(shape: tuple, rows: tuple, cols: tuple) -> np.ndarray:
