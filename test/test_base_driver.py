@@ -481,7 +481,9 @@ def test_fault_is_survived_and_reported(faulty, kind, duration):
     r = faulty
 
     def status_since(t):
-        return [level(m) for when, m in list(r.diag) if when > t]
+        """Return the connection statuses received after ``t`` (other arrays skipped)."""
+        found = [level(m) for when, m in list(r.diag) if when > t]
+        return [s for s in found if s is not None]
     assert r.ros.wait_until(lambda: (status_since(time.monotonic() - 0.25) or [(9,)])[-1][0]
                             == 0, 8.0), status_since(time.monotonic() - 1.0)
     injected = time.monotonic()
