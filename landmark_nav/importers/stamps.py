@@ -33,8 +33,8 @@ from typing import List, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ['GLITCH_MAX', 'StampRepairs', 'WRAP_COARSE', 'repair_stamps', 'repair_streams',
-           'unwrap_stamps']
+__all__ = ['GLITCH_MAX', 'StampRepairs', 'WRAP_COARSE', 'clock_resets', 'repair_stamps',
+           'repair_streams', 'unwrap_stamps']
 
 #: Unsigned 32-bit wrap: stamps in [2**31, 2**33) s are read as t - 2**32.
 _WRAP, _WRAP_FROM, _WRAP_TO = 2.0 ** 32, 2.0 ** 31, 2.0 ** 33
@@ -230,6 +230,43 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
         t = t + offset
         repairs = replace(repairs, offset=offset)
     return t, repairs
+
+
+def _merged(streams: Sequence, lines: Sequence) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the unwrapped stamps of all streams in log order, their lines, and the bad ones."""
+    unwrapped = [unwrap_stamps(t) for t in streams]
+    stamps = [u[0] for u in unwrapped]
+    lines = [np.asarray(n, dtype=float).ravel() for n in lines]
+    for k, (t, n) in enumerate(zip(stamps, lines)):
+        if len(t) != len(n):
+            raise ValueError(f'stream {k}: {len(t)} stamps but {len(n)} line numbers')
+    if not stamps:
+        return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
+    order = np.argsort(np.concatenate(lines), kind='stable')
+    t = np.concatenate(stamps)[order]
+    bad = ~np.isfinite(t) | (t == 0.0) | np.concatenate([u[2] for u in unwrapped])[order]
+    return t, np.concatenate(lines)[order], bad
+
+
+def clock_resets(streams: Sequence, lines: Sequence) -> List[Tuple[int, float, float]]:
+    """Return the clock resets of a log's streams (merged in log order) as they were read.
+
+    The resets are those :func:`repair_streams` shifts the later stamps at (a lasting
+    backward jump of the clock, not a glitch): one ``(line, before, after)`` each, the log
+    line of the first stamp after the reset, the last good stamp before it and that stamp
+    [s], unshifted.
+    """
+    t, n, bad = _merged(streams, lines)
+    good_idx = np.flatnonzero(~bad)
+    raw = t.copy()
+    period = _nominal_period(t[good_idx], good_idx) or 1.0
+    _, resets = _backward(t, bad, good_idx, period)
+    out = []
+    for i, _ in resets:
+        before = good_idx[good_idx < i]
+        out.append((int(n[i]), float(raw[before[-1]]) if before.size else float('nan'),
+                    float(raw[i])))
+    return out
 
 
 def repair_streams(streams: Sequence, lines: Sequence,
