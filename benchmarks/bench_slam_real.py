@@ -21,7 +21,7 @@ or ``--data DIR``)::
         [--params-file YAML ...] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py wean [--landmarks both]
         [--establish-hits N] [--odometry-scale S] [--set NAME=VALUE ...] [--data DIR]
-        [LOG ...]
+        [--corners] [--plot DIR] [LOG ...]
 
 A Carmen LOG is a log name in ``--data DIR`` (default ``../shared/data/carmen``; ``aces``
 -> ``DIR/aces-corrected.log.gz``; default the six logs) or a path to a Carmen log; a Wean
@@ -163,6 +163,11 @@ the odometry's scale wrong? the grid says which scale fits). ``--set NAME=VALUE`
 (repeatable) any other field of ``SlamParams`` or ``FrontendParams``
 (the value read as a Python literal, e.g. ``--set jacobians="'observability_gain'" --set
 spurious_limit=0.05 --set scan_matching=True``).
+``--corners`` also places every scan's corners with the filter's path
+(:func:`~landmark_nav.evaluation.occupancy_check.corner_wall_check`): the share of
+structural and other corners within 10 cm of a wall cell, the structural ones split into
+convex and concave, and the distance to a wall cell of the structural ones off the walls
+(10 / 50 / 90 %); ``--plot DIR`` draws them over the grid.
 A log that holds several runs (the import summary's ``runs``: ``robotdata5``, whose clock
 restarts where the robot is elsewhere) is imported and run one run at a time (``name/runK``,
 ``landmark_nav import --run K``). A log whose odometry the front end had to bridge gets one
@@ -705,6 +710,14 @@ def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args) 
           f'through: corners near them left out): structural {cw["structural_share"]:.3f} of '
           f'{cw["structural_count"]} (left out {cw["structural_left_out"]}), other '
           f'{cw["other_share"]:.3f} of {cw["other_count"]} (left out {cw["other_left_out"]})')
+    off = cw['structural'] & ~cw['left_out'] & ~cw['on_wall']
+    d = cw['wall_distance'][off]
+    print(f'{label} structural convex {cw["structural_convex_share"]:.3f} of '
+          f'{cw["structural_convex_count"]}, concave {cw["structural_concave_share"]:.3f} of '
+          f'{cw["structural_concave_count"]}; off the walls: {int(np.sum(cw["convex"][off]))} '
+          f'of {int(off.sum())} convex, distance to a wall cell [m] '
+          + (' / '.join(f'{q:.2f}' for q in np.quantile(d, [0.1, 0.5, 0.9]))
+             + ' (10 / 50 / 90 %)' if d.size else '-'))
     if args.plot:
         out = Path(args.plot) / (label.replace('#', '_').replace('/', '_')
                                  + '_structural_corners.png')
@@ -806,7 +819,8 @@ def main(argv=None) -> int:
     p.add_argument('--corners', action='store_true',
                    help="also place every scan's corner detections with the SLAM path: "
                         'the share of structural and other corners within 10 cm of a wall '
-                        'cell the log does not see through')
+                        'cell the log does not see through, structural ones split into convex '
+                        'and concave, and how far the off-wall ones are from a wall cell')
     p.add_argument('--plot', default=None, metavar='DIR',
                    help='with --corners: draw them over the grid into DIR/<log>_structural_'
                         'corners.png')

@@ -66,7 +66,9 @@ TINY_RUNS = {
          r'tiny-0 \| [\d.]+ / [\d.]+'),
         (['wean', '--data', '{wean}', 'robotdata1', '--corners', '--plot', '{tmp}'],
          r'\nrobotdata1 \d+ [\d.]+ (.*\n)+robotdata1 corners within 10 cm .* structural '
-         r'([\d.]+|nan) of \d+ (.*\n)+wrote .*robotdata1_structural_corners.png'),
+         r'([\d.]+|nan) of \d+ (.*\n)+robotdata1 structural convex ([\d.]+|nan) of \d+, '
+         r'concave ([\d.]+|nan) of \d+; off the walls: \d+ of \d+ convex(.*\n)+'
+         r'wrote .*robotdata1_structural_corners.png'),
         (['defaults', '--data', '{carmen}', 'tiny'], r'\ntiny \| [\d.]+ / [\d.]+ \([\d.]+\) \|')],
     'bench_localization.py': [
         (['sonar', '--bag', '{hallway}', '--runs', '3'], r'EKF update\s+[\d.]+'),

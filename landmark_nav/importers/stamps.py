@@ -232,20 +232,28 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
     return t, repairs
 
 
-def _merged(streams: Sequence, lines: Sequence) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the unwrapped stamps of all streams in log order, their lines, and the bad ones."""
+def _merged(streams: Sequence, lines: Sequence) -> tuple:
+    """Return the streams unwrapped, and their stamps merged in log order.
+
+    Returns ``(unwrapped, order, t, n, bad)``: :func:`unwrap_stamps` of each stream, the
+    permutation of the concatenated streams into log order, the merged stamps, their log
+    lines and which are missing (zero, non-finite or too coarse to unwrap).
+
+    Raises:
+        ValueError: A stream and its line numbers differ in length.
+
+    """
     unwrapped = [unwrap_stamps(t) for t in streams]
-    stamps = [u[0] for u in unwrapped]
     lines = [np.asarray(n, dtype=float).ravel() for n in lines]
-    for k, (t, n) in enumerate(zip(stamps, lines)):
-        if len(t) != len(n):
-            raise ValueError(f'stream {k}: {len(t)} stamps but {len(n)} line numbers')
-    if not stamps:
-        return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
+    for k, (u, n) in enumerate(zip(unwrapped, lines)):
+        if len(u[0]) != len(n):
+            raise ValueError(f'stream {k}: {len(u[0])} stamps but {len(n)} line numbers')
+    if not unwrapped:
+        return [], np.zeros(0, int), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
     order = np.argsort(np.concatenate(lines), kind='stable')
-    t = np.concatenate(stamps)[order]
+    t = np.concatenate([u[0] for u in unwrapped])[order]
     bad = ~np.isfinite(t) | (t == 0.0) | np.concatenate([u[2] for u in unwrapped])[order]
-    return t, np.concatenate(lines)[order], bad
+    return unwrapped, order, t, np.concatenate(lines)[order], bad
 
 
 def clock_resets(streams: Sequence, lines: Sequence) -> List[Tuple[int, float, float]]:
@@ -256,7 +264,7 @@ def clock_resets(streams: Sequence, lines: Sequence) -> List[Tuple[int, float, f
     line of the first stamp after the reset, the last good stamp before it and that stamp
     [s], unshifted.
     """
-    t, n, bad = _merged(streams, lines)
+    _, _, t, n, bad = _merged(streams, lines)
     good_idx = np.flatnonzero(~bad)
     raw = t.copy()
     period = _nominal_period(t[good_idx], good_idx) or 1.0
@@ -289,17 +297,8 @@ def repair_streams(streams: Sequence, lines: Sequence,
     """
     if not fallback_period > 0:
         raise ValueError(f'fallback period must be > 0, got {fallback_period}')
-    unwrapped = [unwrap_stamps(t) for t in streams]
+    unwrapped, order, t, _, bad = _merged(streams, lines)
     streams = [u[0] for u in unwrapped]
-    lines = [np.asarray(n, dtype=float).ravel() for n in lines]
-    for k, (t, n) in enumerate(zip(streams, lines)):
-        if len(t) != len(n):
-            raise ValueError(f'stream {k}: {len(t)} stamps but {len(n)} line numbers')
-    merged = np.concatenate(streams) if streams else np.zeros(0)
-    coarse_all = np.concatenate([u[2] for u in unwrapped]) if streams else np.zeros(0, bool)
-    order = np.argsort(np.concatenate(lines), kind='stable') if streams else np.zeros(0, int)
-    t = merged[order]
-    bad = ~np.isfinite(t) | (t == 0.0) | coarse_all[order]
     good_idx = np.flatnonzero(~bad)
     period = _nominal_period(t[good_idx], good_idx) or float(fallback_period)
     _, resets = _backward(t, bad, good_idx, period)
