@@ -21,7 +21,7 @@ or ``--data DIR``)::
         [--params-file YAML ...] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py wean [--landmarks both]
         [--establish-hits N] [--odometry-scale S] [--set NAME=VALUE ...] [--data DIR]
-        [LOG ...]
+        [--corners] [--plot DIR] [LOG ...]
 
 A Carmen LOG is a log name in ``--data DIR`` (default ``../shared/data/carmen``; ``aces``
 -> ``DIR/aces-corrected.log.gz``; default the six logs) or a path to a Carmen log; a Wean
@@ -163,8 +163,15 @@ the odometry's scale wrong? the grid says which scale fits). ``--set NAME=VALUE`
 (repeatable) any other field of ``SlamParams`` or ``FrontendParams``
 (the value read as a Python literal, e.g. ``--set jacobians="'observability_gain'" --set
 spurious_limit=0.05 --set scan_matching=True``).
-A log whose odometry the front end had to bridge (``robotdata5``: two runs) gets one more
-line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_segments`:
+``--corners`` also places every scan's corners with the filter's path
+(:func:`~landmark_nav.evaluation.occupancy_check.corner_wall_check`): the share of
+structural and other corners within 10 cm of a wall cell, the structural ones split into
+convex and concave, and the distance to a wall cell of the structural ones off the walls
+(10 / 50 / 90 %); ``--plot DIR`` draws them over the grid.
+A log that holds several runs (the import summary's ``runs``: ``robotdata5``, whose clock
+restarts where the robot is elsewhere) is imported and run one run at a time (``name/runK``,
+``landmark_nav import --run K``). A log whose odometry the front end had to bridge gets one
+more line per part (``name#k``, :func:`~landmark_nav.evaluation.occupancy_check.run_segments`:
 each part aligned on its own).
 """
 
@@ -639,9 +646,7 @@ def run_wean(args) -> int:
           + ' '.join(CATEGORIES) + ' retired wall_depth_max wall_scans_median '
           'wall_cells_scans_median')
     with tempfile.TemporaryDirectory() as tmp:
-        for name, path in logs:
-            bag = Path(tmp) / name
-            import_log(path, bag)
+        for name, path, bag in wean_bags(logs, Path(tmp)):
             sc = load_bag(bag, require_reference=False)
             if args.odometry_scale != 1.0:
                 scale_odometry(sc, args.odometry_scale)
@@ -678,6 +683,26 @@ def run_wean(args) -> int:
     return 0
 
 
+def wean_bags(logs, tmp: Path):
+    """Yield ``(label, log, bag)`` per log, and per run of a log that holds several.
+
+    A log whose clock restarts where the robot is elsewhere
+    (:func:`landmark_nav.importers.runs.find_restarts`, ``robotdata5``) is imported one run
+    at a time (``import --run K``, label ``name/runK``): the filter starts each run afresh
+    from its own odometry.
+    """
+    for name, path in logs:
+        bag = tmp / name
+        result = import_log(path, bag)
+        if not result.restarts:
+            yield name, path, bag
+            continue
+        for k in range(1, len(result.restarts) + 2):
+            bag = tmp / f'{name}-run{k}'
+            import_log(path, bag, run=k)
+            yield f'{name}/run{k}', path, bag
+
+
 def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args) -> None:
     """Print (and with --plot draw) where every scan's corners fall on the grid."""
     cw = corner_wall_check(grid, sc, run, transform, corner_params)
@@ -685,8 +710,17 @@ def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args) 
           f'through: corners near them left out): structural {cw["structural_share"]:.3f} of '
           f'{cw["structural_count"]} (left out {cw["structural_left_out"]}), other '
           f'{cw["other_share"]:.3f} of {cw["other_count"]} (left out {cw["other_left_out"]})')
+    off = cw['structural'] & ~cw['left_out'] & ~cw['on_wall']
+    d = cw['wall_distance'][off]
+    print(f'{label} structural convex {cw["structural_convex_share"]:.3f} of '
+          f'{cw["structural_convex_count"]}, concave {cw["structural_concave_share"]:.3f} of '
+          f'{cw["structural_concave_count"]}; off the walls: {int(np.sum(cw["convex"][off]))} '
+          f'of {int(off.sum())} convex, distance to a wall cell [m] '
+          + (' / '.join(f'{q:.2f}' for q in np.quantile(d, [0.1, 0.5, 0.9]))
+             + ' (10 / 50 / 90 %)' if d.size else '-'))
     if args.plot:
-        out = Path(args.plot) / f'{label.replace("#", "_")}_structural_corners.png'
+        out = Path(args.plot) / (label.replace('#', '_').replace('/', '_')
+                                 + '_structural_corners.png')
         plot_corner_wall_check(grid, cw, f'{label}: structural corners on wean.dat', out)
         print(f'wrote {out}')
 
@@ -785,7 +819,8 @@ def main(argv=None) -> int:
     p.add_argument('--corners', action='store_true',
                    help="also place every scan's corner detections with the SLAM path: "
                         'the share of structural and other corners within 10 cm of a wall '
-                        'cell the log does not see through')
+                        'cell the log does not see through, structural ones split into convex '
+                        'and concave, and how far the off-wall ones are from a wall cell')
     p.add_argument('--plot', default=None, metavar='DIR',
                    help='with --corners: draw them over the grid into DIR/<log>_structural_'
                         'corners.png')

@@ -51,7 +51,9 @@ TINY_RUNS = {
         (['corner-repeatability', '--data', '{carmen}', 'tiny'],
          r'\| tiny \| [\d.]+ \(\d+/\d+\) \|'),
         (['structural-rule', '--data', '{carmen}', 'tiny', '--lengths', '0.2', '--steps', '5',
-          '--min-share', '0'], r'all logs: L 0.2 m, N 5 beam steps: tiny ([\d.]+|nan) ')],
+          '--min-share', '0'], r'all logs: L 0.2 m, N 5 beam steps: tiny ([\d.]+|nan) '),
+        (['quantised-lines', '--data', '{carmen}', 'tiny'],
+         r'\| tiny \| 0.05 \| 2 \| [\d.]+ \| [\d.]+ \| ([\d.]+|nan) \| ([\d.]+|nan) \| ')],
     'bench_slam.py': [
         (['step-time', '--landmarks', '10', '--steps', '3'], r'\n\s+10\s+23\s+[\d.]+'),
         (['step-time', '--bag', '{small_bag}', '--steps', '8'],
@@ -66,7 +68,9 @@ TINY_RUNS = {
          r'tiny-0 \| [\d.]+ / [\d.]+'),
         (['wean', '--data', '{wean}', 'robotdata1', '--corners', '--plot', '{tmp}'],
          r'\nrobotdata1 \d+ [\d.]+ (.*\n)+robotdata1 corners within 10 cm .* structural '
-         r'([\d.]+|nan) of \d+ (.*\n)+wrote .*robotdata1_structural_corners.png'),
+         r'([\d.]+|nan) of \d+ (.*\n)+robotdata1 structural convex ([\d.]+|nan) of \d+, '
+         r'concave ([\d.]+|nan) of \d+; off the walls: \d+ of \d+ convex(.*\n)+'
+         r'wrote .*robotdata1_structural_corners.png'),
         (['defaults', '--data', '{carmen}', 'tiny'], r'\ntiny \| [\d.]+ / [\d.]+ \([\d.]+\) \|')],
     'bench_localization.py': [
         (['sonar', '--bag', '{hallway}', '--runs', '3'], r'EKF update\s+[\d.]+'),

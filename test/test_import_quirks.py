@@ -13,7 +13,7 @@ from landmark_nav.tools.cli import main as cli_main
 import numpy as np
 import pytest
 
-from test_importers import _flaser, _read, _write
+from test_importers import _flaser, _read, _wean_l, _write
 
 
 def _param(name, value):
@@ -72,6 +72,54 @@ def test_negative_stamps_shift_every_stream_alike(tmp_path):
     np.testing.assert_allclose(t - odom[1::2], 0.05, atol=1e-6)
     assert result.repairs['odom'].negative == 10 and result.repairs['scan'].negative == 5
     assert 'all stamps shifted by +5.2 s' in result.summary
+
+
+def _two_runs(jump_cm):
+    """Return a Wean log of two runs, the second ``jump_cm`` further on.
+
+    20 Hz odometry, a scan after every other O line; the clock restarts from 10.4 s to 1.0 s.
+    """
+    text = ''
+    for t0, n, x0 in ((10.0, 9, 0.0), (1.0, 8, 8.0 + jump_cm)):
+        for k in range(n):
+            t = round(t0 + 0.05 * k, 2)
+            text += f'O {x0 + k} 0 0 {t}\n'
+            if k % 2:
+                text += _wean_l(x0 + k, 0, 0, np.full(180, 300), round(t + 0.05, 2))
+    return text
+
+
+def test_log_of_two_runs_reported_and_each_run_imported_alone(tmp_path):
+    # robotdata5's quirk: a second run appended to the log, its clock restarting near 0 and
+    # its odometry 11 m away
+    log = _write(tmp_path / 'robotdata9.log', _two_runs(1100.0))
+    result = import_log(log, tmp_path / 'all')
+    assert [(r.line, r.clock_before, r.clock_after) for r in result.restarts] == \
+        [(14, 10.4, 1.0)]  # line 14: the first O line of the second run
+    assert result.restarts[0].jump == pytest.approx(11.0, abs=1e-9)
+    assert 'runs: 2 in one log (the clock restarts where the robot is elsewhere: line 14: ' \
+        'clock 10.400 s -> 1.000 s, pose jumps 11.00 m); all imported, joined' in result.summary
+    assert 'two runs in one log?' not in result.summary  # the jump is explained
+    topics, custom = _read(tmp_path / 'all')
+    assert (len(topics['/scan']), len(topics['/odom'])) == (8, 17)
+    assert custom['landmark_nav.runs'] == 'starts at lines 1 14; all imported, joined'
+    for run, scans, odom, x0 in ((1, 4, 9, 0.0), (2, 4, 8, 11.08)):
+        one = import_log(log, tmp_path / f'run{run}', run=run)
+        assert f'run {run} imported' in one.summary and one.repairs['odom'].resets == 0
+        topics, custom = _read(tmp_path / f'run{run}')
+        assert (len(topics['/scan']), len(topics['/odom'])) == (scans, odom)
+        assert topics['/odom'][0][1].pose.pose.position.x == pytest.approx(x0, abs=1e-9)
+        assert custom['landmark_nav.runs'].endswith(f'run {run} imported')
+    assert cli_main(['import', str(log), '--out', str(tmp_path / 'r3'), '--run', '3']) == 2
+
+
+def test_clock_reset_without_a_pose_jump_is_one_run(tmp_path):
+    # the logger restarted, the robot did not move: one run, the stamps shifted to continue
+    result = import_log(_write(tmp_path / 'robotdata9.log', _two_runs(0.0)), tmp_path / 'b')
+    assert result.restarts == [] and result.repairs['odom'].resets == 1
+    assert 'runs:' not in result.summary
+    with pytest.raises(ValueError, match='holds 1 run$'):
+        import_log(tmp_path / 'robotdata9.log', tmp_path / 'c', run=2)
 
 
 # --------------------------------------------------------------------- sentinels

@@ -597,7 +597,10 @@ def test_real_wean_robotdata5_clock_reset(tmp_path):
     log = shared_data('wean', 'robotdata5.log.gz')
     result = import_log(log, tmp_path / 'w5')
     assert result.repairs['scan'].resets == 1 and result.repairs['odom'].resets == 1
-    assert 'odometry jumps by 11.02 m' in result.summary
+    # robotdata5 is robotdata1 (lines 1-2218) followed by a second run
+    assert [(r.line, round(r.jump, 2)) for r in result.restarts] == [(2219, 11.02)]
+    assert 'runs: 2 in one log (the clock restarts where the robot is elsewhere: line 2219: ' \
+        'clock 134.998 s -> 0.037 s, pose jumps 11.02 m)' in result.summary
 
 
 def test_real_breezyslam_exp2(tmp_path, capsys):

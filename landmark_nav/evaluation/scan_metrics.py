@@ -567,7 +567,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                    line_methods: Sequence[str] = ('split_merge', 'alfa'),
                    extractor_sigma_r: Union[None, float, str, Mapping] = None,
                    progress: Optional[str] = None,
-                   configs: Optional[Mapping[str, object]] = None) -> dict:
+                   configs: Optional[Mapping[str, object]] = None,
+                   line_gate: Tuple[float, float] = (0.05, math.radians(2.0))) -> dict:
     """Score the extractors and the baseline on real scans with the truth-free metrics.
 
     Every method runs on every scan with its node's configuration (``configs``: the
@@ -599,6 +600,7 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             the estimate too (the sensor's noise as its data shows it).
         progress: Label of a tqdm progress bar, or None for none.
         configs: The nodes' configurations by node name (see above).
+        line_gate: ``(max_drho [m], max_dalpha [rad])`` of :func:`line_repeatability`.
 
     Returns:
         {'scans', 'ple_scans', 'sample', 'sigma_r', 'extractor_sigma_r' (the line
@@ -686,7 +688,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
         if prev is not None and prev[0].pose is not None and scan.pose is not None:
             pairs += 1
             for m, tally in tallies.items():
-                line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], scan)
+                line_repeatability(tally.repeat, prev[1][m], prev[0].pose, segs[m], scan,
+                                   max_drho=line_gate[0], max_dalpha=line_gate[1])
             for m in corner_methods:
                 pos, wedge, label = prev[2][m]
                 corner_repeatability(c_repeat[m], pos, prev[0].pose, corners[m][0], scan,

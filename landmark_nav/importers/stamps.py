@@ -33,8 +33,8 @@ from typing import List, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ['GLITCH_MAX', 'StampRepairs', 'WRAP_COARSE', 'repair_stamps', 'repair_streams',
-           'unwrap_stamps']
+__all__ = ['GLITCH_MAX', 'StampRepairs', 'WRAP_COARSE', 'clock_resets', 'repair_stamps',
+           'repair_streams', 'unwrap_stamps']
 
 #: Unsigned 32-bit wrap: stamps in [2**31, 2**33) s are read as t - 2**32.
 _WRAP, _WRAP_FROM, _WRAP_TO = 2.0 ** 32, 2.0 ** 31, 2.0 ** 33
@@ -232,6 +232,51 @@ def repair_stamps(stamps, fallback_period: float = 1.0) -> Tuple[np.ndarray, Sta
     return t, repairs
 
 
+def _merged(streams: Sequence, lines: Sequence) -> tuple:
+    """Return the streams unwrapped, and their stamps merged in log order.
+
+    Returns ``(unwrapped, order, t, n, bad)``: :func:`unwrap_stamps` of each stream, the
+    permutation of the concatenated streams into log order, the merged stamps, their log
+    lines and which are missing (zero, non-finite or too coarse to unwrap).
+
+    Raises:
+        ValueError: A stream and its line numbers differ in length.
+
+    """
+    unwrapped = [unwrap_stamps(t) for t in streams]
+    lines = [np.asarray(n, dtype=float).ravel() for n in lines]
+    for k, (u, n) in enumerate(zip(unwrapped, lines)):
+        if len(u[0]) != len(n):
+            raise ValueError(f'stream {k}: {len(u[0])} stamps but {len(n)} line numbers')
+    if not unwrapped:
+        return [], np.zeros(0, int), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
+    order = np.argsort(np.concatenate(lines), kind='stable')
+    t = np.concatenate([u[0] for u in unwrapped])[order]
+    bad = ~np.isfinite(t) | (t == 0.0) | np.concatenate([u[2] for u in unwrapped])[order]
+    return unwrapped, order, t, np.concatenate(lines)[order], bad
+
+
+def clock_resets(streams: Sequence, lines: Sequence) -> List[Tuple[int, float, float]]:
+    """Return the clock resets of a log's streams (merged in log order) as they were read.
+
+    The resets are those :func:`repair_streams` shifts the later stamps at (a lasting
+    backward jump of the clock, not a glitch): one ``(line, before, after)`` each, the log
+    line of the first stamp after the reset, the last good stamp before it and that stamp
+    [s], unshifted.
+    """
+    _, _, t, n, bad = _merged(streams, lines)
+    good_idx = np.flatnonzero(~bad)
+    raw = t.copy()
+    period = _nominal_period(t[good_idx], good_idx) or 1.0
+    _, resets = _backward(t, bad, good_idx, period)
+    out = []
+    for i, _ in resets:
+        before = good_idx[good_idx < i]
+        out.append((int(n[i]), float(raw[before[-1]]) if before.size else float('nan'),
+                    float(raw[i])))
+    return out
+
+
 def repair_streams(streams: Sequence, lines: Sequence,
                    fallback_period: float = 1.0) -> Tuple[List[np.ndarray], List[StampRepairs]]:
     """Repair several streams of one log with one clock: resets found on the merged stream.
@@ -252,17 +297,8 @@ def repair_streams(streams: Sequence, lines: Sequence,
     """
     if not fallback_period > 0:
         raise ValueError(f'fallback period must be > 0, got {fallback_period}')
-    unwrapped = [unwrap_stamps(t) for t in streams]
+    unwrapped, order, t, _, bad = _merged(streams, lines)
     streams = [u[0] for u in unwrapped]
-    lines = [np.asarray(n, dtype=float).ravel() for n in lines]
-    for k, (t, n) in enumerate(zip(streams, lines)):
-        if len(t) != len(n):
-            raise ValueError(f'stream {k}: {len(t)} stamps but {len(n)} line numbers')
-    merged = np.concatenate(streams) if streams else np.zeros(0)
-    coarse_all = np.concatenate([u[2] for u in unwrapped]) if streams else np.zeros(0, bool)
-    order = np.argsort(np.concatenate(lines), kind='stable') if streams else np.zeros(0, int)
-    t = merged[order]
-    bad = ~np.isfinite(t) | (t == 0.0) | coarse_all[order]
     good_idx = np.flatnonzero(~bad)
     period = _nominal_period(t[good_idx], good_idx) or float(fallback_period)
     _, resets = _backward(t, bad, good_idx, period)

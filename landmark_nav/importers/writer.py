@@ -19,6 +19,7 @@ import numpy as np
 from .common import ParsedLog
 from .drift import DRIFT_MODELS, DriftModel, parse_drift_model, propagate_covariance, \
     synthetic_odometry
+from .runs import find_restarts, Restart, RUN_JUMP_M, select_run
 from .stamps import repair_streams, StampRepairs
 
 __all__ = ['CUSTOM_KEYS', 'FORMATS', 'ImportResult', 'guess_format', 'import_log',
@@ -40,6 +41,8 @@ CUSTOM_KEYS = {
     'landmark_nav.reference': 'where /ground_truth/odom comes from (when present)',
     'landmark_nav.repairs': 'the stamp repairs, per stream',
     'landmark_nav.laser_rear_mount': '"x y yaw" of the rear laser (Carmen RLASER only)',
+    'landmark_nav.runs': 'a log of several runs: their starts (log lines) and the one '
+                         'imported (all joined, or --run K)',
 }
 
 
@@ -131,6 +134,8 @@ class ImportResult:
     repairs: Dict[str, StampRepairs]
     seconds: float
     lines: List[str] = field(default_factory=list)
+    restarts: List[Restart] = field(default_factory=list)  # where the log's later runs start
+    run: Optional[int] = None  # the run imported alone (1-based), None: all
 
     @property
     def summary(self) -> str:
@@ -178,7 +183,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                lenient: bool = False, force: bool = False, max_scans: Optional[int] = None,
                fallback_period: float = 1.0, progress: bool = False,
                max_range: Optional[float] = None, odom_lines: bool = False,
-               fov: Optional[float] = None, range_max_from: str = 'auto') -> ImportResult:
+               fov: Optional[float] = None, range_max_from: str = 'auto',
+               run: Optional[int] = None) -> ImportResult:
     """Import a log into a bag directory ``out``; return what was written.
 
     Args:
@@ -204,6 +210,8 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         range_max_from: Carmen only: the range cap from the log's header unless its readings
             overrule it (``'auto'``), always from the header (``'header'``) or from the
             readings (``'data'``).
+        run: Import only this run (1-based) of a log that holds several
+            (:func:`~landmark_nav.importers.runs.find_restarts`); None: all, joined.
 
     Raises:
         LineError: A malformed line, unless ``lenient``.
@@ -236,6 +244,9 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
         ref_log = parse_carmen(reference, poses='corrected', lenient=lenient,
                                max_range=max_range, fov=fov)
         pair_with_reference(log, ref_log)
+    restarts = find_restarts(log)
+    if run is not None:
+        log = select_run(log, restarts, run)
 
     # One clock for all streams: resets are found on the merged stream (log order) and
     # shift every stream alike; repeated / zero / backward stamps are repaired per stream.
@@ -348,6 +359,10 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
                 else f'corrected poses of {path}')
         if log.rear_mount is not None:
             custom['landmark_nav.laser_rear_mount'] = _fmt_pose(log.rear_mount)
+        if restarts:
+            custom['landmark_nav.runs'] = (
+                'starts at lines ' + ' '.join(str(n) for n in [1] + [r.line for r in restarts])
+                + (f'; run {run} imported' if run is not None else '; all imported, joined'))
         for key, value in custom.items():
             bag.set_custom_data(key, value)
     seconds = time.monotonic() - t0
@@ -382,11 +397,17 @@ def import_log(path, out, fmt: Optional[str] = None, poses: Optional[str] = None
     if log.ignored:
         lines.append('  not imported: ' + ', '.join(
             f'{k} x{v}' for k, v in sorted(log.ignored.items())))
-    if odometry == 'raw' and len(odom_p) > 1:
+    if restarts:
+        lines.append(f'  runs: {len(restarts) + 1} in one log (the clock restarts where the '
+                     'robot is elsewhere: ' + '; '.join(r.describe() for r in restarts) + '); '
+                     + (f'run {run} imported' if run is not None else
+                        'all imported, joined at the restart (--run K imports run K alone)'))
+    if odometry == 'raw' and len(odom_p) > 1 and (run is not None or not restarts):
         jumps = np.hypot(*np.diff(odom_p[:, :2], axis=0).T)
         k = int(np.argmax(jumps))
-        if jumps[k] > 1.0:  # a wheeled base does not move 1 m between two readings
+        if jumps[k] > RUN_JUMP_M:  # a wheeled base does not move 1 m between two readings
             lines.append(f'  note: the odometry jumps by {jumps[k]:.2f} m at t = '
                          f'{odom_t[k + 1]:.3f} s (record {k + 1}): two runs in one log?')
     lines += [f'  note: {n}' for n in log.notes]
-    return ImportResult(out, log, counts, odometry, model, used_seed, repairs, seconds, lines)
+    return ImportResult(out, log, counts, odometry, model, used_seed, repairs, seconds, lines,
+                        restarts, run)

@@ -106,7 +106,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
                         lenient=args.lenient, force=args.force, max_scans=args.max_scans,
                         fallback_period=args.period, progress=sys.stderr.isatty(),
                         max_range=args.max_range, odom_lines=args.odom_lines,
-                        fov=args.fov, range_max_from=args.range_max_from)
+                        fov=args.fov, range_max_from=args.range_max_from, run=args.run)
     print(result.summary)
     return 0
 
@@ -376,6 +376,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--period', type=_positive_float, default=1.0, metavar='SECONDS',
                    help='scan period assumed when a log has no two distinct stamps '
                         '(default 1.0)')
+    p.add_argument('--run', type=_positive_int, default=None, metavar='K',
+                   help='import only run K (1, 2, ...) of a log that holds several (the '
+                        'clock restarts where the robot is elsewhere; the summary lists them; '
+                        'default: all, joined)')
     p.add_argument('--force', action='store_true', help='replace an existing bag directory')
     p.set_defaults(func=_cmd_import)
 
