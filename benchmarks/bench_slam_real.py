@@ -101,44 +101,16 @@ odometry median (runs <= 0.2), RPE / odometry median (runs <= 1), runs meeting a
 
 ``scan-matching``:
 
-A yardstick for EKF-SLAM on these logs (issue 14): each log is imported as ``landmark_nav
-import`` does (synthetic drift with the importer's default ``pioneer`` model, the given
-seed), and its scans are chained by point-to-line ICP
-(:func:`landmark_nav.slam.scan_matching.base_motion`: returns within 20 m,
-pairs within 50, 30, then 15 cm) of each scan onto the previous one, the odometry's motion
-between the two stamps (through the laser mount) as the initial guess. The ICP motion is
-used when it converged and lies inside the odometry's own 99.9 % region (its difference
-from the odometry's motion, under the bag's stated noise model ``U``, within
-chi2(3, 0.999)); otherwise the odometry's motion is. No landmark, no map, no loop closure:
-what pairwise scan matching alone removes of the odometry's drift. With ``--drift none`` the
-odometry is the reference's own increments (its RPE 0) and the ICP is gated with the
-``pioneer`` model: the chain's RPE is then how far the ICP's motion and the reference's
-disagree over 1 m (the ICP's errors and the reference's own together), while the drifted
-odometry, built on the reference's increments, carries none of the reference's step errors
-in its RPE.
-
-Printed per run: the SE(2)-aligned ATE RMSE [m] of the odometry and of the scan-matched
-chain and their ratio (issue 14's SLAM target: at most 0.2), the RPE over 1 m of both
-[cm], the share of steps that used ICP, the median per-step heading error [deg] of the
-odometry and of the ICP motions against the reference's, and the median NIS of those
-errors under the ICP's own covariance (``s^2 (J^T J)^-1``; 3 expected: larger means the
-classic covariance is optimistic, and the reference's own few-cm error adds to it), then
-the median pairs per step ``N`` and the median of ``NIS / N``: the NIS under the
-covariance of :func:`landmark_nav.slam.scan_matching.fit_information` worth ``pairs``
-residuals is ``pairs NIS / N`` (the front end's ``scan_matching_fit_pairs``).
-
-``--slam`` also runs EKF-SLAM (:func:`landmark_nav.evaluation.slam.run_slam`, corners and
-lines, the ``ekf_slam`` defaults or ``--params-file`` on top; ``--landmarks corners`` or
-``lines`` instead of the file's) twice per run: on the
-bag's odometry with its stated noise model (and the file's front end: the profile's
-``scan_matching`` scan-matches in the filter itself; the README's yardstick figures predate
-it), and on the scan-matched chain (its poses as the odometry samples, at the scan stamps;
-the front end's own scan matching off) with ``--filter-noise`` as ``U`` (default
-``k_d=0.04 k_theta=0.015 k_dtheta=0.03``: about twice the ICP motions' per-step errors
-printed by the first part). It prints each one's ATE [m] (and its ratio to the
-odometry's), RPE over 1 m [cm] and the share of steps with the reference inside the 95 %
-position ellipse: whether the landmark updates add to, or take from, the motion they start
-from.
+A yardstick for EKF-SLAM: each log (imported with the given drift seed) has its scans
+chained by point-to-line ICP (:func:`landmark_nav.slam.scan_matching.base_motion`), each
+onto the previous one from the odometry's motion; the ICP motion is used when it converged
+inside the odometry's 99.9 % region under the bag's noise model, else the odometry's. No
+landmarks, no loop closure: what pairwise scan matching alone removes of the drift
+(``--drift none``: the reference's own increments as odometry). Printed per run: ATE
+(SE(2)-aligned) and RPE over 1 m of the odometry and of the chain, the share of steps that
+used ICP, median heading errors and the NIS of the ICP's errors under its own covariance.
+``--slam`` also runs EKF-SLAM on the bag's odometry and on the chain (its poses as odometry,
+``--filter-noise`` as ``U``): ATE, RPE and the 95 % ellipse share of each.
 
 ``wean``:
 
