@@ -65,15 +65,9 @@ log:
 * ``nees_med``: median robot NEES (3 dof, unaligned), ``psi_err`` / ``psi_sd``: RMS heading
   error and median heading std of the filter [deg], ``ellipse95``: share of steps with the
   reference inside the 95 % position ellipse.
-* ``rot_deg`` / ``ate_se2``: the rotation [deg] of the SE(2) fit of the filter's positions
-  onto the reference (:func:`landmark_nav.evaluation.trajectory.planar_alignment`: map and
-  path turned together, the unobservable global heading) and the position RMSE after it
-  [m], against ``ate_none``, the RMSE without alignment.
-* ``jump5``: share of the squared per-step translation error (relative motion against the
-  reference's) that the worst 5 % of steps carry (what the RPE over 1 m is made of).
-* ``rpe`` / ``odo_rpe``: RPE over 1 m (translation RMSE [m]) of the filter and of the
-  odometry, and ``odo_se2``: the odometry's SE(2)-aligned ATE RMSE [m], as
-  ``evaluate`` computes them (``evaluate_bag``'s evo metrics).
+* ``rot_deg`` / ``ate_se2`` / ``ate_none``: the SE(2) fit's rotation [deg] and the position
+  RMSE after it and without it [m]; ``jump5``: the share of the squared per-step error the
+  worst 5 % of steps carry; ``rpe`` / ``odo_rpe`` / ``odo_se2``: as ``evaluate`` prints them.
 
 ``grid``:
 
