@@ -5,10 +5,10 @@ the keyframes' scans placed by the graph's estimates:
 
 1. **Search** (:func:`.correlative_matching.correlative_match`): the current keyframe's
    scan against the submap of the old keyframes near the current estimate, over every pose
-   of a window (coarse to fine) whose half widths are ``window_sigmas`` standard deviations of the current
-   keyframe's marginal (the graph's uncertainty: the window grows as the pose drifts).
-   The search is exhaustive over the window: the place found does not depend on where in
-   the window the estimate lies.
+   of a window (coarse to fine) whose half widths are ``window_sigmas`` standard deviations
+   of the current keyframe's marginal (the graph's uncertainty: the window grows as the
+   pose drifts). The search is exhaustive over the window: the place found does not depend
+   on where in the window the estimate lies.
 2. **Refinement**: point-to-line ICP (:func:`.scan_matching.point_to_line_icp`) from the
    best pose of the search onto the submap's points.
 3. **Verification**, three tests, any failing refuses the loop (the reason is counted):
@@ -18,8 +18,8 @@ the keyframes' scans placed by the graph's estimates:
      point and an RMS residual at most ``max_rms``;
    * ``ambiguous``: the best score elsewhere in the window (``distinct`` away, on the
      coarse search, both scores of the coarse search) at most ``max_ambiguity`` times the
-     best: a scan that fits two places (a corridor's length,
-     two alike rooms in the window) does not say which;
+     best: a scan that fits two places (a corridor's length, two alike rooms in the
+     window) does not say which;
    * ``free_space``: an independent second check on other data, the *trail* (the scans of
      the keyframes before the current one, placed by the graph relative to it) moved by the
      loop's transform: at most ``max_contradiction`` of its points may fall in cells the
@@ -28,11 +28,9 @@ the keyframes' scans placed by the graph's estimates:
      points in space the submap never saw are neutral (the trail may come from an area
      not mapped yet).
 
-Free-space contradiction as a map consistency test: Hähnel, Burgard et al. ("Map building
-with mobile robots in dynamic environments", ICRA 2003) and Olson's loop validation by
-consistency of a group of hypotheses (Olson, "Recognizing places using spectrally clustered
-local matches", RAS 2009) use the same idea of scoring a hypothesis against data it was not
-chosen from.
+The free-space check scores a hypothesis against data it was not chosen from, the idea of
+Olson's validation of loop hypotheses by their mutual consistency (Olson, "Recognizing
+places using spectrally clustered local matches", RAS 2009), here with the trail's scans.
 """
 
 from dataclasses import dataclass, field
@@ -129,7 +127,7 @@ class LoopCounts:
 
     proposed: int = 0
     accepted: int = 0
-    refused: Dict[str, int] = field(default_factory=lambda: {r: 0 for r in REFUSALS})
+    refused: Dict[str, int] = field(default_factory=lambda: dict.fromkeys(REFUSALS, 0))
 
     def refuse(self, reason: str) -> None:
         """Count one refusal."""

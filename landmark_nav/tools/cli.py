@@ -459,8 +459,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--association', choices=['icnn', 'jcbb'], default=None,
                    help='data association (the parameter association; default icnn)')
     p.add_argument('--backend', choices=['ekf', 'graph'], default='ekf',
-                   help='ekf (default): the ekf_slam node\'s filter; graph: the keyframe pose '
-                        'graph with loop closure (iSAM2; docs/ekf_slam.md, "Graph back end"; '
+                   help="ekf (default): the ekf_slam node's filter; graph: the keyframe pose "
+                        "graph with loop closure (iSAM2; docs/ekf_slam.md, 'Graph back end'; "
                         'uses --out, --max-seconds, --reference, --align, --laser-pose, '
                         '--sigma-r, --rpe-delta only)')
     p.add_argument('--out', default=None,
