@@ -261,8 +261,7 @@ class KeyframeGraph:
         origins = np.array([compose(frame, self._laser_pose(i))[:2] for i in near])
         hits = [transform_points(compose(frame, self._laser_pose(i)), kf[i].points)
                 for i in near]
-        trail_ids = range(max(0, k - lp.trail_keyframes), k)
-        trail = self._submap_points(trail_ids, k)
+        trail = [self._submap_points([i], k) for i in range(max(0, k - lp.trail_keyframes), k)]
         guess = compose(frame, self._laser_pose(k))
         self.loop_counts.proposed += 1
         res = verify_loop(kf[k].points, submap, guess, wxy, wyaw, lp, trail, origins, hits)

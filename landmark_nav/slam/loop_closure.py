@@ -22,8 +22,9 @@ the keyframes' scans placed by the graph's estimates:
      window) does not say which;
    * ``free_space``: an independent second check on other data, the *trail* (the scans of
      the keyframes before the current one, placed by the graph relative to it) moved by the
-     loop's transform: at most ``max_contradiction`` of its points may fall in cells the
-     submap's own beams passed through (seen free) away from any submap point. A wrong
+     loop's transform: at most ``max_contradiction`` of each trail scan's points may fall
+     in cells the submap's own beams passed through (seen free) away from any submap
+     point (per scan: the scans that see what tells two places apart are few). A wrong
      place that looks alike from one pose contradicts the map from the poses before it;
      points in space the submap never saw are neutral (the trail may come from an area
      not mapped yet).
@@ -75,7 +76,7 @@ class LoopParams:
         max_ambiguity: Largest ratio of the best score elsewhere to the best.
         distinct: ``(metres, radians)`` a pose this far from the best is elsewhere.
         free_margin: Free cells within this of a submap point are not contradictions [m].
-        max_contradiction: Largest share of trail points in free space.
+        max_contradiction: Largest share of a trail scan's points in free space.
         min_trail_points: Fewer trail points than this: the check has no data and refuses.
     """
 
@@ -145,7 +146,8 @@ class LoopResult:
         search: The fine correlative search's result.
         fit: ICP's result (None when it failed or did not run).
         overlap: Share of the scan's points near a submap point after ICP.
-        contradiction: Share of trail points in the submap's free space (nan: not run).
+        contradiction: The largest share of a trail scan's points in the submap's free
+            space (nan: not run).
     """
 
     accepted: bool
@@ -229,7 +231,8 @@ def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_
         window_xy: Search half width in translation [m].
         window_yaw: Search half width in heading [rad].
         params: The parameters.
-        trail: (T, 2) the trail's points in the current laser frame (free-space check).
+        trail: The trail's scans, (T_i, 2) points each, in the current laser frame
+            (free-space check).
         origins: (K, 2) the submap keyframes' laser positions in the anchor frame.
         hits: Their scans' points in the anchor frame (K arrays).
         check_ambiguity: Run the ambiguity test (off: a naive matcher, for comparison).
@@ -268,11 +271,12 @@ def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_
         return LoopResult(False, 'ambiguous', fit.pose, found, fit, overlap)
     share = math.nan
     if check_free_space:
-        if trail is None or len(trail) < params.min_trail_points or not hits:
+        if not trail or sum(len(t) for t in trail) < params.min_trail_points or not hits:
             return LoopResult(False, 'free_space', fit.pose, found, fit, overlap)
-        moved_trail = np.asarray(trail) @ np.array([[c, s], [-s, c]]) + fit.pose[:2]
-        share = contradiction_share(moved_trail, submap, origins, hits,
-                                    params.field_resolution * 2, params.free_margin)
+        rot = np.array([[c, s], [-s, c]])
+        share = max(contradiction_share(np.asarray(t) @ rot + fit.pose[:2], submap, origins,
+                                        hits, params.field_resolution * 2, params.free_margin)
+                    for t in trail)
         if share > params.max_contradiction:
             return LoopResult(False, 'free_space', fit.pose, found, fit, overlap, share)
     return LoopResult(True, '', fit.pose, found, fit, overlap, share)
