@@ -97,8 +97,9 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
     kf_cov = graph.final_covariances()
     final, final_cov = [], []
     for k, o in zip(keyframe, odometry):  # the final estimates and marginals
-        final.append(graph.pose_at(k, o)[0])
-        final_cov.append(_final_cov(graph, k, o, kf_cov[k]))
+        pose, cov = graph.pose_at(k, o, kf_cov[k])
+        final.append(pose)
+        final_cov.append(cov)
     seconds += time.perf_counter() - tic
     stamps_a = np.array(stamps, dtype=np.int64)
     return GraphRun(stamps=stamps_a, odometry=np.array(odometry).reshape(-1, 3),
@@ -108,14 +109,6 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
                     final=np.array(final).reshape(-1, 3),
                     final_cov=np.array(final_cov).reshape(-1, 3, 3), graph=graph,
                     seconds=seconds)
-
-
-def _final_cov(graph: KeyframeGraph, k: int, o, kf_cov_map: np.ndarray) -> np.ndarray:
-    from landmark_nav.geometry import compose_jacobians, relative
-    from landmark_nav.slam.prediction import odometry_noise
-    u = relative(graph.keyframes[k].odometry, np.asarray(o, dtype=float))
-    j1, j2 = compose_jacobians(graph.estimates[k], u)
-    return j1 @ kf_cov_map @ j1.T + j2 @ odometry_noise(u, graph.noise) @ j2.T
 
 
 def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,

@@ -300,19 +300,22 @@ class KeyframeGraph:
         """Return keyframe ``i``'s marginal covariance in GTSAM's frame (the pose's own)."""
         return np.asarray(self._isam.marginalCovariance(i), dtype=float)
 
-    def pose_at(self, keyframe: int, odometry_pose) -> Tuple[np.ndarray, np.ndarray]:
+    def pose_at(self, keyframe: int, odometry_pose,
+                covariance: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
         """Return a scan's pose and covariance (map frame) from its keyframe and odometry.
 
         The keyframe's estimate composed with the odometry since it; the covariance the
-        keyframe's marginal (as stored when the keyframe was made: online; see
-        :meth:`final_covariances`) and the odometry's ``U`` of that motion, composed.
+        keyframe's (``covariance`` in the map frame, e.g. from :meth:`final_covariances`;
+        None: its marginal as stored when the keyframe was made, online) and the
+        odometry's ``U`` of that motion, composed (eqs. 27-30 of the corner chapter).
         """
         kf = self.keyframes[keyframe]
         u = relative(kf.odometry, np.asarray(odometry_pose, dtype=float))
         pose = compose(self.estimates[keyframe], u)
         pose[2] = wrap_angle(pose[2])
-        j1, j2 = compose_jacobians(self.estimates[keyframe], u)  # eqs. 27-30 of the chapter
-        p = _to_map(kf.covariance, float(self.estimates[keyframe, 2]))
+        j1, j2 = compose_jacobians(self.estimates[keyframe], u)
+        p = (_to_map(kf.covariance, float(self.estimates[keyframe, 2])) if covariance is None
+             else np.asarray(covariance, dtype=float))
         cov = j1 @ p @ j1.T + j2 @ odometry_noise(u, self.noise) @ j2.T
         return pose, cov
 
