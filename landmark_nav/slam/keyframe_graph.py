@@ -254,8 +254,13 @@ class KeyframeGraph:
         near = np.asarray(old)[d <= wxy + lp.neighbourhood_m]
         if len(near) == 0:
             return
-        near = near[np.argsort(d[d <= wxy + lp.neighbourhood_m])][:lp.submap_keyframes]
-        anchor = int(near[0])
+        anchor = int(near[np.argmin(d[d <= wxy + lp.neighbourhood_m])])
+        # The submap: the anchor's stretch of the chain (consecutive keyframes are placed
+        # consistently by their scan-matched factors; keyframes of other passes near the
+        # same place carry those passes' drift and would blur it).
+        half = lp.submap_keyframes // 2
+        near = np.array([i for i in range(max(0, anchor - half), anchor + half + 1)
+                         if kf[k].travelled - kf[i].travelled >= lp.min_separation_m])
         submap = self._submap_points(near, anchor)
         frame = inverse(self._laser_pose(anchor))
         origins = np.array([compose(frame, self._laser_pose(i))[:2] for i in near])

@@ -4,7 +4,8 @@ A loop is proposed and verified in the laser frame of an old keyframe (the *anch
 the keyframes' scans placed by the graph's estimates:
 
 1. **Search** (:func:`.correlative_matching.correlative_match`): the current keyframe's
-   scan against the submap of the old keyframes near the current estimate, over every pose
+   scan against the submap (the chain of old keyframes around the one nearest the current
+   estimate, placed by the graph), over every pose
    of a window (coarse to fine) whose half widths are ``window_sigmas`` standard deviations
    of the current keyframe's marginal (the graph's uncertainty: the window grows as the
    pose drifts). The search is exhaustive over the window: the place found does not depend
@@ -55,9 +56,10 @@ class LoopParams:
     Attributes:
         min_separation_m: Path travelled between an old keyframe and the current one before
             the old one is a loop candidate [m].
-        neighbourhood_m: Old keyframes whose estimate lies within the search window plus
-            this of the current estimate form the submap [m].
-        submap_keyframes: Most keyframes in the submap (the nearest).
+        neighbourhood_m: The old keyframe nearest the current estimate within the search
+            window plus this is the anchor [m].
+        submap_keyframes: Keyframes in the submap: the anchor's stretch of the chain
+            (``submap_keyframes // 2`` either side).
         trail_keyframes: Keyframes before the current one in the free-space check's trail.
         window_sigmas: Window half widths in marginal standard deviations.
         window_xy: ``(min, max)`` translation half width [m].
