@@ -143,6 +143,9 @@ def test_graph_params_refuse_bad_values():
         LoopParams(window_xy=(2.0, 1.0))
     with pytest.raises(ValueError, match='min_overlap'):
         LoopParams(min_overlap=1.5)
+    graph = KeyframeGraph((0.0, 0.0, 0.0), OdometryNoise(0.05, 0.05, 0.1))
+    with pytest.raises(ValueError, match='nan'):
+        graph.add_scan([0.0, float('nan'), 0.0], np.zeros((10, 2)))
 
 
 def test_graph_closes_a_drifted_loop_in_a_room(world):

@@ -12,7 +12,8 @@ EKF's metrics (:mod:`.trajectory`, evo's ATE and RPE; :func:`.slam_scores.ellips
 * ``final``: each scan placed on its keyframe's estimate after the whole run (every loop
   applied), with the keyframes' final marginals: the map's trajectory.
 
-Scans before the first or after the last odometry sample are not used.
+Scans before the first or after the last odometry sample are not used, nor scans whose
+interpolated odometry pose is not finite (counted in the summary's notes).
 """
 
 from dataclasses import dataclass
@@ -47,6 +48,7 @@ class GraphRun:
     final_cov: np.ndarray         # (S, 3, 3)
     graph: KeyframeGraph
     seconds: float                # back end time [s]
+    skipped: int = 0              # scans whose odometry pose was not finite
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,7 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
     graph = KeyframeGraph(scenario.laser.mount, noise, params)
     stamps, odometry, keyframe, online, online_cov = [], [], [], [], []
     seconds = 0.0
+    skipped = 0
     for ev in scenario.events:
         if not isinstance(ev, ScanSample) or len(t_odo) == 0:
             continue
@@ -81,6 +84,9 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
             continue
         o = interpolate_pose((ev.stamp_ns - t_odo[0]) * 1e-9, (t_odo - t_odo[0]) * 1e-9,
                              p_odo)
+        if not np.all(np.isfinite(o)):  # a pose the bag's odometry did not give
+            skipped += 1
+            continue
         pts = scan_points(ev.ranges, ev.angle_min, ev.angle_increment, ev.range_min,
                           min(ev.range_max, params.max_range))
         tic = time.perf_counter()
@@ -108,7 +114,7 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
                     online_cov=np.array(online_cov).reshape(-1, 3, 3),
                     final=np.array(final).reshape(-1, 3),
                     final_cov=np.array(final_cov).reshape(-1, 3, 3), graph=graph,
-                    seconds=seconds)
+                    seconds=seconds, skipped=skipped)
 
 
 def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,
@@ -136,6 +142,9 @@ def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,
               'loops_accepted': g.loop_counts.accepted,
               'loops_refused': dict(g.loop_counts.refused), 'align': align,
               'rpe_distance_m': float(rpe_delta), 'notes': list(scenario.notes)}
+    if run.skipped:
+        result['notes'].append(f'{run.skipped} scans not used: the odometry pose at their '
+                               'stamp is not finite')
     ref = Trajectory.from_planar(run.stamps, run.truth)
     tracks = {'online': (run.online, run.online_cov), 'final': (run.final, run.final_cov),
               'odom': (run.odometry, None)}

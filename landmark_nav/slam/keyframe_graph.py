@@ -165,10 +165,18 @@ class KeyframeGraph:
 
         Args:
             odometry_pose: (3,) odometry pose at the scan's stamp.
-            points: (N, 2) the scan's returns in the laser frame [m].
+            points: (N, 2) the scan's returns in the laser frame [m] (rows not finite are
+                left out).
+
+        Raises:
+            ValueError: An odometry pose that is not three finite numbers (names it).
         """
-        o = np.asarray(odometry_pose, dtype=float)
+        o = np.asarray(odometry_pose, dtype=float).reshape(-1)
+        if o.shape != (3,) or not np.all(np.isfinite(o)):
+            raise ValueError(f'KeyframeGraph.add_scan: odometry pose must be 3 finite numbers, '
+                             f'got {odometry_pose!r}')
         pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
         if not self.keyframes:
             self._first(o, pts)
             return True
