@@ -197,27 +197,52 @@ def free_cells(origins: np.ndarray, hits: list, resolution: float,
     return free
 
 
+class FreeSpace:
+    """The submap's seen-free space, built once per loop hypothesis (``free_space`` test).
+
+    A point contradicts the submap when its cell was passed through by a submap beam and no
+    submap point lies within ``margin`` of it (module docstring). Points outside the
+    submap's grid count as not contradicting.
+
+    Args:
+        submap: (M, 2) the submap's points (anchor frame) [m].
+        origins: (K, 2) the submap keyframes' laser positions (anchor frame) [m].
+        hits: K arrays (N_k, 2) of those scans' points (anchor frame) [m].
+        resolution: Cell size [m].
+        margin: Free cells within this of a submap point are not contradictions [m].
+    """
+
+    def __init__(self, submap: np.ndarray, origins: np.ndarray, hits: list,
+                 resolution: float, margin: float) -> None:
+        origins = np.asarray(origins, dtype=float).reshape(-1, 2)
+        self.lo = np.minimum(submap.min(axis=0), origins.min(axis=0)) - 1.0
+        hi = np.maximum(submap.max(axis=0), origins.max(axis=0)) + 1.0
+        self.resolution = float(resolution)
+        self.margin = float(margin)
+        self.shape = tuple((np.ceil((hi - self.lo) / resolution) + 1).astype(int))
+        self.free = free_cells(origins, hits, resolution, self.lo, self.shape)
+        self.tree = cKDTree(submap)
+
+    def share(self, points: np.ndarray) -> float:
+        """Return the share of ``points`` (anchor frame) that contradict the submap."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if len(pts) == 0:
+            return 0.0
+        ij = np.floor((pts - self.lo) / self.resolution).astype(np.int64)
+        ok = ((ij[:, 0] >= 0) & (ij[:, 0] < self.shape[0]) & (ij[:, 1] >= 0)
+              & (ij[:, 1] < self.shape[1]))
+        in_free = np.zeros(len(pts), dtype=bool)
+        in_free[ok] = self.free[ij[ok, 0], ij[ok, 1]]
+        if in_free.any():
+            d, _ = self.tree.query(pts[in_free])
+            in_free[np.flatnonzero(in_free)[d <= self.margin]] = False
+        return float(in_free.mean())
+
+
 def contradiction_share(trail: np.ndarray, submap: np.ndarray, origins: np.ndarray,
                         hits: list, resolution: float, margin: float) -> float:
-    """Return the share of ``trail`` points in the submap's seen-free space.
-
-    A trail point contradicts the submap when its cell was passed through by a submap beam
-    and no submap point lies within ``margin`` of it (module docstring, ``free_space``).
-    Points outside the submap's grid count as not contradicting.
-    """
-    origins = np.asarray(origins, dtype=float).reshape(-1, 2)
-    lo = np.minimum(submap.min(axis=0), origins.min(axis=0)) - 1.0
-    hi = np.maximum(submap.max(axis=0), origins.max(axis=0)) + 1.0
-    shape = tuple((np.ceil((hi - lo) / resolution) + 1).astype(int))
-    free = free_cells(origins, hits, resolution, lo, shape)
-    ij = np.floor((trail - lo) / resolution).astype(np.int64)
-    ok = (ij[:, 0] >= 0) & (ij[:, 0] < shape[0]) & (ij[:, 1] >= 0) & (ij[:, 1] < shape[1])
-    in_free = np.zeros(len(trail), dtype=bool)
-    in_free[ok] = free[ij[ok, 0], ij[ok, 1]]
-    if in_free.any():
-        d, _ = cKDTree(submap).query(trail[in_free])
-        in_free[np.flatnonzero(in_free)[d <= margin]] = False
-    return float(in_free.mean()) if len(trail) else 0.0
+    """Return the share of ``trail`` points in the submap's seen-free space (:class:`FreeSpace`)."""
+    return FreeSpace(submap, origins, hits, resolution, margin).share(trail)
 
 
 def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_xy: float,
@@ -276,13 +301,13 @@ def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_
         if not trail or sum(len(t) for t in trail) < params.min_trail_points or not hits:
             return LoopResult(False, 'free_space', fit.pose, found, fit, overlap)
         rot = np.array([[c, s], [-s, c]])
-        share = max(contradiction_share(np.asarray(t) @ rot + fit.pose[:2], submap, origins,
-                                        hits, params.field_resolution * 2, params.free_margin)
-                    for t in trail)
+        space = FreeSpace(submap, origins, hits, params.field_resolution * 2,
+                          params.free_margin)
+        share = max(space.share(np.asarray(t) @ rot + fit.pose[:2]) for t in trail)
         if share > params.max_contradiction:
             return LoopResult(False, 'free_space', fit.pose, found, fit, overlap, share)
     return LoopResult(True, '', fit.pose, found, fit, overlap, share)
 
 
-__all__ = ['contradiction_share', 'free_cells', 'LoopCounts', 'LoopParams', 'LoopResult',
+__all__ = ['contradiction_share', 'free_cells', 'FreeSpace', 'LoopCounts', 'LoopParams', 'LoopResult',
            'REFUSALS', 'thin', 'verify_loop']
