@@ -241,7 +241,10 @@ class FreeSpace:
 
 def contradiction_share(trail: np.ndarray, submap: np.ndarray, origins: np.ndarray,
                         hits: list, resolution: float, margin: float) -> float:
-    """Return the share of ``trail`` points in the submap's seen-free space (:class:`FreeSpace`)."""
+    """Return the share of ``trail`` points in the submap's seen-free space (one use).
+
+    :class:`FreeSpace` keeps the grid for several trail scans.
+    """
     return FreeSpace(submap, origins, hits, resolution, margin).share(trail)
 
 
@@ -309,5 +312,5 @@ def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_
     return LoopResult(True, '', fit.pose, found, fit, overlap, share)
 
 
-__all__ = ['contradiction_share', 'free_cells', 'FreeSpace', 'LoopCounts', 'LoopParams', 'LoopResult',
-           'REFUSALS', 'thin', 'verify_loop']
+__all__ = ['contradiction_share', 'free_cells', 'FreeSpace', 'LoopCounts', 'LoopParams',
+           'LoopResult', 'REFUSALS', 'thin', 'verify_loop']
