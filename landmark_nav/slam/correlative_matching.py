@@ -148,4 +148,23 @@ def correlative_match(field: LikelihoodField, points: np.ndarray, centre,
     return CorrelativeMatch(pose, best, second, int(scores.size))
 
 
-__all__ = ['correlative_match', 'CorrelativeMatch', 'LikelihoodField']
+def coarse_to_fine(submap: np.ndarray, points: np.ndarray, centre, window_xy: float,
+                   window_yaw: float, resolution: float, sigma: float, step_xy: float,
+                   step_yaw: float, coarse: int,
+                   distinct: Tuple[float, float] = (1.0, math.radians(20.0))
+                   ) -> Tuple[CorrelativeMatch, CorrelativeMatch]:
+    """Return the coarse and the fine :func:`correlative_match` of ``points`` on ``submap``.
+
+    Olson's multi-resolution search: the window on a field ``coarse`` times coarser (cell,
+    std and steps), then one coarse step around its best on the fine field.
+    """
+    f = coarse
+    first = correlative_match(LikelihoodField(submap, resolution * f, sigma * f), points,
+                              centre, window_xy, window_yaw, step_xy * f, step_yaw * f,
+                              distinct)
+    fine = correlative_match(LikelihoodField(submap, resolution, sigma), points, first.pose,
+                             step_xy * f, step_yaw * f, step_xy, step_yaw, distinct)
+    return first, fine
+
+
+__all__ = ['coarse_to_fine', 'correlative_match', 'CorrelativeMatch', 'LikelihoodField']

@@ -39,8 +39,7 @@ from dataclasses import dataclass, field
 import math
 from typing import Dict, Optional
 
-from landmark_nav.slam.correlative_matching import (correlative_match, CorrelativeMatch,
-                                                    LikelihoodField)
+from landmark_nav.slam.correlative_matching import coarse_to_fine, CorrelativeMatch
 from landmark_nav.slam.scan_matching import IcpResult, point_to_line_icp
 import numpy as np
 from scipy.spatial import cKDTree
@@ -273,17 +272,9 @@ def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_
     """
     guess = np.asarray(guess, dtype=float)
     thinned = thin(scan, params.max_points)
-    # Coarse to fine (Olson's multi-resolution search): the window on a field ``coarse``
-    # times coarser, then one coarse step around its best on the fine field.
-    f = params.coarse
-    coarse = correlative_match(
-        LikelihoodField(submap, params.field_resolution * f, params.field_sigma * f),
-        thinned, guess, window_xy, window_yaw, params.step_xy * f, params.step_yaw * f,
-        params.distinct)
-    fine = correlative_match(LikelihoodField(submap, params.field_resolution,
-                                             params.field_sigma),
-                             thinned, coarse.pose, params.step_xy * f, params.step_yaw * f,
-                             params.step_xy, params.step_yaw, params.distinct)
+    coarse, fine = coarse_to_fine(submap, thinned, guess, window_xy, window_yaw,
+                                  params.field_resolution, params.field_sigma, params.step_xy,
+                                  params.step_yaw, params.coarse, params.distinct)
     found = fine
     ambiguity = coarse.second_score / max(coarse.score, 1e-12)
     if found.score < params.min_score:
