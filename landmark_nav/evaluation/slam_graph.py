@@ -179,6 +179,7 @@ def format_graph_summary(r: dict) -> str:
     refused = ', '.join(f'{v} {k}' for k, v in r['loops_refused'].items() if v) or 'none'
     lines = [f'{r["bag"]} (graph back end): {r["scans"]} scans, {r["keyframes"]} keyframes; '
              f'factors {r["motions"].get("scan_matching", 0)} scan-matched, '
+             f'{r["motions"].get("scan_verified", 0)} scan-verified, '
              f'{r["motions"].get("odometry", 0)} odometry; loops {r["loops_accepted"]} '
              f'accepted of {r["loops_proposed"]} proposed (refused: {refused})']
     lines += [f'note: {n}' for n in r.get('notes', [])]

@@ -153,8 +153,9 @@ class KeyframeGraph:
         self.loop_counts = LoopCounts()
         #: ``(old keyframe, new keyframe, accepted, reason)`` of every loop proposed.
         self.loop_log: List[Tuple[int, int, bool, str]] = []
-        #: Factors between consecutive keyframes: ``scan_matching`` or ``odometry``.
-        self.motions: Dict[str, int] = {'scan_matching': 0, 'odometry': 0}
+        #: Factors between consecutive keyframes: ``scan_matching``, ``scan_verified`` or
+        #: ``odometry``.
+        self.motions: Dict[str, int] = {'scan_matching': 0, 'scan_verified': 0, 'odometry': 0}
         self.icp_restarts: Dict[str, int] = {}
         self._gate = chi2_gate(3, self.params.scan_accept)
 
@@ -230,11 +231,47 @@ class KeyframeGraph:
             fused = fused_scan_motion(previous, pts, u, cov_fn, self.mount, self._gate,
                                       lambda m: odometry_noise(m, p.scan_noise), p.fit_pairs,
                                       self.icp_restarts, p.side_starts)
+        if fused is None and len(previous) and len(pts):
+            verified = self._verified_motion(previous, pts, u)
+            if verified is not None:
+                self.motions['scan_verified'] += 1
+                return verified
         if fused is None:
             self.motions['odometry'] += 1
             return u, odometry_noise(u, self.noise)
         self.motions['scan_matching'] += 1
         return fused[0], fused[1]
+
+    def _verified_motion(self, previous: np.ndarray, pts: np.ndarray,
+                         u: np.ndarray) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+        """Return the scans' motion verified as a loop is, when the odometry refuted it.
+
+        The scan test refuses the scans' motion when it and the odometry's differ by more
+        than the odometry's model allows; either may be wrong. Here the scan is placed on
+        the previous keyframes' scans by loop closure's search and verification
+        (:func:`.loop_closure.verify_loop` without the free-space check, whose trail is
+        this same chain): an exhaustive search around the odometry's motion over the loop
+        window's largest heading half width and, in translation, ``sqrt(gate)`` stds of
+        the odometry's (at least the loop window's smallest), ICP, and the score, fit and
+        ambiguity tests.
+        A motion that passes is the factor, with the fit's information alone (the
+        odometry it contradicts is left out); None: the odometry stays the factor.
+        """
+        lp = self.params.loop
+        guess = compose(compose(inverse(self.mount), u), self.mount)
+        cov_u = odometry_noise(u, self.noise)
+        wxy = max(lp.window_xy[0], math.sqrt(self._gate * max(
+            float(np.linalg.eigvalsh(cov_u[:2, :2]).max()), 0.0)))
+        res = verify_loop(pts, previous, guess, wxy, lp.window_yaw[1], lp,
+                          check_free_space=False)
+        if not res.accepted:
+            return None
+        z = compose(compose(self.mount, res.pose), inverse(self.mount))
+        try:
+            cov = np.linalg.inv(fit_information(res.fit, self.mount, self.params.fit_pairs))
+        except np.linalg.LinAlgError:
+            return None
+        return z, cov
 
     # ------------------------------------------------------------------ loops
     def _laser_pose(self, i: int) -> np.ndarray:
