@@ -191,11 +191,13 @@ def test_graph_keeps_the_scans_turn_in_place_against_slipping_odometry(world):
     """A turn in place in the room, the odometry 13 deg short with 4 cm of slip.
 
     The scans fix the turn; the odometry's model allows millimetres of translation on a
-    turn in place. The scan-matched motion's test without a floor (the motion-driven
-    model alone: 1 cm of translation) refuses the ICP's turn for its 4 cm difference and
-    the odometry's turn, 13 deg off, becomes the factor; with the default floors (the ICP's
-    measured error, 4 cm and 0.01 rad) the scans' turn is kept. As aces seed 2's keyframe
-    130 (ICP 0.1 deg off, odometry 13.4 deg).
+    turn in place. With the default floors of the scan-matched motion's noise (the ICP's
+    measured error, 4 cm and 0.01 rad) the scans' turn passes the test and is fused with
+    the odometry's. Without a floor (the motion-driven model alone: 1 cm of translation)
+    the test refuses it for its 4 cm; the scans' motion is then verified as a loop is
+    (search, ICP, score, fit, ambiguity) and kept with the fit's information instead of
+    the odometry's turn, 13 deg off. As aces seed 2's keyframe 130 (ICP 0.1 deg off,
+    odometry 13.4 deg).
     """
     rng = np.random.default_rng(1)
     truth = [np.array([-3.0, 0.0, 0.0]), np.array([-3.0, 0.0, 0.75])]
@@ -207,15 +209,15 @@ def test_graph_keeps_the_scans_turn_in_place_against_slipping_odometry(world):
     odo = [truth[0], np.array([-3.0 + 0.03, 0.03, 0.75 - math.radians(13.0)])]
     noise = OdometryNoise(0.0015, 0.01, 0.08)  # 3.3 deg std on this turn
     heading_error = {}
-    for name, scan_noise in (('floors', GraphParams().scan_noise),
-                             ('no floor', OdometryNoise(0.05, 0.03, 0.06))):
+    for kind, scan_noise in (('scan_matching', GraphParams().scan_noise),
+                             ('scan_verified', OdometryNoise(0.05, 0.03, 0.06))):
         graph = KeyframeGraph((0.0, 0.0, 0.0), noise, GraphParams(scan_noise=scan_noise))
         for o, scan in zip(odo, scans):
             graph.add_scan(o, scan)
         assert len(graph.keyframes) == 2
-        kind = 'scan_matching' if name == 'floors' else 'odometry'
-        assert graph.motions[kind] == 1, (name, graph.motions)
-        heading_error[name] = abs(math.degrees(graph.estimates[1, 2] - truth[1][2]))
-    # The scans' turn fused with the odometry's (weighted by their information): 0.58 deg.
-    assert heading_error['floors'] < 0.75
-    assert heading_error['no floor'] > 12.0
+        assert graph.motions[kind] == 1, (kind, graph.motions)
+        heading_error[kind] = abs(math.degrees(graph.estimates[1, 2] - truth[1][2]))
+    # Fused with the odometry's turn (weighted by their information): 0.58 deg.
+    assert heading_error['scan_matching'] < 0.75
+    # The scans' own turn: 0.03 deg.
+    assert heading_error['scan_verified'] < 0.1, heading_error
