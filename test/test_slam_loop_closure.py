@@ -12,7 +12,7 @@ robot really in A, coming from the room, closes the loop to within a few centime
 
 import math
 
-from landmark_nav.geometry import compose, inverse, transform_points
+from landmark_nav.geometry import compose, inverse, transform_points, wrap_angle
 from landmark_nav.sim.world import World
 from landmark_nav.slam.correlative_matching import correlative_match, LikelihoodField
 from landmark_nav.slam.keyframe_graph import GraphParams, KeyframeGraph
@@ -187,37 +187,64 @@ def test_graph_closes_a_drifted_loop_in_a_room(world):
     assert errors[True] < 0.6 * errors[False]
 
 
-def test_graph_keeps_the_scans_turn_in_place_against_slipping_odometry(world):
-    """A turn in place in the room, the odometry 13 deg short with 4 cm of slip.
+def _turn_in_place(world, start, turn: float, odometry_turn: float, slip: float,
+                   odometry: OdometryNoise, scan_noise: OdometryNoise):
+    """Return the graph after a turn in place by ``turn`` [rad] from ``start`` in the room.
 
-    The scans fix the turn; the odometry's model allows millimetres of translation on a
-    turn in place. With the default floors of the scan-matched motion's noise (the ICP's
-    measured error, 4 cm and 0.01 rad) the scans' turn passes the test and is fused with
-    the odometry's. Without a floor (the motion-driven model alone: 1 cm of translation)
-    the test refuses it for its 4 cm; the scans' motion is then verified as a loop is
-    (search, ICP, score, fit, ambiguity) and kept with the fit's information instead of
-    the odometry's turn, 13 deg off. As aces seed 2's keyframe 130 (ICP 0.1 deg off,
-    odometry 13.4 deg).
+    The odometry's turn is ``odometry_turn`` [rad] with ``slip`` [m] of translation on
+    each axis. Scans with 1 cm range noise.
     """
     rng = np.random.default_rng(1)
-    truth = [np.array([-3.0, 0.0, 0.0]), np.array([-3.0, 0.0, 0.75])]
+    truth = [np.array(start, dtype=float), np.array(start, dtype=float) + [0.0, 0.0, turn]]
     scans = []
     for t in truth:
         p = _scan(world, t)
         r = np.hypot(p[:, 0], p[:, 1])
         scans.append(p * ((r + rng.normal(0.0, 0.01, len(r))) / r)[:, None])
-    odo = [truth[0], np.array([-3.0 + 0.03, 0.03, 0.75 - math.radians(13.0)])]
-    noise = OdometryNoise(0.0015, 0.01, 0.08)  # 3.3 deg std on this turn
-    heading_error = {}
+    odo = [truth[0], truth[0] + [slip, slip, odometry_turn]]
+    graph = KeyframeGraph((0.0, 0.0, 0.0), odometry, GraphParams(scan_noise=scan_noise))
+    for o, scan in zip(odo, scans):
+        graph.add_scan(o, scan)
+    assert len(graph.keyframes) == 2
+    return graph
+
+
+def test_graph_keeps_the_scans_turn_in_place_against_slipping_odometry(world):
+    """A 0.75 rad turn in place, the odometry 13 deg short with 4 cm of slip.
+
+    As aces seed 2's keyframe 130. The odometry's model (3.3 deg std on this turn) allows
+    millimetres of translation on a turn in place. With the default floors of the
+    scan-matched motion's noise (the ICP's error, 4 cm and 0.01 rad) the scans' turn passes
+    the test and is fused with the odometry's; without a floor (the motion-driven model
+    alone: 1 cm) the test refuses it for its 4 cm, and the odometry's turn, 13 deg off,
+    becomes the factor.
+    """
+    errors = {}
     for kind, scan_noise in (('scan_matching', GraphParams().scan_noise),
-                             ('scan_verified', OdometryNoise(0.05, 0.03, 0.06))):
-        graph = KeyframeGraph((0.0, 0.0, 0.0), noise, GraphParams(scan_noise=scan_noise))
-        for o, scan in zip(odo, scans):
-            graph.add_scan(o, scan)
-        assert len(graph.keyframes) == 2
+                             ('odometry', OdometryNoise(0.05, 0.03, 0.06))):
+        graph = _turn_in_place(world, (-3.0, 0.0, 0.0), 0.75, 0.75 - math.radians(13.0), 0.03,
+                               OdometryNoise(0.0015, 0.01, 0.08), scan_noise)
         assert graph.motions[kind] == 1, (kind, graph.motions)
-        heading_error[kind] = abs(math.degrees(graph.estimates[1, 2] - truth[1][2]))
+        errors[kind] = abs(math.degrees(wrap_angle(graph.estimates[1, 2] - 0.75)))
     # Fused with the odometry's turn (weighted by their information): 0.58 deg.
-    assert heading_error['scan_matching'] < 0.75
-    # The scans' own turn: 0.03 deg.
-    assert heading_error['scan_verified'] < 0.1, heading_error
+    assert errors['scan_matching'] < 0.75
+    assert errors['odometry'] > 12.0
+
+
+def test_graph_verifies_the_scans_turn_the_odometry_refutes(world):
+    """A 0.95 rad turn in place in the room's corner, the odometry's 25 deg short.
+
+    6 stds of the scan test: it refuses the scans' turn; the scan is then searched and
+    verified as a loop is, and its turn kept with the fit's information (0.05 deg off).
+    With 0.7 m of slip on each axis as well, the verified motion's translation disagrees
+    with the odometry's and the odometry's turn stays the factor.
+    """
+    odometry = OdometryNoise(0.0015, 0.01, 0.04)  # 2.2 deg std on this turn
+    start = (-4.5, -2.0, 0.3)
+    graph = _turn_in_place(world, start, 0.95, 0.95 - math.radians(25.0), 0.0, odometry,
+                           GraphParams().scan_noise)
+    assert graph.motions['scan_verified'] == 1, graph.motions
+    assert abs(math.degrees(wrap_angle(graph.estimates[1, 2] - 0.3 - 0.95))) < 0.1
+    graph = _turn_in_place(world, start, 0.95, 0.95 - math.radians(25.0), 0.7, odometry,
+                           GraphParams().scan_noise)
+    assert graph.motions['odometry'] == 1, graph.motions

@@ -48,7 +48,7 @@ from landmark_nav.geometry import (compose, compose_jacobians, inverse, relative
 from landmark_nav.slam.consistency import chi2_gate
 from landmark_nav.slam.loop_closure import LoopCounts, LoopParams, verify_loop
 from landmark_nav.slam.prediction import odometry_noise
-from landmark_nav.slam.scan_matching import fit_information, fused_scan_motion
+from landmark_nav.slam.scan_matching import fit_information, fused_scan_motion, larger_motion
 from landmark_nav.slam.slam_params import OdometryNoise
 import numpy as np
 
@@ -158,6 +158,7 @@ class KeyframeGraph:
         self.motions: Dict[str, int] = {'scan_matching': 0, 'scan_verified': 0, 'odometry': 0}
         self.icp_restarts: Dict[str, int] = {}
         self._gate = chi2_gate(3, self.params.scan_accept)
+        self._gate_xy = chi2_gate(2, self.params.scan_accept)
 
     @staticmethod
     def _isam_params():
@@ -254,8 +255,13 @@ class KeyframeGraph:
         window's largest heading half width and, in translation, ``sqrt(gate)`` stds of
         the odometry's (at least the loop window's smallest), ICP, and the score, fit and
         ambiguity tests.
-        A motion that passes is the factor, with the fit's information alone (the
-        odometry it contradicts is left out); None: the odometry stays the factor.
+        What odometry gets wrong by more than its model is the turn (a wheel slips);
+        its translation still holds: the verified motion's translation must agree with
+        the odometry's at the scan test's confidence (chi-square on 2 degrees of freedom,
+        ``U + V`` in translation as in the scan test), which refuses a match that slid
+        along a corridor. A motion that passes is the factor, with the fit's information
+        alone (the odometry's turn it contradicts is left out); None: the odometry stays
+        the factor.
         """
         lp = self.params.loop
         guess = compose(compose(inverse(self.mount), u), self.mount)
@@ -267,6 +273,11 @@ class KeyframeGraph:
         if not res.accepted:
             return None
         z = compose(compose(self.mount, res.pose), inverse(self.mount))
+        at = larger_motion(u, z)
+        c = (odometry_noise(at, self.noise) + odometry_noise(at, self.params.scan_noise))[:2, :2]
+        d = z[:2] - u[:2]
+        if float(d @ np.linalg.solve(c, d)) > self._gate_xy:
+            return None
         try:
             cov = np.linalg.inv(fit_information(res.fit, self.mount, self.params.fit_pairs))
         except np.linalg.LinAlgError:
