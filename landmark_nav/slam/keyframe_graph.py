@@ -20,7 +20,9 @@ perception", 2017):
   (aces and fhw, drift seed 2: 5.5 cm RMS in position, 0.44-0.58 deg in heading). Without
   them a turn in place, whose motion model allows millimetres of translation, refuses
   the ICP's correct turn for its few centimetres of translation, and the odometry's turn
-  (13 deg off on aces seed 2) enters the chain;
+  (13 deg off on aces seed 2) enters the chain. When the test still refuses the scans,
+  the scan is searched and verified as a loop is and, if it passes and its translation
+  agrees with the odometry's, that motion is the factor (:meth:`KeyframeGraph._verified_motion`);
 * loop closures (:mod:`.loop_closure`): the current keyframe relative to an old one, from
   the verified match, with the fit's information and a Cauchy kernel (``loop_kernel``), so
   that a closure the verification let through against the rest of the graph is
