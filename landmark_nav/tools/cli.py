@@ -174,6 +174,16 @@ def _slam_configuration(args: argparse.Namespace):
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
     import numpy as np
+    if args.backend == 'graph':
+        from landmark_nav.evaluation.slam_graph import evaluate_graph_bag, format_graph_summary
+        print(format_graph_summary(evaluate_graph_bag(
+            args.bag, args.out, max_seconds=args.max_seconds, reference=args.reference,
+            align=args.align, laser_pose=args.laser_pose, sigma_r=args.sigma_r,
+            rpe_delta=args.rpe_delta)))
+        if args.out is not None:
+            print(f'written: {args.out}/slam_graph.json, trajectory_graph_{{online,final}}.tum, '
+                  'trajectory_gt.tum')
+        return 0
     progress = not args.no_progress and sys.stderr.isatty()
     if args.mode == 'localization' and args.map is None:
         raise ValueError('--mode localization needs --map FILE.npz (a map saved with '
@@ -452,6 +462,11 @@ def build_parser() -> argparse.ArgumentParser:
                    '(/ground_truth/odom or --reference)')
     p.add_argument('--association', choices=['icnn', 'jcbb'], default=None,
                    help='data association (the parameter association; default icnn)')
+    p.add_argument('--backend', choices=['ekf', 'graph'], default='ekf',
+                   help="ekf (default): the ekf_slam node's filter; graph: the keyframe pose "
+                        "graph with loop closure (iSAM2; docs/ekf_slam.md, 'Graph back end'; "
+                        'uses --out, --max-seconds, --reference, --align, --laser-pose, '
+                        '--sigma-r, --rpe-delta only)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
     p.add_argument('--reference', default=None, metavar='FILE.tum',
