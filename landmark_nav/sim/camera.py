@@ -47,9 +47,6 @@ from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
 
-#: float32(m) / 255 for each 8-bit coverage value m (as ``mask.astype(float32) * (1/255)``)
-_COVERAGE_TABLE = np.arange(256, dtype=np.uint8).astype(np.float32) * np.float32(1.0 / 255.0)
-
 
 def _ro(a: np.ndarray, dtype=float) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True, order='C')
@@ -414,18 +411,20 @@ class CameraSimulator:
         # supersampled resolution (area-averaged to anti-aliased edges by the downsampling)
         mask = np.zeros((size[1], size[0]), dtype=np.uint8)
         pts = np.round((poly_roi - [x0, y0]) * 256.0).astype(np.int32)
-        cv2.fillPoly(mask, [pts], 255, lineType=cv2.LINE_8, shift=8)
-        # float32(texel) * gain + black and float32(mask) / 255, each through a 256-entry
-        # table computed with the same float32 operations (one pass instead of three)
+        cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=8)
+        # float32(texel) * gain + black through a 256-entry table computed with the same
+        # float32 operations (one pass instead of three)
         tex = cv2.LUT(warped, self._reflectance_table())
         roi = canvas[y0:y1, x0:x1]
-        if mask.min() == 255:
+        if mask.min() == 1:
             roi[...] = tex
         else:
-            a = cv2.LUT(mask, _COVERAGE_TABLE)
-            tex -= roi
-            tex *= a
-            roi += tex
+            # the coverage is 0 or 1 (no anti-aliasing at this resolution): blending
+            # roi + 1 * (tex - roi) where covered, leaving the rest, is the same float32
+            # arithmetic as the blend with the coverage without the multiplication
+            covered = mask.view(np.bool_)
+            np.subtract(tex, roi, out=tex, where=covered)
+            np.add(roi, tex, out=roi, where=covered)
 
     def _reflectance_table(self) -> np.ndarray:
         """Return the reflectance of each 8-bit texel value (black .. white), float32."""
