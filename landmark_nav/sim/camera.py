@@ -419,12 +419,12 @@ class CameraSimulator:
         if mask.min() == 1:
             roi[...] = tex
         else:
-            # the coverage is 0 or 1 (no anti-aliasing at this resolution): blending
-            # roi + 1 * (tex - roi) where covered, leaving the rest, is the same float32
-            # arithmetic as the blend with the coverage without the multiplication
-            covered = mask.view(np.bool_)
-            np.subtract(tex, roi, out=tex, where=covered)
-            np.add(roi, tex, out=roi, where=covered)
+            # the coverage is 0 or 1 (no anti-aliasing at this resolution): the blend
+            # roi + coverage (tex - roi) is (tex - roi) + roi where covered (the same float32
+            # sum) and roi elsewhere
+            tex -= roi
+            tex += roi
+            np.copyto(roi, tex, where=mask.view(np.bool_))
 
     def _reflectance_table(self) -> np.ndarray:
         """Return the reflectance of each 8-bit texel value (black .. white), float32."""
