@@ -17,6 +17,7 @@ SIGTERM stop playing cleanly. Also available as ``landmark_nav replay``.
 """
 
 import argparse
+from collections import Counter
 import sys
 import time
 from typing import List, Optional
@@ -104,6 +105,7 @@ class BagPlayer(Node):
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if options.clock_hz > 0 else None)
         self.published = 0
+        self.topic_counts: Counter = Counter()  # messages published per topic
         self._last_clock_ns = 0
 
     def _connected(self) -> bool:
@@ -167,6 +169,16 @@ class BagPlayer(Node):
             elapsed_ns = int((time.monotonic() - wall_start) * self.options.rate * 1e9)
             self._publish_clock(min(first_ns + offset_ns + elapsed_ns, due_log_ns))
 
+    def _publish(self, item) -> None:
+        """Publish one bag message on its topic and count it."""
+        self._topic_publishers[item.topic].publish(item.data)
+        self.topic_counts[item.topic] += 1
+
+    def summary(self) -> str:
+        """Return 'N messages (TOPIC n, ...)': what was published, per topic."""
+        per_topic = ', '.join(f'{t} {n}' for t, n in sorted(self.topic_counts.items()))
+        return f'{sum(self.topic_counts.values())} messages ({per_topic or "none"})'
+
     def play_once(self) -> int:
         """Play the bag once; return the number of messages published."""
         count = 0
@@ -182,7 +194,7 @@ class BagPlayer(Node):
                         held[item.topic] = item
                     continue
                 for old in sorted(held.values(), key=lambda m: m.log_time_ns):
-                    self._topic_publishers[old.topic].publish(old.data)
+                    self._publish(old)
                     count += 1
                 held = {}
                 self._sleep_until(wall_start + due, item.log_time_ns, wall_start, first_ns)
@@ -190,10 +202,10 @@ class BagPlayer(Node):
                     break
                 if self._clock_pub:
                     self._publish_clock(item.log_time_ns)
-                self._topic_publishers[item.topic].publish(item.data)
+                self._publish(item)
                 count += 1
             for old in sorted(held.values(), key=lambda m: m.log_time_ns):
-                self._topic_publishers[old.topic].publish(old.data)
+                self._publish(old)
                 count += 1
         self.published += count
         return count
@@ -211,6 +223,12 @@ class BagPlayer(Node):
         return self.published
 
 
+def _stopped(player: Optional[BagPlayer], bag: str) -> None:
+    """Say what a player stopped by a signal had published (to stdout: rclpy is down)."""
+    if player is not None:
+        print(f'bag_player: stopped: published {player.summary()} from {bag}', flush=True)
+
+
 def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> int:
     """Initialise rclpy, play the bag, shut down; return messages published."""
     rclpy.init(args=args)  # SIGINT / SIGTERM shut the context down: playing stops
@@ -223,14 +241,18 @@ def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> i
             # Give reliable transports a moment to deliver the tail of the stream.
             for pub in player._topic_publishers.values():
                 pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2.0))
-            player.get_logger().info(f'Published {published} messages from {bag}')
+            player.get_logger().info(f'Published {player.summary()} from {bag}')
+        else:
+            _stopped(player, bag)
         return published
     except (KeyboardInterrupt, ExternalShutdownException):
+        _stopped(player, bag)
         return player.published if player else 0
     except Exception:
         if rclpy.ok():
             raise
         # A publish racing the shutdown by SIGINT / SIGTERM: stopped, not an error.
+        _stopped(player, bag)
         return player.published if player else 0
     finally:
         destroy_and_shutdown(player)
