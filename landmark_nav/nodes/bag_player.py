@@ -104,7 +104,6 @@ class BagPlayer(Node):
                 message_class(info.type_name), name, qos)
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if options.clock_hz > 0 else None)
-        self.published = 0
         self.topic_counts: Counter = Counter()  # messages published per topic
         self._last_clock_ns = 0
 
@@ -174,10 +173,15 @@ class BagPlayer(Node):
         self._topic_publishers[item.topic].publish(item.data)
         self.topic_counts[item.topic] += 1
 
+    @property
+    def published(self) -> int:
+        """Return the number of messages published so far (every topic, every loop)."""
+        return sum(self.topic_counts.values())
+
     def summary(self) -> str:
         """Return 'N messages (TOPIC n, ...)': what was published, per topic."""
         per_topic = ', '.join(f'{t} {n}' for t, n in sorted(self.topic_counts.items()))
-        return f'{sum(self.topic_counts.values())} messages ({per_topic or "none"})'
+        return f'{self.published} messages ({per_topic or "none"})'
 
     def play_once(self) -> int:
         """Play the bag once; return the number of messages published."""
@@ -207,7 +211,6 @@ class BagPlayer(Node):
             for old in sorted(held.values(), key=lambda m: m.log_time_ns):
                 self._publish(old)
                 count += 1
-        self.published += count
         return count
 
     def play(self) -> int:
