@@ -1,10 +1,11 @@
 """Run the graph back end (:mod:`landmark_nav.slam.keyframe_graph`) on a bag and score it.
 
-``landmark_nav evaluate BAG --backend graph``: the bag's odometry is interpolated to each
-scan's stamp (:func:`landmark_nav.geometry.interpolate_pose`), each scan's returns below
-``max_range`` (:func:`landmark_nav.slam.scan_matching.scan_points`) go with it to
-:meth:`KeyframeGraph.add_scan`. Two trajectories are scored against the reference, with the
-EKF's metrics (:mod:`.trajectory`, evo's ATE and RPE; :func:`.slam_scores.ellipse_share`):
+``landmark_nav evaluate BAG --backend graph``: the bag's odometry samples and each scan's
+returns below ``max_range`` (:func:`landmark_nav.slam.scan_matching.scan_points`) go, in
+the bag's order, to :class:`~landmark_nav.slam.graph_scan_steps.GraphScanSteps`, the
+per-scan step the ``graph_slam`` node runs: each scan with the odometry interpolated at its
+stamp goes to :meth:`KeyframeGraph.add_scan`. Two trajectories are scored against the
+reference, with the EKF's metrics (:mod:`.trajectory`, evo's ATE and RPE; :func:`.slam_scores.ellipse_share`):
 
 * ``online``: each scan's pose as the graph gave it when the scan came (its keyframe's
   estimate then, plus the odometry since), with the keyframe's marginal then: what a node
@@ -12,11 +13,11 @@ EKF's metrics (:mod:`.trajectory`, evo's ATE and RPE; :func:`.slam_scores.ellips
 * ``final``: each scan placed on its keyframe's estimate after the whole run (every loop
   applied), with the keyframes' final marginals: the map's trajectory.
 
-Scans before the first or after the last odometry sample are not used, nor scans whose
-interpolated odometry pose is not finite (counted in the summary's notes).
+Scans before the first or after the last odometry sample are not used, nor odometry
+samples that are not finite (counted by reason in the summary's notes).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import json
 import math
 from pathlib import Path
@@ -27,8 +28,8 @@ from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.blas import single_threaded
 from landmark_nav.evaluation.slam_scores import ellipse_share
 from landmark_nav.evaluation.trajectory import ate, rpe, Trajectory, write_tum
-from landmark_nav.geometry import interpolate_pose
 from landmark_nav.sim import OdometrySample, ScanSample
+from landmark_nav.slam.graph_scan_steps import GraphScanSteps
 from landmark_nav.slam.keyframe_graph import GraphParams, KeyframeGraph
 from landmark_nav.slam.scan_matching import scan_points
 import numpy as np
@@ -48,7 +49,8 @@ class GraphRun:
     final_cov: np.ndarray         # (S, 3, 3)
     graph: KeyframeGraph
     seconds: float                # back end time [s]
-    skipped: int = 0              # scans whose odometry pose was not finite
+    skipped: dict = field(default_factory=dict)  # inputs not used, by reason
+    not_covered: int = 0          # scans after the last odometry sample
 
 
 @dataclass(frozen=True)
@@ -70,35 +72,30 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
         params: Graph parameters.
     """
     params = params or GraphParams()
-    odo = [e for e in scenario.events if isinstance(e, OdometrySample)]
-    t_odo = np.array([e.stamp_ns for e in odo], dtype=np.int64)
-    p_odo = np.array([e.pose for e in odo], dtype=float).reshape(-1, 3)
-    graph = KeyframeGraph(scenario.laser.mount, noise, params)
+    steps = GraphScanSteps(scenario.laser.mount, noise, params)
+    graph = steps.graph
     stamps, odometry, keyframe, online, online_cov = [], [], [], [], []
     seconds = 0.0
-    skipped = 0
     for ev in scenario.events:
-        if not isinstance(ev, ScanSample) or len(t_odo) == 0:
+        if isinstance(ev, OdometrySample):
+            steps.add_odometry(ev.stamp_ns, ev.pose)
+        elif isinstance(ev, ScanSample):
+            steps.add_scan(ev.stamp_ns, scan_points(ev.ranges, ev.angle_min,
+                                                    ev.angle_increment, ev.range_min,
+                                                    min(ev.range_max, params.max_range)))
+        else:
             continue
-        if not t_odo[0] <= ev.stamp_ns <= t_odo[-1]:
-            continue
-        o = interpolate_pose((ev.stamp_ns - t_odo[0]) * 1e-9, (t_odo - t_odo[0]) * 1e-9,
-                             p_odo)
-        if not np.all(np.isfinite(o)):  # a pose the bag's odometry did not give
-            skipped += 1
-            continue
-        pts = scan_points(ev.ranges, ev.angle_min, ev.angle_increment, ev.range_min,
-                          min(ev.range_max, params.max_range))
-        tic = time.perf_counter()
-        graph.add_scan(o, pts)
-        k = len(graph.keyframes) - 1
-        pose, cov = graph.pose_at(k, o)
-        seconds += time.perf_counter() - tic
-        stamps.append(ev.stamp_ns)
-        odometry.append(o)
-        keyframe.append(k)
-        online.append(pose)
-        online_cov.append(cov)
+        while True:
+            tic = time.perf_counter()
+            st = steps.step()
+            seconds += time.perf_counter() - tic
+            if st is None:
+                break
+            stamps.append(st.stamp_ns)
+            odometry.append(st.odometry)
+            keyframe.append(st.keyframe)
+            online.append(st.pose)
+            online_cov.append(st.covariance)
     tic = time.perf_counter()
     kf_cov = graph.final_covariances()
     final, final_cov = [], []
@@ -114,7 +111,8 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
                     online_cov=np.array(online_cov).reshape(-1, 3, 3),
                     final=np.array(final).reshape(-1, 3),
                     final_cov=np.array(final_cov).reshape(-1, 3, 3), graph=graph,
-                    seconds=seconds, skipped=skipped)
+                    seconds=seconds, skipped=dict(steps.counts),
+                    not_covered=steps.waiting)
 
 
 def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,
@@ -142,9 +140,11 @@ def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,
               'loops_accepted': g.loop_counts.accepted,
               'loops_refused': dict(g.loop_counts.refused), 'align': align,
               'rpe_distance_m': float(rpe_delta), 'notes': list(scenario.notes)}
-    if run.skipped:
-        result['notes'].append(f'{run.skipped} scans not used: the odometry pose at their '
-                               'stamp is not finite')
+    for reason, n in sorted(run.skipped.items()):
+        result['notes'].append(f'{n} inputs not used: {reason.replace("_", " ")}')
+    if run.not_covered:
+        result['notes'].append(f'{run.not_covered} scans after the last odometry sample not '
+                               'used')
     ref = Trajectory.from_planar(run.stamps, run.truth)
     tracks = {'online': (run.online, run.online_cov), 'final': (run.final, run.final_cov),
               'odom': (run.odometry, None)}

@@ -1,0 +1,222 @@
+"""The graph back end fed one message at a time: the per-scan step of node and offline runner.
+
+:class:`GraphScanSteps` takes odometry samples and scans (laser-frame points) in the order
+they come and gives the steps of :class:`~landmark_nav.slam.keyframe_graph.KeyframeGraph`:
+a scan waits until the odometry covers its stamp (a sample at or after it), is placed on
+the odometry interpolated at its stamp (:func:`odometry_at`) and goes to
+:meth:`KeyframeGraph.add_scan`; its pose and covariance are the keyframe's estimate and
+marginal then, composed with the odometry since (:meth:`KeyframeGraph.pose_at`). Scans are
+processed in stamp order, each once, whatever the order or the timing in which scans and
+odometry arrive: the ``graph_slam`` node and ``landmark_nav evaluate --backend graph``
+(:mod:`landmark_nav.evaluation.slam_graph`) give the same steps from the same messages.
+
+Splitting the step in :meth:`GraphScanSteps.pop_ready` (cheap: which scan is next, its
+odometry pose) and :meth:`GraphScanSteps.process` (the back end's work) lets a node queue
+scans in one thread while the back end runs in another.
+
+Inputs not used, counted in :attr:`GraphScanSteps.counts` (each with a reason for the
+caller's warning, ``on_drop(reason, message)``):
+
+* ``before_odometry``: a scan stamped before the first odometry sample (no pose exists
+  for it; the offline runner never used such scans either);
+* ``out_of_order``: a scan stamped at or before the last processed one (it would be a
+  second step at an older time), an odometry sample older than the newest;
+* ``odometry_gone``: a scan older than the oldest odometry sample still buffered (the
+  buffer keeps ``buffer_s`` behind the newest sample, and what the waiting scans need);
+* ``nonfinite``: an odometry pose or stamp that is not finite.
+"""
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import Callable, List, Optional, Tuple
+
+from landmark_nav.geometry import interpolate_pose
+from landmark_nav.slam.keyframe_graph import GraphParams, KeyframeGraph
+from landmark_nav.slam.slam_params import OdometryNoise
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class GraphStep:
+    """One processed scan.
+
+    Attributes:
+        stamp_ns: The scan's stamp [ns].
+        odometry: (3,) the odometry pose at the stamp.
+        keyframe: Index of the scan's keyframe.
+        new_keyframe: Whether the scan made that keyframe.
+        pose: (3,) the scan's pose in the map frame when it was processed.
+        covariance: (3, 3) its covariance.
+    """
+
+    stamp_ns: int
+    odometry: np.ndarray
+    keyframe: int
+    new_keyframe: bool
+    pose: np.ndarray
+    covariance: np.ndarray
+
+
+def odometry_at(t_s: float, times: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Return the odometry pose at ``t_s`` from the samples around it (times non-decreasing).
+
+    The last sample stamped at or before ``t_s`` and the next one, linearly
+    (:func:`~landmark_nav.geometry.interpolate_pose`); a sample stamped exactly at ``t_s``
+    is the pose (heading wrapped). Only those samples are read, so a buffer that holds them
+    gives the pose the whole log gives.
+
+    Raises:
+        ValueError: ``t_s`` outside the samples.
+    """
+    i = int(np.searchsorted(times, t_s, side='right')) - 1
+    if i < 0 or t_s > times[-1]:
+        raise ValueError(f'odometry_at: {t_s!r} outside [{times[0]!r}, {times[-1]!r}]')
+    if times[i] == t_s:
+        return interpolate_pose(t_s, times[i:i + 1], poses[i:i + 1])
+    return interpolate_pose(t_s, times[i:i + 2], poses[i:i + 2])
+
+
+class GraphScanSteps:
+    """Odometry and scans in, steps of the graph back end out (module docstring).
+
+    Args:
+        mount: (3,) laser pose in base_link.
+        noise: The odometry's noise model.
+        params: The graph's parameters.
+        buffer_s: Odometry kept behind the newest sample [s] (at least what the waiting
+            scans need).
+        on_drop: Called ``(reason, message)`` for each input not used.
+    """
+
+    def __init__(self, mount, noise: OdometryNoise, params: Optional[GraphParams] = None,
+                 buffer_s: float = 60.0,
+                 on_drop: Optional[Callable[[str, str], None]] = None) -> None:
+        self.graph = KeyframeGraph(mount, noise, params)
+        self.buffer_s = float(buffer_s)
+        self._on_drop = on_drop or (lambda reason, message: None)
+        self.counts: Counter = Counter()
+        self._t0: Optional[int] = None  # first odometry stamp: times are relative to it
+        self._times: List[float] = []  # odometry stamps - t0 [s]
+        self._poses: List[np.ndarray] = []
+        self._newest_ns: Optional[int] = None
+        self._waiting: List[Tuple[int, np.ndarray]] = []  # scans in stamp order
+        self.last_stamp_ns: Optional[int] = None  # the last processed scan's
+        self.processed = 0
+
+    # ------------------------------------------------------------------ input
+    def _drop(self, reason: str, message: str) -> None:
+        self.counts[reason] += 1
+        self._on_drop(reason, message)
+
+    def add_odometry(self, stamp_ns: int, pose) -> bool:
+        """Buffer one odometry sample; return whether it was used (else counted, reported)."""
+        p = np.asarray(pose, dtype=float).reshape(-1)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            self._drop('nonfinite', f'odometry at {stamp_ns} ns: pose {p.tolist()} is not '
+                       'three finite numbers')
+            return False
+        if self._newest_ns is not None and stamp_ns < self._newest_ns:
+            self._drop('out_of_order', f'odometry at {stamp_ns} ns: older than the newest '
+                       f'sample ({self._newest_ns} ns)')
+            return False
+        if self._t0 is None:
+            self._t0 = int(stamp_ns)
+            early = [s for s in self._waiting if s[0] < stamp_ns]
+            self._waiting = [s for s in self._waiting if s[0] >= stamp_ns]
+            for t, _ in early:
+                self._drop('before_odometry', f'scan at {t} ns: stamped before the first '
+                           f'odometry sample ({stamp_ns} ns)')
+        self._newest_ns = int(stamp_ns)
+        self._times.append((stamp_ns - self._t0) * 1e-9)
+        self._poses.append(p)
+        self._trim()
+        return True
+
+    def add_scan(self, stamp_ns: int, points: np.ndarray) -> bool:
+        """Queue one scan's laser-frame points (N, 2); return whether it was queued."""
+        if self.last_stamp_ns is not None and stamp_ns <= self.last_stamp_ns:
+            self._drop('out_of_order', f'scan at {stamp_ns} ns: not after the last processed '
+                       f'scan ({self.last_stamp_ns} ns)')
+            return False
+        if self._t0 is not None and stamp_ns < self._t0:
+            self._drop('before_odometry', f'scan at {stamp_ns} ns: stamped before the first '
+                       f'odometry sample ({self._t0} ns)')
+            return False
+        if self._times and (stamp_ns - self._t0) * 1e-9 < self._times[0]:
+            self._drop('odometry_gone', f'scan at {stamp_ns} ns: older than the odometry '
+                       f'kept ({self.buffer_s:g} s behind the newest sample)')
+            return False
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        k = len(self._waiting)
+        while k and self._waiting[k - 1][0] > stamp_ns:
+            k -= 1
+        if k and self._waiting[k - 1][0] == stamp_ns:
+            self._drop('out_of_order', f'scan at {stamp_ns} ns: a scan with this stamp is '
+                       'already waiting')
+            return False
+        self._waiting.insert(k, (int(stamp_ns), pts))
+        return True
+
+    @property
+    def waiting(self) -> int:
+        """Scans queued, not yet processed."""
+        return len(self._waiting)
+
+    @property
+    def waiting_bytes(self) -> int:
+        """Memory of the queued scans' points [bytes]."""
+        return sum(p.nbytes for _, p in self._waiting)
+
+    def drop_oldest(self, reason: str, message: str) -> Optional[int]:
+        """Drop the oldest waiting scan (a full queue); return its stamp."""
+        if not self._waiting:
+            return None
+        t, _ = self._waiting.pop(0)
+        self._drop(reason, f'scan at {t} ns: {message}')
+        return t
+
+    def _trim(self) -> None:
+        """Forget odometry older than ``buffer_s`` and than what the next scan needs."""
+        if len(self._times) < 3:
+            return
+        keep_s = self._times[-1] - self.buffer_s
+        if self._waiting:
+            keep_s = min(keep_s, (self._waiting[0][0] - self._t0) * 1e-9)
+        if self.last_stamp_ns is not None:
+            keep_s = min(keep_s, (self.last_stamp_ns - self._t0) * 1e-9)
+        # keep the last sample at or before keep_s (the left end of its interval)
+        i = int(np.searchsorted(self._times, keep_s, side='right')) - 1
+        if i > 0:
+            del self._times[:i]
+            del self._poses[:i]
+
+    # ------------------------------------------------------------------ steps
+    def pop_ready(self) -> Optional[Tuple[int, np.ndarray, np.ndarray]]:
+        """Return the next scan the odometry covers: ``(stamp_ns, odometry pose, points)``.
+
+        None when no waiting scan is covered yet (or no odometry came).
+        """
+        if not self._waiting or self._newest_ns is None or \
+                self._waiting[0][0] > self._newest_ns:
+            return None
+        t, pts = self._waiting.pop(0)
+        o = odometry_at((t - self._t0) * 1e-9, np.asarray(self._times),
+                        np.asarray(self._poses))
+        self.last_stamp_ns = t
+        return t, o, pts
+
+    def process(self, stamp_ns: int, odometry: np.ndarray, points: np.ndarray) -> GraphStep:
+        """Run the back end on one scan :meth:`pop_ready` gave; return its step."""
+        new = self.graph.add_scan(odometry, points)
+        k = len(self.graph.keyframes) - 1
+        pose, cov = self.graph.pose_at(k, odometry)
+        self.processed += 1
+        return GraphStep(stamp_ns, odometry, k, new, pose, cov)
+
+    def step(self) -> Optional[GraphStep]:
+        """Process the next covered scan (:meth:`pop_ready` then :meth:`process`), if any."""
+        item = self.pop_ready()
+        return None if item is None else self.process(*item)
+
+
+__all__ = ['GraphScanSteps', 'GraphStep', 'odometry_at']
