@@ -17,6 +17,7 @@ EXECUTABLES = {
     'corridor_follower': 'landmark_nav.nodes.corridor_follower:main',
     'road_classifier': 'landmark_nav.nodes.road_classifier:main',
     'ekf_slam': 'landmark_nav.nodes.ekf_slam:main',
+    'graph_slam': 'landmark_nav.nodes.graph_slam:main',
     'landmark_detector': 'landmark_nav.nodes.landmark_detector:main',
     'laser_driver': 'landmark_nav.nodes.laser_driver:main',
     'line_extractor': 'landmark_nav.nodes.line_extractor:main',

@@ -23,7 +23,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, '-m', 'landmark_nav.tools.cli']
 EXIT_WITHIN_S = 2.0
-NODES = ('corner_extractor', 'line_extractor', 'ekf_slam', 'sonar_localizer',
+NODES = ('corner_extractor', 'line_extractor', 'ekf_slam', 'graph_slam', 'sonar_localizer',
          'landmark_detector', 'corridor_follower', 'road_classifier', 'model_localizer',
          'laser_driver', 'base_driver')
 

@@ -5,7 +5,8 @@ returns below ``max_range`` (:func:`landmark_nav.slam.scan_matching.scan_points`
 the bag's order, to :class:`~landmark_nav.slam.graph_scan_steps.GraphScanSteps`, the
 per-scan step the ``graph_slam`` node runs: each scan with the odometry interpolated at its
 stamp goes to :meth:`KeyframeGraph.add_scan`. Two trajectories are scored against the
-reference, with the EKF's metrics (:mod:`.trajectory`, evo's ATE and RPE; :func:`.slam_scores.ellipse_share`):
+reference, with the EKF's metrics (:mod:`.trajectory`, evo's ATE and RPE;
+:func:`.slam_scores.ellipse_share`):
 
 * ``online``: each scan's pose as the graph gave it when the scan came (its keyframe's
   estimate then, plus the odometry since), with the keyframe's marginal then: what a node

@@ -1,0 +1,166 @@
+"""graph_slam node: the office bag through DDS equals the offline graph run; bad input."""
+
+import math
+from pathlib import Path
+
+from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
+from landmark_nav.bag import BagReader
+from landmark_nav.conversions import make_odometry, make_scan, stamp_to_ns
+from landmark_nav.evaluation.bags import load_bag
+from landmark_nav.evaluation.slam import bag_odometry_noise
+from landmark_nav.evaluation.slam_graph import run_graph
+from landmark_nav.geometry import compose, inverse
+from landmark_nav.nodes.common import ParameterError
+from landmark_nav.nodes.graph_slam import GraphSlamNode
+from landmark_nav.slam.graph_scan_steps import GraphScanSteps, odometry_at
+from landmark_nav.slam.odometry_noise_models import odometry_noise_model
+from landmark_nav.testing import RosHarness
+from nav_msgs.msg import Odometry
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import LaserScan
+
+OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
+SECONDS = 30.0
+
+
+def test_odometry_at_reads_only_the_samples_around_the_stamp():
+    times = np.array([0.0, 1.0, 2.0, 3.0])
+    poses = np.array([[0, 0, 0], [1, 0, 3.0], [2, 0, -3.0], [3, 1, 0]], dtype=float)
+    # between samples: the pair around it, the heading along the shortest arc
+    p = odometry_at(1.5, times, poses)
+    assert p[0] == 1.5 and abs(abs(p[2]) - math.pi) < 1e-12
+    # the same from a buffer that holds only that pair
+    assert np.array_equal(odometry_at(1.5, times[1:3], poses[1:3]), p)
+    # at a sample: that sample, also when it is the newest
+    assert np.array_equal(odometry_at(3.0, times, poses), poses[3])
+    with pytest.raises(ValueError, match='outside'):
+        odometry_at(3.5, times, poses)
+
+
+def test_steps_wait_for_the_odometry_and_go_in_stamp_order():
+    drops = []
+    steps = GraphScanSteps([0.0, 0.0, 0.0], odometry_noise_model('simulator'),
+                           on_drop=lambda r, m: drops.append(r))
+    pts = np.zeros((0, 2))
+    steps.add_scan(5, pts)  # before any odometry: waits, then has none
+    steps.add_odometry(10, [0.0, 0.0, 0.0])
+    assert drops == ['before_odometry'] and steps.waiting == 0
+    steps.add_scan(30, pts)
+    steps.add_scan(20, pts)  # out of arrival order, in stamp order
+    assert steps.pop_ready() is None  # the odometry does not reach 20 yet
+    steps.add_odometry(40, [4.0, 0.0, 0.0])
+    assert [steps.step().stamp_ns for _ in range(2)] == [20, 30]
+    assert np.allclose(steps.graph.keyframes[0].odometry, [4.0 / 3.0, 0.0, 0.0])
+    steps.add_scan(25, pts)  # older than the last processed scan
+    steps.add_odometry(35, [0.0, 0.0, 0.0])  # older than the newest odometry
+    steps.add_odometry(50, [np.nan, 0.0, 0.0])
+    assert drops[1:] == ['out_of_order', 'out_of_order', 'nonfinite']
+
+
+def _bag_messages(seconds):
+    out = []
+    with BagReader(OFFICE) as reader:
+        t0 = None
+        for topic, _, msg in reader.decoded(['/odom', '/scan']):
+            t = stamp_to_ns(msg.header.stamp)
+            t0 = t if t0 is None else t0
+            if t - t0 > seconds * 1e9:
+                break
+            out.append((topic, msg))
+    return out
+
+
+@pytest.mark.dds
+def test_node_equals_offline_on_the_office_bag_with_its_outputs():
+    """Same steps, same poses and covariances as ``evaluate --backend graph``; nothing lost.
+
+    The messages are published as fast as the node takes them, the back end lags behind
+    in its thread (its queue carries the scans).
+    """
+    scenario = load_bag(OFFICE, max_seconds=SECONDS)
+    noise = bag_odometry_noise(scenario)[0]
+    ref = run_graph(scenario, noise)
+    msgs = _bag_messages(SECONDS)
+    with RosHarness() as ros:
+        node = ros.add_node(GraphSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('odometry.model', value='simulator'),
+            Parameter('laser_pose', value=[float(v) for v in scenario.laser.mount])]))
+        poses = ros.collect('pose', PoseWithCovarianceStamped)
+        corrections = ros.collect('map_to_odom', TransformStamped)
+        pub_odom = ros._helper.create_publisher(Odometry, 'odom', 10)
+        pub_scan = ros._helper.create_publisher(LaserScan, 'scan', 10)
+        assert ros.wait_for_subscribers([pub_odom, pub_scan])
+        n = {'/odom': 0, '/scan': 0}
+        for topic, msg in msgs:
+            n[topic] += 1
+            (pub_odom if topic == '/odom' else pub_scan).publish(msg)
+            count = (lambda: node.odom_count) if topic == '/odom' else (lambda: node.scan_count)
+            assert ros.wait_until(lambda: count() >= n[topic], 5)
+        assert ros.wait_until(lambda: len(poses) >= len(ref.stamps)
+                              and node.steps.waiting <= 1, 60)
+        assert ros.wait_until(lambda: len(corrections) == len(poses), 5)
+        stats = node.stats
+        assert stats.dropped_count == 0 and node.warner.count == 0
+        graph = node.steps.graph
+        assert len(graph.keyframes) == len(ref.graph.keyframes) > 5
+        path = node.path_message()
+    stamps = np.array([stamp_to_ns(p.header.stamp) for p in poses])
+    # the offline run leaves out a last scan whose sweep ends after the bag's last odometry
+    assert np.array_equal(stamps[:len(ref.stamps)], ref.stamps) and \
+        len(stamps) - len(ref.stamps) <= 1
+    k = len(ref.stamps)
+    xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in poses])[:k]
+    cov = np.array([np.asarray(p.pose.covariance).reshape(6, 6)[[0, 1, 5]][:, [0, 1, 5]]
+                    for p in poses])[:k]
+    err = np.hypot(*(xy - ref.online[:, :2]).T)
+    print(f'max node-offline difference {err.max():.3g} m over {k} poses')
+    assert err.max() < 1e-9  # measured 0: the same arithmetic on the same numbers
+    assert np.allclose(cov, ref.online_cov, rtol=1e-9, atol=1e-15)
+    # map -> odom composes each pose with the inverse odometry
+    c = corrections[k - 1].transform
+    o = ref.odometry[k - 1]
+    expect = compose(ref.online[k - 1], inverse(o))
+    assert abs(c.translation.x - expect[0]) < 1e-9 and abs(c.translation.y - expect[1]) < 1e-9
+    # the path: the keyframes where the graph places them at the end
+    assert len(path.poses) == len(ref.graph.keyframes)
+    last = path.poses[-1].pose.position
+    assert abs(last.x - ref.graph.estimates[-1, 0]) < 1e-9
+
+
+@pytest.mark.dds
+def test_bad_input_is_warned_and_counted_and_the_node_keeps_running():
+    with RosHarness() as ros:
+        node = ros.add_node(GraphSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('max_beams', value=100)]))
+        node.warner._period = 0.0  # every warning logged (the throttling is tested apart)
+        scan = make_scan(2_000_000_000, 'laser', -1.0, 0.01, [1.0] * 201, 0.1, 30.0)
+        bad_scan = make_scan(2_000_000_000, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0)
+        bad_scan.angle_increment = math.nan
+        node.on_scan(scan)  # 201 beams > max_beams
+        node.on_scan(bad_scan)
+        node.on_odom(make_odometry(0, 'odom', 'base_link', [0.0, 0.0, 0.0]))  # stamp 0
+        odom = make_odometry(1_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0])
+        odom.pose.pose.position.x = math.nan
+        node.on_odom(odom)
+        d = node.stats.dropped
+        assert d['oversized'] == 1 and d['malformed'] == 3
+        assert node.warner.count == 4
+        # still running: a good pair makes a step
+        node.on_odom(make_odometry(3_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        node.on_scan(make_scan(3_000_000_000, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0))
+        assert ros.wait_until(lambda: node.stats.processed_count == 1, 10)
+        assert node.stats.status().values  # the diagnostics build with the graph's counts
+
+
+@pytest.mark.parametrize('name, value, match', [
+    ('loop_floor', [0.03, 0.03], 'loop_floor'),
+    ('loop.window_xy', [0.5], 'loop.window_xy'),
+    ('odometry.model', 'k_d=-1', 'odometry.model'),
+    ('laser_pose', [0.0, 0.0], 'laser_pose')])
+def test_bad_parameter_is_a_parameter_error_naming_it(name, value, match):
+    with RosHarness() as ros:
+        with pytest.raises(ParameterError, match=match):
+            GraphSlamNode(context=ros.context, parameter_overrides=[Parameter(name,
+                                                                              value=value)])
