@@ -42,6 +42,13 @@ N landmarks placed 1 km and more away (never in view: no association, no pruning
 state and covariance the filter carries are those of an N-landmark map) and map the bag's
 landmarks on top, evicting the least recently seen beyond ``max_landmarks`` (200).
 
+``--graph`` runs ``graph_slam`` (the graph back end) alone instead, with the bag's laser
+mount and odometry noise model, records every ``pose`` it publishes, waits until it is idle
+(its back end works through its queue), then runs ``landmark_nav evaluate --backend graph``'s
+run (:func:`landmark_nav.evaluation.slam_graph.run_graph`) on the same bag and prints whether
+the node gave the same steps (scan stamps) and the largest distance between its poses and
+the offline ``online`` trajectory; exit 1 when a step is missing or more than 1 mm off.
+
 The CPU counters start once both nodes are idle after their start-up (imports, DDS
 discovery), so the start-up is not charged to the scans. ``--profile FILE`` runs
 ``ekf_slam`` under cProfile, timed by its main thread's CPU clock (its CPU figure then
@@ -58,6 +65,7 @@ import time
 
 REPO = Path(__file__).resolve().parents[1]
 NODES = ('corner_extractor', 'ekf_slam')
+GRAPH_NODES = ('graph_slam',)
 
 
 def cpu_seconds(pid: int) -> float:
@@ -101,6 +109,9 @@ def main() -> int:
     parser.add_argument('--map-landmarks', type=int, default=0, metavar='N')
     parser.add_argument('--profile', metavar='FILE', default=None,
                         help='run ekf_slam under cProfile, statistics written to FILE')
+    parser.add_argument('--graph', action='store_true',
+                        help='run graph_slam (the graph back end) instead of corner_extractor '
+                             "+ ekf_slam and compare its poses with evaluate --backend graph's")
     parser.add_argument('--params-file', metavar='YAML', default=None,
                         help="ekf_slam's parameters on top of the defaults (e.g. "
                              'config/ekf_slam_chapter.yaml), node and core alike')
@@ -123,8 +134,9 @@ def main() -> int:
     scenario = load_bag(args.bag, max_seconds=args.seconds, require_reference=False)
     laser = scenario.laser
     files = ['--params-file', str(Path(args.params_file).resolve())] if args.params_file else []
+    mount = 'laser_pose:=[' + ','.join(f'{v!r}' for v in map(float, laser.mount)) + ']'
     node_args = {'ekf_slam': ['--ros-args'] + files + [
-        '-p', 'laser_pose:=[' + ','.join(f'{v!r}' for v in map(float, laser.mount)) + ']',
+        '-p', mount,
         '-p', f'landmarks:={args.landmarks}', '-p', f'visibility:={str(args.visibility).lower()}',
         '-p', f'laser_sigma_range:={float(laser.sigma_range)!r}',
         '-p', f'lines.sigma_r:={float(laser.sigma_range)!r}',
@@ -145,6 +157,7 @@ def main() -> int:
             'simulator' if scenario.simulator else 'pioneer')
         noise = bag_odometry_noise(scenario)[0]
         node_args['ekf_slam'] += ['-p', f'odometry.model:={model}']
+        node_args['graph_slam'] = ['--ros-args', '-p', mount, '-p', f'odometry.model:={model}']
     except ImportError:  # an older checkout (--repo): its defaults
         noise = None
     with BagReader(args.bag) as reader:
@@ -155,18 +168,22 @@ def main() -> int:
             scans += 1
     profile = {'ekf_slam': ['-c', PROFILE, str(Path(args.profile).resolve())]
                } if args.profile else {}
+    nodes = GRAPH_NODES if args.graph else NODES
+    slam = nodes[-1]
+    listener = subprocess.Popen([sys.executable, '-c', POSE_LISTENER], env=env, cwd=args.repo,
+                                stdout=subprocess.PIPE, text=True) if args.graph else None
     procs = {n: subprocess.Popen([sys.executable] + profile.get(n, ['-m'])
                                  + [f'landmark_nav.nodes.{n}']
                                  + node_args.get(n, []), env=env,
                                  cwd=args.repo, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)
-             for n in NODES}
+             for n in nodes}
     diag = subprocess.Popen([sys.executable, '-c', DIAG_LISTENER], env=env, cwd=args.repo,
                             stdout=subprocess.PIPE, text=True)
     time.sleep(2.0)
     wait_idle([p.pid for p in procs.values()])
     cpu0 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
-    main0 = main_thread_seconds(procs['ekf_slam'].pid)
+    main0 = main_thread_seconds(procs[slam].pid)
     rss0 = {n: rss_mb(p.pid) for n, p in procs.items()}
     player = [sys.executable, '-m', 'landmark_nav.nodes.bag_player', args.bag, '--topics',
               '/scan', '/odom', '--rate', str(args.rate), '--wait-for-subscribers', '20']
@@ -190,8 +207,10 @@ def main() -> int:
             play.wait(30)
         wall = time.monotonic() - wall
         time.sleep(3.0)
+        if args.graph:  # the back end may still work through its queue
+            wait_idle([procs[slam].pid], timeout=600.0)
         cpu1 = {n: cpu_seconds(p.pid) for n, p in procs.items()}
-        main1 = main_thread_seconds(procs['ekf_slam'].pid)
+        main1 = main_thread_seconds(procs[slam].pid)
         rss1 = {n: rss_mb(p.pid) for n, p in procs.items()}
     finally:
         for p in procs.values():
@@ -204,14 +223,19 @@ def main() -> int:
             last[name] = text
         for p in procs.values():
             p.wait(30)
+        if listener is not None:
+            listener.send_signal(signal.SIGINT)
+            poses, _ = listener.communicate(timeout=30)
     if args.soak is not None:
         values = dict(kv.split('=') for kv in last.get('corner_extractor', '').split())
         scans = int(values.get('processed', 0)) + int(values.get('dropped', 0))
     print(f'{args.bag}: {scans} scans at rate {args.rate} in {wall:.1f} s, code {args.repo}, '
           f'threads {args.threads if args.threads is not None else "default"}')
-    for n in NODES:
+    for n in nodes:
         print(f'{n:18s} CPU {1e3 * (cpu1[n] - cpu0[n]) / scans:7.2f} ms per scan, RSS '
               f'{rss0[n]:.1f} -> {rss1[n]:.1f} MB; diagnostics: {last.get(n, "none")}')
+    if args.graph:
+        return compare_graph(scenario, noise, poses)
     if args.soak is None and noise is not None:  # (an older --repo has no front end)
         core_ms, size = core_step_ms(scenario, noise, args.landmarks, args.visibility,
                                      slam_map, options=slam_options)
@@ -228,6 +252,31 @@ def main() -> int:
               f'({node_ms / core_ms:.2f} back to back; main thread {main_ms:.2f} ms per step, '
               f'the other threads (DDS) {node_ms - main_ms:.2f} ms)')
     return 0
+
+
+def compare_graph(scenario, noise, text: str) -> int:
+    """Compare graph_slam's poses with the offline graph run on the same bag; print them.
+
+    Returns:
+        0 when the node gave every offline step, each within 1 mm, else 1.
+    """
+    import numpy as np
+    from landmark_nav.evaluation.slam_graph import run_graph
+    lines = [line.split() for line in text.splitlines() if line.strip()]
+    stamps = np.array([int(v[0]) for v in lines], dtype=np.int64)
+    xy = np.array([[float(v[1]), float(v[2])] for v in lines]).reshape(-1, 2)
+    tic = time.process_time()
+    ref = run_graph(scenario, noise)
+    cpu = time.process_time() - tic
+    k = len(ref.stamps)
+    same = len(stamps) >= k and np.array_equal(stamps[:k], ref.stamps)
+    err = np.hypot(*(xy[:k] - ref.online[:, :2]).T) if same and k else np.array([np.inf])
+    print(f'graph_slam published {len(stamps)} poses; the offline run (evaluate --backend '
+          f'graph, {1e3 * cpu / max(k, 1):.1f} ms CPU per scan) {k} steps; same stamps: '
+          f'{same}; largest node - offline distance {err.max():.3g} m; keyframes '
+          f'{len(ref.graph.keyframes)}, loops {ref.graph.loop_counts.accepted} accepted of '
+          f'{ref.graph.loop_counts.proposed} proposed')
+    return 0 if same and err.max() <= 1e-3 else 1
 
 
 def wait_idle(pids, timeout: float = 120.0, period: float = 1.0) -> None:
@@ -366,6 +415,29 @@ except SystemExit:
 finally:
     prof.disable()
     prof.dump_stats(out)
+"""
+
+# A listener printing every pose of graph_slam at exit: "stamp_ns x y" lines.
+POSE_LISTENER = """
+import rclpy
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+rclpy.init()
+node = rclpy.create_node('bench_poses')
+rows = []
+def on(msg):
+    s = msg.header.stamp
+    p = msg.pose.pose.position
+    rows.append(f'{s.sec * 1000000000 + s.nanosec} {p.x!r} {p.y!r}')
+node.create_subscription(PoseWithCovarianceStamped, 'pose', on, QoSProfile(
+    depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL))
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+for row in rows:
+    print(row, flush=False)
 """
 
 # A listener printing the last /diagnostics input status of each node.
