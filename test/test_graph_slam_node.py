@@ -13,8 +13,9 @@ from landmark_nav.geometry import compose, inverse
 from landmark_nav.nodes.common import ParameterError
 from landmark_nav.nodes.graph_slam import GraphSlamNode
 from landmark_nav.slam.graph_scan_steps import GraphScanSteps, odometry_at
+from landmark_nav.slam.keyframe_graph import GraphParams
 from landmark_nav.slam.odometry_noise_models import odometry_noise_model
-from landmark_nav.testing import RosHarness
+from landmark_nav.testing import declared_parameters, parameter_file, RosHarness
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -164,3 +165,17 @@ def test_bad_parameter_is_a_parameter_error_naming_it(name, value, match):
         with pytest.raises(ParameterError, match=match):
             GraphSlamNode(context=ros.context, parameter_overrides=[Parameter(name,
                                                                               value=value)])
+
+
+def test_config_file_matches_declared_parameters():
+    """config/graph_slam.yaml lists every declared parameter with its default."""
+    values = parameter_file(OFFICE.parents[1], 'graph_slam')
+    with RosHarness() as ros:
+        node = GraphSlamNode(context=ros.context)
+        declared = declared_parameters(node)
+        params = node.params
+        node.destroy_node()
+    assert set(values) == set(declared)
+    for name, value in values.items():
+        assert declared[name] == (pytest.approx(value) if isinstance(value, float) else value)
+    assert params == GraphParams()  # the defaults are the offline runner's
