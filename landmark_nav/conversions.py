@@ -29,7 +29,7 @@ import math
 from typing import NamedTuple, Optional, Sequence
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseWithCovarianceStamped, Quaternion
+from geometry_msgs.msg import Pose, PoseWithCovarianceStamped, Quaternion, TransformStamped
 from landmark_nav.geometry import quaternion_to_yaw, yaw_to_quaternion
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
@@ -393,6 +393,19 @@ def set_covariance3(cov6: np.ndarray, cov3: np.ndarray) -> np.ndarray:
     return cov6
 
 
+def make_transform(stamp_ns: int, frame_id: str, child_frame_id: str,
+                   pose: Sequence[float]) -> TransformStamped:
+    """Build the TransformStamped of a planar pose ``[x, y, yaw]`` of ``child`` in ``frame``."""
+    t = TransformStamped()
+    t.header.stamp = ns_to_stamp(stamp_ns)
+    t.header.frame_id = frame_id
+    t.child_frame_id = child_frame_id
+    t.transform.translation.x = float(pose[0])
+    t.transform.translation.y = float(pose[1])
+    t.transform.rotation = quaternion_msg_from_yaw(float(pose[2]))
+    return t
+
+
 def make_odometry(stamp_ns: int, frame_id: str, child_frame_id: str, pose: Sequence[float],
                   covariance3: Optional[np.ndarray] = None,
                   twist: Optional[Sequence[float]] = None,
@@ -746,6 +759,7 @@ __all__ = [
     'cov6_to_cov3', 'data_to_scan', 'grid_to_data', 'image_to_array', 'make_camera_info',
     'make_joint_state', 'make_occupancy_grid',
     'make_odometry', 'make_pose_with_covariance_stamped', 'make_range', 'make_scan',
+    'make_transform',
     'ns_to_stamp', 'odometry_to_pose', 'pose_msg_from_2d', 'pose_msg_to_2d',
     'pose_with_covariance_to_pose', 'quaternion_msg_from_yaw', 'range_status',
     'range_to_value', 'scan_to_data', 'stamp_to_ns',

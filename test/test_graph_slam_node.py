@@ -4,7 +4,6 @@ import math
 from pathlib import Path
 
 from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
-from landmark_nav.bag import BagReader
 from landmark_nav.conversions import make_odometry, make_scan, stamp_to_ns
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam import bag_odometry_noise
@@ -21,6 +20,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import LaserScan
+from test_ekf_slam_node import bag_messages
 
 OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
 SECONDS = 30.0
@@ -60,19 +60,6 @@ def test_steps_wait_for_the_odometry_and_go_in_stamp_order():
     assert drops[1:] == ['out_of_order', 'out_of_order', 'nonfinite']
 
 
-def _bag_messages(seconds):
-    out = []
-    with BagReader(OFFICE) as reader:
-        t0 = None
-        for topic, _, msg in reader.decoded(['/odom', '/scan']):
-            t = stamp_to_ns(msg.header.stamp)
-            t0 = t if t0 is None else t0
-            if t - t0 > seconds * 1e9:
-                break
-            out.append((topic, msg))
-    return out
-
-
 @pytest.mark.dds
 def test_node_equals_offline_on_the_office_bag_with_its_outputs():
     """Same steps, same poses and covariances as ``evaluate --backend graph``; nothing lost.
@@ -83,7 +70,7 @@ def test_node_equals_offline_on_the_office_bag_with_its_outputs():
     scenario = load_bag(OFFICE, max_seconds=SECONDS)
     noise = bag_odometry_noise(scenario)[0]
     ref = run_graph(scenario, noise)
-    msgs = _bag_messages(SECONDS)
+    msgs = bag_messages(SECONDS, OFFICE)
     with RosHarness() as ros:
         node = ros.add_node(GraphSlamNode(context=ros.context, parameter_overrides=[
             Parameter('odometry.model', value='simulator'),

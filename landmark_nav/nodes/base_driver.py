@@ -42,9 +42,9 @@ import threading
 import time
 from typing import List, Optional, Tuple
 
-from geometry_msgs.msg import TransformStamped, Twist
+from geometry_msgs.msg import Twist
 from landmark_nav.conversions import (make_joint_state, make_odometry, make_range,
-                                      ns_to_stamp, quaternion_msg_from_yaw)
+                                      make_transform, ns_to_stamp)
 from landmark_nav.drivers.clock_filter import ClockFilter
 from landmark_nav.drivers.p2os import P2osDecoder
 from landmark_nav.drivers.p2os_client import ClientConfig, P2osClient, SipUpdate
@@ -329,14 +329,7 @@ class BaseDriver(Node):
         return msg
 
     def _broadcast(self, stamp: int, pose) -> None:
-        t = TransformStamped()
-        t.header.stamp = ns_to_stamp(stamp)
-        t.header.frame_id = self.odom_frame
-        t.child_frame_id = self.base_frame
-        t.transform.translation.x = float(pose[0])
-        t.transform.translation.y = float(pose[1])
-        t.transform.rotation = quaternion_msg_from_yaw(float(pose[2]))
-        self.tf.sendTransform(t)
+        self.tf.sendTransform(make_transform(stamp, self.odom_frame, self.base_frame, pose))
 
     def robot_status(self) -> List[Tuple[str, str, Status]]:
         """Return the robot's diagnostic entry (battery, motors, stall, bumpers)."""

@@ -24,7 +24,8 @@ import time
 from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from landmark_nav.conversions import ConversionError, pose_with_covariance_to_pose
+from landmark_nav.conversions import (ConversionError, pose_with_covariance_to_pose,
+                                      scan_to_data)
 from landmark_nav.heap import release_free_heap
 from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.parameter_tables import dataclass_parameters, field_value
@@ -107,6 +108,21 @@ def declare(node: Node, name: str, default, description: str,
     if isinstance(default, list):
         value = [float(v) for v in value]
     return value
+
+
+def declare_table(node: Node, table: dict, build: Callable):
+    """Declare every parameter of a table ``{name: Parameter}``; return ``build(values)``.
+
+    Raises:
+        ParameterError: A value out of its limits or not a choice, or what ``build`` refuses
+            with a ValueError (its one-line message).
+    """
+    values = {name: declare(node, name, p.default, p.description, p.limits, p.choices)
+              for name, p in table.items()}
+    try:
+        return build(values)
+    except ValueError as err:
+        raise ParameterError(str(err)) from None
 
 
 def declare_strings(node: Node, name: str, default: list, description: str) -> list:
@@ -555,6 +571,28 @@ def require_stamp(stamp_ns: int, what: str) -> int:
     if stamp_ns <= 0:
         raise ConversionError(f'{what}: stamp {stamp_ns} ns is not a time (an unset header)')
     return stamp_ns
+
+
+def read_scan(msg, max_beams: int, stats: 'InputStats'):
+    """Return a LaserScan's :class:`~landmark_nav.conversions.ScanData`, or None when dropped.
+
+    Dropped with a warning and counted by ``stats``: more than ``max_beams`` beams
+    (``dropped.oversized``), a scan that cannot be read, is empty or has stamp 0
+    (``dropped.malformed``).
+    """
+    if len(msg.ranges) > max_beams:
+        stats.drop('oversized', f'Dropping scan: {len(msg.ranges)} beams, more than '
+                   f'max_beams {max_beams}')
+        return None
+    try:
+        scan = scan_to_data(msg)
+        if scan.ranges.size == 0:
+            raise ConversionError('LaserScan: empty scan (no ranges)')
+        require_stamp(scan.stamp_ns, 'LaserScan')
+    except ConversionError as err:
+        stats.drop('malformed', f'Dropping scan: {err}')
+        return None
+    return scan
 
 
 def ros_home() -> Path:

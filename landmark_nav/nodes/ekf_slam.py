@@ -115,12 +115,12 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from landmark_nav.conversions import (ConversionError, make_odometry,
                                       make_pose_with_covariance_stamped,
-                                      odometry_pose_covariance, scan_to_data, set_covariance3,
-                                      set_pose_2d, set_stamp, stamp_to_ns)
+                                      odometry_pose_covariance, set_covariance3, set_pose_2d,
+                                      set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
-from landmark_nav.nodes.common import (declare, FEATURE_DEPTH, InputStats, output_path,
-                                       ParameterError, ProblemWarner, require_stamp, run_node,
-                                       SCAN_QOS)
+from landmark_nav.nodes.common import (declare_table, FEATURE_DEPTH, InputStats, output_path,
+                                       ParameterError, ProblemWarner, read_scan, require_stamp,
+                                       run_node, SCAN_QOS)
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import CORNER, LINE
@@ -202,12 +202,7 @@ def declare_configuration(node: Node) -> SlamConfiguration:
     :func:`~landmark_nav.slam.configuration.slam_configuration`: the offline tools read a
     parameter file with the same code.
     """
-    values = {name: declare(node, name, p.default, p.description, p.limits, p.choices)
-              for name, p in parameters().items()}
-    try:
-        return slam_configuration(values)
-    except ValueError as err:
-        raise ParameterError(str(err)) from None
+    return declare_table(node, parameters(), slam_configuration)
 
 
 class EkfSlamNode(Node):
@@ -385,17 +380,8 @@ class EkfSlamNode(Node):
     def on_scan(self, msg: LaserScan) -> None:
         """Validate one scan (lines, visibility) and join it to its corner set."""
         self.scan_count += 1
-        if len(msg.ranges) > self.max_beams:
-            self.stats.drop('oversized', f'Dropping scan: {len(msg.ranges)} beams, more than '
-                            f'max_beams {self.max_beams}')
-            return
-        try:
-            scan = scan_to_data(msg)
-            if scan.ranges.size == 0:
-                raise ConversionError('LaserScan: empty scan (no ranges)')
-            require_stamp(scan.stamp_ns, 'LaserScan')
-        except ConversionError as err:
-            self.stats.drop('malformed', f'Dropping scan: {err}')
+        scan = read_scan(msg, self.max_beams, self.stats)
+        if scan is None:
             return
         self._offer('scan', scan.stamp_ns, scan)
 

@@ -48,16 +48,14 @@ import time
 from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TransformStamped
 from landmark_nav.conversions import (ConversionError, make_pose_with_covariance_stamped,
-                                      ns_to_stamp, odometry_pose_covariance,
-                                      quaternion_msg_from_yaw, scan_to_data, set_covariance3,
+                                      make_transform, odometry_pose_covariance, set_covariance3,
                                       set_pose_2d, set_stamp)
 from landmark_nav.geometry import compose, inverse
-from landmark_nav.nodes.common import (declare, InputStats, ParameterError, ProblemWarner,
-                                       require_stamp, run_node)
+from landmark_nav.nodes.common import (declare, declare_table, InputStats, ParameterError,
+                                       ProblemWarner, read_scan, require_stamp, run_node)
 from landmark_nav.nodes.ekf_slam import FEATURE_SCAN_QOS, ODOM_QOS
 from landmark_nav.slam.graph_configuration import graph_parameters, graph_params
 from landmark_nav.slam.graph_scan_steps import GraphScanSteps, GraphStep
-from landmark_nav.slam.keyframe_graph import GraphParams
 from landmark_nav.slam.odometry_noise_models import odometry_noise_model
 from landmark_nav.slam.scan_matching import scan_points
 from nav_msgs.msg import Odometry, Path as PathMsg
@@ -96,23 +94,13 @@ class GraphInputStats(InputStats):
         return status
 
 
-def declare_graph(node: Node) -> GraphParams:
-    """Declare the graph's and loop closure's parameters; return the graph's parameters."""
-    values = {name: declare(node, name, p.default, p.description, p.limits, p.choices)
-              for name, p in graph_parameters().items()}
-    try:
-        return graph_params(values)
-    except ValueError as err:
-        raise ParameterError(str(err)) from None
-
-
 class GraphSlamNode(Node):
     """Thin node: odometry + scans -> :class:`GraphScanSteps` (worker thread) -> outputs."""
 
     def __init__(self, **kwargs) -> None:
         """Declare the parameters, create subscriptions, publishers and the worker."""
         super().__init__('graph_slam', **kwargs)
-        params = declare_graph(self)
+        params = declare_table(self, graph_parameters(), graph_params)
         model = declare(self, 'odometry.model', 'pioneer', "the odometry's noise model: "
                         "pioneer, simulator or drift gains 'k_d=.. k_theta=.. k_dtheta=..' "
                         '(an imported bag states them)')
@@ -192,15 +180,8 @@ class GraphSlamNode(Node):
     def on_scan(self, msg: LaserScan) -> None:
         """Queue one scan's returns (laser frame); wake the back end."""
         self.scan_count += 1
-        if len(msg.ranges) > self.max_beams:
-            self.stats.drop('oversized', f'Dropping scan: {len(msg.ranges)} beams, more than '
-                            f'max_beams {self.max_beams}')
-            return
-        try:
-            scan = scan_to_data(msg)
-            require_stamp(scan.stamp_ns, 'LaserScan')
-        except ConversionError as err:
-            self.stats.drop('malformed', f'Dropping scan: {err}')
+        scan = read_scan(msg, self.max_beams, self.stats)
+        if scan is None:
             return
         pts = scan_points(scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
                           min(scan.range_max, self.params.max_range))
@@ -244,14 +225,8 @@ class GraphSlamNode(Node):
         set_pose_2d(msg.pose.pose, step.pose)
         msg.pose.covariance = set_covariance3(msg.pose.covariance, step.covariance)
         self.pub_pose.publish(msg)
-        correction = compose(step.pose, inverse(step.odometry))
-        t = TransformStamped()
-        t.header.stamp = ns_to_stamp(step.stamp_ns)
-        t.header.frame_id = self.map_frame
-        t.child_frame_id = self.odom_frame
-        t.transform.translation.x = float(correction[0])
-        t.transform.translation.y = float(correction[1])
-        t.transform.rotation = quaternion_msg_from_yaw(float(correction[2]))
+        t = make_transform(step.stamp_ns, self.map_frame, self.odom_frame,
+                           compose(step.pose, inverse(step.odometry)))
         self.pub_tf.publish(t)
         if self.tf is not None:
             self.tf.sendTransform(t)
