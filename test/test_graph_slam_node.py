@@ -23,7 +23,7 @@ from sensor_msgs.msg import LaserScan
 from test_ekf_slam_node import bag_messages
 
 OFFICE = Path(__file__).resolve().parents[1] / 'bags' / 'office'
-SECONDS = 30.0
+SECONDS = 20.0
 
 
 def test_odometry_at_reads_only_the_samples_around_the_stamp():
