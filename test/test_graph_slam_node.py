@@ -140,6 +140,20 @@ def test_bad_input_is_warned_and_counted_and_the_node_keeps_running():
         node.on_scan(make_scan(3_000_000_000, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0))
         assert ros.wait_until(lambda: node.stats.processed_count == 1, 10)
         assert node.stats.status().values  # the diagnostics build with the graph's counts
+        # a back end that fails on a scan: counted and warned, the next scan is processed
+        add_scan, failed = node.steps.graph.add_scan, []
+
+        def fail_once(*args):
+            if not failed:
+                failed.append(1)
+                raise RuntimeError('injected')
+            return add_scan(*args)
+        node.steps.graph.add_scan = fail_once
+        for t in (4_000_000_000, 5_000_000_000):
+            node.on_odom(make_odometry(t, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+            node.on_scan(make_scan(t, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0))
+        assert ros.wait_until(lambda: node.stats.processed_count == 2, 10)
+        assert node.stats.dropped['backend_error'] == 1
 
 
 @pytest.mark.parametrize('name, value, match', [

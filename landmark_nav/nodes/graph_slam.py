@@ -209,13 +209,15 @@ class GraphSlamNode(Node):
                 continue
             try:
                 step = self.steps.process(*item)
+                if self._stop.is_set():
+                    return
+                self._publish(step)
             except Exception as err:  # the node keeps running; say what failed
+                if self._stop.is_set():  # shutting down: the publishers may be gone
+                    return
                 self.stats.drop('backend_error', f'Dropping scan at {item[0]} ns: the back end '
                                 f'failed ({type(err).__name__}: {err})')
                 continue
-            if self._stop.is_set():
-                return
-            self._publish(step)
             self.stats.processed(received or 0)
 
     def _publish(self, step: GraphStep) -> None:
