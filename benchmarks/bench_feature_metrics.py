@@ -60,8 +60,11 @@ out; then the same choice over all logs (the shipped rule).
 ranges rounded to ``--step`` (5 cm: a quantised laser), scored as ``metrics`` does with
 the range noise estimated from the scans (``split_merge`` lines); printed per log and line
 repeatability gate (``|d rho| <= --drho``, ``|d alpha| <= --dalpha`` deg, every pair) the
-coverage f and the line repeatability of both and the repeatability's drop: does the
-metric's gate, rather than the extractor, make the quantised log's lines less repeatable?
+quantised copy's estimated sigma_r and the std its gates use (``LineParams.gate_sigma_r``),
+the coverage f and the line repeatability of both and the repeatability's drop; between
+them the repeatability of the unquantised log extracted with the quantised copy's settings
+(its sigma_r and rounding): the drop from the log to that column is what the settings
+cost, the rest what the rounded data lose.
 """
 
 from dataclasses import replace
@@ -87,7 +90,7 @@ from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.extractor_configuration import (extractor_configuration,
                                                         ScanSegmenter)
 from landmark_nav.laser.lines import extract_lines, LineParams
-from landmark_nav.laser.range_noise import estimate_range_noise
+from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.tools.evaluate_features import format_scan_metrics
 import numpy as np
@@ -335,9 +338,10 @@ def run_structural_rule(args) -> int:
 
 def run_quantised_lines(args) -> int:
     """Run ``quantised-lines``: line repeatability of a log and its quantised copy per gate."""
-    print('| log | d rho gate [m] | d alpha gate [deg] | f | f quantised | repeatability | '
-          'quantised | drop |')
-    print('| --- | --- | --- | --- | --- | --- | --- | --- |')
+    print('| log | sigma_r [cm] | gate sigma [cm] | d rho gate [m] | d alpha gate [deg] | f | '
+          'f quantised | repeatability | at the quantised settings | quantised | drop |')
+    print('| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |')
+    base = extractor_configuration('line_extractor')
     for name, path in log_paths(args.data, args.logs):
         scans = carmen_metric_scans(path)
         rounded = []
@@ -345,19 +349,28 @@ def run_quantised_lines(args) -> int:
             r = np.where(np.isfinite(s.ranges), np.round(s.ranges / args.step) * args.step,
                          s.ranges)
             rounded.append(replace(s, ranges=r, valid=s.valid & (r > 0.0)))
+        noise = estimate_range_noise(((s.ranges, s.angles, s.valid)
+                                      for s in rounded), stated=0.01)
+        # the quantised log's extractor settings (its noise and rounding) on the log itself
+        settings = replace(base, params=replace(base.params, range_step=noise.step,
+                                                range_step_share=noise.step_share))
         for drho in args.drho:
             for dalpha in args.dalpha:
                 fig = []
-                for sc in (scans, rounded):
-                    res = evaluate_scans(sc, extractor_sigma_r='auto',
+                for sc, sigma, configs in ((scans, 'auto', None), (rounded, 'auto', None),
+                                           (scans, noise.sigma_r,
+                                            {'line_extractor': settings})):
+                    res = evaluate_scans(sc, extractor_sigma_r=sigma,
                                          line_methods=('split_merge',),
-                                         corner_methods=('minus_cosine',),
+                                         corner_methods=('minus_cosine',), configs=configs,
                                          line_gate=(drho, math.radians(dalpha)))
                     lines = res['lines']['split_merge']
                     fig.append((lines['f'], lines['line_repeatability']))
-                print(f'| {name} | {drho:g} | {dalpha:g} | {fig[0][0]:.3f} | {fig[1][0]:.3f} '
-                      f'| {fig[0][1]:.3f} | {fig[1][1]:.3f} | {fig[0][1] - fig[1][1]:.3f} |',
-                      flush=True)
+                print(f'| {name} | {100 * noise.sigma_r:.2f} | '
+                      f'{100 * gate_sigma(noise.sigma_r, noise.step, noise.step_share):.2f} | '
+                      f'{drho:g} | {dalpha:g} | '
+                      f'{fig[0][0]:.3f} | {fig[1][0]:.3f} | {fig[0][1]:.3f} | {fig[2][1]:.3f} '
+                      f'| {fig[1][1]:.3f} | {fig[0][1] - fig[1][1]:.3f} |', flush=True)
     return 0
 
 
