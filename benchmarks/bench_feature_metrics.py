@@ -61,7 +61,8 @@ ranges rounded to ``--step`` (5 cm: a quantised laser), scored as ``metrics`` do
 the range noise estimated from the scans (``split_merge`` lines); printed per log and line
 repeatability gate (``|d rho| <= --drho``, ``|d alpha| <= --dalpha`` deg, every pair) the
 quantised copy's estimated sigma_r and the std its gates use (``LineParams.gate_sigma_r``),
-the coverage f and the line repeatability of both and the repeatability's drop; between
+the coverage f, the fit RMS (on the ``metrics`` sample of 20 scans), the false-surface beams
+(all scans) and the line repeatability of both and the repeatability's drop; between
 them the repeatability of the unquantised log extracted with the quantised copy's settings
 (its sigma_r and rounding): the drop from the log to that column is what the settings
 cost, the rest what the rounded data lose. ``--misses``: how each opportunity ends, for
@@ -396,8 +397,9 @@ def line_misses(scans: list, noise, gate: tuple) -> dict:
 def run_quantised_lines(args) -> int:
     """Run ``quantised-lines``: line repeatability of a log and its quantised copy per gate."""
     print('| log | sigma_r [cm] | gate sigma [cm] | d rho gate [m] | d alpha gate [deg] | f | '
-          'f quantised | repeatability | at the quantised settings | quantised | drop |')
-    print('| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |')
+          'f quantised | fit RMS [cm] | quantised | false-surface beams | quantised | '
+          'repeatability | at the quantised settings | quantised | drop |')
+    print('|' + ' --- |' * 15)
     base = extractor_configuration('line_extractor')
     misses = ['\n| log | d rho gate [m] | d alpha gate [deg] | copy | opportunities | '
               're-detected | near, d rho | near, d alpha | within 4 gates | lost | '
@@ -426,11 +428,14 @@ def run_quantised_lines(args) -> int:
                                          corner_methods=('minus_cosine',), configs=configs,
                                          line_gate=(drho, math.radians(dalpha)))
                     lines = res['lines']['split_merge']
-                    fig.append((lines['f'], lines['line_repeatability']))
+                    fig.append((lines['f'], lines['line_repeatability'], lines['fit_rms_m'],
+                                lines['false_surface_beams']))
                 print(f'| {name} | {100 * noise.sigma_r:.2f} | '
                       f'{100 * gate_sigma(noise.sigma_r, noise.step, noise.step_share):.2f} | '
                       f'{drho:g} | {dalpha:g} | '
-                      f'{fig[0][0]:.3f} | {fig[1][0]:.3f} | {fig[0][1]:.3f} | {fig[2][1]:.3f} '
+                      f'{fig[0][0]:.3f} | {fig[1][0]:.3f} | {100 * fig[0][2]:.2f} | '
+                      f'{100 * fig[1][2]:.2f} | {fig[0][3]} | {fig[1][3]} | '
+                      f'{fig[0][1]:.3f} | {fig[2][1]:.3f} '
                       f'| {fig[1][1]:.3f} | {fig[0][1] - fig[1][1]:.3f} |', flush=True)
                 if args.misses:
                     for label, sc, nz in (('log', scans, own), ('quantised', rounded, noise)):
