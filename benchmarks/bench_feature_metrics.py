@@ -347,16 +347,20 @@ def line_misses(scans: list, noise, gate: tuple) -> dict:
     (a next-scan segment overlaps it within twice the gate; ``near d rho`` when only
     |d rho| is over the gate), ``within 4 gates`` or ``lost`` (none within four times the
     gate); ``near`` ones also by the line's incidence at its midpoint (0-15, 15-45, 45-90
-    deg).
+    deg). For those ``within 4 gates`` the medians of their length, beams and distance
+    (midpoint) and of |d rho|, |d alpha| to the nearest next-scan segment (``far ...``).
     """
     cfg = extractor_configuration('line_extractor')
     segmenter = ScanSegmenter(cfg.incidence_deg, cfg.min_points, noise.sigma_r)
     params = replace(cfg.params, sigma_r=noise.sigma_r, range_step=noise.step,
                      range_step_share=noise.step_share)
-    segs = []
+    segs, beams = [], []
     for s in scans:
         clusters = segmenter.segment(s.ranges, s.angles, s.valid, s.angle_increment)
-        segs.append(segments_of(extract_lines(clusters, params)).reshape(-1, 2, 2))
+        lines = extract_lines(clusters, params)
+        segs.append(segments_of(lines).reshape(-1, 2, 2))
+        beams.append([ln.num_points for ln in lines])
+    far = []  # (length, beams, distance, |d rho|, |d alpha|) of those within 4 gates
     out = dict.fromkeys(('opportunities', 're-detected', 'near d rho', 'near d alpha',
                          'within 4 gates', 'lost', 'near 0-15', 'near 15-45', 'near 45-90'), 0)
     for k in range(len(scans) - 1):
@@ -389,8 +393,16 @@ def line_misses(scans: list, noise, gate: tuple) -> dict:
                                else '45-90')] += 1
             elif np.any(overlap[a] & (d_rho[a] <= 4.0) & (d_alpha[a] <= 4.0)):
                 out['within 4 gates'] += 1
+                b = np.flatnonzero(overlap[a])[np.argmin(np.fmax(d_rho[a], d_alpha[a])[
+                    overlap[a]])]
+                far.append((math.hypot(*d[a]), beams[k][index[a]], math.hypot(*mid[a]),
+                            100 * gate[0] * d_rho[a, b], math.degrees(gate[1] * d_alpha[a, b])))
             else:
                 out['lost'] += 1
+    far = np.array(far).reshape(-1, 5)
+    for j, key in enumerate(('far length [m]', 'far beams', 'far distance [m]',
+                             'far |d rho| [cm]', 'far |d alpha| [deg]')):
+        out[key] = f'{np.median(far[:, j]):.3g}' if far.size else '-'
     return out
 
 
@@ -403,7 +415,8 @@ def run_quantised_lines(args) -> int:
     base = extractor_configuration('line_extractor')
     misses = ['\n| log | d rho gate [m] | d alpha gate [deg] | copy | opportunities | '
               're-detected | near, d rho | near, d alpha | within 4 gates | lost | '
-              'near at 0-15 deg | 15-45 deg | 45-90 deg |', '|' + ' --- |' * 13]
+              'near at 0-15 deg | 15-45 deg | 45-90 deg | within 4 gates: length [m] | '
+              'beams | distance [m] | d rho [cm] | d alpha [deg] |', '|' + ' --- |' * 18]
     for name, path in log_paths(args.data, args.logs):
         scans = carmen_metric_scans(path)
         rounded = []
