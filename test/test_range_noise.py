@@ -43,6 +43,7 @@ def test_quantised_ranges_have_the_step_floor():
     assert est.floor == pytest.approx(0.05 / math.sqrt(12), rel=1e-9)
     assert est.sigma_r >= est.floor
     assert 'range step 5 cm on 100 %' in est.describe()
+    assert f'line gates as for {100 * gate_sigma(est.sigma_r, 0.05):.2f} cm' in est.describe()
 
 
 def test_range_step_of_cm_readings_is_not_a_coarser_grid():

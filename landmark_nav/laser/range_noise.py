@@ -76,9 +76,10 @@ class RangeNoise:
 
     def describe(self) -> str:
         """Return e.g. ``'sigma_r 1.9 cm from the data (fits 1.8 cm over 5000 windows; ...)'``."""
+        gates = gate_sigma(self.sigma_r, self.step, self.step_share)
         step = (f'range step {100 * self.step:g} cm on {100 * self.step_share:.0f} % of the '
-                f'readings, floor {100 * self.floor:.2f} cm' if self.step else
-                'ranges not rounded to a step')
+                f'readings, floor {100 * self.floor:.2f} cm, line gates as for '
+                f'{100 * gates:.2f} cm' if self.step else 'ranges not rounded to a step')
         stated = f'; stated {100 * self.stated:.2f} cm' if self.stated else ''
         return (f'sigma_r {100 * self.sigma_r:.2f} cm from the data (local fits '
                 f'{100 * self.fit:.2f} cm over {self.windows} windows; {step}{stated})')
