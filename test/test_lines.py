@@ -456,7 +456,9 @@ def test_segment_builds_the_dataclass_fields():
                                          ({'merge_gap_angle': -0.1}, 'merge_gap_angle'),
                                          ({'min_length': float('inf')}, 'min_length'),
                                          ({'max_gradient': 0.0}, 'max_gradient'),
-                                         ({'trim_sigma': 0.0}, 'trim_sigma')])
+                                         ({'trim_sigma': 0.0}, 'trim_sigma'),
+                                         ({'range_step': -0.05}, 'range_step'),
+                                         ({'range_step_share': 1.5}, 'range_step_share')])
 def test_invalid_parameters_name_the_field(kwargs, name):
     with pytest.raises(ValueError, match=name):
         LineParams(**kwargs)
