@@ -9,7 +9,7 @@ Run from the repository root (needs ``../shared/data/carmen`` or ``--data DIR``)
     python benchmarks/bench_feature_metrics.py structural-rule [--data DIR]
         [--min-share 0.3] [LOG ...]
     python benchmarks/bench_feature_metrics.py quantised-lines [--data DIR] [--step 0.05]
-        [--drho 0.05 ...] [--dalpha 2 ...] [LOG ...]
+        [--drho 0.05 ...] [--dalpha 2 ...] [--misses] [LOG ...]
 
 A LOG is a log name in ``--data DIR`` (``aces`` -> ``DIR/aces-corrected.log.gz``; default
 the six Carmen logs) or a path to a Carmen log.
@@ -60,8 +60,13 @@ out; then the same choice over all logs (the shipped rule).
 ranges rounded to ``--step`` (5 cm: a quantised laser), scored as ``metrics`` does with
 the range noise estimated from the scans (``split_merge`` lines); printed per log and line
 repeatability gate (``|d rho| <= --drho``, ``|d alpha| <= --dalpha`` deg, every pair) the
-coverage f and the line repeatability of both and the repeatability's drop: does the
-metric's gate, rather than the extractor, make the quantised log's lines less repeatable?
+quantised copy's estimated sigma_r and the std its gates use (``LineParams.gate_sigma_r``),
+the coverage f, the fit RMS (on the ``metrics`` sample of 20 scans), the false-surface beams
+(all scans) and the line repeatability of both and the repeatability's drop; between
+them the repeatability of the unquantised log extracted with the quantised copy's settings
+(its sigma_r and rounding): the drop from the log to that column is what the settings
+cost, the rest what the rounded data lose. ``--misses``: how each opportunity ends, for
+the log and its copy (:func:`line_misses`).
 """
 
 from dataclasses import replace
@@ -76,18 +81,19 @@ from common import (add_logs_argument, log_paths, parse_set, run_subcommand,
                     subcommand_parser)
 from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_truth_free,
                                                   sensor_facts)
-from landmark_nav.evaluation.features import segment_per_extractor
+from landmark_nav.evaluation.features import normal_form, segment_per_extractor
 from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repeatability,
-                                                  evaluate_scans, MetricScan, ray_metrics,
-                                                  Repeatability, segments_of)
-from landmark_nav.geometry import transform_points
+                                                  evaluate_scans, line_opportunities,
+                                                  MetricScan, ray_metrics, Repeatability,
+                                                  segments_of)
+from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
 from landmark_nav.importers.carmen import read_carmen_scans
 from landmark_nav.importers.writer import import_log
 from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.extractor_configuration import (extractor_configuration,
                                                         ScanSegmenter)
 from landmark_nav.laser.lines import extract_lines, LineParams
-from landmark_nav.laser.range_noise import estimate_range_noise
+from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.tools.evaluate_features import format_scan_metrics
 import numpy as np
@@ -333,11 +339,84 @@ def run_structural_rule(args) -> int:
     return 0
 
 
+def line_misses(scans: list, noise, gate: tuple) -> dict:
+    """Return the ``split_merge`` line opportunities of ``scans`` and how they end.
+
+    Lines as ``evaluate_scans`` extracts them at the range noise ``noise`` (its sigma_r and
+    rounding); each opportunity of :func:`line_repeatability` is ``re-detected``, ``near``
+    (a next-scan segment overlaps it within twice the gate; ``near d rho`` when only
+    |d rho| is over the gate), ``within 4 gates`` or ``lost`` (none within four times the
+    gate); ``near`` ones also by the line's incidence at its midpoint (0-15, 15-45, 45-90
+    deg). For those ``within 4 gates`` the medians of their length, beams and distance
+    (midpoint) and of |d rho|, |d alpha| to the nearest next-scan segment (``far ...``).
+    """
+    cfg = extractor_configuration('line_extractor')
+    segmenter = ScanSegmenter(cfg.incidence_deg, cfg.min_points, noise.sigma_r)
+    params = replace(cfg.params, sigma_r=noise.sigma_r, range_step=noise.step,
+                     range_step_share=noise.step_share)
+    segs, beams = [], []
+    for s in scans:
+        clusters = segmenter.segment(s.ranges, s.angles, s.valid, s.angle_increment)
+        lines = extract_lines(clusters, params)
+        segs.append(segments_of(lines).reshape(-1, 2, 2))
+        beams.append([ln.num_points for ln in lines])
+    far = []  # (length, beams, distance, |d rho|, |d alpha|) of those within 4 gates
+    out = dict.fromkeys(('opportunities', 're-detected', 'near d rho', 'near d alpha',
+                         'within 4 gates', 'lost', 'near 0-15', 'near 15-45', 'near 45-90'), 0)
+    for k in range(len(scans) - 1):
+        index, world = line_opportunities(segs[k], scans[k].pose, scans[k + 1])
+        out['opportunities'] += int(index.size)
+        if not index.size:
+            continue
+        mine = inverse_transform_points(scans[k + 1].pose,
+                                        world.reshape(-1, 2)).reshape(-1, 2, 2)
+        other = segs[k + 1]
+        f_k, f_n = normal_form(mine[:, 0], mine[:, 1]), normal_form(other[:, 0], other[:, 1])
+        d_rho = np.abs(f_k[:, None, 0] - f_n[None, :, 0]) / gate[0]
+        d_alpha = np.abs(wrap_angle(f_k[:, None, 1] - f_n[None, :, 1])) / gate[1]
+        d = mine[:, 1] - mine[:, 0]
+        t = np.einsum('bej,aj->abe', other, d)
+        t -= np.einsum('aj,aj->a', mine[:, 0], d)[:, None, None]
+        t /= np.einsum('ij,ij->i', d, d)[:, None, None]
+        overlap = (t.max(axis=2) > 0.0) & (t.min(axis=2) < 1.0)
+        mid = inverse_transform_points(scans[k].pose, world.mean(axis=1))
+        incidence = np.degrees(np.abs(wrap_angle(np.arctan2(mid[:, 1], mid[:, 0])
+                                                 - normal_form(segs[k][index, 0],
+                                                               segs[k][index, 1])[:, 1])))
+        incidence = np.minimum(incidence, 180.0 - incidence)
+        for a in range(index.size):
+            if np.any(overlap[a] & (d_rho[a] <= 1.0) & (d_alpha[a] <= 1.0)):
+                out['re-detected'] += 1
+            elif np.any(near := overlap[a] & (d_rho[a] <= 2.0) & (d_alpha[a] <= 2.0)):
+                out['near d alpha' if np.any(near & (d_alpha[a] > 1.0)) else 'near d rho'] += 1
+                out['near ' + ('0-15' if incidence[a] < 15 else '15-45' if incidence[a] < 45
+                               else '45-90')] += 1
+            elif np.any(overlap[a] & (d_rho[a] <= 4.0) & (d_alpha[a] <= 4.0)):
+                out['within 4 gates'] += 1
+                b = np.flatnonzero(overlap[a])[np.argmin(np.fmax(d_rho[a], d_alpha[a])[
+                    overlap[a]])]
+                far.append((math.hypot(*d[a]), beams[k][index[a]], math.hypot(*mid[a]),
+                            100 * gate[0] * d_rho[a, b], math.degrees(gate[1] * d_alpha[a, b])))
+            else:
+                out['lost'] += 1
+    far = np.array(far).reshape(-1, 5)
+    for j, key in enumerate(('far length [m]', 'far beams', 'far distance [m]',
+                             'far |d rho| [cm]', 'far |d alpha| [deg]')):
+        out[key] = f'{np.median(far[:, j]):.3g}' if far.size else '-'
+    return out
+
+
 def run_quantised_lines(args) -> int:
     """Run ``quantised-lines``: line repeatability of a log and its quantised copy per gate."""
-    print('| log | d rho gate [m] | d alpha gate [deg] | f | f quantised | repeatability | '
-          'quantised | drop |')
-    print('| --- | --- | --- | --- | --- | --- | --- | --- |')
+    print('| log | sigma_r [cm] | gate sigma [cm] | d rho gate [m] | d alpha gate [deg] | f | '
+          'f quantised | fit RMS [cm] | quantised | false-surface beams | quantised | '
+          'repeatability | at the quantised settings | quantised | drop |')
+    print('|' + ' --- |' * 15)
+    base = extractor_configuration('line_extractor')
+    misses = ['\n| log | d rho gate [m] | d alpha gate [deg] | copy | opportunities | '
+              're-detected | near, d rho | near, d alpha | within 4 gates | lost | '
+              'near at 0-15 deg | 15-45 deg | 45-90 deg | within 4 gates: length [m] | '
+              'beams | distance [m] | d rho [cm] | d alpha [deg] |', '|' + ' --- |' * 18]
     for name, path in log_paths(args.data, args.logs):
         scans = carmen_metric_scans(path)
         rounded = []
@@ -345,19 +424,39 @@ def run_quantised_lines(args) -> int:
             r = np.where(np.isfinite(s.ranges), np.round(s.ranges / args.step) * args.step,
                          s.ranges)
             rounded.append(replace(s, ranges=r, valid=s.valid & (r > 0.0)))
+        noise = estimate_range_noise(((s.ranges, s.angles, s.valid)
+                                      for s in rounded), stated=0.01)
+        own = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans), stated=0.01)
+        # the quantised log's extractor settings (its noise and rounding) on the log itself
+        settings = replace(base, params=replace(base.params, range_step=noise.step,
+                                                range_step_share=noise.step_share))
         for drho in args.drho:
             for dalpha in args.dalpha:
                 fig = []
-                for sc in (scans, rounded):
-                    res = evaluate_scans(sc, extractor_sigma_r='auto',
+                for sc, sigma, configs in ((scans, 'auto', None), (rounded, 'auto', None),
+                                           (scans, noise.sigma_r,
+                                            {'line_extractor': settings})):
+                    res = evaluate_scans(sc, extractor_sigma_r=sigma,
                                          line_methods=('split_merge',),
-                                         corner_methods=('minus_cosine',),
+                                         corner_methods=('minus_cosine',), configs=configs,
                                          line_gate=(drho, math.radians(dalpha)))
                     lines = res['lines']['split_merge']
-                    fig.append((lines['f'], lines['line_repeatability']))
-                print(f'| {name} | {drho:g} | {dalpha:g} | {fig[0][0]:.3f} | {fig[1][0]:.3f} '
-                      f'| {fig[0][1]:.3f} | {fig[1][1]:.3f} | {fig[0][1] - fig[1][1]:.3f} |',
-                      flush=True)
+                    fig.append((lines['f'], lines['line_repeatability'], lines['fit_rms_m'],
+                                lines['false_surface_beams']))
+                print(f'| {name} | {100 * noise.sigma_r:.2f} | '
+                      f'{100 * gate_sigma(noise.sigma_r, noise.step, noise.step_share):.2f} | '
+                      f'{drho:g} | {dalpha:g} | '
+                      f'{fig[0][0]:.3f} | {fig[1][0]:.3f} | {100 * fig[0][2]:.2f} | '
+                      f'{100 * fig[1][2]:.2f} | {fig[0][3]} | {fig[1][3]} | '
+                      f'{fig[0][1]:.3f} | {fig[2][1]:.3f} '
+                      f'| {fig[1][1]:.3f} | {fig[0][1] - fig[1][1]:.3f} |', flush=True)
+                if args.misses:
+                    for label, sc, nz in (('log', scans, own), ('quantised', rounded, noise)):
+                        found = line_misses(sc, nz, (drho, math.radians(dalpha)))
+                        misses.append(f'| {name} | {drho:g} | {dalpha:g} | {label} | '
+                                      + ' | '.join(map(str, found.values())) + ' |')
+    if args.misses:
+        print('\n'.join(misses))
     return 0
 
 
@@ -391,6 +490,9 @@ def main(argv=None) -> int:
                    help='repeatability gates on |d rho| [m] (the metric: 0.05)')
     p.add_argument('--dalpha', type=float, nargs='+', default=[2.0],
                    help='repeatability gates on |d alpha| [deg] (the metric: 2)')
+    p.add_argument('--misses', action='store_true',
+                   help='also how the opportunities end: re-detected, near (within twice '
+                        'the gate), within four times the gate, or lost')
     p.set_defaults(run=run_quantised_lines)
     p = sub.add_parser('structural-rule',
                        help="how Corner.structural's bounds were chosen (leave one log out)")

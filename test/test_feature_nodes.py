@@ -246,7 +246,7 @@ def test_line_extractor_replays_the_office_bag():
 @pytest.mark.dds
 def test_line_extractor_estimates_the_range_noise_when_asked():
     # the office scans rounded to 5 cm: the node's lines are those of the extractor at the
-    # noise the tracker measures on the scans so far (more than the stated 1 cm)
+    # noise and rounding the tracker measures on the scans so far (more than the stated 1 cm)
     from landmark_nav.laser.lines import extract_lines
     from landmark_nav.laser.range_noise import RangeNoiseTracker
     from landmark_nav.nodes.line_extractor import LineExtractor
@@ -267,9 +267,12 @@ def test_line_extractor_estimates_the_range_noise_when_asked():
     tracker = RangeNoiseTracker(3, stated=params.sigma_r)
     for scan, cloud in zip(scans, clouds):
         data = scan_to_data(scan)
-        sigma = tracker.add(data.ranges, data.angles, data.valid).sigma_r
+        noise = tracker.add(data.ranges, data.angles, data.valid)
+        sigma = noise.sigma_r
         assert sigma > 0.014  # at least the 5 cm step's q / sqrt(12)
-        at = replace(params, sigma_r=sigma)
+        assert noise.step == 0.05  # and the rounding, for the gates
+        at = replace(params, sigma_r=sigma, range_step=noise.step,
+                     range_step_share=noise.step_share)
         expected = extract_lines(segment_scan(data.ranges, data.angles, data.valid,
                                               data.angle_increment, 10.0, sigma, 5), at)
         fields = feature_cloud_to_arrays(cloud)

@@ -2,7 +2,7 @@
 
 import math
 
-from landmark_nav.laser.range_noise import estimate_range_noise, range_step, \
+from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma, range_step, \
     RangeNoiseTracker, window_variances
 import numpy as np
 import pytest
@@ -43,6 +43,7 @@ def test_quantised_ranges_have_the_step_floor():
     assert est.floor == pytest.approx(0.05 / math.sqrt(12), rel=1e-9)
     assert est.sigma_r >= est.floor
     assert 'range step 5 cm on 100 %' in est.describe()
+    assert f'line gates as for {100 * gate_sigma(est.sigma_r, 0.05):.2f} cm' in est.describe()
 
 
 def test_range_step_of_cm_readings_is_not_a_coarser_grid():
@@ -119,3 +120,25 @@ def test_quantised_real_log_keeps_its_walls_with_the_estimate():
     _, f_fixed, _ = figures(None, None)
     _, f_q_fixed, _ = figures(0.05, None)
     assert f_fixed - f_q_fixed > 0.05
+
+
+@pytest.mark.parametrize('sigma_0, step, share', [(0.01, 0.05, 1.0), (0.003, 0.05, 1.0),
+                                                  (0.01, 0.05, 0.8), (0.0, 0.05, 1.0)])
+def test_gate_sigma_holds_the_rounded_errors_tail(sigma_0, step, share):
+    # 2e6 draws of the error of a reading rounded to `step` (a share of them) on sensor noise
+    # sigma_0: 3 gate sigmas hold all but 2 Q(3) = 0.270 % of them (binomial sd 0.004 %)
+    rng = np.random.default_rng(0)
+    n = 2_000_000
+    rounded = np.where(rng.random(n) < share, rng.uniform(-step / 2, step / 2, n), 0.0)
+    e = rng.normal(0.0, sigma_0, n) + rounded
+    sigma_r = math.sqrt(sigma_0 ** 2 + share * step ** 2 / 12.0)
+    g = gate_sigma(sigma_r, step, share)
+    assert g < sigma_r
+    assert np.mean(np.abs(e) > 3.0 * g) == pytest.approx(0.0027, abs=0.00015)
+    assert gate_sigma(sigma_r) == sigma_r  # not rounded: the Gaussian's own
+
+
+def test_gate_sigma_of_5cm_steps_on_1cm_noise():
+    # the figure the docs quote: 99.73 % of the errors within 4.6 cm, not 3 x 1.76 cm
+    assert 3.0 * gate_sigma(math.sqrt(0.01 ** 2 + 0.05 ** 2 / 12), 0.05) == pytest.approx(
+        0.04585, abs=5e-5)

@@ -597,7 +597,8 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
             ``sigma_r`` as its lower bound
             (:func:`landmark_nav.laser.range_noise.estimate_range_noise`, stated in the
             result's ``extractor_sigma_r_estimate``); the false-surface margin then uses
-            the estimate too (the sensor's noise as its data shows it).
+            the estimate too (the sensor's noise as its data shows it), and the line
+            extractors' gates the rounding it finds (``LineParams.range_step``).
         progress: Label of a tqdm progress bar, or None for none.
         configs: The nodes' configurations by node name (see above).
         line_gate: ``(max_drho [m], max_dalpha [rad])`` of :func:`line_repeatability`.
@@ -634,7 +635,10 @@ def evaluate_scans(scans: Sequence[MetricScan], sigma_r: float = 0.01,
                   for kind, c in (('corners', configs['corner_extractor']),
                                   ('lines', configs['line_extractor']))}
     line_base = configs['line_extractor'].params
-    line_params = {m: replace(line_base, method=m, sigma_r=ext['line_extractor'])
+    rounding = {}  # the readings' rounding, for the gates of an estimated noise
+    if spec.get('line_extractor') == 'auto':
+        rounding = {'range_step': estimate.step, 'range_step_share': estimate.step_share}
+    line_params = {m: replace(line_base, method=m, sigma_r=ext['line_extractor'], **rounding)
                    for m in line_methods}
     corner_params = {m: replace(configs['corner_extractor'].params, method=m,
                                 sigma_r=ext['corner_extractor']) for m in corner_methods}

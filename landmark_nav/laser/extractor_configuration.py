@@ -117,6 +117,7 @@ class ScanSegmenter:
         self.incidence_deg = incidence_deg
         self.min_points = min_points
         self.sigma_r = sigma_r  # the range noise of the latest scan
+        self.range_step = (0.0, 1.0)  # the readings' rounding (step, share) in that noise
         self.noise = RangeNoiseTracker(noise_scans, stated=sigma_r) if from_data else None
 
     @classmethod
@@ -132,7 +133,9 @@ class ScanSegmenter:
     def track(self, ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray) -> float:
         """Take one scan into the range noise; return the noise of this scan [m]."""
         if self.noise is not None:
-            self.sigma_r = self.noise.add(ranges, angles, valid).sigma_r
+            estimate = self.noise.add(ranges, angles, valid)
+            self.sigma_r = estimate.sigma_r
+            self.range_step = (estimate.step, estimate.step_share)
         return self.sigma_r
 
     def segment(self, ranges: np.ndarray, angles: np.ndarray, valid: np.ndarray,
@@ -142,7 +145,18 @@ class ScanSegmenter:
                             self.sigma_r, self.min_points)
 
     def at_scan_noise(self, params):
-        """Return extractor ``params`` with ``sigma_r`` the range noise of the latest scan."""
+        """Return extractor ``params`` with ``sigma_r`` the range noise of the latest scan.
+
+        Line parameters also get the readings' rounding found with it (``range_step``,
+        ``range_step_share``: the gates' noise model) when the noise is estimated.
+        """
+        if isinstance(params, LineParams) and self.noise is not None:
+            step, share = self.range_step
+            if (params.sigma_r, params.range_step, params.range_step_share) != (
+                    self.sigma_r, step, share):
+                return replace(params, sigma_r=self.sigma_r, range_step=step,
+                               range_step_share=share)
+            return params
         if params.sigma_r == self.sigma_r:
             return params
         return replace(params, sigma_r=self.sigma_r)

@@ -144,7 +144,7 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
     xs, ys, rng, cps, sps = scan.rows()[:_TOL]
     ox, oy = scan.origin
-    sr, sp_ = params.sigma_r, params.sigma_phi
+    sr, sp_ = params.gate_sigma_r, params.sigma_phi
     gate = params.trim_sigma
     reach = params.min_points
 
@@ -205,5 +205,5 @@ def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.nda
     d = x * nx + y * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
-    var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
+    var = (params.gate_sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
     return np.abs(d) / np.sqrt(np.maximum(var, 1e-24))

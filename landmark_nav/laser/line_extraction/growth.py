@@ -62,7 +62,7 @@ def _grow(scan: _Scan, feats: np.ndarray, sums: np.ndarray, first: np.ndarray,
     d = (x + ox) * nx + (y + oy) * ny - rho
     n_u = nx * cp + ny * sp
     n_v = ny * cp - nx * sp
-    var = (params.sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
+    var = (params.gate_sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
     ok = has.repeat(size_g, axis=1) & (d * d <= gate * gate * var) & (np.abs(d) <= tol)
     # Bearing steps: step[i] is the step from point i - 1 to i (True at both scan ends);
     # row 0 steps onto each point, row 1 off it.
@@ -99,7 +99,7 @@ def _grow_runs_py(scan: _Scan, f: _Fit, first: List[int], last: List[int],
     rhos, _, nxs, nys = f.params.tolist()
     ox, oy = scan.origin
     gg = params.trim_sigma * params.trim_sigma
-    sr, sp_ = params.sigma_r, params.sigma_phi
+    sr, sp_ = params.gate_sigma_r, params.sigma_phi
     angle = params.merge_gap_angle
     n_pts, n_lines = len(xs), len(first)
 

@@ -69,7 +69,7 @@ def _occluded_extents(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
         return same
     r, cos_in = r[hit], cos_in[hit]
     c2 = cos_in * cos_in
-    var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
+    var = params.gate_sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
     hit = hit[front[hit] > params.see_through_tolerance + 3.0 * np.sqrt(var)]
     if hit.size < 2:
         return same

@@ -4,6 +4,7 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Tuple
 
+from landmark_nav.laser.range_noise import gate_sigma
 import numpy as np
 
 
@@ -45,6 +46,11 @@ class LineParams:
             (step 5, :func:`_join_occluded`); their segments then share it. False: each
             side is fitted on its own beams (independent measurements, as a filter that
             maps each segment as a landmark with its extent needs).
+        range_step: Range quantisation q of the readings [m] (0: not rounded), e.g. found
+            by :func:`~landmark_nav.laser.range_noise.estimate_range_noise`; ``sigma_r``
+            then includes the rounding (>= q / sqrt(12)). The gates use
+            :attr:`gate_sigma_r`, the covariances ``sigma_r``.
+        range_step_share: Share of the readings on the ``range_step`` grid.
 
     """
 
@@ -65,6 +71,8 @@ class LineParams:
     merge_gap_angle: float = math.radians(5.0)
     see_through: Optional[float] = None
     join_occluded: bool = True
+    range_step: float = 0.0
+    range_step_share: float = 1.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the bad parameter."""
@@ -120,22 +128,38 @@ class LineParams:
             raise bad('see_through', 'None or a number > 0')
         if not isinstance(self.join_occluded, (bool, np.bool_)):
             raise bad('join_occluded', 'a bool')
+        if not (number(self.range_step) and math.isfinite(self.range_step)
+                and self.range_step >= 0):
+            raise bad('range_step', 'a number >= 0')
+        if not (number(self.range_step_share) and 0 <= self.range_step_share <= 1):
+            raise bad('range_step_share', 'a number in [0, 1]')
         if not (number(self.trim_sigma) and self.trim_sigma > 0):
             raise bad('trim_sigma', 'a number > 0 (inf disables the clean-up)')
+
+    @property
+    def gate_sigma_r(self) -> float:
+        """Return the range noise std the gates use [m] (``sigma_r`` unless rounded).
+
+        Rounded readings (``range_step``) have lighter tails than a Gaussian of std
+        ``sigma_r``: the std whose 3-sigma gate has the rounded error's tail
+        (:func:`~landmark_nav.laser.range_noise.gate_sigma`).
+        """
+        return gate_sigma(float(self.sigma_r), float(self.range_step),
+                          float(self.range_step_share))
 
     @property
     def threshold(self) -> float:
         """Return the split tolerance at zero range [m]."""
         if self.split_threshold is not None:
             return float(self.split_threshold)
-        return max(0.03, 4.0 * self.sigma_r)
+        return max(0.03, 4.0 * self.gate_sigma_r)
 
     @property
     def see_through_tolerance(self) -> float:
         """Return the see-through tolerance [m] (``see_through`` or its default)."""
         if self.see_through is not None:
             return float(self.see_through)
-        return max(3.0 * self.sigma_r, 0.05)
+        return max(3.0 * self.gate_sigma_r, 0.05)
 
     @property
     def rmse_bounds(self) -> Tuple[float, float]:

@@ -71,7 +71,7 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
         return line[:0], idx[:0], np.zeros(0, dtype=bool)
     line, idx = line[bad], idx[bad]
     if bad.size <= _SEEN_PY:  # the opening test on Python floats (the same operations)
-        sr2, sp = params.sigma_r ** 2, params.sigma_phi
+        sr2, sp = params.gate_sigma_r ** 2, params.sigma_phi
         opening = []
         for b, rr, c in zip(*np.array((beyond, r, cos_in)).take(bad, axis=1).tolist()):
             t, c2 = rr * sp, c * c
@@ -79,7 +79,7 @@ def _seen_through(scan: _Scan, f: _Fit, first: np.ndarray, last: np.ndarray,
         return line, idx, np.array(opening, dtype=bool)
     beyond, r, cos_in = beyond[bad], r[bad], cos_in[bad]
     c2 = cos_in * cos_in
-    var = params.sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
+    var = params.gate_sigma_r ** 2 + (r * params.sigma_phi) ** 2 * (1.0 - c2) / c2
     return line, idx, beyond > tol + 3.0 * np.sqrt(var)
 
 
