@@ -81,6 +81,26 @@ def office_demo(run_once) -> Tuple[str, Path]:
     return run_once('office_demo', lambda out: run_demo(REPO / 'bags' / 'office', out))
 
 
+@pytest.fixture(scope='session')
+def carmen_evaluation(run_once) -> Tuple[Tuple[dict, dict], Path]:
+    """Return ``((per-topic counts, figures), folder)``: a real log evaluated once per test run.
+
+    ``import_log`` of the Freiburg 101 CARMEN log into ``folder / 'bag'`` and
+    ``evaluate_bag`` of that bag with its defaults (files and plots in ``folder / 'out'``);
+    test_evaluate_slam.py and test_trajectory.py check the same run.
+    """
+    from landmark_nav.evaluation.slam import evaluate_bag
+    from landmark_nav.importers import import_log
+    from landmark_nav.testing import shared_data
+
+    def compute(out: Path) -> Tuple[dict, dict]:
+        imported = import_log(shared_data('carmen', 'freiburg-101-corrected.log.gz'),
+                              out / 'bag')
+        return dict(imported.counts), evaluate_bag(out / 'bag', out_dir=out / 'out',
+                                                   progress=False)
+    return run_once('carmen_evaluate', compute)
+
+
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
 
 

@@ -254,14 +254,12 @@ def test_evaluate_imported_wean_log_without_reference(tmp_path, capsys):
     assert fit['slam']['poses_unknown'] == 0
 
 
-def test_evaluate_imported_carmen_log(tmp_path):
+def test_evaluate_imported_carmen_log(carmen_evaluation):
     """A real log through ``landmark_nav import``: the facts come from the bag's custom_data."""
-    log = shared_data('carmen', 'freiburg-101-corrected.log.gz')
-    imported = import_log(log, tmp_path / 'bag')
-    r = evaluate_bag(tmp_path / 'bag', out_dir=tmp_path / 'out', progress=False)
+    (counts, r), folder = carmen_evaluation
     assert r['simulator_truth'] is False and r['reference'] == '/ground_truth/odom'
     assert r['laser_mount'] == [-0.04, 0.0, 0.0] and r['laser_sigma_range'] == 0.01
-    assert r['scans'] == imported.counts['/scan'] == r['ate_se2_pairs']
+    assert r['scans'] == counts['/scan'] == r['ate_se2_pairs']
     assert r['true_visible'] is None and r['wrong_associations'] is None
     assert f'{r["resets"]} filter resets' in format_summary(r)
     assert sum(r['reset_reasons'].values()) == r['resets']
@@ -273,7 +271,7 @@ def test_evaluate_imported_carmen_log(tmp_path):
     assert (noise['sigma_xy_per_sqrt_m'], noise['sigma_yaw_per_sqrt_m'],
             noise['sigma_yaw_per_sqrt_rad']) == (0.05, 0.05, 0.1)
     for name in FILES:
-        assert (tmp_path / 'out' / name).stat().st_size > 0, name
+        assert (folder / 'out' / name).stat().st_size > 0, name
 
 
 def test_laser_facts_precedence(tmp_path):
