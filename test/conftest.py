@@ -101,6 +101,35 @@ def carmen_evaluation(run_once) -> Tuple[Tuple[dict, dict], Path]:
     return run_once('carmen_evaluate', compute)
 
 
+@pytest.fixture(scope='session')
+def hallway_localization(run_once) -> Callable[[int], dict]:
+    """Return ``get(seed)``: a simulated hallway and its sonar localization, once per test run.
+
+    The protocol of ``hallway_study``, test_loc_accuracy.py and test_loc_nees.py: the map
+    ``rasterize_world(world, 0.1)``, the start drawn from ``CHAPTER_P0`` with generator seed
+    ``1000 + seed``, the EKF and the UKF through ``run_localization``. ``get`` gives
+    ``inp`` (the LocalizationInput), ``grid``, ``path_length``, ``i0`` (the first motion),
+    ``x0`` and per filter (``'ekf'``, ``'ukf'``) ``(trajectory, covariances)``.
+    """
+    from landmark_nav.evaluation.localization import (CHAPTER_P0, draw_initial_pose,
+                                                      first_motion_index, LocalizationInput,
+                                                      run_localization)
+    from landmark_nav.localization.grid import rasterize_world
+    from landmark_nav.sim import run_scenario
+
+    def compute(seed: int) -> dict:
+        res = run_scenario('hallway', seed)
+        inp = LocalizationInput.from_result(res)
+        grid = rasterize_world(res.world, 0.1)
+        x0 = draw_initial_pose(inp.truth[0], CHAPTER_P0, 1000 + seed)
+        out = {'inp': inp, 'grid': grid, 'path_length': float(res.path_length),
+               'i0': first_motion_index(inp.truth), 'x0': x0}
+        for filt in ('ekf', 'ukf'):
+            out[filt] = run_localization(res, filt, grid, x0, CHAPTER_P0)
+        return out
+    return lambda seed: run_once(f'hallway_localization_{seed}', lambda _: compute(seed))[0]
+
+
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
 
 
