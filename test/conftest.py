@@ -130,6 +130,20 @@ def hallway_localization(run_once) -> Callable[[int], dict]:
     return lambda seed: run_once(f'hallway_localization_{seed}', lambda _: compute(seed))[0]
 
 
+@pytest.fixture(scope='session')
+def hallway_bag_localization(run_once) -> Tuple[dict, Path]:
+    """Return ``({filter: result}, folder)``: ``evaluate_localization`` of bags/hallway.
+
+    The EKF and the UKF with the defaults, their files written into ``folder``: the
+    ``localization`` run of bags/hallway/expected.yaml, once per test run for
+    test_golden.py and test_localization_tools.py.
+    """
+    from landmark_nav.evaluation.localization_bags import evaluate_localization
+    bag = REPO / 'bags' / 'hallway'
+    return run_once('hallway_bag_localization', lambda out: {
+        filt: evaluate_localization(bag, filt, out_dir=out) for filt in ('ekf', 'ukf')})
+
+
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
 
 
