@@ -182,8 +182,7 @@ LONGEST_FILES = (
     'test_false_surfaces.py', 'test_sonar_localizer_node.py', 'test_protocol_p2os.py',
     'test_landmarks_real.py', 'test_protocol_scip2.py', 'test_york_vanishing_points.py',
     'test_landmark_pose.py', 'test_emulator_robot.py', 'test_slam_consistency.py',
-    'test_vision_landmark.py', 'test_localization_tools.py', 'test_evaluate_features_params.py',
-    'test_trajectory.py')
+    'test_vision_landmark.py', 'test_evaluate_features_params.py', 'test_trajectory.py')
 
 
 def pytest_collection_modifyitems(items):
