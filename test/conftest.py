@@ -81,6 +81,69 @@ def office_demo(run_once) -> Tuple[str, Path]:
     return run_once('office_demo', lambda out: run_demo(REPO / 'bags' / 'office', out))
 
 
+@pytest.fixture(scope='session')
+def carmen_evaluation(run_once) -> Tuple[Tuple[dict, dict], Path]:
+    """Return ``((per-topic counts, figures), folder)``: a real log evaluated once per test run.
+
+    ``import_log`` of the Freiburg 101 CARMEN log into ``folder / 'bag'`` and
+    ``evaluate_bag`` of that bag with its defaults (files and plots in ``folder / 'out'``);
+    test_evaluate_slam.py and test_trajectory.py check the same run.
+    """
+    from landmark_nav.evaluation.slam import evaluate_bag
+    from landmark_nav.importers import import_log
+    from landmark_nav.testing import shared_data
+
+    def compute(out: Path) -> Tuple[dict, dict]:
+        imported = import_log(shared_data('carmen', 'freiburg-101-corrected.log.gz'),
+                              out / 'bag')
+        return dict(imported.counts), evaluate_bag(out / 'bag', out_dir=out / 'out',
+                                                   progress=False)
+    return run_once('carmen_evaluate', compute)
+
+
+@pytest.fixture(scope='session')
+def hallway_localization(run_once) -> Callable[[int], dict]:
+    """Return ``get(seed)``: a simulated hallway and its sonar localization, once per test run.
+
+    The protocol of ``hallway_study``, test_loc_accuracy.py and test_loc_nees.py: the map
+    ``rasterize_world(world, 0.1)``, the start drawn from ``CHAPTER_P0`` with generator seed
+    ``1000 + seed``, the EKF and the UKF through ``run_localization``. ``get`` gives
+    ``inp`` (the LocalizationInput), ``grid``, ``path_length``, ``i0`` (the first motion),
+    ``x0`` and per filter (``'ekf'``, ``'ukf'``) ``(trajectory, covariances)``.
+    """
+    from landmark_nav.evaluation.localization import (CHAPTER_P0, draw_initial_pose,
+                                                      first_motion_index, LocalizationInput,
+                                                      run_localization)
+    from landmark_nav.localization.grid import rasterize_world
+    from landmark_nav.sim import run_scenario
+
+    def compute(seed: int) -> dict:
+        res = run_scenario('hallway', seed)
+        inp = LocalizationInput.from_result(res)
+        grid = rasterize_world(res.world, 0.1)
+        x0 = draw_initial_pose(inp.truth[0], CHAPTER_P0, 1000 + seed)
+        out = {'inp': inp, 'grid': grid, 'path_length': float(res.path_length),
+               'i0': first_motion_index(inp.truth), 'x0': x0}
+        for filt in ('ekf', 'ukf'):
+            out[filt] = run_localization(res, filt, grid, x0, CHAPTER_P0)
+        return out
+    return lambda seed: run_once(f'hallway_localization_{seed}', lambda _: compute(seed))[0]
+
+
+@pytest.fixture(scope='session')
+def hallway_bag_localization(run_once) -> Tuple[dict, Path]:
+    """Return ``({filter: result}, folder)``: ``evaluate_localization`` of bags/hallway.
+
+    The EKF and the UKF with the defaults, their files written into ``folder``: the
+    ``localization`` run of bags/hallway/expected.yaml, once per test run for
+    test_golden.py and test_localization_tools.py.
+    """
+    from landmark_nav.evaluation.localization_bags import evaluate_localization
+    bag = REPO / 'bags' / 'hallway'
+    return run_once('hallway_bag_localization', lambda out: {
+        filt: evaluate_localization(bag, filt, out_dir=out) for filt in ('ekf', 'ukf')})
+
+
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
 
 
@@ -101,19 +164,25 @@ if _CPU_LOG:  # where the suite's CPU goes: LANDMARK_NAV_TEST_CPU=FILE make test
             log.write(f'{item.nodeid}\t{_cpu_seconds() - start:.3f}\n')
 
 
-#: the files that cost the most CPU, most first (``pytest -n 4 --dist loadfile
-#: --durations=0 test``, summed per file; the first ten measured alone with ``/usr/bin/time``:
-#: slam_ambiguous 71 CPU-s, ekf_slam_node 59, landmark_repeatability 58, corridor_frame 49,
-#: slam_landmark_types 44, landmark_detection_rates 35, flake8 34, landmark_shuttle 30); a
-#: file missing from the list only runs later
+#: the files that cost the most CPU, most first: CPU seconds per file of
+#: ``LANDMARK_NAV_TEST_CPU=FILE make test`` (each test's CPU, its module fixtures and the
+#: runs it computes for others included) on 2 cores: evaluate_slam 82, benchmarks 53,
+#: slam_ambiguous 50, golden 50, ekf_slam_node 47, road_fusion 45, landmark_repeatability 44,
+#: node_runtime 39, corridor_frame 37, slam_landmark_types 36, flake8 29 ...
+#: evaluate_features_params 10.7, trajectory 10 (the Freiburg run it shares with
+#: evaluate_slam computed there); a file missing from the list only runs later
 LONGEST_FILES = (
-    'test_slam_ambiguous.py', 'test_ekf_slam_node.py', 'test_landmark_repeatability.py',
-    'test_corridor_frame.py', 'test_slam_landmark_types.py', 'test_loc_accuracy.py',
-    'test_landmark_detection_rates.py', 'test_flake8.py', 'test_landmark_shuttle.py',
-    'test_evaluate_slam.py', 'test_golden.py', 'test_monocular.py', 'test_slam_office.py',
-    'test_road_fusion.py', 'test_york_vanishing_points.py', 'test_vision_landmark.py',
-    'test_protocol_lms2xx.py', 'test_localization_tools.py', 'test_corridor_follower_node.py',
-    'test_record.py', 'test_sonar_localizer_node.py', 'test_pep257.py')
+    'test_evaluate_slam.py', 'test_benchmarks.py', 'test_slam_ambiguous.py', 'test_golden.py',
+    'test_ekf_slam_node.py', 'test_road_fusion.py', 'test_landmark_repeatability.py',
+    'test_node_runtime.py', 'test_corridor_frame.py', 'test_slam_landmark_types.py',
+    'test_flake8.py', 'test_loc_accuracy.py', 'test_pipeline.py',
+    'test_landmark_detection_rates.py', 'test_monocular.py', 'test_landmark_shuttle.py',
+    'test_protocol_lms2xx.py', 'test_cli.py', 'test_loc_nees.py', 'test_stop_signals.py',
+    'test_corridor_follower_node.py', 'test_record.py', 'test_slam_office.py',
+    'test_false_surfaces.py', 'test_sonar_localizer_node.py', 'test_protocol_p2os.py',
+    'test_landmarks_real.py', 'test_protocol_scip2.py', 'test_york_vanishing_points.py',
+    'test_landmark_pose.py', 'test_emulator_robot.py', 'test_slam_consistency.py',
+    'test_vision_landmark.py', 'test_evaluate_features_params.py', 'test_trajectory.py')
 
 
 def pytest_collection_modifyitems(items):

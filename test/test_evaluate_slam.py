@@ -2,6 +2,7 @@
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 from landmark_nav.bag import BagError, BagReader, BagWriter
 from landmark_nav.conversions import make_odometry, odometry_to_pose
@@ -12,10 +13,11 @@ from landmark_nav.evaluation.slam import (bag_odometry_noise, evaluate_bag, form
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
 from landmark_nav.importers import import_log
-from landmark_nav.laser.corners import CornerParams
+from landmark_nav.sim import ScanSample
 from landmark_nav.slam.configuration import CHAPTER
-from landmark_nav.slam.ekf_slam import EkfSlam, SlamParams
+from landmark_nav.slam.ekf_slam import CORNER, EkfSlam, LINE, SlamParams
 from landmark_nav.slam.frontend import FrontendParams
+from landmark_nav.slam.slam_map import load_map
 from landmark_nav.testing import shared_data
 from landmark_nav.tools.cli import main as cli_main
 from landmark_nav.tools.demo import chapter_config
@@ -227,12 +229,21 @@ def test_evaluate_imported_wean_log_without_reference(tmp_path, capsys):
     assert r['mapped'] > 0 and r['lines_mapped'] > 0 and r['associations'] > 0
     assert (tmp_path / 'out' / 'slam_map.png').stat().st_size > 0
     assert not (tmp_path / 'out' / 'trajectory_gt.tum').exists()
-    # The same run as the CLI's (the bag's stated odometry noise model), on the grid.
+    # The CLI's run on the grid: its trajectories (TUM, stamps exact to the nanosecond: the
+    # scans it processed) and its saved map's corners.
     scenario = load_bag(tmp_path / 'bag', require_reference=False)
-    run = run_slam(scenario, SlamParams(odometry=bag_odometry_noise(scenario)[0]),
-                   CornerParams(sigma_r=scenario.laser.sigma_range,
-                                sigma_phi=scenario.laser.sigma_angle), landmarks='both')
-    assert run.landmarks.shape[0] == r['mapped'] and run.lines.shape[0] == r['lines_mapped']
+    slam, odom = (read_tum(tmp_path / 'out' / f'trajectory_{name}.tum')
+                  for name in ('slam', 'odom'))
+    scan_ns = np.array([s.stamp_ns for s in scenario.of_type(ScanSample)], dtype=np.int64)
+    scan_index = np.searchsorted(scan_ns, slam.stamps_ns)
+    assert np.array_equal(scan_ns[np.minimum(scan_index, len(scan_ns) - 1)], slam.stamps_ns)
+    assert np.array_equal(odom.stamps_ns, slam.stamps_ns)
+    saved = load_map(tmp_path / 'map.npz')
+    kinds = np.asarray(saved.kinds)
+    landmarks = np.asarray(saved.means, dtype=float).reshape(-1, 2)[kinds == CORNER]
+    assert landmarks.shape[0] == r['mapped'] and np.sum(kinds == LINE) == r['lines_mapped']
+    run = SimpleNamespace(scan_index=scan_index, poses=slam.planar(), odometry=odom.planar(),
+                          landmarks=landmarks)
     grid = load_occupancy_grid(shared_data('wean', 'wean.dat.gz'))
     fit = check_run(grid, scenario, run)
     print('wean map check', fit)
@@ -243,14 +254,12 @@ def test_evaluate_imported_wean_log_without_reference(tmp_path, capsys):
     assert fit['slam']['poses_unknown'] == 0
 
 
-def test_evaluate_imported_carmen_log(tmp_path):
+def test_evaluate_imported_carmen_log(carmen_evaluation):
     """A real log through ``landmark_nav import``: the facts come from the bag's custom_data."""
-    log = shared_data('carmen', 'freiburg-101-corrected.log.gz')
-    imported = import_log(log, tmp_path / 'bag')
-    r = evaluate_bag(tmp_path / 'bag', out_dir=tmp_path / 'out', progress=False)
+    (counts, r), folder = carmen_evaluation
     assert r['simulator_truth'] is False and r['reference'] == '/ground_truth/odom'
     assert r['laser_mount'] == [-0.04, 0.0, 0.0] and r['laser_sigma_range'] == 0.01
-    assert r['scans'] == imported.counts['/scan'] == r['ate_se2_pairs']
+    assert r['scans'] == counts['/scan'] == r['ate_se2_pairs']
     assert r['true_visible'] is None and r['wrong_associations'] is None
     assert f'{r["resets"]} filter resets' in format_summary(r)
     assert sum(r['reset_reasons'].values()) == r['resets']
@@ -262,7 +271,7 @@ def test_evaluate_imported_carmen_log(tmp_path):
     assert (noise['sigma_xy_per_sqrt_m'], noise['sigma_yaw_per_sqrt_m'],
             noise['sigma_yaw_per_sqrt_rad']) == (0.05, 0.05, 0.1)
     for name in FILES:
-        assert (tmp_path / 'out' / name).stat().st_size > 0, name
+        assert (folder / 'out' / name).stat().st_size > 0, name
 
 
 def test_laser_facts_precedence(tmp_path):
@@ -349,7 +358,6 @@ def test_update_corrections_are_what_each_update_moved_the_pose(scan_matching, m
 
 def test_ellipse_share_with_the_reference_noise():
     """A filter right about its own error, scored against a reference with noise of its own."""
-    from types import SimpleNamespace
     from landmark_nav.evaluation.slam import ellipse_share
     rng = np.random.default_rng(5)
     n, sa, sc = 40000, 0.03, 0.005  # the reference's std along / across its heading [m]

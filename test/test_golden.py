@@ -24,14 +24,15 @@ PAGES = {str(p.relative_to(ROOT)): p.read_text().splitlines()
 
 
 @pytest.fixture(scope='module')
-def outputs(tmp_path_factory, office_demo, office_evaluation):
+def outputs(tmp_path_factory, office_demo, office_evaluation, hallway_bag_localization):
     """Return ``get(bag, run)``: the outputs of one run, computed on first use.
 
-    The office demo and JCBB evaluation are the suite's shared runs (conftest), the same
-    calls as the runs of expected.yaml.
+    The office demo and JCBB evaluation and the hallway localization are the suite's shared
+    runs (conftest), the same calls as the runs of expected.yaml.
     """
     shared = {('office', 'demo'): lambda: office_demo[1],
-              ('office', 'evaluate_jcbb'): lambda: office_evaluation('jcbb')[1]}
+              ('office', 'evaluate_jcbb'): lambda: office_evaluation('jcbb')[1],
+              ('hallway', 'localization'): lambda: hallway_bag_localization[1]}
     cache = {}
 
     def get(name, run):

@@ -14,9 +14,7 @@ from landmark_nav.evaluation.localization import (CHAPTER_P0, distance_index,
                                                   draw_initial_pose, first_motion_index,
                                                   last_exceedance, localization_errors,
                                                   LocalizationInput, localize,
-                                                  odometry_trajectory, run_localization,
-                                                  TARGETS)
-from landmark_nav.localization.grid import rasterize_world
+                                                  odometry_trajectory, TARGETS)
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.sonar_model import build_sonar_map
 from landmark_nav.sim import run_scenario
@@ -26,28 +24,18 @@ import pytest
 SEEDS = (1, 2, 3)
 
 
-@pytest.fixture(scope='module')
-def runs():
-    out = {}
-    for seed in SEEDS:
-        res = run_scenario('hallway', seed)
-        out[seed] = (res, LocalizationInput.from_result(res), rasterize_world(res.world, 0.1))
-    return out
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize('seed', SEEDS)
-def test_hallway_targets(runs, seed):
-    res, inp, grid = runs[seed]
-    assert 19.0 < res.path_length < 21.0
-    x0 = draw_initial_pose(inp.truth[0], CHAPTER_P0, 1000 + seed)
-    i0 = first_motion_index(inp.truth)
+def test_hallway_targets(hallway_localization, seed):
+    run = hallway_localization(seed)  # shared with test_loc_nees.py (conftest)
+    inp, i0 = run['inp'], run['i0']
+    assert 19.0 < run['path_length'] < 21.0
     assert i0 >= 10
     odo_cal = localization_errors(odometry_trajectory(inp, inp.truth[0], inp.true_k),
                                   inp.truth, i0)
     odo_raw = localization_errors(odometry_trajectory(inp, inp.truth[0]), inp.truth, i0)
     for filt in ('ekf', 'ukf'):
-        traj, covs = run_localization(res, filt, grid, x0, CHAPTER_P0)
+        traj, covs = run[filt]
         assert traj.shape == (inp.truth.shape[0], 3) and covs.shape == (traj.shape[0], 3, 3)
         err = localization_errors(traj, inp.truth, i0)
         max_pos, max_head = TARGETS[filt]
@@ -61,8 +49,9 @@ def test_hallway_targets(runs, seed):
 
 @pytest.mark.slow
 @pytest.mark.parametrize('filt', ['ekf', 'ukf'])
-def test_two_sigma_start_converges_within_5m(runs, filt):
-    res, inp, grid = runs[1]
+def test_two_sigma_start_converges_within_5m(hallway_localization, filt):
+    run1 = hallway_localization(1)
+    inp, grid = run1['inp'], run1['grid']
     sigma = np.sqrt(np.diag(CHAPTER_P0))
     i5 = distance_index(inp.truth, 5.0)
     for signs in ((1, 1, 1), (-1, -1, -1), (1, -1, 1), (-1, 1, -1)):
@@ -76,11 +65,11 @@ def test_two_sigma_start_converges_within_5m(runs, filt):
 
 
 @pytest.mark.slow
-def test_sonar_built_map_keeps_ukf_within_15cm(runs):
+def test_sonar_built_map_keeps_ukf_within_15cm(hallway_localization):
     ref = LocalizationInput.from_result(run_scenario('hallway', 100))
     built = build_sonar_map(ref.truth, ref.sonar_ranges, ref.mounts, 0.1)
     params = LocalizationParams(unknown='free')  # unexplored gaps inside the free space
-    res, inp, _ = runs[2]
+    inp = hallway_localization(2)['inp']
     x0 = draw_initial_pose(inp.truth[0], CHAPTER_P0, 1002)
     run = localize(inp, 'ukf', built, x0, CHAPTER_P0, params)
     err = localization_errors(run.trajectory, inp.truth, first_motion_index(inp.truth))

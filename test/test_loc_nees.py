@@ -21,21 +21,18 @@ Measured on seeds 1-5 (mean NEES, share of steps below 7.81):
 * UKF now: 1.29 / 1.95 / 3.01 / 2.16 / 2.04; 100.0 / 98.8 / 96.3 / 98.8 / 99.5 %.
 
 Run time: the whole file takes 9 s of CPU time (22 s wall on a loaded 2-core machine): one
-simulation per seed and one run per seed and filter, shared by the module-scoped fixture,
+simulation per seed and one run per seed and filter, shared by the session fixture
+``hallway_localization`` (conftest; test_loc_accuracy.py checks the same runs of seeds 1-3),
 so no shortened runs are needed.
 """
 
 import dataclasses
 import math
 
-from landmark_nav.evaluation.localization import (CHAPTER_P0, draw_initial_pose,
-                                                  first_motion_index, LocalizationInput,
-                                                  localize)
 from landmark_nav.localization import ekf, ukf
-from landmark_nav.localization.grid import GridMap, rasterize_world
+from landmark_nav.localization.grid import GridMap
 from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.sonar_model import predict_ranges
-from landmark_nav.sim import run_scenario
 from landmark_nav.sim.sonar import SONAR_MOUNTS
 from landmark_nav.slam.consistency import chi2_gate, nees, share_inside
 import numpy as np
@@ -47,26 +44,6 @@ MIN_INSIDE = 0.90
 #: Band of the mean NEES per seed: the measured means (EKF 1.79-2.77, UKF 1.29-3.01)
 #: widened by 0.5 on each side.
 MEAN_BAND = {'ekf': (1.3, 3.3), 'ukf': (0.8, 3.5)}
-
-
-@pytest.fixture(scope='module')
-def hallway_runs():
-    """Per seed: the input, the grid and the first-motion index; filter runs on demand."""
-    cache = {}
-
-    def get(seed, filt):
-        if seed not in cache:
-            res = run_scenario('hallway', seed)
-            inp = LocalizationInput.from_result(res)
-            cache[seed] = {'inp': inp, 'grid': rasterize_world(res.world, 0.1),
-                           'i0': first_motion_index(inp.truth),
-                           'x0': draw_initial_pose(inp.truth[0], CHAPTER_P0, 1000 + seed)}
-        entry = cache[seed]
-        if filt not in entry:
-            entry[filt] = localize(entry['inp'], filt, entry['grid'], entry['x0'], CHAPTER_P0)
-        return entry
-
-    return get
 
 
 def pose_nees(trajectory, truth, covariances):
@@ -81,11 +58,11 @@ def test_bound_is_the_chi2_quantile():
 @pytest.mark.slow
 @pytest.mark.parametrize('filt', ['ekf', 'ukf'])
 @pytest.mark.parametrize('seed', SEEDS)
-def test_nees_inside_95_bound(hallway_runs, seed, filt):
-    entry = hallway_runs(seed, filt)
-    run, inp, i0 = entry[filt], entry['inp'], entry['i0']
+def test_nees_inside_95_bound(hallway_localization, seed, filt):
+    entry = hallway_localization(seed)  # the runs of test_loc_accuracy.py (conftest)
+    (trajectory, covariances), inp, i0 = entry[filt], entry['inp'], entry['i0']
     assert i0 >= 10 and inp.truth.shape[0] - i0 >= 590  # the full run
-    values = pose_nees(run.trajectory[i0:], inp.truth[i0:], run.covariances[i0:])
+    values = pose_nees(trajectory[i0:], inp.truth[i0:], covariances[i0:])
     inside = share_inside(values, 3, 0.95, two_sided=False)
     lo, hi = MEAN_BAND[filt]
     assert inside >= MIN_INSIDE, (filt, seed, inside, values.mean())

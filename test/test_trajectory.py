@@ -12,12 +12,9 @@ import subprocess
 import sys
 
 from evo.tools import file_interface
-from landmark_nav.evaluation.slam import evaluate_bag
 from landmark_nav.evaluation.trajectory import (ate, read_tum, rpe, STATISTICS, Trajectory,
                                                 write_tum)
 from landmark_nav.geometry import compose
-from landmark_nav.importers import import_log
-from landmark_nav.testing import shared_data
 import numpy as np
 import pytest
 
@@ -102,13 +99,13 @@ def test_agrees_with_evo_office(office_files, tmp_path):
     assert r['pairs'] > 1000
 
 
-def test_agrees_with_evo_imported_carmen(tmp_path):
-    """The output of ``evaluate`` on a real log imported with ``landmark_nav import``."""
-    log = shared_data('carmen', 'freiburg-101-corrected.log.gz')
-    import_log(log, tmp_path / 'bag')
-    evaluate_bag(tmp_path / 'bag', out_dir=tmp_path / 'out', progress=False, plots=False)
-    r = _check_agreement(tmp_path / 'out' / 'trajectory_gt.tum',
-                         tmp_path / 'out' / 'trajectory_slam.tum', tmp_path)
+def test_agrees_with_evo_imported_carmen(tmp_path, carmen_evaluation):
+    """The output of ``evaluate`` on a real log imported with ``landmark_nav import``.
+
+    The run of test_evaluate_slam.py (conftest ``carmen_evaluation``).
+    """
+    out = carmen_evaluation[1] / 'out'
+    r = _check_agreement(out / 'trajectory_gt.tum', out / 'trajectory_slam.tum', tmp_path)
     assert r['pairs'] > 150
 
 

@@ -28,7 +28,8 @@ Outputs = Dict[str, Any]
 #: The JSON files the outputs of these runs are read from, so that a run already computed
 #: elsewhere (the test suite computes the office demo and JCBB evaluation once per run)
 #: gives its outputs with :func:`read_outputs`.
-RUN_FILES = {'demo': ('slam.json', 'drift.json'), 'evaluate_jcbb': ('slam.json',)}
+RUN_FILES = {'demo': ('slam.json', 'drift.json'), 'evaluate_jcbb': ('slam.json',),
+             'localization': ('localization_ekf.json', 'localization_ukf.json')}
 
 
 def read_outputs(run: str, out: Any) -> Outputs:
@@ -60,12 +61,9 @@ def _features(every: int) -> Callable[[Path, Path], Outputs]:
 
 def _localization(bag: Path, out: Path, map_path: Any = None) -> Outputs:
     from landmark_nav.evaluation.localization_bags import evaluate_localization
-    result = {}
     for filt in ('ekf', 'ukf'):
         evaluate_localization(bag, filt, map_path=map_path, out_dir=out)
-        name = f'localization_{filt}.json'
-        result[name] = json.loads((out / name).read_text())
-    return result
+    return read_outputs('localization', out)
 
 
 def _sonar_map_localization(bag: Path, out: Path) -> Outputs:
