@@ -30,7 +30,7 @@ import tiny_logs  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH = REPO / 'benchmarks'
-HELPERS = ('common.py',)
+HELPERS = ('common.py', 'slam_real_graph.py')
 ENTRY_POINTS = sorted(p.name for p in BENCH.glob('*.py') if p.name not in HELPERS)
 
 # script -> [(arguments, regular expression the output must match)]; {name} are the paths
