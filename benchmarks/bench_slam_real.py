@@ -621,7 +621,7 @@ def run_wean(args) -> int:
     if args.backend == 'graph':
         print('log keyframes loops_accepted loops_proposed poses poses_in_wall '
               'poses_in_wall_counted poses_unknown points_graph points_odom structural_share '
-              'structural_count structural_left_out ms_per_scan')
+              'structural_count structural_left_out places_share places_count ms_per_scan')
     else:
         print('log corners share_10cm poses_in_wall poses_unknown points_slam points_odom '
               + ' '.join(CATEGORIES) + ' retired wall_depth_max wall_scans_median '

@@ -17,7 +17,9 @@ keyframes, loops accepted and proposed, poses, poses in wall cells, those left w
 cell of tolerance and the cells the log's scans see through excused
 (``poses_in_wall_counted``; issue 41 asks 0), poses in unknown cells, scan end points near a
 wall with the graph's and with the odometry's poses, the structural corners' share within
-10 cm of a wall cell (asks >= 0.9), their count and the count left out, back-end ms per scan.
+10 cm of a wall cell (asks >= 0.9), their count and the count left out, the same share per
+place (``corner_places``: detections within 10 cm linked, places seen >= 3 times) and the
+places' count, back-end ms per scan.
 """
 
 import math
@@ -77,8 +79,9 @@ def wean_graph(grid, sc, label: str, args) -> None:
           f'{s["poses"]} {s["poses_in_wall"]} {w["poses_in_wall_counted"]} '
           f'{s["poses_unknown"]} {s["point_share"]:.3f} '
           f'{w["check"]["odometry"]["point_share"]:.3f} {c["structural_share"]:.3f} '
-          f'{c["structural_count"]} {c["structural_left_out"]} '
-          f'{1e3 * run.seconds / max(len(run.stamps), 1):.0f}', flush=True)
+          f'{c["structural_count"]} {c["structural_left_out"]} {w["places"]["share"]:.3f} '
+          f'{w["places"]["count"]} {1e3 * run.seconds / max(len(run.stamps), 1):.0f}',
+          flush=True)
     if args.corners or args.plot:
         corners_on_walls(grid, sc, placed_run(sc, run, cp), s['transform'], cp, label, args,
                          c)

@@ -72,7 +72,7 @@ TINY_RUNS = {
          r'concave ([\d.]+|nan) of \d+; off the walls: \d+ of \d+ convex(.*\n)+'
          r'wrote .*robotdata1_structural_corners.png'),
         (['wean', '--data', '{wean}', 'robotdata1', '--backend', 'graph'],
-         r'\nrobotdata1( \d+){7} [\d.]+ [\d.]+ ([\d.]+|nan)( \d+){3}\n'),
+         r'\nrobotdata1( \d+){7} [\d.]+ [\d.]+ ([\d.]+|nan)( \d+){2} ([\d.]+|nan)( \d+){2}\n'),
         (['defaults', '--data', '{carmen}', 'tiny'], r'\ntiny \| [\d.]+ / [\d.]+ \([\d.]+\) \|')],
     'bench_localization.py': [
         (['sonar', '--bag', '{hallway}', '--runs', '3'], r'EKF update\s+[\d.]+'),

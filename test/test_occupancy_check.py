@@ -158,3 +158,18 @@ def test_scan_indices_match_used_scans_in_order_with_repeated_stamps():
     assert scan_indices(stamps, np.array([5, 9])).tolist() == [0, 3]
     with pytest.raises(ValueError, match='stamp 7 ns'):
         scan_indices(stamps, np.array([9, 7]))
+
+
+def test_corner_places_scores_each_place_once():
+    """Five views of a corner on a wall, three of one off it, two of a third: 1 of 2."""
+    from landmark_nav.evaluation.graph_wall_check import corner_places
+    pts = np.array([[0.0, 0.0], [0.03, 0.0], [0.06, 0.01], [0.09, 0.0], [0.12, 0.0],
+                    [5.0, 5.0], [5.02, 5.0], [5.04, 5.0], [9.0, 0.0], [9.01, 0.0]])
+    cw = {'points': pts, 'structural': np.ones(10, dtype=bool),
+          'wall_distance': np.array([0.0] * 5 + [0.2] * 3 + [0.0] * 2),
+          'left_out': np.zeros(10, dtype=bool)}
+    p = corner_places(cw)
+    assert (p['count'], p['share'], p['left_out'], p['views_median']) == (2, 0.5, 0, 4.0)
+    cw['left_out'][5:7] = True  # most views of the off-wall place left out: so is the place
+    p = corner_places(cw)
+    assert (p['count'], p['share'], p['left_out']) == (1, 1.0, 1)

@@ -13,7 +13,11 @@ trajectory standing for the landmarks:
   one cell of tolerance and the cells the log's own scans see through are excused
   (:func:`.occupancy_check.wall_poses_counted`);
 * the share of the structural corners within 10 cm of a wall cell, corners near a wall
-  cell the log sees through left out (:func:`.occupancy_check.corner_wall_check`).
+  cell the log sees through left out (:func:`.occupancy_check.corner_wall_check`): each
+  detection counts, so a place seen from many poses weighs as much as its views;
+* the same share per place (:func:`corner_places`): the detections linked into places as
+  a landmark map would hold them, one figure per place, as the EKF's landmark share
+  counts each landmark once.
 """
 
 from types import SimpleNamespace
@@ -70,6 +74,46 @@ def placed_run(scenario, run, corner_params=None) -> SimpleNamespace:
                            landmarks=np.vstack(corners) if corners else np.zeros((0, 2)))
 
 
+def corner_places(cw: Dict[str, object], link: float = 0.1, min_views: int = 3,
+                  tolerance: float = 0.1) -> Dict[str, object]:
+    """Group the structural corner detections into places and score each place once.
+
+    Detections (grid frame, a :func:`.occupancy_check.corner_wall_check` result) closer than
+    ``link`` are linked (single linkage: connected components of the pairs within
+    ``link``); a place seen at least ``min_views`` times (the EKF's ``confirm_hits``) is a
+    landmark. It lies on a wall when the median of its detections' distances to a wall
+    cell is within ``tolerance`` (as :func:`.occupancy_check.landmark_diagnosis` judges a
+    landmark by its observations), and is left out when most of its detections are.
+
+    Returns:
+        ``count`` places judged, ``share`` of them on a wall (nan: none), ``left_out``,
+        ``views_median`` detections per place judged.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+    sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool))
+    pts = np.asarray(cw['points'], dtype=float)[sel]
+    if len(pts) == 0:
+        return {'count': 0, 'share': float('nan'), 'left_out': 0, 'views_median': 0.0}
+    pairs = cKDTree(pts).query_pairs(link, output_type='ndarray')
+    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                     shape=(len(pts), len(pts)))
+    label = connected_components(adj, directed=False)[1]
+    views = np.bincount(label)
+    dist = np.asarray(cw['wall_distance'], dtype=float)[sel]
+    out_frac = np.bincount(label, np.asarray(cw['left_out'], dtype=float)[sel]) / views
+    on, judged = [], []
+    for c in np.flatnonzero(views >= min_views):
+        if out_frac[c] > 0.5:
+            continue
+        judged.append(views[c])
+        on.append(np.median(dist[label == c]) <= tolerance)
+    return {'count': len(judged), 'share': float(np.mean(on)) if on else float('nan'),
+            'left_out': int(np.sum((views >= min_views) & (out_frac > 0.5))),
+            'views_median': float(np.median(judged)) if judged else 0.0}
+
+
 def graph_wall_check(grid: OccupancyGrid, scenario, run,
                      corner_params=None) -> Dict[str, object]:
     """Judge a graph run on the grid (module docstring).
@@ -84,7 +128,7 @@ def graph_wall_check(grid: OccupancyGrid, scenario, run,
         ``check`` (:func:`.occupancy_check.check_run`: ``'slam'`` the graph's poses,
         ``'odometry'``), ``wall`` (:func:`.occupancy_check.wall_pose_diagnosis` over every
         step), ``poses_in_wall_counted``, ``corners``
-        (:func:`.occupancy_check.corner_wall_check`).
+        (:func:`.occupancy_check.corner_wall_check`), ``places`` (:func:`corner_places`).
 
     Raises:
         ValueError: No structural corner in the run (the alignment has nothing to score).
@@ -95,9 +139,10 @@ def graph_wall_check(grid: OccupancyGrid, scenario, run,
     fit = check_run(grid, scenario, placed)
     t = np.asarray(fit['slam']['transform'])
     wall = wall_pose_diagnosis(grid, scenario, placed, t, every=1)
+    cw = corner_wall_check(grid, scenario, placed, t, corner_params)
     return {'check': fit, 'wall': wall,
             'poses_in_wall_counted': wall_poses_counted(wall, grid.resolution),
-            'corners': corner_wall_check(grid, scenario, placed, t, corner_params)}
+            'corners': cw, 'places': corner_places(cw)}
 
 
-__all__ = ['graph_wall_check', 'placed_run', 'scan_indices']
+__all__ = ['corner_places', 'graph_wall_check', 'placed_run', 'scan_indices']
