@@ -178,7 +178,7 @@ from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model
 from landmark_nav.slam.line_landmarks import line_initialization, lines_to_observations
 from landmark_nav.slam.scan_matching import base_motion, scan_points
 import numpy as np
-from slam_real_graph import corners_on_walls, graph_grid, wean_graph
+from slam_real_graph import corners_on_walls, graph_backend, graph_grid, wean_graph
 
 WEAN_LOGS = ('robotdata1', 'robotdata2', 'robotdata5')
 
@@ -507,7 +507,7 @@ def run_grid(args) -> int:
     options.update(parse_set(args.set))
     if args.landmarks:
         options['landmarks'] = args.landmarks
-    options['backend'] = args.backend
+    options['backend'] = graph_backend(args)
     os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or tmp
@@ -618,7 +618,7 @@ def run_wean(args) -> int:
     if not map_file.is_file():
         sys.exit(f'error: occupancy map {map_file} not found (give one with --map FILE)')
     grid = load_occupancy_grid(map_file)
-    if args.backend == 'graph':
+    if graph_backend(args) == 'graph':
         print('log keyframes loops_accepted loops_proposed poses poses_in_wall '
               'poses_in_wall_counted poses_unknown points_graph points_odom structural_share '
               'structural_count structural_left_out places_share places_count ms_per_scan')

@@ -24,6 +24,7 @@ places' count, back-end ms per scan.
 
 import math
 from pathlib import Path
+import sys
 
 from landmark_nav.evaluation.graph_wall_check import graph_wall_check, placed_run
 from landmark_nav.evaluation.occupancy_check import corner_wall_check
@@ -32,6 +33,17 @@ from landmark_nav.evaluation.slam_graph import run_graph
 from landmark_nav.evaluation.slam_plots import plot_corner_wall_check
 from landmark_nav.laser.corners import CornerParams
 import numpy as np
+
+
+def graph_backend(args) -> str:
+    """Return ``args.backend``; with ``graph``, exit naming an option only the EKF reads."""
+    if args.backend == 'graph':
+        given = [f'--{n.replace("_", "-")}' for n in ('set', 'params_file', 'establish_hits')
+                 if getattr(args, n, None)]
+        given += ['--landmarks'] if getattr(args, 'landmarks', None) not in (None, 'both') else []
+        if given:
+            sys.exit(f'error: {", ".join(given)}: EKF options, not read by --backend graph')
+    return args.backend
 
 
 def graph_targets(r: dict) -> dict:
