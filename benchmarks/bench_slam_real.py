@@ -13,7 +13,7 @@ or ``--data DIR``)::
         [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py grid [--seeds 0 1]
         [--params-file YAML] [--set NAME=VALUE ...] [--landmarks corners|lines|both]
-        [--procs 2] [--cache DIR] [--data DIR] [LOG ...]
+        [--procs 2] [--cache DIR] [--backend graph] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py scan-matching [--seeds 0 1]
         [--drift none] [--slam [--params-file YAML] [--filter-noise MODEL]
         [--landmarks KIND]] [--data DIR] [LOG ...]
@@ -21,7 +21,7 @@ or ``--data DIR``)::
         [--params-file YAML ...] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py wean [--landmarks both]
         [--establish-hits N] [--odometry-scale S] [--set NAME=VALUE ...] [--data DIR]
-        [--corners] [--plot DIR] [LOG ...]
+        [--corners] [--plot DIR] [--backend graph] [LOG ...]
 
 A Carmen LOG is a log name in ``--data DIR`` (default ``../shared/data/carmen``; ``aces``
 -> ``DIR/aces-corrected.log.gz``; default the six logs) or a path to a Carmen log; a Wean
@@ -92,6 +92,7 @@ as truth: it tells a filter that misjudges its own error from one the reference'
 pushes out). Then the summary used in the README: ellipse median (runs >= 80 %), ATE /
 odometry median (runs <= 0.2), RPE / odometry median (runs <= 1), runs meeting all three
 (issue 14's targets per log), and the median (runs >= 80 %) of the second ellipse share.
+``--backend graph``: the graph back end against issue 41's targets (``slam_real_graph.py``).
 
 ``scan-matching``:
 
@@ -122,13 +123,14 @@ and with the odometry's poses, and the count per category (``on_wall``, ``moved`
 cell's depth into its wall region [m] (0.1: all at the region's edge), the median number
 of the log's scans that see through those cells, and the same median over every wall cell
 any scan sees through (a cell that many of the log's scans see through was free in this
-run: the grid holds something that was not there). ``--establish-hits`` sets
-``SlamParams.establish_hits``;
-``--odometry-scale S`` multiplies the raw odometry's translations by S before the filter (is
-the odometry's scale wrong? the grid says which scale fits). ``--set NAME=VALUE``
-(repeatable) any other field of ``SlamParams`` or ``FrontendParams``
-(the value read as a Python literal, e.g. ``--set jacobians="'observability_gain'" --set
-spurious_limit=0.05 --set scan_matching=True``).
+run: the grid holds something that was not there), and the poses in wall cells beyond one
+cell of tolerance in cells no scan sees through (``wall_poses_counted``; issue 41 asks 0).
+``--establish-hits`` sets ``SlamParams.establish_hits``; ``--odometry-scale S`` multiplies
+the raw odometry's translations by S before the filter (is the odometry's scale wrong? the
+grid says which scale fits). ``--set NAME=VALUE`` (repeatable) any other field of
+``SlamParams`` or ``FrontendParams`` (the value read as a Python literal, e.g. ``--set
+jacobians="'observability_gain'" --set spurious_limit=0.05 --set scan_matching=True``).
+``--backend graph``: the graph back end, its structural corners and poses (``slam_real_graph.py``).
 ``--corners`` also places every scan's corners with the filter's path
 (:func:`~landmark_nav.evaluation.occupancy_check.corner_wall_check`): the share of
 structural and other corners within 10 cm of a wall cell, the structural ones split into
@@ -155,13 +157,14 @@ from bench_node_cpu import params_file_options, split_frontend
 from common import (add_logs_argument, CARMEN_LOGS, data_folder, log_paths, parse_set,
                     run_subcommand, subcommand_parser)
 from landmark_nav.evaluation.bags import load_bag
-from landmark_nav.evaluation.occupancy_check import (check_run, corner_wall_check,
+from landmark_nav.evaluation.occupancy_check import (check_run,
                                                      landmark_diagnosis, load_occupancy_grid,
-                                                     run_segments, wall_pose_diagnosis)
+                                                     run_segments, wall_pose_diagnosis,
+                                                     wall_poses_counted)
 from landmark_nav.evaluation.odometry_drift import odometry_window_nees
 from landmark_nav.evaluation.slam import (bag_odometry_noise, ellipse_share, evaluate_bag,
                                           run_slam, scan_features, update_corrections)
-from landmark_nav.evaluation.slam_plots import plot_corner_wall_check
+from landmark_nav.evaluation.slam_graph import evaluate_graph_bag
 from landmark_nav.evaluation.trajectory import ate, planar_alignment, rpe, Trajectory
 from landmark_nav.geometry import compose, interpolate_pose, inverse, relative, wrap_angle
 from landmark_nav.importers.writer import import_log
@@ -175,6 +178,7 @@ from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model
 from landmark_nav.slam.line_landmarks import line_initialization, lines_to_observations
 from landmark_nav.slam.scan_matching import base_motion, scan_points
 import numpy as np
+from slam_real_graph import corners_on_walls, graph_backend, graph_grid, wean_graph
 
 WEAN_LOGS = ('robotdata1', 'robotdata2', 'robotdata5')
 
@@ -289,12 +293,15 @@ def diagnose(bag: Path, landmarks: str, extra: dict, filter_noise=None) -> dict:
 
 
 def run_one(job: tuple) -> tuple:
-    """Import one log with one drift seed (unless cached) and diagnose it."""
+    """Import one log with one drift seed (unless cached) and diagnose it (or run the graph)."""
     name, path, seed, options, cache = job
     bag = Path(cache) / f'{name}-{seed}'
     if not (bag / 'metadata.yaml').is_file():
         import_log(path, bag, seed=seed, force=True)
     options = dict(options)
+    if options.pop('backend', 'ekf') == 'graph':
+        sd = REFERENCE_SD.get(log_name(bag))
+        return name, seed, dict(evaluate_graph_bag(bag, reference_sd=sd), reference_sd=sd)
     landmarks = options.pop('landmarks', 'both')
     return name, seed, diagnose(bag, landmarks, options)
 
@@ -500,6 +507,7 @@ def run_grid(args) -> int:
     options.update(parse_set(args.set))
     if args.landmarks:
         options['landmarks'] = args.landmarks
+    options['backend'] = graph_backend(args)
     os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache or tmp
@@ -510,6 +518,8 @@ def run_grid(args) -> int:
         else:
             with Pool(args.procs) as pool:
                 results = pool.map(run_one, jobs, chunksize=1)
+    if args.backend == 'graph':
+        return graph_grid(results)
     print('run | ellipse | ATE filter / odometry [m] (ratio) | RPE filter / odometry [cm] '
           '(ratio) | heading error [deg] | updates moving the pose > 20 cm: count, RMS over '
           "the steps [cm] | ellipse with the reference's noise")
@@ -608,14 +618,22 @@ def run_wean(args) -> int:
     if not map_file.is_file():
         sys.exit(f'error: occupancy map {map_file} not found (give one with --map FILE)')
     grid = load_occupancy_grid(map_file)
-    print('log corners share_10cm poses_in_wall poses_unknown points_slam points_odom '
-          + ' '.join(CATEGORIES) + ' retired wall_depth_max wall_scans_median '
-          'wall_cells_scans_median')
+    if graph_backend(args) == 'graph':
+        print('log keyframes loops_accepted loops_proposed poses poses_in_wall '
+              'poses_in_wall_counted poses_unknown points_graph points_odom structural_share '
+              'structural_count structural_left_out places_share places_count ms_per_scan')
+    else:
+        print('log corners share_10cm poses_in_wall poses_unknown points_slam points_odom '
+              + ' '.join(CATEGORIES) + ' retired wall_depth_max wall_scans_median '
+              'wall_cells_scans_median poses_in_wall_counted')
     with tempfile.TemporaryDirectory() as tmp:
         for name, path, bag in wean_bags(logs, Path(tmp)):
             sc = load_bag(bag, require_reference=False)
             if args.odometry_scale != 1.0:
                 scale_odometry(sc, args.odometry_scale)
+            if args.backend == 'graph':
+                wean_graph(grid, sc, name, args)
+                continue
             prm = SlamParams(odometry=bag_odometry_noise(sc)[0],
                              establish_hits=args.establish_hits, **extra)
             corner_params = CornerParams(sigma_r=sc.laser.sigma_range,
@@ -643,7 +661,8 @@ def run_wean(args) -> int:
                       f'{s["poses_in_wall"]} {s["poses_unknown"]} {s["point_share"]:.3f} '
                       f'{fit["odometry"]["point_share"]:.3f} '
                       + ' '.join(str(count.get(c, 0)) for c in CATEGORIES)
-                      + f' {run.stats.get("retired", 0)} {depth} {seen} {cells}', flush=True)
+                      + f' {run.stats.get("retired", 0)} {depth} {seen} {cells} '
+                      f'{wall_poses_counted(wall, grid.resolution)}', flush=True)
                 if args.corners or args.plot:
                     corners_on_walls(grid, sc, part, s['transform'], corner_params, label, args)
     return 0
@@ -667,28 +686,6 @@ def wean_bags(logs, tmp: Path):
             bag = tmp / f'{name}-run{k}'
             import_log(path, bag, run=k)
             yield f'{name}/run{k}', path, bag
-
-
-def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args) -> None:
-    """Print (and with --plot draw) where every scan's corners fall on the grid."""
-    cw = corner_wall_check(grid, sc, run, transform, corner_params)
-    print(f'{label} corners within 10 cm of a wall cell ({cw["seen_through"]} cells seen '
-          f'through: corners near them left out): structural {cw["structural_share"]:.3f} of '
-          f'{cw["structural_count"]} (left out {cw["structural_left_out"]}), other '
-          f'{cw["other_share"]:.3f} of {cw["other_count"]} (left out {cw["other_left_out"]})')
-    off = cw['structural'] & ~cw['left_out'] & ~cw['on_wall']
-    d = cw['wall_distance'][off]
-    print(f'{label} structural convex {cw["structural_convex_share"]:.3f} of '
-          f'{cw["structural_convex_count"]}, concave {cw["structural_concave_share"]:.3f} of '
-          f'{cw["structural_concave_count"]}; off the walls: {int(np.sum(cw["convex"][off]))} '
-          f'of {int(off.sum())} convex, distance to a wall cell [m] '
-          + (' / '.join(f'{q:.2f}' for q in np.quantile(d, [0.1, 0.5, 0.9]))
-             + ' (10 / 50 / 90 %)' if d.size else '-'))
-    if args.plot:
-        out = Path(args.plot) / (label.replace('#', '_').replace('/', '_')
-                                 + '_structural_corners.png')
-        plot_corner_wall_check(grid, cw, f'{label}: structural corners on wean.dat', out)
-        print(f'wrote {out}')
 
 
 def main(argv=None) -> int:
@@ -750,6 +747,8 @@ def main(argv=None) -> int:
     p.add_argument('--landmarks', choices=('corners', 'lines', 'both'), default=None)
     p.add_argument('--procs', type=int, default=2)
     p.add_argument('--cache', default=None, help='keep the imported bags here')
+    p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
+                   help="graph: the pose graph against issue 41's targets (exit 1 on a miss)")
     p.set_defaults(run=run_grid)
     p = sub.add_parser('scan-matching',
                        help='dead reckoning by ICP of consecutive scans (and SLAM on it)')
@@ -787,6 +786,8 @@ def main(argv=None) -> int:
                         'the share of structural and other corners within 10 cm of a wall '
                         'cell the log does not see through, structural ones split into convex '
                         'and concave, and how far the off-wall ones are from a wall cell')
+    p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
+                   help='graph: the pose graph, its poses and structural corners')
     p.add_argument('--plot', default=None, metavar='DIR',
                    help='with --corners: draw them over the grid into DIR/<log>_structural_'
                         'corners.png')

@@ -30,7 +30,7 @@ import tiny_logs  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH = REPO / 'benchmarks'
-HELPERS = ('common.py',)
+HELPERS = ('common.py', 'slam_real_graph.py')
 ENTRY_POINTS = sorted(p.name for p in BENCH.glob('*.py') if p.name not in HELPERS)
 
 # script -> [(arguments, regular expression the output must match)]; {name} are the paths
@@ -71,6 +71,8 @@ TINY_RUNS = {
          r'([\d.]+|nan) of \d+ (.*\n)+robotdata1 structural convex ([\d.]+|nan) of \d+, '
          r'concave ([\d.]+|nan) of \d+; off the walls: \d+ of \d+ convex(.*\n)+'
          r'wrote .*robotdata1_structural_corners.png'),
+        (['wean', '--data', '{wean}', 'robotdata1', '--backend', 'graph'],
+         r'\nrobotdata1( \d+){7} [\d.]+ [\d.]+ ([\d.]+|nan)( \d+){2} ([\d.]+|nan)( \d+){2}\n'),
         (['defaults', '--data', '{carmen}', 'tiny'], r'\ntiny \| [\d.]+ / [\d.]+ \([\d.]+\) \|')],
     'bench_localization.py': [
         (['sonar', '--bag', '{hallway}', '--runs', '3'], r'EKF update\s+[\d.]+'),

@@ -504,3 +504,18 @@ def test_cli_refuses_an_unknown_name_in_a_parameter_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "ekf_slam has no parameter 'use_sim_time'" not in err  # rclpy declares it
     assert "no parameter 'odometry.modle' (did you mean odometry.model?)" in err, err
+
+
+def test_graph_ellipse_with_the_reference_noise(tmp_path, monkeypatch):
+    """``evaluate_graph_bag(reference_sd=...)``: the ellipse also with the reference's std."""
+    import tiny_logs
+    from landmark_nav.evaluation import slam_graph
+    import_log(tiny_logs.write_carmen(tmp_path / 'tiny-corrected.log.gz'), tmp_path / 'bag')
+    given = []
+    share = slam_graph.ellipse_share
+    monkeypatch.setattr(slam_graph, 'ellipse_share', lambda run, **kw: (
+        given.append(kw.get('reference_sd')), share(run, **kw))[1])
+    r = slam_graph.evaluate_graph_bag(tmp_path / 'bag', reference_sd=(0.02, 0.01))
+    assert given == [None, (0.02, 0.01)] * 2  # online, final: plain, then with the std
+    for name in ('online', 'final'):
+        assert r[f'{name}_ellipse95_share'] <= r[f'{name}_ellipse95_ref_share'] <= 1.0

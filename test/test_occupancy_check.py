@@ -143,3 +143,33 @@ def test_wall_pose_diagnosis_depth_and_crossings():
     # Scan 0's beam runs from x = 12.3 to 16.7 at y = 10.15: cells (140-142, 101).
     assert d['crossings'].tolist() == [0, 1]
     assert d['wall_crossings'].tolist() == [1, 1, 1]
+    # Issue 41's count: the edge cell is within one cell's tolerance, the deep one is seen
+    # through; the deep one counts when no scan sees through it.
+    from landmark_nav.evaluation.occupancy_check import wall_poses_counted
+    assert wall_poses_counted(d, grid.resolution) == 0
+    assert wall_poses_counted(dict(d, crossings=np.zeros(2)), grid.resolution) == 1
+    assert wall_poses_counted(dict(d, crossings=np.zeros(2)), grid.resolution, cells=2) == 0
+
+
+def test_scan_indices_match_used_scans_in_order_with_repeated_stamps():
+    from landmark_nav.evaluation.graph_wall_check import scan_indices
+    stamps = np.array([5, 7, 7, 9, 12])
+    assert scan_indices(stamps, np.array([7, 7, 12])).tolist() == [1, 2, 4]
+    assert scan_indices(stamps, np.array([5, 9])).tolist() == [0, 3]
+    with pytest.raises(ValueError, match='stamp 7 ns'):
+        scan_indices(stamps, np.array([9, 7]))
+
+
+def test_corner_places_scores_each_place_once():
+    """Five views of a corner on a wall, three of one off it, two of a third: 1 of 2."""
+    from landmark_nav.evaluation.graph_wall_check import corner_places
+    pts = np.array([[0.0, 0.0], [0.03, 0.0], [0.06, 0.01], [0.09, 0.0], [0.12, 0.0],
+                    [5.0, 5.0], [5.02, 5.0], [5.04, 5.0], [9.0, 0.0], [9.01, 0.0]])
+    cw = {'points': pts, 'structural': np.ones(10, dtype=bool),
+          'wall_distance': np.array([0.0] * 5 + [0.2] * 3 + [0.0] * 2),
+          'left_out': np.zeros(10, dtype=bool)}
+    p = corner_places(cw)
+    assert (p['count'], p['share'], p['left_out'], p['views_median']) == (2, 0.5, 0, 4.0)
+    cw['left_out'][5:7] = True  # most views of the off-wall place left out: so is the place
+    p = corner_places(cw)
+    assert (p['count'], p['share'], p['left_out']) == (1, 1.0, 1)

@@ -428,6 +428,27 @@ def wall_pose_diagnosis(grid: OccupancyGrid, scenario, run, transform: np.ndarra
             'wall_crossings': crossed[wall & (crossed > 0)]}
 
 
+def wall_poses_counted(diagnosis: Dict[str, np.ndarray], resolution: float,
+                       cells: int = 1) -> int:
+    """Count the poses in wall cells that neither a tolerance nor the log's scans excuse.
+
+    Of the poses :func:`wall_pose_diagnosis` found in wall cells, a pose whose cell lies
+    within ``cells`` cells of a known non-wall cell (depth at most ``cells`` diagonal
+    steps: the grid's walls are drawn to the cell and a pose a few centimetres off the
+    corridor's edge lands in one), or whose cell this log's own scans see through
+    (``crossings`` > 0: the grid holds something that was not there in this run), is not
+    counted; the rest are poses inside walls as the run saw them.
+
+    Args:
+        diagnosis: A :func:`wall_pose_diagnosis` result.
+        resolution: The grid's cell size [m].
+        cells: The tolerance in cells.
+    """
+    depth = np.asarray(diagnosis['depth'], dtype=float)
+    seen = np.asarray(diagnosis['crossings']) > 0
+    return int(np.count_nonzero((depth > cells * math.sqrt(2.0) * resolution + 1e-9) & ~seen))
+
+
 def ray_crossings(grid: OccupancyGrid, scenario, run, transform: np.ndarray, every: int = 2,
                   max_range: float = 8.0, margin: float = 0.3) -> np.ndarray:
     """Count, per grid cell, the run's scans with a ray through the cell.
@@ -625,4 +646,4 @@ __all__ = ['check_run', 'corner_wall_check', 'landmark_diagnosis', 'load_occupan
            'occupancy_check',
            'occupancy_check_files', 'run_segments',
            'OccupancyGrid', 'ray_crossings',
-           'scan_end_points', 'wall_pose_diagnosis']
+           'scan_end_points', 'wall_pose_diagnosis', 'wall_poses_counted']

@@ -119,13 +119,16 @@ def run_graph(scenario, noise, params: Optional[GraphParams] = None) -> GraphRun
 def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,
                        max_seconds: Optional[float] = None, reference=None,
                        align: str = 'se2', laser_pose=None, sigma_r: Optional[float] = None,
-                       rpe_delta: float = 1.0) -> dict:
+                       rpe_delta: float = 1.0, reference_sd=None) -> dict:
     """Run the graph back end on a bag and return its figures (``slam_graph.json``).
 
     Figures for ``online`` and ``final`` (module docstring): ``<which>_ate_<align>_rmse``,
     ``<which>_rpe_trans_rmse`` / ``<which>_rpe_rot_rmse_deg`` over ``rpe_delta`` m,
     ``<which>_ellipse95_share``; the odometry's ATE and RPE; keyframes, the factors between
-    consecutive keyframes by kind, loops proposed / accepted / refused by reason.
+    consecutive keyframes by kind, loops proposed / accepted / refused by reason. With
+    ``reference_sd`` (the reference's per-pose std along / across its heading [m]) also
+    ``<which>_ellipse95_ref_share``: the ellipse with the reference's noise added
+    (:func:`.slam_scores.ellipse_share`).
     """
     from landmark_nav.evaluation.slam import bag_odometry_noise
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r)
@@ -157,6 +160,9 @@ def evaluate_graph_bag(bag, out_dir=None, params: Optional[GraphParams] = None,
         result[f'{name}_rpe_rot_rmse_deg'] = r['rot_rmse_deg']
         if covs is not None:
             result[f'{name}_ellipse95_share'] = ellipse_share(_Posed(poses, run.truth, covs))
+            if reference_sd is not None:
+                result[f'{name}_ellipse95_ref_share'] = ellipse_share(
+                    _Posed(poses, run.truth, covs), reference_sd=reference_sd)
     result['seconds_total'] = float(wall)
     result['ms_per_scan'] = 1e3 * run.seconds / max(len(run.stamps), 1)
     if out_dir is not None:

@@ -1,0 +1,148 @@
+"""The graph back end's run judged on a building's occupancy grid (no trajectory truth).
+
+The graph back end (:mod:`.slam_graph`) keeps no landmarks: its map is its trajectory and
+the scans placed with it. On a log with a grid of the building (the CMU Wean runs and
+``wean.dat``) it is judged as the EKF's run is (:mod:`.occupancy_check`), on its final
+trajectory (every loop applied), with every scan's structural corners
+(``Corner.structural``: both arms on surfaces the scan supports) placed with that
+trajectory standing for the landmarks:
+
+* the alignment to the grid and the scan end points near a wall, of the graph's poses and
+  of the odometry's (:func:`.occupancy_check.check_run`);
+* poses in wall cells (:func:`.occupancy_check.wall_pose_diagnosis`) and those left once
+  one cell of tolerance and the cells the log's own scans see through are excused
+  (:func:`.occupancy_check.wall_poses_counted`);
+* the share of the structural corners within 10 cm of a wall cell, corners near a wall
+  cell the log sees through left out (:func:`.occupancy_check.corner_wall_check`): each
+  detection counts, so a place seen from many poses weighs as much as its views;
+* the same share per place (:func:`corner_places`): the detections linked into places as
+  a landmark map would hold them, one figure per place, as the EKF's landmark share
+  counts each landmark once.
+"""
+
+from types import SimpleNamespace
+from typing import Dict
+
+from landmark_nav.evaluation.occupancy_check import (check_run, corner_wall_check,
+                                                     OccupancyGrid, wall_pose_diagnosis,
+                                                     wall_poses_counted)
+from landmark_nav.evaluation.slam_run import scan_corners
+from landmark_nav.geometry import compose, transform_points
+from landmark_nav.sim import ScanSample
+import numpy as np
+
+
+def scan_indices(scan_stamps: np.ndarray, used_stamps: np.ndarray) -> np.ndarray:
+    """Return the index among all scans of each scan a run used (in order; stamps may repeat).
+
+    The run used a subsequence of the scans in their order: each used stamp is matched to
+    the next scan with that stamp.
+
+    Raises:
+        ValueError: A used stamp with no scan left to match (names it).
+    """
+    out, k = [], 0
+    stamps = np.asarray(scan_stamps)
+    for t in np.asarray(used_stamps):
+        while k < len(stamps) and stamps[k] != t:
+            k += 1
+        if k == len(stamps):
+            raise ValueError(f'scan_indices: no scan left with stamp {int(t)} ns')
+        out.append(k)
+        k += 1
+    return np.array(out, dtype=np.int64)
+
+
+def placed_run(scenario, run, corner_params=None) -> SimpleNamespace:
+    """Return the fields the occupancy checks read, from a :class:`.slam_graph.GraphRun`.
+
+    ``poses`` the final trajectory, ``odometry``, ``stamps``, ``scan_index`` (into the
+    scenario's scans) and ``landmarks``: every used scan's structural corners
+    (:func:`.slam_run.scan_corners` with ``corner_params``) placed with its final pose and
+    the laser mount, (K, 2).
+    """
+    scans = scenario.of_type(ScanSample)
+    index = scan_indices(np.array([s.stamp_ns for s in scans], dtype=np.int64), run.stamps)
+    mount = np.asarray(scenario.laser.mount, dtype=float)
+    corners = []
+    for k, i in enumerate(index):
+        found = [c.position for c in scan_corners(scans[int(i)], corner_params) if c.structural]
+        if found:
+            corners.append(transform_points(compose(run.final[k], mount), np.array(found)))
+    return SimpleNamespace(poses=run.final, odometry=run.odometry, stamps=run.stamps,
+                           scan_index=index,
+                           landmarks=np.vstack(corners) if corners else np.zeros((0, 2)))
+
+
+def corner_places(cw: Dict[str, object], link: float = 0.1, min_views: int = 3,
+                  tolerance: float = 0.1) -> Dict[str, object]:
+    """Group the structural corner detections into places and score each place once.
+
+    Detections (grid frame, a :func:`.occupancy_check.corner_wall_check` result) closer than
+    ``link`` are linked (single linkage: connected components of the pairs within
+    ``link``); a place seen at least ``min_views`` times (the EKF's ``confirm_hits``) is a
+    landmark. It lies on a wall when the median of its detections' distances to a wall
+    cell is within ``tolerance`` (as :func:`.occupancy_check.landmark_diagnosis` judges a
+    landmark by its observations), and is left out when most of its detections are.
+
+    Returns:
+        ``count`` places judged, ``share`` of them on a wall (nan: none), ``left_out``,
+        ``views_median`` detections per place judged.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+    sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool))
+    pts = np.asarray(cw['points'], dtype=float)[sel]
+    if len(pts) == 0:
+        return {'count': 0, 'share': float('nan'), 'left_out': 0, 'views_median': 0.0}
+    pairs = cKDTree(pts).query_pairs(link, output_type='ndarray')
+    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                     shape=(len(pts), len(pts)))
+    label = connected_components(adj, directed=False)[1]
+    views = np.bincount(label)
+    dist = np.asarray(cw['wall_distance'], dtype=float)[sel]
+    out_frac = np.bincount(label, np.asarray(cw['left_out'], dtype=float)[sel]) / views
+    on, judged = [], []
+    for c in np.flatnonzero(views >= min_views):
+        if out_frac[c] > 0.5:
+            continue
+        judged.append(views[c])
+        on.append(np.median(dist[label == c]) <= tolerance)
+    return {'count': len(judged), 'share': float(np.mean(on)) if on else float('nan'),
+            'left_out': int(np.sum((views >= min_views) & (out_frac > 0.5))),
+            'views_median': float(np.median(judged)) if judged else 0.0}
+
+
+def graph_wall_check(grid: OccupancyGrid, scenario, run,
+                     corner_params=None) -> Dict[str, object]:
+    """Judge a graph run on the grid (module docstring).
+
+    Args:
+        grid: The building's grid.
+        scenario: The bag (:func:`landmark_nav.evaluation.bags.load_bag`).
+        run: :func:`.slam_graph.run_graph` on it.
+        corner_params: The corner extractor's parameters (the laser's noise).
+
+    Returns:
+        ``check`` (:func:`.occupancy_check.check_run`: ``'slam'`` the graph's poses,
+        ``'odometry'``), ``wall`` (:func:`.occupancy_check.wall_pose_diagnosis` over every
+        step), ``poses_in_wall_counted``, ``corners``
+        (:func:`.occupancy_check.corner_wall_check`), ``places`` (:func:`corner_places`).
+
+    Raises:
+        ValueError: No structural corner in the run (the alignment has nothing to score).
+    """
+    placed = placed_run(scenario, run, corner_params)
+    if placed.landmarks.shape[0] == 0:
+        raise ValueError('graph_wall_check: no structural corner in any scan of the run')
+    fit = check_run(grid, scenario, placed)
+    t = np.asarray(fit['slam']['transform'])
+    wall = wall_pose_diagnosis(grid, scenario, placed, t, every=1)
+    cw = corner_wall_check(grid, scenario, placed, t, corner_params)
+    return {'check': fit, 'wall': wall,
+            'poses_in_wall_counted': wall_poses_counted(wall, grid.resolution),
+            'corners': cw, 'places': corner_places(cw)}
+
+
+__all__ = ['corner_places', 'graph_wall_check', 'placed_run', 'scan_indices']
