@@ -53,7 +53,8 @@ TINY_RUNS = {
         (['structural-rule', '--data', '{carmen}', 'tiny', '--lengths', '0.2', '--steps', '5',
           '--min-share', '0'], r'all logs: L 0.2 m, N 5 beam steps: tiny ([\d.]+|nan) '),
         (['quantised-lines', '--data', '{carmen}', 'tiny'],
-         r'\| tiny \| 0.05 \| 2 \| [\d.]+ \| [\d.]+ \| ([\d.]+|nan) \| ([\d.]+|nan) \| ')],
+         r'\| tiny \| [\d.]+ \| [\d.]+ \| 0.05 \| 2 \| [\d.]+ \| [\d.]+ \| ([\d.]+|nan) \| '
+         r'([\d.]+|nan) \| \d+ \| \d+ \| ')],
     'bench_slam.py': [
         (['step-time', '--landmarks', '10', '--steps', '3'], r'\n\s+10\s+23\s+[\d.]+'),
         (['step-time', '--bag', '{small_bag}', '--steps', '8'],
