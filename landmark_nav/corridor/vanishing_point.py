@@ -407,7 +407,7 @@ def refine_manhattan(geo: _Geometry, D: np.ndarray, params: VPParams) -> np.ndar
     Extension (Manhattan world): the nearest rotation to ``D`` (columns) is refined by
     minimising ``sum z^2`` of the exclusively labelled segments of all three directions
     (:func:`_labels`) over a rotation ``w`` (:func:`_rotation_information`,
-    ``w = -J^-1 b``), relabelling after each step. Stops when the step is below 1e-12
+    ``w = -J^-1 b``), relabelling after each step. Stops when the step is below 1e-9
     rad, after ``refine_iterations`` steps, or when the lines do not fix the rotation
     (``J`` singular).
 
@@ -424,7 +424,7 @@ def refine_manhattan(geo: _Geometry, D: np.ndarray, params: VPParams) -> np.ndar
         th = float(np.linalg.norm(w))
         S = _skew(w / max(th, _EPS))
         R = (np.eye(3) + np.sin(th) * S + (1.0 - np.cos(th)) * S @ S) @ R   # Rodrigues
-        if th < 1e-12:
+        if th < 1e-9:
             break
     return R
 
