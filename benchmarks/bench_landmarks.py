@@ -300,7 +300,7 @@ def run_versus_apriltag(args) -> int:
     r2 = med['landmark_fast'] / med['apriltag2']
     print(f'  default / AprilTag decimate 1: {r1:.2f}x ({"met" if r1 <= 1.0 else "NOT met"}: '
           f'<= 1.0x); fast / decimate 2: {r2:.2f}x ({"met" if r2 <= 1.0 else "NOT met"})')
-    stages = {}
+    stages, counts = {}, {'corner candidates': [], 'edges (both directions)': []}
     for img in frames:
         best = {}
         for _ in range(args.repeat):
@@ -310,8 +310,12 @@ def run_versus_apriltag(args) -> int:
                 best[k] = min(best.get(k, math.inf), v)
         for k, v in best.items():
             stages.setdefault(k, []).append(v)
+        counts['corner candidates'].append(len(dbg['points']))
+        counts['edges (both directions)'].append(len(dbg['edges']))
     print('  default, CPU ms per step (median of the best of each frame): ' + ', '.join(
         f'{k} {statistics.median(v):.2f}' for k, v in stages.items()))
+    print('  median per frame: ' + ', '.join(f'{statistics.median(v):.0f} {k}'
+                                             for k, v in counts.items()))
     return 0
 
 
