@@ -45,7 +45,9 @@ array operations, one sparse scan, grouping of the sparse pixels only).
 photographs without a landmark (default: the 51 York Urban training images, 640 x 480, as
 they are; or the images of ``--data DIR``) of the landmark detector (default and fast mode,
 ``decimate=2``) and AprilTag tag36h11 (``pupil_apriltags``, one thread, decimate 1 and 2)
-on the same images in one run, best of ``--repeat`` per frame, medians and their ratios.
+on the same images in one run, best of ``--repeat`` per frame, medians and their ratios;
+then the default detector's CPU time per step (``stage_ms`` of its ``debug`` output: corner
+candidates, neighbours with the k-d tree, edge chains, frames, code fits and readings).
 Targets: default <= 1.0x AprilTag decimate 1, fast <= 1.0x decimate 2.
 
 ``real`` (needs the test extra ``pupil-apriltags``, see requirements-test.txt, and the York
@@ -298,6 +300,22 @@ def run_versus_apriltag(args) -> int:
     r2 = med['landmark_fast'] / med['apriltag2']
     print(f'  default / AprilTag decimate 1: {r1:.2f}x ({"met" if r1 <= 1.0 else "NOT met"}: '
           f'<= 1.0x); fast / decimate 2: {r2:.2f}x ({"met" if r2 <= 1.0 else "NOT met"})')
+    stages, counts = {}, {'corner candidates': [], 'edges (both directions)': []}
+    for img in frames:
+        best = {}
+        for _ in range(args.repeat):
+            dbg = {}
+            detect_landmarks(img, debug=dbg)
+            for k, v in dbg['stage_ms'].items():
+                best[k] = min(best.get(k, math.inf), v)
+        for k, v in best.items():
+            stages.setdefault(k, []).append(v)
+        counts['corner candidates'].append(len(dbg['points']))
+        counts['edges (both directions)'].append(len(dbg['edges']))
+    print('  default, CPU ms per step (median of the best of each frame): ' + ', '.join(
+        f'{k} {statistics.median(v):.2f}' for k, v in stages.items()))
+    print('  median per frame: ' + ', '.join(f'{statistics.median(v):.0f} {k}'
+                                             for k, v in counts.items()))
     return 0
 
 

@@ -3,7 +3,7 @@
 Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
-        [--scales 1,0.5] [--confidence | --calibrate]
+        [--scales 1,0.5] [--confidence | --calibrate] [--no-orthogonal]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -27,14 +27,17 @@ fraction within 2 deg among the confident directions, fraction of images whose s
 radius covers the error; and the per-fold constants. Acceptance per size: >= 98 % within
 2 deg among the confident, confident on >= 85 % of the images, 95 % radius covering the
 error on >= 90 % of the images. ``--calibrate``: fit on all images and print the constants
-for ``landmark_nav/corridor/vp_confidence.py``.
+for ``landmark_nav/corridor/vp_confidence.py``. ``--no-orthogonal``: the Manhattan frame
+without the joint refinement of its triad (``VPParams(orthogonal=False)``), for comparison.
 """
 
 import argparse
+from dataclasses import replace
 import statistics
 import sys
 
 from common import add_data_argument, data_folder
+from landmark_nav.corridor.vanishing_point import VPParams
 from landmark_nav.evaluation.vanishing_points import (calibrate, confidence_samples,
                                                       confidence_summary, cross_validate,
                                                       evaluate_image, load_york_urban,
@@ -57,12 +60,15 @@ def main(argv=None) -> int:
                       help='held-out (5-fold) figures of the direction confidence')
     mode.add_argument('--calibrate', action='store_true',
                       help='fit the confidence constants on all images and print them')
+    ap.add_argument('--no-orthogonal', action='store_true',
+                    help='the Manhattan frame without the joint refinement of its triad')
     args = ap.parse_args(argv)
+    vp = replace(VPParams(), orthogonal=not args.no_orthogonal)
     items = load_york_urban(data_folder(args.data))[:args.images]
     scales = [float(s) for s in args.scales.split(',')]
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
-                   for s in confidence_samples(it, scale)]
+                   for s in confidence_samples(it, scale, vp_params=vp)]
         return (_calibrate if args.calibrate else _confidence)(samples, scales)
     for scale in scales:
         w, h = round(640 * scale), round(480 * scale)
@@ -70,7 +76,8 @@ def main(argv=None) -> int:
         for run in RUNS:
             results, t_lines, t_vp = [], [], []
             for it in items:
-                reps = [evaluate_image(it, run[0], run[1], scale) for _ in range(args.repeat)]
+                reps = [evaluate_image(it, run[0], run[1], scale, vp_params=vp)
+                        for _ in range(args.repeat)]
                 results.append(reps[0])
                 t_lines.append(min(r.t_lines for r in reps))
                 t_vp.append(min(r.t_vp for r in reps))

@@ -2,9 +2,10 @@
 
 import math
 
-from landmark_nav.corridor.vanishing_point import (chapter_vanishing_point, consistency,
-                                                   corridor_vanishing_point, manhattan_frame,
-                                                   vanishing_point, VPParams)
+from landmark_nav.corridor.vanishing_point import (_Geometry, chapter_vanishing_point,
+                                                   consistency, corridor_vanishing_point,
+                                                   manhattan_frame, refine_direction,
+                                                   refine_manhattan, vanishing_point, VPParams)
 from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CALIBRATION,
                                                  fit_calibration, log10_nfa, mixture_radius)
 import numpy as np
@@ -195,6 +196,28 @@ def test_parameters_are_used():
     assert np.count_nonzero(loose.inliers) > np.count_nonzero(tight.inliers) + 10
 
 
+def test_refine_manhattan_fixes_a_direction_with_two_lines_by_the_other_two():
+    rng = np.random.default_rng(4)
+    R = corridor_frame(6.0, 3.0, 2.0)
+    # a frontal view: 30 lines along each of x and y, two receding ones (no third to check
+    # them: on its own lines the direction is where the two happen to meet)
+    seg = np.vstack([lines_along(rng, R[:, 0], 30, 0.5), lines_along(rng, R[:, 1], 30, 0.5),
+                     lines_along(rng, R[:, 2], 2, 0.5)])
+    params = VPParams()
+    start = Rotation.from_rotvec([0.02, -0.03, 0.01]).as_matrix() @ R     # 2.1 deg off
+    out = refine_manhattan(_Geometry(seg, K, params.sigma_px), start, params)
+    np.testing.assert_allclose(out.T @ out, np.eye(3), atol=1e-12)
+    for k in range(3):                      # columns stay in the start's order
+        assert angle_deg(out[:, k], R[:, k]) < 0.3          # measured 0.14 / 0.19 / 0.22
+    # on its own two lines the receding direction stays where it started
+    own = refine_direction(seg, K, start[:, 2], params=params)[0]
+    assert angle_deg(own, R[:, 2]) > 1.9                    # measured 2.0
+    # a frame of one direction's lines does not fix a rotation: the start comes back
+    one = lines_along(rng, R[:, 0], 30, 0.5)
+    same = refine_manhattan(_Geometry(one, K, params.sigma_px), start, params)
+    np.testing.assert_allclose(same, start, atol=1e-12)
+
+
 # ------------------------------------------------------------------ confidence (vp_confidence)
 @pytest.mark.parametrize('seed', [0, 1, 3])
 def test_confidence_flags_a_frontal_view_as_weak_and_a_good_frame_as_confident(seed):
@@ -216,12 +239,15 @@ def test_confidence_flags_a_frontal_view_as_weak_and_a_good_frame_as_confident(s
     mf = manhattan_frame(seg, K)
     weak = assess_frame(mf, seg, K, sigma)[0]
     assert not weak.confident and weak.p_correct < CALIBRATION.p_confident
-    # its error is mostly the wrong mode's (5.5 deg) where the good frame's is its own
+    # its error is mostly the wrong mode's (5.3 deg) where the good frame's is its own
     assert math.degrees(math.sqrt(np.trace(weak.mixture_covariance) / 2)) > 4.0
     assert math.degrees(math.sqrt(np.trace(good.first_order) / 2)) < 0.2
     assert math.degrees(math.sqrt(np.trace(good.wrong_covariance) / 2)) == pytest.approx(
         CALIBRATION.sigma_wrong_deg)
-    assert weak.radius95 > math.radians(13.0)        # Rayleigh(5.5 deg) 95 %: 13.5 deg
+    # p = 0 (its lines do not check it): the 95 % radius of the wrong mode alone, the
+    # Rayleigh quantile sigma_wrong sqrt(-2 ln 0.05) (5.3 deg: 13.0 deg)
+    assert weak.radius95 == pytest.approx(math.radians(CALIBRATION.sigma_wrong_deg)
+                                          * math.sqrt(-2.0 * math.log(0.05)), rel=1e-3)
 
 
 def test_mixture_radius_and_calibration_fit():

@@ -79,6 +79,13 @@ class VPParams:
         refine_iterations: IRLS iterations of the refinement.
         hypotheses: d1 hypotheses tried by :func:`manhattan_frame` (peaks of the candidate
             histogram, besides the clustered dominant direction).
+        orthogonal: before each direction of :func:`manhattan_frame` is refined on its own
+            lines, refine the triad jointly as one rotation (:func:`refine_manhattan`)
+            and label the segments by it: a direction whose own fit went to the wrong
+            lines (few receding lines of a frontal facade, clutter) is brought back to
+            the one orthogonal to the other two first. York Urban training half,
+            corridor direction within 2 deg: 640 x 480 90.2 -> 92.2 %, 320 x 240 82.4 ->
+            92.2 % (False: the triad of the hypothesis search is refined as it is).
     """
 
     sigma_px: float = 0.6
@@ -89,6 +96,7 @@ class VPParams:
     min_length_px: float = 10.0
     refine_iterations: int = 10
     hypotheses: int = 12
+    orthogonal: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -365,6 +373,88 @@ def direction_covariance(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
     return T.T @ np.linalg.inv(Jt) @ T
 
 
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _rotation_information(geo: _Geometry, R: np.ndarray, labels: np.ndarray
+                          ) -> Tuple[np.ndarray, np.ndarray]:
+    """Return ``(J, b)``: normal equations of ``sum z^2`` in a rotation ``w`` of the frame.
+
+    Column ``k`` of ``R`` rotated by ``w`` is ``d_k + w x d_k``, so a residual of its
+    segment ``i`` moves by ``w . (d_k x K^T l_i)``: with ``g_i = d_k x K^T l_i`` and the
+    variance ``std_i^2`` at ``R`` (module docstring), ``J = sum g g^T / std^2`` and
+    ``b = sum g r / std^2`` over the segments labelled ``k``.
+    """
+    J, b = np.zeros((3, 3)), np.zeros(3)
+    for k in range(3):
+        idx = np.nonzero(labels == k)[0]
+        if idx.size == 0:
+            continue
+        sub = geo.subset(idx)
+        r, std = (t[0] for t in sub.terms(R[:, k]))
+        ok = np.isfinite(std) & (std > 0)
+        g = np.cross(R[:, k], sub.kl[:, ok].T)
+        w = 1.0 / std[ok] ** 2
+        J += (g * w[:, None]).T @ g
+        b += g.T @ (w * r[ok])
+    return J, b
+
+
+def refine_manhattan(geo: _Geometry, D: np.ndarray, params: VPParams) -> np.ndarray:
+    """Refine three directions jointly as the columns of one rotation (IRLS, Gauss-Newton).
+
+    Extension (Manhattan world): the nearest rotation to ``D`` (columns) is refined by
+    minimising ``sum z^2`` of the exclusively labelled segments of all three directions
+    (:func:`_labels`) over a rotation ``w`` (:func:`_rotation_information`,
+    ``w = -J^-1 b``), relabelling after each step. Stops when the step is below 1e-9
+    rad, after ``refine_iterations`` steps, or when the lines do not fix the rotation
+    (``J`` singular).
+
+    Returns:
+        (3, 3) orthonormal columns, in the order of ``D``'s.
+    """
+    U, _, Vt = np.linalg.svd(D)
+    R = U @ Vt
+    for _ in range(params.refine_iterations):
+        J, b = _rotation_information(geo, R, _labels(geo, R, params, exclusive=True))
+        if np.linalg.cond(J) > 1e12:
+            break
+        w = -np.linalg.solve(J, b)
+        th = float(np.linalg.norm(w))
+        S = _skew(w / max(th, _EPS))
+        R = (np.eye(3) + np.sin(th) * S + (1.0 - np.cos(th)) * S @ S) @ R   # Rodrigues
+        if th < 1e-9:
+            break
+    return R
+
+
+def _pair_starts(D: np.ndarray, support: np.ndarray) -> list:
+    """Return the orthonormal starts of :func:`refine_manhattan` from a triad ``D``.
+
+    ``D``'s nearest rotation, and for each pair of columns the better supported one kept
+    as it is, the other made orthogonal to it (Gram-Schmidt) and the third their cross
+    product: a wrong or weakly supported direction does not then pull a well supported
+    one off its lines (with the two directions made orthogonal symmetrically instead, a
+    rendered corridor frame at 320 x 240 with two and three lines along the cross
+    directions lost its six corridor lines).
+    """
+    U, _, Vt = np.linalg.svd(D)
+    out = [U @ Vt]
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        if support[b] > support[a]:
+            a, b = b, a
+        x = D[:, a] / np.linalg.norm(D[:, a])
+        y = D[:, b] - (D[:, b] @ x) * x
+        y /= max(np.linalg.norm(y), _EPS)
+        R = np.empty((3, 3))
+        R[:, a], R[:, b] = x, y
+        R[:, 3 - a - b] = np.cross(x, y) if (a, b) in ((0, 1), (1, 2), (2, 0)) else \
+            np.cross(y, x)
+        out.append(R)
+    return out
+
+
 def _make_vp(seg: np.ndarray, K: np.ndarray, d: np.ndarray, inl: np.ndarray,
              w: np.ndarray) -> VanishingPoint:
     d = _canonical(d)
@@ -588,6 +678,15 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
     scored = [(_triad_support(geo, refined[3 * h:3 * h + 3].T, w, params),
                refined[3 * h:3 * h + 3].T) for h in range(len(hyps))]
     D = max(scored, key=lambda sd: sd[0])[1]       # the first of equal scores
+    if params.orthogonal:
+        # the triad refined jointly as a rotation from each start (the best MSAC triad score
+        # wins) labels the segments as a Manhattan frame would; each direction is then
+        # refined on its own lines below, so a frame that is not quite orthogonal in the
+        # image (an unmodelled lens distortion) keeps its own directions
+        lab = _labels(geo, D, params, exclusive=True)
+        support = np.bincount(lab[lab >= 0], w[lab >= 0], minlength=3)
+        rotations = [refine_manhattan(geo, R0, params) for R0 in _pair_starts(D, support)]
+        D = max(rotations, key=lambda R: _triad_support(geo, R, w, params))
     for _ in range(params.refine_iterations):      # exclusive labels, then refine each
         lab = _labels(geo, D, params, exclusive=True)
         D_new = _refine_many(geo, D.T, params, lab[None, :] == np.arange(3)[:, None])[0].T

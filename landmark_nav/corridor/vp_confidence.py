@@ -107,8 +107,8 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(0.8261, -1.1039, -0.4348), scale=1.1650, floor_deg=0.3741,
-                            sigma_wrong_deg=5.5204, p_confident=0.9270)
+CALIBRATION = VPCalibration(weights=(0.8050, -1.0989, -0.0380), scale=1.2160, floor_deg=0.3760,
+                            sigma_wrong_deg=5.3255, p_confident=0.9416)
 
 
 @dataclass(frozen=True, eq=False)

@@ -293,7 +293,15 @@ def saddle_corners(g: np.ndarray, threshold: float = 1000.0, kappa: float = 0.0,
     # |Gxx - Gyy| / 2)^2: only pixels where that bound exceeds the threshold (a few % of a
     # photograph) can be corners, so S is evaluated there only (the others are 0 below)
     bound = math.sqrt(max(float(threshold), 0.0) / 2.0)
-    maybe = (np.abs(gxy) > bound) | (np.abs(cv2.subtract(gxx, gyy)) > 2.0 * bound)
+    if depth == cv2.CV_16S:
+        # integer derivatives: |x| > b is |x| > floor(b) (OpenCV's saturating array
+        # operations; no 16-bit derivative of 8-bit grey levels reaches the saturation)
+        maybe = cv2.bitwise_or(
+            cv2.compare(cv2.absdiff(gxy, 0), math.floor(bound), cv2.CMP_GT),
+            cv2.compare(cv2.absdiff(gxx, gyy), math.floor(2.0 * bound), cv2.CMP_GT))
+        maybe = cv2.bitwise_and(maybe, 1).view(bool)
+    else:
+        maybe = (np.abs(gxy) > bound) | (np.abs(cv2.subtract(gxx, gyy)) > 2.0 * bound)
     maybe[:border] = False
     maybe[h - border:] = False
     maybe[:, :border] = False
@@ -304,9 +312,11 @@ def saddle_corners(g: np.ndarray, threshold: float = 1000.0, kappa: float = 0.0,
     fxy = gxy.ravel()[idx].astype(np.float64)
     tr = fxx + fyy
     strength = fxy * fxy - fxx * fyy - kappa * tr * tr
-    s = np.zeros(h * w)
-    s[idx] = strength
     sel = np.flatnonzero(strength > threshold)
+    # a pixel below the threshold cannot be the larger of two strong neighbours: only the
+    # strong pixels go into the image of S compared below
+    s = np.zeros(h * w)
+    s[idx[sel]] = strength[sel]
     # 3 x 3 local maxima (ties kept) among the strong pixels (none is at the border)
     for off in (-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1):
         sel = sel[strength[sel] >= s[idx[sel] + off]]
@@ -339,7 +349,9 @@ def saddle_corners(g: np.ndarray, threshold: float = 1000.0, kappa: float = 0.0,
         # crowd its neighbours out of their direction sectors (composites at 12-15 px per
         # block: 4-7 % of the corner's strength, 5-8 px away; frame X-corners at 3-5 px
         # per block are at least 17 % of any candidate near them)
-        pairs = cKDTree(pts).query_pairs(radius, output_type='ndarray')
+        # (the pairs' order does not matter to the maxima: the unbalanced tree builds faster)
+        pairs = cKDTree(pts, balanced_tree=False, compact_nodes=False).query_pairs(
+            radius, output_type='ndarray')
         if len(pairs):
             near = wgt.copy()
             np.maximum.at(near, pairs[:, 0], wgt[pairs[:, 1]])

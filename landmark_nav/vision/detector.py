@@ -44,6 +44,7 @@ those of the whole pipeline (tested in ``test/test_landmark_detector.py``):
 from dataclasses import dataclass, field
 import functools
 import math
+import time
 from typing import Callable, List, Optional, Tuple
 
 import cv2
@@ -374,6 +375,21 @@ def _refined_frame(raw: np.ndarray, pts: np.ndarray, frame: np.ndarray,
                      params.min_contrast, grid=grid)
 
 
+class _StageClock:
+    """CPU time of the steps of :func:`detect_landmarks` into ``debug['stage_ms']``."""
+
+    def __init__(self, debug: Optional[dict]) -> None:
+        self.out = None if debug is None else debug.setdefault('stage_ms', {})
+        self.t = time.process_time() if self.out is not None else 0.0
+
+    def mark(self, stage: str) -> None:
+        """Book the time since the previous mark to ``stage``."""
+        if self.out is not None:
+            t = time.process_time()
+            self.out[stage] = 1e3 * (t - self.t)
+            self.t = t
+
+
 def _grid_inside(grid: np.ndarray, width: int, height: int) -> bool:
     """Return whether every grid point is finite and inside the image."""
     if not np.all(np.isfinite(grid)):
@@ -394,7 +410,9 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
         camera: optional camera model; with a lens that distorts, the edge line fits (eq. 5)
             are made on undistorted corner positions (see :func:`fit_frame`).
         debug: if a dict, filled with the intermediate results (``corners``, ``edges``,
-            ``frames``, ``grids``, ``readings``).
+            ``frames``, ``grids``, ``readings``) and ``stage_ms``, the CPU time of this
+            process per step [ms]: ``corners`` (smoothing and candidates), ``neighbours``
+            (with the k-d tree), ``chains``, ``frames``, ``codes`` (fits and readings).
 
     Returns:
         The detections, strongest (largest margin) first; overlapping detections (sharing
@@ -406,6 +424,7 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
     img = np.asarray(gray)
     if img.ndim != 2:
         raise ValueError(f'detect_landmarks needs a 2-D grey image; got shape {img.shape}')
+    clock = _StageClock(debug)
     design = params.design
     n = design.corners_per_edge
     if img.dtype != np.uint8:
@@ -433,6 +452,7 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
     if params.decimate > 1:
         corners = Corners(corners.points * f + 0.5 * (f - 1), corners.weights,
                           corners.filters)
+    clock.mark('corners')
     pts, filt = corners.points, corners.filters
     if len(pts) > params.max_corners:
         keep = np.argsort(corners.weights)[::-1][:params.max_corners]
@@ -441,13 +461,16 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
     nbrs = corner_neighbours(pts, params.neighbour_fraction * img.shape[0],
                              params.max_neighbours, tree, params.neighbour_mode,
                              math.radians(params.second_neighbour_angle))
+    clock.mark('neighbours')
     edges, virtual = chain_edges(pts, nbrs, n, params.k_lim, params.k_g, tree, filt,
                                  params.max_gaps)
+    clock.mark('chains')
     if debug is not None:
         debug.update(corners=corners, points=pts, virtual=virtual)
     if len(virtual):
         pts = np.vstack([pts, virtual])
     frames = find_frames(pts, edges, params.k_p)
+    clock.mark('frames')
     if debug is not None:
         debug.update(edges=edges, frames=frames, grids=[], readings=[])
     found = []
@@ -501,6 +524,7 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
             edge_corners=edge_corners, rotation=reading.rotation,
             contrast=reading.contrast, margin=reading.margin, line_rms=fg.line_rms,
             block_pixels=float(spacing), bits=reading.bits)))
+    clock.mark('codes')
     found.sort(key=lambda fd: -fd[1].margin)
     out, used = [], set()
     for frame, det in found:

@@ -74,19 +74,21 @@ def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
         if idx.shape[1] < k:
             idx = np.hstack([idx, np.full((n, k - idx.shape[1]), n)])
         return idx.astype(np.int64)
-    valid = idx < n
-    ext = np.vstack([points, [[0.0, 0.0]]])
-    d = ext[np.where(valid, idx, n)] - points[:, None, :]
-    ang = np.arctan2(d[..., 1], d[..., 0])
-    sector = np.floor((ang + math.pi) / (2 * math.pi) * k)
+    # the tables are built transposed ((columns, n), one row per neighbour rank): the loop
+    # below then writes contiguous rows
+    idx_t = idx.T.copy()
+    valid = idx_t < n
+    dx = np.append(points[:, 0], 0.0)[idx_t] - points[:, 0]
+    dy = np.append(points[:, 1], 0.0)[idx_t] - points[:, 1]
+    ang_t = np.arctan2(dy, dx)
+    sector = np.floor((ang_t + math.pi) / (2 * math.pi) * k)
     sector = np.where(valid, np.clip(sector.astype(np.int64), 0, k - 1), k)   # k: none
     # the columns of a row are in order of distance: writing them from the farthest to the
     # nearest leaves each sector's nearest corner in it (column k collects the missing
     # ones); the corner a write replaces is the sector's next nearest, its second. The
     # (n, k + 1) tables are written through flat indices, column by column (one write per
     # row each)
-    flat = (sector + (k + 1) * np.arange(n)[:, None]).T.copy()
-    idx_t, ang_t = idx.T.copy(), ang.T.copy()
+    flat = sector + (k + 1) * np.arange(n)
     out = np.full(n * (k + 1), n, dtype=np.int64)
     first_ang = np.zeros(n * (k + 1))
     extra = second_ang = None
@@ -196,41 +198,54 @@ def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
     if filters is not None:
         f = np.append(np.asarray(filters), -1)
         ok &= f[h1] != f[np.minimum(h2, n)]
-    chain = [h1[ok], h2[ok]]
-    pos = points[chain[1]]
-    v = pos - points[chain[0]]                                    # v_2 = h_2 - h_1
+    h1, h2 = h1[ok], h2[ok]
+    # the chains' corners are written into one table; each step works on the rows of the
+    # chains still alive (``rows``) and their current position, spacing and gap count
+    ids = np.empty((len(h1), n_corners), np.int64)
+    ids[:, 0], ids[:, 1] = h1, h2
+    vtab = np.full((len(h1), n_corners - 2, 2), np.nan)           # virtual corner positions
+    rows = np.arange(len(h1))
+    last = h2
+    pos = points[h2]
+    v = pos - points[h1]                                          # v_2 = h_2 - h_1
     gaps = np.zeros(len(v), np.int64)
     was_virtual = np.zeros(len(v), bool)
-    virtual_pos = []                              # per step: positions (-1 entries)
     for step in range(n_corners - 2):
-        if not len(v):
-            break
+        if not len(rows):
+            return none
         pred = pos + v                                            # eq. 3 prediction
         dist, best = tree.query(pred, k=1)
         good = dist < k_lim * np.linalg.norm(v, axis=1)           # |h_i - h^_i| < k_lim |v_i|
         if filters is not None:
             # neighbouring corners of an edge alternate in polarity, as h_1 and h_2 (a
             # bridged corner, index -1, has no filter: f[-1] = -1)
-            good &= f[np.minimum(best, n)] != f[chain[-1]]
-        virt = np.zeros_like(good)
+            good &= f[np.minimum(best, n)] != f[last]
         if max_gaps > 0 and 1 <= step < n_corners - 3:
             virt = ~good & (gaps < max_gaps) & ~was_virtual
-        keep = good | virt
-        chain = [c[keep] for c in chain]
-        virtual_pos = [p[keep] for p in virtual_pos]
-        best, pred, v, good, virt = best[keep], pred[keep], v[keep], good[keep], virt[keep]
-        gaps = gaps[keep] + virt
-        was_virtual = virt
-        best = np.where(good, best, -1)
-        corr = np.where(good[:, None], points[np.maximum(best, 0)] - pred, 0.0)
-        v = v + k_g * corr                                        # v_{i+1} = v_i + k_g (...)
-        pos = np.where(good[:, None], points[np.maximum(best, 0)], pred)
-        chain.append(best)
-        virtual_pos.append(np.where(virt[:, None], pred, np.nan))
-    if len(chain) < n_corners or not len(chain[0]):
+            alive = np.flatnonzero(good | virt)
+            virt, good = virt[alive], good[alive]
+        else:
+            virt = None
+            alive = np.flatnonzero(good)
+        rows, best, pred, v = rows[alive], best[alive], pred[alive], v[alive]
+        hit = points[np.minimum(best, n - 1)]     # (n: no corner, for a non-finite pred)
+        if virt is None:
+            gaps = gaps[alive]
+            was_virtual = np.zeros(len(rows), bool)
+            last = best
+            v = v + k_g * (hit - pred)                            # v_{i+1} = v_i + k_g (...)
+            pos = hit
+        else:
+            gaps = gaps[alive] + virt
+            was_virtual = virt
+            last = np.where(good, best, -1)
+            v = v + k_g * np.where(good[:, None], hit - pred, 0.0)
+            pos = np.where(good[:, None], hit, pred)
+            vtab[rows[virt], step] = pred[virt]
+        ids[rows, step + 2] = last
+    if not len(rows):
         return none
-    edges = np.column_stack(chain)
-    vpos = np.stack(virtual_pos, axis=1) if virtual_pos else np.zeros((len(edges), 0, 2))
+    edges, vpos = ids[rows], vtab[rows]
     real = edges >= 0
     srt = np.sort(np.where(real, edges, -1 - np.arange(n_corners)), axis=1)
     distinct = np.all(srt[:, 1:] != srt[:, :-1], axis=1)
