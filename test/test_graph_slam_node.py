@@ -154,6 +154,21 @@ def test_bad_input_is_warned_and_counted_and_the_node_keeps_running():
             node.on_scan(make_scan(t, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0))
         assert ros.wait_until(lambda: node.stats.processed_count == 2, 10)
         assert node.stats.dropped['backend_error'] == 1
+        # a failure between scans (the queue's bookkeeping): warned and counted, the worker
+        # goes on with the next scan instead of ending
+        pop_ready, failed = node.steps.pop_ready, []
+
+        def fail_first(*args):
+            if not failed:
+                failed.append(1)
+                raise RuntimeError('injected between scans')
+            return pop_ready(*args)
+        node.steps.pop_ready = fail_first
+        assert ros.wait_until(lambda: node.stats.events['backend_error'] == 1, 10)
+        node.on_odom(make_odometry(6_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+        node.on_scan(make_scan(6_000_000_000, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0))
+        assert ros.wait_until(lambda: node.stats.processed_count == 3, 10)
+        assert node._worker.is_alive() and node.stats.dropped['backend_error'] == 1
 
 
 @pytest.mark.parametrize('name, value, match', [

@@ -37,7 +37,9 @@ running: odometry or scans that cannot be read (NaN fields, beam counts that do 
 the angles), with stamp 0 or a non-finite odometry pose (``dropped.malformed``), scans of
 more than ``max_beams`` beams (``dropped.oversized``), scans or odometry older than what
 was processed (``dropped.out_of_order``), scans older than the odometry kept
-(``dropped.odometry_gone``).
+(``dropped.odometry_gone``). A failure of the back end is warned and counted too
+(``dropped.backend_error`` when it cost a scan, the event ``backend_error`` otherwise) and
+its worker goes on.
 Scans stamped before the first odometry have no pose: counted as ``before_odometry`` (not
 a drop, as ``ekf_slam``).
 """
@@ -196,27 +198,42 @@ class GraphSlamNode(Node):
             self._lock.notify()
 
     # ------------------------------------------------------------------ back end
+    def _stopping(self) -> bool:
+        """Whether the node is going: destroyed, or its context shut down (SIGINT, SIGTERM)."""
+        return self._stop.is_set() or not self.context.ok()
+
     def _work(self) -> None:
-        """Process the scans the odometry covers, one at a time, until stopped."""
-        while not self._stop.is_set():
-            with self._lock:
-                item = self.steps.pop_ready()
-                if item is None:
-                    self._lock.wait(WAIT_S)
-                received = None if item is None else self._received.pop(item[0], None)
-            if item is None:
-                self._publish_path()
-                continue
+        """Process the scans the odometry covers, one at a time, until stopped.
+
+        A failure is warned and counted (``dropped.backend_error`` when it cost a scan, the
+        event ``backend_error`` otherwise) and the loop goes on: the back end never stops
+        while the node runs. Once the node is going nothing is published or warned.
+        """
+        while not self._stopping():
+            item = None
             try:
+                with self._lock:
+                    item = self.steps.pop_ready()
+                    if item is None:
+                        self._lock.wait(WAIT_S)
+                    received = None if item is None else self._received.pop(item[0], None)
+                if item is None:
+                    self._publish_path()
+                    continue
                 step = self.steps.process(*item)
-                if self._stop.is_set():
+                if self._stopping():
                     return
                 self._publish(step)
             except Exception as err:  # the node keeps running; say what failed
-                if self._stop.is_set():  # shutting down: the publishers may be gone
+                if self._stopping():  # shutting down: the publishers may be gone
                     return
-                self.stats.drop('backend_error', f'Dropping scan at {item[0]} ns: the back end '
-                                f'failed ({type(err).__name__}: {err})')
+                failure = f'{type(err).__name__}: {err}'
+                if item is None:
+                    self.stats.event('backend_error', f'The back end failed between scans '
+                                     f'({failure})')
+                else:
+                    self.stats.drop('backend_error', f'Dropping scan at {item[0]} ns: the '
+                                    f'back end failed ({failure})')
                 continue
             self.stats.processed(received or 0)
 
