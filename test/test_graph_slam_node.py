@@ -171,6 +171,30 @@ def test_bad_input_is_warned_and_counted_and_the_node_keeps_running():
         assert node._worker.is_alive() and node.stats.dropped['backend_error'] == 1
 
 
+def test_a_full_queue_says_why_the_scans_wait():
+    """No odometry, or none as new as the scans: the warning says so (not just its size)."""
+    with RosHarness() as ros:
+        node = GraphSlamNode(context=ros.context, parameter_overrides=[
+            Parameter('max_queue_mb', value=0.01)])  # 10 KiB: two scans of 400 points
+        warnings = []
+        node.warner._logger = type('Log', (), {'warning': staticmethod(warnings.append)})
+        node.warner._period = 0.0
+        try:
+            for t in (2, 3):
+                node.on_scan(make_scan(t * 10 ** 9, 'laser', -1.0, 0.005, [1.0] * 400, 0.1,
+                                       30.0))
+            node.on_odom(make_odometry(1_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+            node.on_scan(make_scan(4 * 10 ** 9, 'laser', -1.0, 0.005, [1.0] * 400, 0.1, 30.0))
+        finally:
+            node.destroy_node()
+    assert node.stats.dropped['queue_full'] == 2 and len(warnings) == 2
+    assert 'Dropping scan at 2000000000 ns' in warnings[0]
+    assert 'no odometry received yet' in warnings[0]
+    assert 'Dropping scan at 3000000000 ns' in warnings[1]
+    assert 'the newest odometry, at 1000000000 ns, is older than every waiting scan' \
+        in warnings[1]
+
+
 @pytest.mark.parametrize('name, value, match', [
     ('loop_floor', [0.03, 0.03], 'loop_floor'),
     ('loop.window_xy', [0.5], 'loop.window_xy'),

@@ -193,9 +193,19 @@ class GraphSlamNode(Node):
             while self.steps.waiting_bytes > self.max_queue_bytes:
                 t = self.steps.drop_oldest('queue_full', 'the scans waiting for the back end '
                                            f'take more than {self.max_queue_bytes / 2 ** 20:g} '
-                                           'MiB')
+                                           f'MiB ({self._queue_cause()})')
                 self._received.pop(t, None)
             self._lock.notify()
+
+    def _queue_cause(self) -> str:
+        """Say why scans pile up: no odometry (yet, or not past them) or a slow back end."""
+        newest = self.steps.newest_odometry_ns
+        if newest is None:
+            return 'no odometry received yet: each scan waits for the odometry around its stamp'
+        if self.steps.waiting and newest < self.steps.oldest_waiting_ns:
+            return (f'the newest odometry, at {newest} ns, is older than every waiting scan: '
+                    'each waits for the odometry around its stamp')
+        return 'the back end is slower than the scans'
 
     # ------------------------------------------------------------------ back end
     def _stopping(self) -> bool:

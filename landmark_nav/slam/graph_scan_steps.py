@@ -163,6 +163,16 @@ class GraphScanSteps:
         return len(self._waiting)
 
     @property
+    def oldest_waiting_ns(self) -> Optional[int]:
+        """Stamp of the oldest waiting scan [ns] (None when none waits)."""
+        return self._waiting[0][0] if self._waiting else None
+
+    @property
+    def newest_odometry_ns(self) -> Optional[int]:
+        """Stamp of the newest odometry sample [ns] (None before the first)."""
+        return self._newest_ns
+
+    @property
     def waiting_bytes(self) -> int:
         """Memory of the queued scans' points [bytes]."""
         return sum(p.nbytes for _, p in self._waiting)
