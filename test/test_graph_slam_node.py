@@ -60,6 +60,43 @@ def test_steps_wait_for_the_odometry_and_go_in_stamp_order():
     assert drops[1:] == ['out_of_order', 'out_of_order', 'nonfinite']
 
 
+def test_a_restarted_odometry_source_starts_a_new_graph():
+    events = []
+    steps = GraphScanSteps([0.0, 0.0, 0.0], odometry_noise_model('simulator'),
+                           on_drop=lambda r, m: events.append(r), restart=True)
+    s = 10 ** 9
+    pts = np.zeros((0, 2))
+    for t in range(10, 21):
+        steps.add_odometry(t * s, [float(t), 0.0, 0.0])
+    for t in (12, 14, 30):  # 30: waits, the odometry never reaches it in this run
+        steps.add_scan(t * s, pts)
+    assert [steps.step().stamp_ns for _ in range(2)] == [12 * s, 14 * s]
+    late = steps.pop_ready  # a scan taken before the restart and processed after it
+    steps.add_scan(16 * s, pts)
+    item = late()
+    # one far-back sample, then the old time base goes on: dropped, nothing restarts
+    steps.add_odometry(2 * s, [0.0, 0.0, 0.0])
+    steps.add_odometry(21 * s, [21.0, 0.0, 0.0])
+    assert events == ['out_of_order'] and steps.generation == 0
+    # three in a row, each newer: a new graph from them, the old run's waiting scan dropped
+    for t in (1, 2):
+        steps.add_odometry(t * s, [5.0 + t, 0.0, 0.0])
+    assert events == ['out_of_order'] and steps.generation == 0  # held so far
+    steps.add_odometry(3 * s, [8.0, 0.0, 0.0])
+    assert events[1:] == ['restart', 'restarted'] and steps.generation == 1
+    assert steps.process(*item) is None and events[-1] == 'restarted'
+    steps.add_scan(int(1.5 * s), pts)  # of the new run: its odometry, the new graph
+    st = steps.step()
+    assert st.stamp_ns == int(1.5 * s) and st.generation == 1
+    assert np.allclose(st.odometry, [6.5, 0.0, 0.0]) and len(steps.graph.keyframes) == 1
+    # without restart (the offline runner) the same samples are dropped
+    plain = GraphScanSteps([0.0, 0.0, 0.0], odometry_noise_model('simulator'))
+    plain.add_odometry(10 * s, [0.0, 0.0, 0.0])
+    for t in (1, 2, 3):
+        plain.add_odometry(t * s, [0.0, 0.0, 0.0])
+    assert plain.counts['out_of_order'] == 3 and plain.generation == 0
+
+
 @pytest.mark.dds
 def test_node_equals_offline_on_the_office_bag_with_its_outputs():
     """Same steps, same poses and covariances as ``evaluate --backend graph``; nothing lost.

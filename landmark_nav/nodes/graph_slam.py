@@ -41,7 +41,12 @@ was processed (``dropped.out_of_order``), scans older than the odometry kept
 (``dropped.backend_error`` when it cost a scan, the event ``backend_error`` otherwise) and
 its worker goes on.
 Scans stamped before the first odometry have no pose: counted as ``before_odometry`` (not
-a drop, as ``ekf_slam``).
+a drop, as ``ekf_slam``). A restarted odometry source (a bag replayed in a loop: odometry
+more than 1 s back in time, three samples in a row) starts the graph over, as ``ekf_slam``
+restarts its filter (the event ``restart``, warned; the old run's scans not yet processed
+are dropped, ``dropped.restarted``, and so are the new run's scans that come before its
+third odometry sample, ``dropped.out_of_order``; ``path`` then holds the new graph's
+keyframes).
 """
 
 import threading
@@ -129,7 +134,9 @@ class GraphSlamNode(Node):
         self.display_period = declare(self, 'display_period', 0.5, 'least period of the path '
                                       'topic (published after a keyframe) [s]', (0.01, 3600.0))
         self.warner = ProblemWarner(self)
-        self.steps = GraphScanSteps(laser_pose, noise, params, buffer_s, self._on_drop)
+        self.steps = GraphScanSteps(laser_pose, noise, params, buffer_s, self._on_drop,
+                                    restart=True)
+        self._generation = 0  # of the graph whose keyframes keyframe_stamps holds
         self.params = self.steps.graph.params
         self.stats = GraphInputStats(self, self.warner)
         quiet = PublisherEventCallbacks(use_default_callbacks=False)
@@ -161,7 +168,9 @@ class GraphSlamNode(Node):
     # ------------------------------------------------------------------ input
     def _on_drop(self, reason: str, message: str) -> None:
         """Report an input :class:`GraphScanSteps` did not use."""
-        if reason in NOT_DROPS:
+        if reason == 'restart':
+            self.stats.event(reason, f'Odometry: {message}')
+        elif reason in NOT_DROPS:
             self.stats.event(reason, f'Not processed: {message}')
         else:
             self.stats.drop(reason, f'Dropping {message}')
@@ -233,6 +242,12 @@ class GraphSlamNode(Node):
                 step = self.steps.process(*item)
                 if self._stopping():
                     return
+                if step is None:  # the graph started over before it (counted)
+                    continue
+                if step.generation != self.steps.generation:  # ... while it was processed
+                    self.stats.drop('restarted', f'Dropping scan at {step.stamp_ns} ns: of the '
+                                    'odometry source before its restart')
+                    continue
                 self._publish(step)
             except Exception as err:  # the node keeps running; say what failed
                 if self._stopping():  # shutting down: the publishers may be gone
@@ -259,6 +274,9 @@ class GraphSlamNode(Node):
         self.pub_tf.publish(t)
         if self.tf is not None:
             self.tf.sendTransform(t)
+        if step.generation != self._generation:  # a new graph: its keyframes only
+            self._generation = step.generation
+            self.keyframe_stamps = []
         if step.new_keyframe:
             self.keyframe_stamps.append(step.stamp_ns)
             self._path_due = True

@@ -24,6 +24,17 @@ caller's warning, ``on_drop(reason, message)``):
 * ``odometry_gone``: a scan older than the oldest odometry sample still buffered (the
   buffer keeps ``buffer_s`` behind the newest sample, and what the waiting scans need);
 * ``nonfinite``: an odometry pose or stamp that is not finite.
+
+With ``restart`` (the node; the offline runner reads a bag as it is), a restarted odometry
+source (a bag replayed in a loop, a driver restarted with its clock) starts the graph over,
+as ``ekf_slam``'s front end restarts its filter (its defaults: :data:`MAX_BACKWARD_S`,
+:data:`RESTART_MESSAGES`): samples more than ``MAX_BACKWARD_S`` older than the newest are
+held; when ``RESTART_MESSAGES`` of them come in a row, each newer than the one before, a
+new graph starts from them (``on_drop('restart', ...)``; :attr:`GraphScanSteps.generation`
+counts the starts) and the scans of the old run still waiting, or taken by
+:meth:`GraphScanSteps.pop_ready` before it and processed after, are dropped
+(``restarted``). Held samples that a sample of the old time base interrupts are dropped
+(``out_of_order``).
 """
 
 from collections import Counter
@@ -32,8 +43,14 @@ from typing import Callable, List, Optional, Tuple
 
 from landmark_nav.geometry import interpolate_pose
 from landmark_nav.slam.keyframe_graph import GraphParams, KeyframeGraph
+from landmark_nav.slam.odometry_checks import BackwardRun
 from landmark_nav.slam.slam_params import OdometryNoise
 import numpy as np
+
+#: Odometry older than the newest by more than this may come from a restarted source [s].
+MAX_BACKWARD_S = 1.0
+#: Such samples in a row that restart the graph (``restart``).
+RESTART_MESSAGES = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +64,7 @@ class GraphStep:
         new_keyframe: Whether the scan made that keyframe.
         pose: (3,) the scan's pose in the map frame when it was processed.
         covariance: (3, 3) its covariance.
+        generation: :attr:`GraphScanSteps.generation` of its graph.
     """
 
     stamp_ns: int
@@ -55,6 +73,7 @@ class GraphStep:
     new_keyframe: bool
     pose: np.ndarray
     covariance: np.ndarray
+    generation: int = 0
 
 
 def odometry_at(t_s: float, times: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -86,22 +105,31 @@ class GraphScanSteps:
         buffer_s: Odometry kept behind the newest sample [s] (at least what the waiting
             scans need).
         on_drop: Called ``(reason, message)`` for each input not used.
+        restart: Start the graph over when the odometry source restarts (module docstring).
     """
 
     def __init__(self, mount, noise: OdometryNoise, params: Optional[GraphParams] = None,
                  buffer_s: float = 60.0,
-                 on_drop: Optional[Callable[[str, str], None]] = None) -> None:
+                 on_drop: Optional[Callable[[str, str], None]] = None,
+                 restart: bool = False) -> None:
         self.graph = KeyframeGraph(mount, noise, params)
         self.buffer_s = float(buffer_s)
         self._on_drop = on_drop or (lambda reason, message: None)
         self.counts: Counter = Counter()
+        self.restart = bool(restart)
+        self.generation = 0  # the graph's starts after the first (restarted sources)
+        self._back_run = BackwardRun(RESTART_MESSAGES)
+        self.processed = 0
+        self._start()
+
+    def _start(self) -> None:
+        """Forget the odometry, the queue and the last step (a new graph or the first)."""
         self._t0: Optional[int] = None  # first odometry stamp: times are relative to it
         self._times: List[float] = []  # odometry stamps - t0 [s]
         self._poses: List[np.ndarray] = []
         self._newest_ns: Optional[int] = None
         self._waiting: List[Tuple[int, np.ndarray]] = []  # scans in stamp order
         self.last_stamp_ns: Optional[int] = None  # the last processed scan's
-        self.processed = 0
 
     # ------------------------------------------------------------------ input
     def _drop(self, reason: str, message: str) -> None:
@@ -116,9 +144,14 @@ class GraphScanSteps:
                        'three finite numbers')
             return False
         if self._newest_ns is not None and stamp_ns < self._newest_ns:
+            back = (self._newest_ns - stamp_ns) * 1e-9
+            if self.restart and back > MAX_BACKWARD_S:
+                return self._far_back(int(stamp_ns), p, back)
+            self._drop_held()
             self._drop('out_of_order', f'odometry at {stamp_ns} ns: older than the newest '
                        f'sample ({self._newest_ns} ns)')
             return False
+        self._drop_held()
         if self._t0 is None:
             self._t0 = int(stamp_ns)
             early = [s for s in self._waiting if s[0] < stamp_ns]
@@ -130,6 +163,33 @@ class GraphScanSteps:
         self._times.append((stamp_ns - self._t0) * 1e-9)
         self._poses.append(p)
         self._trim()
+        return True
+
+    def _drop_held(self) -> None:
+        """Drop the far-back samples held: the old time base went on (module docstring)."""
+        for t, _, _ in self._back_run.clear():
+            self._drop('out_of_order', f'odometry at {t} ns: more than {MAX_BACKWARD_S:g} s '
+                       f'older than the newest sample ({self._newest_ns} ns), and the samples '
+                       'after it did not go on from it')
+
+    def _far_back(self, stamp_ns: int, pose: np.ndarray, back: float) -> bool:
+        """Hold a far-back sample; start a new graph from the run once it is persistent."""
+        if not self._back_run.continues(stamp_ns):
+            self._drop_held()
+        if not self._back_run.add(stamp_ns, pose, None):
+            return True
+        run, old = self._back_run.clear(), self._waiting
+        self._on_drop('restart', f'odometry went {back:.3f} s back in time ({len(run)} '
+                      f'samples in a row, {self._newest_ns} -> {run[0][0]} ns): the source '
+                      'restarted, the graph starts over')
+        self.graph = KeyframeGraph(self.graph.mount, self.graph.noise, self.graph.params)
+        self.generation += 1
+        self._start()
+        for t, _ in old:
+            self._drop('restarted', f'scan at {t} ns: of the odometry source before its '
+                       'restart')
+        for t, p, _ in run:
+            self.add_odometry(t, p)
         return True
 
     def add_scan(self, stamp_ns: int, points: np.ndarray) -> bool:
@@ -201,10 +261,11 @@ class GraphScanSteps:
             del self._poses[:i]
 
     # ------------------------------------------------------------------ steps
-    def pop_ready(self) -> Optional[Tuple[int, np.ndarray, np.ndarray]]:
-        """Return the next scan the odometry covers: ``(stamp_ns, odometry pose, points)``.
+    def pop_ready(self) -> Optional[Tuple[int, np.ndarray, np.ndarray, int]]:
+        """Return the next scan the odometry covers, or None.
 
-        None when no waiting scan is covered yet (or no odometry came).
+        ``(stamp_ns, odometry pose, points, generation)``; None when no waiting scan is
+        covered yet (or no odometry came).
         """
         if not self._waiting or self._newest_ns is None or \
                 self._waiting[0][0] > self._newest_ns:
@@ -213,20 +274,34 @@ class GraphScanSteps:
         o = odometry_at((t - self._t0) * 1e-9, np.asarray(self._times),
                         np.asarray(self._poses))
         self.last_stamp_ns = t
-        return t, o, pts
+        return t, o, pts, self.generation
 
-    def process(self, stamp_ns: int, odometry: np.ndarray, points: np.ndarray) -> GraphStep:
-        """Run the back end on one scan :meth:`pop_ready` gave; return its step."""
-        new = self.graph.add_scan(odometry, points)
-        k = len(self.graph.keyframes) - 1
-        pose, cov = self.graph.pose_at(k, odometry)
+    def process(self, stamp_ns: int, odometry: np.ndarray, points: np.ndarray,
+                generation: int = 0) -> Optional[GraphStep]:
+        """Run the back end on one scan :meth:`pop_ready` gave; return its step.
+
+        None (the scan dropped as ``restarted``) when the graph started over since.
+        """
+        graph = self.graph
+        if generation != self.generation:
+            self._drop('restarted', f'scan at {stamp_ns} ns: of the odometry source before '
+                       'its restart')
+            return None
+        new = graph.add_scan(odometry, points)
+        k = len(graph.keyframes) - 1
+        pose, cov = graph.pose_at(k, odometry)
         self.processed += 1
-        return GraphStep(stamp_ns, odometry, k, new, pose, cov)
+        return GraphStep(stamp_ns, odometry, k, new, pose, cov, generation)
 
     def step(self) -> Optional[GraphStep]:
         """Process the next covered scan (:meth:`pop_ready` then :meth:`process`), if any."""
-        item = self.pop_ready()
-        return None if item is None else self.process(*item)
+        while True:
+            item = self.pop_ready()
+            if item is None:
+                return None
+            step = self.process(*item)
+            if step is not None:
+                return step
 
 
 __all__ = ['GraphScanSteps', 'GraphStep', 'odometry_at']
