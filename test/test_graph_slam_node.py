@@ -232,6 +232,22 @@ def test_a_full_queue_says_why_the_scans_wait():
         in warnings[1]
 
 
+def test_scans_dropped_while_waiting_leave_no_reception_time_behind():
+    with RosHarness() as ros:
+        node = GraphSlamNode(context=ros.context)
+        try:
+            for t in (1, 2, 5):
+                node.on_scan(make_scan(t * 10 ** 9, 'laser', -1.0, 0.01, [1.0] * 50, 0.1,
+                                       30.0))
+            assert sorted(node._received) == [t * 10 ** 9 for t in (1, 2, 5)]
+            # the first odometry at 3 s: the scans at 1 and 2 s have no pose, 5 s waits
+            node.on_odom(make_odometry(3 * 10 ** 9, 'odom', 'base_link', [0.0, 0.0, 0.0]))
+            assert node.steps.counts['before_odometry'] == 2
+            assert sorted(node._received) == [5 * 10 ** 9] == node.steps.waiting_stamps
+        finally:
+            node.destroy_node()
+
+
 @pytest.mark.parametrize('name, value, match', [
     ('loop_floor', [0.03, 0.03], 'loop_floor'),
     ('loop.window_xy', [0.5], 'loop.window_xy'),

@@ -186,7 +186,19 @@ class GraphSlamNode(Node):
             return
         with self._lock:
             self.steps.add_odometry(t, pose)
+            self._forget_dropped()
             self._lock.notify()
+
+    def _forget_dropped(self) -> None:
+        """Forget the reception times of scans the steps dropped from their queue (call locked).
+
+        The waiting scans' times are kept until the worker takes them; the scans dropped
+        while waiting (stamped before the first odometry, of a restarted source's old run)
+        would otherwise stay in ``_received`` for good.
+        """
+        if len(self._received) > self.steps.waiting:
+            waiting = set(self.steps.waiting_stamps)
+            self._received = {t: r for t, r in self._received.items() if t in waiting}
 
     def on_scan(self, msg: LaserScan) -> None:
         """Queue one scan's returns (laser frame); wake the back end."""

@@ -233,6 +233,11 @@ class GraphScanSteps:
         return self._newest_ns
 
     @property
+    def waiting_stamps(self) -> List[int]:
+        """Stamps of the queued scans [ns], oldest first."""
+        return [t for t, _ in self._waiting]
+
+    @property
     def waiting_bytes(self) -> int:
         """Memory of the queued scans' points [bytes]."""
         return sum(p.nbytes for _, p in self._waiting)
