@@ -92,7 +92,7 @@ as truth: it tells a filter that misjudges its own error from one the reference'
 pushes out). Then the summary used in the README: ellipse median (runs >= 80 %), ATE /
 odometry median (runs <= 0.2), RPE / odometry median (runs <= 1), runs meeting all three
 (issue 14's targets per log), and the median (runs >= 80 %) of the second ellipse share.
-``--backend graph``: the graph back end against issue 41's targets (``slam_real_graph.py``).
+``--backend graph``: the graph back end against its targets (``slam_real_graph.py``).
 
 ``scan-matching``:
 
@@ -124,7 +124,7 @@ cell's depth into its wall region [m] (0.1: all at the region's edge), the media
 of the log's scans that see through those cells, and the same median over every wall cell
 any scan sees through (a cell that many of the log's scans see through was free in this
 run: the grid holds something that was not there), and the poses in wall cells beyond one
-cell of tolerance in cells no scan sees through (``wall_poses_counted``; issue 41 asks 0).
+cell of tolerance in cells no scan sees through (``wall_poses_counted``; the target is 0).
 ``--establish-hits`` sets ``SlamParams.establish_hits``; ``--odometry-scale S`` multiplies
 the raw odometry's translations by S before the filter (is the odometry's scale wrong? the
 grid says which scale fits). ``--set NAME=VALUE`` (repeatable) any other field of
@@ -748,7 +748,7 @@ def main(argv=None) -> int:
     p.add_argument('--procs', type=int, default=2)
     p.add_argument('--cache', default=None, help='keep the imported bags here')
     p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
-                   help="graph: the pose graph against issue 41's targets (exit 1 on a miss)")
+                   help='graph: the pose graph against its targets (module doc; exit 1 on a miss)')
     p.set_defaults(run=run_grid)
     p = sub.add_parser('scan-matching',
                        help='dead reckoning by ICP of consecutive scans (and SLAM on it)')

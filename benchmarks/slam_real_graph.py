@@ -3,7 +3,7 @@
 ``grid --backend graph``: each run is ``landmark_nav evaluate BAG --backend graph``
 (:func:`landmark_nav.evaluation.slam_graph.evaluate_graph_bag`) with the log's reference
 noise (``REFERENCE_SD``), printed as the docs' "Graph back end" table, and checked against
-issue 41's targets: the final trajectory's SE(2)-aligned ATE at most 1/10 of the
+the targets: the final trajectory's SE(2)-aligned ATE at most 1/10 of the
 odometry's; its RPE over 1 m at most the odometry's or within 1 cm of the reference's own
 floor (``sqrt(2)`` times its per-pose std, ``sqrt(along^2 + across^2)``: two poses' noise);
 the reference inside the final 95 % ellipse with the reference's std added on at least
@@ -15,7 +15,7 @@ when a run misses one (the ``missed`` column names it).
 placed with its final poses stand for the landmarks it does not keep). Printed per run:
 keyframes, loops accepted and proposed, poses, poses in wall cells, those left with one
 cell of tolerance and the cells the log's scans see through excused
-(``poses_in_wall_counted``; issue 41 asks 0), poses in unknown cells, scan end points near a
+(``poses_in_wall_counted``; the target is 0), poses in unknown cells, scan end points near a
 wall with the graph's and with the odometry's poses, the structural corners' share within
 10 cm of a wall cell (asks >= 0.9), their count and the count left out, the same share per
 place (``corner_places``: detections within 10 cm linked, places seen >= 3 times) and the
