@@ -42,6 +42,8 @@ def wrap_angle(a: ArrayLike) -> Union[float, np.ndarray]:
         A float for scalar input, otherwise an array of the same shape. ``pi`` maps to
         ``-pi``; NaN and +-inf give NaN.
     """
+    if isinstance(a, float) and -math.pi <= a < math.pi:  # one angle in range (the usual)
+        return float(a)
     arr = np.asarray(a, dtype=float)
     with np.errstate(invalid='ignore'):
         out = np.mod(arr + math.pi, TWO_PI) - math.pi
@@ -77,6 +79,8 @@ def compose(x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     x = p1[..., 0] + p2[..., 0] * c - p2[..., 1] * s  # eq. 16, row 1
     y = p1[..., 1] + p2[..., 0] * s + p2[..., 1] * c  # eq. 16, row 2
     th = wrap_angle(p1[..., 2] + p2[..., 2])  # eq. 16, row 3
+    if p1.ndim == 1 and p2.ndim == 1:  # two poses: no broadcasting
+        return np.array([x, y, th])
     x, y, th = np.broadcast_arrays(x, y, th)
     return np.stack([x, y, th], axis=-1)
 
@@ -95,6 +99,8 @@ def inverse(x: ArrayLike) -> np.ndarray:
     xi = -p[..., 0] * c - p[..., 1] * s  # eq. 17, row 1
     yi = p[..., 0] * s - p[..., 1] * c  # eq. 17, row 2
     th = wrap_angle(-p[..., 2])  # eq. 17, row 3
+    if p.ndim == 1:
+        return np.array([xi, yi, th])
     return np.stack([xi, yi, np.broadcast_to(th, xi.shape)], axis=-1)
 
 
