@@ -333,6 +333,13 @@ def interpolate_pose(t: ArrayLike, times: ArrayLike, poses: ArrayLike,
         out = np.repeat(ps[:1], tq.size, axis=0)
         out[:, 2] = wrap_angle(out[:, 2])
         return out[0] if scalar else out
+    if scalar:  # one query (the usual): the same arithmetic on scalars
+        k = min(max(int(np.searchsorted(ts, tq[0], side='right')) - 1, 0), ts.size - 2)
+        dt = ts[k + 1] - ts[k]
+        f = (tq[0] - ts[k]) / dt if dt > 0 else 1.0
+        xy = ps[k, :2] + f * (ps[k + 1, :2] - ps[k, :2])
+        th = wrap_angle(ps[k, 2] + f * wrap_angle(ps[k + 1, 2] - ps[k, 2]))
+        return np.array([xy[0], xy[1], th])
     i = np.clip(np.searchsorted(ts, tq, side='right') - 1, 0, ts.size - 2)
     t0, t1 = ts[i], ts[i + 1]
     dt = t1 - t0
