@@ -40,12 +40,19 @@ demo: $(STAMP)
 # driver tests (wall-clock bounds on device I/O) run afterwards, apart: beside the workers
 # on a busy machine they were starved of CPU. Their two files run side by side: their
 # tests mostly wait on device timers (a quarter of a CPU each).
+# Every worker collects every test file. Where the environment says not to write bytecode
+# (PYTHONDONTWRITEBYTECODE), each worker would rewrite the asserts of every test module and
+# compile the package from source at each run (8 of its 10 CPU-s of collection), and so
+# would every node process a test starts: the test run writes its caches (__pycache__,
+# ignored by git).
 REALTIME_FILES := $(shell grep -l 'mark.realtime' test/test_*.py)
 WORKERS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
+WRITE_BYTECODE := PYTHONDONTWRITEBYTECODE=
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(WORKERS) --dist loadfile --no-loadscope-reorder \
-		-m 'not realtime' test
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m realtime $(REALTIME_FILES)
+	$(WRITE_BYTECODE) $(BIN)/python -m pytest -q -n $(WORKERS) --dist loadfile \
+		--no-loadscope-reorder -m 'not realtime' test
+	$(WRITE_BYTECODE) $(BIN)/python -m pytest -q -n 2 --dist loadfile -m realtime \
+		$(REALTIME_FILES)
 
 # Timing, soak and long evaluations: figures as ratios against an in-run reference,
 # compared with the stored results (exit 1 on a regression). Run on an idle machine.

@@ -42,6 +42,8 @@ def wrap_angle(a: ArrayLike) -> Union[float, np.ndarray]:
         A float for scalar input, otherwise an array of the same shape. ``pi`` maps to
         ``-pi``; NaN and +-inf give NaN.
     """
+    if isinstance(a, float) and -math.pi <= a < math.pi:  # one angle in range (the usual)
+        return float(a)
     arr = np.asarray(a, dtype=float)
     with np.errstate(invalid='ignore'):
         out = np.mod(arr + math.pi, TWO_PI) - math.pi
@@ -77,6 +79,8 @@ def compose(x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     x = p1[..., 0] + p2[..., 0] * c - p2[..., 1] * s  # eq. 16, row 1
     y = p1[..., 1] + p2[..., 0] * s + p2[..., 1] * c  # eq. 16, row 2
     th = wrap_angle(p1[..., 2] + p2[..., 2])  # eq. 16, row 3
+    if p1.ndim == 1 and p2.ndim == 1:  # two poses: no broadcasting
+        return np.array([x, y, th])
     x, y, th = np.broadcast_arrays(x, y, th)
     return np.stack([x, y, th], axis=-1)
 
@@ -95,6 +99,8 @@ def inverse(x: ArrayLike) -> np.ndarray:
     xi = -p[..., 0] * c - p[..., 1] * s  # eq. 17, row 1
     yi = p[..., 0] * s - p[..., 1] * c  # eq. 17, row 2
     th = wrap_angle(-p[..., 2])  # eq. 17, row 3
+    if p.ndim == 1:
+        return np.array([xi, yi, th])
     return np.stack([xi, yi, np.broadcast_to(th, xi.shape)], axis=-1)
 
 
@@ -327,6 +333,13 @@ def interpolate_pose(t: ArrayLike, times: ArrayLike, poses: ArrayLike,
         out = np.repeat(ps[:1], tq.size, axis=0)
         out[:, 2] = wrap_angle(out[:, 2])
         return out[0] if scalar else out
+    if scalar:  # one query (the usual): the same arithmetic on scalars
+        k = min(max(int(np.searchsorted(ts, tq[0], side='right')) - 1, 0), ts.size - 2)
+        dt = ts[k + 1] - ts[k]
+        f = (tq[0] - ts[k]) / dt if dt > 0 else 1.0
+        xy = ps[k, :2] + f * (ps[k + 1, :2] - ps[k, :2])
+        th = wrap_angle(ps[k, 2] + f * wrap_angle(ps[k + 1, 2] - ps[k, 2]))
+        return np.array([xy[0], xy[1], th])
     i = np.clip(np.searchsorted(ts, tq, side='right') - 1, 0, ts.size - 2)
     t0, t1 = ts[i], ts[i + 1]
     dt = t1 - t0

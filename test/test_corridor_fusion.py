@@ -4,9 +4,9 @@ import math
 
 from landmark_nav.corridor.fusion import CorridorEKF, DeadReckoningNoise
 from landmark_nav.geometry import wrap_angle
+from landmark_nav.slam.consistency import chi2_gate
 import numpy as np
 import pytest
-from scipy.stats import chi2
 
 NOISE = DeadReckoningNoise(wheel_separation=0.4, k_left=4e-4, k_right=2e-4,
                            sigma_separation=0.002)
@@ -96,7 +96,7 @@ def test_filter_is_consistent_and_bounded(reverse):
         finals.append(abs(ekf.s[2] - truth[2]))
     assert rejected <= 6                         # 1500 updates, 99.9 % gate: measured 1
     nees = np.concatenate(all_nees)
-    inside = np.mean(nees <= chi2.ppf(0.95, 3))
+    inside = np.mean(nees <= chi2_gate(3, 0.95))
     assert inside >= 0.92                        # measured 0.948 / 0.956 (reverse)
     assert 2.6 < np.mean(nees) < 3.3             # measured 2.98 / 2.82
     # single frames off by 10 cm (std), fused: measured 2.6 / 2.0 cm RMS at the end

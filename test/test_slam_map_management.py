@@ -228,6 +228,29 @@ def test_a_sighting_resets_the_miss_count():
     assert slam.num_landmarks == 0
 
 
+def test_a_blackout_scan_shows_nothing_and_keeps_the_counts():
+    """A scan without returns neither counts a miss nor resets one, nor gives a chance."""
+    blackout = scan_with(lambda a: np.full(a.shape, np.inf))
+    assert not blackout.has_returns and scan_with(wall_at(6.0)).has_returns
+    prm = SlamParams(confirm_hits=1, confirm_window=1, prune_misses=2)
+    slam = EkfSlam(prm)
+    pt = np.array([[3.0, 0.0]])
+    gone = scan_with(wall_at(6.0))
+    slam.update(observe(np.zeros(3), pt), rs(1), scan=gone)
+    slam.update(np.zeros((0, 2)), scan=gone)  # the first miss
+    for _ in range(5):
+        slam.predict(np.zeros(3))
+        res = slam.update(np.zeros((0, 2)), scan=blackout)
+        assert res.status.shape == (0,) and res.nis_dof == 0
+    assert slam.num_landmarks == 1 and slam.stats['updates'] == 7
+    slam.update(np.zeros((0, 2)), scan=gone)  # the second in a row
+    assert slam.num_landmarks == 0 and slam.stats['pruned'] == 1
+    est, pts = establishing_filter()
+    for _ in range(10):
+        est.update(observe(np.zeros(3), pts[:1]), rs(1), scan=blackout)
+    assert est.num_landmarks == 2 and est.stats['retired'] == 0
+
+
 # --------------------------------------------------------------------------- map size
 def drive_past_corners(prm, n_corners=12):
     """Drive along a row of corners 1 m apart; each seen only within 3 m."""

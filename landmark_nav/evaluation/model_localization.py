@@ -46,7 +46,6 @@ from landmark_nav.sim.scenarios import OdometrySample, run_scenario
 from landmark_nav.vision.camera import CameraModel
 from landmark_nav.vision.rwrht import detect_model_lines, MODEL_LINE_METHODS
 import numpy as np
-from scipy.stats import chi2
 
 NS = 1_000_000_000
 
@@ -370,6 +369,7 @@ def summarize(run: HallwayRun,
     ``lost_inflation_rad`` (exact, since the heading row of the motion Jacobian is
     ``[0, 0, 1]``): below about 2 the drift while lost is what the odometry model predicts.
     """
+    from scipy.stats import chi2  # here: scipy.stats takes 0.3 s to import
     bound = chi2.ppf(0.95, 3)
     track = ~run.lost
     moving = run.travelled > 0.01

@@ -54,7 +54,7 @@ from landmark_nav.geometry import compose
 from landmark_nav.slam.ekf_slam import CORNER
 from landmark_nav.slam.slam_map import load_map
 import numpy as np
-from scipy import ndimage, optimize, signal
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 
@@ -141,6 +141,7 @@ def _best_shift(near: np.ndarray, open_: np.ndarray, lm: np.ndarray, poses: np.n
     """Best integer-cell translation for points already rotated: (score, translation)."""
     cl, lo_l = _raster(lm, res)
     cp, lo_p = _raster(poses, res)
+    from scipy import signal  # here: scipy.signal (with scipy.stats) takes 0.5 s to import
     # score[s] = sum_k near[s + ij_k]: correlation = convolution with the flipped raster.
     sl = signal.fftconvolve(near, cl[::-1, ::-1], mode='full') / lm.shape[0]
     sp = signal.fftconvolve(open_, cp[::-1, ::-1], mode='full') / poses.shape[0]
@@ -248,6 +249,7 @@ def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarra
         d = ndimage.map_coordinates(dist, (g - 0.5).T, order=1, mode='nearest')
         return float(np.mean(np.minimum(d, clip) ** 2))
 
+    from scipy import optimize  # here: scipy.optimize takes 0.35 s to import
     simplex = [[0, 0, 0], [res / 2, 0, 0], [0, res / 2, 0], [0, 0, math.radians(fine_step_deg)]]
     p = optimize.minimize(cost, np.zeros(3), method='Nelder-Mead',
                           options={'xatol': 1e-3, 'fatol': 1e-8, 'initial_simplex': simplex}).x

@@ -34,7 +34,6 @@ from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame,
                                                  fit_calibration, VPCalibration)
 from landmark_nav.vision.image_lines import detect_lines, LineParams
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 #: York Urban intrinsics (its README): f = 6.05317 mm / 0.00896875 mm per pixel.
 YORK_K = np.array([[674.917, 0.0, 307.551], [0.0, 674.917, 251.454], [0.0, 0.0, 1.0]])
@@ -118,6 +117,7 @@ def matched_errors(detected: np.ndarray, truth: np.ndarray) -> np.ndarray:
         return out
     cost = np.array([[angular_error_deg(detected[:, i], truth[:, j])
                       for j in range(truth.shape[1])] for i in range(detected.shape[1])])
+    from scipy.optimize import linear_sum_assignment  # here: scipy.optimize takes 0.35 s to import
     r, c = linear_sum_assignment(cost)
     out[c] = cost[r, c]
     return out
@@ -260,6 +260,7 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     D = frame.directions
     cost = np.array([[angular_error_deg(D[:, i], item.directions[:, j]) for j in range(3)]
                      for i in range(3)])
+    from scipy.optimize import linear_sum_assignment  # here: scipy.optimize takes 0.35 s to import
     r, c = linear_sum_assignment(cost)
     return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity,
                             conf[k].inliers, conf[k].log10_nfa,

@@ -57,7 +57,6 @@ from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from .odometry import control_from_wheels
 from ..geometry import wrap_angle
@@ -359,6 +358,7 @@ class _Criterion:
 
 def _fit(criterion: _Criterion, k: Sequence[float], free: Sequence[int]) -> np.ndarray:
     """Minimise the criterion over the factors ``free`` (indices), the others fixed."""
+    from scipy.optimize import least_squares  # here: scipy.optimize takes 0.35 s to import
     k = np.array(k, dtype=float)
     free = list(free)
 

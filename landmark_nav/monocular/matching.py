@@ -50,7 +50,6 @@ import math
 from typing import Tuple
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from .model import LineModel
 from .visibility import CameraMount, Intrinsics, projection_jacobian, VisibleLines
@@ -316,6 +315,7 @@ def match_lines(pred: PredictedLines, segments: np.ndarray,
     ok[amb] = False
     if not ok.any():
         return Matches(*(empty.model, empty.image, empty.d2, empty.h, empty.V), n_amb)
+    from scipy.optimize import linear_sum_assignment  # here: scipy.optimize takes 0.35 s to import
     big = 1e9
     cost = np.where(ok, d2, big)
     r, c = linear_sum_assignment(cost)                           # global nearest neighbour

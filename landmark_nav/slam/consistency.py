@@ -18,7 +18,7 @@ from typing import Tuple
 
 from landmark_nav.geometry import wrap_angle
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 
 @lru_cache(maxsize=256)
@@ -39,7 +39,9 @@ def chi2_gate(dof: int, probability: float = 0.95) -> float:
         raise ValueError(f'chi2_gate: dof must be an integer >= 1, got {dof!r}')
     if not 0.0 < probability < 1.0:
         raise ValueError(f'chi2_gate: probability must be in (0, 1), got {probability!r}')
-    return float(chi2.ppf(probability, int(dof)))
+    # The quantile as scipy.stats.chi2.ppf computes it, 2 P^-1(d / 2, p) (P the regularised
+    # lower incomplete gamma function), without importing scipy.stats (0.3 s).
+    return float(2.0 * gammaincinv(0.5 * int(dof), probability))
 
 
 def chi2_band(dof: int, probability: float = 0.95) -> Tuple[float, float]:

@@ -411,6 +411,12 @@ class EkfSlam(HypothesisChecks, MapManagement):
         cand_id = np.full(m, -1, dtype=np.int64)
         d2_out = np.full(m, np.nan)
         is_line = kind_all == LINE
+        if m == 0:  # a prediction-only step (a laser blackout, no features): bookkeeping
+            if self._manages_map(scan):
+                nothing = np.zeros(self.num_landmarks, dtype=bool)
+                self._manage_by_visibility(scan, nothing, nothing)
+            return self._finish_update(status, lm_id, cand_id, reason, d2_out, 0.0, 0, 0,
+                                       kind_all)
 
         # Validation: NaN / inf, ranges, covariances.
         with np.errstate(invalid='ignore'):
@@ -526,8 +532,7 @@ class EkfSlam(HypothesisChecks, MapManagement):
         if veto.size:  # inside the gate, so not a candidate either
             reason[use[veto]] = 'free_space'
             rest = np.setdiff1d(rest, veto)
-        manage = scan is not None and prm.mode == 'slam' and lm_before > 0
-        if manage and (prm.prune_misses > 0 or prm.establish_hits > 0):
+        if self._manages_map(scan):
             seen = np.zeros(lm_before, dtype=bool)
             seen[hyp[ok]] = True
             gz = np.flatnonzero(graze)
@@ -539,23 +544,22 @@ class EkfSlam(HypothesisChecks, MapManagement):
                                                 prm.gate_probability, 0, None,
                                                 kind_all[gz], self._kind)
                 near |= np.any(d2g < chi2_gate(2, prm.new_landmark_probability), axis=0)
-            drop = np.zeros(0, dtype=np.int64)
-            if prm.prune_misses > 0:
-                drop = self._count_misses(scan, seen | near)
-            if prm.establish_hits > 0:
-                retire = np.setdiff1d(self._count_chances(scan, seen, near), drop)
-                self.stats['retired'] += int(retire.size)
-                drop = np.union1d(drop, retire)
-            if drop.size:
-                self._remove_landmarks(drop)
+            self._manage_by_visibility(scan, seen, near)
         if rest.size and prm.mode == 'localization':
             reason[use[rest]] = 'localization'
         elif rest.size:
             self._handle_candidates(zu[rest], ru[rest], use[rest], bvec[rest],
                                     desc[rest, 1], status, reason, lm_id, cand_id, ku[rest],
                                     ends_all[use[rest]])
-        self._expire_candidates()
+        return self._finish_update(status, lm_id, cand_id, reason, d2_out, nis, dof, nodes,
+                                   kind_all)
 
+    def _finish_update(self, status: np.ndarray, lm_id: np.ndarray, cand_id: np.ndarray,
+                       reason: np.ndarray, d2: np.ndarray, nis: float, dof: int, nodes: int,
+                       kind: np.ndarray) -> UpdateResult:
+        """End every update: expire candidates, check P every few scans, count, report."""
+        prm = self.params
+        self._expire_candidates()
         repaired = False
         if self._scan % prm.psd_check_interval == 0 and not is_psd(self._p, prm.psd_tolerance):
             self._p = nearest_psd(self._p)
@@ -564,8 +568,8 @@ class EkfSlam(HypothesisChecks, MapManagement):
         self.stats['matched'] += int(np.sum(status == 'matched'))
         self.stats['rejected'] += int(np.sum(status == 'rejected'))
         return UpdateResult(status=status, landmark_id=lm_id, candidate_id=cand_id,
-                            reason=reason, d2=d2_out, nis=nis, nis_dof=dof,
-                            psd_repaired=repaired, jcbb_nodes=nodes, kind=kind_all)
+                            reason=reason, d2=d2, nis=nis, nis_dof=dof,
+                            psd_repaired=repaired, jcbb_nodes=nodes, kind=kind)
 
     def step(self, u: Sequence[float], z: np.ndarray, r: Optional[np.ndarray] = None,
              u_cov: Optional[np.ndarray] = None) -> UpdateResult:

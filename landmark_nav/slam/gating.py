@@ -161,7 +161,6 @@ import math
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy.stats import binom
 
 from ._linalg import _wrap
 from .association import icnn, jcbb, joint_mahalanobis, mahalanobis_table
@@ -414,6 +413,7 @@ def free_space_significant(count: int, in_view: int, gate_probability: float,
     """
     if count <= 0:
         return False
+    from scipy.stats import binom  # here: scipy.stats takes 0.3 s to import
     q = 0.5 * (1.0 - gate_probability)
     return bool(binom.sf(count - 1, max(int(in_view), int(count)), q) < 1.0 - probability)
 

@@ -146,20 +146,49 @@ class MapManagement:
             self._ends[j] = merge_extent(lm[j], self._ends[j], ends_w[k])
 
     # ------------------------------------------------------------------ map management
+    def _manages_map(self, scan: Optional[ScanGeometry]) -> bool:
+        """Whether an update with this scan counts misses / chances (SLAM, a map, a scan)."""
+        prm = self.params
+        return (scan is not None and prm.mode == 'slam' and self.num_landmarks > 0
+                and (prm.prune_misses > 0 or prm.establish_hits > 0))
+
+    def _manage_by_visibility(self, scan: ScanGeometry, seen: np.ndarray,
+                              near: np.ndarray) -> None:
+        """Prune the landmarks the scan shows absent, retire unestablished ones.
+
+        Args:
+            scan: The scan's geometry.
+            seen: (n,) landmarks detected in this scan (the first n of the state).
+            near: (n,) landmarks an unassociated observation lay near.
+        """
+        prm = self.params
+        drop = np.zeros(0, dtype=np.int64)
+        if prm.prune_misses > 0:
+            drop = self._count_misses(scan, seen | near)
+        if prm.establish_hits > 0:
+            retire = np.setdiff1d(self._count_chances(scan, seen, near), drop)
+            self.stats['retired'] += int(retire.size)
+            drop = np.union1d(drop, retire)
+        if drop.size:
+            self._remove_landmarks(drop)
+
     def _count_misses(self, scan: ScanGeometry, seen: np.ndarray) -> np.ndarray:
         """Count misses of landmarks the scan should have shown; return those to prune."""
         prm = self.params
         n = seen.size
-        index = np.arange(n)
-        kind = self._kind[:n]
-        zhat, hr, hf = observation_model(self._x, index, kind)
-        var = np.diagonal(predicted_observation_covariance(self._p, index, hr, hf), 0, 1, 2)
-        miss = landmarks_missed(self._x[:3], kind, self._x[3:3 + 2 * n].reshape(-1, 2),
-                                self._ends[:n], self._bis[:n], self._open[:n],
-                                np.sqrt(np.maximum(var, 0.0)), scan,
-                                math.sqrt(chi2_gate(1, prm.gate_probability)),
-                                prm.min_view_margin, prm.line_min_beams)
-        miss &= ~seen
+        miss = np.zeros(n, dtype=bool)  # a scan without returns shows no landmark absent
+        if scan.has_returns:
+            index = np.arange(n)
+            kind = self._kind[:n]
+            zhat, hr, hf = observation_model(self._x, index, kind)
+            var = np.diagonal(predicted_observation_covariance(self._p, index, hr, hf),
+                              0, 1, 2)
+            miss = landmarks_missed(self._x[:3], kind, self._x[3:3 + 2 * n].reshape(-1, 2),
+                                    self._ends[:n], self._bis[:n], self._open[:n],
+                                    np.sqrt(np.maximum(var, 0.0)), scan,
+                                    math.sqrt(chi2_gate(1, prm.gate_probability)),
+                                    prm.min_view_margin, prm.line_min_beams)
+            miss &= ~seen
         self._misses[:n][miss] += 1
         self._misses[:n][seen] = 0
         drop = np.flatnonzero(self._misses[:n] >= prm.prune_misses)
@@ -184,7 +213,7 @@ class MapManagement:
             return prov
         chance = seen[prov].copy()
         look = ~chance & ~near[prov]
-        if np.any(look):
+        if np.any(look) and scan.has_returns:  # without returns no chance (corners_in_view)
             idx = prov[look]
             zhat, hr, hf = observation_model(self._x, idx)
             var = np.diagonal(predicted_observation_covariance(self._p, idx, hr, hf), 0, 1, 2)

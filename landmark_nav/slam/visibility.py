@@ -31,6 +31,7 @@ angle constant of its own:
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Tuple
 
 import numpy as np
@@ -70,6 +71,16 @@ class ScanGeometry:
     def angles(self) -> np.ndarray:
         """(B,) beam angles."""
         return self.angle_min + self.angle_increment * np.arange(np.asarray(self.ranges).size)
+
+    @cached_property
+    def has_returns(self) -> bool:
+        """Whether any beam returned (a finite range).
+
+        Without one the scan shows nothing: no landmark is seen through (missed) or has a
+        chance to be detected (:func:`corners_missed`, :func:`lines_missed`,
+        :func:`corners_in_view` need finite returns), as in a laser blackout.
+        """
+        return bool(np.isfinite(np.asarray(self.ranges, dtype=float)).any())
 
 
 def swept_region(scan: ScanGeometry) -> Tuple[float, float]:
