@@ -44,19 +44,20 @@ def test_steps_wait_for_the_odometry_and_go_in_stamp_order():
     drops = []
     steps = GraphScanSteps([0.0, 0.0, 0.0], odometry_noise_model('simulator'),
                            on_drop=lambda r, m: drops.append(r))
+    s = 10 ** 9  # stamps in seconds: 4 m in 3 s is a plausible motion
     pts = np.zeros((0, 2))
-    steps.add_scan(5, pts)  # before any odometry: waits, then has none
-    steps.add_odometry(10, [0.0, 0.0, 0.0])
+    steps.add_scan(5 * s, pts)  # before any odometry: waits, then has none
+    steps.add_odometry(10 * s, [0.0, 0.0, 0.0])
     assert drops == ['before_odometry'] and steps.waiting == 0
-    steps.add_scan(30, pts)
-    steps.add_scan(20, pts)  # out of arrival order, in stamp order
+    steps.add_scan(30 * s, pts)
+    steps.add_scan(20 * s, pts)  # out of arrival order, in stamp order
     assert steps.pop_ready() is None  # the odometry does not reach 20 yet
-    steps.add_odometry(40, [4.0, 0.0, 0.0])
-    assert [steps.step().stamp_ns for _ in range(2)] == [20, 30]
+    steps.add_odometry(40 * s, [4.0, 0.0, 0.0])
+    assert [steps.step().stamp_ns for _ in range(2)] == [20 * s, 30 * s]
     assert np.allclose(steps.graph.keyframes[0].odometry, [4.0 / 3.0, 0.0, 0.0])
-    steps.add_scan(25, pts)  # older than the last processed scan
-    steps.add_odometry(35, [0.0, 0.0, 0.0])  # older than the newest odometry
-    steps.add_odometry(50, [np.nan, 0.0, 0.0])
+    steps.add_scan(25 * s, pts)  # older than the last processed scan
+    steps.add_odometry(35 * s, [0.0, 0.0, 0.0])  # older than the newest odometry
+    steps.add_odometry(50 * s, [np.nan, 0.0, 0.0])
     assert drops[1:] == ['out_of_order', 'out_of_order', 'nonfinite']
 
 
@@ -95,6 +96,54 @@ def test_a_restarted_odometry_source_starts_a_new_graph():
     for t in (1, 2, 3):
         plain.add_odometry(t * s, [0.0, 0.0, 0.0])
     assert plain.counts['out_of_order'] == 3 and plain.generation == 0
+
+
+def _steps_node(ros, warnings):
+    """Return a node whose warnings go to ``warnings``, each logged (no throttling)."""
+    node = GraphSlamNode(context=ros.context)
+    node.warner._logger = type('Log', (), {'warning': staticmethod(warnings.append)})
+    node.warner._period = 0.0
+    return node
+
+
+def test_an_odometry_jump_is_bridged_counted_and_warned():
+    """A driver re-zeroing its pose: the odometry after it continues from the pose before."""
+    s = 10 ** 9
+    pts = np.zeros((0, 2))
+    steps = GraphScanSteps([0.0, 0.0, 0.0], odometry_noise_model('simulator'))
+    for t, x in ((1, 10.0), (2, 11.0), (3, 0.0), (4, 1.0)):  # reset to 0 at 3 s
+        steps.add_odometry(t * s, [x, 0.0, 0.0])
+    steps.add_scan(int(3.5 * s), pts)
+    assert steps.counts['jump'] == 1
+    assert np.allclose(steps.pop_ready()[1], [11.5, 0.0, 0.0])  # not 0.5: bridged
+    warnings = []
+    with RosHarness() as ros:
+        node = _steps_node(ros, warnings)
+        try:
+            for t, x in ((1, 10.0), (2, 11.0), (3, 0.0)):
+                node.on_odom(make_odometry(t * s, 'odom', 'base_link', [x, 0.0, 0.0]))
+        finally:
+            node.destroy_node()
+    assert node.stats.events['odometry.jump'] == 1 and node.stats.dropped_count == 0
+    assert len(warnings) == 1 and 'at 3000000000 ns moved 11.000 m' in warnings[0]
+
+
+def test_a_future_odometry_stamp_is_withdrawn_counted_and_warned():
+    """One sample stamped far ahead, then the clock goes on: it goes, the graph stays."""
+    s = 10 ** 9
+    warnings = []
+    with RosHarness() as ros:
+        node = _steps_node(ros, warnings)
+        try:
+            for t in (1.0, 1.1, 50.0, 1.2, 1.3, 1.4, 1.5):  # 50 s: in the future
+                node.on_odom(make_odometry(int(t * s), 'odom', 'base_link', [t, 0.0, 0.0]))
+            steps = node.steps
+            assert steps.newest_odometry_ns == int(1.5 * s) and steps.generation == 0
+        finally:
+            node.destroy_node()
+    assert node.stats.events['odometry.retracted'] == 1 and 'restart' not in node.stats.events
+    assert node.stats.dropped_count == 0 and steps.counts['jump'] == 0
+    assert len(warnings) == 1 and 'at 50000000000 ns: lay 48.900 s ahead' in warnings[0]
 
 
 @pytest.mark.dds

@@ -41,12 +41,17 @@ was processed (``dropped.out_of_order``), scans older than the odometry kept
 (``dropped.backend_error`` when it cost a scan, the event ``backend_error`` otherwise) and
 its worker goes on.
 Scans stamped before the first odometry have no pose: counted as ``before_odometry`` (not
-a drop, as ``ekf_slam``). A restarted odometry source (a bag replayed in a loop: odometry
-more than 1 s back in time, three samples in a row) starts the graph over, as ``ekf_slam``
-restarts its filter (the event ``restart``, warned; the old run's scans not yet processed
-are dropped, ``dropped.restarted``, and so are the new run's scans that come before its
-third odometry sample, ``dropped.out_of_order``; ``path`` then holds the new graph's
-keyframes).
+a drop, as ``ekf_slam``). Odometry is checked as ``ekf_slam`` checks it (parameters
+``max_speed``, ``max_turn_rate``, ``jump_sigmas``, ``min_step_s``, ``max_backward_s``,
+``restart_messages``): a jump beyond the motion model's bound is bridged (the event
+``odometry.jump``, warned), a sample stamped in the future is withdrawn once the samples
+after it continue those before it (``odometry.retracted``). A restarted odometry source (a
+bag replayed in a loop: odometry more than ``max_backward_s`` back in time,
+``restart_messages`` samples in a row) starts the graph over, as ``ekf_slam`` restarts its
+filter (the event ``restart``, warned; the old run's scans not yet processed are dropped,
+``dropped.restarted``, and so are the new run's scans that come before its
+``restart_messages``-th odometry sample, ``dropped.out_of_order``; ``path`` then holds the
+new graph's keyframes).
 """
 
 import threading
@@ -61,7 +66,8 @@ from landmark_nav.geometry import compose, inverse
 from landmark_nav.nodes.common import (declare, declare_table, InputStats, ParameterError,
                                        ProblemWarner, read_scan, require_stamp, run_node)
 from landmark_nav.nodes.ekf_slam import FEATURE_SCAN_QOS, ODOM_QOS
-from landmark_nav.slam.graph_configuration import graph_parameters, graph_params
+from landmark_nav.slam.graph_configuration import (graph_parameters, graph_params,
+                                                   odometry_check_parameters, odometry_limits)
 from landmark_nav.slam.graph_scan_steps import GraphScanSteps, GraphStep
 from landmark_nav.slam.odometry_noise_models import odometry_noise_model
 from landmark_nav.slam.scan_matching import scan_points
@@ -78,6 +84,9 @@ except ImportError:  # pragma: no cover - depends on the install
 
 #: Drops of :class:`GraphScanSteps` that are not drops (no pose exists for such a scan).
 NOT_DROPS = ('before_odometry',)
+#: Odometry of :class:`GraphScanSteps` used other than as it came -> event (as ``ekf_slam``).
+ODOMETRY_EVENTS = {'restart': 'restart', 'jump': 'odometry.jump',
+                   'retracted': 'odometry.retracted'}
 #: The worker waits this long for a scan the odometry covers before it looks again [s].
 WAIT_S = 0.2
 
@@ -133,9 +142,10 @@ class GraphSlamNode(Node):
                              'importable (it is also published on map_to_odom)')
         self.display_period = declare(self, 'display_period', 0.5, 'least period of the path '
                                       'topic (published after a keyframe) [s]', (0.01, 3600.0))
+        limits = declare_table(self, odometry_check_parameters(), odometry_limits)
         self.warner = ProblemWarner(self)
         self.steps = GraphScanSteps(laser_pose, noise, params, buffer_s, self._on_drop,
-                                    restart=True)
+                                    restart=True, limits=limits)
         self._generation = 0  # of the graph whose keyframes keyframe_stamps holds
         self.params = self.steps.graph.params
         self.stats = GraphInputStats(self, self.warner)
@@ -168,8 +178,8 @@ class GraphSlamNode(Node):
     # ------------------------------------------------------------------ input
     def _on_drop(self, reason: str, message: str) -> None:
         """Report an input :class:`GraphScanSteps` did not use."""
-        if reason == 'restart':
-            self.stats.event(reason, f'Odometry: {message}')
+        if reason in ODOMETRY_EVENTS:
+            self.stats.event(ODOMETRY_EVENTS[reason], f'Odometry: {message}')
         elif reason in NOT_DROPS:
             self.stats.event(reason, f'Not processed: {message}')
         else:

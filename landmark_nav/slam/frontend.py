@@ -118,7 +118,7 @@ from dataclasses import dataclass, field, replace
 import math
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
-from landmark_nav.geometry import compose, interpolate_pose, inverse, relative
+from landmark_nav.geometry import interpolate_pose, relative
 import numpy as np
 
 from .consistency import chi2_gate
@@ -126,7 +126,8 @@ from .ekf_slam import EkfSlam, odometry_noise, SlamParams, UpdateResult
 from .keyframes import KeyframeParams, NO_UPDATE, pose_between_keyframes
 from .line_landmarks import lines_to_observations
 from .observations import corner_descriptors, corners_to_observations
-from .odometry_checks import BackwardRun, covariance_problem, implausible_motion
+from .odometry_checks import (BackwardRun, bridge_offset, bridged, covariance_problem,
+                              future_stamp, odometry_jump, OdometryLimits)
 from .odometry_noise_models import odometry_noise_model, ODOMETRY_NOISE_MODELS
 from .scan_matching import fused_scan_motion, scan_motion, scan_points
 from .slam_map import SlamMap
@@ -183,12 +184,12 @@ class FrontendParams:
 
     deskew: bool = True
     descriptors: bool = True
-    max_speed: float = 1.5
-    max_turn_rate: float = 5.3
-    jump_sigmas: float = 5.0
-    min_step_s: float = 0.02
-    max_backward_s: float = 1.0
-    restart_messages: int = 3
+    max_speed: float = OdometryLimits.max_speed
+    max_turn_rate: float = OdometryLimits.max_turn_rate
+    jump_sigmas: float = OdometryLimits.jump_sigmas
+    min_step_s: float = OdometryLimits.min_step_s
+    max_backward_s: float = OdometryLimits.max_backward_s
+    restart_messages: int = OdometryLimits.restart_messages
     buffer_s: float = 60.0
     scan_matching: bool = False
     scan_matching_noise: str = 'k_d=0.05 k_theta=0.03 k_dtheta=0.06'
@@ -546,18 +547,15 @@ class SlamFrontend:
             return self._backward(stamp_ns, pose, cov)
         self._drop_back_run()
         dt = (stamp_ns - last) * 1e-9
-        u = relative(b.raw_last, pose)  # eq. 13
         f = self.frontend
-        why = implausible_motion(u, dt, self.params.odometry, f.max_speed, f.max_turn_rate,
-                                 f.jump_sigmas, f.min_step_s)
+        why = odometry_jump(b.raw_last, pose, dt, self.params.odometry, f)
         if why is None:
-            bridged = pose if b.offset is None else compose(b.offset, pose)
-            self._accept(stamp_ns, pose, bridged, cov, np.zeros(3), b.offset)
+            self._accept(stamp_ns, pose, bridged(b.offset, pose), cov, np.zeros(3), b.offset)
             return self._event('accepted'), self.process()
         span = max(dt, f.min_step_s)
         extra = np.array([(f.max_speed * span) ** 2, (f.max_speed * span) ** 2,
                           (f.max_turn_rate * span) ** 2])
-        offset = compose(b.pose[-1], inverse(pose))  # bridged(pose) == last bridged pose
+        offset = bridge_offset(b.pose[-1], pose)  # bridged(pose) == last bridged pose
         self._accept(stamp_ns, pose, b.pose[-1].copy(), cov, extra, offset)
         return self._event('jump', f'odometry {why} in {dt:.3f} s: bridged as a '
                            f'discontinuity of the odometry frame (map kept)'), self.process()
@@ -577,11 +575,11 @@ class SlamFrontend:
                                f'the last one ({b.t[-1]} ns): held, {len(self._back_run.samples)}'
                                f' of {f.restart_messages} in a row restart'), []
         run = self._back_run.clear()
-        if (len(b.t) >= 2 and b.previous is not None and run[0][0] > b.t[-2]
-                and (b.t[-1] - b.t[-2]) * 1e-9 > f.max_backward_s):
-            kind = self._event('retracted', f'odometry stamp {b.t[-1]} ns lay '
-                               f'{(b.t[-1] - b.t[-2]) * 1e-9:.3f} s ahead of the samples '
-                               'around it: withdrawn')
+        before = b.t[-2] if len(b.t) >= 2 and b.previous is not None else None
+        ahead = future_stamp(before, b.t[-1], run[0][0], f.max_backward_s)
+        if ahead is not None:
+            kind = self._event('retracted', f'odometry stamp {b.t[-1]} ns lay {ahead:.3f} s '
+                               'ahead of the samples around it: withdrawn')
             del b.t[-1], b.pose[-1], b.extra[-1]
             b.raw_last, b.cov_last, b.offset = b.previous
             b.previous = None

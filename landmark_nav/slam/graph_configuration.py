@@ -5,15 +5,18 @@ Tables ``{field: (description, limits or None, choices or None)}`` of
 of :class:`~landmark_nav.slam.loop_closure.LoopParams` (``loop.`` + the field); the
 defaults are the dataclasses' (:mod:`landmark_nav.parameter_tables`). The ``graph_slam``
 node declares them (:func:`graph_parameters`) and builds the parameters from their values
-(:func:`graph_params`); fields not listed keep their defaults.
+(:func:`graph_params`); fields not listed keep their defaults. The odometry checks take
+``ekf_slam``'s parameters (:func:`odometry_check_parameters`).
 """
 
 import math
 from typing import Any, Dict, Mapping
 
 from landmark_nav.parameter_tables import dataclass_parameters, Parameter
+from landmark_nav.slam.configuration import FRONTEND_PARAMETERS
 from landmark_nav.slam.keyframe_graph import GraphParams
 from landmark_nav.slam.loop_closure import LoopParams
+from landmark_nav.slam.odometry_checks import OdometryLimits
 
 GRAPH_PARAMETERS = {
     'keyframe_distance': ('a scan is a keyframe once the odometry travelled this far since '
@@ -73,6 +76,20 @@ def graph_parameters() -> Dict[str, Parameter]:
     return out
 
 
+def odometry_check_parameters() -> Dict[str, Parameter]:
+    """Return the odometry checks' parameters (``ekf_slam``'s, same names and limits)."""
+    table = {}
+    for k in OdometryLimits.__dataclass_fields__:
+        description, limits, choices = FRONTEND_PARAMETERS[k]
+        table[k] = (description.replace('the filter', 'the graph'), limits, choices)
+    return dataclass_parameters(table, OdometryLimits())
+
+
+def odometry_limits(values: Mapping[str, Any]) -> OdometryLimits:
+    """Return the odometry checks' parameters from their values by name."""
+    return OdometryLimits(**values)
+
+
 def graph_params(values: Mapping[str, Any]) -> GraphParams:
     """Return the graph's parameters from parameter values by name (defaults for the rest).
 
@@ -95,4 +112,5 @@ def graph_params(values: Mapping[str, Any]) -> GraphParams:
         raise ValueError(f'graph_slam: {err}') from None
 
 
-__all__ = ['GRAPH_PARAMETERS', 'graph_parameters', 'graph_params', 'LOOP_PARAMETERS']
+__all__ = ['GRAPH_PARAMETERS', 'graph_parameters', 'graph_params', 'LOOP_PARAMETERS',
+           'odometry_check_parameters', 'odometry_limits']

@@ -25,16 +25,29 @@ caller's warning, ``on_drop(reason, message)``):
   buffer keeps ``buffer_s`` behind the newest sample, and what the waiting scans need);
 * ``nonfinite``: an odometry pose or stamp that is not finite.
 
+Odometry used other than as it came, by ``ekf_slam``'s checks (:mod:`.odometry_checks`,
+``limits``: :class:`~landmark_nav.slam.odometry_checks.OdometryLimits`), also counted and
+reported (``on_drop``):
+
+* ``jump``: an increment the robot cannot have made in the elapsed time
+  (:func:`~landmark_nav.slam.odometry_checks.odometry_jump`: a driver re-zeroing its pose,
+  a teleport) is a discontinuity of the odometry frame: it is bridged, the odometry after it
+  re-expressed to continue from the pose before it (zero motion across the step; the graph
+  is kept);
+* ``retracted`` (with ``restart``): a sample stamped in the future, shown by the samples
+  after it continuing those before it (:func:`~.odometry_checks.future_stamp`), is
+  withdrawn instead of starting the graph over. The scans it covered meanwhile were placed
+  on the odometry interpolated across its gap, as ``ekf_slam`` does.
+
 With ``restart`` (the node; the offline runner reads a bag as it is), a restarted odometry
 source (a bag replayed in a loop, a driver restarted with its clock) starts the graph over,
-as ``ekf_slam``'s front end restarts its filter (its defaults: :data:`MAX_BACKWARD_S`,
-:data:`RESTART_MESSAGES`): samples more than ``MAX_BACKWARD_S`` older than the newest are
-held; when ``RESTART_MESSAGES`` of them come in a row, each newer than the one before, a
-new graph starts from them (``on_drop('restart', ...)``; :attr:`GraphScanSteps.generation`
-counts the starts) and the scans of the old run still waiting, or taken by
-:meth:`GraphScanSteps.pop_ready` before it and processed after, are dropped
-(``restarted``). Held samples that a sample of the old time base interrupts are dropped
-(``out_of_order``).
+as ``ekf_slam``'s front end restarts its filter (``limits``): samples more than
+``max_backward_s`` older than the newest are held; when ``restart_messages`` of them come
+in a row, each newer than the one before, a new graph starts from them
+(``on_drop('restart', ...)``; :attr:`GraphScanSteps.generation` counts the starts) and the
+scans of the old run still waiting, or taken by :meth:`GraphScanSteps.pop_ready` before it
+and processed after, are dropped (``restarted``). Held samples that a sample of the old
+time base interrupts are dropped (``out_of_order``).
 """
 
 from collections import Counter
@@ -43,14 +56,10 @@ from typing import Callable, List, Optional, Tuple
 
 from landmark_nav.geometry import interpolate_pose
 from landmark_nav.slam.keyframe_graph import GraphParams, KeyframeGraph
-from landmark_nav.slam.odometry_checks import BackwardRun
+from landmark_nav.slam.odometry_checks import (BackwardRun, bridge_offset, bridged,
+                                               future_stamp, odometry_jump, OdometryLimits)
 from landmark_nav.slam.slam_params import OdometryNoise
 import numpy as np
-
-#: Odometry older than the newest by more than this may come from a restarted source [s].
-MAX_BACKWARD_S = 1.0
-#: Such samples in a row that restart the graph (``restart``).
-RESTART_MESSAGES = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,19 +115,21 @@ class GraphScanSteps:
             scans need).
         on_drop: Called ``(reason, message)`` for each input not used.
         restart: Start the graph over when the odometry source restarts (module docstring).
+        limits: Parameters of the odometry checks (module docstring).
     """
 
     def __init__(self, mount, noise: OdometryNoise, params: Optional[GraphParams] = None,
                  buffer_s: float = 60.0,
                  on_drop: Optional[Callable[[str, str], None]] = None,
-                 restart: bool = False) -> None:
+                 restart: bool = False, limits: OdometryLimits = OdometryLimits()) -> None:
         self.graph = KeyframeGraph(mount, noise, params)
         self.buffer_s = float(buffer_s)
         self._on_drop = on_drop or (lambda reason, message: None)
         self.counts: Counter = Counter()
         self.restart = bool(restart)
         self.generation = 0  # the graph's starts after the first (restarted sources)
-        self._back_run = BackwardRun(RESTART_MESSAGES)
+        self.limits = limits
+        self._back_run = BackwardRun(limits.restart_messages)
         self.processed = 0
         self._start()
 
@@ -128,6 +139,9 @@ class GraphScanSteps:
         self._times: List[float] = []  # odometry stamps - t0 [s]
         self._poses: List[np.ndarray] = []
         self._newest_ns: Optional[int] = None
+        self._raw_last: Optional[np.ndarray] = None  # the newest sample's pose as it came
+        self._offset: Optional[np.ndarray] = None  # of the last bridged jump
+        self._previous: Optional[tuple] = None  # (stamp, raw, offset) before the newest
         self._waiting: List[Tuple[int, np.ndarray]] = []  # scans in stamp order
         self.last_stamp_ns: Optional[int] = None  # the last processed scan's
 
@@ -145,7 +159,7 @@ class GraphScanSteps:
             return False
         if self._newest_ns is not None and stamp_ns < self._newest_ns:
             back = (self._newest_ns - stamp_ns) * 1e-9
-            if self.restart and back > MAX_BACKWARD_S:
+            if self.restart and back > self.limits.max_backward_s:
                 return self._far_back(int(stamp_ns), p, back)
             self._drop_held()
             self._drop('out_of_order', f'odometry at {stamp_ns} ns: older than the newest '
@@ -159,35 +173,57 @@ class GraphScanSteps:
             for t, _ in early:
                 self._drop('before_odometry', f'scan at {t} ns: stamped before the first '
                            f'odometry sample ({stamp_ns} ns)')
+        previous = (self._newest_ns, self._raw_last, self._offset)
+        pose_used = bridged(self._offset, p)
+        if self._newest_ns is not None:
+            dt = (stamp_ns - self._newest_ns) * 1e-9
+            why = odometry_jump(self._raw_last, p, dt, self.graph.noise, self.limits)
+            if why is not None:
+                self._offset = bridge_offset(self._poses[-1], p)
+                pose_used = self._poses[-1].copy()
+                self._drop('jump', f'odometry at {stamp_ns} ns {why} in {dt:.3f} s: bridged as '
+                           'a discontinuity of the odometry frame (graph kept)')
+        self._previous = previous
         self._newest_ns = int(stamp_ns)
+        self._raw_last = p
         self._times.append((stamp_ns - self._t0) * 1e-9)
-        self._poses.append(p)
+        self._poses.append(pose_used)
         self._trim()
         return True
 
     def _drop_held(self) -> None:
         """Drop the far-back samples held: the old time base went on (module docstring)."""
         for t, _, _ in self._back_run.clear():
-            self._drop('out_of_order', f'odometry at {t} ns: more than {MAX_BACKWARD_S:g} s '
+            self._drop('out_of_order', f'odometry at {t} ns: more than '
+                       f'{self.limits.max_backward_s:g} s '
                        f'older than the newest sample ({self._newest_ns} ns), and the samples '
                        'after it did not go on from it')
 
     def _far_back(self, stamp_ns: int, pose: np.ndarray, back: float) -> bool:
-        """Hold a far-back sample; start a new graph from the run once it is persistent."""
+        """Hold a far-back sample; once persistent, withdraw a future stamp or start over."""
         if not self._back_run.continues(stamp_ns):
             self._drop_held()
         if not self._back_run.add(stamp_ns, pose, None):
             return True
         run, old = self._back_run.clear(), self._waiting
-        self._on_drop('restart', f'odometry went {back:.3f} s back in time ({len(run)} '
-                      f'samples in a row, {self._newest_ns} -> {run[0][0]} ns): the source '
-                      'restarted, the graph starts over')
-        self.graph = KeyframeGraph(self.graph.mount, self.graph.noise, self.graph.params)
-        self.generation += 1
-        self._start()
-        for t, _ in old:
-            self._drop('restarted', f'scan at {t} ns: of the odometry source before its '
-                       'restart')
+        before = self._previous[0] if self._previous is not None else None
+        ahead = future_stamp(before, self._newest_ns, run[0][0], self.limits.max_backward_s)
+        if ahead is not None:
+            self._drop('retracted', f'odometry at {self._newest_ns} ns: lay {ahead:.3f} s ahead '
+                       'of the samples around it: withdrawn')
+            del self._times[-1], self._poses[-1]
+            self._newest_ns, self._raw_last, self._offset = self._previous
+            self._previous = None
+        else:
+            self._on_drop('restart', f'odometry went {back:.3f} s back in time ({len(run)} '
+                          f'samples in a row, {self._newest_ns} -> {run[0][0]} ns): the '
+                          'source restarted, the graph starts over')
+            self.graph = KeyframeGraph(self.graph.mount, self.graph.noise, self.graph.params)
+            self.generation += 1
+            self._start()
+            for t, _ in old:
+                self._drop('restarted', f'scan at {t} ns: of the odometry source before its '
+                           'restart')
         for t, p, _ in run:
             self.add_odometry(t, p)
         return True

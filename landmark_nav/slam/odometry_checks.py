@@ -3,7 +3,8 @@
 Used by :class:`~landmark_nav.slam.frontend.SlamFrontend` (the ``ekf_slam`` node and the
 offline evaluation alike):
 
-* :func:`implausible_motion`: an increment is judged against the motion model's own bound,
+* :func:`odometry_jump` (:func:`implausible_motion` on the increment between two
+  samples): an increment is judged against the motion model's own bound,
   from the elapsed time and the robot's limits plus ``k`` standard deviations of the
   filter's odometry noise model at that increment, never against the covariance the
   message states (a teleport claiming a covariance of 1e6 m^2 is still a teleport);
@@ -13,12 +14,19 @@ offline evaluation alike):
 * :class:`BackwardRun`: "time went back" is a persistent condition: only ``needed``
   consecutive samples, each more than ``max_backward_s`` older than the last accepted one
   and newer than the one before it in the run, mean a restarted source; a single stamp
-  never resets anything.
+  never resets anything. Such a run that continues the samples before the last accepted
+  one, when that one lay more than ``max_backward_s`` ahead of them, shows that one was
+  stamped in the future instead (:func:`future_stamp`): it is withdrawn.
+
+:class:`OdometryLimits` holds the parameters of these checks (the defaults of
+:class:`~landmark_nav.slam.frontend.FrontendParams` and of the graph's per-scan step).
 """
 
+from dataclasses import dataclass
 import math
 from typing import List, Optional, Tuple
 
+from landmark_nav.geometry import compose, inverse, relative
 import numpy as np
 
 from .ekf_slam import OdometryNoise
@@ -48,6 +56,59 @@ def implausible_motion(u: np.ndarray, dt: float, noise: OdometryNoise, max_speed
     if turn > lim_psi:
         return f'turned {turn:.3f} rad (> {lim_psi:.3f} rad plausible)'
     return None
+
+
+@dataclass(frozen=True)
+class OdometryLimits:
+    """Parameters of the odometry checks (their meaning: :class:`FrontendParams`)."""
+
+    max_speed: float = 1.5
+    max_turn_rate: float = 5.3
+    jump_sigmas: float = 5.0
+    min_step_s: float = 0.02
+    max_backward_s: float = 1.0
+    restart_messages: int = 3
+
+
+def odometry_jump(last: np.ndarray, pose: np.ndarray, dt: float, noise: OdometryNoise,
+                  limits) -> Optional[str]:
+    """Return why odometry ``last`` -> ``pose`` in ``dt`` s is no motion (a jump), or None.
+
+    :func:`implausible_motion` on the increment ``u = (-)last (+) pose`` (eq. 13), the
+    limits' ``max_speed``, ``max_turn_rate``, ``jump_sigmas`` and ``min_step_s`` (an
+    :class:`OdometryLimits` or a :class:`~landmark_nav.slam.frontend.FrontendParams`).
+    """
+    return implausible_motion(relative(last, pose), dt, noise, limits.max_speed,
+                              limits.max_turn_rate, limits.jump_sigmas, limits.min_step_s)
+
+
+def bridge_offset(last_bridged: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Return the offset that bridges a jump: ``offset (+) pose`` is ``last_bridged``.
+
+    Odometry after the jump is re-expressed as ``offset (+) o``: it continues from the
+    pose before the jump (zero motion across it).
+    """
+    return compose(last_bridged, inverse(pose))
+
+
+def bridged(offset: Optional[np.ndarray], pose: np.ndarray) -> np.ndarray:
+    """Return an odometry pose re-expressed by the offset of the last jump (None: none)."""
+    return pose if offset is None else compose(offset, pose)
+
+
+def future_stamp(before_ns: Optional[int], newest_ns: int, run_first_ns: int,
+                 max_backward_s: float) -> Optional[float]:
+    """Return how far the newest sample lay in the future [s], or None (a restart).
+
+    A complete :class:`BackwardRun` starting at ``run_first_ns`` after ``before_ns`` (the
+    accepted sample before the newest; None when there is none) continues the odometry
+    before the newest sample: when the newest lay more than ``max_backward_s`` ahead of
+    ``before_ns`` it was stamped in the future, and is withdrawn.
+    """
+    if before_ns is None or run_first_ns <= before_ns:
+        return None
+    gap = (newest_ns - before_ns) * 1e-9
+    return gap if gap > max_backward_s else None
 
 
 def covariance_problem(cov: np.ndarray) -> Optional[str]:
@@ -101,4 +162,5 @@ class BackwardRun:
         return len(self.samples) >= self.needed
 
 
-__all__ = ['BackwardRun', 'covariance_problem', 'COVARIANCE_RTOL', 'implausible_motion']
+__all__ = ['BackwardRun', 'bridge_offset', 'bridged', 'covariance_problem', 'COVARIANCE_RTOL',
+           'future_stamp', 'implausible_motion', 'odometry_jump', 'OdometryLimits']
