@@ -113,9 +113,14 @@ def test_an_odometry_jump_is_bridged_counted_and_warned():
     steps = GraphScanSteps([0.0, 0.0, 0.0], odometry_noise_model('simulator'))
     for t, x in ((1, 10.0), (2, 11.0), (3, 0.0), (4, 1.0)):  # reset to 0 at 3 s
         steps.add_odometry(t * s, [x, 0.0, 0.0])
-    steps.add_scan(int(3.5 * s), pts)
+    for t in (1.5, 3.5):
+        steps.add_scan(int(t * s), pts)
     assert steps.counts['jump'] == 1
-    assert np.allclose(steps.pop_ready()[1], [11.5, 0.0, 0.0])  # not 0.5: bridged
+    assert steps.pop_ready()[4] is None  # before the jump: the odometry as it came
+    _, odometry, _, _, offset = steps.pop_ready()
+    assert np.allclose(odometry, [11.5, 0.0, 0.0])  # not 0.5: bridged
+    # the offset gives the odometry back in its frame as it came (the node's map -> odom)
+    assert np.allclose(compose(offset, [0.5, 0.0, 0.0]), odometry)
     warnings = []
     with RosHarness() as ros:
         node = _steps_node(ros, warnings)

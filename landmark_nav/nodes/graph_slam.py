@@ -22,8 +22,9 @@ Publishes, per scan (stamp of the scan, frame ``map_frame``):
   placed it then, composed with the odometry since, and the keyframe's iSAM2 marginal
   composed with the odometry's noise (the offline run's ``online`` trajectory);
 * ``map_to_odom`` (geometry_msgs/TransformStamped, ``map_frame`` -> ``odom_frame``): the
-  correction ``pose (+) (-)odometry``; also broadcast on TF when ``publish_tf`` and tf2_ros
-  is importable (a full ROS install);
+  correction ``pose (+) (-)odometry`` (odometry in its frame as it came: after a bridged
+  jump, ``pose (+) (-)bridged (+) offset``, :attr:`GraphStep.offset`); also broadcast on
+  TF when ``publish_tf`` and tf2_ros is importable (a full ROS install);
 
 and every ``display_period`` after a keyframe, while subscribed: ``path`` (nav_msgs/Path)
 the keyframes as the graph places them now, every loop closure applied (the map's
@@ -291,8 +292,10 @@ class GraphSlamNode(Node):
         set_pose_2d(msg.pose.pose, step.pose)
         msg.pose.covariance = set_covariance3(msg.pose.covariance, step.covariance)
         self.pub_pose.publish(msg)
-        t = make_transform(step.stamp_ns, self.map_frame, self.odom_frame,
-                           compose(step.pose, inverse(step.odometry)))
+        correction = compose(step.pose, inverse(step.odometry))
+        if step.offset is not None:  # against the odometry frame as it came (bridged jumps)
+            correction = compose(correction, step.offset)
+        t = make_transform(step.stamp_ns, self.map_frame, self.odom_frame, correction)
         self.pub_tf.publish(t)
         if self.tf is not None:
             self.tf.sendTransform(t)

@@ -33,7 +33,8 @@ reported (``on_drop``):
   (:func:`~landmark_nav.slam.odometry_checks.odometry_jump`: a driver re-zeroing its pose,
   a teleport) is a discontinuity of the odometry frame: it is bridged, the odometry after it
   re-expressed to continue from the pose before it (zero motion across the step; the graph
-  is kept);
+  is kept). A step's :attr:`GraphStep.offset` turns its odometry back into the odometry
+  frame as it came (the node's ``map -> odom``);
 * ``retracted`` (with ``restart``): a sample stamped in the future, shown by the samples
   after it continuing those before it (:func:`~.odometry_checks.future_stamp`), is
   withdrawn instead of starting the graph over. The scans it covered meanwhile were placed
@@ -74,6 +75,8 @@ class GraphStep:
         pose: (3,) the scan's pose in the map frame when it was processed.
         covariance: (3, 3) its covariance.
         generation: :attr:`GraphScanSteps.generation` of its graph.
+        offset: (3,) ``odometry = offset (+) o`` for the odometry pose ``o`` as it came, when
+            a jump was bridged before the stamp (None: none, ``odometry`` is as it came).
     """
 
     stamp_ns: int
@@ -83,6 +86,7 @@ class GraphStep:
     pose: np.ndarray
     covariance: np.ndarray
     generation: int = 0
+    offset: Optional[np.ndarray] = None
 
 
 def odometry_at(t_s: float, times: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -138,6 +142,7 @@ class GraphScanSteps:
         self._t0: Optional[int] = None  # first odometry stamp: times are relative to it
         self._times: List[float] = []  # odometry stamps - t0 [s]
         self._poses: List[np.ndarray] = []
+        self._offsets: List[Optional[np.ndarray]] = []  # each sample's bridge offset
         self._newest_ns: Optional[int] = None
         self._raw_last: Optional[np.ndarray] = None  # the newest sample's pose as it came
         self._offset: Optional[np.ndarray] = None  # of the last bridged jump
@@ -188,6 +193,7 @@ class GraphScanSteps:
         self._raw_last = p
         self._times.append((stamp_ns - self._t0) * 1e-9)
         self._poses.append(pose_used)
+        self._offsets.append(self._offset)
         self._trim()
         return True
 
@@ -211,7 +217,7 @@ class GraphScanSteps:
         if ahead is not None:
             self._drop('retracted', f'odometry at {self._newest_ns} ns: lay {ahead:.3f} s ahead '
                        'of the samples around it: withdrawn')
-            del self._times[-1], self._poses[-1]
+            del self._times[-1], self._poses[-1], self._offsets[-1]
             self._newest_ns, self._raw_last, self._offset = self._previous
             self._previous = None
         else:
@@ -300,25 +306,30 @@ class GraphScanSteps:
         if i > 0:
             del self._times[:i]
             del self._poses[:i]
+            del self._offsets[:i]
 
     # ------------------------------------------------------------------ steps
-    def pop_ready(self) -> Optional[Tuple[int, np.ndarray, np.ndarray, int]]:
+    def pop_ready(self) -> Optional[Tuple[int, np.ndarray, np.ndarray, int,
+                                          Optional[np.ndarray]]]:
         """Return the next scan the odometry covers, or None.
 
-        ``(stamp_ns, odometry pose, points, generation)``; None when no waiting scan is
-        covered yet (or no odometry came).
+        ``(stamp_ns, odometry pose, points, generation, offset)`` (``offset``: the bridge
+        offset of the first sample at or after the stamp, :attr:`GraphStep.offset`); None
+        when no waiting scan is covered yet (or no odometry came).
         """
         if not self._waiting or self._newest_ns is None or \
                 self._waiting[0][0] > self._newest_ns:
             return None
         t, pts = self._waiting.pop(0)
-        o = odometry_at((t - self._t0) * 1e-9, np.asarray(self._times),
-                        np.asarray(self._poses))
+        t_s, times = (t - self._t0) * 1e-9, np.asarray(self._times)
+        o = odometry_at(t_s, times, np.asarray(self._poses))
+        offset = self._offsets[int(np.searchsorted(times, t_s, side='left'))]
         self.last_stamp_ns = t
-        return t, o, pts, self.generation
+        return t, o, pts, self.generation, offset
 
     def process(self, stamp_ns: int, odometry: np.ndarray, points: np.ndarray,
-                generation: int = 0) -> Optional[GraphStep]:
+                generation: int = 0, offset: Optional[np.ndarray] = None
+                ) -> Optional[GraphStep]:
         """Run the back end on one scan :meth:`pop_ready` gave; return its step.
 
         None (the scan dropped as ``restarted``) when the graph started over since.
@@ -332,7 +343,7 @@ class GraphScanSteps:
         k = len(graph.keyframes) - 1
         pose, cov = graph.pose_at(k, odometry)
         self.processed += 1
-        return GraphStep(stamp_ns, odometry, k, new, pose, cov, generation)
+        return GraphStep(stamp_ns, odometry, k, new, pose, cov, generation, offset)
 
     def step(self) -> Optional[GraphStep]:
         """Process the next covered scan (:meth:`pop_ready` then :meth:`process`), if any."""
