@@ -306,7 +306,8 @@ def test_scans_dropped_while_waiting_leave_no_reception_time_behind():
     ('loop_floor', [0.03, 0.03], 'loop_floor'),
     ('loop.window_xy', [0.5], 'loop.window_xy'),
     ('odometry.model', 'k_d=-1', 'odometry.model'),
-    ('laser_pose', [0.0, 0.0], 'laser_pose')])
+    ('laser_pose', [0.0, 0.0], 'laser_pose'),
+    ('restart_messages', 0, 'restart_messages')])
 def test_bad_parameter_is_a_parameter_error_naming_it(name, value, match):
     with RosHarness() as ros:
         with pytest.raises(ParameterError, match=match):
