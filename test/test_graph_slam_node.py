@@ -230,7 +230,10 @@ def test_bad_input_is_warned_and_counted_and_the_node_keeps_running():
         node.on_odom(make_odometry(3_000_000_000, 'odom', 'base_link', [0.0, 0.0, 0.0]))
         node.on_scan(make_scan(3_000_000_000, 'laser', -1.0, 0.01, [1.0] * 50, 0.1, 30.0))
         assert ros.wait_until(lambda: node.stats.processed_count == 1, 10)
-        assert node.stats.status().values  # the diagnostics build with the graph's counts
+        # the diagnostics carry the graph's counts as the worker left them after its step
+        values = {kv.key: kv.value for kv in node.stats.status().values}
+        assert values['keyframes'] == str(len(node.steps.graph.keyframes)) == '1'
+        assert values['waiting'] == '0' and values['loops.proposed'] == '0'
         # a back end that fails on a scan: counted and warned, the next scan is processed
         add_scan, failed = node.steps.graph.add_scan, []
 

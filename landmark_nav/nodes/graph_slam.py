@@ -96,19 +96,30 @@ class GraphInputStats(InputStats):
     """:class:`InputStats` plus the queue, keyframes, loops and factors of the graph."""
 
     def status(self):
-        """Return the input status with the graph's counts."""
+        """Return the input status with the graph's counts.
+
+        The queue's counts are read under the node's lock, the graph's from the snapshot the
+        worker takes after each step (the worker changes the graph outside the lock).
+        """
         status = super().status()
         node = self._node
-        graph = node.steps.graph
-        values = {'waiting': node.steps.waiting, 'keyframes': len(graph.keyframes),
-                  'before_odometry': node.steps.counts['before_odometry'],
-                  'loops.proposed': graph.loop_counts.proposed,
-                  'loops.accepted': graph.loop_counts.accepted}
-        values.update({f'loops.refused.{k}': v
-                       for k, v in sorted(graph.loop_counts.refused.items())})
-        values.update({f'factors.{k}': v for k, v in sorted(graph.motions.items())})
+        with node._lock:
+            values = {'waiting': node.steps.waiting,
+                      'before_odometry': node.steps.counts['before_odometry']}
+        values.update(node.graph_counts)
         status.values += [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return status
+
+
+def graph_counts(graph) -> dict:
+    """Keyframes, loops (proposed, accepted, refused by reason) and factors of ``graph``."""
+    values = {'keyframes': len(graph.keyframes),
+              'loops.proposed': graph.loop_counts.proposed,
+              'loops.accepted': graph.loop_counts.accepted}
+    values.update({f'loops.refused.{k}': v
+                   for k, v in sorted(graph.loop_counts.refused.items())})
+    values.update({f'factors.{k}': v for k, v in sorted(graph.motions.items())})
+    return values
 
 
 class GraphSlamNode(Node):
@@ -149,6 +160,7 @@ class GraphSlamNode(Node):
                                     restart=True, limits=limits)
         self._generation = 0  # of the graph whose keyframes keyframe_stamps holds
         self.params = self.steps.graph.params
+        self.graph_counts = graph_counts(self.steps.graph)  # replaced by the worker's snapshots
         self.stats = GraphInputStats(self, self.warner)
         quiet = PublisherEventCallbacks(use_default_callbacks=False)
         self.pub_pose = self.create_publisher(PoseWithCovarianceStamped, 'pose', 10,
@@ -263,6 +275,7 @@ class GraphSlamNode(Node):
                     self._publish_path()
                     continue
                 step = self.steps.process(*item)
+                self.graph_counts = graph_counts(self.steps.graph)
                 if self._stopping():
                     return
                 if step is None:  # the graph started over before it (counted)
