@@ -120,6 +120,9 @@ def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args,
           f'of {int(off.sum())} convex, distance to a wall cell [m] '
           + (' / '.join(f'{q:.2f}' for q in np.quantile(d, [0.1, 0.5, 0.9]))
              + ' (10 / 50 / 90 %)' if d.size else '-'))
+    print(f'{label} structural with both arm ends seen (no arm occluded, no silhouette: '
+          f'Corner.occluded, Corner.silhouette) {cw["structural_seen_ends_share"]:.3f} of '
+          f'{cw["structural_seen_ends_count"]}')
     if args.plot:
         out = Path(args.plot) / (label.replace('#', '_').replace('/', '_')
                                  + '_structural_corners.png')

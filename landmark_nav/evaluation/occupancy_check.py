@@ -506,12 +506,13 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
     Returns:
         ``points`` (K, 2) grid frame, ``structural`` (K,) bool (``Corner.structural``),
         ``convex`` (K,) bool (opening above pi: the corner juts out toward the sensor),
+        ``seen_ends`` (K,) bool (neither ``Corner.occluded`` nor ``Corner.silhouette``),
         ``wall_distance`` (K,) distance to the nearest wall cell's square [m] (inf beyond
         1 m), ``on_wall`` (K,) bool, ``left_out`` (K,) bool (near a wall cell seen
         through), ``path`` (P, 2) the run's positions in the grid frame, and per class
-        (``structural``, ``other``, and the structural ones split into
-        ``structural_convex`` and ``structural_concave``) the count judged and the share of
-        it on a wall (``<class>_count``, ``<class>_share``) and the count left out
+        (``structural``, ``other``, the structural ones split into ``structural_convex``
+        and ``structural_concave``, and ``structural_seen_ends``) the count judged and the
+        share of it on a wall (``<class>_count``, ``<class>_share``) and the count left out
         (``<class>_left_out``); ``seen_through`` the number of wall cells seen through.
         A concave corner placed behind a wall's face stays within a thick wall's cells; a
         convex one placed in front of it leaves them: the split shows which way the grid
@@ -526,7 +527,7 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
     seen = wall & (crossed > 0)
     scans = scenario.of_type(ScanSample)
     mount = np.asarray(scenario.laser.mount, dtype=float)
-    pts, label, convex = [], [], []
+    pts, label, convex, seen_ends = [], [], [], []
     for k in range(0, len(run.poses), every):
         found = scan_corners(scans[int(run.scan_index[k])], corner_params)
         if not found:
@@ -536,9 +537,11 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
         pts.append(c @ _rot(lp[2]).T + lp[:2])
         label.extend(f.structural for f in found)
         convex.extend(f.opening > math.pi for f in found)
+        seen_ends.extend(not (f.occluded or f.silhouette) for f in found)
     points = _transform(np.concatenate(pts), t) if pts else np.zeros((0, 2))
     structural = np.array(label, dtype=bool)
     convex = np.array(convex, dtype=bool)
+    seen_ends = np.array(seen_ends, dtype=bool)
 
     def distance(cells, reach):
         if not cells.any():
@@ -549,13 +552,14 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
     wall_distance = distance(wall, max(tolerance, 1.0))
     on_wall, left_out = wall_distance <= tolerance, distance(seen, tolerance) <= tolerance
     out: Dict[str, object] = {
-        'points': points, 'structural': structural, 'convex': convex,
+        'points': points, 'structural': structural, 'convex': convex, 'seen_ends': seen_ends,
         'wall_distance': wall_distance, 'on_wall': on_wall, 'left_out': left_out,
         'path': _transform(np.asarray(run.poses, dtype=float)[:, :2], t),
         'seen_through': int(np.count_nonzero(seen))}
     for name, m in (('structural', structural), ('other', ~structural),
                     ('structural_convex', structural & convex),
-                    ('structural_concave', structural & ~convex)):
+                    ('structural_concave', structural & ~convex),
+                    ('structural_seen_ends', structural & seen_ends)):
         judged = m & ~left_out
         out[f'{name}_count'] = int(judged.sum())
         out[f'{name}_left_out'] = int((m & left_out).sum())
