@@ -789,6 +789,8 @@ def main(argv=None) -> int:
                         'and concave, and how far the off-wall ones are from a wall cell')
     p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
                    help='graph: the pose graph, its poses and structural corners')
+    p.add_argument('--cell-alignment', action='store_true',
+                   help='with --backend graph: align to the grid in whole cells (no refinement)')
     p.add_argument('--plot', default=None, metavar='DIR',
                    help='with --corners: draw them over the grid into DIR/<log>_structural_'
                         'corners.png')
