@@ -97,7 +97,8 @@ modules of :mod:`landmark_nav.laser.corner_detection` named after what they comp
 ``windows`` (``sliding_window``, eq. 1; ``minus_cosine``, eq. 11), ``refine`` (the
 refinement and the arm checks), ``split_merge`` (eq. 4), ``tls_lines`` (the TLS lines,
 eqs. 5-10, and their noise from eq. 7), ``corner`` (:class:`Corner`), ``params``
-(:class:`CornerParams`) and ``scan_stack`` (the clusters of a scan back to back).
+(:class:`CornerParams`), ``scan_stack`` (the clusters of a scan back to back) and
+``arm_ends`` (what the scan shows beyond each arm, ``Corner.arm_ends``).
 """
 
 from dataclasses import replace
