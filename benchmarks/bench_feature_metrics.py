@@ -285,7 +285,7 @@ def structural_rule_records(bag: Path, rules: list, arm_ends: bool = False) -> t
     scans, _ = bag_metric_scans(bag, mount)
     noise = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans), stated=0.01)
     config = extractor_configuration('corner_extractor')
-    params = replace(config.params, sigma_r=noise.sigma_r)
+    params = replace(config.params, sigma_r=noise.sigma_r, arm_ends=arm_ends)
     segmenter = ScanSegmenter(config.incidence_deg, config.min_points, noise.sigma_r,
                               config.sigma_r_from_data, config.sigma_r_scans)
     scores = [Repeatability() for _ in rules]

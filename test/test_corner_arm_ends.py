@@ -2,12 +2,14 @@
 
 import math
 
-from landmark_nav.laser.corners import detect_corners, extract_corners
+from landmark_nav.laser.corners import CornerParams, detect_corners, extract_corners
 from landmark_nav.laser.segmentation import Cluster
 from landmark_nav.sim import World
 import numpy as np
+import pytest
 
 STEP = math.radians(0.5)
+ASK = CornerParams(arm_ends=True)
 
 
 def _scan(world, pose, fov_deg=180.0):
@@ -17,10 +19,10 @@ def _scan(world, pose, fov_deg=180.0):
     return hits.ranges, angles
 
 
-def _corner_near(world, pose, point, fov_deg=180.0):
+def _corner_near(world, pose, point, fov_deg=180.0, params=ASK):
     """Return the corner detected within 5 cm of ``point`` (world frame)."""
     ranges, angles = _scan(world, pose, fov_deg)
-    found = extract_corners(ranges, angles, None, STEP)
+    found = extract_corners(ranges, angles, None, STEP, params)
     c, s = math.cos(pose[2]), math.sin(pose[2])
     for f in found:
         p = np.array([pose[0] + c * f.position[0] - s * f.position[1],
@@ -51,6 +53,13 @@ def test_a_room_corner_has_both_arms_ending_inside_their_walls():
     assert not f.silhouette and not f.occluded
 
 
+def test_arm_ends_only_when_asked_for():
+    f = _corner_near(_room(), (3.0, 3.0, 0.25 * math.pi), (6.0, 6.0), params=CornerParams())
+    assert f.arm_ends is None and not f.occluded and not f.silhouette and f.structural
+    with pytest.raises(ValueError, match='arm_ends'):
+        CornerParams(arm_ends=1)
+
+
 def test_an_arm_hidden_by_a_nearer_post_is_occluded():
     w = _room()
     w.add_rectangle(4.0, 4.6, 0.3, 0.3)  # hides the wall y = 6 left of the corner
@@ -70,6 +79,6 @@ def test_clusters_without_their_scan_give_no_arm_ends():
     ranges, angles = _scan(_room(), (3.0, 3.0, 0.25 * math.pi))
     pts = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)])
     cluster = Cluster(indices=np.arange(ranges.size), points=pts, ranges=ranges, angles=angles)
-    found = detect_corners([cluster])
+    found = detect_corners([cluster], ASK)
     assert found and all(f.arm_ends is None and not f.occluded and not f.silhouette
                          for f in found)

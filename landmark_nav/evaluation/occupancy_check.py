@@ -44,7 +44,7 @@ says otherwise), so walls are the values <= ``wall_max``. Line ``i`` holds the c
 as the format's reader ``bee-map.c`` fills it).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import gzip
 import math
 from pathlib import Path
@@ -525,7 +525,9 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
         and the scans disagree.
     """
     from landmark_nav.evaluation.slam_run import scan_corners
+    from landmark_nav.laser.corners import CornerParams
     from landmark_nav.sim import ScanSample
+    corner_params = replace(corner_params or CornerParams(), arm_ends=True)
     t = np.asarray(transform, dtype=float).reshape(3)
     v, res = grid.values, grid.resolution
     crossed = ray_crossings(grid, scenario, run, t, every=1)

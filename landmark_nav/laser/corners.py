@@ -130,9 +130,9 @@ def detect_corners(clusters: Sequence[Cluster], params: Optional[CornerParams] =
         params: detector parameters (defaults: minus-cosine with refinement).
 
     Returns:
-        Corners in scan order (by cluster, then beam), laser frame, with ``arm_ends``
-        (:func:`~landmark_nav.laser.corner_detection.arm_ends.arm_ends`) when the clusters
-        carry their scan's arrays.
+        Corners in scan order (by cluster, then beam), laser frame; with
+        ``params.arm_ends`` and clusters that carry their scan's arrays, with ``arm_ends``
+        (:func:`~landmark_nav.laser.corner_detection.arm_ends.arm_ends`).
 
     """
     params = params or CornerParams()
@@ -148,7 +148,7 @@ def detect_corners(clusters: Sequence[Cluster], params: Optional[CornerParams] =
         else:
             out = _split_merge(clusters, st, params)
     out = sorted(out, key=lambda c: c.index) if len(out) > 1 else out
-    ends = arm_ends(out, clusters)
+    ends = arm_ends(out, clusters) if params.arm_ends else None
     if ends is None:
         return out
     return [replace(c, arm_ends=e) for c, e in zip(out, ends)]

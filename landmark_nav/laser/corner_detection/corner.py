@@ -56,8 +56,9 @@ class Corner:
         beam_step: the scan's beam spacing at the corner [rad] (NaN when unknown).
         arm_ends: what the scan shows beyond each arm's outer end, a pair of
             :data:`~landmark_nav.laser.corner_detection.arm_ends.ARM_ENDS` names
-            (``'inside'``, ``'nearer'``, ``'farther'``, ``'unknown'``); None when the
-            detector was not given the whole scan (clusters built by hand).
+            (``'inside'``, ``'nearer'``, ``'farther'``, ``'unknown'``); None unless asked
+            for (``CornerParams.arm_ends``) and the detector has the whole scan (not with
+            clusters built by hand).
 
     ``structural`` labels the corners whose two arms are both at least
     :data:`STRUCTURAL_ARM` long and :data:`STRUCTURAL_BEAM_STEPS` beam steps wide (a
