@@ -225,3 +225,18 @@ def test_place_scan_agreement_tells_a_surface_the_grid_lacks():
     assert off['at_distance'] == pytest.approx(0.235)
     assert a['off']['scans_off'] == 1 and a['on']['scans_off'] == 0
     assert a['overall'] == pytest.approx(5 / 8)
+
+
+def test_plot_place_crops_draws_the_places_off_the_walls(tmp_path):
+    from landmark_nav.evaluation.slam_plots import plot_place_crops
+    grid = _room_grid()
+    cw = {'points': np.array([[5.05, 8.0], [6.0, 8.0]]), 'structural': np.ones(2, dtype=bool),
+          'left_out': np.zeros(2, dtype=bool), 'on_wall': np.array([True, False])}
+    place = {'centre': np.array([6.0, 8.0]), 'views': 3, 'on_wall': False, 'convex': True,
+             'at_share': 0.0, 'ring_share': 1.0}
+    scan = {'points': np.array([[5.05, 7.5], [6.0, 8.05]]), 'wall_distance': np.array([0.0, 0.9])}
+    out = tmp_path / 'crops.png'
+    assert plot_place_crops(grid, cw, {'places': [dict(place, on_wall=True)]}, scan, 't',
+                            out) == 0 and not out.exists()
+    assert plot_place_crops(grid, cw, {'places': [place]}, scan, 't', out) == 1
+    assert out.stat().st_size > 0
