@@ -7,7 +7,7 @@ Run from the repository root (needs ``../shared/data/carmen`` or ``--data DIR``)
     python benchmarks/bench_feature_metrics.py corner-repeatability [--data DIR]
         [--method minus_cosine] [--set NAME=VALUE ...] [LOG ...]
     python benchmarks/bench_feature_metrics.py structural-rule [--data DIR]
-        [--min-share 0.3] [LOG ...]
+        [--min-share 0.3] [--arm-ends required|ignored] [LOG ...]
     python benchmarks/bench_feature_metrics.py quantised-lines [--data DIR] [--step 0.05]
         [--drho 0.05 ...] [--dalpha 2 ...] [--misses] [LOG ...]
 
@@ -50,7 +50,9 @@ re-detected / opportunities``).
 ``structural-rule``: how ``Corner.structural``'s bounds were chosen. Each log is imported and
 its corners found as ``landmark_nav evaluate-features`` does (node defaults, range noise
 estimated from the scans); for every rule "both arms >= L m and >= N beam steps"
-(``--lengths``, ``--steps``) the re-detection of the corners it marks (as
+(``--lengths``, ``--steps``; with ``--arm-ends required`` also neither arm occluded nor
+the corner a silhouette, ``Corner.occluded`` / ``Corner.silhouette``: measured, not
+adopted) the re-detection of the corners it marks (as
 ``evaluate-features``' structural column) and the share of corners it marks. Leaving one
 log out, the rule with the best worst-log re-detection among those marking at least
 ``--min-share`` of the corners of every other log is chosen and scored on the log left
@@ -273,13 +275,17 @@ def run_corner_repeatability(args) -> int:
     return 0
 
 
-def structural_rule_records(bag: Path, rules: list) -> tuple:
-    """Return per rule the Repeatability of the corners it marks, and the share it marks."""
+def structural_rule_records(bag: Path, rules: list, arm_ends: bool = False) -> tuple:
+    """Return per rule the Repeatability of the corners it marks, and the share it marks.
+
+    With ``arm_ends`` a rule marks only corners neither occluded nor a silhouette
+    (``Corner.occluded``, ``Corner.silhouette``).
+    """
     mount, _, _ = sensor_facts(bag)
     scans, _ = bag_metric_scans(bag, mount)
     noise = estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans), stated=0.01)
     config = extractor_configuration('corner_extractor')
-    params = replace(config.params, sigma_r=noise.sigma_r)
+    params = replace(config.params, sigma_r=noise.sigma_r, arm_ends=arm_ends)
     segmenter = ScanSegmenter(config.incidence_deg, config.min_points, noise.sigma_r,
                               config.sigma_r_from_data, config.sigma_r_scans)
     scores = [Repeatability() for _ in rules]
@@ -293,7 +299,10 @@ def structural_rule_records(bag: Path, rules: list) -> tuple:
         wedge = np.array([[c.bisector, c.opening] for c in found]).reshape(-1, 2)
         arms = np.array([[min(c.arm_lengths), min(c.arm_beam_steps)] for c in found]
                         ).reshape(-1, 2)
-        masks = [(arms[:, 0] >= length) & (arms[:, 1] >= steps) for length, steps in rules]
+        seen = np.array([not (arm_ends and (c.occluded or c.silhouette)) for c in found],
+                        dtype=bool)
+        masks = [(arms[:, 0] >= length) & (arms[:, 1] >= steps) & seen
+                 for length, steps in rules]
         total += len(found)
         marked += [m.sum() for m in masks]
         if prev is not None and prev[0].pose is not None and s.pose is not None:
@@ -311,7 +320,8 @@ def run_structural_rule(args) -> int:
     for name, path in log_paths(args.data, args.logs):
         with tempfile.TemporaryDirectory() as tmp:
             import_log(path, Path(tmp) / name)
-            scores, share = structural_rule_records(Path(tmp) / name, rules)
+            scores, share = structural_rule_records(Path(tmp) / name, rules,
+                                                    args.arm_ends == 'required')
         fig[name] = [(sc.fraction, sh) for sc, sh in zip(scores, share)]
         print(f'{name}: {scores[0].opportunities} opportunities of the corners with both '
               f'arms >= {rules[0][0]:g} m and {rules[0][1]:g} beam steps', flush=True)
@@ -503,6 +513,10 @@ def main(argv=None) -> int:
                    help='arm beam-step bounds N')
     p.add_argument('--min-share', type=float, default=0.3,
                    help='a rule must mark at least this share of the corners of each log')
+    p.add_argument('--arm-ends', choices=('required', 'ignored'), default='ignored',
+                   help='required: a rule also needs no occluded arm and no silhouette '
+                        '(Corner.occluded, Corner.silhouette; measured, not adopted); '
+                        'ignored (default, as Corner.structural): arm length and beam steps')
     p.set_defaults(run=run_structural_rule)
     return run_subcommand(ap, argv)
 

@@ -135,7 +135,8 @@ jacobians="'observability_gain'" --set spurious_limit=0.05 --set scan_matching=T
 (:func:`~landmark_nav.evaluation.occupancy_check.corner_wall_check`): the share of
 structural and other corners within 10 cm of a wall cell, the structural ones split into
 convex and concave, and the distance to a wall cell of the structural ones off the walls
-(10 / 50 / 90 %); ``--plot DIR`` draws them over the grid.
+(10 / 50 / 90 %), and of the structural corners neither ``Corner.occluded`` nor
+``Corner.silhouette``; ``--plot DIR`` draws them over the grid.
 A log that holds several runs (the import summary's ``runs``: ``robotdata5``, whose clock
 restarts where the robot is elsewhere) is imported and run one run at a time (``name/runK``,
 ``landmark_nav import --run K``). A log whose odometry the front end had to bridge gets one
@@ -788,6 +789,8 @@ def main(argv=None) -> int:
                         'and concave, and how far the off-wall ones are from a wall cell')
     p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
                    help='graph: the pose graph, its poses and structural corners')
+    p.add_argument('--cell-alignment', action='store_true',
+                   help='with --backend graph: align to the grid in whole cells (no refinement)')
     p.add_argument('--plot', default=None, metavar='DIR',
                    help='with --corners: draw them over the grid into DIR/<log>_structural_'
                         'corners.png')

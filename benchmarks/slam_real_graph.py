@@ -19,7 +19,11 @@ cell of tolerance and the cells the log's scans see through excused
 wall with the graph's and with the odometry's poses, the structural corners' share within
 10 cm of a wall cell (asks >= 0.9), their count and the count left out, the same share per
 place (``corner_places``: detections within 10 cm linked, places seen >= 3 times) and the
-places' count, back-end ms per scan.
+places' count, back-end ms per scan. With ``--corners``, also whether the log's own
+scans agree with the grid at the corner places
+(:func:`~landmark_nav.evaluation.graph_wall_check.place_scan_agreement`); with ``--plot``
+the places off the walls drawn (``<log>_off_wall_places.png``). ``--cell-alignment``: the
+grid alignment without its continuous refinement (whole cells).
 """
 
 import math
@@ -30,7 +34,7 @@ from landmark_nav.evaluation.graph_wall_check import graph_wall_check, placed_ru
 from landmark_nav.evaluation.occupancy_check import corner_wall_check
 from landmark_nav.evaluation.slam import bag_odometry_noise
 from landmark_nav.evaluation.slam_graph import run_graph
-from landmark_nav.evaluation.slam_plots import plot_corner_wall_check
+from landmark_nav.evaluation.slam_plots import plot_corner_wall_check, plot_place_crops
 from landmark_nav.laser.corners import CornerParams
 import numpy as np
 
@@ -85,7 +89,7 @@ def wean_graph(grid, sc, label: str, args) -> None:
     """Run the graph back end on one Wean bag and print its line (module docstring)."""
     run = run_graph(sc, bag_odometry_noise(sc)[0])
     cp = CornerParams(sigma_r=sc.laser.sigma_range, sigma_phi=sc.laser.sigma_angle)
-    w = graph_wall_check(grid, sc, run, cp)
+    w = graph_wall_check(grid, sc, run, cp, refine=not getattr(args, 'cell_alignment', False))
     s, c, g = w['check']['slam'], w['corners'], run.graph
     print(f'{label} {len(g.keyframes)} {g.loop_counts.accepted} {g.loop_counts.proposed} '
           f'{s["poses"]} {s["poses_in_wall"]} {w["poses_in_wall_counted"]} '
@@ -97,6 +101,25 @@ def wean_graph(grid, sc, label: str, args) -> None:
     if args.corners or args.plot:
         corners_on_walls(grid, sc, placed_run(sc, run, cp), s['transform'], cp, label, args,
                          c)
+        a = w['agreement']
+        print(f"{label} scan points within 10 cm of a wall cell: all {a['overall']:.3f}; at "
+              f"the {a['off']['count']} corner places off the walls (within 0.1 m) "
+              f"{a['off']['at_share']:.3f}, around them (0.5-1.5 m) "
+              f"{a['off']['ring_share']:.3f} ({a['off']['scans_off']} places with their scan "
+              f"points mostly off the walls too); at the {a['on']['count']} places on the "
+              f"walls {a['on']['at_share']:.3f}, around them {a['on']['ring_share']:.3f}")
+        for p in a['places']:
+            if not p['on_wall']:
+                print(f"{label} place off the walls at ({p['centre'][0]:.2f}, "
+                      f"{p['centre'][1]:.2f}): {p['views']} views, "
+                      f"{'convex' if p['convex'] else 'concave'}, {p['distance']:.2f} m from a "
+                      f"wall cell; its scan points {p['at_distance']:.2f} m (median), "
+                      f"{p['at_share']:.2f} on a wall; around it {p['ring_share']:.2f}")
+    if args.plot:
+        out = Path(args.plot) / (label.replace('/', '_') + '_off_wall_places.png')
+        if plot_place_crops(grid, c, w['agreement'], w['scan_points'],
+                            f'{label}: structural corner places off the walls', out):
+            print(f'wrote {out}')
 
 
 def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args,
@@ -120,6 +143,9 @@ def corners_on_walls(grid, sc, run, transform, corner_params, label: str, args,
           f'of {int(off.sum())} convex, distance to a wall cell [m] '
           + (' / '.join(f'{q:.2f}' for q in np.quantile(d, [0.1, 0.5, 0.9]))
              + ' (10 / 50 / 90 %)' if d.size else '-'))
+    print(f'{label} structural with both arm ends seen (no arm occluded, no silhouette: '
+          f'Corner.occluded, Corner.silhouette) {cw["structural_seen_ends_share"]:.3f} of '
+          f'{cw["structural_seen_ends_count"]}')
     if args.plot:
         out = Path(args.plot) / (label.replace('#', '_').replace('/', '_')
                                  + '_structural_corners.png')

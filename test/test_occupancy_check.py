@@ -173,3 +173,70 @@ def test_corner_places_scores_each_place_once():
     cw['left_out'][5:7] = True  # most views of the off-wall place left out: so is the place
     p = corner_places(cw)
     assert (p['count'], p['share'], p['left_out']) == (1, 1.0, 1)
+
+
+def test_point_wall_distance_is_to_the_wall_cells_square():
+    from landmark_nav.evaluation.occupancy_check import point_wall_distance
+    d = point_wall_distance(_room_grid(), np.array([[5.05, 8.0], [5.4, 8.0], [5.12, 8.0]]))
+    assert d == pytest.approx([0.0, 0.3, 0.02], abs=1e-9)  # wall cell x 5.0 - 5.1 m
+
+
+def test_refinement_brings_the_points_closer_to_the_walls():
+    """Points 3 cm off the walls: the whole-cell search cannot take them closer, the fit can."""
+    from landmark_nav.evaluation.occupancy_check import point_wall_distance
+    v = -np.ones((70, 50))  # a 5 x 3 m room, walls 1 cell thick, a stub against symmetry
+    v[10:61, 10:41] = 0.0
+    v[11:60, 11:40] = 1.0
+    v[20, 11:20] = 0.0
+    grid = OccupancyGrid(v, 0.1, 'small room')
+    y = np.linspace(1.5, 3.5, 30)
+    pts = np.vstack([np.column_stack([np.full_like(y, 1.08), y]),
+                     np.column_stack([np.full_like(y, 5.98), y]),
+                     np.column_stack([np.linspace(2.5, 5.5, 30), np.full(30, 1.08)])])
+    poses = np.column_stack([np.linspace(2.5, 5.5, 20), np.full(20, 2.5)])
+
+    def mean_distance(r):
+        t = r['transform']
+        return point_wall_distance(grid, pts @ _rot(t[2]).T + t[:2]).mean()
+
+    kw = {'coarse_step_deg': 10.0, 'fine_step_deg': 1.0}
+    fine = occupancy_check(grid, pts[:5], poses, points=pts, **kw)
+    cells = occupancy_check(grid, pts[:5], poses, points=pts, refine=False, **kw)
+    assert mean_distance(fine) < mean_distance(cells)
+
+
+def test_place_scan_agreement_tells_a_surface_the_grid_lacks():
+    """A place on a wall with its points on it; one off with its points off, walls around on."""
+    from landmark_nav.evaluation.graph_wall_check import place_scan_agreement
+    corners = np.array([[0.0, 0.0]] * 3 + [[5.0, 5.0]] * 4)
+    cw = {'points': corners, 'structural': np.ones(7, dtype=bool),
+          'left_out': np.zeros(7, dtype=bool), 'convex': np.array([False] * 3 + [True] * 4),
+          'wall_distance': np.array([0.0] * 3 + [0.25] * 4)}
+    at = np.array([[0.02, 0.0], [0.0, 0.03], [5.03, 5.0], [5.0, 4.98]])
+    ring = np.array([[1.0, 0.0], [0.0, -1.0], [6.0, 5.0], [5.0, 6.2]])
+    points = np.vstack([at, ring])
+    d = np.array([0.0, 0.0, 0.25, 0.22, 0.0, 0.0, 0.0, 0.3])
+    a = place_scan_agreement(cw, points, d)
+    assert [(p['views'], p['on_wall'], p['convex']) for p in a['places']] == [
+        (4, False, True), (3, True, False)]
+    off, on = a['places']
+    assert (off['at_share'], off['at_points'], off['ring_share']) == (0.0, 2, 0.5)
+    assert (on['at_share'], on['ring_share']) == (1.0, 1.0)
+    assert off['at_distance'] == pytest.approx(0.235)
+    assert a['off']['scans_off'] == 1 and a['on']['scans_off'] == 0
+    assert a['overall'] == pytest.approx(5 / 8)
+
+
+def test_plot_place_crops_draws_the_places_off_the_walls(tmp_path):
+    from landmark_nav.evaluation.slam_plots import plot_place_crops
+    grid = _room_grid()
+    cw = {'points': np.array([[5.05, 8.0], [6.0, 8.0]]), 'structural': np.ones(2, dtype=bool),
+          'left_out': np.zeros(2, dtype=bool), 'on_wall': np.array([True, False])}
+    place = {'centre': np.array([6.0, 8.0]), 'views': 3, 'on_wall': False, 'convex': True,
+             'at_share': 0.0, 'ring_share': 1.0}
+    scan = {'points': np.array([[5.05, 7.5], [6.0, 8.05]]), 'wall_distance': np.array([0.0, 0.9])}
+    out = tmp_path / 'crops.png'
+    assert plot_place_crops(grid, cw, {'places': [dict(place, on_wall=True)]}, scan, 't',
+                            out) == 0 and not out.exists()
+    assert plot_place_crops(grid, cw, {'places': [place]}, scan, 't', out) == 1
+    assert out.stat().st_size > 0

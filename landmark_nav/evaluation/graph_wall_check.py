@@ -17,14 +17,17 @@ trajectory standing for the landmarks:
   detection counts, so a place seen from many poses weighs as much as its views;
 * the same share per place (:func:`corner_places`): the detections linked into places as
   a landmark map would hold them, one figure per place, as the EKF's landmark share
-  counts each landmark once.
+  counts each landmark once;
+* whether the log's own scans agree with the grid at each place
+  (:func:`place_scan_agreement`).
 """
 
 from types import SimpleNamespace
 from typing import Dict
 
 from landmark_nav.evaluation.occupancy_check import (check_run, corner_wall_check,
-                                                     OccupancyGrid, wall_pose_diagnosis,
+                                                     OccupancyGrid, point_wall_distance,
+                                                     run_scan_points, wall_pose_diagnosis,
                                                      wall_poses_counted)
 from landmark_nav.evaluation.slam_run import scan_corners
 from landmark_nav.geometry import compose, transform_points
@@ -74,6 +77,17 @@ def placed_run(scenario, run, corner_params=None) -> SimpleNamespace:
                            landmarks=np.vstack(corners) if corners else np.zeros((0, 2)))
 
 
+def _linked(pts: np.ndarray, link: float) -> np.ndarray:
+    """Label the points' single-linkage groups (pairs closer than ``link`` joined)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(pts).query_pairs(link, output_type='ndarray')
+    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                     shape=(len(pts), len(pts)))
+    return connected_components(adj, directed=False)[1]
+
+
 def corner_places(cw: Dict[str, object], link: float = 0.1, min_views: int = 3,
                   tolerance: float = 0.1) -> Dict[str, object]:
     """Group the structural corner detections into places and score each place once.
@@ -89,17 +103,11 @@ def corner_places(cw: Dict[str, object], link: float = 0.1, min_views: int = 3,
         ``count`` places judged, ``share`` of them on a wall (nan: none), ``left_out``,
         ``views_median`` detections per place judged.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
     sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool))
     pts = np.asarray(cw['points'], dtype=float)[sel]
     if len(pts) == 0:
         return {'count': 0, 'share': float('nan'), 'left_out': 0, 'views_median': 0.0}
-    pairs = cKDTree(pts).query_pairs(link, output_type='ndarray')
-    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                     shape=(len(pts), len(pts)))
-    label = connected_components(adj, directed=False)[1]
+    label = _linked(pts, link)
     views = np.bincount(label)
     dist = np.asarray(cw['wall_distance'], dtype=float)[sel]
     out_frac = np.bincount(label, np.asarray(cw['left_out'], dtype=float)[sel]) / views
@@ -114,8 +122,74 @@ def corner_places(cw: Dict[str, object], link: float = 0.1, min_views: int = 3,
             'views_median': float(np.median(judged)) if judged else 0.0}
 
 
-def graph_wall_check(grid: OccupancyGrid, scenario, run,
-                     corner_params=None) -> Dict[str, object]:
+def place_scan_agreement(cw: Dict[str, object], points: np.ndarray, wall_distance: np.ndarray,
+                         link: float = 0.1, min_views: int = 3, tolerance: float = 0.1,
+                         at: float = 0.1, near: float = 0.5, ring: float = 1.5
+                         ) -> Dict[str, object]:
+    """Ask, at each structural-corner place, whether the log's own scans agree with the grid.
+
+    Places as :func:`corner_places` groups them (``link``, ``min_views``; those mostly left
+    out are skipped). For each, the run's scan end points (grid frame, ``points``, with
+    their ``wall_distance``, :func:`.occupancy_check.point_wall_distance`) within ``at`` of
+    the place (the surfaces that make the corner) and those in the square ring between
+    ``near`` and ``ring`` around it (the walls nearby): the share within ``tolerance`` of a
+    wall cell of each. A corner off the walls whose own scan points are off the walls too,
+    while the walls nearby agree, is a surface the log saw and the grid does not hold (made
+    at another time, an object, a finer detail than its cells), not a misplaced corner; one
+    whose scan points lie on the walls is a corner the extractor placed off them.
+
+    Returns:
+        ``places``: a list (views, descending) of dicts ``centre`` (2,), ``views``,
+        ``on_wall``, ``convex`` (most detections convex), ``distance`` (the detections'
+        median distance to a wall cell), ``at_share``, ``at_points``, ``at_distance`` (the
+        median distance to a wall cell of the points within ``at``), ``ring_share``;
+        ``on`` / ``off``: per group of places (on / off the walls) ``count``, the mean
+        ``at_share`` and ``ring_share``, and ``scans_off``: the places whose points within
+        ``at`` are mostly off the walls (``at_share`` below 0.5); ``overall``: the share
+        of all points.
+    """
+    sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool)
+                         & ~np.asarray(cw['left_out'], dtype=bool))
+    pts = np.asarray(cw['points'], dtype=float)[sel]
+    wd = np.asarray(wall_distance, dtype=float)
+    pw = wd <= tolerance
+    out: Dict[str, object] = {'places': [], 'overall': float(pw.mean()) if pw.size else
+                              float('nan')}
+    if len(pts):
+        from scipy.spatial import cKDTree
+        tree = cKDTree(points)
+        label = _linked(pts, link)
+        dist = np.asarray(cw['wall_distance'], dtype=float)[sel]
+        convex = np.asarray(cw['convex'], dtype=bool)[sel]
+        for c in np.flatnonzero(np.bincount(label) >= min_views):
+            m = label == c
+            centre = np.median(pts[m], axis=0)
+            at_i = tree.query_ball_point(centre, at)
+            box = np.array(tree.query_ball_point(centre, ring * np.sqrt(2.0)), dtype=np.int64)
+            off = np.abs(points[box] - centre).max(axis=1)
+            ring_i = box[(off > near) & (off <= ring)]
+            out['places'].append({
+                'centre': centre, 'views': int(m.sum()),
+                'on_wall': bool(np.median(dist[m]) <= tolerance),
+                'convex': bool(convex[m].mean() > 0.5), 'distance': float(np.median(dist[m])),
+                'at_share': float(pw[at_i].mean()) if at_i else float('nan'),
+                'at_points': len(at_i),
+                'at_distance': float(np.median(wd[at_i])) if at_i else float('nan'),
+                'ring_share': float(pw[ring_i].mean()) if ring_i.size else float('nan')})
+    out['places'].sort(key=lambda p: -p['views'])
+    for key, on in (('on', True), ('off', False)):
+        group = [p for p in out['places'] if p['on_wall'] == on]
+        out[key] = {'count': len(group),
+                    'at_share': float(np.nanmean([p['at_share'] for p in group]))
+                    if group else float('nan'),
+                    'ring_share': float(np.nanmean([p['ring_share'] for p in group]))
+                    if group else float('nan'),
+                    'scans_off': sum(p['at_share'] < 0.5 for p in group)}
+    return out
+
+
+def graph_wall_check(grid: OccupancyGrid, scenario, run, corner_params=None,
+                     refine: bool = True) -> Dict[str, object]:
     """Judge a graph run on the grid (module docstring).
 
     Args:
@@ -123,12 +197,15 @@ def graph_wall_check(grid: OccupancyGrid, scenario, run,
         scenario: The bag (:func:`landmark_nav.evaluation.bags.load_bag`).
         run: :func:`.slam_graph.run_graph` on it.
         corner_params: The corner extractor's parameters (the laser's noise).
+        refine: The alignment's continuous refinement (:func:`.occupancy_check.occupancy_check`).
 
     Returns:
         ``check`` (:func:`.occupancy_check.check_run`: ``'slam'`` the graph's poses,
         ``'odometry'``), ``wall`` (:func:`.occupancy_check.wall_pose_diagnosis` over every
         step), ``poses_in_wall_counted``, ``corners``
-        (:func:`.occupancy_check.corner_wall_check`), ``places`` (:func:`corner_places`).
+        (:func:`.occupancy_check.corner_wall_check`), ``places`` (:func:`corner_places`),
+        ``agreement`` (:func:`place_scan_agreement`, every other scan's points) and
+        ``scan_points`` (those points in the grid frame, with ``wall_distance``).
 
     Raises:
         ValueError: No structural corner in the run (the alignment has nothing to score).
@@ -136,13 +213,18 @@ def graph_wall_check(grid: OccupancyGrid, scenario, run,
     placed = placed_run(scenario, run, corner_params)
     if placed.landmarks.shape[0] == 0:
         raise ValueError('graph_wall_check: no structural corner in any scan of the run')
-    fit = check_run(grid, scenario, placed)
+    fit = check_run(grid, scenario, placed, refine=refine)
     t = np.asarray(fit['slam']['transform'])
     wall = wall_pose_diagnosis(grid, scenario, placed, t, every=1)
     cw = corner_wall_check(grid, scenario, placed, t, corner_params)
+    pts = transform_points(t, run_scan_points(scenario, placed.scan_index, placed.poses))
+    d = point_wall_distance(grid, pts)
     return {'check': fit, 'wall': wall,
             'poses_in_wall_counted': wall_poses_counted(wall, grid.resolution),
-            'corners': cw, 'places': corner_places(cw)}
+            'corners': cw, 'places': corner_places(cw),
+            'agreement': place_scan_agreement(cw, pts, d),
+            'scan_points': {'points': pts, 'wall_distance': d}}
 
 
-__all__ = ['corner_places', 'graph_wall_check', 'placed_run', 'scan_indices']
+__all__ = ['corner_places', 'graph_wall_check', 'place_scan_agreement', 'placed_run',
+           'scan_indices']

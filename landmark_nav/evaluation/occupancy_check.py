@@ -44,7 +44,7 @@ says otherwise), so walls are the values <= ``wall_max``. Line ``i`` holds the c
 as the format's reader ``bee-map.c`` fills it).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import gzip
 import math
 from pathlib import Path
@@ -184,7 +184,8 @@ def _pool(a: np.ndarray, f: int) -> np.ndarray:
 def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarray,
                     points: Optional[np.ndarray] = None, tolerance: float = 0.1,
                     wall_max: float = 0.1, coarse_step_deg: float = 2.0,
-                    fine_step_deg: float = 0.2, coarse_factor: int = 2) -> Dict[str, object]:
+                    fine_step_deg: float = 0.2, coarse_factor: int = 2,
+                    refine: bool = True) -> Dict[str, object]:
     """Align the SLAM result to the grid and score it (module docstring).
 
     Args:
@@ -200,6 +201,8 @@ def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarra
         coarse_step_deg: Rotation grid of the global search [deg].
         fine_step_deg: Rotation grid of the refinement [deg].
         coarse_factor: The global search runs on cells this many times larger.
+        refine: Refine the translation and rotation continuously (module docstring);
+            False keeps the search's whole-cell translation and ``fine_step_deg`` rotation.
 
     Returns:
         ``landmarks``, ``landmarks_near_wall``, ``landmark_share`` (within ``tolerance``),
@@ -251,8 +254,11 @@ def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarra
 
     from scipy import optimize  # here: scipy.optimize takes 0.35 s to import
     simplex = [[0, 0, 0], [res / 2, 0, 0], [0, res / 2, 0], [0, 0, math.radians(fine_step_deg)]]
-    p = optimize.minimize(cost, np.zeros(3), method='Nelder-Mead',
-                          options={'xatol': 1e-3, 'fatol': 1e-8, 'initial_simplex': simplex}).x
+    p = np.zeros(3)
+    if refine:
+        p = optimize.minimize(cost, p, method='Nelder-Mead',
+                              options={'xatol': 1e-3, 'fatol': 1e-8,
+                                       'initial_simplex': simplex}).x
     th_f = th + p[2]
     t_xy = shift + p[:2] - centre @ _rot(th_f).T
     t = np.array([t_xy[0], t_xy[1], th_f])
@@ -506,19 +512,22 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
     Returns:
         ``points`` (K, 2) grid frame, ``structural`` (K,) bool (``Corner.structural``),
         ``convex`` (K,) bool (opening above pi: the corner juts out toward the sensor),
+        ``seen_ends`` (K,) bool (neither ``Corner.occluded`` nor ``Corner.silhouette``),
         ``wall_distance`` (K,) distance to the nearest wall cell's square [m] (inf beyond
         1 m), ``on_wall`` (K,) bool, ``left_out`` (K,) bool (near a wall cell seen
         through), ``path`` (P, 2) the run's positions in the grid frame, and per class
-        (``structural``, ``other``, and the structural ones split into
-        ``structural_convex`` and ``structural_concave``) the count judged and the share of
-        it on a wall (``<class>_count``, ``<class>_share``) and the count left out
+        (``structural``, ``other``, the structural ones split into ``structural_convex``
+        and ``structural_concave``, and ``structural_seen_ends``) the count judged and the
+        share of it on a wall (``<class>_count``, ``<class>_share``) and the count left out
         (``<class>_left_out``); ``seen_through`` the number of wall cells seen through.
         A concave corner placed behind a wall's face stays within a thick wall's cells; a
         convex one placed in front of it leaves them: the split shows which way the grid
         and the scans disagree.
     """
     from landmark_nav.evaluation.slam_run import scan_corners
+    from landmark_nav.laser.corners import CornerParams
     from landmark_nav.sim import ScanSample
+    corner_params = replace(corner_params or CornerParams(), arm_ends=True)
     t = np.asarray(transform, dtype=float).reshape(3)
     v, res = grid.values, grid.resolution
     crossed = ray_crossings(grid, scenario, run, t, every=1)
@@ -526,7 +535,7 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
     seen = wall & (crossed > 0)
     scans = scenario.of_type(ScanSample)
     mount = np.asarray(scenario.laser.mount, dtype=float)
-    pts, label, convex = [], [], []
+    pts, label, convex, seen_ends = [], [], [], []
     for k in range(0, len(run.poses), every):
         found = scan_corners(scans[int(run.scan_index[k])], corner_params)
         if not found:
@@ -536,9 +545,11 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
         pts.append(c @ _rot(lp[2]).T + lp[:2])
         label.extend(f.structural for f in found)
         convex.extend(f.opening > math.pi for f in found)
+        seen_ends.extend(not (f.occluded or f.silhouette) for f in found)
     points = _transform(np.concatenate(pts), t) if pts else np.zeros((0, 2))
     structural = np.array(label, dtype=bool)
     convex = np.array(convex, dtype=bool)
+    seen_ends = np.array(seen_ends, dtype=bool)
 
     def distance(cells, reach):
         if not cells.any():
@@ -549,13 +560,14 @@ def corner_wall_check(grid: OccupancyGrid, scenario, run, transform: np.ndarray,
     wall_distance = distance(wall, max(tolerance, 1.0))
     on_wall, left_out = wall_distance <= tolerance, distance(seen, tolerance) <= tolerance
     out: Dict[str, object] = {
-        'points': points, 'structural': structural, 'convex': convex,
+        'points': points, 'structural': structural, 'convex': convex, 'seen_ends': seen_ends,
         'wall_distance': wall_distance, 'on_wall': on_wall, 'left_out': left_out,
         'path': _transform(np.asarray(run.poses, dtype=float)[:, :2], t),
         'seen_through': int(np.count_nonzero(seen))}
     for name, m in (('structural', structural), ('other', ~structural),
                     ('structural_convex', structural & convex),
-                    ('structural_concave', structural & ~convex)):
+                    ('structural_concave', structural & ~convex),
+                    ('structural_seen_ends', structural & seen_ends)):
         judged = m & ~left_out
         out[f'{name}_count'] = int(judged.sum())
         out[f'{name}_left_out'] = int((m & left_out).sum())
@@ -603,7 +615,8 @@ def occupancy_check_files(grid: Union[str, Path, OccupancyGrid], map_file: Union
 
 
 def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: float = 8.0,
-              tolerance: float = 0.1, wall_max: float = 0.1) -> Dict[str, Dict[str, object]]:
+              tolerance: float = 0.1, wall_max: float = 0.1,
+              refine: bool = True) -> Dict[str, Dict[str, object]]:
     """:func:`occupancy_check` of a SLAM run and of its odometry on the same grid.
 
     The scan end points (every ``every``-th step, valid returns up to ``max_range``: far
@@ -619,14 +632,30 @@ def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: flo
         max_range: Longest range used [m].
         tolerance: See :func:`occupancy_check`.
         wall_max: See :func:`occupancy_check`.
+        refine: See :func:`occupancy_check`.
 
     Returns:
         ``{'slam': figures, 'odometry': figures}``.
     """
+    out = {}
+    for name, poses in (('slam', run.poses), ('odometry', run.odometry)):
+        pts = run_scan_points(scenario, run.scan_index, poses, every, max_range)
+        out[name] = occupancy_check(grid, run.landmarks, poses[:, :2], pts, tolerance,
+                                    wall_max, refine=refine)
+    return out
+
+
+def run_scan_points(scenario, scan_index: np.ndarray, poses: np.ndarray, every: int = 2,
+                    max_range: float = 8.0) -> np.ndarray:
+    """Scan end points (map frame) of every ``every``-th step placed with ``poses``.
+
+    Step ``k`` uses scan ``scan_index[k]`` of the scenario and pose ``poses[k]``; valid
+    returns (REP 117) up to ``max_range`` (:func:`scan_end_points`).
+    """
     from landmark_nav.conversions import classify_ranges
     from landmark_nav.sim import ScanSample
     scans = scenario.of_type(ScanSample)
-    sel = np.asarray(run.scan_index)[::every]
+    sel = np.asarray(scan_index)[::every]
     ranges = np.array([scans[k].ranges for k in sel], dtype=float)
     valid = np.array([classify_ranges(scans[k].ranges, scans[k].range_min,
                                       scans[k].range_max)[0] for k in sel])
@@ -635,17 +664,27 @@ def check_run(grid: OccupancyGrid, scenario, run, every: int = 2, max_range: flo
     s0 = scans[int(sel[0])]
     angles = s0.angle_min + s0.angle_increment * np.arange(ranges.shape[1])
     mount = np.asarray(scenario.laser.mount, dtype=float)
-    out = {}
-    for name, poses in (('slam', run.poses), ('odometry', run.odometry)):
-        pts = scan_end_points(poses[::every], mount, np.where(valid, ranges, 0.0), angles,
-                              valid)
-        out[name] = occupancy_check(grid, run.landmarks, poses[:, :2], pts, tolerance,
-                                    wall_max)
-    return out
+    return scan_end_points(np.asarray(poses)[::every], mount, np.where(valid, ranges, 0.0),
+                           angles, valid)
+
+
+def point_wall_distance(grid: OccupancyGrid, points_grid: np.ndarray,
+                        wall_max: float = 0.1) -> np.ndarray:
+    """Distance of grid-frame points to a wall cell's square [m] (approximate).
+
+    As :func:`occupancy_check`'s ``point_share``: the distance transform between cell
+    centres, bilinear at the point, minus half a cell (0 inside a wall cell).
+    """
+    v, res = grid.values, grid.resolution
+    wall = (v >= 0.0) & (v <= wall_max)
+    dist = ndimage.distance_transform_edt(~wall) * res
+    g = np.asarray(points_grid, dtype=float).reshape(-1, 2) / res - 0.5
+    d = ndimage.map_coordinates(dist, g.T, order=1, mode='nearest')
+    return np.maximum(d - 0.5 * res, 0.0)
 
 
 __all__ = ['check_run', 'corner_wall_check', 'landmark_diagnosis', 'load_occupancy_grid',
            'occupancy_check',
            'occupancy_check_files', 'run_segments',
-           'OccupancyGrid', 'ray_crossings',
+           'OccupancyGrid', 'point_wall_distance', 'ray_crossings', 'run_scan_points',
            'scan_end_points', 'wall_pose_diagnosis', 'wall_poses_counted']

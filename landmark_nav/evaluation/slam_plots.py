@@ -117,7 +117,7 @@ def plot_run(scenario, run: SlamRun, out_dir: Path, title: str, align: str = ALI
     return ['slam_map.png', 'slam_trajectory.png', 'slam_errors.png']
 
 
-__all__ = ['plot_run']
+__all__ = ['plot_corner_wall_check', 'plot_place_crops', 'plot_run']
 
 
 def plot_corner_wall_check(grid, check: dict, title: str, path: Path) -> None:
@@ -151,3 +151,56 @@ def plot_corner_wall_check(grid, check: dict, title: str, path: Path) -> None:
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     _save_plan(fig, ax, title, path)
+
+
+def plot_place_crops(grid, check: dict, agreement: dict, scan_points: dict, title: str,
+                     path: Path, count: int = 4, half: float = 1.5) -> int:
+    """Draw the grid around the places off the walls with the most views; return how many.
+
+    ``check``: :func:`landmark_nav.evaluation.occupancy_check.corner_wall_check`'s result;
+    ``agreement``: :func:`landmark_nav.evaluation.graph_wall_check.place_scan_agreement`'s;
+    ``scan_points``: ``points`` (grid frame) and their ``wall_distance``. One panel per
+    place (up to ``count``), ``half`` metres around it: the grid's cells, the run's scan
+    points within 10 cm of a wall cell and the others, and the structural corners.
+    Nothing is written when no place is off the walls.
+    """
+    places = [p for p in agreement['places'] if not p['on_wall']][:count]
+    if not places:
+        return 0
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    v, res = grid.values, grid.resolution
+    cols = min(2, len(places))
+    rows = (len(places) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 4.2 * rows), squeeze=False)
+    pts, near = scan_points['points'], scan_points['wall_distance'] <= 0.1
+    s = check['structural'] & ~check['left_out']
+    shade = np.where(v < 0.0, 0.75, v)
+    for ax, p in zip(axes.flat, places):
+        c = p['centre']
+        ax.imshow(shade.T, origin='lower', cmap='gray', vmin=0.0, vmax=1.0,
+                  extent=(0.0, v.shape[0] * res, 0.0, v.shape[1] * res),
+                  interpolation='nearest')
+        box = np.all(np.abs(pts - c) <= half, axis=1)
+        ax.plot(*pts[box & near].T, ',', color='tab:blue', label='scan point on a wall')
+        ax.plot(*pts[box & ~near].T, ',', color='tab:orange', label='scan point off the walls')
+        for m, mk, col, lab in ((s & check['on_wall'], '.', 'tab:green', 'corner on a wall'),
+                                (s & ~check['on_wall'], 'x', 'tab:red', 'corner off')):
+            q = m & np.all(np.abs(check['points'] - c) <= half, axis=1)
+            ax.plot(*check['points'][q].T, mk, color=col, ms=4, label=lab)
+        ax.set_xlim(c[0] - half, c[0] + half)
+        ax.set_ylim(c[1] - half, c[1] + half)
+        ax.set_aspect('equal')
+        ax.set_title(f"({c[0]:.1f}, {c[1]:.1f}) {p['views']} views, "
+                     f"{'convex' if p['convex'] else 'concave'}\nscan points on a wall: "
+                     f"at it {p['at_share']:.2f}, around {p['ring_share']:.2f}", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(places):]:
+        ax.set_visible(False)
+    axes.flat[0].legend(loc='lower left', fontsize=6, markerscale=3)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return len(places)

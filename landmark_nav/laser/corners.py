@@ -97,11 +97,14 @@ modules of :mod:`landmark_nav.laser.corner_detection` named after what they comp
 ``windows`` (``sliding_window``, eq. 1; ``minus_cosine``, eq. 11), ``refine`` (the
 refinement and the arm checks), ``split_merge`` (eq. 4), ``tls_lines`` (the TLS lines,
 eqs. 5-10, and their noise from eq. 7), ``corner`` (:class:`Corner`), ``params``
-(:class:`CornerParams`) and ``scan_stack`` (the clusters of a scan back to back).
+(:class:`CornerParams`), ``scan_stack`` (the clusters of a scan back to back) and
+``arm_ends`` (what the scan shows beyond each arm, ``Corner.arm_ends``).
 """
 
+from dataclasses import replace
 from typing import List, Optional, Sequence
 
+from landmark_nav.laser.corner_detection.arm_ends import arm_ends
 from landmark_nav.laser.corner_detection.corner import Corner
 from landmark_nav.laser.corner_detection.params import CORNER_PARAMETERS, CornerParams, METHODS
 from landmark_nav.laser.corner_detection.scan_stack import _stack
@@ -127,7 +130,9 @@ def detect_corners(clusters: Sequence[Cluster], params: Optional[CornerParams] =
         params: detector parameters (defaults: minus-cosine with refinement).
 
     Returns:
-        Corners in scan order (by cluster, then beam), laser frame.
+        Corners in scan order (by cluster, then beam), laser frame; with
+        ``params.arm_ends`` and clusters that carry their scan's arrays, with ``arm_ends``
+        (:func:`~landmark_nav.laser.corner_detection.arm_ends.arm_ends`).
 
     """
     params = params or CornerParams()
@@ -142,7 +147,11 @@ def detect_corners(clusters: Sequence[Cluster], params: Optional[CornerParams] =
             out = _sliding_window(st, params)
         else:
             out = _split_merge(clusters, st, params)
-    return sorted(out, key=lambda c: c.index) if len(out) > 1 else out
+    out = sorted(out, key=lambda c: c.index) if len(out) > 1 else out
+    ends = arm_ends(out, clusters) if params.arm_ends else None
+    if ends is None:
+        return out
+    return [replace(c, arm_ends=e) for c, e in zip(out, ends)]
 
 
 def extract_corners(ranges: np.ndarray, angles: np.ndarray, valid: Optional[np.ndarray],

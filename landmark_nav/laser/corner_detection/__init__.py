@@ -14,6 +14,7 @@ parts (corner chapter, Namoshe et al., section 2.1):
 * :mod:`.refine`: refinement of minus-cosine detections by two TLS lines, and the arm
   checks (real surfaces, no false surface) shared with split and merge.
 * :mod:`.split_merge`: the ``split_merge`` detector (section 2.1.2, eq. 4).
+* :mod:`.arm_ends`: what the scan shows beyond each arm's outer end (``Corner.arm_ends``).
 
 No module here imports :mod:`landmark_nav.laser.corners`.
 """

@@ -67,6 +67,9 @@ class CornerParams:
         fit_sigmas: the same for the refined corner's angle: the fitted arms' ``f`` may lie
             ``fit_sigmas`` standard deviations (propagated through the TLS fits, eqs. 7-8)
             outside the bounds. 0 (the default) is the hard cut.
+        arm_ends: also tell what the scan shows beyond each arm's outer end
+            (``Corner.arm_ends``; evaluation, not the label): off by default, it costs
+            about a sixth of the detector's time.
     """
 
     method: str = 'minus_cosine'
@@ -92,6 +95,7 @@ class CornerParams:
     see_through: Optional[float] = None
     gate_sigmas: float = 0.0
     fit_sigmas: float = 0.0
+    arm_ends: bool = False
 
     def __post_init__(self) -> None:
         """Validate the parameters; raise ValueError naming the bad one."""
@@ -146,6 +150,8 @@ class CornerParams:
             raise bad('refine', 'a bool')
         if not isinstance(self.real_arms, (bool, np.bool_)):
             raise bad('real_arms', 'a bool')
+        if not isinstance(self.arm_ends, (bool, np.bool_)):
+            raise bad('arm_ends', 'a bool')
         for name in ('arm_rmse', 'see_through'):
             v = getattr(self, name)
             if v is not None and (not is_num(v) or v <= 0.0):
