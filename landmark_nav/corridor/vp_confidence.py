@@ -32,8 +32,9 @@ first. Per direction this module states:
   Desolneux, Vamech 2003). Two segments meet somewhere whatever their directions, so only
   the others check a direction; a segment of length ``L`` whose orientation were random
   would pass the consistency gate (``|z| <= gate``, the direction of a segment with
-  end-point noise ``sigma_px`` has the std ``sqrt(2) sigma_px / L``) with probability
-  ``P = min(1, 2 gate sqrt(2) sigma_px / (pi L))``, and the number of false alarms over
+  end-point noise ``sigma_px`` and direction noise ``sigma_angle`` has the std
+  ``s = sqrt(2 sigma_px^2 / L^2 + sigma_angle^2)``) with probability
+  ``P = min(1, 2 gate s / pi)``, and the number of false alarms over
   the ``N (N - 1) / 2`` candidate points of ``N`` segments is::
 
       NFA = N (N - 1) / 2 * prod_{i >= 3} P_i
@@ -73,7 +74,7 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence, Tuple
 
-from landmark_nav.corridor.vanishing_point import direction_covariance, ManhattanFrame
+from landmark_nav.corridor.vanishing_point import direction_covariance, ManhattanFrame, VPParams
 import numpy as np
 
 #: Two directions closer than this are the same hypothesis [deg].
@@ -187,7 +188,7 @@ def direction_ambiguities(frame: ManhattanFrame) -> np.ndarray:
 
 
 def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
-              gate: float = 3.0) -> float:
+              gate: float = 3.0, sigma_angle_deg: float = VPParams.sigma_angle_deg) -> float:
     """Return ``log10 NFA`` of a direction's inlier segments (module docstring).
 
     Args:
@@ -195,13 +196,15 @@ def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
         inliers: (N,) mask of the direction's segments.
         sigma_px: end-point noise [px].
         gate: the consistency gate on ``|z|``.
+        sigma_angle_deg: direction noise of a segment beyond its end-point noise [deg].
     """
     seg = np.asarray(segments, dtype=float).reshape(-1, 4)
     n = len(seg)
     sel = seg[np.asarray(inliers, dtype=bool)]
     length = np.hypot(sel[:, 2] - sel[:, 0], sel[:, 3] - sel[:, 1])
-    p = np.minimum(1.0, 2.0 * gate * math.sqrt(2.0) * sigma_px
-                   / (math.pi * np.maximum(length, 1e-9)))
+    std = np.sqrt(2.0 * (sigma_px / np.maximum(length, 1e-9)) ** 2
+                  + math.radians(sigma_angle_deg) ** 2)
+    p = np.minimum(1.0, 2.0 * gate * std / math.pi)
     checks = np.sort(np.log10(p))[2:]           # all but the two longest segments
     return math.log10(max(0.5 * n * (n - 1), 1.0)) + float(np.sum(checks))
 
@@ -223,8 +226,8 @@ def assess_direction(sigma_cov: float, ambiguity: float, nfa: float,
 
 
 def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
-                 sigma_px: float, calibration: VPCalibration = CALIBRATION, gate: float = 3.0
-                 ) -> Tuple[DirectionConfidence, DirectionConfidence, DirectionConfidence]:
+                 sigma_px: float, calibration: VPCalibration = CALIBRATION, gate: float = 3.0,
+                 sigma_angle_deg: float = VPParams.sigma_angle_deg) -> Tuple[DirectionConfidence, DirectionConfidence, DirectionConfidence]:
     """Return the support and calibrated uncertainty of each direction of ``frame``.
 
     Args:
@@ -234,6 +237,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         sigma_px: end-point noise used for the estimate [px].
         calibration: the model's constants.
         gate: the consistency gate the estimate used (``VPParams.gate``).
+        sigma_angle_deg: direction noise of a segment used for the estimate [deg].
     """
     amb = direction_ambiguities(frame)
     c = calibration
@@ -242,11 +246,11 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
     for k, vp in enumerate(frame.points):
         d = vp.direction
         tangent = np.eye(3) - np.outer(d, d)
-        cov = direction_covariance(segments, K, d, vp.inliers, sigma_px)
+        cov = direction_covariance(segments, K, d, vp.inliers, sigma_px, sigma_angle_deg)
         finite = bool(np.all(np.isfinite(cov)))
         s_cov = math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)) if finite else math.inf
         n_in = int(np.count_nonzero(vp.inliers))
-        nfa = log10_nfa(segments, vp.inliers, sigma_px, gate)
+        nfa = log10_nfa(segments, vp.inliers, sigma_px, gate, sigma_angle_deg)
         p, sigma, r95 = assess_direction(s_cov, float(amb[k]), nfa, c)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)

@@ -256,7 +256,8 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     img, K = _load_scaled(item, scale)
     lines = detect_lines(img, line_method)
     frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
-    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate)
+    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate,
+                        sigma_angle_deg=vp_params.sigma_angle_deg)
     D = frame.directions
     cost = np.array([[angular_error_deg(D[:, i], item.directions[:, j]) for j in range(3)]
                      for i in range(3)])
