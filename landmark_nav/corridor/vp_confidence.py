@@ -13,9 +13,15 @@ first. Per direction this module states:
   divided by the chosen frame's score (near or above 1: another frame explains the lines
   about as well; 0 when no hypothesis disagrees).
 * ``p_correct``: the probability that the direction is within 2 deg of the truth, a
-  logistic model of ``(1, ln(sigma_cov / 1 deg), min(ambiguity, 2))``::
+  logistic model of the spread in pixels at the focal length ``f`` (``sigma_cov f``: the
+  same lines give the same value at any image size, where ``sigma_cov`` itself doubles
+  when the image is halved, while whether a direction took the wrong lines depends on
+  the lines, not on the pixel size) and of the number ``n`` of its inlier segments::
 
-      p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov / 1 deg) + w2 min(ambiguity, 2))))
+      p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n)))
+
+  (the ambiguity did not separate wrong directions from right ones on York: held out,
+  it changed the confident fraction by 2 % and the precision not at all).
 
 * an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
   the sphere (the angular error ``e`` of each component Rayleigh distributed): with
@@ -92,7 +98,7 @@ class VPCalibration:
     """Constants of the confidence model (see the module docstring).
 
     Attributes:
-        weights: logistic weights ``(w0, w1, w2)`` of ``(1, ln sigma_cov [deg], ambiguity)``.
+        weights: logistic weights ``(w0, w1, w2)`` of ``(1, ln(sigma_cov f) [px], ln n)``.
         scale: ``a``, factor on the first-order spread.
         floor_deg: ``b``, spread added in quadrature [deg].
         sigma_wrong_deg: spread of the wrong mode [deg].
@@ -108,8 +114,8 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(0.8050, -1.0989, -0.0380), scale=1.2160, floor_deg=0.3760,
-                            sigma_wrong_deg=5.3255, p_confident=0.9416)
+CALIBRATION = VPCalibration(weights=(4.4359, -1.2459, -0.2802), scale=1.3493, floor_deg=0.2026,
+                            sigma_wrong_deg=5.2509, p_confident=0.8054)
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,10 +153,13 @@ class DirectionConfidence:
     confident: bool
 
 
-def features(sigma_cov: float, ambiguity: float) -> np.ndarray:
-    """Return the logistic model's feature vector ``(1, ln sigma_cov [deg], min(amb, 2))``."""
-    s = math.degrees(sigma_cov) if math.isfinite(sigma_cov) else 90.0
-    return np.array([1.0, math.log(min(max(s, 1e-4), 90.0)), min(max(ambiguity, 0.0), 2.0)])
+def features(sigma_cov: float, focal_px: float, inliers: int) -> np.ndarray:
+    """Return the logistic model's feature vector ``(1, ln(sigma_cov f) [px], ln n)``.
+
+    ``sigma_cov`` [rad] is capped at pi / 2 (inf: no spread known), ``n`` at least 1.
+    """
+    s = min(sigma_cov, math.pi / 2) if math.isfinite(sigma_cov) else math.pi / 2
+    return np.array([1.0, math.log(max(s * focal_px, 1e-6)), math.log(max(inliers, 1))])
 
 
 def mixture_radius(p: float, sigma: float, sigma_wrong: float,
@@ -209,17 +218,18 @@ def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
     return math.log10(max(0.5 * n * (n - 1), 1.0)) + float(np.sum(checks))
 
 
-def assess_direction(sigma_cov: float, ambiguity: float, nfa: float,
+def assess_direction(sigma_cov: float, focal_px: float, inliers: int, nfa: float,
                      calibration: VPCalibration = CALIBRATION) -> Tuple[float, float, float]:
     """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
 
-    ``nfa`` is the direction's ``log10 NFA`` (:func:`log10_nfa`).
+    ``sigma_cov`` [rad] is its first-order spread, ``focal_px`` the focal length [px],
+    ``inliers`` its segment count, ``nfa`` its ``log10 NFA`` (:func:`log10_nfa`).
     """
     c = calibration
     s_wrong = math.radians(c.sigma_wrong_deg)
     if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
-    z = float(np.asarray(c.weights, dtype=float) @ features(sigma_cov, ambiguity))
+    z = float(np.asarray(c.weights, dtype=float) @ features(sigma_cov, focal_px, inliers))
     p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
     sigma = math.hypot(c.scale * sigma_cov, math.radians(c.floor_deg))
     return p, sigma, mixture_radius(p, sigma, s_wrong)
@@ -240,6 +250,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         sigma_angle_deg: direction noise of a segment used for the estimate [deg].
     """
     amb = direction_ambiguities(frame)
+    focal = math.sqrt(float(K[0, 0]) * float(K[1, 1]))
     c = calibration
     s_wrong = math.radians(c.sigma_wrong_deg)
     out = []
@@ -251,7 +262,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         s_cov = math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)) if finite else math.inf
         n_in = int(np.count_nonzero(vp.inliers))
         nfa = log10_nfa(segments, vp.inliers, sigma_px, gate, sigma_angle_deg)
-        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), nfa, c)
+        p, sigma, r95 = assess_direction(s_cov, focal, n_in, nfa, c)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
@@ -299,15 +310,16 @@ def _rayleigh_fit(s: np.ndarray, e: np.ndarray, limit: float) -> Tuple[float, fl
     return math.exp(t[0]), math.exp(t[1])
 
 
-def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
-                    nfa: Sequence[float], error_deg: Sequence[float],
+def fit_calibration(sigma_cov: Sequence[float], focal_px: Sequence[float],
+                    inliers: Sequence[int], nfa: Sequence[float], error_deg: Sequence[float],
                     precision: float = 0.98,
                     threshold_on: Optional[Sequence[bool]] = None) -> VPCalibration:
     """Fit the confidence model on directions with known errors (module docstring).
 
     Args:
         sigma_cov: first-order spreads [rad].
-        ambiguity: competing hypotheses' relative scores.
+        focal_px: the focal lengths of their images [px].
+        inliers: their inlier segment counts.
         nfa: their ``log10 NFA`` (``>= MAX_LOG10_NFA``: p = 0, left out of the threshold).
         error_deg: the true angular errors [deg].
         precision: fraction within 2 deg wanted among the confident directions.
@@ -318,16 +330,17 @@ def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
         ValueError: inputs of different lengths, or no direction on either side of 2 deg.
     """
     s = np.asarray(sigma_cov, dtype=float)
-    a = np.asarray(ambiguity, dtype=float)
+    f = np.asarray(focal_px, dtype=float)
+    m = np.asarray(inliers, dtype=float)
     n = np.asarray(nfa, dtype=float)
     e = np.asarray(error_deg, dtype=float)
-    if not (s.shape == a.shape == n.shape == e.shape):
-        raise ValueError(f'inputs differ in length: {s.shape}, {a.shape}, {n.shape}, '
-                         f'{e.shape}')
+    if not (s.shape == f.shape == m.shape == n.shape == e.shape):
+        raise ValueError(f'inputs differ in length: {s.shape}, {f.shape}, {m.shape}, '
+                         f'{n.shape}, {e.shape}')
     good = e <= CORRECT_DEG
     if good.all() or not good.any():
         raise ValueError('calibration needs directions both within and beyond 2 deg')
-    X = np.array([features(si, ai) for si, ai in zip(s, a)])
+    X = np.array([features(si, fi, mi) for si, fi, mi in zip(s, f, m)])
     w = _logistic(X, good.astype(float))
     ok = good & np.isfinite(s)
     scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok], CORRECT_DEG)

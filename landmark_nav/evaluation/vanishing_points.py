@@ -244,6 +244,7 @@ class DirectionSample:
     column: int
     sigma_cov: float
     ambiguity: float
+    focal_px: float
     inliers: int
     log10_nfa: float
     error: float
@@ -263,7 +264,8 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
                      for i in range(3)])
     from scipy.optimize import linear_sum_assignment  # here: scipy.optimize takes 0.35 s to import
     r, c = linear_sum_assignment(cost)
-    return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity,
+    focal = float(np.sqrt(K[0, 0] * K[1, 1]))
+    return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity, focal,
                             conf[k].inliers, conf[k].log10_nfa,
                             float(cost[k, c[list(r).index(k)]]))
             for k in range(3)]
@@ -286,7 +288,8 @@ def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
     All directions fit the model; the confidence threshold is chosen on the corridor
     directions (column 0).
     """
-    return fit_calibration([s.sigma_cov for s in samples], [s.ambiguity for s in samples],
+    return fit_calibration([s.sigma_cov for s in samples], [s.focal_px for s in samples],
+                           [s.inliers for s in samples],
                            [s.log10_nfa for s in samples], [s.error for s in samples],
                            threshold_on=[s.column == 0 for s in samples])
 
@@ -306,7 +309,8 @@ def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
         cals.append(cal)
         for s in samples:
             if fold_of[s.image] == f:
-                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, s.log10_nfa, cal)
+                p, _, r95 = assess_direction(s.sigma_cov, s.focal_px, s.inliers, s.log10_nfa,
+                                             cal)
                 out.append(HeldOut(s, f, p, float(np.degrees(r95)), p >= cal.p_confident))
     return out, cals
 
