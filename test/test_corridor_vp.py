@@ -276,17 +276,17 @@ def test_mixture_radius_and_calibration_fit():
     wrong |= err > 2.0
     err = np.where(wrong, np.maximum(err, 2.01), err)
     f, m = np.full(n, 500.0), np.full(n, 10)
-    cal = fit_calibration(s_cov, f, m, np.full(n, -10.0), err)
+    cal = fit_calibration(s_cov, s_cov, f, m, np.full(n, -10.0), err)
     # truncated ML from ~1900 correct ones: measured a 0.70 b 0.397 (seeds 2-7: a 0.70-0.78,
     # b 0.387-0.402)
     assert 0.63 < cal.scale < 0.8 and 0.36 < cal.floor_deg < 0.44
-    assert cal.weights[1] < 0                       # a larger spread, a smaller p
-    p = [assess_direction(x, 500.0, 10, -10.0, cal)[0] for x in s_cov]
+    assert cal.weights[1] + cal.weights[3] < 0      # a larger spread (here both), a smaller p
+    p = [assess_direction(x, x, 500.0, 10, -10.0, cal)[0] for x in s_cov]
     conf = np.array(p) >= cal.p_confident
     assert np.mean(err[conf] <= 2.0) >= 0.98
-    assert assess_direction(s_cov[0], 500.0, 10, 0.0, cal)[0] == 0.0   # NFA 1: not checked
+    assert assess_direction(s_cov[0], s_cov[0], 500.0, 10, 0.0, cal)[0] == 0.0  # NFA 1
     with pytest.raises(ValueError, match='differ in length'):
-        fit_calibration(s_cov, f, np.zeros(3), np.full(n, -10.0), err)
+        fit_calibration(s_cov, s_cov, f, np.zeros(3), np.full(n, -10.0), err)
 
 
 def test_nfa_counts_long_consistent_lines_not_their_number():
@@ -311,10 +311,9 @@ def test_nfa_counts_long_consistent_lines_not_their_number():
     # five short ones (25 px): as many lines, far less evidence (measured log10 NFA 0.1)
     short = np.vstack([through_v([25.0] * 5), others])
     assert log10_nfa(short, inl, sigma, gate) > 0.0
-    assert assess_direction(math.radians(0.1), 500.0, 5,
-                            log10_nfa(short, inl, sigma, gate))[0] == 0
-    assert assess_direction(math.radians(0.1), 500.0, 5,
-                            log10_nfa(edges, inl, sigma, gate))[0] > 0.9
+    s = math.radians(0.1)
+    assert assess_direction(s, s, 500.0, 5, log10_nfa(short, inl, sigma, gate))[0] == 0
+    assert assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate))[0] > 0.9
     # the two longest fix the point and do not count
     mixed = np.vstack([through_v([400.0, 400.0, 300.0, 300.0, 300.0]), others])
     assert log10_nfa(mixed, inl, sigma, gate) == pytest.approx(math.log10(4950 * p ** 3))

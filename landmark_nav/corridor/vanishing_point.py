@@ -61,8 +61,10 @@ Constants (all in :class:`VPParams`): ``sigma_px = 0.6`` px end-point noise of d
 segments (pixel quantisation 0.29 px plus edge localisation and the wiggle of real edges)
 and ``sigma_angle_deg = 0.38`` deg, the maximum-likelihood estimates of the two noise
 terms from the residuals of the labelled segmented-Hough segments against York Urban's
-true directions (training half, 640 x 480, segments beyond 4 sigma trimmed: 0.600 px and
-0.380 deg with both free; ``python benchmarks/bench_vanishing_points.py --noise``), ``gate = 3.0`` (a 3-sigma test), ``removal_fraction = 0.05`` and
+true directions (training half, 640 x 480, segments beyond 4 sigma trimmed, labels of the
+estimator without the angle term: 0.600 px and 0.380 deg; 0.638 px and 0.388 deg at 320 x 240;
+``python benchmarks/bench_vanishing_points.py --noise``), ``gate = 3.0`` (a 3-sigma
+test), ``removal_fraction = 0.05`` and
 ``final_candidates = 10`` (the chapter's "few"; only speed and the start of the refinement
 depend on them), ``max_lines = 150`` longest segments for the candidates (about 11 000
 pairs).
@@ -252,6 +254,21 @@ class _Geometry:
 
 def _geometry(seg: np.ndarray, K: np.ndarray, params: VPParams) -> _Geometry:
     return _Geometry(seg, K, params.sigma_px, np.radians(params.sigma_angle_deg))
+
+
+def residual_terms(segments: np.ndarray, K: np.ndarray, d: np.ndarray
+                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return, per segment against direction ``d``, ``r`` and the two variance factors.
+
+    ``std(r)^2 = sigma_px^2 a + sigma_angle^2 b`` (module docstring) with the returned
+    ``(r, a, b)``, each (N,), for fitting the two noise terms to residuals of known
+    directions.
+    """
+    seg, K = _check(segments, K)
+    geo = _Geometry(seg, K, 1.0)
+    r, s_end = (t[0] for t in geo.terms(np.asarray(d, dtype=float)))
+    geo.sigma, geo.sigma_angle = 0.0, 1.0
+    return r, s_end ** 2, geo.terms(np.asarray(d, dtype=float))[1][0] ** 2
 
 
 def consistency(segments: np.ndarray, v: np.ndarray, sigma_px: float = 1.0) -> np.ndarray:
