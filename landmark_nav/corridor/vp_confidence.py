@@ -17,10 +17,12 @@ first. Per direction this module states:
   same lines give the same value at any image size, where ``sigma_cov`` itself doubles
   when the image is halved, while whether a direction took the wrong lines depends on
   the lines, not on the pixel size), of the number ``n`` of its inlier segments and of
-  the frame's weakest direction, the largest ``sigma_cov`` of its three directions
+  the frame's weakest direction, the largest finite ``sigma_cov`` of its three directions
   ``sigma_frame`` (a frame one of whose directions has few or short lines fixes its
   rotation, and so the labelling of the other directions' lines, poorly: on York's
-  frontal views the corridor direction then often went to the wrong lines)::
+  frontal views the corridor direction then often went to the wrong lines; a direction
+  without the two lines that fix it takes no lines from the others and does not count,
+  as in a corridor seen along its axis with no line across it; York has no such frame)::
 
       p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n
                           + w3 ln(sigma_frame f / 1 px))))
@@ -136,7 +138,7 @@ class DirectionConfidence:
         support: their summed weight.
         log10_nfa: a-contrario number of false alarms of the inliers (module docstring).
         sigma_cov: first-order spread (largest std of the direction covariance) [rad].
-        sigma_frame: the largest ``sigma_cov`` of the frame's three directions [rad].
+        sigma_frame: the largest finite ``sigma_cov`` of the frame's directions [rad].
         ambiguity: best competing hypothesis' score over the frame's (see the module).
         p_correct: probability of being within 2 deg of the truth.
         sigma: spread of the correct mode [rad].
@@ -278,6 +280,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
                                  sigma_angle_deg) for vp in frame.points]
     spreads = [math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
                if np.all(np.isfinite(cov)) else math.inf for cov in covs]
+    s_frame = max([x for x in spreads if math.isfinite(x)], default=math.inf)
     out = []
     for k, vp in enumerate(frame.points):
         d = vp.direction
@@ -286,12 +289,12 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         finite = math.isfinite(s_cov)
         n_in = int(np.count_nonzero(vp.inliers))
         nfa = log10_nfa(segments, vp.inliers, sigma_px, gate, sigma_angle_deg)
-        p, sigma, r95 = assess_direction(s_cov, max(spreads), focal, n_in, nfa, c)
+        p, sigma, r95 = assess_direction(s_cov, s_frame, focal, n_in, nfa, c)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
             inliers=n_in, support=vp.support, log10_nfa=nfa, sigma_cov=s_cov,
-            sigma_frame=max(spreads),
+            sigma_frame=s_frame,
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
             first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
             mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
