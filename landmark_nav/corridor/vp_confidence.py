@@ -6,9 +6,9 @@ lot (the wrong set of lines won: a frontal facade with few receding lines, clutt
 first-order covariance of :func:`~.vanishing_point.direction_covariance` only knows the
 first. Per direction this module states:
 
-* ``support``: the inlier segments (count, summed weight) and two features of the
-  evidence: ``sigma_cov``, the square root of the largest eigenvalue of the first-order
-  covariance [rad], and ``ambiguity``, the MSAC score of the best competing Manhattan
+* ``support``: the inlier segments (count, summed weight), ``sigma_cov``, the square
+  root of the largest eigenvalue of the first-order covariance [rad], and (reported, not
+  used by the model) ``ambiguity``, the MSAC score of the best competing Manhattan
   hypothesis that does *not* contain this direction (none of its columns within 2 deg)
   divided by the chosen frame's score (near or above 1: another frame explains the lines
   about as well; 0 when no hypothesis disagrees).
@@ -27,9 +27,10 @@ first. Per direction this module states:
       p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n
                           + w3 ln(sigma_frame f / 1 px))))
 
-  (the ambiguity did not separate wrong directions from right ones on York: held out,
-  it changed the confident fraction by 2 % and the precision not at all).
-
+  (the ambiguity, the a-contrario number below as a value and the angle between the
+  direction and the jointly refined triad's did not separate wrong directions from right
+  ones on York; held out they changed the confident fraction by a few per cent and the
+  precision not at all or for the worse).
 * an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
   the sphere (the angular error ``e`` of each component Rayleigh distributed): with
   probability ``p`` the correct mode, ``sigma = sqrt((a sigma_cov)^2 + b^2)`` (the
@@ -73,10 +74,9 @@ The constants (:data:`CALIBRATION`) are fitted on the York Urban training half (
 the logistic weights by ridge-regularised Newton iterations (ridge ``1`` on the
 non-constant weights) on the corridor directions (the one closest to the optical axis in
 each frame, what the follower steers on; the other directions get the same model),
-``a`` and ``b`` by maximum likelihood of the Rayleigh model
-truncated at 2 deg on the directions within 2 deg, ``sigma_wrong`` as the RMS error of the
-others, and ``p_confident`` as the smallest threshold at which the corridor directions (the
-one closest to the optical axis in each frame, what the follower steers on) called
+``a`` and ``b`` by maximum likelihood of the Rayleigh model truncated at 2 deg on all
+directions within 2 deg, ``sigma_wrong`` as the RMS error of all the others, and
+``p_confident`` as the smallest threshold at which the corridor directions called
 confident are >= 98 % within 2 deg.
 Refit (and print) them with::
 
