@@ -5,7 +5,8 @@ import math
 from landmark_nav.corridor.vanishing_point import (_Geometry, chapter_vanishing_point,
                                                    consistency, corridor_vanishing_point,
                                                    manhattan_frame, refine_direction,
-                                                   refine_manhattan, vanishing_point, VPParams)
+                                                   refine_manhattan, residual_terms,
+                                                   vanishing_point, VPParams)
 from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CALIBRATION,
                                                  fit_calibration, log10_nfa, mixture_radius)
 import numpy as np
@@ -83,6 +84,34 @@ def test_z_score_is_scale_free_and_handles_infinity():
     # ~100 px segments, end-point sigma 0.3 px: direction std 0.24 deg, so z ~ 12
     assert np.median(np.abs(consistency(seg, off, sigma_px=0.3))) > 9.0
     assert np.median(np.abs(consistency(seg, K @ d, sigma_px=0.3))) < 1.0
+
+
+def test_direction_noise_of_a_segment_grows_with_its_distance_to_the_vp():
+    # a 400 px segment on the line through the VP, its mid-point 300 px from it, turned by
+    # t = 0.5 deg about its mid-point (an edge a little bent): the line misses the VP by
+    # 300 sin t, and the direction-noise factor of the variance is the distance along the
+    # segment from its mid-point to the VP, squared
+    v = np.array([400.0, 260.0])
+    u = np.array([math.cos(0.3), math.sin(0.3)])
+    m = v - 300.0 * u
+    t = math.radians(0.5)
+    ut = np.array([math.cos(0.3 + t), math.sin(0.3 + t)])
+    seg = np.r_[m - 200.0 * ut, m + 200.0 * ut][None]
+    d = np.linalg.solve(K, np.r_[v, 1.0])        # K d = v: homogeneous weight 1
+    r, a, b = residual_terms(seg, K, d)
+    c = 300.0 * math.cos(t)
+    assert abs(r[0]) == pytest.approx(300.0 * math.sin(t), rel=1e-9)
+    assert b[0] == pytest.approx(c ** 2, rel=1e-9)
+    # end points alone: A^2 + B^2 (module docstring)
+    assert a[0] == pytest.approx(((200.0 - c) ** 2 + (200.0 + c) ** 2) / 400.0 ** 2, rel=1e-9)
+    # end-point noise alone (0.6 px) puts it beyond the gate (z 3.4); with 0.38 deg of
+    # direction noise it is a line of that VP (z 1.2)
+    z_end = abs(_Geometry(seg, K, 0.6).z(d[None])[0, 0])
+    z_both = abs(_Geometry(seg, K, 0.6, math.radians(0.38)).z(d[None])[0, 0])
+    assert z_end == pytest.approx(abs(r[0]) / (0.6 * math.sqrt(a[0])), rel=1e-9)
+    assert z_end > VPParams().gate > z_both
+    assert z_both == pytest.approx(abs(r[0]) / math.sqrt(0.36 * a[0]
+                                                         + math.radians(0.38) ** 2 * b[0]))
 
 
 # ------------------------------------------------------------------ the chapter's method
