@@ -153,10 +153,6 @@ class ManhattanFrame:
         alternatives: ``(score, (3, 3) directions)`` of every triad hypothesis tried
             (before the final relabelling), for the confidence of
             :mod:`.vp_confidence`.
-        rotation: (3, 3) the triad refined jointly as one rotation
-            (:func:`refine_manhattan`), columns in the order of ``directions`` (signs
-            free), before each direction was refined on its own lines; None without
-            ``VPParams.orthogonal``.
     """
 
     directions: np.ndarray
@@ -164,7 +160,6 @@ class ManhattanFrame:
     points: Tuple[VanishingPoint, VanishingPoint, VanishingPoint]
     score: float = 0.0
     alternatives: Tuple[Tuple[float, np.ndarray], ...] = ()
-    rotation: Optional[np.ndarray] = None
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -733,7 +728,6 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
         support = np.bincount(lab[lab >= 0], w[lab >= 0], minlength=3)
         rotations = [refine_manhattan(geo, R0, params) for R0 in _pair_starts(D, support)]
         D = max(rotations, key=lambda R: _triad_support(geo, R, w, params))
-    joint = D.copy() if params.orthogonal else None
     for _ in range(params.refine_iterations):      # exclusive labels, then refine each
         lab = _labels(geo, D, params, exclusive=True)
         D_new = _refine_many(geo, D.T, params, lab[None, :] == np.arange(3)[:, None])[0].T
@@ -750,8 +744,7 @@ def manhattan_frame(segments: np.ndarray, K: np.ndarray, weights: Optional[np.nd
     points = tuple(_make_vp(seg, K, D[:, k], new_lab == k, w) for k in range(3))
     return ManhattanFrame(directions=np.column_stack([p.direction for p in points]),
                           labels=new_lab, points=points,
-                          score=_triad_support(geo, D, w, params), alternatives=tuple(scored),
-                          rotation=None if joint is None else joint[:, order])
+                          score=_triad_support(geo, D, w, params), alternatives=tuple(scored))
 
 
 def corridor_vanishing_point(segments: np.ndarray, K: np.ndarray,
