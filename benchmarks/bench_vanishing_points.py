@@ -3,7 +3,7 @@
 Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
-        [--scales 1,0.5] [--confidence | --calibrate] [--no-orthogonal]
+        [--scales 1,0.5] [--confidence | --calibrate | --noise] [--no-orthogonal]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -27,7 +27,11 @@ fraction within 2 deg among the confident directions, fraction of images whose s
 radius covers the error; and the per-fold constants. Acceptance per size: >= 98 % within
 2 deg among the confident, confident on >= 85 % of the images, 95 % radius covering the
 error on >= 90 % of the images. ``--calibrate``: fit on all images and print the constants
-for ``landmark_nav/corridor/vp_confidence.py``. ``--no-orthogonal``: the Manhattan frame
+for ``landmark_nav/corridor/vp_confidence.py``. ``--noise``: the maximum-likelihood end-point
+and direction noise of the segments (``VPParams.sigma_px``, ``sigma_angle_deg``) from their
+residuals against the true directions, the segments labelled by the estimator without the
+direction noise (:func:`landmark_nav.evaluation.vanishing_points.segment_noise`), per
+size. ``--no-orthogonal``: the Manhattan frame
 without the joint refinement of its triad (``VPParams(orthogonal=False)``), for comparison.
 """
 
@@ -41,7 +45,7 @@ from landmark_nav.corridor.vanishing_point import VPParams
 from landmark_nav.evaluation.vanishing_points import (calibrate, confidence_samples,
                                                       confidence_summary, cross_validate,
                                                       evaluate_image, load_york_urban,
-                                                      summarize)
+                                                      segment_noise, summarize)
 from landmark_nav.vision.image_lines import METHODS
 
 RUNS = [(m, 'manhattan') for m in METHODS] + [('segmented_hough', 'chapter')]
@@ -60,12 +64,20 @@ def main(argv=None) -> int:
                       help='held-out (5-fold) figures of the direction confidence')
     mode.add_argument('--calibrate', action='store_true',
                       help='fit the confidence constants on all images and print them')
+    mode.add_argument('--noise', action='store_true',
+                      help='fit the segment noise terms to residuals of the true directions')
     ap.add_argument('--no-orthogonal', action='store_true',
                     help='the Manhattan frame without the joint refinement of its triad')
     args = ap.parse_args(argv)
     vp = replace(VPParams(), orthogonal=not args.no_orthogonal)
     items = load_york_urban(data_folder(args.data))[:args.images]
     scales = [float(s) for s in args.scales.split(',')]
+    if args.noise:
+        for scale in scales:
+            sp, sa, n = segment_noise(items, scale, replace(vp, sigma_angle_deg=0.0))
+            print(f'{round(640 * scale)} x {round(480 * scale)}: sigma_px {sp:.3f} px, '
+                  f'sigma_angle {sa:.3f} deg ({n} segments kept)')
+        return 0
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
                    for s in confidence_samples(it, scale, vp_params=vp)]
@@ -110,8 +122,8 @@ def _calibrate(samples, scales) -> int:
     cal = calibrate(samples)
     n_img = len({s.image for s in samples})
     print(f'# fitted on {n_img} images x {len(scales)} sizes x 3 directions')
-    print(f'CALIBRATION = VPCalibration(weights=({", ".join(f"{w:.4f}" for w in cal.weights)}),'
-          f' scale={cal.scale:.4f}, floor_deg={cal.floor_deg:.4f},')
+    print(f'CALIBRATION = VPCalibration(weights=({", ".join(f"{w:.4f}" for w in cal.weights)}),')
+    print(f'                            scale={cal.scale:.4f}, floor_deg={cal.floor_deg:.4f},')
     print(f'                            sigma_wrong_deg={cal.sigma_wrong_deg:.4f}, '
           f'p_confident={cal.p_confident:.4f})')
     return 0
@@ -120,7 +132,7 @@ def _calibrate(samples, scales) -> int:
 def _confidence(samples, scales) -> int:
     held, cals = cross_validate(samples)
     print('Per-fold constants (fitted on the other four folds):')
-    print(f'  {"fold":>4s}{"w0":>8s}{"w1":>8s}{"w2":>8s}{"a":>7s}{"b deg":>7s}'
+    print(f'  {"fold":>4s}{"w0":>8s}{"w1":>8s}{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}'
           f'{"wrong":>7s}{"p conf":>8s}')
     for f, c in enumerate(cals):
         print(f'  {f:4d}' + ''.join(f'{w:8.3f}' for w in c.weights)

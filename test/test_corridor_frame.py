@@ -84,9 +84,9 @@ def test_fused_run_along_the_rendered_corridor():
     # measured: nothing lost; the gate rejected 1 frame 2.5 m before the open end of the
     # corridor, where the VP came out 22 deg off
     assert s['frames'] == 270 and s['lost'] == 0 and s['rejected'] <= 3
-    # measured (seed 0): fused lateral RMS 0.9 mm, heading RMS 0.055 deg (start 10 cm and
-    # 3 deg off; the last 7 frames, with only three or four corridor edges, not confident,
-    # p 0.82-0.93); single frames: medians 0.7 mm and 0.014 deg
+    # measured (seed 0): fused lateral RMS 0.9 mm, heading RMS 0.058 deg (start 10 cm and
+    # 3 deg off; every frame confident, also the last ones with only four corridor edges);
+    # single frames: medians 0.8 mm and 0.017 deg
     assert s['fused_lateral_rms'] < 0.003
     assert s['fused_heading_rms_deg'] < 0.1
     assert s['single_lateral_median'] < 0.003

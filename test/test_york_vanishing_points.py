@@ -81,17 +81,17 @@ def test_bad_folder(tmp_path):
 def test_segmented_hough_meets_the_acceptance(york):
     s = summarize(evaluate_york(york, 'segmented_hough', 'manhattan'))
     assert s['images'] == 51
-    assert s['axis_within_2deg'] >= 45 / 51          # measured 46/51 (the acceptance: 90 %)
-    assert s['axis_median'] <= 0.55                  # measured 0.41 (acceptance: 1 deg)
-    assert s['all_median'] <= 0.9                    # measured 0.70 (acceptance: 1.3 deg)
+    assert s['axis_within_2deg'] >= 48 / 51          # measured 49/51 (the acceptance: 90 %)
+    assert s['axis_median'] <= 0.4                   # measured 0.32 (acceptance: 1 deg)
+    assert s['all_median'] <= 0.75                   # measured 0.64 (acceptance: 1.3 deg)
 
 
 @pytest.mark.slow
 def test_lsd_input(york):
     s = summarize(evaluate_york(york, 'lsd', 'manhattan'))
     assert s['axis_within_2deg'] >= 45 / 51          # measured 46/51
-    assert s['axis_median'] <= 0.45                  # measured 0.32
-    assert s['all_median'] <= 0.65                   # measured 0.49
+    assert s['axis_median'] <= 0.45                  # measured 0.36
+    assert s['all_median'] <= 0.65                   # measured 0.54
 
 
 @pytest.mark.slow

@@ -170,7 +170,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel, model: CorridorModel,
                                prior, params.vp.sigma_px)
     except ValueError as err:
         raise CorridorLost(f'no lateral position: {err}') from None
-    conf = assess_frame(frame, lines.segments, K, params.vp.sigma_px, gate=params.vp.gate)[0]
+    conf = assess_frame(frame, lines.segments, K, params.vp.sigma_px, gate=params.vp.gate,
+                        sigma_angle_deg=params.vp.sigma_angle_deg)[0]
     h_std = _heading_std(vp, conf.first_order, mount)
     return CorridorMeasurement(
         heading=orient.heading, heading_std=math.hypot(h_std, params.heading_std_floor),

@@ -6,17 +6,31 @@ lot (the wrong set of lines won: a frontal facade with few receding lines, clutt
 first-order covariance of :func:`~.vanishing_point.direction_covariance` only knows the
 first. Per direction this module states:
 
-* ``support``: the inlier segments (count, summed weight) and two features of the
-  evidence: ``sigma_cov``, the square root of the largest eigenvalue of the first-order
-  covariance [rad], and ``ambiguity``, the MSAC score of the best competing Manhattan
+* ``support``: the inlier segments (count, summed weight), ``sigma_cov``, the square
+  root of the largest eigenvalue of the first-order covariance [rad], and (reported, not
+  used by the model) ``ambiguity``, the MSAC score of the best competing Manhattan
   hypothesis that does *not* contain this direction (none of its columns within 2 deg)
   divided by the chosen frame's score (near or above 1: another frame explains the lines
   about as well; 0 when no hypothesis disagrees).
 * ``p_correct``: the probability that the direction is within 2 deg of the truth, a
-  logistic model of ``(1, ln(sigma_cov / 1 deg), min(ambiguity, 2))``::
+  logistic model of the spread in pixels at the focal length ``f`` (``sigma_cov f``: the
+  same lines give the same value at any image size, where ``sigma_cov`` itself doubles
+  when the image is halved, while whether a direction took the wrong lines depends on
+  the lines, not on the pixel size), of the number ``n`` of its inlier segments and of
+  the frame's weakest direction, the largest finite ``sigma_cov`` of its three directions
+  ``sigma_frame`` (a frame one of whose directions has few or short lines fixes its
+  rotation, and so the labelling of the other directions' lines, poorly: on York's
+  frontal views the corridor direction then often went to the wrong lines; a direction
+  without the two lines that fix it takes no lines from the others and does not count,
+  as in a corridor seen along its axis with no line across it; York has no such frame)::
 
-      p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov / 1 deg) + w2 min(ambiguity, 2))))
+      p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n
+                          + w3 ln(sigma_frame f / 1 px))))
 
+  (the ambiguity, the a-contrario number below as a value and the angle between the
+  direction and the jointly refined triad's did not separate wrong directions from right
+  ones on York; held out they changed the confident fraction by a few per cent and the
+  precision not at all or for the worse).
 * an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
   the sphere (the angular error ``e`` of each component Rayleigh distributed): with
   probability ``p`` the correct mode, ``sigma = sqrt((a sigma_cov)^2 + b^2)`` (the
@@ -32,8 +46,9 @@ first. Per direction this module states:
   Desolneux, Vamech 2003). Two segments meet somewhere whatever their directions, so only
   the others check a direction; a segment of length ``L`` whose orientation were random
   would pass the consistency gate (``|z| <= gate``, the direction of a segment with
-  end-point noise ``sigma_px`` has the std ``sqrt(2) sigma_px / L``) with probability
-  ``P = min(1, 2 gate sqrt(2) sigma_px / (pi L))``, and the number of false alarms over
+  end-point noise ``sigma_px`` and direction noise ``sigma_angle`` has the std
+  ``s = sqrt(2 sigma_px^2 / L^2 + sigma_angle^2)``) with probability
+  ``P = min(1, 2 gate s / pi)``, and the number of false alarms over
   the ``N (N - 1) / 2`` candidate points of ``N`` segments is::
 
       NFA = N (N - 1) / 2 * prod_{i >= 3} P_i
@@ -57,10 +72,11 @@ direction then moves the estimate little unless it agrees with the prediction.
 The constants (:data:`CALIBRATION`) are fitted on the York Urban training half (both
 640 x 480 and 320 x 240, all three directions of each image) by :func:`fit_calibration`:
 the logistic weights by ridge-regularised Newton iterations (ridge ``1`` on the
-non-constant weights), ``a`` and ``b`` by maximum likelihood of the Rayleigh model
-truncated at 2 deg on the directions within 2 deg, ``sigma_wrong`` as the RMS error of the
-others, and ``p_confident`` as the smallest threshold at which the corridor directions (the
-one closest to the optical axis in each frame, what the follower steers on) called
+non-constant weights) on the corridor directions (the one closest to the optical axis in
+each frame, what the follower steers on; the other directions get the same model),
+``a`` and ``b`` by maximum likelihood of the Rayleigh model truncated at 2 deg on all
+directions within 2 deg, ``sigma_wrong`` as the RMS error of all the others, and
+``p_confident`` as the smallest threshold at which the corridor directions called
 confident are >= 98 % within 2 deg.
 Refit (and print) them with::
 
@@ -73,7 +89,7 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence, Tuple
 
-from landmark_nav.corridor.vanishing_point import direction_covariance, ManhattanFrame
+from landmark_nav.corridor.vanishing_point import direction_covariance, ManhattanFrame, VPParams
 import numpy as np
 
 #: Two directions closer than this are the same hypothesis [deg].
@@ -91,14 +107,15 @@ class VPCalibration:
     """Constants of the confidence model (see the module docstring).
 
     Attributes:
-        weights: logistic weights ``(w0, w1, w2)`` of ``(1, ln sigma_cov [deg], ambiguity)``.
+        weights: logistic weights ``(w0, w1, w2, w3)`` of
+            ``(1, ln(sigma_cov f) [px], ln n, ln(sigma_frame f) [px])``.
         scale: ``a``, factor on the first-order spread.
         floor_deg: ``b``, spread added in quadrature [deg].
         sigma_wrong_deg: spread of the wrong mode [deg].
         p_confident: ``p_correct`` at or above which a direction is confident.
     """
 
-    weights: Tuple[float, float, float]
+    weights: Tuple[float, float, float, float]
     scale: float
     floor_deg: float
     sigma_wrong_deg: float
@@ -107,8 +124,9 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(0.8050, -1.0989, -0.0380), scale=1.2160, floor_deg=0.3760,
-                            sigma_wrong_deg=5.3255, p_confident=0.9416)
+CALIBRATION = VPCalibration(weights=(6.7105, -1.4404, 0.5759, -1.4683),
+                            scale=1.3493, floor_deg=0.2026,
+                            sigma_wrong_deg=5.2509, p_confident=0.7906)
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,6 +138,7 @@ class DirectionConfidence:
         support: their summed weight.
         log10_nfa: a-contrario number of false alarms of the inliers (module docstring).
         sigma_cov: first-order spread (largest std of the direction covariance) [rad].
+        sigma_frame: the largest finite ``sigma_cov`` of the frame's directions [rad].
         ambiguity: best competing hypothesis' score over the frame's (see the module).
         p_correct: probability of being within 2 deg of the truth.
         sigma: spread of the correct mode [rad].
@@ -135,6 +154,7 @@ class DirectionConfidence:
     support: float
     log10_nfa: float
     sigma_cov: float
+    sigma_frame: float
     ambiguity: float
     p_correct: float
     sigma: float
@@ -146,10 +166,19 @@ class DirectionConfidence:
     confident: bool
 
 
-def features(sigma_cov: float, ambiguity: float) -> np.ndarray:
-    """Return the logistic model's feature vector ``(1, ln sigma_cov [deg], min(amb, 2))``."""
-    s = math.degrees(sigma_cov) if math.isfinite(sigma_cov) else 90.0
-    return np.array([1.0, math.log(min(max(s, 1e-4), 90.0)), min(max(ambiguity, 0.0), 2.0)])
+def _log_spread_px(sigma: float, focal_px: float) -> float:
+    s = min(sigma, math.pi / 2) if math.isfinite(sigma) else math.pi / 2
+    return math.log(max(s * focal_px, 1e-6))
+
+
+def features(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int
+             ) -> np.ndarray:
+    """Return the logistic model's features ``(1, ln(sigma_cov f), ln n, ln(sigma_frame f))``.
+
+    Spreads [rad] are capped at pi / 2 (inf: no spread known), ``n`` at least 1.
+    """
+    return np.array([1.0, _log_spread_px(sigma_cov, focal_px), math.log(max(inliers, 1)),
+                     _log_spread_px(sigma_frame, focal_px)])
 
 
 def mixture_radius(p: float, sigma: float, sigma_wrong: float,
@@ -187,7 +216,7 @@ def direction_ambiguities(frame: ManhattanFrame) -> np.ndarray:
 
 
 def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
-              gate: float = 3.0) -> float:
+              gate: float = 3.0, sigma_angle_deg: float = VPParams.sigma_angle_deg) -> float:
     """Return ``log10 NFA`` of a direction's inlier segments (module docstring).
 
     Args:
@@ -195,35 +224,42 @@ def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
         inliers: (N,) mask of the direction's segments.
         sigma_px: end-point noise [px].
         gate: the consistency gate on ``|z|``.
+        sigma_angle_deg: direction noise of a segment beyond its end-point noise [deg].
     """
     seg = np.asarray(segments, dtype=float).reshape(-1, 4)
     n = len(seg)
     sel = seg[np.asarray(inliers, dtype=bool)]
     length = np.hypot(sel[:, 2] - sel[:, 0], sel[:, 3] - sel[:, 1])
-    p = np.minimum(1.0, 2.0 * gate * math.sqrt(2.0) * sigma_px
-                   / (math.pi * np.maximum(length, 1e-9)))
+    std = np.sqrt(2.0 * (sigma_px / np.maximum(length, 1e-9)) ** 2
+                  + math.radians(sigma_angle_deg) ** 2)
+    p = np.minimum(1.0, 2.0 * gate * std / math.pi)
     checks = np.sort(np.log10(p))[2:]           # all but the two longest segments
     return math.log10(max(0.5 * n * (n - 1), 1.0)) + float(np.sum(checks))
 
 
-def assess_direction(sigma_cov: float, ambiguity: float, nfa: float,
-                     calibration: VPCalibration = CALIBRATION) -> Tuple[float, float, float]:
+def assess_direction(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int,
+                     nfa: float, calibration: VPCalibration = CALIBRATION
+                     ) -> Tuple[float, float, float]:
     """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
 
-    ``nfa`` is the direction's ``log10 NFA`` (:func:`log10_nfa`).
+    ``sigma_cov`` [rad] is its first-order spread, ``sigma_frame`` [rad] the largest of its
+    frame's three, ``focal_px`` the focal length [px], ``inliers`` its segment count,
+    ``nfa`` its ``log10 NFA`` (:func:`log10_nfa`).
     """
     c = calibration
     s_wrong = math.radians(c.sigma_wrong_deg)
     if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
-    z = float(np.asarray(c.weights, dtype=float) @ features(sigma_cov, ambiguity))
+    z = float(np.asarray(c.weights, dtype=float)
+              @ features(sigma_cov, sigma_frame, focal_px, inliers))
     p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
     sigma = math.hypot(c.scale * sigma_cov, math.radians(c.floor_deg))
     return p, sigma, mixture_radius(p, sigma, s_wrong)
 
 
 def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
-                 sigma_px: float, calibration: VPCalibration = CALIBRATION, gate: float = 3.0
+                 sigma_px: float, calibration: VPCalibration = CALIBRATION, gate: float = 3.0,
+                 sigma_angle_deg: float = VPParams.sigma_angle_deg
                  ) -> Tuple[DirectionConfidence, DirectionConfidence, DirectionConfidence]:
     """Return the support and calibrated uncertainty of each direction of ``frame``.
 
@@ -234,24 +270,31 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         sigma_px: end-point noise used for the estimate [px].
         calibration: the model's constants.
         gate: the consistency gate the estimate used (``VPParams.gate``).
+        sigma_angle_deg: direction noise of a segment used for the estimate [deg].
     """
     amb = direction_ambiguities(frame)
+    focal = math.sqrt(float(K[0, 0]) * float(K[1, 1]))
     c = calibration
     s_wrong = math.radians(c.sigma_wrong_deg)
+    covs = [direction_covariance(segments, K, vp.direction, vp.inliers, sigma_px,
+                                 sigma_angle_deg) for vp in frame.points]
+    spreads = [math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
+               if np.all(np.isfinite(cov)) else math.inf for cov in covs]
+    s_frame = max([x for x in spreads if math.isfinite(x)], default=math.inf)
     out = []
     for k, vp in enumerate(frame.points):
         d = vp.direction
         tangent = np.eye(3) - np.outer(d, d)
-        cov = direction_covariance(segments, K, d, vp.inliers, sigma_px)
-        finite = bool(np.all(np.isfinite(cov)))
-        s_cov = math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)) if finite else math.inf
+        cov, s_cov = covs[k], spreads[k]
+        finite = math.isfinite(s_cov)
         n_in = int(np.count_nonzero(vp.inliers))
-        nfa = log10_nfa(segments, vp.inliers, sigma_px, gate)
-        p, sigma, r95 = assess_direction(s_cov, float(amb[k]), nfa, c)
+        nfa = log10_nfa(segments, vp.inliers, sigma_px, gate, sigma_angle_deg)
+        p, sigma, r95 = assess_direction(s_cov, s_frame, focal, n_in, nfa, c)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
             inliers=n_in, support=vp.support, log10_nfa=nfa, sigma_cov=s_cov,
+            sigma_frame=s_frame,
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
             first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
             mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
@@ -295,42 +338,49 @@ def _rayleigh_fit(s: np.ndarray, e: np.ndarray, limit: float) -> Tuple[float, fl
     return math.exp(t[0]), math.exp(t[1])
 
 
-def fit_calibration(sigma_cov: Sequence[float], ambiguity: Sequence[float],
-                    nfa: Sequence[float], error_deg: Sequence[float],
+def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
+                    focal_px: Sequence[float], inliers: Sequence[int], nfa: Sequence[float],
+                    error_deg: Sequence[float],
                     precision: float = 0.98,
                     threshold_on: Optional[Sequence[bool]] = None) -> VPCalibration:
     """Fit the confidence model on directions with known errors (module docstring).
 
     Args:
         sigma_cov: first-order spreads [rad].
-        ambiguity: competing hypotheses' relative scores.
+        sigma_frame: the largest spread of each one's frame [rad].
+        focal_px: the focal lengths of their images [px].
+        inliers: their inlier segment counts.
         nfa: their ``log10 NFA`` (``>= MAX_LOG10_NFA``: p = 0, left out of the threshold).
         error_deg: the true angular errors [deg].
         precision: fraction within 2 deg wanted among the confident directions.
-        threshold_on: the directions ``p_confident`` is chosen on (default: all), e.g. the
-            corridor directions only; the other constants use all.
+        threshold_on: the directions the logistic weights and ``p_confident`` are fitted
+            on (default: all), e.g. the corridor directions only; ``a``, ``b`` and
+            ``sigma_wrong`` use all.
 
     Raises:
-        ValueError: inputs of different lengths, or no direction on either side of 2 deg.
+        ValueError: inputs of different lengths, or no direction (of ``threshold_on``) on
+            either side of 2 deg.
     """
     s = np.asarray(sigma_cov, dtype=float)
-    a = np.asarray(ambiguity, dtype=float)
+    sf = np.asarray(sigma_frame, dtype=float)
+    f = np.asarray(focal_px, dtype=float)
+    m = np.asarray(inliers, dtype=float)
     n = np.asarray(nfa, dtype=float)
     e = np.asarray(error_deg, dtype=float)
-    if not (s.shape == a.shape == n.shape == e.shape):
-        raise ValueError(f'inputs differ in length: {s.shape}, {a.shape}, {n.shape}, '
-                         f'{e.shape}')
+    if not (s.shape == sf.shape == f.shape == m.shape == n.shape == e.shape):
+        raise ValueError(f'inputs differ in length: {s.shape}, {sf.shape}, {f.shape}, '
+                         f'{m.shape}, {n.shape}, {e.shape}')
     good = e <= CORRECT_DEG
-    if good.all() or not good.any():
+    on = np.ones(e.shape, dtype=bool) if threshold_on is None else \
+        np.asarray(threshold_on, dtype=bool)
+    if good[on].all() or not good[on].any():
         raise ValueError('calibration needs directions both within and beyond 2 deg')
-    X = np.array([features(si, ai) for si, ai in zip(s, a)])
-    w = _logistic(X, good.astype(float))
+    X = np.array([features(*v) for v in zip(s, sf, f, m)])
+    w = _logistic(X[on], good[on].astype(float))
     ok = good & np.isfinite(s)
     scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok], CORRECT_DEG)
     sigma_wrong = float(np.sqrt(np.mean(e[~good] ** 2)))
-    sel = np.ones(e.shape, dtype=bool) if threshold_on is None else \
-        np.asarray(threshold_on, dtype=bool)
-    sel = sel & (n < MAX_LOG10_NFA)
+    sel = on & (n < MAX_LOG10_NFA)
     p = (1.0 / (1.0 + np.exp(-X @ w)))[sel]
     good = good[sel]
     thr = float(np.max(p))

@@ -29,6 +29,7 @@ from typing import Callable, Dict, List, Sequence, Tuple, Union
 
 import cv2
 from landmark_nav.corridor.vanishing_point import (chapter_vanishing_point, manhattan_frame,
+                                                   residual_terms,
                                                    VPParams)
 from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CORRECT_DEG,
                                                  fit_calibration, VPCalibration)
@@ -243,7 +244,9 @@ class DirectionSample:
     scale: float
     column: int
     sigma_cov: float
+    sigma_frame: float
     ambiguity: float
+    focal_px: float
     inliers: int
     log10_nfa: float
     error: float
@@ -256,13 +259,16 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     img, K = _load_scaled(item, scale)
     lines = detect_lines(img, line_method)
     frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
-    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate)
+    conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate,
+                        sigma_angle_deg=vp_params.sigma_angle_deg)
     D = frame.directions
     cost = np.array([[angular_error_deg(D[:, i], item.directions[:, j]) for j in range(3)]
                      for i in range(3)])
     from scipy.optimize import linear_sum_assignment  # here: scipy.optimize takes 0.35 s to import
     r, c = linear_sum_assignment(cost)
-    return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].ambiguity,
+    focal = float(np.sqrt(K[0, 0] * K[1, 1]))
+    return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].sigma_frame,
+                            conf[k].ambiguity, focal,
                             conf[k].inliers, conf[k].log10_nfa,
                             float(cost[k, c[list(r).index(k)]]))
             for k in range(3)]
@@ -282,10 +288,12 @@ class HeldOut:
 def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
     """Fit the confidence model on samples (:func:`~.vp_confidence.fit_calibration`).
 
-    All directions fit the model; the confidence threshold is chosen on the corridor
-    directions (column 0).
+    All directions fit the correct mode's spread and the wrong mode's; the logistic weights
+    and the confidence threshold are fitted on the corridor directions (column 0).
     """
-    return fit_calibration([s.sigma_cov for s in samples], [s.ambiguity for s in samples],
+    return fit_calibration([s.sigma_cov for s in samples], [s.sigma_frame for s in samples],
+                           [s.focal_px for s in samples],
+                           [s.inliers for s in samples],
                            [s.log10_nfa for s in samples], [s.error for s in samples],
                            threshold_on=[s.column == 0 for s in samples])
 
@@ -305,7 +313,8 @@ def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
         cals.append(cal)
         for s in samples:
             if fold_of[s.image] == f:
-                p, _, r95 = assess_direction(s.sigma_cov, s.ambiguity, s.log10_nfa, cal)
+                p, _, r95 = assess_direction(s.sigma_cov, s.sigma_frame, s.focal_px,
+                                             s.inliers, s.log10_nfa, cal)
                 out.append(HeldOut(s, f, p, float(np.degrees(r95)), p >= cal.p_confident))
     return out, cals
 
@@ -329,3 +338,51 @@ def confidence_summary(held: Sequence[HeldOut]) -> Dict[str, float]:
         out[f'{key}_within_2deg'] = float(np.mean([h.sample.error <= CORRECT_DEG
                                                    for h in rows]))
     return out
+
+
+# ----------------------------------------------------------------------------- line noise
+def segment_noise(items: Sequence[YorkImage], scale: float = 1.0,
+                  vp_params: VPParams = VPParams(), line_method: str = 'segmented_hough',
+                  trim: float = 4.0) -> Tuple[float, float, int]:
+    """Fit the segment noise ``(sigma_px, sigma_angle_deg)`` to residuals of true directions.
+
+    Each image's segments labelled by :func:`manhattan_frame` (with ``vp_params``) are
+    scored against the true direction matched to their label; the two noise terms of
+    :func:`~landmark_nav.corridor.vanishing_point.residual_terms` are fitted by maximum
+    likelihood (``r ~ N(0, sigma_px^2 a + sigma_angle^2 b)``), segments beyond ``trim``
+    sigma dropped and the fit repeated until the kept set no longer changes (at most 10
+    times).
+
+    Returns:
+        ``(sigma_px, sigma_angle_deg, segments kept)``.
+    """
+    from scipy.optimize import linear_sum_assignment, minimize
+    rs, As, Bs = [], [], []
+    for item in items:
+        img, K = _load_scaled(item, scale)
+        lines = detect_lines(img, line_method)
+        frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
+        cost = np.array([[angular_error_deg(frame.directions[:, i], item.directions[:, j])
+                          for j in range(3)] for i in range(3)])
+        rows, cols = linear_sum_assignment(cost)
+        for k, j in zip(rows, cols):
+            mask = frame.labels == k
+            if np.any(mask):
+                r, a, b = residual_terms(lines.segments[mask], K, item.directions[:, j])
+                rs.append(r)
+                As.append(a)
+                Bs.append(b)
+    r, a, b = (np.concatenate(x) for x in (rs, As, Bs))
+    keep = np.isfinite(r) & np.isfinite(a) & np.isfinite(b)
+    t = np.array([0.0, np.log(1e-3)])
+    for _ in range(10):
+        def nll(t: np.ndarray, k=keep) -> float:
+            v = np.exp(2 * t[0]) * a[k] + np.exp(2 * t[1]) * b[k]
+            return float(np.sum(np.log(v) + r[k] ** 2 / v))
+        t = minimize(nll, t, method='Nelder-Mead', options={'xatol': 1e-8, 'fatol': 1e-10}).x
+        v = np.exp(2 * t[0]) * a + np.exp(2 * t[1]) * b
+        new = np.isfinite(r) & np.isfinite(a) & np.isfinite(b) & (np.abs(r) <= trim * np.sqrt(v))
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    return float(np.exp(t[0])), float(np.degrees(np.exp(t[1]))), int(np.count_nonzero(keep))
