@@ -6,7 +6,7 @@ Run from the repository root::
     python benchmarks/bench_localization.py model [--frames N] [--seeds S] [--first-seed K]
         [--bag DIR]
 
-``sonar``: one EKF / UKF update and the ray-cast time per beam. Targets (issue 6): one UKF
+``sonar``: one EKF / UKF update and the ray-cast time per beam. Targets: one UKF
 measurement update with 16 sonars <= 3 ms, one EKF update <= 1 ms. Medians over ``--runs``
 repetitions (the figures: 500) on the hallway scenario's map (``rasterize_world``, 0.1 m;
 the simulated hallway run, seed 1, or with ``--bag DIR`` a recorded simulator bag with its

@@ -21,7 +21,7 @@ or ``--data DIR``)::
         [--params-file YAML ...] [--data DIR] [LOG ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_slam_real.py wean [--landmarks both]
         [--establish-hits N] [--odometry-scale S] [--set NAME=VALUE ...] [--data DIR]
-        [--corners] [--plot DIR] [--backend graph] [LOG ...]
+        [--corners] [--plot DIR] [--backend graph [--cell-alignment]] [LOG ...]
 
 A Carmen LOG is a log name in ``--data DIR`` (default ``../shared/data/carmen``; ``aces``
 -> ``DIR/aces-corrected.log.gz``; default the six logs) or a path to a Carmen log; a Wean
@@ -36,10 +36,10 @@ Each log is imported with ``landmark_nav import`` defaults (``pioneer`` drift, s
 bag's stated drift model; the other options set those :class:`SlamParams` fields.
 
 Printed per log and landmark type: filter resets, corner and line landmarks at the end,
-the SE(2)-aligned ATE RMSE of EKF-SLAM and of the odometry and their ratio (issue 14 asks
-<= 0.2), the RPE over 1 m (translation RMSE) of both and their ratio (asks <= 1), the share
-of steps whose reference position lies inside the filter's 95 % position ellipse (asks
->= 0.8), landmarks pruned, filter ms per scan.
+the SE(2)-aligned ATE RMSE of EKF-SLAM and of the odometry and their ratio (target
+<= 0.2), the RPE over 1 m (translation RMSE) of both and their ratio (target <= 1), the
+share of steps whose reference position lies inside the filter's 95 % position ellipse
+(target >= 0.8), landmarks pruned, filter ms per scan.
 
 ``diagnose``:
 
@@ -86,12 +86,11 @@ the pose by more than 20 cm (:func:`landmark_nav.evaluation.slam.update_correcti
 loop closed moves it by the drift since the landmark was last seen): their count and
 ``sqrt(sum of their squares / steps)``, what they alone put into an RPE over one step
 (the steps of these logs are about 1 m) [cm], and the ellipse share again with the
-reference's own per-pose noise added to the filter's covariance
-(``REFERENCE_SD``; not issue 14's figure, which takes the reference
-as truth: it tells a filter that misjudges its own error from one the reference's noise
-pushes out). Then the summary used in the README: ellipse median (runs >= 80 %), ATE /
-odometry median (runs <= 0.2), RPE / odometry median (runs <= 1), runs meeting all three
-(issue 14's targets per log), and the median (runs >= 80 %) of the second ellipse share.
+reference's own per-pose noise added (``REFERENCE_SD``; the first share takes the
+reference as truth: this one tells a filter that misjudges its own error from one the
+reference's noise pushes out). Then the summary used in the README: ellipse median (runs
+>= 80 %), ATE / odometry median (runs <= 0.2), RPE / odometry median (runs <= 1), runs
+meeting all three targets, and the median (runs >= 80 %) of the second ellipse share.
 ``--backend graph``: the graph back end against its targets (``slam_real_graph.py``).
 
 ``scan-matching``:
@@ -115,8 +114,8 @@ import`` defaults (raw odometry) into a temporary directory and run as the test
 noise, the laser's stated noise); :func:`landmark_nav.evaluation.occupancy_check.check_run`
 aligns the result to ``wean.dat`` and :func:`~landmark_nav.evaluation.occupancy_check.
 landmark_diagnosis` says why each corner landmark is off the walls. Printed per log:
-corner landmarks, the share within 10 cm of a wall cell (issue 14 asks >= 0.9), poses in
-wall / unknown cells (asks 0), the share of scan end points near a wall with the filter's
+corner landmarks, the share within 10 cm of a wall cell (target >= 0.9), poses in
+wall / unknown cells (target 0), the share of scan end points near a wall with the filter's
 and with the odometry's poses, and the count per category (``on_wall``, ``moved``,
 ``few_views``, ``off_grid``), and for the poses in wall cells
 (:func:`~landmark_nav.evaluation.occupancy_check.wall_pose_diagnosis`) the deepest such
@@ -789,8 +788,8 @@ def main(argv=None) -> int:
                         'and concave, and how far the off-wall ones are from a wall cell')
     p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
                    help='graph: the pose graph, its poses and structural corners')
-    p.add_argument('--cell-alignment', action='store_true',
-                   help='with --backend graph: align to the grid in whole cells (no refinement)')
+    p.add_argument('--cell-alignment', action='store_true', help='with --backend graph: '
+                   'align to the grid in whole cells (no refinement)')
     p.add_argument('--plot', default=None, metavar='DIR',
                    help='with --corners: draw them over the grid into DIR/<log>_structural_'
                         'corners.png')
