@@ -782,10 +782,9 @@ def main(argv=None) -> int:
                    help='scale the raw odometry translations before the filter (a test of '
                         'the odometry scale against the grid; default 1)')
     p.add_argument('--corners', action='store_true',
-                   help="also place every scan's corner detections with the SLAM path: "
-                        'the share of structural and other corners within 10 cm of a wall '
-                        'cell the log does not see through, structural ones split into convex '
-                        'and concave, and how far the off-wall ones are from a wall cell')
+                   help="also place every scan's corners with the SLAM path: the share of "
+                        'structural and other corners within 10 cm of a wall cell the log '
+                        'does not see through, convex / concave, distances of the off-wall ones')
     p.add_argument('--backend', choices=('ekf', 'graph'), default='ekf',
                    help='graph: the pose graph, its poses and structural corners')
     p.add_argument('--cell-alignment', action='store_true', help='with --backend graph: '
