@@ -790,8 +790,7 @@ def main(argv=None) -> int:
     p.add_argument('--cell-alignment', action='store_true', help='with --backend graph: '
                    'align to the grid in whole cells (no refinement)')
     p.add_argument('--plot', default=None, metavar='DIR',
-                   help='with --corners: draw them over the grid into DIR/<log>_structural_'
-                        'corners.png')
+                   help='with --corners: draw them into DIR/<log>_structural_corners.png')
     p.set_defaults(run=run_wean)
     return run_subcommand(ap, argv)
 
