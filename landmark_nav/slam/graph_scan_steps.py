@@ -51,6 +51,7 @@ and processed after, are dropped (``restarted``). Held samples that a sample of 
 time base interrupts are dropped (``out_of_order``).
 """
 
+import bisect
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Tuple
@@ -321,9 +322,12 @@ class GraphScanSteps:
                 self._waiting[0][0] > self._newest_ns:
             return None
         t, pts = self._waiting.pop(0)
-        t_s, times = (t - self._t0) * 1e-9, np.asarray(self._times)
-        o = odometry_at(t_s, times, np.asarray(self._poses))
-        offset = self._offsets[int(np.searchsorted(times, t_s, side='left'))]
+        t_s = (t - self._t0) * 1e-9
+        # the samples around the stamp only (the buffer holds up to buffer_s of odometry)
+        lo = max(bisect.bisect_right(self._times, t_s) - 1, 0)
+        o = odometry_at(t_s, np.asarray(self._times[lo:lo + 2]),
+                        np.asarray(self._poses[lo:lo + 2]))
+        offset = self._offsets[bisect.bisect_left(self._times, t_s)]
         self.last_stamp_ns = t
         return t, o, pts, self.generation, offset
 
