@@ -3,8 +3,8 @@
 Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
-        [--scales 1,0.5] [--confidence [--in-sample-noise] | --calibrate | --noise]
-        [--no-orthogonal]
+        [--scales 1,0.5] [--confidence [--folds K] [--in-sample-noise] | --calibrate |
+        --noise] [--no-orthogonal]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -21,7 +21,8 @@ Acceptance (640 x 480, segmented Hough): axis error <= 2 deg on >= 90 % and medi
 median over all three directions <= 1.3 deg.
 
 ``--confidence``: the accuracy and the confidence of each Manhattan direction
-(:mod:`landmark_nav.corridor.vp_confidence`), 5-fold over the images, held out end to end
+(:mod:`landmark_nav.corridor.vp_confidence`), k-fold over the images (``--folds K``,
+default 5; the number of images: leave-one-out), held out end to end
 (:func:`landmark_nav.evaluation.vanishing_points.cross_validate_noise`): per fold, the
 segment noise (``VPParams.sigma_px``, ``sigma_angle_deg``) is fitted on the other folds'
 images at 640 x 480 as ``--noise`` fits it, every image is estimated with it at every size
@@ -34,13 +35,14 @@ optical axis, as the accuracy table; median over all three directions) and the c
 figures. Acceptance per size: >= 98 % within 2 deg among the confident, confident on >= 85 %
 of the images, 95 % radius covering the error on >= 90 % of the images.
 ``--in-sample-noise``: with ``--confidence``, every fold uses ``VPParams``' noise (fitted on
-all images) and only the confidence model is held out. ``--calibrate``: fit on all images and print the constants
-for ``landmark_nav/corridor/vp_confidence.py``. ``--noise``: the maximum-likelihood end-point
-and direction noise of the segments (``VPParams.sigma_px``, ``sigma_angle_deg``) from their
-residuals against the true directions, the segments labelled by the estimator without the
-direction noise (:func:`landmark_nav.evaluation.vanishing_points.segment_noise`), per
-size. ``--no-orthogonal``: the Manhattan frame
-without the joint refinement of its triad (``VPParams(orthogonal=False)``), for comparison.
+all images) and only the confidence model is held out. ``--calibrate``: fit on all images
+and print the constants for ``landmark_nav/corridor/vp_confidence.py``. ``--noise``: the
+maximum-likelihood end-point and direction noise of the segments (``VPParams.sigma_px``,
+``sigma_angle_deg``) from their residuals against the true directions, the segments
+labelled by the estimator without the direction noise
+(:func:`landmark_nav.evaluation.vanishing_points.segment_noise`), per size.
+``--no-orthogonal``: the Manhattan frame without the joint refinement of its triad
+(``VPParams(orthogonal=False)``), for comparison.
 """
 
 import argparse
@@ -71,12 +73,14 @@ def main(argv=None) -> int:
     ap.add_argument('--scales', default='1,0.5', help='image scales (1 = 640 x 480)')
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument('--confidence', action='store_true',
-                      help='held-out (5-fold) accuracy and direction confidence, the '
+                      help='held-out (k-fold) accuracy and direction confidence, the '
                       'segment noise fitted per fold')
     mode.add_argument('--calibrate', action='store_true',
                       help='fit the confidence constants on all images and print them')
     mode.add_argument('--noise', action='store_true',
                       help='fit the segment noise terms to residuals of the true directions')
+    ap.add_argument('--folds', type=int, default=5, metavar='K',
+                    help='folds of images of --confidence (default 5)')
     ap.add_argument('--in-sample-noise', action='store_true',
                     help="--confidence with VPParams' noise (fitted on all images) in every fold")
     ap.add_argument('--no-orthogonal', action='store_true',
@@ -93,14 +97,16 @@ def main(argv=None) -> int:
         return 0
     if args.in_sample_noise and not args.confidence:
         ap.error('--in-sample-noise goes with --confidence')
+    if args.confidence and not 2 <= args.folds <= len(items):
+        ap.error(f'--folds {args.folds}: give 2 to the number of images ({len(items)})')
     if args.confidence and not args.in_sample_noise:
-        return _confidence(*cross_validate_noise(items, scales, vp), scales)
+        return _confidence(*cross_validate_noise(items, scales, vp, args.folds), scales)
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
                    for s in confidence_samples(it, scale, vp_params=vp)]
         if args.calibrate:
             return _calibrate(samples, scales)
-        held, cals = cross_validate(samples)
+        held, cals = cross_validate(samples, args.folds)
         noise = FoldNoise(vp.sigma_px, vp.sigma_angle_deg, 0)
         return _confidence(held, cals, [noise] * len(cals), scales, in_sample=True)
     for scale in scales:
@@ -154,7 +160,7 @@ def _confidence(held, cals, noises, scales, in_sample=False) -> int:
     if in_sample:
         print(f'Segment noise of every fold: VPParams (fitted on all images): sigma_px '
               f'{noises[0].sigma_px:.3f} px, sigma_angle {noises[0].sigma_angle_deg:.3f} deg')
-    print('Per-fold constants (fitted on the other four folds):')
+    print(f'Per-fold constants (fitted on the other {len(cals) - 1} folds):')
     print(f'  {"fold":>4s}{"sig px":>8s}{"sig deg":>8s}{"segs":>6s}{"w0":>8s}{"w1":>8s}'
           f'{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}{"p conf":>8s}')
     for f, (c, n) in enumerate(zip(cals, noises)):
@@ -165,7 +171,8 @@ def _confidence(held, cals, noises, scales, in_sample=False) -> int:
         w, h = round(640 * scale), round(480 * scale)
         rows = [x for x in held if x.sample.scale == scale]
         what = 'confidence held out, noise in-sample' if in_sample else 'held out'
-        print(f'York Urban at {w} x {h}, {what} (5-fold over {len(rows) // 3} images):')
+        print(f'York Urban at {w} x {h}, {what} ({len(cals)}-fold over {len(rows) // 3} '
+              'images):')
         print(f'  {"fold":>4s}{"images":>7s}{"<=2deg":>8s}{"confident":>10s}{"<=2 among":>10s}'
               f'{"covered":>8s}')
         for f in range(len(cals)):
