@@ -27,13 +27,18 @@ a third for the medians (the errors of neighbouring ranks, so one changed image 
 cross them).
 """
 
-from landmark_nav.corridor.vanishing_point import consistency
-from landmark_nav.evaluation.vanishing_points import (angular_error_deg, evaluate_york,
-                                                      load_york_urban, matched_errors,
+from dataclasses import replace
+
+from landmark_nav.corridor.vanishing_point import consistency, VPParams
+from landmark_nav.evaluation.vanishing_points import (angular_error_deg, confidence_samples,
+                                                      cross_validate_noise, evaluate_york,
+                                                      image_folds, load_york_urban,
+                                                      matched_errors, segment_noise,
                                                       summarize, YORK_FLIP, YORK_K)
 from landmark_nav.testing import shared_data
 import numpy as np
 import pytest
+import tiny_logs
 
 
 @pytest.fixture(scope='module')
@@ -104,3 +109,21 @@ def test_the_chapter_method_alone_is_far_worse_on_outdoor_images(york):
     # in York Urban the axis direction is often 30-60 deg off axis (measured median 17.9)
     s = summarize(evaluate_york(york, 'segmented_hough', 'chapter'))
     assert s['axis_median'] > 5.0
+
+
+def test_held_out_noise_is_fitted_without_the_fold(tmp_path):
+    # 4 synthetic images in 3 folds (0 and 3 together); the odd ones' true axis direction is
+    # 5 deg off, so the confidence model has both sides of 2 deg in every training set
+    items = load_york_urban(tiny_logs.write_york(tmp_path, images=4, off_deg=5.0))
+    held, cals, noises = cross_validate_noise(items, (1.0,), folds=3)
+    assert image_folds([it.name for it in items], 3) == {
+        'T000': 0, 'T001': 1, 'T002': 2, 'T003': 0}
+    assert len(cals) == len(noises) == 3 and len(held) == 4 * 3
+    f = 1                                                     # trained on T000, T002, T003
+    train = [it for it in items if it.name != 'T001']
+    sp, sa, kept = segment_noise(train, 1.0, VPParams(sigma_angle_deg=0.0))
+    assert (noises[f].sigma_px, noises[f].sigma_angle_deg, noises[f].segments) == (sp, sa, kept)
+    ref = confidence_samples(items[1], 1.0, vp_params=replace(VPParams(), sigma_px=sp,
+                                                              sigma_angle_deg=sa))
+    assert [h.sample for h in held if h.fold == f] == ref
+    assert sum(h.sample.true_axis for h in held) == 4
