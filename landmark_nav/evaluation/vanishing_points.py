@@ -268,7 +268,7 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
                        ) -> List[DirectionSample]:
     """Return the three detected directions of one image with their features and errors.
 
-    ``lines``: the image's ``(segments, K)`` from :func:`image_lines` at ``scale`` (detected
+    ``lines``: the image's ``(lines, K)`` from :func:`image_lines` at ``scale`` (detected
     here when None). ``true_axis`` marks the sample matched to the true direction closest
     to the optical axis (its error is :class:`FrameResult`'s ``axis``).
     """
@@ -367,9 +367,11 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
     (:func:`segment_noise`, as ``VPParams``' defaults were fitted on all images at 640 x
     480); every image is estimated at every size in ``scales`` with that noise; the
     confidence model is fitted on the other folds' directions (:func:`calibrate`) and
-    applies to the fold's own. Nothing of a held-out image enters its estimate's
-    constants. Lines are detected once per image and size (the noise changes only the
-    Manhattan search).
+    applies to the fold's own. The segments the noise is fitted on are labelled with
+    ``vp_params.sigma_px`` and no direction noise (as ``segment_noise`` is used for the
+    defaults); apart from that labelling constant nothing of a held-out image enters its
+    estimate's constants. Lines are detected once per image and size (the noise changes
+    only the Manhattan search).
 
     Returns:
         ``(held-out directions, calibration per fold, noise per fold)``.
