@@ -3,7 +3,8 @@
 Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
-        [--scales 1,0.5] [--confidence | --calibrate | --noise] [--no-orthogonal]
+        [--scales 1,0.5] [--confidence [--folds K] [--in-sample-noise] | --calibrate |
+        --noise] [--no-orthogonal]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -19,20 +20,29 @@ in the same run (machines differ).
 Acceptance (640 x 480, segmented Hough): axis error <= 2 deg on >= 90 % and median <= 1 deg;
 median over all three directions <= 1.3 deg.
 
-``--confidence``: the confidence of each Manhattan direction
-(:mod:`landmark_nav.corridor.vp_confidence`), 5-fold over the images (the model fitted on
-the other folds' images at every size in ``--scales``, applied to the held-out fold); per
-size, held-out figures only: fraction of images whose corridor direction is confident,
-fraction within 2 deg among the confident directions, fraction of images whose stated 95 %
-radius covers the error; and the per-fold constants. Acceptance per size: >= 98 % within
-2 deg among the confident, confident on >= 85 % of the images, 95 % radius covering the
-error on >= 90 % of the images. ``--calibrate``: fit on all images and print the constants
-for ``landmark_nav/corridor/vp_confidence.py``. ``--noise``: the maximum-likelihood end-point
-and direction noise of the segments (``VPParams.sigma_px``, ``sigma_angle_deg``) from their
-residuals against the true directions, the segments labelled by the estimator without the
-direction noise (:func:`landmark_nav.evaluation.vanishing_points.segment_noise`), per
-size. ``--no-orthogonal``: the Manhattan frame
-without the joint refinement of its triad (``VPParams(orthogonal=False)``), for comparison.
+``--confidence``: the accuracy and the confidence of each Manhattan direction
+(:mod:`landmark_nav.corridor.vp_confidence`), k-fold over the images (``--folds K``,
+default 5; the number of images: leave-one-out), held out end to end
+(:func:`landmark_nav.evaluation.vanishing_points.cross_validate_noise`): per fold, the
+segment noise (``VPParams.sigma_px``, ``sigma_angle_deg``) is fitted on the other folds'
+images at 640 x 480 as ``--noise`` fits it, every image is estimated with it at every size
+in ``--scales``, and the confidence model is fitted on the other folds' directions and
+applied to the held-out fold. Printed: per fold the fitted noise and constants; per size
+and fold the held-out figures (corridor direction within 2 deg, confident, within 2 deg
+among the confident, stated 95 % radius covering the error), and pooled over the folds the
+accuracy (median and within 2 deg of the direction matched to the true one closest to the
+optical axis, as the accuracy table; median over all three directions) and the confidence
+figures. Acceptance per size: >= 98 % within 2 deg among the confident, confident on >= 85 %
+of the images, 95 % radius covering the error on >= 90 % of the images.
+``--in-sample-noise``: with ``--confidence``, every fold uses ``VPParams``' noise (fitted on
+all images) and only the confidence model is held out. ``--calibrate``: fit on all images
+and print the constants for ``landmark_nav/corridor/vp_confidence.py``. ``--noise``: the
+maximum-likelihood end-point and direction noise of the segments (``VPParams.sigma_px``,
+``sigma_angle_deg``) from their residuals against the true directions, the segments
+labelled by the estimator without the direction noise
+(:func:`landmark_nav.evaluation.vanishing_points.segment_noise`), per size.
+``--no-orthogonal``: the Manhattan frame without the joint refinement of its triad
+(``VPParams(orthogonal=False)``), for comparison.
 """
 
 import argparse
@@ -42,10 +52,12 @@ import sys
 
 from common import add_data_argument, data_folder
 from landmark_nav.corridor.vanishing_point import VPParams
-from landmark_nav.evaluation.vanishing_points import (calibrate, confidence_samples,
-                                                      confidence_summary, cross_validate,
-                                                      evaluate_image, load_york_urban,
-                                                      segment_noise, summarize)
+from landmark_nav.evaluation.vanishing_points import (accuracy_summary, calibrate,
+                                                      confidence_samples, confidence_summary,
+                                                      cross_validate, cross_validate_noise,
+                                                      evaluate_image, FoldNoise,
+                                                      load_york_urban, segment_noise,
+                                                      summarize)
 from landmark_nav.vision.image_lines import METHODS
 
 RUNS = [(m, 'manhattan') for m in METHODS] + [('segmented_hough', 'chapter')]
@@ -61,11 +73,16 @@ def main(argv=None) -> int:
     ap.add_argument('--scales', default='1,0.5', help='image scales (1 = 640 x 480)')
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument('--confidence', action='store_true',
-                      help='held-out (5-fold) figures of the direction confidence')
+                      help='held-out (k-fold) accuracy and direction confidence, the '
+                      'segment noise fitted per fold')
     mode.add_argument('--calibrate', action='store_true',
                       help='fit the confidence constants on all images and print them')
     mode.add_argument('--noise', action='store_true',
                       help='fit the segment noise terms to residuals of the true directions')
+    ap.add_argument('--folds', type=int, default=5, metavar='K',
+                    help='folds of images of --confidence (default 5)')
+    ap.add_argument('--in-sample-noise', action='store_true',
+                    help="--confidence with VPParams' noise (fitted on all images) in every fold")
     ap.add_argument('--no-orthogonal', action='store_true',
                     help='the Manhattan frame without the joint refinement of its triad')
     args = ap.parse_args(argv)
@@ -78,10 +95,20 @@ def main(argv=None) -> int:
             print(f'{round(640 * scale)} x {round(480 * scale)}: sigma_px {sp:.3f} px, '
                   f'sigma_angle {sa:.3f} deg ({n} segments kept)')
         return 0
+    if args.in_sample_noise and not args.confidence:
+        ap.error('--in-sample-noise goes with --confidence')
+    if args.confidence and not 2 <= args.folds <= len(items):
+        ap.error(f'--folds {args.folds}: give 2 to the number of images ({len(items)})')
+    if args.confidence and not args.in_sample_noise:
+        return _confidence(*cross_validate_noise(items, scales, vp, args.folds), scales)
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
                    for s in confidence_samples(it, scale, vp_params=vp)]
-        return (_calibrate if args.calibrate else _confidence)(samples, scales)
+        if args.calibrate:
+            return _calibrate(samples, scales)
+        held, cals = cross_validate(samples, args.folds)
+        noise = FoldNoise(vp.sigma_px, vp.sigma_angle_deg, 0)
+        return _confidence(held, cals, [noise] * len(cals), scales, in_sample=True)
     for scale in scales:
         w, h = round(640 * scale), round(480 * scale)
         rows = {}
@@ -129,30 +156,43 @@ def _calibrate(samples, scales) -> int:
     return 0
 
 
-def _confidence(samples, scales) -> int:
-    held, cals = cross_validate(samples)
-    print('Per-fold constants (fitted on the other four folds):')
-    print(f'  {"fold":>4s}{"w0":>8s}{"w1":>8s}{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}'
-          f'{"wrong":>7s}{"p conf":>8s}')
-    for f, c in enumerate(cals):
-        print(f'  {f:4d}' + ''.join(f'{w:8.3f}' for w in c.weights)
+def _confidence(held, cals, noises, scales, in_sample=False) -> int:
+    if in_sample:
+        print(f'Segment noise of every fold: VPParams (fitted on all images): sigma_px '
+              f'{noises[0].sigma_px:.3f} px, sigma_angle {noises[0].sigma_angle_deg:.3f} deg')
+    print(f'Per-fold constants (fitted on the other {len(cals) - 1} folds):')
+    print(f'  {"fold":>4s}{"sig px":>8s}{"sig deg":>8s}{"segs":>6s}{"w0":>8s}{"w1":>8s}'
+          f'{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}{"p conf":>8s}')
+    for f, (c, n) in enumerate(zip(cals, noises)):
+        print(f'  {f:4d}{n.sigma_px:8.3f}{n.sigma_angle_deg:8.3f}{n.segments:6d}'
+              + ''.join(f'{w:8.3f}' for w in c.weights)
               + f'{c.scale:7.3f}{c.floor_deg:7.3f}{c.sigma_wrong_deg:7.2f}{c.p_confident:8.3f}')
     for scale in scales:
         w, h = round(640 * scale), round(480 * scale)
         rows = [x for x in held if x.sample.scale == scale]
-        print(f'York Urban at {w} x {h}, held-out (5-fold over {len(rows) // 3} images):')
-        print(f'  {"fold":>4s}{"images":>7s}{"confident":>10s}{"<=2 among":>10s}'
+        what = 'confidence held out, noise in-sample' if in_sample else 'held out'
+        print(f'York Urban at {w} x {h}, {what} ({len(cals)}-fold over {len(rows) // 3} '
+              'images):')
+        print(f'  {"fold":>4s}{"images":>7s}{"<=2deg":>8s}{"confident":>10s}{"<=2 among":>10s}'
               f'{"covered":>8s}')
         for f in range(len(cals)):
-            s = confidence_summary([x for x in rows if x.fold == f])
-            print(f'  {f:4d}{s["axis_n"]:7.0f}{100 * s["axis_confident"]:9.1f}%'
+            fold = [x for x in rows if x.fold == f]
+            s, a = confidence_summary(fold), accuracy_summary(fold)
+            print(f'  {f:4d}{s["axis_n"]:7.0f}{100 * a["axis_within_2deg"]:7.1f}%'
+                  f'{100 * s["axis_confident"]:9.1f}%'
                   f'{100 * s["axis_precision"]:9.1f}%{100 * s["axis_coverage"]:7.1f}%')
-        s = confidence_summary(rows)
+        s, a = confidence_summary(rows), accuracy_summary(rows)
+        print(f'  accuracy: axis median {a["axis_median"]:.2f} deg, within 2 deg '
+              f'{100 * a["axis_within_2deg"]:.1f} %, all three median {a["all_median"]:.2f} deg')
         for key, what in (('axis', 'corridor direction (column 0)'), ('all', 'all directions')):
             print(f'  {what}: within 2 deg {100 * s[key + "_within_2deg"]:.1f} %, confident '
                   f'{100 * s[key + "_confident"]:.1f} %, within 2 deg among the confident '
                   f'{100 * s[key + "_precision"]:.1f} %, 95 % radius covers '
                   f'{100 * s[key + "_coverage"]:.1f} %')
+        off = [x for x in rows if x.sample.column == 0 and x.sample.error > 2.0]
+        print('  corridor directions more than 2 deg off: ' + (', '.join(
+            f'{x.sample.image} (fold {x.fold}, {x.sample.error:.1f} deg, '
+            f'{"confident" if x.confident else "not confident"})' for x in off) or 'none'))
         ok = (s['axis_precision'] >= 0.98 and s['axis_confident'] >= 0.85
               and s['axis_coverage'] >= 0.90)
         print(f'  acceptance (corridor direction): {"met" if ok else "NOT met"}')

@@ -99,7 +99,11 @@ TINY_RUNS = {
          r'shuttle: FAILED')],
     'bench_vanishing_points.py': [
         (['--data', '{york}', '--repeat', '1', '--scales', '1'],
-         r'segmented_hough manhattan\s+[\d.]+')],
+         r'segmented_hough manhattan\s+[\d.]+'),
+        # held out end to end: the noise and the confidence fitted per fold
+        (['--data', '{york_cv}', '--confidence', '--folds', '3', '--scales', '0.5'],
+         r'\n\s+2\s+[\d.]+\s+[\d.]+\s+\d+(.*\n)+.*3-fold over 4 images(.*\n)+'
+         r'  accuracy: axis median [\d.]+ deg')],
     'bench_road.py': [
         (['--scans', '3', '--frames', '2', '--data', '{camvid}'],
          r'vision CamVid 480x360 learned\s+[\d.]+')],
@@ -182,6 +186,7 @@ def inputs(tmp_path_factory):
     import_log(log, tmp / 'small_bag')   # 4 s of scans and odometry, with a reference
     tiny_logs.write_wean(tmp / 'wean')
     tiny_logs.write_york(tmp / 'york')
+    tiny_logs.write_york(tmp / 'york_cv', images=4, off_deg=5.0)
     tiny_logs.write_camvid(tmp / 'camvid')
     tiny_logs.write_camvid(tmp / 'photos_src')
     (tmp / 'photos').mkdir()
@@ -189,7 +194,8 @@ def inputs(tmp_path_factory):
         p.rename(tmp / 'photos' / p.name)
     tiny_logs.write_scip2_capture(tmp / 'capture.bin', frames=3)
     return {'carmen': str(tmp / 'carmen'), 'wean': str(tmp / 'wean'),
-            'york': str(tmp / 'york'), 'camvid': str(tmp / 'camvid'),
+            'york': str(tmp / 'york'), 'york_cv': str(tmp / 'york_cv'),
+            'camvid': str(tmp / 'camvid'),
             'photos': str(tmp / 'photos'), 'small_bag': str(tmp / 'small_bag'),
             'bag': str(REPO / 'bags' / 'office'), 'hallway': str(REPO / 'bags' / 'hallway'),
             'corridor': str(REPO / 'bags' / 'corridor'), 'capture': str(tmp / 'capture.bin'),

@@ -98,12 +98,15 @@ def write_wean(folder: Path, name: str = 'robotdata1', n: int = 40, seed: int = 
     return folder
 
 
-def write_york(folder: Path, images: int = 2, seed: int = 0) -> Path:
+def write_york(folder: Path, images: int = 2, seed: int = 0, off_deg: float = 0.0) -> Path:
     """Write York Urban-format images (``NAME.jpg`` + ``NAME_gt.npz``) of line segments.
 
     Each 640 x 480 image holds dark segments toward the three orthogonal vanishing points
     of a random camera rotation (the dataset's intrinsics and y-up convention); the
     ground truth lists the segments and their vanishing point (1-based, as the dataset).
+    ``off_deg``: in every odd-numbered image the true direction nearest the optical axis
+    is turned by this angle about the camera's x axis, so an estimate of it is about that
+    far off (directions on both sides of 2 deg, as a calibration needs).
     """
     import cv2
     from landmark_nav.evaluation.vanishing_points import YORK_FLIP, YORK_K
@@ -129,6 +132,12 @@ def write_york(folder: Path, images: int = 2, seed: int = 0) -> Path:
                 lines.append([p[0], p[1], e[0], e[1]])
                 assoc.append(i + 1)
         cv2.imwrite(str(folder / f'T{n:03d}.jpg'), img)
+        if n % 2:
+            t = math.radians(off_deg)
+            k = int(np.argmax(np.abs(rot[2])))
+            rot = rot.copy()
+            rot[:, k] = np.array([[1, 0, 0], [0, math.cos(t), -math.sin(t)],
+                                  [0, math.sin(t), math.cos(t)]]) @ rot[:, k]
         np.savez(folder / f'T{n:03d}_gt.npz', vp=np.linalg.inv(YORK_FLIP) @ rot,
                  lines=np.array(lines), vp_association=np.array(assoc))
     return folder

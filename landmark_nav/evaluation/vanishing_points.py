@@ -22,10 +22,10 @@ Metrics (angles between axial directions, ``acos |a . b|``, in degrees):
   detected partner), as the Manhattan-frame literature reports them.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 import time
-from typing import Callable, Dict, List, Sequence, Tuple, Union
+from typing import Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import cv2
 from landmark_nav.corridor.vanishing_point import (chapter_vanishing_point, manhattan_frame,
@@ -33,7 +33,7 @@ from landmark_nav.corridor.vanishing_point import (chapter_vanishing_point, manh
                                                    VPParams)
 from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CORRECT_DEG,
                                                  fit_calibration, VPCalibration)
-from landmark_nav.vision.image_lines import detect_lines, LineParams
+from landmark_nav.vision.image_lines import detect_lines, ImageLines, LineParams
 import numpy as np
 
 #: York Urban intrinsics (its README): f = 6.05317 mm / 0.00896875 mm per pixel.
@@ -237,7 +237,8 @@ class DirectionSample:
 
     ``column`` 0 is the detected direction closest to the optical axis (the corridor
     direction); ``error`` [deg] is against the true direction matched to it (one-to-one
-    assignment, :func:`matched_errors`).
+    assignment, :func:`matched_errors`); ``true_axis``: that true direction is the one
+    closest to the optical axis.
     """
 
     image: str
@@ -250,14 +251,28 @@ class DirectionSample:
     inliers: int
     log10_nfa: float
     error: float
+    true_axis: bool
+
+
+def image_lines(item: YorkImage, scale: float = 1.0, line_method: str = 'segmented_hough'
+                ) -> Tuple[ImageLines, np.ndarray]:
+    """Return the line segments of one image resized by ``scale`` and the image's K."""
+    img, K = _load_scaled(item, scale)
+    return detect_lines(img, line_method), K
 
 
 def confidence_samples(item: YorkImage, scale: float = 1.0,
                        line_method: str = 'segmented_hough',
-                       vp_params: VPParams = VPParams()) -> List[DirectionSample]:
-    """Return the three detected directions of one image with their features and errors."""
-    img, K = _load_scaled(item, scale)
-    lines = detect_lines(img, line_method)
+                       vp_params: VPParams = VPParams(),
+                       lines: Optional[Tuple[ImageLines, np.ndarray]] = None
+                       ) -> List[DirectionSample]:
+    """Return the three detected directions of one image with their features and errors.
+
+    ``lines``: the image's ``(lines, K)`` from :func:`image_lines` at ``scale`` (detected
+    here when None). ``true_axis`` marks the sample matched to the true direction closest
+    to the optical axis (its error is :class:`FrameResult`'s ``axis``).
+    """
+    lines, K = image_lines(item, scale, line_method) if lines is None else lines
     frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
     conf = assess_frame(frame, lines.segments, K, vp_params.sigma_px, gate=vp_params.gate,
                         sigma_angle_deg=vp_params.sigma_angle_deg)
@@ -270,7 +285,8 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].sigma_frame,
                             conf[k].ambiguity, focal,
                             conf[k].inliers, conf[k].log10_nfa,
-                            float(cost[k, c[list(r).index(k)]]))
+                            float(cost[k, c[list(r).index(k)]]),
+                            c[list(r).index(k)] == item.axis_index)
             for k in range(3)]
 
 
@@ -298,25 +314,101 @@ def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
                            threshold_on=[s.column == 0 for s in samples])
 
 
+def image_folds(names: Sequence[str], folds: int = 5) -> Dict[str, int]:
+    """Return the fold of each image: in name order, image ``i`` to fold ``i mod folds``."""
+    return {n: i % folds for i, n in enumerate(sorted(set(names)))}
+
+
+def _held_out(samples: Sequence[DirectionSample], fold: int, cal: VPCalibration
+              ) -> List[HeldOut]:
+    """Return ``samples`` (one fold's) scored by a calibration fitted without them."""
+    out = []
+    for s in samples:
+        p, _, r95 = assess_direction(s.sigma_cov, s.sigma_frame, s.focal_px, s.inliers,
+                                     s.log10_nfa, cal)
+        out.append(HeldOut(s, fold, p, float(np.degrees(r95)), p >= cal.p_confident))
+    return out
+
+
 def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
                    ) -> Tuple[List[HeldOut], List[VPCalibration]]:
     """Score every sample with a calibration fitted on the other folds of images.
 
-    Images are dealt to the folds in name order (image ``i`` to fold ``i mod folds``); all
-    sizes and directions of an image stay in its fold.
+    Images are dealt to the folds by :func:`image_folds`; all sizes and directions of an
+    image stay in its fold. The samples' segment noise is the same for every fold (see
+    :func:`cross_validate_noise` for noise fitted per fold).
     """
-    names = sorted({s.image for s in samples})
-    fold_of = {n: i % folds for i, n in enumerate(names)}
+    fold_of = image_folds([s.image for s in samples], folds)
     out, cals = [], []
     for f in range(folds):
         cal = calibrate([s for s in samples if fold_of[s.image] != f])
         cals.append(cal)
-        for s in samples:
-            if fold_of[s.image] == f:
-                p, _, r95 = assess_direction(s.sigma_cov, s.sigma_frame, s.focal_px,
-                                             s.inliers, s.log10_nfa, cal)
-                out.append(HeldOut(s, f, p, float(np.degrees(r95)), p >= cal.p_confident))
+        out += _held_out([s for s in samples if fold_of[s.image] == f], f, cal)
     return out, cals
+
+
+@dataclass(frozen=True)
+class FoldNoise:
+    """The segment noise fitted on one fold's training images (:func:`segment_noise`)."""
+
+    sigma_px: float
+    sigma_angle_deg: float
+    segments: int
+
+
+def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (1.0, 0.5),
+                         vp_params: VPParams = VPParams(), folds: int = 5,
+                         line_method: str = 'segmented_hough', noise_scale: float = 1.0
+                         ) -> Tuple[List[HeldOut], List[VPCalibration], List[FoldNoise]]:
+    """Held-out directions with the segment noise *and* the confidence fitted per fold.
+
+    For each fold of images (:func:`image_folds`): the segment noise ``(sigma_px,
+    sigma_angle_deg)`` is fitted on the other folds' images at ``noise_scale``
+    (:func:`segment_noise`, as ``VPParams``' defaults were fitted on all images at 640 x
+    480); every image is estimated at every size in ``scales`` with that noise; the
+    confidence model is fitted on the other folds' directions (:func:`calibrate`) and
+    applies to the fold's own. The segments the noise is fitted on are labelled with
+    ``vp_params.sigma_px`` and no direction noise (as ``segment_noise`` is used for the
+    defaults); apart from that labelling constant nothing of a held-out image enters its
+    estimate's constants. Lines are detected once per image and size (the noise changes
+    only the Manhattan search).
+
+    Returns:
+        ``(held-out directions, calibration per fold, noise per fold)``.
+    """
+    names = [it.name for it in items]
+    fold_of = image_folds(names, folds)
+    lines = {(it.name, sc): image_lines(it, sc, line_method)
+             for sc in sorted(set(scales) | {noise_scale}) for it in items}
+    label = replace(vp_params, sigma_angle_deg=0.0)
+    residuals = {it.name: segment_residuals(it, noise_scale, label, line_method,
+                                            lines[it.name, noise_scale]) for it in items}
+    out, cals, noises = [], [], []
+    for f in range(folds):
+        train = [n for n in names if fold_of[n] != f]
+        sp, sa, kept = fit_segment_noise(*(np.concatenate([residuals[n][i] for n in train])
+                                           for i in range(3)))
+        noises.append(FoldNoise(sp, sa, kept))
+        vp = replace(vp_params, sigma_px=sp, sigma_angle_deg=sa)
+        samples = [s for sc in scales for it in items
+                   for s in confidence_samples(it, sc, line_method, vp, lines[it.name, sc])]
+        cal = calibrate([s for s in samples if fold_of[s.image] != f])
+        cals.append(cal)
+        out += _held_out([s for s in samples if fold_of[s.image] == f], f, cal)
+    return out, cals, noises
+
+
+def accuracy_summary(held: Sequence[HeldOut]) -> Dict[str, float]:
+    """Return the accuracy of held-out directions as :func:`summarize` names it [deg, 0-1].
+
+    ``axis_*``: the detection matched to each image's true direction closest to the
+    optical axis; ``all_median``: the median over all three matched directions.
+    """
+    axis = np.array([h.sample.error for h in held if h.sample.true_axis])
+    every = np.array([h.sample.error for h in held])
+    return {'images': float(axis.size), 'axis_median': float(np.median(axis)),
+            'axis_within_2deg': float(np.mean(axis <= CORRECT_DEG)),
+            'all_median': float(np.median(every))}
 
 
 def confidence_summary(held: Sequence[HeldOut]) -> Dict[str, float]:
@@ -341,38 +433,44 @@ def confidence_summary(held: Sequence[HeldOut]) -> Dict[str, float]:
 
 
 # ----------------------------------------------------------------------------- line noise
-def segment_noise(items: Sequence[YorkImage], scale: float = 1.0,
-                  vp_params: VPParams = VPParams(), line_method: str = 'segmented_hough',
-                  trim: float = 4.0) -> Tuple[float, float, int]:
-    """Fit the segment noise ``(sigma_px, sigma_angle_deg)`` to residuals of true directions.
+def segment_residuals(item: YorkImage, scale: float = 1.0, vp_params: VPParams = VPParams(),
+                      line_method: str = 'segmented_hough',
+                      lines: Optional[Tuple[ImageLines, np.ndarray]] = None
+                      ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``(r, a, b)`` of one image's labelled segments against its true directions.
 
-    Each image's segments labelled by :func:`manhattan_frame` (with ``vp_params``) are
-    scored against the true direction matched to their label; the two noise terms of
-    :func:`~landmark_nav.corridor.vanishing_point.residual_terms` are fitted by maximum
-    likelihood (``r ~ N(0, sigma_px^2 a + sigma_angle^2 b)``), segments beyond ``trim``
-    sigma dropped and the fit repeated until the kept set no longer changes (at most 10
-    times).
+    The segments labelled by :func:`manhattan_frame` (with ``vp_params``) are scored
+    against the true direction matched to their label
+    (:func:`~landmark_nav.corridor.vanishing_point.residual_terms`). ``lines``: as for
+    :func:`confidence_samples`.
+    """
+    from scipy.optimize import linear_sum_assignment
+    lines, K = image_lines(item, scale, line_method) if lines is None else lines
+    frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
+    cost = np.array([[angular_error_deg(frame.directions[:, i], item.directions[:, j])
+                      for j in range(3)] for i in range(3)])
+    rs, As, Bs = [np.zeros(0)], [np.zeros(0)], [np.zeros(0)]
+    for k, j in zip(*linear_sum_assignment(cost)):
+        mask = frame.labels == k
+        if np.any(mask):
+            r, a, b = residual_terms(lines.segments[mask], K, item.directions[:, j])
+            rs.append(r)
+            As.append(a)
+            Bs.append(b)
+    return np.concatenate(rs), np.concatenate(As), np.concatenate(Bs)
+
+
+def fit_segment_noise(r: np.ndarray, a: np.ndarray, b: np.ndarray, trim: float = 4.0
+                      ) -> Tuple[float, float, int]:
+    """Fit ``r ~ N(0, sigma_px^2 a + sigma_angle^2 b)`` by maximum likelihood.
+
+    Residuals beyond ``trim`` sigma are dropped and the fit repeated until the kept set no
+    longer changes (at most 10 times).
 
     Returns:
-        ``(sigma_px, sigma_angle_deg, segments kept)``.
+        ``(sigma_px, sigma_angle_deg, residuals kept)``.
     """
-    from scipy.optimize import linear_sum_assignment, minimize
-    rs, As, Bs = [], [], []
-    for item in items:
-        img, K = _load_scaled(item, scale)
-        lines = detect_lines(img, line_method)
-        frame = manhattan_frame(lines.segments, K, lines.weights, vp_params)
-        cost = np.array([[angular_error_deg(frame.directions[:, i], item.directions[:, j])
-                          for j in range(3)] for i in range(3)])
-        rows, cols = linear_sum_assignment(cost)
-        for k, j in zip(rows, cols):
-            mask = frame.labels == k
-            if np.any(mask):
-                r, a, b = residual_terms(lines.segments[mask], K, item.directions[:, j])
-                rs.append(r)
-                As.append(a)
-                Bs.append(b)
-    r, a, b = (np.concatenate(x) for x in (rs, As, Bs))
+    from scipy.optimize import minimize
     keep = np.isfinite(r) & np.isfinite(a) & np.isfinite(b)
     t = np.array([0.0, np.log(1e-3)])
     for _ in range(10):
@@ -386,3 +484,19 @@ def segment_noise(items: Sequence[YorkImage], scale: float = 1.0,
             break
         keep = new
     return float(np.exp(t[0])), float(np.degrees(np.exp(t[1]))), int(np.count_nonzero(keep))
+
+
+def segment_noise(items: Sequence[YorkImage], scale: float = 1.0,
+                  vp_params: VPParams = VPParams(), line_method: str = 'segmented_hough',
+                  trim: float = 4.0) -> Tuple[float, float, int]:
+    """Fit the segment noise ``(sigma_px, sigma_angle_deg)`` to residuals of true directions.
+
+    Each image's labelled segments (:func:`segment_residuals`) are pooled and the two
+    noise terms fitted by :func:`fit_segment_noise`.
+
+    Returns:
+        ``(sigma_px, sigma_angle_deg, segments kept)``.
+    """
+    res = [segment_residuals(item, scale, vp_params, line_method) for item in items]
+    return fit_segment_noise(*(np.concatenate([x[i] for x in res]) for i in range(3)),
+                             trim=trim)
