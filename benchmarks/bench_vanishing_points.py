@@ -85,6 +85,12 @@ def main(argv=None) -> int:
                     help="--confidence with VPParams' noise (fitted on all images) in every fold")
     ap.add_argument('--no-orthogonal', action='store_true',
                     help='the Manhattan frame without the joint refinement of its triad')
+    ap.add_argument('--noise-per-size', action='store_true',
+                    help='--confidence with the segment noise fitted at each size for that size')
+    ap.add_argument('--model-per-size', action='store_true',
+                    help='--confidence with one confidence model per size')
+    ap.add_argument('--orthogonality', action='store_true',
+                    help='--confidence with the orthogonality residual as a fifth feature')
     args = ap.parse_args(argv)
     vp = replace(VPParams(), orthogonal=not args.no_orthogonal)
     items = load_york_urban(data_folder(args.data))[:args.images]
@@ -99,8 +105,17 @@ def main(argv=None) -> int:
         ap.error('--in-sample-noise goes with --confidence')
     if args.confidence and not 2 <= args.folds <= len(items):
         ap.error(f'--folds {args.folds}: give 2 to the number of images ({len(items)})')
+    if (args.noise_per_size or args.model_per_size or args.orthogonality) \
+            and not args.confidence:
+        ap.error('--noise-per-size, --model-per-size and --orthogonality go with --confidence')
+    if args.in_sample_noise and (args.noise_per_size or args.model_per_size
+                                 or args.orthogonality):
+        ap.error('--in-sample-noise goes without --noise-per-size, --model-per-size and '
+                 '--orthogonality')
     if args.confidence and not args.in_sample_noise:
-        return _confidence(*cross_validate_noise(items, scales, vp, args.folds), scales)
+        return _confidence(*cross_validate_noise(
+            items, scales, vp, args.folds, noise_scale=None if args.noise_per_size else 1.0,
+            per_size=args.model_per_size, orthogonality=args.orthogonality), scales)
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
                    for s in confidence_samples(it, scale, vp_params=vp)]
@@ -108,7 +123,8 @@ def main(argv=None) -> int:
             return _calibrate(samples, scales)
         held, cals = cross_validate(samples, args.folds)
         noise = FoldNoise(vp.sigma_px, vp.sigma_angle_deg, 0)
-        return _confidence(held, cals, [noise] * len(cals), scales, in_sample=True)
+        return _confidence(held, [{sc: c for sc in scales} for c in cals],
+                           [{sc: noise for sc in scales}] * len(cals), scales, in_sample=True)
     for scale in scales:
         w, h = round(640 * scale), round(480 * scale)
         rows = {}
@@ -158,15 +174,19 @@ def _calibrate(samples, scales) -> int:
 
 def _confidence(held, cals, noises, scales, in_sample=False) -> int:
     if in_sample:
+        n = noises[0][scales[0]]
         print(f'Segment noise of every fold: VPParams (fitted on all images): sigma_px '
-              f'{noises[0].sigma_px:.3f} px, sigma_angle {noises[0].sigma_angle_deg:.3f} deg')
-    print(f'Per-fold constants (fitted on the other {len(cals) - 1} folds):')
-    print(f'  {"fold":>4s}{"sig px":>8s}{"sig deg":>8s}{"segs":>6s}{"w0":>8s}{"w1":>8s}'
-          f'{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}{"p conf":>8s}')
-    for f, (c, n) in enumerate(zip(cals, noises)):
-        print(f'  {f:4d}{n.sigma_px:8.3f}{n.sigma_angle_deg:8.3f}{n.segments:6d}'
-              + ''.join(f'{w:8.3f}' for w in c.weights)
-              + f'{c.scale:7.3f}{c.floor_deg:7.3f}{c.sigma_wrong_deg:7.2f}{c.p_confident:8.3f}')
+              f'{n.sigma_px:.3f} px, sigma_angle {n.sigma_angle_deg:.3f} deg')
+    print(f'Per-fold constants (fitted on the other {len(cals) - 1} folds), per size:')
+    print(f'  {"fold":>4s}{"size":>5s}{"sig px":>8s}{"sig deg":>8s}{"segs":>6s}{"w0":>8s}'
+          f'{"w1":>8s}{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}{"p conf":>8s}')
+    for f, (cal, noise) in enumerate(zip(cals, noises)):
+        for scale in scales:
+            c, n = cal[scale], noise[scale]
+            print(f'  {f:4d}{round(640 * scale):5d}{n.sigma_px:8.3f}{n.sigma_angle_deg:8.3f}'
+                  f'{n.segments:6d}' + ''.join(f'{w:8.3f}' for w in c.weights)
+                  + f'{c.scale:7.3f}{c.floor_deg:7.3f}{c.sigma_wrong_deg:7.2f}'
+                  f'{c.p_confident:8.3f}')
     for scale in scales:
         w, h = round(640 * scale), round(480 * scale)
         rows = [x for x in held if x.sample.scale == scale]

@@ -8,7 +8,8 @@ from landmark_nav.corridor.vanishing_point import (_Geometry, chapter_vanishing_
                                                    refine_manhattan, residual_terms,
                                                    vanishing_point, VPParams)
 from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CALIBRATION,
-                                                 fit_calibration, log10_nfa, mixture_radius)
+                                                 features, fit_calibration, log10_nfa,
+                                                 mixture_radius, orthogonality_residuals)
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -316,6 +317,21 @@ def test_mixture_radius_and_calibration_fit():
     assert assess_direction(s_cov[0], s_cov[0], 500.0, 10, 0.0, cal)[0] == 0.0  # NFA 1
     with pytest.raises(ValueError, match='differ in length'):
         fit_calibration(s_cov, s_cov, f, np.zeros(3), np.full(n, -10.0), err)
+
+
+def test_orthogonality_residual_is_the_angle_to_the_other_two_directions_normal():
+    R = Rotation.from_euler('xyz', [0.3, -0.2, 0.5]).as_matrix()
+    assert np.all(orthogonality_residuals(R) < 1e-7)
+    # column 0 tilted by 3 deg towards column 1: 3 deg off the normal of columns 1 and 2,
+    # and columns 1 and 2 each 3 deg off the normal of the others (the plane of 0 and 2, of
+    # 0 and 1, tilts with column 0)
+    D = R.copy()
+    D[:, 0] = math.cos(math.radians(3)) * R[:, 0] + math.sin(math.radians(3)) * R[:, 1]
+    assert np.degrees(orthogonality_residuals(D)) == pytest.approx([3.0, 3.0, 0.0], abs=1e-9)
+    # the fifth feature of the confidence model, only when given
+    assert features(0.01, 0.01, 500.0, 10).shape == (4,)
+    assert features(0.01, 0.01, 500.0, 10, math.radians(3))[4] == pytest.approx(
+        math.log(math.radians(3)))
 
 
 def test_nfa_counts_long_consistent_lines_not_their_number():

@@ -122,7 +122,8 @@ def test_held_out_noise_is_fitted_without_the_fold(tmp_path):
     f = 1                                                     # trained on T000, T002, T003
     train = [it for it in items if it.name != 'T001']
     sp, sa, kept = segment_noise(train, 1.0, VPParams(sigma_angle_deg=0.0))
-    assert (noises[f].sigma_px, noises[f].sigma_angle_deg, noises[f].segments) == (sp, sa, kept)
+    assert (noises[f][1.0].sigma_px, noises[f][1.0].sigma_angle_deg,
+            noises[f][1.0].segments) == (sp, sa, kept)
     ref = confidence_samples(items[1], 1.0, vp_params=replace(VPParams(), sigma_px=sp,
                                                               sigma_angle_deg=sa))
     assert [h.sample for h in held if h.fold == f] == ref

@@ -139,6 +139,7 @@ class DirectionConfidence:
         log10_nfa: a-contrario number of false alarms of the inliers (module docstring).
         sigma_cov: first-order spread (largest std of the direction covariance) [rad].
         sigma_frame: the largest finite ``sigma_cov`` of the frame's directions [rad].
+        orthogonality: angle to the normal of the frame's other two directions [rad].
         ambiguity: best competing hypothesis' score over the frame's (see the module).
         p_correct: probability of being within 2 deg of the truth.
         sigma: spread of the correct mode [rad].
@@ -155,6 +156,7 @@ class DirectionConfidence:
     log10_nfa: float
     sigma_cov: float
     sigma_frame: float
+    orthogonality: float
     ambiguity: float
     p_correct: float
     sigma: float
@@ -171,14 +173,33 @@ def _log_spread_px(sigma: float, focal_px: float) -> float:
     return math.log(max(s * focal_px, 1e-6))
 
 
-def features(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int
-             ) -> np.ndarray:
+def features(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int,
+             orthogonality: Optional[float] = None) -> np.ndarray:
     """Return the logistic model's features ``(1, ln(sigma_cov f), ln n, ln(sigma_frame f))``.
 
-    Spreads [rad] are capped at pi / 2 (inf: no spread known), ``n`` at least 1.
+    Spreads [rad] are capped at pi / 2 (inf: no spread known), ``n`` at least 1. With
+    ``orthogonality`` [rad] given, ``ln(max(orthogonality, 1e-4))`` is appended.
     """
-    return np.array([1.0, _log_spread_px(sigma_cov, focal_px), math.log(max(inliers, 1)),
-                     _log_spread_px(sigma_frame, focal_px)])
+    x = [1.0, _log_spread_px(sigma_cov, focal_px), math.log(max(inliers, 1)),
+         _log_spread_px(sigma_frame, focal_px)]
+    if orthogonality is not None:
+        x.append(math.log(max(orthogonality, 1e-4)))
+    return np.array(x)
+
+
+def orthogonality_residuals(directions: np.ndarray) -> np.ndarray:
+    """Return, per column ``d_k``, its angle to the normal of the other two [rad].
+
+    Each direction is refined on its own lines after the triad's joint refinement, so a
+    direction that went to lines of no Manhattan direction leaves the triad's orthogonality.
+    """
+    D = np.asarray(directions, dtype=float)
+    out = np.zeros(3)
+    for k in range(3):
+        c = np.cross(D[:, (k + 1) % 3], D[:, (k + 2) % 3])
+        c /= max(float(np.linalg.norm(c)), 1e-12)
+        out[k] = math.acos(min(1.0, abs(float(c @ D[:, k]))))
+    return out
 
 
 def mixture_radius(p: float, sigma: float, sigma_wrong: float,
@@ -238,8 +259,8 @@ def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
 
 
 def assess_direction(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int,
-                     nfa: float, calibration: VPCalibration = CALIBRATION
-                     ) -> Tuple[float, float, float]:
+                     nfa: float, calibration: VPCalibration = CALIBRATION,
+                     orthogonality: float = 0.0) -> Tuple[float, float, float]:
     """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
 
     ``sigma_cov`` [rad] is its first-order spread, ``sigma_frame`` [rad] the largest of its
@@ -251,7 +272,8 @@ def assess_direction(sigma_cov: float, sigma_frame: float, focal_px: float, inli
     if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
     z = float(np.asarray(c.weights, dtype=float)
-              @ features(sigma_cov, sigma_frame, focal_px, inliers))
+              @ features(sigma_cov, sigma_frame, focal_px, inliers,
+                         orthogonality if len(c.weights) > 4 else None))
     p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
     sigma = math.hypot(c.scale * sigma_cov, math.radians(c.floor_deg))
     return p, sigma, mixture_radius(p, sigma, s_wrong)
@@ -281,6 +303,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
     spreads = [math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
                if np.all(np.isfinite(cov)) else math.inf for cov in covs]
     s_frame = max([x for x in spreads if math.isfinite(x)], default=math.inf)
+    orth = orthogonality_residuals(frame.directions)
     out = []
     for k, vp in enumerate(frame.points):
         d = vp.direction
@@ -289,12 +312,12 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         finite = math.isfinite(s_cov)
         n_in = int(np.count_nonzero(vp.inliers))
         nfa = log10_nfa(segments, vp.inliers, sigma_px, gate, sigma_angle_deg)
-        p, sigma, r95 = assess_direction(s_cov, s_frame, focal, n_in, nfa, c)
+        p, sigma, r95 = assess_direction(s_cov, s_frame, focal, n_in, nfa, c, float(orth[k]))
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
             inliers=n_in, support=vp.support, log10_nfa=nfa, sigma_cov=s_cov,
-            sigma_frame=s_frame,
+            sigma_frame=s_frame, orthogonality=float(orth[k]),
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
             first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
             mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
@@ -342,7 +365,8 @@ def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
                     focal_px: Sequence[float], inliers: Sequence[int], nfa: Sequence[float],
                     error_deg: Sequence[float],
                     precision: float = 0.98,
-                    threshold_on: Optional[Sequence[bool]] = None) -> VPCalibration:
+                    threshold_on: Optional[Sequence[bool]] = None,
+                    orthogonality: Optional[Sequence[float]] = None) -> VPCalibration:
     """Fit the confidence model on directions with known errors (module docstring).
 
     Args:
@@ -356,6 +380,8 @@ def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
         threshold_on: the directions the logistic weights and ``p_confident`` are fitted
             on (default: all), e.g. the corridor directions only; ``a``, ``b`` and
             ``sigma_wrong`` use all.
+        orthogonality: with it, their :func:`orthogonality_residuals` [rad] are a fifth
+            feature.
 
     Raises:
         ValueError: inputs of different lengths, or no direction (of ``threshold_on``) on
@@ -375,7 +401,8 @@ def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
         np.asarray(threshold_on, dtype=bool)
     if good[on].all() or not good[on].any():
         raise ValueError('calibration needs directions both within and beyond 2 deg')
-    X = np.array([features(*v) for v in zip(s, sf, f, m)])
+    o = [None] * len(e) if orthogonality is None else list(orthogonality)
+    X = np.array([features(*v) for v in zip(s, sf, f, m, o)])
     w = _logistic(X[on], good[on].astype(float))
     ok = good & np.isfinite(s)
     scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok], CORRECT_DEG)

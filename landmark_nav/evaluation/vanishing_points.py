@@ -248,6 +248,7 @@ class DirectionSample:
     sigma_frame: float
     ambiguity: float
     focal_px: float
+    orthogonality: float
     inliers: int
     log10_nfa: float
     error: float
@@ -283,7 +284,7 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     r, c = linear_sum_assignment(cost)
     focal = float(np.sqrt(K[0, 0] * K[1, 1]))
     return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].sigma_frame,
-                            conf[k].ambiguity, focal,
+                            conf[k].ambiguity, focal, conf[k].orthogonality,
                             conf[k].inliers, conf[k].log10_nfa,
                             float(cost[k, c[list(r).index(k)]]),
                             c[list(r).index(k)] == item.axis_index)
@@ -301,7 +302,8 @@ class HeldOut:
     confident: bool
 
 
-def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
+def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = False
+              ) -> VPCalibration:
     """Fit the confidence model on samples (:func:`~.vp_confidence.fit_calibration`).
 
     All directions fit the correct mode's spread and the wrong mode's; the logistic weights
@@ -311,7 +313,9 @@ def calibrate(samples: Sequence[DirectionSample]) -> VPCalibration:
                            [s.focal_px for s in samples],
                            [s.inliers for s in samples],
                            [s.log10_nfa for s in samples], [s.error for s in samples],
-                           threshold_on=[s.column == 0 for s in samples])
+                           threshold_on=[s.column == 0 for s in samples],
+                           orthogonality=([s.orthogonality for s in samples]
+                                          if orthogonality else None))
 
 
 def image_folds(names: Sequence[str], folds: int = 5) -> Dict[str, int]:
@@ -325,7 +329,7 @@ def _held_out(samples: Sequence[DirectionSample], fold: int, cal: VPCalibration
     out = []
     for s in samples:
         p, _, r95 = assess_direction(s.sigma_cov, s.sigma_frame, s.focal_px, s.inliers,
-                                     s.log10_nfa, cal)
+                                     s.log10_nfa, cal, s.orthogonality)
         out.append(HeldOut(s, fold, p, float(np.degrees(r95)), p >= cal.p_confident))
     return out
 
@@ -358,43 +362,58 @@ class FoldNoise:
 
 def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (1.0, 0.5),
                          vp_params: VPParams = VPParams(), folds: int = 5,
-                         line_method: str = 'segmented_hough', noise_scale: float = 1.0
-                         ) -> Tuple[List[HeldOut], List[VPCalibration], List[FoldNoise]]:
+                         line_method: str = 'segmented_hough',
+                         noise_scale: Optional[float] = 1.0, per_size: bool = False,
+                         orthogonality: bool = False
+                         ) -> Tuple[List[HeldOut], List[Dict[float, VPCalibration]],
+                                    List[Dict[float, FoldNoise]]]:
     """Held-out directions with the segment noise *and* the confidence fitted per fold.
 
     For each fold of images (:func:`image_folds`): the segment noise ``(sigma_px,
     sigma_angle_deg)`` is fitted on the other folds' images at ``noise_scale``
     (:func:`segment_noise`, as ``VPParams``' defaults were fitted on all images at 640 x
-    480); every image is estimated at every size in ``scales`` with that noise; the
-    confidence model is fitted on the other folds' directions (:func:`calibrate`) and
-    applies to the fold's own. The segments the noise is fitted on are labelled with
-    ``vp_params.sigma_px`` and no direction noise (as ``segment_noise`` is used for the
-    defaults); apart from that labelling constant nothing of a held-out image enters its
-    estimate's constants. Lines are detected once per image and size (the noise changes
-    only the Manhattan search).
+    480), or, with ``noise_scale=None``, at each size in ``scales`` for the images of that
+    size; every image is estimated at every size in ``scales`` with that noise; the
+    confidence model is fitted on the other folds' directions (:func:`calibrate`; with
+    ``per_size``, one model per size on that size's directions) and applies to the fold's
+    own. The segments the noise is fitted on are labelled with ``vp_params.sigma_px`` and
+    no direction noise (as ``segment_noise`` is used for the defaults); apart from that
+    labelling constant nothing of a held-out image enters its estimate's constants. Lines
+    are detected once per image and size (the noise changes only the Manhattan search).
 
     Returns:
-        ``(held-out directions, calibration per fold, noise per fold)``.
+        ``(held-out directions, calibration per fold and size, noise per fold and size)``.
     """
     names = [it.name for it in items]
     fold_of = image_folds(names, folds)
+    noise_at = {sc: sc if noise_scale is None else noise_scale for sc in scales}
     lines = {(it.name, sc): image_lines(it, sc, line_method)
-             for sc in sorted(set(scales) | {noise_scale}) for it in items}
+             for sc in sorted(set(scales) | set(noise_at.values())) for it in items}
     label = replace(vp_params, sigma_angle_deg=0.0)
-    residuals = {it.name: segment_residuals(it, noise_scale, label, line_method,
-                                            lines[it.name, noise_scale]) for it in items}
+    residuals = {(it.name, ns): segment_residuals(it, ns, label, line_method, lines[it.name, ns])
+                 for ns in set(noise_at.values()) for it in items}
     out, cals, noises = [], [], []
     for f in range(folds):
         train = [n for n in names if fold_of[n] != f]
-        sp, sa, kept = fit_segment_noise(*(np.concatenate([residuals[n][i] for n in train])
-                                           for i in range(3)))
-        noises.append(FoldNoise(sp, sa, kept))
-        vp = replace(vp_params, sigma_px=sp, sigma_angle_deg=sa)
+        fitted = {}
+        for ns in sorted(set(noise_at.values()), reverse=True):
+            sp, sa, kept = fit_segment_noise(*(np.concatenate(
+                [residuals[n, ns][i] for n in train]) for i in range(3)))
+            fitted[ns] = FoldNoise(sp, sa, kept)
+        noises.append({sc: fitted[noise_at[sc]] for sc in scales})
         samples = [s for sc in scales for it in items
-                   for s in confidence_samples(it, sc, line_method, vp, lines[it.name, sc])]
-        cal = calibrate([s for s in samples if fold_of[s.image] != f])
-        cals.append(cal)
-        out += _held_out([s for s in samples if fold_of[s.image] == f], f, cal)
+                   for s in confidence_samples(it, sc, line_method, replace(
+                       vp_params, sigma_px=noises[f][sc].sigma_px,
+                       sigma_angle_deg=noises[f][sc].sigma_angle_deg), lines[it.name, sc])]
+        groups = {sc: [sc] for sc in scales} if per_size else {None: list(scales)}
+        cal_f = {}
+        for group in groups.values():
+            cal = calibrate([s for s in samples if fold_of[s.image] != f and s.scale in group],
+                            orthogonality)
+            cal_f.update({sc: cal for sc in group})
+            out += _held_out([s for s in samples if fold_of[s.image] == f and s.scale in group],
+                             f, cal)
+        cals.append(cal_f)
     return out, cals, noises
 
 
