@@ -89,8 +89,8 @@ def main(argv=None) -> int:
                     help='--confidence with the segment noise fitted at each size for that size')
     ap.add_argument('--model-per-size', action='store_true',
                     help='--confidence with one confidence model per size')
-    ap.add_argument('--orthogonality', action='store_true',
-                    help='--confidence with the orthogonality residual as a fifth feature')
+    ap.add_argument('--four-features', action='store_true',
+                    help='--confidence without the orthogonality residual as a feature')
     args = ap.parse_args(argv)
     vp = replace(VPParams(), orthogonal=not args.no_orthogonal)
     items = load_york_urban(data_folder(args.data))[:args.images]
@@ -105,17 +105,17 @@ def main(argv=None) -> int:
         ap.error('--in-sample-noise goes with --confidence')
     if args.confidence and not 2 <= args.folds <= len(items):
         ap.error(f'--folds {args.folds}: give 2 to the number of images ({len(items)})')
-    if (args.noise_per_size or args.model_per_size or args.orthogonality) \
+    if (args.noise_per_size or args.model_per_size or args.four_features) \
             and not args.confidence:
-        ap.error('--noise-per-size, --model-per-size and --orthogonality go with --confidence')
+        ap.error('--noise-per-size, --model-per-size and --four-features go with --confidence')
     if args.in_sample_noise and (args.noise_per_size or args.model_per_size
-                                 or args.orthogonality):
+                                 or args.four_features):
         ap.error('--in-sample-noise goes without --noise-per-size, --model-per-size and '
-                 '--orthogonality')
+                 '--four-features')
     if args.confidence and not args.in_sample_noise:
         return _confidence(*cross_validate_noise(
             items, scales, vp, args.folds, noise_scale=None if args.noise_per_size else 1.0,
-            per_size=args.model_per_size, orthogonality=args.orthogonality), scales)
+            per_size=args.model_per_size, orthogonality=not args.four_features), scales)
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
                    for s in confidence_samples(it, scale, vp_params=vp)]
@@ -179,12 +179,14 @@ def _confidence(held, cals, noises, scales, in_sample=False) -> int:
               f'{n.sigma_px:.3f} px, sigma_angle {n.sigma_angle_deg:.3f} deg')
     print(f'Per-fold constants (fitted on the other {len(cals) - 1} folds), per size:')
     print(f'  {"fold":>4s}{"size":>5s}{"sig px":>8s}{"sig deg":>8s}{"segs":>6s}{"w0":>8s}'
-          f'{"w1":>8s}{"w2":>8s}{"w3":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}{"p conf":>8s}')
+          f'{"w1":>8s}{"w2":>8s}{"w3":>8s}{"w4":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}'
+          f'{"p conf":>8s}')
     for f, (cal, noise) in enumerate(zip(cals, noises)):
         for scale in scales:
             c, n = cal[scale], noise[scale]
             print(f'  {f:4d}{round(640 * scale):5d}{n.sigma_px:8.3f}{n.sigma_angle_deg:8.3f}'
                   f'{n.segments:6d}' + ''.join(f'{w:8.3f}' for w in c.weights)
+                  + ('' if len(c.weights) > 4 else f'{"-":>8s}')
                   + f'{c.scale:7.3f}{c.floor_deg:7.3f}{c.sigma_wrong_deg:7.2f}'
                   f'{c.p_confident:8.3f}')
     for scale in scales:

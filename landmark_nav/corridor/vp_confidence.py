@@ -25,12 +25,17 @@ first. Per direction this module states:
   as in a corridor seen along its axis with no line across it; York has no such frame)::
 
       p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n
-                          + w3 ln(sigma_frame f / 1 px))))
+                          + w3 ln(sigma_frame f / 1 px) + w4 ln(o / 1 rad))))
 
-  (the ambiguity, the a-contrario number below as a value and the angle between the
+  and of the direction's orthogonality residual ``o``, its angle to the normal of the
+  frame's other two directions (:func:`orthogonality_residuals`; after the joint
+  refinement each direction is refined on its own lines, and one that went to lines of no
+  Manhattan direction, such as pavement edges, leaves the triad's orthogonality; York's
+  true triads are themselves up to 4 deg off, so this is a soft sign, fitted ``w4`` about
+  -0.8). The ambiguity, the a-contrario number below as a value and the angle between the
   direction and the jointly refined triad's did not separate wrong directions from right
   ones on York; held out they changed the confident fraction by a few per cent and the
-  precision not at all or for the worse).
+  precision not at all or for the worse.
 * an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
   the sphere (the angular error ``e`` of each component Rayleigh distributed): with
   probability ``p`` the correct mode, ``sigma = sqrt((a sigma_cov)^2 + b^2)`` (the
@@ -107,15 +112,16 @@ class VPCalibration:
     """Constants of the confidence model (see the module docstring).
 
     Attributes:
-        weights: logistic weights ``(w0, w1, w2, w3)`` of
-            ``(1, ln(sigma_cov f) [px], ln n, ln(sigma_frame f) [px])``.
+        weights: logistic weights ``(w0, w1, w2, w3, w4)`` of
+            ``(1, ln(sigma_cov f) [px], ln n, ln(sigma_frame f) [px], ln o [rad])`` (four
+            weights: without ``o``, the orthogonality residual).
         scale: ``a``, factor on the first-order spread.
         floor_deg: ``b``, spread added in quadrature [deg].
         sigma_wrong_deg: spread of the wrong mode [deg].
         p_confident: ``p_correct`` at or above which a direction is confident.
     """
 
-    weights: Tuple[float, float, float, float]
+    weights: Tuple[float, ...]
     scale: float
     floor_deg: float
     sigma_wrong_deg: float
@@ -124,9 +130,9 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(6.7105, -1.4404, 0.5759, -1.4683),
+CALIBRATION = VPCalibration(weights=(2.6849, -1.4930, 0.7321, -1.0584, -0.8132),
                             scale=1.3493, floor_deg=0.2026,
-                            sigma_wrong_deg=5.2509, p_confident=0.7906)
+                            sigma_wrong_deg=5.2509, p_confident=0.7547)
 
 
 @dataclass(frozen=True, eq=False)

@@ -302,7 +302,7 @@ class HeldOut:
     confident: bool
 
 
-def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = False
+def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = True
               ) -> VPCalibration:
     """Fit the confidence model on samples (:func:`~.vp_confidence.fit_calibration`).
 
@@ -364,7 +364,7 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
                          vp_params: VPParams = VPParams(), folds: int = 5,
                          line_method: str = 'segmented_hough',
                          noise_scale: Optional[float] = 1.0, per_size: bool = False,
-                         orthogonality: bool = False
+                         orthogonality: bool = True
                          ) -> Tuple[List[HeldOut], List[Dict[float, VPCalibration]],
                                     List[Dict[float, FoldNoise]]]:
     """Held-out directions with the segment noise *and* the confidence fitted per fold.
