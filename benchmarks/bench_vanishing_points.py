@@ -3,8 +3,8 @@
 Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
-        [--scales 1,0.5] [--confidence [--folds K] [--in-sample-noise] | --calibrate |
-        --noise] [--no-orthogonal]
+        [--scales 1,0.5] [--confidence [--folds K] [--in-sample-noise] [--noise-per-size]
+        [--model-per-size] [--four-features] | --calibrate | --noise] [--no-orthogonal]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -42,7 +42,11 @@ maximum-likelihood end-point and direction noise of the segments (``VPParams.sig
 labelled by the estimator without the direction noise
 (:func:`landmark_nav.evaluation.vanishing_points.segment_noise`), per size.
 ``--no-orthogonal``: the Manhattan frame without the joint refinement of its triad
-(``VPParams(orthogonal=False)``), for comparison.
+(``VPParams(orthogonal=False)``), for comparison. Alternatives of ``--confidence``, for
+comparison: ``--noise-per-size`` (the segment noise fitted at each size on that size's
+segments and used for it), ``--model-per-size`` (one confidence model per size, fitted on
+that size's directions), ``--four-features`` (the model without the orthogonality
+residual).
 """
 
 import argparse

@@ -308,6 +308,8 @@ def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = True
 
     All directions fit the correct mode's spread and the wrong mode's; the logistic weights
     and the confidence threshold are fitted on the corridor directions (column 0).
+    ``orthogonality``: the orthogonality residual is the model's fifth feature (as in
+    :data:`~.vp_confidence.CALIBRATION`); False: the four-feature model.
     """
     return fit_calibration([s.sigma_cov for s in samples], [s.sigma_frame for s in samples],
                            [s.focal_px for s in samples],
@@ -376,10 +378,11 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
     size; every image is estimated at every size in ``scales`` with that noise; the
     confidence model is fitted on the other folds' directions (:func:`calibrate`; with
     ``per_size``, one model per size on that size's directions) and applies to the fold's
-    own. The segments the noise is fitted on are labelled with ``vp_params.sigma_px`` and
-    no direction noise (as ``segment_noise`` is used for the defaults); apart from that
-    labelling constant nothing of a held-out image enters its estimate's constants. Lines
-    are detected once per image and size (the noise changes only the Manhattan search).
+    own (with ``orthogonality`` as :func:`calibrate`). The segments the noise is fitted on
+    are labelled with ``vp_params.sigma_px`` and no direction noise (as ``segment_noise``
+    is used for the defaults); apart from that labelling constant nothing of a held-out
+    image enters its estimate's constants. Lines are detected once per image and size (the
+    noise changes only the Manhattan search).
 
     Returns:
         ``(held-out directions, calibration per fold and size, noise per fold and size)``.
