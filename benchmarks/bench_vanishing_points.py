@@ -112,10 +112,8 @@ def main(argv=None) -> int:
     if (args.noise_per_size or args.model_per_size or args.four_features) \
             and not args.confidence:
         ap.error('--noise-per-size, --model-per-size and --four-features go with --confidence')
-    if args.in_sample_noise and (args.noise_per_size or args.model_per_size
-                                 or args.four_features):
-        ap.error('--in-sample-noise goes without --noise-per-size, --model-per-size and '
-                 '--four-features')
+    if args.in_sample_noise and (args.noise_per_size or args.model_per_size):
+        ap.error('--in-sample-noise goes without --noise-per-size and --model-per-size')
     if args.confidence and not args.in_sample_noise:
         return _confidence(*cross_validate_noise(
             items, scales, vp, args.folds, noise_scale=None if args.noise_per_size else 1.0,
@@ -125,7 +123,7 @@ def main(argv=None) -> int:
                    for s in confidence_samples(it, scale, vp_params=vp)]
         if args.calibrate:
             return _calibrate(samples, scales)
-        held, cals = cross_validate(samples, args.folds)
+        held, cals = cross_validate(samples, args.folds, not args.four_features)
         noise = FoldNoise(vp.sigma_px, vp.sigma_angle_deg, 0)
         return _confidence(held, [{sc: c for sc in scales} for c in cals],
                            [{sc: noise for sc in scales}] * len(cals), scales, in_sample=True)

@@ -336,18 +336,19 @@ def _held_out(samples: Sequence[DirectionSample], fold: int, cal: VPCalibration
     return out
 
 
-def cross_validate(samples: Sequence[DirectionSample], folds: int = 5
-                   ) -> Tuple[List[HeldOut], List[VPCalibration]]:
+def cross_validate(samples: Sequence[DirectionSample], folds: int = 5,
+                   orthogonality: bool = True) -> Tuple[List[HeldOut], List[VPCalibration]]:
     """Score every sample with a calibration fitted on the other folds of images.
 
     Images are dealt to the folds by :func:`image_folds`; all sizes and directions of an
     image stay in its fold. The samples' segment noise is the same for every fold (see
-    :func:`cross_validate_noise` for noise fitted per fold).
+    :func:`cross_validate_noise` for noise fitted per fold). ``orthogonality``: as
+    :func:`calibrate`.
     """
     fold_of = image_folds([s.image for s in samples], folds)
     out, cals = [], []
     for f in range(folds):
-        cal = calibrate([s for s in samples if fold_of[s.image] != f])
+        cal = calibrate([s for s in samples if fold_of[s.image] != f], orthogonality)
         cals.append(cal)
         out += _held_out([s for s in samples if fold_of[s.image] == f], f, cal)
     return out, cals
