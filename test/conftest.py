@@ -144,6 +144,28 @@ def hallway_bag_localization(run_once) -> Tuple[dict, Path]:
         filt: evaluate_localization(bag, filt, out_dir=out) for filt in ('ekf', 'ukf')})
 
 
+@pytest.fixture(scope='session')
+def hallway_sonar_map_localization(run_once) -> Tuple[dict, Path]:
+    """Return ``({'summary', 'ekf', 'ukf'}, folder)``: a sonar map of bags/hallway, localized on.
+
+    ``build_sonar_map`` of bags/hallway with its defaults into ``folder / 'map.yaml'``, then
+    ``evaluate_localization`` on that map (EKF and UKF, files in ``folder / 'localization'``):
+    the ``sonar_map_localization`` run of bags/hallway/expected.yaml, once per test run for
+    test_golden.py and test_localization_tools.py.
+    """
+    from landmark_nav.evaluation.localization_bags import evaluate_localization
+    from landmark_nav.tools.localization_tools import build_sonar_map
+    bag = REPO / 'bags' / 'hallway'
+
+    def compute(out: Path) -> dict:  # build_sonar_map creates the folder
+        got = {'summary': build_sonar_map(bag, out=out / 'map.yaml')}
+        for filt in ('ekf', 'ukf'):
+            got[filt] = evaluate_localization(bag, filt, map_path=out / 'map.yaml',
+                                              out_dir=out / 'localization')
+        return got
+    return run_once('hallway_sonar_map_localization', compute)
+
+
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
 
 
