@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 import pickle
 import resource
+import sys
 from typing import Any, Callable, Tuple
 
 from landmark_nav.testing import isolate_dds
@@ -164,6 +165,24 @@ def hallway_sonar_map_localization(run_once) -> Tuple[dict, Path]:
                                               out_dir=out / 'localization')
         return got
     return run_once('hallway_sonar_map_localization', compute)
+
+
+def pytest_configure(config):
+    """Before the pytest-xdist workers start, write the bytecode caches they all need.
+
+    Each worker rewrites and compiles every test module and compiles the package's modules
+    where no cache exists (a fresh clone): done once here, on every CPU, instead. Not where
+    the environment says not to write bytecode, nor with the assertion pass hook (pytest's
+    rewriting of the test modules then depends on the configuration).
+    """
+    if (os.environ.get('PYTEST_XDIST_WORKER') or not config.getoption('numprocesses', None)
+            or sys.dont_write_bytecode or config.getini('enable_assertion_pass_hook')):
+        return
+    from landmark_nav.testing.bytecode_caches import write_bytecode_caches
+    tests = REPO / 'test'
+    write_bytecode_caches(sorted(tests.glob('test_*.py')), sorted(
+        [*(REPO / 'landmark_nav').rglob('*.py'),
+         *(p for p in tests.glob('*.py') if not p.name.startswith(('test_', 'conftest')))]))
 
 
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
