@@ -249,50 +249,56 @@ class Photometry:
 
 
 # ---------------------------------------------------------------------- polygon helpers
+def _clip_edges(pts: list, axis: int, bound: float, keep_ge: bool) -> list:
+    """Clip a polygon (a list of coordinate lists) to one side of ``x[axis] = bound``.
+
+    Sutherland-Hodgman on Python floats (the same IEEE double operations as on numpy rows,
+    without numpy's per-call cost on 2- and 3-vectors).
+    """
+    out = []
+    n = len(pts)
+    for i in range(n):
+        a, b = pts[i], pts[(i + 1) % n]
+        ina = a[axis] >= bound if keep_ge else a[axis] <= bound
+        inb = b[axis] >= bound if keep_ge else b[axis] <= bound
+        if ina:
+            out.append(a)
+        if ina != inb:
+            t = (bound - a[axis]) / (b[axis] - a[axis])
+            out.append([ak + t * (bk - ak) for ak, bk in zip(a, b)])
+    return out
+
+
+def _as_points(poly: np.ndarray) -> list:
+    """Return the rows of a float64 polygon as lists of Python floats."""
+    return np.asarray(poly, dtype=np.float64).tolist()
+
+
 def clip_polygon_near(poly: np.ndarray, near: float, keep_far: bool = True) -> np.ndarray:
     """Clip a 3-D polygon (N, 3) in camera coordinates to ``z >= near`` (Sutherland-Hodgman).
 
     With ``keep_far=False`` keep ``z <= near`` instead.
     """
-    out = []
-    n = len(poly)
-    for i in range(n):
-        a, b = poly[i], poly[(i + 1) % n]
-        ina = a[2] >= near if keep_far else a[2] <= near
-        inb = b[2] >= near if keep_far else b[2] <= near
-        if ina:
-            out.append(a)
-        if ina != inb:
-            t = (near - a[2]) / (b[2] - a[2])
-            out.append(a + t * (b - a))
-    return np.array(out).reshape(-1, 3)
+    return np.array(_clip_edges(_as_points(poly), 2, float(near), keep_far)).reshape(-1, 3)
 
 
 def _clip_polygon_rect(poly: np.ndarray, x0: float, y0: float, x1: float,
                        y1: float) -> np.ndarray:
     """Clip a 2-D polygon (N, 2) to an axis-aligned rectangle."""
-    pts = list(poly)
+    pts = _as_points(poly)
     for axis, bound, keep_ge in ((0, x0, True), (0, x1, False), (1, y0, True), (1, y1, False)):
         if not pts:
             break
-        out = []
-        n = len(pts)
-        for i in range(n):
-            a, b = pts[i], pts[(i + 1) % n]
-            ina = a[axis] >= bound if keep_ge else a[axis] <= bound
-            inb = b[axis] >= bound if keep_ge else b[axis] <= bound
-            if ina:
-                out.append(a)
-            if ina != inb:
-                t = (bound - a[axis]) / (b[axis] - a[axis])
-                out.append(a + t * (b - a))
-        pts = out
+        pts = _clip_edges(pts, axis, float(bound), keep_ge)
     return np.array(pts).reshape(-1, 2)
 
 
 def _area(poly2: np.ndarray) -> float:
+    """Return the area of a 2-D polygon (shoelace formula)."""
     x, y = poly2[:, 0], poly2[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    # y and x rolled by one (np.roll's values, without its per-call cost)
+    y1, x1 = np.concatenate((y[1:], y[:1])), np.concatenate((x[1:], x[:1]))
+    return 0.5 * abs(float(np.dot(x, y1) - np.dot(y, x1)))
 
 
 # ---------------------------------------------------------------------- simulator
