@@ -471,16 +471,21 @@ class CameraSimulator:
         depth = [-float(it[3][:, 2].mean()) for it in items]
         after = [set() for _ in range(n)]  # after[i] = planes that must be drawn after i
 
-        def in_front(b: int, a: int) -> bool:
-            _, R_a, t_a, _ = items[a]
+        sides = []  # per plane a: its normal, a point on it, the camera's side of it
+        for _, R_a, t_a, _ in items:
             nrm = R_a[:, 0]
             cam_side = -float(nrm @ t_a)  # signed distance of the camera from plane a
-            dist = (items[b][3] - t_a) @ nrm
-            return bool(np.all(dist * math.copysign(1.0, cam_side) >= -1e-4))
+            sides.append((nrm, t_a, math.copysign(1.0, cam_side)))
 
+        def in_front(b: int, a: int) -> bool:
+            nrm, t_a, sign = sides[a]
+            dist = (items[b][3] - t_a) @ nrm
+            return bool(np.all(dist * sign >= -1e-4))
+
+        front = [[b != a and in_front(b, a) for a in range(n)] for b in range(n)]
         for i in range(n):
             for j in range(n):
-                if i != j and in_front(j, i) and not in_front(i, j):
+                if front[j][i] and not front[i][j]:
                     after[i].add(j)
         indeg = [0] * n
         for i in range(n):
