@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 import pickle
 import resource
+import sys
 from typing import Any, Callable, Tuple
 
 from landmark_nav.testing import isolate_dds
@@ -144,6 +145,46 @@ def hallway_bag_localization(run_once) -> Tuple[dict, Path]:
         filt: evaluate_localization(bag, filt, out_dir=out) for filt in ('ekf', 'ukf')})
 
 
+@pytest.fixture(scope='session')
+def hallway_sonar_map_localization(run_once) -> Tuple[dict, Path]:
+    """Return ``({'summary', 'ekf', 'ukf'}, folder)``: a sonar map of bags/hallway, localized on.
+
+    ``build_sonar_map`` of bags/hallway with its defaults into ``folder / 'map.yaml'``, then
+    ``evaluate_localization`` on that map (EKF and UKF, files in ``folder / 'localization'``):
+    the ``sonar_map_localization`` run of bags/hallway/expected.yaml, once per test run for
+    test_golden.py and test_localization_tools.py.
+    """
+    from landmark_nav.evaluation.localization_bags import evaluate_localization
+    from landmark_nav.tools.localization_tools import build_sonar_map
+    bag = REPO / 'bags' / 'hallway'
+
+    def compute(out: Path) -> dict:  # build_sonar_map creates the folder
+        got = {'summary': build_sonar_map(bag, out=out / 'map.yaml')}
+        for filt in ('ekf', 'ukf'):
+            got[filt] = evaluate_localization(bag, filt, map_path=out / 'map.yaml',
+                                              out_dir=out / 'localization')
+        return got
+    return run_once('hallway_sonar_map_localization', compute)
+
+
+def pytest_configure(config):
+    """Before the pytest-xdist workers start, write the bytecode caches they all need.
+
+    Each worker rewrites and compiles every test module and compiles the package's modules
+    where no cache exists (a fresh clone): done once here, on every CPU, instead. Not where
+    the environment says not to write bytecode, nor with the assertion pass hook (pytest's
+    rewriting of the test modules then depends on the configuration).
+    """
+    if (os.environ.get('PYTEST_XDIST_WORKER') or not config.getoption('numprocesses', None)
+            or sys.dont_write_bytecode or config.getini('enable_assertion_pass_hook')):
+        return
+    from landmark_nav.testing.bytecode_caches import write_bytecode_caches
+    tests = REPO / 'test'
+    write_bytecode_caches(sorted(tests.glob('test_*.py')), sorted(
+        [*(REPO / 'landmark_nav').rglob('*.py'),
+         *(p for p in tests.glob('*.py') if not p.name.startswith(('test_', 'conftest')))]))
+
+
 _CPU_LOG = os.environ.get('LANDMARK_NAV_TEST_CPU')
 
 
@@ -166,23 +207,23 @@ if _CPU_LOG:  # where the suite's CPU goes: LANDMARK_NAV_TEST_CPU=FILE make test
 
 #: the files that cost the most CPU, most first: CPU seconds per file of
 #: ``LANDMARK_NAV_TEST_CPU=FILE make test`` (each test's CPU, its module fixtures and the
-#: runs it computes for others included) on 2 cores: evaluate_slam 82, benchmarks 53,
-#: slam_ambiguous 50, golden 50, ekf_slam_node 47, road_fusion 45, landmark_repeatability 44,
-#: node_runtime 39, corridor_frame 37, slam_landmark_types 36, flake8 29 ...
-#: evaluate_features_params 10.7, trajectory 10 (the Freiburg run it shares with
-#: evaluate_slam computed there); a file missing from the list only runs later
+#: runs it computes for others included) on 2 cores, the machine shared with other work:
+#: evaluate_slam 102, benchmarks 54, golden 53, ekf_slam_node 47, slam_landmark_types 38,
+#: node_runtime 38, landmark_repeatability 35, slam_ambiguous 35, corridor_frame 34,
+#: flake8 30 ... lines 10.5, soak 9.5 (a shared run lands on the file that asks first); a
+#: file missing from the list only runs later
 LONGEST_FILES = (
-    'test_evaluate_slam.py', 'test_benchmarks.py', 'test_slam_ambiguous.py', 'test_golden.py',
-    'test_ekf_slam_node.py', 'test_road_fusion.py', 'test_landmark_repeatability.py',
-    'test_node_runtime.py', 'test_corridor_frame.py', 'test_slam_landmark_types.py',
-    'test_flake8.py', 'test_loc_accuracy.py', 'test_pipeline.py',
-    'test_landmark_detection_rates.py', 'test_monocular.py', 'test_landmark_shuttle.py',
-    'test_protocol_lms2xx.py', 'test_cli.py', 'test_loc_nees.py', 'test_stop_signals.py',
-    'test_corridor_follower_node.py', 'test_record.py', 'test_slam_office.py',
-    'test_false_surfaces.py', 'test_sonar_localizer_node.py', 'test_protocol_p2os.py',
-    'test_landmarks_real.py', 'test_protocol_scip2.py', 'test_york_vanishing_points.py',
-    'test_landmark_pose.py', 'test_emulator_robot.py', 'test_slam_consistency.py',
-    'test_vision_landmark.py', 'test_evaluate_features_params.py', 'test_trajectory.py')
+    'test_evaluate_slam.py', 'test_benchmarks.py', 'test_golden.py', 'test_ekf_slam_node.py',
+    'test_slam_landmark_types.py', 'test_node_runtime.py', 'test_landmark_repeatability.py',
+    'test_slam_ambiguous.py', 'test_corridor_frame.py', 'test_flake8.py',
+    'test_loc_accuracy.py', 'test_pipeline.py', 'test_landmark_detection_rates.py',
+    'test_road_fusion.py', 'test_record.py', 'test_stop_signals.py', 'test_landmark_shuttle.py',
+    'test_protocol_lms2xx.py', 'test_corridor_follower_node.py', 'test_monocular.py',
+    'test_false_surfaces.py', 'test_cli.py', 'test_protocol_scip2.py',
+    'test_sonar_localizer_node.py', 'test_slam_office.py', 'test_landmarks_real.py',
+    'test_protocol_p2os.py', 'test_landmark_pose.py', 'test_trajectory.py',
+    'test_york_vanishing_points.py', 'test_evaluate_features_params.py',
+    'test_emulator_robot.py', 'test_slam_consistency.py', 'test_lines.py', 'test_soak.py')
 
 
 def pytest_collection_modifyitems(items):

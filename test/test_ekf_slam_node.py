@@ -619,13 +619,20 @@ def test_waiting_sets_are_processed_when_odometry_stops():
         slam.destroy_node()
 
 
+@pytest.fixture(scope='module')
+def aces_bag(tmp_path_factory):
+    """Return the first 100 scans of the aces log imported into a bag (once per module)."""
+    from landmark_nav.importers.writer import import_log
+    bag = tmp_path_factory.mktemp('carmen') / 'aces'
+    import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
+    return bag
+
+
 @pytest.mark.dds
-def test_node_equals_offline_on_an_imported_carmen_log(tmp_path):
+def test_node_equals_offline_on_an_imported_carmen_log(tmp_path, aces_bag):
     """A real log (aces, corridors, 1 m steps): corners and lines, landmarks pruned alike."""
     from landmark_nav.evaluation.slam import DRIFT_KEY
-    from landmark_nav.importers.writer import import_log
-    bag = tmp_path / 'aces'
-    import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
+    bag = aces_bag
     model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
     node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model, chapter_profile())
     assert_node_equals_offline(node, ref)
@@ -712,12 +719,10 @@ def test_bad_scan_matching_setting_is_a_parameter_error(overrides, match):
 
 
 @pytest.mark.dds
-def test_node_equals_offline_with_the_default_configuration(tmp_path):
+def test_node_equals_offline_with_the_default_configuration(tmp_path, aces_bag):
     """The defaults' checks run in the node as offline (imported aces, 100 scans)."""
     from landmark_nav.evaluation.slam import DRIFT_KEY
-    from landmark_nav.importers.writer import import_log
-    bag = tmp_path / 'aces'
-    import_log(shared_data('carmen', 'aces-corrected.log.gz'), bag, max_scans=100)
+    bag = aces_bag
     model = load_bag(bag, require_reference=False).custom_data[DRIFT_KEY]
     node, ref = node_and_offline(tmp_path, bag, 1e6, 'both', model)
     assert_node_equals_offline(node, ref)

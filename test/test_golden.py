@@ -24,21 +24,26 @@ PAGES = {str(p.relative_to(ROOT)): p.read_text().splitlines()
 
 
 @pytest.fixture(scope='module')
-def outputs(tmp_path_factory, office_demo, office_evaluation, hallway_bag_localization):
+def outputs(tmp_path_factory, office_demo, office_evaluation, hallway_bag_localization,
+            hallway_sonar_map_localization):
     """Return ``get(bag, run)``: the outputs of one run, computed on first use.
 
-    The office demo and JCBB evaluation and the hallway localization are the suite's shared
-    runs (conftest), the same calls as the runs of expected.yaml.
+    The office demo and JCBB evaluation and the hallway localizations (on the true map and on
+    the sonar map) are the suite's shared runs (conftest), the same calls as the runs of
+    expected.yaml.
     """
-    shared = {('office', 'demo'): lambda: office_demo[1],
-              ('office', 'evaluate_jcbb'): lambda: office_evaluation('jcbb')[1],
-              ('hallway', 'localization'): lambda: hallway_bag_localization[1]}
+    shared = {('office', 'demo'): ('demo', lambda: office_demo[1]),
+              ('office', 'evaluate_jcbb'): ('evaluate_jcbb', lambda: office_evaluation('jcbb')[1]),
+              ('hallway', 'localization'): ('localization', lambda: hallway_bag_localization[1]),
+              ('hallway', 'sonar_map_localization'): (
+                  'localization', lambda: hallway_sonar_map_localization[1] / 'localization')}
     cache = {}
 
     def get(name, run):
         if (name, run) not in cache:
             if (name, run) in shared:
-                cache[name, run] = read_outputs(run, shared[name, run]())
+                files, folder = shared[name, run]
+                cache[name, run] = read_outputs(files, folder())
             else:
                 out = tmp_path_factory.mktemp(f'{name}_{run}')
                 cache[name, run] = run_outputs(run, ROOT / 'bags' / name, out)

@@ -41,11 +41,13 @@ def test_evaluate_localization_meets_the_targets_on_the_hallway(hallway_bag_loca
         assert data[:8] == b'\x89PNG\r\n\x1a\n' and len(data) > 20_000
 
 
-def test_build_sonar_map_writes_a_loadable_map_to_localize_on(tmp_path):
-    out = tmp_path / 'maps' / 'hallway_sonar.yaml'
-    summary = build_sonar_map(HALLWAY, '/ground_truth/odom', out, 0.1)
+def test_build_sonar_map_writes_a_loadable_map_to_localize_on(hallway_sonar_map_localization):
+    # build_sonar_map(HALLWAY, out=folder / 'map.yaml') with its defaults ('/ground_truth/odom',
+    # 0.1 m), then evaluate_localization(HALLWAY, 'ukf', map_path=) (shared with test_golden)
+    runs, folder = hallway_sonar_map_localization
+    out, summary = folder / 'map.yaml', runs['summary']
     assert summary['cycles'] == 607
-    assert format_map_summary(summary).startswith(f'wrote {out} + hallway_sonar.pgm: ')
+    assert format_map_summary(summary).startswith(f'wrote {out} + map.pgm: ')
     assert Path(summary['image']).read_bytes()[:2] == b'P5'
     grid = load_map_yaml(out)
     assert grid.shape == (summary['height'], summary['width'])
@@ -60,7 +62,7 @@ def test_build_sonar_map_writes_a_loadable_map_to_localize_on(tmp_path):
                            occ[:, None, 1] - walls[None, :, 1]), axis=1)
     assert np.median(dist) <= 0.1 and np.mean(dist <= 0.2) > 0.9
     # Localizing on it (unknown cells free) keeps the UKF within 15 cm / 5 deg.
-    result = evaluate_localization(HALLWAY, 'ukf', map_path=out)
+    result = runs['ukf']
     assert result['params']['unknown'] == 'free'
     err = result['errors']['filter']
     assert err['max_position'] <= 0.15 and err['max_heading'] <= math.radians(5.0), err

@@ -86,21 +86,20 @@ def test_replay_gives_ekf_slam_what_the_bag_states():
 
 
 @pytest.mark.dds
-def test_replay_ends_when_the_nodes_have_processed_every_scan(processes):
+def test_replay_ends_when_the_nodes_have_processed_every_scan(processes, office_evaluation):
     """A replay at 3x: one pose per scan, equal to the offline run of the same front end.
 
     The player's end stopped ekf_slam 1 s later: under load at 3x, 1,482 of 1,988 scans
     reached its output. Now the pipeline waits for the nodes to process what they received.
-    The chapter profile on both sides (the offline reference is the chapter's filter).
+    The chapter profile on both sides: the offline reference is the suite's ICNN evaluation
+    of the bag with config/ekf_slam_chapter.yaml (conftest), its trajectory_slam.tum (stamps
+    to the nanosecond, positions to 1e-9 m).
     """
     from landmark_nav.conversions import stamp_to_ns
-    from landmark_nav.evaluation.bags import load_bag
-    from landmark_nav.evaluation.slam_run import run_slam
-    from landmark_nav.laser.corners import CornerParams
-    from landmark_nav.slam.ekf_slam import SlamParams
-    from landmark_nav.slam.frontend import ODOMETRY_NOISE_MODELS
+    from landmark_nav.evaluation.trajectory import read_tum
     import numpy as np
     bag = REPO / 'bags' / 'office'
+    ref = read_tum(office_evaluation('icnn')[1] / 'trajectory_slam.tum')
     with RosHarness() as ros:
         poses = ros.collect('/pose', PoseWithCovarianceStamped)
         proc = processes.start(
@@ -113,17 +112,16 @@ def test_replay_ends_when_the_nodes_have_processed_every_scan(processes):
         got = list(poses)
     assert proc.returncode == 0 and 'Traceback' not in out, out
     assert 'replay drained: the nodes handled all 1200 scans' in out, out
-    ref = run_slam(load_bag(bag), SlamParams(odometry=ODOMETRY_NOISE_MODELS['simulator']),
-                   CornerParams(), deskew=True, landmarks='corners')
     # One pose per scan: ekf_slam made as many steps as the offline run ...
-    assert len(ref.stamps) == 1200
+    assert len(ref.stamps_ns) == 1200
     assert 'ekf_slam processed 1200, dropped 0' in out, out
     # ... the same ones: the poses this test received (its subscription may match the node
-    # after the first steps) are the offline run's at their stamps, to the last bit.
+    # after the first steps) are the offline run's at their stamps, to the file's rounding
+    # (5e-10 m per coordinate).
     stamps = np.array([stamp_to_ns(p.header.stamp) for p in got])
-    first = int(np.searchsorted(ref.stamps, stamps[0]))
-    assert len(got) > 1000 and np.array_equal(stamps, ref.stamps[first:])
+    first = int(np.searchsorted(ref.stamps_ns, stamps[0]))
+    assert len(got) > 1000 and np.array_equal(stamps, ref.stamps_ns[first:])
     xy = np.array([[p.pose.pose.position.x, p.pose.pose.position.y] for p in got])
-    err = np.hypot(*(xy - ref.poses[first:, :2]).T)
+    err = np.hypot(*(xy - ref.positions[first:, :2]).T)
     assert err.max() < 1e-9, (err.max(), int(np.argmax(err > 0)), [
         line for line in out.splitlines() if 'WARN' in line])

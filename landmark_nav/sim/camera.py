@@ -19,7 +19,9 @@ distortion remap tables; :meth:`CameraSimulator.render` then draws one frame:
    view are not resolved (no z-buffer); build scenes without. Leading low-detail planes
    (``Plane.detail=False``: plain walls, floors) are drawn without supersampling.
 2. Area downsampling (``cv2.INTER_AREA``) to the camera resolution: each output pixel is the
-   mean over its footprint.
+   mean over its footprint. Above :data:`TILED_SUPERSAMPLE` only tiles around the planes
+   drawn supersampled go through the large canvas (the same image: bit for bit inside the
+   tiles, to float32 rounding elsewhere).
 3. Lens distortion: ``cv2.remap`` with the camera's distorted -> ideal pixel map.
 4. Photometry (:class:`Photometry`): illumination = exposure x linear gradient x radial
    vignetting on the reflectances; defocus (Gaussian) and linear motion blur; gamma
@@ -247,53 +249,66 @@ class Photometry:
 
 
 # ---------------------------------------------------------------------- polygon helpers
+def _clip_edges(pts: list, axis: int, bound: float, keep_ge: bool) -> list:
+    """Clip a polygon (a list of coordinate lists) to one side of ``x[axis] = bound``.
+
+    Sutherland-Hodgman on Python floats (the same IEEE double operations as on numpy rows,
+    without numpy's per-call cost on 2- and 3-vectors).
+    """
+    out = []
+    n = len(pts)
+    for i in range(n):
+        a, b = pts[i], pts[(i + 1) % n]
+        ina = a[axis] >= bound if keep_ge else a[axis] <= bound
+        inb = b[axis] >= bound if keep_ge else b[axis] <= bound
+        if ina:
+            out.append(a)
+        if ina != inb:
+            t = (bound - a[axis]) / (b[axis] - a[axis])
+            out.append([ak + t * (bk - ak) for ak, bk in zip(a, b)])
+    return out
+
+
+def _as_points(poly: np.ndarray) -> list:
+    """Return the rows of a float64 polygon as lists of Python floats."""
+    return np.asarray(poly, dtype=np.float64).tolist()
+
+
 def clip_polygon_near(poly: np.ndarray, near: float, keep_far: bool = True) -> np.ndarray:
     """Clip a 3-D polygon (N, 3) in camera coordinates to ``z >= near`` (Sutherland-Hodgman).
 
     With ``keep_far=False`` keep ``z <= near`` instead.
     """
-    out = []
-    n = len(poly)
-    for i in range(n):
-        a, b = poly[i], poly[(i + 1) % n]
-        ina = a[2] >= near if keep_far else a[2] <= near
-        inb = b[2] >= near if keep_far else b[2] <= near
-        if ina:
-            out.append(a)
-        if ina != inb:
-            t = (near - a[2]) / (b[2] - a[2])
-            out.append(a + t * (b - a))
-    return np.array(out).reshape(-1, 3)
+    return np.array(_clip_edges(_as_points(poly), 2, float(near), keep_far)).reshape(-1, 3)
 
 
 def _clip_polygon_rect(poly: np.ndarray, x0: float, y0: float, x1: float,
                        y1: float) -> np.ndarray:
     """Clip a 2-D polygon (N, 2) to an axis-aligned rectangle."""
-    pts = list(poly)
+    pts = _as_points(poly)
     for axis, bound, keep_ge in ((0, x0, True), (0, x1, False), (1, y0, True), (1, y1, False)):
         if not pts:
             break
-        out = []
-        n = len(pts)
-        for i in range(n):
-            a, b = pts[i], pts[(i + 1) % n]
-            ina = a[axis] >= bound if keep_ge else a[axis] <= bound
-            inb = b[axis] >= bound if keep_ge else b[axis] <= bound
-            if ina:
-                out.append(a)
-            if ina != inb:
-                t = (bound - a[axis]) / (b[axis] - a[axis])
-                out.append(a + t * (b - a))
-        pts = out
+        pts = _clip_edges(pts, axis, float(bound), keep_ge)
     return np.array(pts).reshape(-1, 2)
 
 
 def _area(poly2: np.ndarray) -> float:
+    """Return the area of a 2-D polygon (shoelace formula)."""
     x, y = poly2[:, 0], poly2[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    # y and x rolled by one (np.roll's values, without its per-call cost)
+    y1, x1 = np.concatenate((y[1:], y[:1])), np.concatenate((x[1:], x[:1]))
+    return 0.5 * abs(float(np.dot(x, y1) - np.dot(y, x1)))
 
 
 # ---------------------------------------------------------------------- simulator
+#: Above this supersampling the planes drawn supersampled are rendered in tiles around them,
+#: the rest of the image at the camera resolution (:meth:`CameraSimulator._render_tiles`):
+#: the supersampled canvas grows with its square (about 90 M pixels at 16 x 16 for
+#: 640 x 480) and its round trip, not the planes, took most of a frame's time.
+TILED_SUPERSAMPLE = 4
+
+
 class CameraSimulator:
     """Render planar scenes for one camera model (caches the distortion maps).
 
@@ -344,32 +359,41 @@ class CameraSimulator:
         return R, t
 
     def _draw_plane(self, canvas: np.ndarray, cam: CameraModel, plane: Plane,
-                    R_cp: np.ndarray, t_cp: np.ndarray, clipped: np.ndarray) -> None:
+                    R_cp: np.ndarray, t_cp: np.ndarray, clipped: np.ndarray,
+                    origin: Tuple[int, int] = (0, 0)) -> None:
         """Draw a plane in depth bands (a factor of 2 in depth each, 2 % overlap), far first.
 
         Each band gets its own mipmap level, so a floor running from the robot's feet to the
-        far wall is neither blurred nearby nor aliased far away.
+        far wall is neither blurred nearby nor aliased far away. ``canvas`` may be a tile of
+        the image of ``cam``: its pixel (0, 0) is the image's pixel ``origin`` (x, y), and the
+        plane's :meth:`_box` lies inside it.
         """
         z = clipped[:, 2]
         z0, z1 = float(z.min()), float(z.max())
         if z1 <= 2.5 * z0:
-            self._draw_polygon(canvas, cam, plane, R_cp, t_cp, clipped)
+            self._draw_polygon(canvas, cam, plane, R_cp, t_cp, clipped, origin)
             return
         edges = [z0 * 2.0 ** k for k in range(int(math.ceil(math.log2(z1 / z0))))] + [z1]
         for za, zb in reversed(list(zip(edges[:-1], edges[1:]))):
             band = clip_polygon_near(clipped, za * 0.98)
             band = clip_polygon_near(band, zb * 1.02, keep_far=False) if len(band) else band
             if len(band) >= 3:
-                self._draw_polygon(canvas, cam, plane, R_cp, t_cp, band)
+                self._draw_polygon(canvas, cam, plane, R_cp, t_cp, band, origin)
 
-    def _draw_polygon(self, canvas: np.ndarray, cam: CameraModel, plane: Plane,
-                      R_cp: np.ndarray, t_cp: np.ndarray, clipped: np.ndarray) -> None:
-        Hc, Wc = canvas.shape
-        poly2 = cam.project(clipped, distort=False)
+    @staticmethod
+    def _box(cam: CameraModel, poly2: np.ndarray) -> Tuple[int, int, int, int]:
+        """Return the pixels ``(x0, y0, x1, y1)`` (ends excluded) a polygon is drawn into."""
         lo = np.floor(poly2.min(axis=0)) - 1
         hi = np.ceil(poly2.max(axis=0)) + 2
-        x0, y0 = int(max(0, lo[0])), int(max(0, lo[1]))
-        x1, y1 = int(min(Wc, hi[0])), int(min(Hc, hi[1]))
+        return (int(max(0, lo[0])), int(max(0, lo[1])), int(min(cam.width, hi[0])),
+                int(min(cam.height, hi[1])))
+
+    def _draw_polygon(self, canvas: np.ndarray, cam: CameraModel, plane: Plane,
+                      R_cp: np.ndarray, t_cp: np.ndarray, clipped: np.ndarray,
+                      origin: Tuple[int, int] = (0, 0)) -> None:
+        Hc, Wc = cam.height, cam.width
+        poly2 = cam.project(clipped, distort=False)
+        x0, y0, x1, y1 = self._box(cam, poly2)
         if x1 <= x0 or y1 <= y0:
             return
         poly_roi = _clip_polygon_rect(poly2, x0 - 1.0, y0 - 1.0, x1 + 1.0, y1 + 1.0)
@@ -415,7 +439,7 @@ class CameraSimulator:
         # float32(texel) * gain + black through a 256-entry table computed with the same
         # float32 operations (one pass instead of three)
         tex = cv2.LUT(warped, self._reflectance_table())
-        roi = canvas[y0:y1, x0:x1]
+        roi = canvas[y0 - origin[1]:y1 - origin[1], x0 - origin[0]:x1 - origin[0]]
         if mask.min() == 1:
             roi[...] = tex
         else:
@@ -447,16 +471,21 @@ class CameraSimulator:
         depth = [-float(it[3][:, 2].mean()) for it in items]
         after = [set() for _ in range(n)]  # after[i] = planes that must be drawn after i
 
-        def in_front(b: int, a: int) -> bool:
-            _, R_a, t_a, _ = items[a]
+        sides = []  # per plane a: its normal, a point on it, the camera's side of it
+        for _, R_a, t_a, _ in items:
             nrm = R_a[:, 0]
             cam_side = -float(nrm @ t_a)  # signed distance of the camera from plane a
-            dist = (items[b][3] - t_a) @ nrm
-            return bool(np.all(dist * math.copysign(1.0, cam_side) >= -1e-4))
+            sides.append((nrm, t_a, math.copysign(1.0, cam_side)))
 
+        def in_front(b: int, a: int) -> bool:
+            nrm, t_a, sign = sides[a]
+            dist = (items[b][3] - t_a) @ nrm
+            return bool(np.all(dist * sign >= -1e-4))
+
+        front = [[b != a and in_front(b, a) for a in range(n)] for b in range(n)]
         for i in range(n):
             for j in range(n):
-                if i != j and in_front(j, i) and not in_front(i, j):
+                if front[j][i] and not front[i][j]:
                     after[i].add(j)
         indeg = [0] * n
         for i in range(n):
@@ -506,6 +535,10 @@ class CameraSimulator:
                 k += 1
             if k == len(ordered):
                 return canvas
+            if s > TILED_SUPERSAMPLE:
+                tiles = self._detail_tiles(ordered[k:], canvas.shape)
+                if tiles is not None:
+                    return self._render_tiles(canvas, ordered[k:], tiles)
             # into a buffer kept between frames: a new one (hundreds of MB at 16 x 16) was
             # paged in afresh for every frame
             if getattr(self, '_canvas', None) is None or self._canvas.shape != (cam.height,
@@ -521,6 +554,73 @@ class CameraSimulator:
             canvas = cv2.resize(canvas, (low_cam.width, low_cam.height),
                                 interpolation=cv2.INTER_AREA)
         return canvas
+
+    def _detail_tiles(self, items: list, shape: Tuple[int, int]
+                      ) -> Optional[List[Tuple[int, int, int, int, list]]]:
+        """Group the supersampled planes into disjoint tiles of the ideal image.
+
+        A tile ``(x0, y0, x1, y1, items)`` (ideal pixels, ends excluded) holds every pixel a
+        plane of ``items`` is drawn into, plus a pixel of margin; overlapping tiles are
+        merged, so a plane lies in one tile, with the planes it may cover or be covered by.
+        None when the tiles cover more than half the image (no gain then).
+        """
+        s = int(self.options.supersample)
+        cam = self.canvas_camera
+        tiles = []
+        for item in items:
+            x0, y0, x1, y1 = self._box(cam, cam.project(item[3], distort=False))
+            if x1 <= x0 or y1 <= y0:
+                continue  # outside the image: not drawn
+            tiles.append([max(0, x0 // s - 1), max(0, y0 // s - 1),
+                          min(shape[1], -(-x1 // s) + 1), min(shape[0], -(-y1 // s) + 1), [item]])
+        merged = True
+        while merged:
+            merged = False
+            for i in range(len(tiles)):
+                for j in range(i + 1, len(tiles)):
+                    a, b = tiles[i], tiles[j]
+                    if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
+                        tiles[i] = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]),
+                                    max(a[3], b[3]), a[4] + b[4]]
+                        del tiles[j]
+                        merged = True
+                        break
+                if merged:
+                    break
+        if sum((t[2] - t[0]) * (t[3] - t[1]) for t in tiles) > 0.5 * shape[0] * shape[1]:
+            return None
+        order = {id(item): n for n, item in enumerate(items)}
+        return [(x0, y0, x1, y1, sorted(its, key=lambda it: order[id(it)]))
+                for x0, y0, x1, y1, its in tiles]
+
+    def _render_tiles(self, low: np.ndarray, items: list,
+                      tiles: List[Tuple[int, int, int, int, list]]) -> np.ndarray:
+        """Finish the image with only the tiles of the supersampled planes supersampled.
+
+        Each tile is what the whole supersampled canvas gives there: the low-detail image
+        ``low`` upsampled (``cv2.INTER_LINEAR``, from the tile and one pixel around it, which
+        is all the interpolation reads), the planes drawn in, area-downsampled. Elsewhere the
+        round trip up and down is, per axis, the 3-tap filter ``(a, 1 - 2a, a)`` with ``a``
+        the mean interpolation weight on a neighbour over a pixel's ``s`` samples (1/8 for an
+        even ``s``), applied directly (the same to float32 rounding).
+        """
+        s = int(self.options.supersample)
+        offsets = (np.arange(s) + 0.5) / s - 0.5
+        a = float(np.mean(np.maximum(-offsets, 0.0)))
+        taps = np.array([a, 1.0 - 2.0 * a, a], dtype=np.float32)
+        out = cv2.sepFilter2D(low, cv2.CV_32F, taps, taps, borderType=cv2.BORDER_REPLICATE)
+        H, W = low.shape
+        for x0, y0, x1, y1, its in tiles:
+            # the low-detail pixels around the tile, upsampled; the tile is the inner part
+            ex0, ey0, ex1, ey1 = max(0, x0 - 1), max(0, y0 - 1), min(W, x1 + 1), min(H, y1 + 1)
+            up = cv2.resize(low[ey0:ey1, ex0:ex1], ((ex1 - ex0) * s, (ey1 - ey0) * s),
+                            interpolation=cv2.INTER_LINEAR)
+            tile = up[(y0 - ey0) * s:(y1 - ey0) * s, (x0 - ex0) * s:(x1 - ex0) * s]
+            for item in its:
+                self._draw_plane(tile, self.canvas_camera, *item, origin=(x0 * s, y0 * s))
+            out[y0:y1, x0:x1] = cv2.resize(tile, (x1 - x0, y1 - y0),
+                                           interpolation=cv2.INTER_AREA)
+        return out
 
     def render_reflectance(self, planes: Sequence[Plane], rotation: np.ndarray,
                            position: np.ndarray) -> np.ndarray:

@@ -204,6 +204,34 @@ _COLOURS = {ROAD: ((105, 105, 110), 10.0), SHOULDER: ((105, 118, 72), 18.0),
 _GRAVEL = ((150, 138, 115), 14.0)
 
 
+_GROUND_RAYS: dict = {}
+
+
+def _ground_rays(camera, mount: Sequence[float]) -> tuple:
+    """Return every pixel ``(u, v)`` (H * W, 2), its ray (base_link) and ground point (x, y).
+
+    The same for every frame of one camera and mount: computed once per camera (its
+    parameters) and mount, read-only.
+    """
+    from landmark_nav.corridor.orientation import mount_rotation
+    from landmark_nav.road.fusion import pixels_to_ground
+    arrays = (camera.K, camera.D, camera.R, camera.P)
+    key = (camera.width, camera.height, camera.distortion_model,
+           tuple(None if a is None else np.asarray(a, dtype=float).tobytes() for a in arrays),
+           tuple(float(m) for m in mount))
+    if key not in _GROUND_RAYS:
+        if len(_GROUND_RAYS) >= 4:
+            _GROUND_RAYS.clear()
+        vv, uu = np.mgrid[0:camera.height, 0:camera.width]
+        px = np.column_stack([uu.ravel(), vv.ravel()]).astype(float)
+        rays = camera.back_project(px) @ mount_rotation(mount).T
+        g = pixels_to_ground(camera, mount, px, max_distance=200.0)
+        for a in (px, rays, g):
+            a.setflags(write=False)
+        _GROUND_RAYS[key] = (px, rays, g)
+    return _GROUND_RAYS[key]
+
+
 def render_view(road: ParkRoad, pose: Sequence[float], camera, mount: Sequence[float],
                 lighting: Lighting = Lighting(), markings: bool = False,
                 rng: Optional[np.random.Generator] = None, gravel: bool = False) -> np.ndarray:
@@ -215,11 +243,8 @@ def render_view(road: ParkRoad, pose: Sequence[float], camera, mount: Sequence[f
     see the sky; upright cylinders (pedestrians) in front of the ground are dark grey.
     ``markings`` paints a dashed white centre line.
     """
-    from landmark_nav.road.fusion import pixels_to_ground
     h, w = camera.height, camera.width
-    vv, uu = np.mgrid[0:h, 0:w]
-    px = np.column_stack([uu.ravel(), vv.ravel()]).astype(float)
-    g = pixels_to_ground(camera, mount, px, max_distance=200.0)
+    px, rays, g = _ground_rays(camera, mount)
     c, s = math.cos(pose[2]), math.sin(pose[2])
     wx = pose[0] + c * g[:, 0] - s * g[:, 1]
     wy = pose[1] + s * g[:, 0] + c * g[:, 1]
@@ -251,18 +276,16 @@ def render_view(road: ParkRoad, pose: Sequence[float], camera, mount: Sequence[f
     img[:, 2] *= 1.0 + tint
     img[sky] = (170, 200, 235)
     if road.cylinders:
-        rays_hit = _cylinder_pixels(road, pose, camera, mount, px, g)
+        rays_hit = _cylinder_pixels(road, pose, mount, rays, g)
         img[rays_hit] = (45, 40, 50)
     if rng is not None:
         img += rng.normal(0.0, 2.0, img.shape)
     return np.clip(img, 0, 255).reshape(h, w, 3).astype(np.uint8)
 
 
-def _cylinder_pixels(road: ParkRoad, pose, camera, mount, px: np.ndarray,
+def _cylinder_pixels(road: ParkRoad, pose, mount, rays: np.ndarray,
                      ground: np.ndarray) -> np.ndarray:
-    """Pixels whose ray meets an upright cylinder before the ground."""
-    from landmark_nav.corridor.orientation import mount_rotation
-    rays = camera.back_project(px) @ mount_rotation(mount).T          # base_link
+    """Pixels whose ray (base_link) meets an upright cylinder before the ground."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     d = rays @ rot.T
@@ -270,7 +293,7 @@ def _cylinder_pixels(road: ParkRoad, pose, camera, mount, px: np.ndarray,
     t_ground = np.where(np.isfinite(ground[:, 0]),
                         np.linalg.norm(ground - np.asarray(mount[:2]), axis=1)
                         / np.maximum(np.linalg.norm(rays[:, :2], axis=1), 1e-12), np.inf)
-    hit = np.zeros(px.shape[0], dtype=bool)
+    hit = np.zeros(rays.shape[0], dtype=bool)
     for cx, cy, radius, height in road.cylinders:
         oc = o[:2] - np.array([cx, cy])
         qa = np.sum(d[:, :2] ** 2, axis=1)

@@ -290,17 +290,18 @@ def _cell_hough(xs: np.ndarray, ys: np.ndarray, normal: np.ndarray, shape: tuple
         offs = np.arange(-half, half + 1)
 
     def votes(sel: np.ndarray) -> np.ndarray:
+        """Return the accumulator bins the pixels ``sel`` vote for (one entry per vote)."""
         tb = t0[sel, None] + offs
         # a line normal at t + pi is the same line with r negated
         flip = np.where((tb < 0) | (tb >= n_t), -1.0, 1.0)
         tb = tb % n_t
         rho = flip * (lx[sel, None] * cos_t[tb] + ly[sel, None] * sin_t[tb])
         rb = np.rint(rho).astype(np.int64) + r_off
-        idx = (cell[sel, None] * n_t + tb) * n_r + rb
-        return np.bincount(idx.ravel(), minlength=n_cells * n_t * n_r)
+        return ((cell[sel, None] * n_t + tb) * n_r + rb).ravel()
 
     alive = np.ones(xs.size, dtype=bool)
-    acc = votes(alive).reshape(n_cells, n_t * n_r)
+    acc = np.bincount(votes(alive), minlength=n_cells * n_t * n_r).reshape(n_cells, n_t * n_r)
+    bins = acc.reshape(-1)  # the same counts, flat
     mom, segs, cells = [], [], []
     for _ in range(p.max_lines_per_cell):
         peak = np.argmax(acc, axis=1)
@@ -322,9 +323,9 @@ def _cell_hough(xs: np.ndarray, ys: np.ndarray, normal: np.ndarray, shape: tuple
         mi = idx_alive[member]
         if mi.size == 0:
             break
-        sel = np.zeros(xs.size, dtype=bool)
-        sel[mi] = True
-        acc -= votes(sel).reshape(n_cells, n_t * n_r)
+        # withdraw their votes: only the bins they voted for change
+        drop, count = np.unique(votes(mi), return_counts=True)
+        bins[drop] -= count
         alive[mi] = False
         lab_cell = cell[mi]
         used_cells, lab = np.unique(lab_cell, return_inverse=True)
