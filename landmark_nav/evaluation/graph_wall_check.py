@@ -188,12 +188,10 @@ def place_scan_agreement(cw: Dict[str, object], points: np.ndarray, wall_distanc
     out['places'].sort(key=lambda p: -p['views'])
     for key, on in (('on', True), ('off', False)):
         group = [p for p in out['places'] if p['on_wall'] == on]
-        out[key] = {'count': len(group),
-                    'at_share': float(np.nanmean([p['at_share'] for p in group]))
-                    if group else float('nan'),
-                    'ring_share': float(np.nanmean([p['ring_share'] for p in group]))
-                    if group else float('nan'),
-                    'scans_off': sum(p['at_share'] < 0.5 for p in group)}
+        out[key] = {'count': len(group), 'scans_off': sum(p['at_share'] < 0.5 for p in group)}
+        for share in ('at_share', 'ring_share'):  # the mean of the places with points there
+            known = [p[share] for p in group if np.isfinite(p[share])]
+            out[key][share] = float(np.mean(known)) if known else float('nan')
     return out
 
 
