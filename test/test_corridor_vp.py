@@ -356,9 +356,14 @@ def test_nfa_counts_long_consistent_lines_not_their_number():
     # five short ones (25 px): as many lines, far less evidence (measured log10 NFA 0.1)
     short = np.vstack([through_v([25.0] * 5), others])
     assert log10_nfa(short, inl, sigma, gate) > 0.0
-    s = math.radians(0.1)
-    assert assess_direction(s, s, 500.0, 5, log10_nfa(short, inl, sigma, gate))[0] == 0
-    assert assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate))[0] > 0.9
+    s, o = math.radians(0.1), math.radians(1.0)       # orthogonality residual 1 deg
+    assert assess_direction(s, s, 500.0, 5, log10_nfa(short, inl, sigma, gate),
+                            orthogonality=o)[0] == 0
+    assert assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate),
+                            orthogonality=o)[0] > 0.9
+    # the shipped model weighs the residual: not given, it is not taken as 0 (most confident)
+    with pytest.raises(ValueError, match='orthogonality'):
+        assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate))
     # the two longest fix the point and do not count
     mixed = np.vstack([through_v([400.0, 400.0, 300.0, 300.0, 300.0]), others])
     assert log10_nfa(mixed, inl, sigma, gate) == pytest.approx(math.log10(4950 * p ** 3))

@@ -240,3 +240,19 @@ def test_plot_place_crops_draws_the_places_off_the_walls(tmp_path):
                             out) == 0 and not out.exists()
     assert plot_place_crops(grid, cw, {'places': [place]}, scan, 't', out) == 1
     assert out.stat().st_size > 0
+
+
+def test_place_scan_agreement_judges_the_places_corner_places_judges():
+    """A place mostly left out is skipped by both, its other detections included."""
+    from landmark_nav.evaluation.graph_wall_check import corner_places, place_scan_agreement
+    # 7 views off the walls, 4 of them left out (skipped as a place, as corner_places does,
+    # not kept as a place of its 3 others), and 3 views on a wall
+    cw = {'points': np.array([[5.0, 5.0]] * 7 + [[0.0, 0.0]] * 3),
+          'structural': np.ones(10, dtype=bool),
+          'left_out': np.array([True] * 4 + [False] * 6), 'convex': np.ones(10, dtype=bool),
+          'wall_distance': np.array([0.25] * 7 + [0.0] * 3)}
+    a = place_scan_agreement(cw, np.array([[5.0, 5.0], [0.0, 0.0]]), np.array([0.25, 0.0]))
+    p = corner_places(cw)
+    assert (p['count'], p['left_out']) == (1, 1)
+    assert [(q['views'], q['on_wall']) for q in a['places']] == [(3, True)]
+    assert (a['on']['count'], a['off']['count']) == (1, 0)

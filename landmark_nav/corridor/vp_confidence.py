@@ -266,14 +266,22 @@ def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
 
 def assess_direction(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int,
                      nfa: float, calibration: VPCalibration = CALIBRATION,
-                     orthogonality: float = 0.0) -> Tuple[float, float, float]:
+                     orthogonality: Optional[float] = None) -> Tuple[float, float, float]:
     """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
 
     ``sigma_cov`` [rad] is its first-order spread, ``sigma_frame`` [rad] the largest of its
     frame's three, ``focal_px`` the focal length [px], ``inliers`` its segment count,
-    ``nfa`` its ``log10 NFA`` (:func:`log10_nfa`).
+    ``nfa`` its ``log10 NFA`` (:func:`log10_nfa`), ``orthogonality`` its orthogonality
+    residual [rad] (:func:`orthogonality_residuals`; needed by a five-weight calibration).
+
+    Raises:
+        ValueError: a five-weight calibration and no ``orthogonality`` (0 would be the
+            most confident value, not a neutral one).
     """
     c = calibration
+    if len(c.weights) > 4 and orthogonality is None:
+        raise ValueError('assess_direction: the calibration weighs the orthogonality '
+                         'residual; give orthogonality [rad]')
     s_wrong = math.radians(c.sigma_wrong_deg)
     if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)

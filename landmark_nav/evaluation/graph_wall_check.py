@@ -23,7 +23,7 @@ trajectory standing for the landmarks:
 """
 
 from types import SimpleNamespace
-from typing import Dict
+from typing import Dict, Tuple
 
 from landmark_nav.evaluation.occupancy_check import (check_run, corner_wall_check,
                                                      OccupancyGrid, point_wall_distance,
@@ -103,23 +103,34 @@ def corner_places(cw: Dict[str, object], link: float = 0.1, min_views: int = 3,
         ``count`` places judged, ``share`` of them on a wall (nan: none), ``left_out``,
         ``views_median`` detections per place judged.
     """
-    sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool))
-    pts = np.asarray(cw['points'], dtype=float)[sel]
-    if len(pts) == 0:
+    sel, label, kept, skipped = _places(cw, link, min_views)
+    if sel.size == 0:
         return {'count': 0, 'share': float('nan'), 'left_out': 0, 'views_median': 0.0}
-    label = _linked(pts, link)
-    views = np.bincount(label)
     dist = np.asarray(cw['wall_distance'], dtype=float)[sel]
-    out_frac = np.bincount(label, np.asarray(cw['left_out'], dtype=float)[sel]) / views
-    on, judged = [], []
-    for c in np.flatnonzero(views >= min_views):
-        if out_frac[c] > 0.5:
-            continue
-        judged.append(views[c])
-        on.append(np.median(dist[label == c]) <= tolerance)
+    judged = [int(np.count_nonzero(label == c)) for c in kept]
+    on = [np.median(dist[label == c]) <= tolerance for c in kept]
     return {'count': len(judged), 'share': float(np.mean(on)) if on else float('nan'),
-            'left_out': int(np.sum((views >= min_views) & (out_frac > 0.5))),
-            'views_median': float(np.median(judged)) if judged else 0.0}
+            'left_out': skipped, 'views_median': float(np.median(judged)) if judged else 0.0}
+
+
+def _places(cw: Dict[str, object], link: float, min_views: int
+            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Group the structural detections into places (:func:`corner_places`).
+
+    Returns:
+        ``(sel, label, kept, skipped)``: the structural detections' indices, the place of
+        each, the places seen at least ``min_views`` times and not mostly left out, and the
+        number of places seen that often but mostly left out.
+    """
+    sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool))
+    if sel.size == 0:
+        return sel, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), 0
+    label = _linked(np.asarray(cw['points'], dtype=float)[sel], link)
+    views = np.bincount(label)
+    out_frac = np.bincount(label, np.asarray(cw['left_out'], dtype=float)[sel]) / views
+    seen = views >= min_views
+    return sel, label, np.flatnonzero(seen & (out_frac <= 0.5)), \
+        int(np.count_nonzero(seen & (out_frac > 0.5)))
 
 
 def place_scan_agreement(cw: Dict[str, object], points: np.ndarray, wall_distance: np.ndarray,
@@ -148,20 +159,18 @@ def place_scan_agreement(cw: Dict[str, object], points: np.ndarray, wall_distanc
         ``at`` are mostly off the walls (``at_share`` below 0.5); ``overall``: the share
         of all points.
     """
-    sel = np.flatnonzero(np.asarray(cw['structural'], dtype=bool)
-                         & ~np.asarray(cw['left_out'], dtype=bool))
+    sel, label, kept, _ = _places(cw, link, min_views)
     pts = np.asarray(cw['points'], dtype=float)[sel]
     wd = np.asarray(wall_distance, dtype=float)
     pw = wd <= tolerance
     out: Dict[str, object] = {'places': [], 'overall': float(pw.mean()) if pw.size else
                               float('nan')}
-    if len(pts):
+    if kept.size:
         from scipy.spatial import cKDTree
         tree = cKDTree(points)
-        label = _linked(pts, link)
         dist = np.asarray(cw['wall_distance'], dtype=float)[sel]
         convex = np.asarray(cw['convex'], dtype=bool)[sel]
-        for c in np.flatnonzero(np.bincount(label) >= min_views):
+        for c in kept:
             m = label == c
             centre = np.median(pts[m], axis=0)
             at_i = tree.query_ball_point(centre, at)
@@ -179,12 +188,10 @@ def place_scan_agreement(cw: Dict[str, object], points: np.ndarray, wall_distanc
     out['places'].sort(key=lambda p: -p['views'])
     for key, on in (('on', True), ('off', False)):
         group = [p for p in out['places'] if p['on_wall'] == on]
-        out[key] = {'count': len(group),
-                    'at_share': float(np.nanmean([p['at_share'] for p in group]))
-                    if group else float('nan'),
-                    'ring_share': float(np.nanmean([p['ring_share'] for p in group]))
-                    if group else float('nan'),
-                    'scans_off': sum(p['at_share'] < 0.5 for p in group)}
+        out[key] = {'count': len(group), 'scans_off': sum(p['at_share'] < 0.5 for p in group)}
+        for share in ('at_share', 'ring_share'):  # the mean of the places with points there
+            known = [p[share] for p in group if np.isfinite(p[share])]
+            out[key][share] = float(np.mean(known)) if known else float('nan')
     return out
 
 

@@ -219,17 +219,19 @@ def _ground_rays(camera, mount: Sequence[float]) -> tuple:
     key = (camera.width, camera.height, camera.distortion_model,
            tuple(None if a is None else np.asarray(a, dtype=float).tobytes() for a in arrays),
            tuple(float(m) for m in mount))
-    if key not in _GROUND_RAYS:
-        if len(_GROUND_RAYS) >= 4:
-            _GROUND_RAYS.clear()
+    found = _GROUND_RAYS.get(key)
+    if found is None:
         vv, uu = np.mgrid[0:camera.height, 0:camera.width]
         px = np.column_stack([uu.ravel(), vv.ravel()]).astype(float)
         rays = camera.back_project(px) @ mount_rotation(mount).T
         g = pixels_to_ground(camera, mount, px, max_distance=200.0)
         for a in (px, rays, g):
             a.setflags(write=False)
-        _GROUND_RAYS[key] = (px, rays, g)
-    return _GROUND_RAYS[key]
+        found = (px, rays, g)
+        if len(_GROUND_RAYS) >= 4:
+            _GROUND_RAYS.clear()
+        _GROUND_RAYS[key] = found
+    return found  # not read back: another thread may clear the cache in between
 
 
 def render_view(road: ParkRoad, pose: Sequence[float], camera, mount: Sequence[float],
