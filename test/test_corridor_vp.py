@@ -328,6 +328,9 @@ def test_orthogonality_residual_is_the_angle_to_the_other_two_directions_normal(
     D = R.copy()
     D[:, 0] = math.cos(math.radians(3)) * R[:, 0] + math.sin(math.radians(3)) * R[:, 1]
     assert np.degrees(orthogonality_residuals(D)) == pytest.approx([3.0, 3.0, 0.0], abs=1e-9)
+    # a direction that is not finite is the least confident, not the most
+    D[:, 2] = np.nan
+    assert orthogonality_residuals(D) == pytest.approx([math.pi / 2] * 3)
     # the fifth feature of the confidence model, only when given
     assert features(0.01, 0.01, 500.0, 10).shape == (4,)
     assert features(0.01, 0.01, 500.0, 10, math.radians(3))[4] == pytest.approx(

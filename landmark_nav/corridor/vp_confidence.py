@@ -198,13 +198,15 @@ def orthogonality_residuals(directions: np.ndarray) -> np.ndarray:
 
     Each direction is refined on its own lines after the triad's joint refinement, so a
     direction that went to lines of no Manhattan direction leaves the triad's orthogonality.
+    A direction that is not finite gets pi / 2, the least confident value (not 0, the most).
     """
     D = np.asarray(directions, dtype=float)
     out = np.zeros(3)
     for k in range(3):
         c = np.cross(D[:, (k + 1) % 3], D[:, (k + 2) % 3])
         c /= max(float(np.linalg.norm(c)), 1e-12)
-        out[k] = math.acos(min(1.0, abs(float(c @ D[:, k]))))
+        dot = abs(float(c @ D[:, k]))
+        out[k] = math.acos(min(1.0, dot)) if math.isfinite(dot) else math.pi / 2
     return out
 
 
