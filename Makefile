@@ -51,8 +51,12 @@ demo: $(STAMP)
 REALTIME_FILES := $(shell grep -l 'mark.realtime' test/test_*.py)
 WORKERS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
 WRITE_BYTECODE := PYTHONDONTWRITEBYTECODE=
+# The parallel part's workers already fill the CPUs: one thread per numerical library each
+# (BLAS threads spinning beside four workers cost CPU; the nodes default to one anyway).
+ONE_THREAD := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENCV_FOR_THREADS_NUM=1
+
 test: $(STAMP)
-	$(WRITE_BYTECODE) $(BIN)/python -m pytest -q -n $(WORKERS) --dist loadfile \
+	$(WRITE_BYTECODE) $(ONE_THREAD) $(BIN)/python -m pytest -q -n $(WORKERS) --dist loadfile \
 		--no-loadscope-reorder -m 'not realtime' test
 	$(WRITE_BYTECODE) $(BIN)/python -m pytest -q -n 2 --dist loadfile -m realtime \
 		$(REALTIME_FILES)
