@@ -64,22 +64,55 @@ def office_evaluation(run_once) -> Callable[[str], Tuple[dict, Path]]:
     With the chapter profile (the filter of the simulator figures). ``get`` gives the
     figures and the folder with the written files (TUM, slam.json, plots);
     test_evaluate_slam.py, test_trajectory.py and the golden jcbb run need the same run.
+    The ICNN run is the demo's (``office_demo``), which makes that very call.
     """
     from landmark_nav.evaluation.slam import evaluate_bag
     from landmark_nav.tools.demo import chapter_config
     bag = REPO / 'bags' / 'office'
 
     def get(association: str) -> Tuple[dict, Path]:
+        if association == 'icnn':  # the demo's own evaluation: the same call
+            (_, result), folder = run_once('office_demo', _office_demo)
+            return result, folder
         return run_once(f'office_evaluate_{association}', lambda out: evaluate_bag(
             bag, association, out, progress=False, config=chapter_config(bag)))
     return get
 
 
+def _office_demo(out: Path) -> Tuple[str, dict]:
+    """Return the summary of ``run_demo`` on bags/office and the figures of its evaluation.
+
+    The demo evaluates the bag as ``office_evaluation('icnn')`` does (``evaluate_bag`` with
+    ICNN and the chapter profile, its files written into the demo's folder): that call's
+    figures are kept, and the call checked to be that one.
+    """
+    import landmark_nav.evaluation.slam as slam
+    from landmark_nav.tools.demo import chapter_config, run_demo
+    bag, calls, evaluate_bag = REPO / 'bags' / 'office', [], slam.evaluate_bag
+
+    def recorded(*args, **kwargs):
+        calls.append((args, kwargs, evaluate_bag(*args, **kwargs)))
+        return calls[-1][2]
+    slam.evaluate_bag = recorded
+    try:
+        summary = run_demo(bag, out)
+    finally:
+        slam.evaluate_bag = evaluate_bag
+    (args, kwargs, result), = calls
+    assert args == (bag, 'icnn', out) and sorted(kwargs) == ['config', 'progress'], (
+        args, kwargs)
+    assert kwargs['config'] == chapter_config(bag)
+    return summary, result
+
+
 @pytest.fixture(scope='session')
 def office_demo(run_once) -> Tuple[str, Path]:
-    """Return the summary and the folder of ``run_demo`` on bags/office, once per test run."""
-    from landmark_nav.tools.demo import run_demo
-    return run_once('office_demo', lambda out: run_demo(REPO / 'bags' / 'office', out))
+    """Return the summary and the folder of ``run_demo`` on bags/office, once per test run.
+
+    The folder also holds the files of ``office_evaluation('icnn')``: the demo's evaluation.
+    """
+    (summary, _), folder = run_once('office_demo', _office_demo)
+    return summary, folder
 
 
 @pytest.fixture(scope='session')
