@@ -64,22 +64,55 @@ def office_evaluation(run_once) -> Callable[[str], Tuple[dict, Path]]:
     With the chapter profile (the filter of the simulator figures). ``get`` gives the
     figures and the folder with the written files (TUM, slam.json, plots);
     test_evaluate_slam.py, test_trajectory.py and the golden jcbb run need the same run.
+    The ICNN run is the demo's (``office_demo``), which makes that very call.
     """
     from landmark_nav.evaluation.slam import evaluate_bag
     from landmark_nav.tools.demo import chapter_config
     bag = REPO / 'bags' / 'office'
 
     def get(association: str) -> Tuple[dict, Path]:
+        if association == 'icnn':  # the demo's own evaluation: the same call
+            (_, result), folder = run_once('office_demo', _office_demo)
+            return result, folder
         return run_once(f'office_evaluate_{association}', lambda out: evaluate_bag(
             bag, association, out, progress=False, config=chapter_config(bag)))
     return get
 
 
+def _office_demo(out: Path) -> Tuple[str, dict]:
+    """Return the summary of ``run_demo`` on bags/office and the figures of its evaluation.
+
+    The demo evaluates the bag as ``office_evaluation('icnn')`` does (``evaluate_bag`` with
+    ICNN and the chapter profile, its files written into the demo's folder): that call's
+    figures are kept, and the call checked to be that one.
+    """
+    import landmark_nav.evaluation.slam as slam
+    from landmark_nav.tools.demo import chapter_config, run_demo
+    bag, calls, evaluate_bag = REPO / 'bags' / 'office', [], slam.evaluate_bag
+
+    def recorded(*args, **kwargs):
+        calls.append((args, kwargs, evaluate_bag(*args, **kwargs)))
+        return calls[-1][2]
+    slam.evaluate_bag = recorded
+    try:
+        summary = run_demo(bag, out)
+    finally:
+        slam.evaluate_bag = evaluate_bag
+    (args, kwargs, result), = calls
+    assert args == (bag, 'icnn', out) and sorted(kwargs) == ['config', 'progress'], (
+        args, kwargs)
+    assert kwargs['config'] == chapter_config(bag)
+    return summary, result
+
+
 @pytest.fixture(scope='session')
 def office_demo(run_once) -> Tuple[str, Path]:
-    """Return the summary and the folder of ``run_demo`` on bags/office, once per test run."""
-    from landmark_nav.tools.demo import run_demo
-    return run_once('office_demo', lambda out: run_demo(REPO / 'bags' / 'office', out))
+    """Return the summary and the folder of ``run_demo`` on bags/office, once per test run.
+
+    The folder also holds the files of ``office_evaluation('icnn')``: the demo's evaluation.
+    """
+    (summary, _), folder = run_once('office_demo', _office_demo)
+    return summary, folder
 
 
 @pytest.fixture(scope='session')
@@ -207,23 +240,23 @@ if _CPU_LOG:  # where the suite's CPU goes: LANDMARK_NAV_TEST_CPU=FILE make test
 
 #: the files that cost the most CPU, most first: CPU seconds per file of
 #: ``LANDMARK_NAV_TEST_CPU=FILE make test`` (each test's CPU, its module fixtures and the
-#: runs it computes for others included) on 2 cores, the machine shared with other work:
-#: evaluate_slam 102, benchmarks 54, golden 53, ekf_slam_node 47, slam_landmark_types 38,
-#: node_runtime 38, landmark_repeatability 35, slam_ambiguous 35, corridor_frame 34,
-#: flake8 30 ... lines 10.5, soak 9.5 (a shared run lands on the file that asks first); a
-#: file missing from the list only runs later
+#: runs it computes for others included) on an idle fresh clone: evaluate_slam 82,
+#: benchmarks 44, golden 44, node_runtime 32, landmark_repeatability 32,
+#: slam_landmark_types 30, slam_ambiguous 29, corridor_frame 28, flake8 28 (one process),
+#: ekf_slam_node 25 ... lines 8.6, soak 8.4 (a shared run lands on the file that asks
+#: first); a file missing from the list only runs later
 LONGEST_FILES = (
-    'test_evaluate_slam.py', 'test_benchmarks.py', 'test_golden.py', 'test_ekf_slam_node.py',
-    'test_slam_landmark_types.py', 'test_node_runtime.py', 'test_landmark_repeatability.py',
-    'test_slam_ambiguous.py', 'test_corridor_frame.py', 'test_flake8.py',
-    'test_loc_accuracy.py', 'test_pipeline.py', 'test_landmark_detection_rates.py',
-    'test_road_fusion.py', 'test_record.py', 'test_stop_signals.py', 'test_landmark_shuttle.py',
-    'test_protocol_lms2xx.py', 'test_corridor_follower_node.py', 'test_monocular.py',
-    'test_false_surfaces.py', 'test_cli.py', 'test_protocol_scip2.py',
-    'test_sonar_localizer_node.py', 'test_slam_office.py', 'test_landmarks_real.py',
-    'test_protocol_p2os.py', 'test_landmark_pose.py', 'test_trajectory.py',
-    'test_york_vanishing_points.py', 'test_evaluate_features_params.py',
-    'test_emulator_robot.py', 'test_slam_consistency.py', 'test_lines.py', 'test_soak.py')
+    'test_evaluate_slam.py', 'test_benchmarks.py', 'test_golden.py', 'test_node_runtime.py',
+    'test_landmark_repeatability.py', 'test_slam_landmark_types.py', 'test_slam_ambiguous.py',
+    'test_corridor_frame.py', 'test_flake8.py', 'test_ekf_slam_node.py',
+    'test_loc_accuracy.py', 'test_road_fusion.py', 'test_landmark_detection_rates.py',
+    'test_protocol_lms2xx.py', 'test_pipeline.py', 'test_landmark_shuttle.py',
+    'test_corridor_follower_node.py', 'test_false_surfaces.py', 'test_monocular.py',
+    'test_cli.py', 'test_sonar_localizer_node.py', 'test_protocol_p2os.py', 'test_record.py',
+    'test_slam_office.py', 'test_york_vanishing_points.py', 'test_stop_signals.py',
+    'test_landmark_pose.py', 'test_trajectory.py', 'test_protocol_scip2.py',
+    'test_emulator_robot.py', 'test_evaluate_features_params.py', 'test_landmarks_real.py',
+    'test_lines.py', 'test_evaluate_localization_params.py', 'test_soak.py')
 
 
 def pytest_collection_modifyitems(items):
