@@ -126,7 +126,8 @@ def test_quantised_real_log_keeps_its_walls_with_the_estimate():
                                                   (0.01, 0.05, 0.8), (0.0, 0.05, 1.0)])
 def test_gate_sigma_holds_the_rounded_errors_tail(sigma_0, step, share):
     # 2e6 draws of the error of a reading rounded to `step` (a share of them) on sensor noise
-    # sigma_0: 3 gate sigmas hold all but 2 Q(3) = 0.270 % of them (binomial sd 0.004 %)
+    # sigma_0: 3 gate sigmas hold all but 2 Q(3) = 0.270 % of them (binomial sd 0.004 %), and
+    # 4 of the k = 4 gate std (the split tolerance) all but 2 Q(4) = 0.0063 % (sd 0.0006 %)
     rng = np.random.default_rng(0)
     n = 2_000_000
     rounded = np.where(rng.random(n) < share, rng.uniform(-step / 2, step / 2, n), 0.0)
@@ -135,6 +136,8 @@ def test_gate_sigma_holds_the_rounded_errors_tail(sigma_0, step, share):
     g = gate_sigma(sigma_r, step, share)
     assert g < sigma_r
     assert np.mean(np.abs(e) > 3.0 * g) == pytest.approx(0.0027, abs=0.00015)
+    g4 = gate_sigma(sigma_r, step, share, k=4.0)
+    assert g4 < g and np.mean(np.abs(e) > 4.0 * g4) == pytest.approx(6.33e-5, abs=2e-5)
     assert gate_sigma(sigma_r) == sigma_r  # not rounded: the Gaussian's own
 
 

@@ -83,9 +83,7 @@ def _clean_pieces(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
     win = np.empty((s.size, 2 * reach), dtype=np.int64)
     np.minimum(s[:, None] + steps, e[:, None], out=win[:, :reach])
     np.maximum(e[:, None] - steps, s[:, None], out=win[:, reach:])
-    # scatter along the line (the larger eigenvalue), for the points' leverage
-    stt = sxx * ny * ny + syy * nx * nx - 2.0 * sxy * nx * ny
-    z = _z(scan, nx, ny, rho, win, params, (cx, cy, sums[0], stt))
+    z = _z(scan, nx, ny, rho, win, params)
     # leading (head) and trailing (tail) runs of outlying points
     lead, trail = (z > gate).reshape(s.size, 2, reach).cumprod(axis=2).sum(axis=2).T
     ns, ne = s + lead, e - trail
@@ -135,7 +133,7 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         sxx = (p3[b] - p3[a]) - ncx * cx
         syy = (p4[b] - p4[a]) - n * cy * cy
         sxy = (p5[b] - p5[a]) - ncx * cy
-        scat.append((cx, cy, n, sxx, syy, sxy))
+        scat.append((cx, cy))
         a_in.append(-2.0 * sxy)
         b_in.append(syy - sxx)
     if _MATH_TRIG:  # numpy's results (see _math_is_numpy)
@@ -146,30 +144,24 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
         nxs, nys = np.cos(alpha).tolist(), np.sin(alpha).tolist()
     xs, ys, rng, cps, sps = scan.rows()[:_TOL]
     ox, oy = scan.origin
-    gs, sr, sp_ = params.gate_sigma_r, params.sigma_r, params.sigma_phi
+    sr, sp_ = params.gate_sigma_r, params.sigma_phi
     gate = params.trim_sigma
     reach = params.min_points
 
     def z(i: int, nx: float, ny: float, rho: float) -> float:
-        """Return :func:`_z` of point i to one line (its piece: cx, cy, n, stt)."""
+        """Return :func:`_z` of point i to one line."""
         d = xs[i] * nx + ys[i] * ny - rho
         cp, sp = cps[i], sps[i]
-        t = (ys[i] - cy) * nx - (xs[i] - cx) * ny
-        h = 1.0 / n + (t * t / stt if stt > 0.0 else 0.0)
-        u = nx * cp + ny * sp
-        a = gs * u
-        c = sr * u
+        a = sr * (nx * cp + ny * sp)
         b = rng[i] * sp_ * (ny * cp - nx * sp)
-        g = 1.0 - h
-        return abs(d) / math.sqrt(max(g * (g * a * a + h * c * c + b * b), 1e-24))
+        return abs(d) / math.sqrt(max(a * a + b * b, 1e-24))
 
     ns, ne = s_l[:], e_l[:]
     z_first, z_last = [math.inf] * size, [math.inf] * size
     for i, j in enumerate(fitted):
         a, b = s_l[j], e_l[j]
         nx, ny = nxs[i], nys[i]
-        cx, cy, n, sxx, syy, sxy = scat[i]
-        stt = sxx * ny * ny + syy * nx * nx - 2.0 * sxy * nx * ny
+        cx, cy = scat[i]
         # rho of the line relative to the scan origin (see _clean_pieces)
         rho = (cx + ox) * nx + (cy + oy) * ny - nx * ox - ny * oy
         za, zb = z(a, nx, ny, rho), z(b, nx, ny, rho)
@@ -202,35 +194,16 @@ def _clean_pieces_py(scan: _Scan, pre: np.ndarray, s: np.ndarray, e: np.ndarray,
 
 
 def _z(scan: _Scan, nx: np.ndarray, ny: np.ndarray, rho: np.ndarray, pts: np.ndarray,
-       params: LineParams, pieces: Tuple[np.ndarray, ...]) -> np.ndarray:
-    """Return |residual| / its std of points pts (L, K) of the L pieces to their lines.
+       params: LineParams) -> np.ndarray:
+    """Return |distance| / std (eq. 7 on the normal) of points pts (L, K) to the L lines.
 
-    ``rho`` is relative to the scan origin; ``pieces`` = (cx, cy, n, stt) of each piece: its
-    centroid, its point count and its scatter along the line. The points are part of their
-    piece's fit, which leans toward each of them by its leverage h = 1/n + t^2 / stt (t:
-    its position along the line from the centroid; about 4 / n at an end): the residual d
-    = (1 - h) e_i - (the other points' errors through the fit). Its variance is therefore
-    (1 - h)^2 var(e_i) + h (1 - h) sigma^2 (the standard regression residual variance
-    (1 - h) sigma^2 when both are one Gaussian), with var(e_i) that of the point's own
-    error, eq. 7 on the normal with the gates' range std (``gate_sigma_r``: a rounded
-    reading's error n + u is bounded, see
-    :func:`~landmark_nav.laser.range_noise.gate_sigma`), and sigma^2 the fit's part, eq. 7
-    with ``sigma_r``: the fit averages the errors of many beams, rounding included
-    (variance q^2 / 12 each). Without this factor an end point off its line (a corner's
-    far side) pulls a short piece toward itself and hides within the gate.
+    ``rho`` is relative to the scan origin.
     """
     x, y, rng, cp, sp = scan.cols[:_TOL].take(pts, axis=1)
     # the lines' parameters once per point (no broadcasting below)
-    k = pts.shape[1]
-    nx, ny, rho, cx, cy, n, stt = np.array((nx, ny, rho) + tuple(pieces)).repeat(
-        k, axis=1).reshape((7,) + pts.shape)
+    nx, ny, rho = np.array((nx, ny, rho)).repeat(pts.shape[1], axis=1).reshape((3,) + pts.shape)
     d = x * nx + y * ny - rho
-    t = (y - cy) * nx - (x - cx) * ny
-    h = 1.0 / n + np.where(stt > 0.0, t * t / np.where(stt > 0.0, stt, 1.0), 0.0)
-    u = nx * cp + ny * sp
-    a = params.gate_sigma_r * u
-    c = params.sigma_r * u
-    b = rng * params.sigma_phi * (ny * cp - nx * sp)
-    g = 1.0 - h
-    var = g * (g * a * a + h * c * c + b * b)
+    n_u = nx * cp + ny * sp
+    n_v = ny * cp - nx * sp
+    var = (params.gate_sigma_r * n_u) ** 2 + (rng * params.sigma_phi * n_v) ** 2
     return np.abs(d) / np.sqrt(np.maximum(var, 1e-24))
