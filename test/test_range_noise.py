@@ -2,6 +2,7 @@
 
 import math
 
+from landmark_nav.laser.lines import LineParams
 from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma, range_step, \
     RangeNoiseTracker, window_variances
 import numpy as np
@@ -142,6 +143,10 @@ def test_gate_sigma_holds_the_rounded_errors_tail(sigma_0, step, share):
 
 
 def test_gate_sigma_of_5cm_steps_on_1cm_noise():
-    # the figure the docs quote: 99.73 % of the errors within 4.6 cm, not 3 x 1.76 cm
-    assert 3.0 * gate_sigma(math.sqrt(0.01 ** 2 + 0.05 ** 2 / 12), 0.05) == pytest.approx(
-        0.04585, abs=5e-5)
+    # the figures the docs quote: 99.73 % of the errors within 4.6 cm, not 3 x 1.76 cm; the
+    # 4-sigma tail (the split tolerance) beyond 5.7 cm, not 4 x 1.53 = 6.1 cm or 4 x 1.76 cm
+    sigma_r = math.sqrt(0.01 ** 2 + 0.05 ** 2 / 12)
+    assert 3.0 * gate_sigma(sigma_r, 0.05) == pytest.approx(0.04585, abs=5e-5)
+    assert 4.0 * gate_sigma(sigma_r, 0.05, k=4.0) == pytest.approx(0.05742, abs=5e-5)
+    assert LineParams(sigma_r=sigma_r, range_step=0.05).threshold == pytest.approx(
+        0.05742, abs=5e-5)
