@@ -19,7 +19,8 @@ class LineParams:
     Attributes:
         method: ``'split_merge'`` (default) or ``'alfa'``.
         split_threshold: Split-and-merge distance tolerance [m] (eq. 4); None means
-            ``max(0.03, 4 * sigma_r)``. The tolerance of a point at range r is this plus
+            ``max(0.03, 4 * sigma_r)`` (rounded readings: their error's 4-sigma-tail bound,
+            see :attr:`threshold`). The tolerance of a point at range r is this plus
             ``3 * sigma_phi * r`` (the bearing noise's lateral effect). Also bounds the
             merge, the growth and every line's RMSE (both methods).
         min_points: Fewest points of a line (ALFA's ``least_point_in_line``).
