@@ -9,7 +9,8 @@ Run from the repository root (needs ``../shared/data/carmen`` or ``--data DIR``)
     python benchmarks/bench_feature_metrics.py structural-rule [--data DIR]
         [--min-share 0.3] [--arm-ends required|ignored] [LOG ...]
     python benchmarks/bench_feature_metrics.py quantised-lines [--data DIR] [--step 0.05]
-        [--drho 0.05 ...] [--dalpha 2 ...] [--misses] [LOG ...]
+        [--drho 0.05 ...] [--dalpha 2 ...] [--set NAME=VALUE ...] [--misses] [--gate-costs]
+        [LOG ...]
 
 A LOG is a log name in ``--data DIR`` (``aces`` -> ``DIR/aces-corrected.log.gz``; default
 the six Carmen logs) or a path to a Carmen log.
@@ -67,8 +68,11 @@ the coverage f, the fit RMS (on the ``metrics`` sample of 20 scans), the false-s
 (all scans) and the line repeatability of both and the repeatability's drop; between
 them the repeatability of the unquantised log extracted with the quantised copy's settings
 (its sigma_r and rounding): the drop from the log to that column is what the settings
-cost, the rest what the rounded data lose. ``--misses``: how each opportunity ends, for
-the log and its copy (:func:`line_misses`).
+cost, the rest what the rounded data lose. ``--set NAME=VALUE`` (repeatable) changes a
+:class:`LineParams` field for all three. ``--misses``: how each opportunity ends, for
+the log and its copy (:func:`line_misses`). ``--gate-costs``: which of the settings cost
+it (:func:`gate_costs`): the log at its own settings with one gate at the copy's, and the
+copy at its settings with one gate at the log's.
 """
 
 from dataclasses import replace
@@ -86,8 +90,8 @@ from landmark_nav.evaluation.feature_bags import (bag_metric_scans, evaluate_tru
 from landmark_nav.evaluation.features import normal_form, segment_per_extractor
 from landmark_nav.evaluation.scan_metrics import (corner_observable, corner_repeatability,
                                                   evaluate_scans, line_opportunities,
-                                                  MetricScan, ray_metrics, Repeatability,
-                                                  segments_of)
+                                                  line_repeatability, MetricScan, ray_metrics,
+                                                  Repeatability, segments_of)
 from landmark_nav.geometry import inverse_transform_points, transform_points, wrap_angle
 from landmark_nav.importers.carmen import read_carmen_scans
 from landmark_nav.importers.writer import import_log
@@ -349,12 +353,12 @@ def run_structural_rule(args) -> int:
     return 0
 
 
-def line_misses(scans: list, noise, gate: tuple) -> dict:
+def line_misses(scans: list, noise, gate: tuple, base: LineParams) -> dict:
     """Return the ``split_merge`` line opportunities of ``scans`` and how they end.
 
-    Lines as ``evaluate_scans`` extracts them at the range noise ``noise`` (its sigma_r and
-    rounding); each opportunity of :func:`line_repeatability` is ``re-detected``, ``near``
-    (a next-scan segment overlaps it within twice the gate; ``near d rho`` when only
+    Lines as ``evaluate_scans`` extracts them with ``base`` at the range noise ``noise`` (its
+    sigma_r and rounding); each opportunity of :func:`line_repeatability` is ``re-detected``,
+    ``near`` (a next-scan segment overlaps it within twice the gate; ``near d rho`` when only
     |d rho| is over the gate), ``within 4 gates`` or ``lost`` (none within four times the
     gate); ``near`` ones also by the line's incidence at its midpoint (0-15, 15-45, 45-90
     deg). For those ``within 4 gates`` the medians of their length, beams and distance
@@ -362,7 +366,7 @@ def line_misses(scans: list, noise, gate: tuple) -> dict:
     """
     cfg = extractor_configuration('line_extractor')
     segmenter = ScanSegmenter(cfg.incidence_deg, cfg.min_points, noise.sigma_r)
-    params = replace(cfg.params, sigma_r=noise.sigma_r, range_step=noise.step,
+    params = replace(base, sigma_r=noise.sigma_r, range_step=noise.step,
                      range_step_share=noise.step_share)
     segs, beams = [], []
     for s in scans:
@@ -416,6 +420,77 @@ def line_misses(scans: list, noise, gate: tuple) -> dict:
     return out
 
 
+#: The gates :func:`gate_costs` moves one at a time, each through public settings.
+GATES = ('segmentation', 'split tolerance', 'trim and growth', 'see-through', 'merge test')
+
+
+def _with_gate(params: LineParams, seg_sigma: float, other: LineParams, other_seg: float,
+               gate: str) -> tuple:
+    """Return ``(params, segmentation sigma)`` with ``gate`` set as ``other`` sets it.
+
+    ``split tolerance``: ``split_threshold`` = the other's; ``trim and growth``:
+    ``trim_sigma`` scaled so that its gate is the other's (``trim_sigma`` times
+    ``gate_sigma_r``); ``see-through``: ``see_through`` = the other's tolerance (the margins'
+    3-sigma part stays); ``merge test``: ``merge_chi2`` scaled by (other sigma_r / sigma_r)^2,
+    the merge and join tests' chi-square as the other's covariances would give it where the
+    range noise dominates them.
+    """
+    if gate == 'segmentation':
+        return params, other_seg
+    if gate == 'split tolerance':
+        return replace(params, split_threshold=other.threshold), seg_sigma
+    if gate == 'trim and growth':
+        return replace(params, trim_sigma=params.trim_sigma * other.gate_sigma_r
+                       / params.gate_sigma_r), seg_sigma
+    if gate == 'see-through':
+        return replace(params, see_through=other.see_through_tolerance), seg_sigma
+    return replace(params, merge_chi2=params.merge_chi2
+                   * (other.sigma_r / params.sigma_r) ** 2), seg_sigma
+
+
+def split_merge_repeatability(scans: list, params: LineParams, seg_sigma: float,
+                              gate: tuple) -> Repeatability:
+    """Return the line repeatability of ``split_merge`` lines with these settings.
+
+    Segmentation as the ``line_extractor`` node's with range noise ``seg_sigma``; scored as
+    ``evaluate_scans`` scores it (:func:`line_repeatability`, ``gate`` = (d rho, d alpha)).
+    """
+    cfg = extractor_configuration('line_extractor')
+    segmenter = ScanSegmenter(cfg.incidence_deg, cfg.min_points, seg_sigma)
+    score, prev = Repeatability(), None
+    for s in scans:
+        segs = segments_of(extract_lines(
+            segmenter.segment(s.ranges, s.angles, s.valid, s.angle_increment), params))
+        if prev is not None:
+            line_repeatability(score, prev[1], prev[0].pose, segs, s, max_drho=gate[0],
+                               max_dalpha=gate[1])
+        prev = (s, segs)
+    return score
+
+
+def gate_costs(scans: list, rounded: list, own, noise, gate: tuple, base: LineParams
+               ) -> list:
+    """Return rows (data, settings, repeatability, one per :data:`GATES` moved).
+
+    The log (``scans``, range noise ``own``) at its settings with each gate in turn at the
+    rounded copy's (``rounded``, ``noise``), and the copy at its settings with each gate
+    at the log's (:func:`_with_gate`); settings as ``evaluate_scans`` derives them from an
+    estimate (``sigma_r``, ``range_step``, ``range_step_share``) on ``base``.
+    """
+    p_own, p_copy = (replace(base, sigma_r=n.sigma_r, range_step=n.step,
+                             range_step_share=n.step_share) for n in (own, noise))
+    rows = []
+    for data, sc, mine, seg, other, other_seg in (
+            ('log', scans, p_own, own.sigma_r, p_copy, noise.sigma_r),
+            ('copy', rounded, p_copy, noise.sigma_r, p_own, own.sigma_r)):
+        row = [data, 'own', split_merge_repeatability(sc, mine, seg, gate).fraction]
+        for g in GATES:
+            params, seg_g = _with_gate(mine, seg, other, other_seg, g)
+            row.append(split_merge_repeatability(sc, params, seg_g, gate).fraction)
+        rows.append(row)
+    return rows
+
+
 def run_quantised_lines(args) -> int:
     """Run ``quantised-lines``: line repeatability of a log and its quantised copy per gate."""
     print('| log | sigma_r [cm] | gate sigma [cm] | d rho gate [m] | d alpha gate [deg] | f | '
@@ -423,10 +498,14 @@ def run_quantised_lines(args) -> int:
           'repeatability | at the quantised settings | quantised | drop |')
     print('|' + ' --- |' * 15)
     base = extractor_configuration('line_extractor')
+    base = replace(base, params=replace(base.params, **parse_set(args.set)))
     misses = ['\n| log | d rho gate [m] | d alpha gate [deg] | copy | opportunities | '
               're-detected | near, d rho | near, d alpha | within 4 gates | lost | '
               'near at 0-15 deg | 15-45 deg | 45-90 deg | within 4 gates: length [m] | '
               'beams | distance [m] | d rho [cm] | d alpha [deg] |', '|' + ' --- |' * 18]
+    costs = ['\n| log | d rho gate [m] | d alpha gate [deg] | data | repeatability at its '
+             'settings | ' + ' | '.join(f"{g} as the other's" for g in GATES) + ' |',
+             '|' + ' --- |' * (5 + len(GATES))]
     for name, path in log_paths(args.data, args.logs):
         scans = carmen_metric_scans(path)
         rounded = []
@@ -443,7 +522,8 @@ def run_quantised_lines(args) -> int:
         for drho in args.drho:
             for dalpha in args.dalpha:
                 fig = []
-                for sc, sigma, configs in ((scans, 'auto', None), (rounded, 'auto', None),
+                for sc, sigma, configs in ((scans, 'auto', {'line_extractor': base}),
+                                           (rounded, 'auto', {'line_extractor': base}),
                                            (scans, noise.sigma_r,
                                             {'line_extractor': settings})):
                     res = evaluate_scans(sc, extractor_sigma_r=sigma,
@@ -462,11 +542,19 @@ def run_quantised_lines(args) -> int:
                       f'| {fig[1][1]:.3f} | {fig[0][1] - fig[1][1]:.3f} |', flush=True)
                 if args.misses:
                     for label, sc, nz in (('log', scans, own), ('quantised', rounded, noise)):
-                        found = line_misses(sc, nz, (drho, math.radians(dalpha)))
+                        found = line_misses(sc, nz, (drho, math.radians(dalpha)),
+                                            base.params)
                         misses.append(f'| {name} | {drho:g} | {dalpha:g} | {label} | '
                                       + ' | '.join(map(str, found.values())) + ' |')
+                if args.gate_costs:
+                    for row in gate_costs(scans, rounded, own, noise,
+                                          (drho, math.radians(dalpha)), base.params):
+                        costs.append(f'| {name} | {drho:g} | {dalpha:g} | {row[0]} | '
+                                     + ' | '.join(f'{v:.3f}' for v in row[2:]) + ' |')
     if args.misses:
         print('\n'.join(misses))
+    if args.gate_costs:
+        print('\n'.join(costs))
     return 0
 
 
@@ -503,6 +591,11 @@ def main(argv=None) -> int:
     p.add_argument('--misses', action='store_true',
                    help='also how the opportunities end: re-detected, near (within twice '
                         'the gate), within four times the gate, or lost')
+    p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                   help='a LineParams field for the log and its copy (a Python literal)')
+    p.add_argument('--gate-costs', action='store_true',
+                   help="also the repeatability of the log with each gate at the copy's "
+                        "setting, and of the copy with each gate at the log's")
     p.set_defaults(run=run_quantised_lines)
     p = sub.add_parser('structural-rule',
                        help="how Corner.structural's bounds were chosen (leave one log out)")

@@ -52,9 +52,11 @@ TINY_RUNS = {
          r'\| tiny \| [\d.]+ \(\d+/\d+\) \|'),
         (['structural-rule', '--data', '{carmen}', 'tiny', '--lengths', '0.2', '--steps', '5',
           '--min-share', '0'], r'all logs: L 0.2 m, N 5 beam steps: tiny ([\d.]+|nan) '),
-        (['quantised-lines', '--data', '{carmen}', 'tiny'],
+        (['quantised-lines', '--data', '{carmen}', 'tiny', '--set', 'trim_sigma=3.0',
+          '--gate-costs'],
          r'\| tiny \| [\d.]+ \| [\d.]+ \| 0.05 \| 2 \| [\d.]+ \| [\d.]+ \| ([\d.]+|nan) \| '
-         r'([\d.]+|nan) \| \d+ \| \d+ \| ')],
+         r'([\d.]+|nan) \| \d+ \| \d+ \| (.*\n)+'
+         r'\| tiny \| 0.05 \| 2 \| copy( \| ([\d.]+|nan)){6} \|')],
     'bench_slam.py': [
         (['step-time', '--landmarks', '10', '--steps', '3'], r'\n\s+10\s+23\s+[\d.]+'),
         (['step-time', '--bag', '{small_bag}', '--steps', '8'],

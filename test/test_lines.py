@@ -9,6 +9,7 @@ from landmark_nav.evaluation.features import _cut_variance, FeatureRun, line_crl
 from landmark_nav.geometry import compose, wrap_angle
 from landmark_nav.laser.lines import (explained_points, extract_lines, fit_line, LineParams,
                                       lowess, METHODS, point_covariances, split_pieces)
+from landmark_nav.laser.range_noise import gate_sigma
 from landmark_nav.laser.segmentation import Cluster, segment_scan
 from landmark_nav.sim import run_scenario, ScanSample, World
 from landmark_nav.slam.features import extract_scan_features
@@ -701,4 +702,7 @@ def test_gate_sigma_of_unrounded_ranges_is_sigma_r():
     p = LineParams(sigma_r=0.02)
     assert p.gate_sigma_r == 0.02 and p.threshold == 0.08 and p.see_through_tolerance == 0.06
     q = LineParams(sigma_r=0.02, range_step=0.05)
-    assert q.gate_sigma_r < 0.02 and q.threshold == 4.0 * q.gate_sigma_r
+    # the split tolerance: the rounded error's 4-sigma-tail bound, below 4 of its 3-sigma
+    # gate std (the bounded rounding's tail shortens faster than a Gaussian's)
+    assert q.gate_sigma_r < 0.02 and q.threshold == 4.0 * gate_sigma(0.02, 0.05, k=4.0)
+    assert q.threshold < 4.0 * q.gate_sigma_r

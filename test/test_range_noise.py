@@ -2,6 +2,7 @@
 
 import math
 
+from landmark_nav.laser.lines import LineParams
 from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma, range_step, \
     RangeNoiseTracker, window_variances
 import numpy as np
@@ -102,7 +103,7 @@ def _carmen_metric_scans(name, n, step=None):
 def test_quantised_real_log_keeps_its_walls_with_the_estimate():
     # belgioioso (1 cm readings, 0.5 deg), 120 scans, and the same rounded to 5 cm: with
     # sigma_r estimated, coverage f and line repeatability stay within 0.05 of the
-    # unquantised log's (measured 0.669 / 0.858 -> 0.678 / 0.850); at the fixed 1 cm the
+    # unquantised log's (measured 0.669 / 0.858 -> 0.646 / 0.852); at the fixed 1 cm the
     # rounded walls break up (f 0.662 -> 0.604)
     from landmark_nav.evaluation.scan_metrics import evaluate_scans
 
@@ -126,7 +127,8 @@ def test_quantised_real_log_keeps_its_walls_with_the_estimate():
                                                   (0.01, 0.05, 0.8), (0.0, 0.05, 1.0)])
 def test_gate_sigma_holds_the_rounded_errors_tail(sigma_0, step, share):
     # 2e6 draws of the error of a reading rounded to `step` (a share of them) on sensor noise
-    # sigma_0: 3 gate sigmas hold all but 2 Q(3) = 0.270 % of them (binomial sd 0.004 %)
+    # sigma_0: 3 gate sigmas hold all but 2 Q(3) = 0.270 % of them (binomial sd 0.004 %), and
+    # 4 of the k = 4 gate std (the split tolerance) all but 2 Q(4) = 0.0063 % (sd 0.0006 %)
     rng = np.random.default_rng(0)
     n = 2_000_000
     rounded = np.where(rng.random(n) < share, rng.uniform(-step / 2, step / 2, n), 0.0)
@@ -135,10 +137,16 @@ def test_gate_sigma_holds_the_rounded_errors_tail(sigma_0, step, share):
     g = gate_sigma(sigma_r, step, share)
     assert g < sigma_r
     assert np.mean(np.abs(e) > 3.0 * g) == pytest.approx(0.0027, abs=0.00015)
+    g4 = gate_sigma(sigma_r, step, share, k=4.0)
+    assert g4 < g and np.mean(np.abs(e) > 4.0 * g4) == pytest.approx(6.33e-5, abs=2e-5)
     assert gate_sigma(sigma_r) == sigma_r  # not rounded: the Gaussian's own
 
 
 def test_gate_sigma_of_5cm_steps_on_1cm_noise():
-    # the figure the docs quote: 99.73 % of the errors within 4.6 cm, not 3 x 1.76 cm
-    assert 3.0 * gate_sigma(math.sqrt(0.01 ** 2 + 0.05 ** 2 / 12), 0.05) == pytest.approx(
-        0.04585, abs=5e-5)
+    # the figures the docs quote: 99.73 % of the errors within 4.6 cm, not 3 x 1.76 cm; the
+    # 4-sigma tail (the split tolerance) beyond 5.7 cm, not 4 x 1.53 = 6.1 cm or 4 x 1.76 cm
+    sigma_r = math.sqrt(0.01 ** 2 + 0.05 ** 2 / 12)
+    assert 3.0 * gate_sigma(sigma_r, 0.05) == pytest.approx(0.04585, abs=5e-5)
+    assert 4.0 * gate_sigma(sigma_r, 0.05, k=4.0) == pytest.approx(0.05742, abs=5e-5)
+    assert LineParams(sigma_r=sigma_r, range_step=0.05).threshold == pytest.approx(
+        0.05742, abs=5e-5)

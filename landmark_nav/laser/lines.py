@@ -83,10 +83,11 @@ Choices where the chapters are silent, or misprinted:
   through first-order derivatives of the total-least-squares solution (:func:`fit_line`).
 * Ranges rounded to a step q (``LineParams.range_step``, found by the range-noise estimate):
   the covariances use ``sigma_r`` (sensor noise and rounding, q^2 / 12), the gates above
-  (trim, growth, split tolerance, see-through and occluder margins) the std whose 3-sigma
-  gate has the rounded error's tail (``LineParams.gate_sigma_r``,
-  :func:`landmark_nav.laser.range_noise.gate_sigma`): a bounded rounding error has lighter
-  tails than a Gaussian of its variance.
+  (trim, growth, see-through and occluder margins) the std whose 3-sigma gate has the
+  rounded error's tail (``LineParams.gate_sigma_r``,
+  :func:`landmark_nav.laser.range_noise.gate_sigma`), the split tolerance (4 sigma) the
+  bound with the tail of a Gaussian's 4 sigma: a bounded rounding error has lighter tails
+  than a Gaussian of its variance.
 
 Code: this module runs the steps (:func:`extract_lines`); each step is a module of
 :mod:`landmark_nav.laser.line_extraction` named after what it computes (the names in

@@ -19,7 +19,8 @@ class LineParams:
     Attributes:
         method: ``'split_merge'`` (default) or ``'alfa'``.
         split_threshold: Split-and-merge distance tolerance [m] (eq. 4); None means
-            ``max(0.03, 4 * sigma_r)``. The tolerance of a point at range r is this plus
+            ``max(0.03, 4 * sigma_r)`` (rounded readings: their error's 4-sigma-tail bound,
+            see :attr:`threshold`). The tolerance of a point at range r is this plus
             ``3 * sigma_phi * r`` (the bearing noise's lateral effect). Also bounds the
             merge, the growth and every line's RMSE (both methods).
         min_points: Fewest points of a line (ALFA's ``least_point_in_line``).
@@ -149,10 +150,17 @@ class LineParams:
 
     @property
     def threshold(self) -> float:
-        """Return the split tolerance at zero range [m]."""
+        """Return the split tolerance at zero range [m].
+
+        ``max(0.03, 4 sigma)``, the 4-sigma bound of a point's range error: for rounded
+        readings the bound their error exceeds as rarely as a Gaussian's exceeds 4 standard
+        deviations (:func:`~landmark_nav.laser.range_noise.gate_sigma` with k = 4; 4 times
+        the 3-sigma gate std would be wider, the rounding's tail being bounded).
+        """
         if self.split_threshold is not None:
             return float(self.split_threshold)
-        return max(0.03, 4.0 * self.gate_sigma_r)
+        return max(0.03, 4.0 * gate_sigma(float(self.sigma_r), float(self.range_step),
+                                          float(self.range_step_share), k=4.0))
 
     @property
     def see_through_tolerance(self) -> float:
