@@ -136,9 +136,9 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(2.6849, -1.4930, 0.7321, -1.0584, -0.8132),
+CALIBRATION = VPCalibration(weights=(3.5018, -1.4254, 0.4824, -1.0867, -0.7728, -0.7858),
                             scale=1.3493, floor_deg=0.2026,
-                            sigma_wrong_deg=5.2509, p_confident=0.7547)
+                            sigma_wrong_deg=5.2509, p_confident=0.8201)
 
 
 @dataclass(frozen=True, eq=False)

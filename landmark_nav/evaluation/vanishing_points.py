@@ -386,11 +386,11 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
     size; every image is estimated at every size in ``scales`` with that noise; the
     confidence model is fitted on the other folds' directions (:func:`calibrate`; with
     ``per_size``, one model per size on that size's directions) and applies to the fold's
-    own (with ``orthogonality`` and ``influence`` as :func:`calibrate`). The segments the noise is fitted on
-    are labelled with ``vp_params.sigma_px`` and no direction noise (as ``segment_noise``
-    is used for the defaults); apart from that labelling constant nothing of a held-out
-    image enters its estimate's constants. Lines are detected once per image and size (the
-    noise changes only the Manhattan search).
+    own (with ``orthogonality`` and ``influence`` as :func:`calibrate`). The segments the
+    noise is fitted on are labelled with ``vp_params.sigma_px`` and no direction noise (as
+    ``segment_noise`` is used for the defaults); apart from that labelling constant nothing
+    of a held-out image enters its estimate's constants. Lines are detected once per image
+    and size (the noise changes only the Manhattan search).
 
     Returns:
         ``(held-out directions, calibration per fold and size, noise per fold and size)``.
