@@ -25,17 +25,27 @@ first. Per direction this module states:
   as in a corridor seen along its axis with no line across it; York has no such frame)::
 
       p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n
-                          + w3 ln(sigma_frame f / 1 px) + w4 ln(o / 1 rad))))
+                          + w3 ln(sigma_frame f / 1 px) + w4 ln(o / 1 rad) + w5 ln i)))
 
-  and of the direction's orthogonality residual ``o``, its angle to the normal of the
+  of the direction's orthogonality residual ``o``, its angle to the normal of the
   frame's other two directions (:func:`orthogonality_residuals`; after the joint
   refinement each direction is refined on its own lines, and one that went to lines of no
   Manhattan direction, such as pavement edges, leaves the triad's orthogonality; York's
   true triads are themselves up to 4 deg off, so this is a soft sign, fitted ``w4`` about
-  -0.8). The ambiguity, the a-contrario number below as a value and the angle between the
-  direction and the jointly refined triad's did not separate wrong directions from right
-  ones on York; held out they changed the confident fraction by a few per cent and the
-  precision not at all or for the worse.
+  -0.8), and of its influence ``i`` (:func:`influence`): the largest angle by which the
+  direction moves when one of its inlier segments is left out (the jackknife's deleted
+  estimates, each refined as the direction was), over its first-order spread
+  ``sigma_cov`` -- the deletion diagnostic DFBETAS of regression (Belsley, Kuh, Welsch,
+  *Regression Diagnostics*, 1980, §2.1), which the first-order covariance cannot show: it
+  assumes every inlier is a line of the direction. Many lines of the direction give a
+  value below 1 (York's median 0.8); a direction resting on one or two of its lines,
+  whose deletion moves it by more than its stated spread, a larger one (fitted ``w5``
+  about -0.8; it is the one feature of the model that depends on how the inliers agree
+  with each other rather than on their number and geometry). The ambiguity, the
+  a-contrario number below as a value and the angle between the direction and the jointly
+  refined triad's did not separate wrong directions from right ones on York; held out
+  they changed the confident fraction by a few per cent and the precision not at all or
+  for the worse.
 * an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
   the sphere (the angular error ``e`` of each component Rayleigh distributed): with
   probability ``p`` the correct mode, ``sigma = sqrt((a sigma_cov)^2 + b^2)`` (the
