@@ -4,7 +4,8 @@ Run from the repository root::
 
     python benchmarks/bench_vanishing_points.py [--data DIR] [--images N] [--repeat R]
         [--scales 1,0.5] [--confidence [--folds K] [--in-sample-noise] [--noise-per-size]
-        [--model-per-size] [--four-features] | --calibrate | --noise] [--no-orthogonal]
+        [--model-per-size] [--four-features | --no-influence] | --calibrate | --noise]
+        [--no-orthogonal]
 
 For the 51 training images of ``../shared/data/york_urban_train`` (Denis, Elder, Estrada,
 ECCV 2008; or any folder of ``NAME.jpg`` + ``NAME_gt.npz`` in the dataset's format given
@@ -45,8 +46,8 @@ labelled by the estimator without the direction noise
 (``VPParams(orthogonal=False)``), for comparison. Alternatives of ``--confidence``, for
 comparison: ``--noise-per-size`` (the segment noise fitted at each size on that size's
 segments and used for it), ``--model-per-size`` (one confidence model per size, fitted on
-that size's directions), ``--four-features`` (the model without the orthogonality
-residual).
+that size's directions), ``--no-influence`` (the model without the influence of single
+segments), ``--four-features`` (without the influence and the orthogonality residual).
 """
 
 import argparse
@@ -94,7 +95,10 @@ def main(argv=None) -> int:
     ap.add_argument('--model-per-size', action='store_true',
                     help='--confidence with one confidence model per size')
     ap.add_argument('--four-features', action='store_true',
-                    help='--confidence without the orthogonality residual as a feature')
+                    help='--confidence without the orthogonality residual and the influence '
+                    'as features')
+    ap.add_argument('--no-influence', action='store_true',
+                    help='--confidence without the influence as a feature')
     args = ap.parse_args(argv)
     vp = replace(VPParams(), orthogonal=not args.no_orthogonal)
     items = load_york_urban(data_folder(args.data))[:args.images]
@@ -109,21 +113,24 @@ def main(argv=None) -> int:
         ap.error('--in-sample-noise goes with --confidence')
     if args.confidence and not 2 <= args.folds <= len(items):
         ap.error(f'--folds {args.folds}: give 2 to the number of images ({len(items)})')
-    if (args.noise_per_size or args.model_per_size or args.four_features) \
-            and not args.confidence:
-        ap.error('--noise-per-size, --model-per-size and --four-features go with --confidence')
+    if (args.noise_per_size or args.model_per_size or args.four_features
+            or args.no_influence) and not args.confidence:
+        ap.error('--noise-per-size, --model-per-size, --four-features and --no-influence go '
+                 'with --confidence')
     if args.in_sample_noise and (args.noise_per_size or args.model_per_size):
         ap.error('--in-sample-noise goes without --noise-per-size and --model-per-size')
     if args.confidence and not args.in_sample_noise:
         return _confidence(*cross_validate_noise(
             items, scales, vp, args.folds, noise_scale=None if args.noise_per_size else 1.0,
-            per_size=args.model_per_size, orthogonality=not args.four_features), scales)
+            per_size=args.model_per_size, orthogonality=not args.four_features,
+            influence=not args.no_influence), scales)
     if args.confidence or args.calibrate:
         samples = [s for scale in scales for it in items
                    for s in confidence_samples(it, scale, vp_params=vp)]
         if args.calibrate:
             return _calibrate(samples, scales)
-        held, cals = cross_validate(samples, args.folds, not args.four_features)
+        held, cals = cross_validate(samples, args.folds, not args.four_features,
+                                    not args.no_influence)
         noise = FoldNoise(vp.sigma_px, vp.sigma_angle_deg, 0)
         return _confidence(held, [{sc: c for sc in scales} for c in cals],
                            [{sc: noise for sc in scales}] * len(cals), scales, in_sample=True)
@@ -181,14 +188,14 @@ def _confidence(held, cals, noises, scales, in_sample=False) -> int:
               f'{n.sigma_px:.3f} px, sigma_angle {n.sigma_angle_deg:.3f} deg')
     print(f'Per-fold constants (fitted on the other {len(cals) - 1} folds), per size:')
     print(f'  {"fold":>4s}{"size":>5s}{"sig px":>8s}{"sig deg":>8s}{"segs":>6s}{"w0":>8s}'
-          f'{"w1":>8s}{"w2":>8s}{"w3":>8s}{"w4":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}'
+          f'{"w1":>8s}{"w2":>8s}{"w3":>8s}{"w4":>8s}{"w5":>8s}{"a":>7s}{"b deg":>7s}{"wrong":>7s}'
           f'{"p conf":>8s}')
     for f, (cal, noise) in enumerate(zip(cals, noises)):
         for scale in scales:
             c, n = cal[scale], noise[scale]
             print(f'  {f:4d}{round(640 * scale):5d}{n.sigma_px:8.3f}{n.sigma_angle_deg:8.3f}'
                   f'{n.segments:6d}' + ''.join(f'{w:8.3f}' for w in c.weights)
-                  + ('' if len(c.weights) > 4 else f'{"-":>8s}')
+                  + f'{"-":>8s}' * (6 - len(c.weights))
                   + f'{c.scale:7.3f}{c.floor_deg:7.3f}{c.sigma_wrong_deg:7.2f}'
                   f'{c.p_confident:8.3f}')
     for scale in scales:

@@ -4,12 +4,15 @@ import math
 
 from landmark_nav.corridor.vanishing_point import (_Geometry, chapter_vanishing_point,
                                                    consistency, corridor_vanishing_point,
+                                                   direction_covariance,
+                                                   leave_one_out_directions,
                                                    manhattan_frame, refine_direction,
                                                    refine_manhattan, residual_terms,
                                                    vanishing_point, VPParams)
 from landmark_nav.corridor.vp_confidence import (assess_direction, assess_frame, CALIBRATION,
-                                                 features, fit_calibration, log10_nfa,
-                                                 mixture_radius, orthogonality_residuals)
+                                                 features, fit_calibration, influence,
+                                                 log10_nfa, mixture_radius,
+                                                 orthogonality_residuals)
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -335,6 +338,51 @@ def test_orthogonality_residual_is_the_angle_to_the_other_two_directions_normal(
     assert features(0.01, 0.01, 500.0, 10).shape == (4,)
     assert features(0.01, 0.01, 500.0, 10, math.radians(3))[4] == pytest.approx(
         math.log(math.radians(3)))
+    # the sixth, the influence, with the fifth; no leave-one-out estimate: the upper bound
+    assert features(0.01, 0.01, 500.0, 10, math.radians(3), 2.0)[5] == pytest.approx(
+        math.log(2.0))
+    assert features(0.01, 0.01, 500.0, 10, math.radians(3), math.inf)[5] == pytest.approx(
+        math.log(1e3))
+
+
+def _refined(seg, params):
+    d, inl = refine_direction(seg, K, corridor_frame(8.0, 4.0)[:, 2], params=params)
+    cov = direction_covariance(seg, K, d, inl, params.sigma_px, params.sigma_angle_deg)
+    return d, inl, math.sqrt(np.linalg.eigvalsh(cov)[-1])
+
+
+def test_influence_is_the_largest_leave_one_out_move_over_the_spread():
+    params = VPParams()
+    d_true = corridor_frame(8.0, 4.0)[:, 2]
+    v = (K @ d_true)[:2] / d_true[2]
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        # 20 lines of the direction, 0.5 px end-point noise: no line moves it by its spread
+        seg = lines_along(rng, d_true, 20, 0.5)
+        d, inl, s = _refined(seg, params)
+        many = influence(seg, K, d, inl, s, params)
+        assert many < 1.0                                   # measured 0.28-0.70
+        # the deleted estimates are the direction refined on the other inliers
+        loo = leave_one_out_directions(seg, K, d, inl, params)
+        first = inl.copy()
+        first[np.argmax(inl)] = False
+        own = refine_direction(seg, K, d, params=params, allowed=first)[0]
+        assert angle_deg(loo[0], own) < 1e-9
+        assert many * s == pytest.approx(max(math.radians(angle_deg(x, d)) for x in loo))
+        # one long line (300 px) and four short ones (25 px) through the vanishing point:
+        # the long line carries the direction, leaving it out moves it far more
+        segs = []
+        for ang, length, start in [(0.3, 300.0, 40.0)] + [
+                (a, 25.0, 150.0) for a in rng.uniform(-2.5, 2.5, 4)]:
+            u = np.array([math.cos(ang), math.sin(ang)])
+            nrm = np.array([-u[1], u[0]])
+            segs.append(np.r_[v + start * u + rng.normal(0, 0.5) * nrm,
+                              v + (start + length) * u + rng.normal(0, 0.5) * nrm])
+        seg = np.array(segs)
+        d, inl, s = _refined(seg, params)
+        assert influence(seg, K, d, inl, s, params) > many  # measured 0.68-3.19
+    # fewer than three inliers: no deleted estimate to measure it
+    assert influence(seg[:2], K, d, np.ones(2, bool), s, params) == math.inf
 
 
 def test_nfa_counts_long_consistent_lines_not_their_number():
@@ -360,13 +408,17 @@ def test_nfa_counts_long_consistent_lines_not_their_number():
     short = np.vstack([through_v([25.0] * 5), others])
     assert log10_nfa(short, inl, sigma, gate) > 0.0
     s, o = math.radians(0.1), math.radians(1.0)       # orthogonality residual 1 deg
+    i = 0.8                                           # influence: York's median
     assert assess_direction(s, s, 500.0, 5, log10_nfa(short, inl, sigma, gate),
-                            orthogonality=o)[0] == 0
+                            orthogonality=o, influence=i)[0] == 0
     assert assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate),
-                            orthogonality=o)[0] > 0.9
-    # the shipped model weighs the residual: not given, it is not taken as 0 (most confident)
+                            orthogonality=o, influence=i)[0] > 0.9
+    # the shipped model weighs the residual and the influence: not given, neither is taken
+    # as 0 (the most confident value)
     with pytest.raises(ValueError, match='orthogonality'):
         assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate))
+    with pytest.raises(ValueError, match='influence'):
+        assess_direction(s, s, 500.0, 5, log10_nfa(edges, inl, sigma, gate), orthogonality=o)
     # the two longest fix the point and do not count
     mixed = np.vstack([through_v([400.0, 400.0, 300.0, 300.0, 300.0]), others])
     assert log10_nfa(mixed, inl, sigma, gate) == pytest.approx(math.log10(4950 * p ** 3))

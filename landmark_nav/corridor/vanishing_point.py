@@ -417,6 +417,26 @@ def direction_covariance(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
     return T.T @ np.linalg.inv(Jt) @ T
 
 
+def leave_one_out_directions(segments: np.ndarray, K: np.ndarray, d: np.ndarray,
+                             inliers: np.ndarray, params: VPParams = VPParams()) -> np.ndarray:
+    """Return the direction refined without each of its inlier segments in turn.
+
+    Row ``i`` is :func:`refine_direction` from ``d`` on the inliers but the ``i``-th (in
+    index order), for the influence of single segments on the direction (the jackknife's
+    deleted estimates); (n, 3) for ``n`` inliers, (0, 3) when fewer than three.
+    """
+    seg, K = _check(segments, K)
+    idx = np.nonzero(np.asarray(inliers, dtype=bool))[0]
+    if idx.size < 3:
+        return np.zeros((0, 3))
+    allowed = np.zeros((idx.size, len(seg)), dtype=bool)
+    allowed[:, idx] = True
+    allowed[np.arange(idx.size), idx] = False
+    d = np.asarray(d, dtype=float)
+    return _refine_many(_geometry(seg, K, params), np.repeat(d[None], idx.size, 0), params,
+                        allowed)[0]
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 

@@ -25,17 +25,27 @@ first. Per direction this module states:
   as in a corridor seen along its axis with no line across it; York has no such frame)::
 
       p = 1 / (1 + exp(-(w0 + w1 ln(sigma_cov f / 1 px) + w2 ln n
-                          + w3 ln(sigma_frame f / 1 px) + w4 ln(o / 1 rad))))
+                          + w3 ln(sigma_frame f / 1 px) + w4 ln(o / 1 rad) + w5 ln i)))
 
-  and of the direction's orthogonality residual ``o``, its angle to the normal of the
+  of the direction's orthogonality residual ``o``, its angle to the normal of the
   frame's other two directions (:func:`orthogonality_residuals`; after the joint
   refinement each direction is refined on its own lines, and one that went to lines of no
   Manhattan direction, such as pavement edges, leaves the triad's orthogonality; York's
   true triads are themselves up to 4 deg off, so this is a soft sign, fitted ``w4`` about
-  -0.8). The ambiguity, the a-contrario number below as a value and the angle between the
-  direction and the jointly refined triad's did not separate wrong directions from right
-  ones on York; held out they changed the confident fraction by a few per cent and the
-  precision not at all or for the worse.
+  -0.8), and of its influence ``i`` (:func:`influence`): the largest angle by which the
+  direction moves when one of its inlier segments is left out (the jackknife's deleted
+  estimates, each refined as the direction was), over its first-order spread
+  ``sigma_cov`` -- the deletion diagnostic DFBETAS of regression (Belsley, Kuh, Welsch,
+  *Regression Diagnostics*, 1980, §2.1), which the first-order covariance cannot show: it
+  assumes every inlier is a line of the direction. Many lines of the direction give a
+  value below 1 (York's median 0.8); a direction resting on one or two of its lines,
+  whose deletion moves it by more than its stated spread, a larger one (fitted ``w5``
+  about -0.8; it is the one feature of the model that depends on how the inliers agree
+  with each other rather than on their number and geometry). The ambiguity, the
+  a-contrario number below as a value and the angle between the direction and the jointly
+  refined triad's did not separate wrong directions from right ones on York; held out
+  they changed the confident fraction by a few per cent and the precision not at all or
+  for the worse.
 * an error model, a two-component mixture of isotropic Gaussians on the tangent plane of
   the sphere (the angular error ``e`` of each component Rayleigh distributed): with
   probability ``p`` the correct mode, ``sigma = sqrt((a sigma_cov)^2 + b^2)`` (the
@@ -94,7 +104,9 @@ from dataclasses import dataclass
 import math
 from typing import Optional, Sequence, Tuple
 
-from landmark_nav.corridor.vanishing_point import direction_covariance, ManhattanFrame, VPParams
+from landmark_nav.corridor.vanishing_point import (direction_covariance,
+                                                   leave_one_out_directions, ManhattanFrame,
+                                                   VPParams)
 import numpy as np
 
 #: Two directions closer than this are the same hypothesis [deg].
@@ -105,6 +117,9 @@ CORRECT_DEG = 2.0
 MAX_LOG10_NFA = 0.0
 #: chi-square quantile used for the radius (2 dof, 95 %) of a single Gaussian mode.
 COVERAGE = 0.95
+#: Bounds of the influence feature (a direction with fewer than three inliers has no
+#: leave-one-out estimate and gets the upper bound) [first-order standard deviations].
+INFLUENCE_RANGE = (1e-3, 1e3)
 
 
 @dataclass(frozen=True)
@@ -112,9 +127,10 @@ class VPCalibration:
     """Constants of the confidence model (see the module docstring).
 
     Attributes:
-        weights: logistic weights ``(w0, w1, w2, w3, w4)`` of
-            ``(1, ln(sigma_cov f) [px], ln n, ln(sigma_frame f) [px], ln o [rad])`` (four
-            weights: without ``o``, the orthogonality residual).
+        weights: logistic weights ``(w0, w1, w2, w3, w4, w5)`` of
+            ``(1, ln(sigma_cov f) [px], ln n, ln(sigma_frame f) [px], ln o [rad], ln i)``
+            (five weights: without ``i``, the influence; four: without ``o``, the
+            orthogonality residual, either).
         scale: ``a``, factor on the first-order spread.
         floor_deg: ``b``, spread added in quadrature [deg].
         sigma_wrong_deg: spread of the wrong mode [deg].
@@ -130,9 +146,9 @@ class VPCalibration:
 
 #: Fitted by ``python benchmarks/bench_vanishing_points.py --calibrate`` (York Urban training
 #: half, 51 images x 2 sizes x 3 directions, segmented Hough lines, ``VPParams()``).
-CALIBRATION = VPCalibration(weights=(2.6849, -1.4930, 0.7321, -1.0584, -0.8132),
+CALIBRATION = VPCalibration(weights=(3.5018, -1.4254, 0.4824, -1.0867, -0.7728, -0.7858),
                             scale=1.3493, floor_deg=0.2026,
-                            sigma_wrong_deg=5.2509, p_confident=0.7547)
+                            sigma_wrong_deg=5.2509, p_confident=0.8201)
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,6 +162,8 @@ class DirectionConfidence:
         sigma_cov: first-order spread (largest std of the direction covariance) [rad].
         sigma_frame: the largest finite ``sigma_cov`` of the frame's directions [rad].
         orthogonality: angle to the normal of the frame's other two directions [rad].
+        influence: the largest move of the direction when one inlier is left out, over
+            ``sigma_cov`` (module docstring).
         ambiguity: best competing hypothesis' score over the frame's (see the module).
         p_correct: probability of being within 2 deg of the truth.
         sigma: spread of the correct mode [rad].
@@ -163,6 +181,7 @@ class DirectionConfidence:
     sigma_cov: float
     sigma_frame: float
     orthogonality: float
+    influence: float
     ambiguity: float
     p_correct: float
     sigma: float
@@ -180,17 +199,41 @@ def _log_spread_px(sigma: float, focal_px: float) -> float:
 
 
 def features(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int,
-             orthogonality: Optional[float] = None) -> np.ndarray:
+             orthogonality: Optional[float] = None,
+             influence: Optional[float] = None) -> np.ndarray:
     """Return the logistic model's features ``(1, ln(sigma_cov f), ln n, ln(sigma_frame f))``.
 
     Spreads [rad] are capped at pi / 2 (inf: no spread known), ``n`` at least 1. With
-    ``orthogonality`` [rad] given, ``ln(max(orthogonality, 1e-4))`` is appended.
+    ``orthogonality`` [rad] given, ``ln(max(orthogonality, 1e-4))`` is appended; with
+    ``influence`` too, its logarithm (clipped to :data:`INFLUENCE_RANGE`; not a number:
+    the upper bound).
     """
     x = [1.0, _log_spread_px(sigma_cov, focal_px), math.log(max(inliers, 1)),
          _log_spread_px(sigma_frame, focal_px)]
     if orthogonality is not None:
         x.append(math.log(max(orthogonality, 1e-4)))
+        if influence is not None:
+            lo, hi = INFLUENCE_RANGE
+            x.append(math.log(min(max(influence, lo), hi) if influence == influence else hi))
     return np.array(x)
+
+
+def influence(segments: np.ndarray, K: np.ndarray, direction: np.ndarray,
+              inliers: np.ndarray, sigma_cov: float, params: VPParams = VPParams()) -> float:
+    """Return the largest move of a direction when one inlier is left out, over ``sigma_cov``.
+
+    The deleted estimates of the jackknife (:func:`~.vanishing_point.leave_one_out_directions`,
+    refined as the direction was, with ``params``): the largest angle [rad] between one of
+    them and ``direction``, divided by the first-order spread ``sigma_cov`` [rad] (the
+    deletion diagnostic DFBETAS of regression, Belsley, Kuh, Welsch 1980, §2.1). inf with
+    fewer than three inliers or no finite spread.
+    """
+    D = leave_one_out_directions(segments, K, direction, inliers, params)
+    if D.shape[0] == 0 or not math.isfinite(sigma_cov) or sigma_cov <= 0:
+        return math.inf
+    cos = np.clip(np.abs(D @ (np.asarray(direction, dtype=float)
+                              / np.linalg.norm(direction))), 0.0, 1.0)
+    return float(np.max(np.arccos(cos))) / sigma_cov
 
 
 def orthogonality_residuals(directions: np.ndarray) -> np.ndarray:
@@ -268,28 +311,35 @@ def log10_nfa(segments: np.ndarray, inliers: np.ndarray, sigma_px: float,
 
 def assess_direction(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int,
                      nfa: float, calibration: VPCalibration = CALIBRATION,
-                     orthogonality: Optional[float] = None) -> Tuple[float, float, float]:
+                     orthogonality: Optional[float] = None,
+                     influence: Optional[float] = None) -> Tuple[float, float, float]:
     """Return ``(p_correct, sigma [rad], radius95 [rad])`` of one direction's features.
 
     ``sigma_cov`` [rad] is its first-order spread, ``sigma_frame`` [rad] the largest of its
     frame's three, ``focal_px`` the focal length [px], ``inliers`` its segment count,
     ``nfa`` its ``log10 NFA`` (:func:`log10_nfa`), ``orthogonality`` its orthogonality
-    residual [rad] (:func:`orthogonality_residuals`; needed by a five-weight calibration).
+    residual [rad] (:func:`orthogonality_residuals`; needed by a five- or six-weight
+    calibration), ``influence`` its :func:`influence` (needed by a six-weight one).
 
     Raises:
-        ValueError: a five-weight calibration and no ``orthogonality`` (0 would be the
-            most confident value, not a neutral one).
+        ValueError: a five- or six-weight calibration and no ``orthogonality``, or a
+            six-weight one and no ``influence`` (0 would be the most confident value, not
+            a neutral one).
     """
     c = calibration
     if len(c.weights) > 4 and orthogonality is None:
         raise ValueError('assess_direction: the calibration weighs the orthogonality '
                          'residual; give orthogonality [rad]')
+    if len(c.weights) > 5 and influence is None:
+        raise ValueError('assess_direction: the calibration weighs the influence; '
+                         'give influence')
     s_wrong = math.radians(c.sigma_wrong_deg)
     if not math.isfinite(sigma_cov) or not nfa < MAX_LOG10_NFA:
         return 0.0, s_wrong, mixture_radius(0.0, s_wrong, s_wrong)
     z = float(np.asarray(c.weights, dtype=float)
               @ features(sigma_cov, sigma_frame, focal_px, inliers,
-                         orthogonality if len(c.weights) > 4 else None))
+                         orthogonality if len(c.weights) > 4 else None,
+                         influence if len(c.weights) > 5 else None))
     p = 1.0 / (1.0 + math.exp(-z)) if z > -700 else 0.0
     sigma = math.hypot(c.scale * sigma_cov, math.radians(c.floor_deg))
     return p, sigma, mixture_radius(p, sigma, s_wrong)
@@ -320,6 +370,7 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
                if np.all(np.isfinite(cov)) else math.inf for cov in covs]
     s_frame = max([x for x in spreads if math.isfinite(x)], default=math.inf)
     orth = orthogonality_residuals(frame.directions)
+    params = VPParams(sigma_px=sigma_px, sigma_angle_deg=sigma_angle_deg, gate=gate)
     out = []
     for k, vp in enumerate(frame.points):
         d = vp.direction
@@ -328,12 +379,14 @@ def assess_frame(frame: ManhattanFrame, segments: np.ndarray, K: np.ndarray,
         finite = math.isfinite(s_cov)
         n_in = int(np.count_nonzero(vp.inliers))
         nfa = log10_nfa(segments, vp.inliers, sigma_px, gate, sigma_angle_deg)
-        p, sigma, r95 = assess_direction(s_cov, s_frame, focal, n_in, nfa, c, float(orth[k]))
+        infl = influence(segments, K, d, vp.inliers, s_cov, params)
+        p, sigma, r95 = assess_direction(s_cov, s_frame, focal, n_in, nfa, c, float(orth[k]),
+                                         infl)
         good_cov = (c.scale ** 2 * cov + math.radians(c.floor_deg) ** 2 * tangent
                     if finite else s_wrong ** 2 * tangent)
         out.append(DirectionConfidence(
             inliers=n_in, support=vp.support, log10_nfa=nfa, sigma_cov=s_cov,
-            sigma_frame=s_frame, orthogonality=float(orth[k]),
+            sigma_frame=s_frame, orthogonality=float(orth[k]), influence=infl,
             ambiguity=float(amb[k]), p_correct=p, sigma=sigma, radius95=r95,
             first_order=cov if finite else s_wrong ** 2 * tangent, covariance=good_cov,
             mixture_covariance=p * good_cov + (1.0 - p) * s_wrong ** 2 * tangent,
@@ -382,7 +435,8 @@ def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
                     error_deg: Sequence[float],
                     precision: float = 0.98,
                     threshold_on: Optional[Sequence[bool]] = None,
-                    orthogonality: Optional[Sequence[float]] = None) -> VPCalibration:
+                    orthogonality: Optional[Sequence[float]] = None,
+                    influence: Optional[Sequence[float]] = None) -> VPCalibration:
     """Fit the confidence model on directions with known errors (module docstring).
 
     Args:
@@ -398,6 +452,7 @@ def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
             ``sigma_wrong`` use all.
         orthogonality: with it, their :func:`orthogonality_residuals` [rad] are a fifth
             feature.
+        influence: with it (and ``orthogonality``), their :func:`influence` is a sixth.
 
     Raises:
         ValueError: inputs of different lengths, or no direction (of ``threshold_on``) on
@@ -418,7 +473,8 @@ def fit_calibration(sigma_cov: Sequence[float], sigma_frame: Sequence[float],
     if good[on].all() or not good[on].any():
         raise ValueError('calibration needs directions both within and beyond 2 deg')
     o = [None] * len(e) if orthogonality is None else list(orthogonality)
-    X = np.array([features(*v) for v in zip(s, sf, f, m, o)])
+    i = [None] * len(e) if influence is None else list(influence)
+    X = np.array([features(*v) for v in zip(s, sf, f, m, o, i)])
     w = _logistic(X[on], good[on].astype(float))
     ok = good & np.isfinite(s)
     scale, floor = _rayleigh_fit(np.degrees(s[ok]), e[ok], CORRECT_DEG)

@@ -249,6 +249,7 @@ class DirectionSample:
     ambiguity: float
     focal_px: float
     orthogonality: float
+    influence: float
     inliers: int
     log10_nfa: float
     error: float
@@ -285,7 +286,7 @@ def confidence_samples(item: YorkImage, scale: float = 1.0,
     focal = float(np.sqrt(K[0, 0] * K[1, 1]))
     return [DirectionSample(item.name, scale, k, conf[k].sigma_cov, conf[k].sigma_frame,
                             conf[k].ambiguity, focal, conf[k].orthogonality,
-                            conf[k].inliers, conf[k].log10_nfa,
+                            conf[k].influence, conf[k].inliers, conf[k].log10_nfa,
                             float(cost[k, c[list(r).index(k)]]),
                             c[list(r).index(k)] == item.axis_index)
             for k in range(3)]
@@ -302,14 +303,16 @@ class HeldOut:
     confident: bool
 
 
-def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = True
-              ) -> VPCalibration:
+def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = True,
+              influence: bool = True) -> VPCalibration:
     """Fit the confidence model on samples (:func:`~.vp_confidence.fit_calibration`).
 
     All directions fit the correct mode's spread and the wrong mode's; the logistic weights
     and the confidence threshold are fitted on the corridor directions (column 0).
-    ``orthogonality``: the orthogonality residual is the model's fifth feature (as in
-    :data:`~.vp_confidence.CALIBRATION`); False: the four-feature model.
+    ``orthogonality``: the orthogonality residual is the model's fifth feature and, with
+    ``influence``, the influence its sixth (as in :data:`~.vp_confidence.CALIBRATION`);
+    ``influence`` False: the five-feature model; ``orthogonality`` False: the four-feature
+    model.
     """
     return fit_calibration([s.sigma_cov for s in samples], [s.sigma_frame for s in samples],
                            [s.focal_px for s in samples],
@@ -317,7 +320,9 @@ def calibrate(samples: Sequence[DirectionSample], orthogonality: bool = True
                            [s.log10_nfa for s in samples], [s.error for s in samples],
                            threshold_on=[s.column == 0 for s in samples],
                            orthogonality=([s.orthogonality for s in samples]
-                                          if orthogonality else None))
+                                          if orthogonality else None),
+                           influence=([s.influence for s in samples]
+                                      if orthogonality and influence else None))
 
 
 def image_folds(names: Sequence[str], folds: int = 5) -> Dict[str, int]:
@@ -331,24 +336,26 @@ def _held_out(samples: Sequence[DirectionSample], fold: int, cal: VPCalibration
     out = []
     for s in samples:
         p, _, r95 = assess_direction(s.sigma_cov, s.sigma_frame, s.focal_px, s.inliers,
-                                     s.log10_nfa, cal, s.orthogonality)
+                                     s.log10_nfa, cal, s.orthogonality, s.influence)
         out.append(HeldOut(s, fold, p, float(np.degrees(r95)), p >= cal.p_confident))
     return out
 
 
 def cross_validate(samples: Sequence[DirectionSample], folds: int = 5,
-                   orthogonality: bool = True) -> Tuple[List[HeldOut], List[VPCalibration]]:
+                   orthogonality: bool = True, influence: bool = True
+                   ) -> Tuple[List[HeldOut], List[VPCalibration]]:
     """Score every sample with a calibration fitted on the other folds of images.
 
     Images are dealt to the folds by :func:`image_folds`; all sizes and directions of an
     image stay in its fold. The samples' segment noise is the same for every fold (see
-    :func:`cross_validate_noise` for noise fitted per fold). ``orthogonality``: as
-    :func:`calibrate`.
+    :func:`cross_validate_noise` for noise fitted per fold). ``orthogonality``,
+    ``influence``: as :func:`calibrate`.
     """
     fold_of = image_folds([s.image for s in samples], folds)
     out, cals = [], []
     for f in range(folds):
-        cal = calibrate([s for s in samples if fold_of[s.image] != f], orthogonality)
+        cal = calibrate([s for s in samples if fold_of[s.image] != f], orthogonality,
+                        influence)
         cals.append(cal)
         out += _held_out([s for s in samples if fold_of[s.image] == f], f, cal)
     return out, cals
@@ -367,7 +374,7 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
                          vp_params: VPParams = VPParams(), folds: int = 5,
                          line_method: str = 'segmented_hough',
                          noise_scale: Optional[float] = 1.0, per_size: bool = False,
-                         orthogonality: bool = True
+                         orthogonality: bool = True, influence: bool = True
                          ) -> Tuple[List[HeldOut], List[Dict[float, VPCalibration]],
                                     List[Dict[float, FoldNoise]]]:
     """Held-out directions with the segment noise *and* the confidence fitted per fold.
@@ -379,11 +386,11 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
     size; every image is estimated at every size in ``scales`` with that noise; the
     confidence model is fitted on the other folds' directions (:func:`calibrate`; with
     ``per_size``, one model per size on that size's directions) and applies to the fold's
-    own (with ``orthogonality`` as :func:`calibrate`). The segments the noise is fitted on
-    are labelled with ``vp_params.sigma_px`` and no direction noise (as ``segment_noise``
-    is used for the defaults); apart from that labelling constant nothing of a held-out
-    image enters its estimate's constants. Lines are detected once per image and size (the
-    noise changes only the Manhattan search).
+    own (with ``orthogonality`` and ``influence`` as :func:`calibrate`). The segments the
+    noise is fitted on are labelled with ``vp_params.sigma_px`` and no direction noise (as
+    ``segment_noise`` is used for the defaults); apart from that labelling constant nothing
+    of a held-out image enters its estimate's constants. Lines are detected once per image
+    and size (the noise changes only the Manhattan search).
 
     Returns:
         ``(held-out directions, calibration per fold and size, noise per fold and size)``.
@@ -413,7 +420,7 @@ def cross_validate_noise(items: Sequence[YorkImage], scales: Sequence[float] = (
         cal_f = {}
         for group in groups.values():
             cal = calibrate([s for s in samples if fold_of[s.image] != f and s.scale in group],
-                            orthogonality)
+                            orthogonality, influence)
             cal_f.update({sc: cal for sc in group})
             out += _held_out([s for s in samples if fold_of[s.image] == f and s.scale in group],
                              f, cal)
