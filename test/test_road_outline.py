@@ -81,7 +81,7 @@ def test_bad_input():
         road_outline(img[..., 0], np.ones(img.shape[:2], bool))
     with pytest.raises(ValueError, match='chroma'):
         OutlineParams(chroma='hsv')
-    with pytest.raises(ValueError, match="method must be 'learned' or 'chapter'"):
+    with pytest.raises(ValueError, match='method must be one of learned, cnn, chapter'):
         OutlineParams(method='otsu')
     with pytest.raises(ValueError, match='p_road must be in'):
         OutlineParams(p_road=1.5)
