@@ -1,6 +1,5 @@
 """Road CNN (road.road_cnn): numpy forward pass, weights file, and its PyTorch twin."""
 
-import cv2
 from landmark_nav.road.road_cnn import conv2d, LAYERS, RoadCNN, upsample2
 from landmark_nav.road.road_probability import FEATURE_NAMES
 import numpy as np
@@ -40,9 +39,17 @@ def test_conv2d_is_a_zero_padded_cross_correlation():
 
 
 def test_upsample2_is_bilinear_with_half_pixel_centres():
-    x = np.random.default_rng(1).normal(size=(5, 7, 3)).astype(np.float32)
-    want = cv2.resize(x, (14, 10), interpolation=cv2.INTER_LINEAR)   # half-pixel centres
+    x = np.random.default_rng(1).normal(size=(5, 7, 16)).astype(np.float32)
+    # output 2i at input i - 1/4, 2i + 1 at i + 1/4 (weights 3/4, 1/4), borders replicated
+    pad = np.pad(x, ((1, 1), (1, 1), (0, 0)), mode='edge')
+    rows = np.empty((10, 9, 16), np.float32)
+    rows[0::2] = 0.75 * pad[1:-1] + 0.25 * pad[:-2]
+    rows[1::2] = 0.75 * pad[1:-1] + 0.25 * pad[2:]
+    want = np.empty((10, 14, 16), np.float32)
+    want[:, 0::2] = 0.75 * rows[:, 1:-1] + 0.25 * rows[:, :-2]
+    want[:, 1::2] = 0.75 * rows[:, 1:-1] + 0.25 * rows[:, 2:]
     np.testing.assert_allclose(upsample2(x), want, atol=1e-5)
+    assert upsample2(x[..., :1]).shape == (10, 14, 1)
 
 
 def test_cnn_save_load_and_refusals(tmp_path):

@@ -26,6 +26,7 @@ from landmark_nav.evaluation.road_outline import (evaluate_folder, frame_names, 
                                                   ROAD_CLASS, SEED_COLS, SEED_ROAD_SHARE,
                                                   SEED_ROWS, summarize, UNLABELLED_CLASS)
 from landmark_nav.road.outline import band_seed, OutlineParams
+from landmark_nav.road.road_cnn import MeanProbability
 from landmark_nav.road.road_probability import FEATURE_NAMES, FEATURE_SIZE, pixel_features
 from landmark_nav.road.road_probability import RoadModel
 from landmark_nav.road.road_training import fit_road_model
@@ -170,25 +171,26 @@ def leave_one_drive_out(folders: Sequence[Path], params: OutlineParams = Outline
                         seed: int = 0, cnn_steps: int = CNN_STEPS) -> Dict[str, dict]:
     """Per drive: the summary of its frames scored by a model fitted on the other drives.
 
-    ``params.method``: 'learned' fits the perceptron, 'cnn' the convolutional network
-    (``cnn_steps`` mini-batches; needs PyTorch); with 'chapter' nothing is trained (eqs.
-    26-28 have no model).
+    ``params.method``: 'learned' fits the perceptron, 'cnn' the perceptron and the
+    convolutional network (``cnn_steps`` mini-batches; needs PyTorch) and averages their
+    probabilities; with 'chapter' nothing is trained (eqs. 26-28 have no model).
     """
     folders = [Path(f) for f in folders]
     drives = sorted({drive_of(n) for f in folders for n in frame_names(f)})
     if len(drives) < 2:
         raise ValueError(f'leave one drive out needs two drives or more; got {drives}')
-    if params.method == 'learned':
+    if params.method != 'chapter':
         data = sample_frames(folders, seed=seed)
-    elif params.method == 'cnn':
-        data = feature_maps(folders, seed=seed)
+    if params.method == 'cnn':
+        maps = feature_maps(folders, seed=seed)
     out = {}
     for held in drives:
         model = None
         if params.method != 'chapter':
             others = [d for d in drives if d != held and np.any(data.drive == d)]
-            model = train(data, others, seed) if params.method == 'learned' else \
-                train_cnn(data, others, seed, cnn_steps)
+            model = train(data, others, seed)
+        if params.method == 'cnn':
+            model = MeanProbability((train_cnn(maps, others, seed, cnn_steps), model))
         scores: List = []
         for folder in folders:
             names = [n for n in frame_names(folder) if drive_of(n) == held]

@@ -56,8 +56,9 @@ def parameters() -> Dict[str, Parameter]:
                              (1, 1000)),
         'outline_method': Parameter(OutlineParams().method, 'road criterion of the vision '
                                     "outline: 'learned' (road probability of the packaged "
-                                    "perceptron), 'cnn' (of the packaged convolutional "
-                                    "network) or 'chapter' (eqs. 26-28)", None,
+                                    "perceptron), 'cnn' (its mean with the packaged "
+                                    "convolutional network's) or 'chapter' (eqs. 26-28)",
+                                    None,
                                     list(METHODS)),
         'k_limit': Parameter(OutlineParams().k_limit, 'road where P_c + P_e exceeds this '
                              "(eq. 26; outline_method 'chapter')", (0.0, 2.0)),

@@ -41,8 +41,8 @@ grey and, on overcast frames, over walls and parked cars. The default criterion
 (:mod:`landmark_nav.road.road_probability`: colour relative to the seed, texture, image
 position) above ``p_road``, evaluated at 160 x 120 and interpolated to the working size;
 the seed's connected region, the closing and the hole filling are the same.
-``method='cnn'`` takes that probability from a small fully convolutional network over the
-same features instead (:mod:`landmark_nav.road.road_cnn`: it judges a pixel from the layout
+``method='cnn'`` averages that probability with a small fully convolutional network's over
+the same features (:mod:`landmark_nav.road.road_cnn`: it judges a pixel from the layout
 around it). ``method='chapter'`` keeps eqs. 26-28.
 
 Each outline carries a confidence in [0, 1]: the smaller of the model's mean road
@@ -59,12 +59,11 @@ spans. ``reliable`` when the confidence reaches ``min_confidence`` and the row f
 
 from dataclasses import dataclass
 import math
-from typing import Optional, Union
+from typing import Optional
 
 import cv2
-from landmark_nav.road.road_cnn import default_cnn, RoadCNN
-from landmark_nav.road.road_probability import (FEATURE_SIZE, road_probability,
-                                                RoadModel)
+from landmark_nav.road.road_cnn import default_cnn_criterion, ProbabilityModel
+from landmark_nav.road.road_probability import FEATURE_SIZE, road_probability
 import numpy as np
 
 #: Processing size of the chapter (columns, rows).
@@ -208,7 +207,7 @@ def _fill_marking_holes(mask: np.ndarray, intensity: np.ndarray, road_level: flo
 
 def road_outline(rgb: np.ndarray, seed: np.ndarray,
                  params: OutlineParams = OutlineParams(),
-                 model: Union[RoadModel, RoadCNN, None] = None) -> RoadOutline:
+                 model: Optional[ProbabilityModel] = None) -> RoadOutline:
     """Find the road region connected to a seed area (eqs. 25-28 or the learned criterion).
 
     Args:
@@ -216,7 +215,8 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
         seed: (H, W) bool mask of the seed area (the laser's traversable segment).
         params: Weights and limits.
         model: Road-probability model of the learned criteria (default: the packaged
-            perceptron with ``method='learned'``, the packaged CNN with ``'cnn'``).
+            perceptron with ``method='learned'``; with ``'cnn'`` the packaged network
+            averaged with it).
 
     Returns:
         The road mask and outline at the input resolution.
@@ -241,7 +241,7 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
                         f'(needs {params.min_seed_pixels})')
     if params.method != 'chapter':
         if model is None and params.method == 'cnn':
-            model = default_cnn()
+            model = default_cnn_criterion()
         prob = road_probability(img, seed, model)
         road = (_work_size(prob) > params.p_road) | seed_s
         p_c = p_e = None

@@ -166,6 +166,10 @@ def pixel_features(rgb: np.ndarray, seed: np.ndarray) -> np.ndarray:
 
 def road_probability(rgb: np.ndarray, seed: np.ndarray,
                      model: Optional[RoadModel] = None) -> np.ndarray:
-    """Return the (120, 160) float32 probability that each pixel is road."""
+    """Return the (120, 160) float32 probability that each pixel is road.
+
+    ``model``: the packaged perceptron by default, or any model with its ``predict`` on
+    (120, 160, F) features (:class:`landmark_nav.road.road_cnn.RoadCNN`).
+    """
     model = default_model() if model is None else model
     return model.predict(pixel_features(rgb, seed)).astype(np.float32)
