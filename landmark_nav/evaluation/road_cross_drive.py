@@ -53,11 +53,11 @@ class TrainingSet:
     skipped: Tuple[str, ...]       # frames whose seed band is not road
 
 
-def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
-                  seed: int = 0) -> TrainingSet:
-    """Sample labelled pixels of every frame of the folders (see the module text)."""
-    rng = np.random.default_rng(seed)
-    xs, ys, drives, skipped = [], [], [], []
+def _road_seeded_frames(folders: Sequence[Path], skipped: List[str]):
+    """Yield (name, RGB, label at FEATURE_SIZE, seed band) of the frames whose band is road.
+
+    The names of the others are appended to ``skipped``.
+    """
     for folder in map(Path, folders):
         names = frame_names(folder)
         if not names:
@@ -69,13 +69,23 @@ def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
             if float(np.mean(label[seed] == ROAD_CLASS)) < SEED_ROAD_SHARE:
                 skipped.append(name)
                 continue
-            feats = pixel_features(rgb, seed).reshape(-1, len(FEATURE_NAMES))
-            small = cv2.resize(label, FEATURE_SIZE, interpolation=cv2.INTER_NEAREST).ravel()
-            usable = np.flatnonzero(small != UNLABELLED_CLASS)
-            idx = rng.choice(usable, min(per_frame, len(usable)), replace=False)
-            xs.append(feats[idx])
-            ys.append((small[idx] == ROAD_CLASS).astype(np.float32))
-            drives.append(np.full(len(idx), drive_of(name)))
+            yield name, rgb, cv2.resize(label, FEATURE_SIZE,
+                                        interpolation=cv2.INTER_NEAREST), seed
+
+
+def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
+                  seed: int = 0) -> TrainingSet:
+    """Sample labelled pixels of every frame of the folders (see the module text)."""
+    rng = np.random.default_rng(seed)
+    xs, ys, drives, skipped = [], [], [], []
+    for name, rgb, small, seed_band in _road_seeded_frames(folders, skipped):
+        feats = pixel_features(rgb, seed_band).reshape(-1, len(FEATURE_NAMES))
+        small = small.ravel()
+        usable = np.flatnonzero(small != UNLABELLED_CLASS)
+        idx = rng.choice(usable, min(per_frame, len(usable)), replace=False)
+        xs.append(feats[idx])
+        ys.append((small[idx] == ROAD_CLASS).astype(np.float32))
+        drives.append(np.full(len(idx), drive_of(name)))
     if not xs:
         raise ValueError('no frame with a road seed to train on')
     return TrainingSet(np.concatenate(xs), np.concatenate(ys), np.concatenate(drives),
@@ -124,24 +134,13 @@ def feature_maps(folders: Sequence[Path], copies: int = CNN_COPIES, seed: int = 
     from landmark_nav.road.road_cnn_training import photometric
     rng = np.random.default_rng(seed)
     xs, ys, valid, drives, skipped = [], [], [], [], []
-    for folder in map(Path, folders):
-        names = frame_names(folder)
-        if not names:
-            raise FileNotFoundError(f'{folder}: no frames with both images/ and '
-                                    'labels_camvid11/ PNGs')
-        for name in names:
-            rgb, label = load_frame(folder, name)
-            seed_band = band_seed(rgb.shape, SEED_ROWS, SEED_COLS)
-            if float(np.mean(label[seed_band] == ROAD_CLASS)) < SEED_ROAD_SHARE:
-                skipped.append(name)
-                continue
-            small = cv2.resize(label, FEATURE_SIZE, interpolation=cv2.INTER_NEAREST)
-            for k in range(copies + 1):
-                img = rgb if k == 0 else photometric(rgb, rng)
-                xs.append(pixel_features(img, seed_band).astype(np.float16))
-                ys.append(small == ROAD_CLASS)
-                valid.append(small != UNLABELLED_CLASS)
-                drives.append(drive_of(name))
+    for name, rgb, small, seed_band in _road_seeded_frames(folders, skipped):
+        for k in range(copies + 1):
+            img = rgb if k == 0 else photometric(rgb, rng)
+            xs.append(pixel_features(img, seed_band).astype(np.float16))
+            ys.append(small == ROAD_CLASS)
+            valid.append(small != UNLABELLED_CLASS)
+            drives.append(drive_of(name))
     if not xs:
         raise ValueError('no frame with a road seed to train on')
     return FeatureMaps(np.stack(xs), np.stack(ys), np.stack(valid), np.array(drives),

@@ -34,7 +34,8 @@ from pathlib import Path
 from typing import Dict, Sequence, Union
 
 import cv2
-from landmark_nav.road.road_probability import default_model, FEATURE_NAMES, RoadModel
+from landmark_nav.road.road_probability import (default_model, FEATURE_NAMES, read_weights,
+                                                RoadModel, write_weights)
 import numpy as np
 
 #: The CNN shipped with the package (trained on all CamVid training drives).
@@ -122,12 +123,7 @@ class RoadCNN:
 
     def save(self, path: Union[str, Path]) -> Path:
         """Write the weights (float32) to an ``.npz`` file."""
-        path = Path(path)
-        np.savez_compressed(path, features=np.array(FEATURE_NAMES),
-                            mean=np.asarray(self.mean, np.float32),
-                            scale=np.asarray(self.scale, np.float32),
-                            **{k: np.asarray(v, np.float32) for k, v in self.weights.items()})
-        return path
+        return write_weights(path, {'mean': self.mean, 'scale': self.scale, **self.weights})
 
     @classmethod
     def load(cls, path: Union[str, Path] = DEFAULT_CNN) -> 'RoadCNN':
@@ -137,14 +133,8 @@ class RoadCNN:
             FileNotFoundError: No such file.
             ValueError: The file's features differ from :data:`FEATURE_NAMES`.
         """
-        with np.load(Path(path)) as z:
-            names = tuple(str(n) for n in z['features'])
-            if names != FEATURE_NAMES:
-                raise ValueError(f'{path}: road CNN features {names} differ from '
-                                 f'{FEATURE_NAMES}; retrain it (landmark_nav '
-                                 'train-road-outline --kind cnn)')
-            weights = {k: z[k].astype(np.float32) for k in z.files if '.' in k}
-            return cls(z['mean'], z['scale'], weights)
+        z = read_weights(path, 'train-road-outline --kind cnn')
+        return cls(z['mean'], z['scale'], {k: v for k, v in z.items() if '.' in k})
 
     def logits(self, features: np.ndarray) -> np.ndarray:
         """Road logit of (H, W, F) features; H and W multiples of 4."""
