@@ -69,6 +69,17 @@ def median_ms(fn, items, repeat: int = 3) -> float:
     return 1e3 * statistics.median(times)
 
 
+def paired_ms(fn, ref, items, repeat: int = 3):
+    """Median times of fn and ref [ms] and the median of their per-item ratio.
+
+    Each item's fn and ref are timed back to back (best of ``repeat`` each), so a change of
+    the machine's load during the run weighs on both alike.
+    """
+    pairs = [(median_ms(fn, [it], repeat), median_ms(ref, [it], repeat)) for it in items]
+    t, r = np.array(pairs).T
+    return float(np.median(t)), float(np.median(r)), float(np.median(t / r))
+
+
 def reference_pass(rgb: np.ndarray) -> None:
     """Full-frame Sobel 3x3 + 5x5 and a Mahalanobis pass on the chromaticity (320 x 240)."""
     small = cv2.resize(rgb, (320, 240), interpolation=cv2.INTER_AREA)
@@ -135,11 +146,10 @@ def main(argv=None) -> int:
                  'labels_camvid11/NAME.png')
     real = [load_frame(folder, n)[0] for n in frame_names(folder)[:args.frames]]
     seed = band_seed(real[0].shape, SEED_ROWS, SEED_COLS)
-    r = median_ms(reference_pass, real)
     for name in METHODS:
         params = OutlineParams(method=name)
-        t = median_ms(lambda f: road_outline(f, seed, params), real)
-        print(f'{"vision CamVid 480x360 " + name:34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+        t, r, ratio = paired_ms(lambda f: road_outline(f, seed, params), reference_pass, real)
+        print(f'{"vision CamVid 480x360 " + name:34s} {t:7.2f} {r:7.2f} {ratio:6.1f}')
     return 0
 
 

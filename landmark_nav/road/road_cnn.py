@@ -143,7 +143,8 @@ class RoadCNN:
             raise ValueError(f'road CNN needs (H, W, F) features with H, W multiples of 4; '
                              f'got {features.shape}')
         p = self.weights
-        x = ((features - self.mean) / self.scale).astype(np.float32)
+        x = np.subtract(features, self.mean, dtype=np.float32)
+        x *= 1.0 / self.scale
 
         def layer(name: str, a: np.ndarray, relu: bool = True) -> np.ndarray:
             _, stride, dilation = LAYERS[name]
@@ -181,7 +182,10 @@ class MeanProbability:
 
     def predict(self, features: np.ndarray) -> np.ndarray:
         """Mean road probability of (H, W, F) features."""
-        return np.mean([m.predict(features) for m in self.models], axis=0)
+        total = self.models[0].predict(features)
+        for m in self.models[1:]:
+            total = total + m.predict(features)
+        return total / len(self.models)
 
 
 #: Anything with a ``predict(features) -> probability`` the outline accepts.
