@@ -124,7 +124,9 @@ def _cmd_train_road_outline(args: argparse.Namespace) -> int:
         try:
             import torch  # noqa: F401
         except ImportError:
-            print('error: training the CNN needs torch: pip install torch==2.13.0')
+            import sys
+            print('error: training the CNN needs torch: pip install torch==2.13.0',
+                  file=sys.stderr)
             return 2
         data = rcd.feature_maps(folders, seed=args.seed)
         model = rcd.train_cnn(data, seed=args.seed, steps=args.steps or rcd.CNN_STEPS)
