@@ -98,3 +98,16 @@ def test_cnn_training_smoke():
     assert cnn.predict(x[0].astype(np.float32)).shape == (8, 12)
     with pytest.raises(ValueError, match='labels'):
         fit_road_cnn(x, y[:1], np.ones_like(y), np.array(['a', 'b']))
+
+
+def test_photometric_alteration_and_training_refusals():
+    from landmark_nav.evaluation.road_cross_drive import FeatureMaps, train_cnn
+    from landmark_nav.road.road_cnn_training import photometric
+    rgb = np.random.default_rng(5).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    a = photometric(rgb, np.random.default_rng(6))
+    assert a.shape == rgb.shape and a.dtype == np.uint8 and not np.array_equal(a, rgb)
+    np.testing.assert_array_equal(a, photometric(rgb, np.random.default_rng(6)))
+    maps = FeatureMaps(np.zeros((2, 8, 12, F), np.float16), np.zeros((2, 8, 12), bool),
+                       np.ones((2, 8, 12), bool), np.array(['0001TP', '0006R0']), ())
+    with pytest.raises(ValueError, match="drive '0016E5' has no training frames"):
+        train_cnn(maps, ['0016E5'])
