@@ -30,7 +30,7 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
     package_data={'landmark_nav.monocular': ['hallway_model.yaml'],
-                  'landmark_nav.road': ['road_model.npz']},
+                  'landmark_nav.road': ['road_model.npz', 'road_cnn.npz']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
@@ -40,6 +40,8 @@ setup(
         (os.path.join('share', PACKAGE, 'rviz'), glob('rviz/*.rviz')),
     ],
     install_requires=['setuptools'],
+    # training the road CNN only (landmark_nav train-road-outline --kind cnn); inference is numpy
+    extras_require={'train': ['torch==2.13.0']},
     zip_safe=True,
     maintainer='landmark_nav maintainers',
     maintainer_email='maintainers@landmark-nav.invalid',

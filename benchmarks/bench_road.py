@@ -3,7 +3,8 @@
 Run from the repository root::
 
     python benchmarks/bench_road.py [--scans N] [--frames N] [--seed S] [--data DIR]
-    python benchmarks/bench_road.py --cross-drive DIR [DIR ...] [--json FILE]
+    python benchmarks/bench_road.py --cross-drive DIR [DIR ...] [--methods M ...]
+        [--cnn-steps N] [--json FILE]
 
 * :func:`landmark_nav.road.terrain.classify_scan` on simulated 361-beam tilted scans of the
   asphalt and gravel park roads; reference in the same run: one ``np.polyfit`` of degree 2
@@ -16,14 +17,17 @@ Run from the repository root::
   reference in the same run: a full-frame OpenCV Sobel 3 x 3 + 5 x 5 and a Mahalanobis pass
   on the eq. 25 chromaticity at 320 x 240. Target (issue): <= 20 ms.
 Times are medians of single-threaded calls; the real frames are timed with the packaged
-learned criterion (the default) and with the chapter's (eqs. 26-28).
+learned criterion (the default), the packaged CNN (``cnn``) and the chapter's (eqs. 26-28).
 
 ``--cross-drive DIR ...`` instead scores the outline leaving one drive out
 (:func:`landmark_nav.evaluation.road_cross_drive.leave_one_drive_out`): per drive, the
 road-probability model fitted on the other drives' frames, the drive's frames scored; the
-chapter's criterion (no training) on the same frames for comparison. Frames whose seed band
-is not road are counted and listed apart. A frame is flagged when the outline's confidence is
-below ``min_confidence`` or its row fill below the limit calibrated on the other drives
+chapter's criterion (no training) on the same frames for comparison. ``--methods`` picks
+the criteria (default ``learned chapter``; ``cnn`` trains the convolutional network per
+drive with PyTorch, ``--cnn-steps`` mini-batches, about 3 min per drive on one core).
+Frames whose seed band is not road are counted and listed apart. A frame is flagged when
+the outline's confidence is below ``min_confidence`` or its row fill below the limit
+calibrated on the other drives
 (:func:`landmark_nav.evaluation.road_cross_drive.row_fill_limits`); the table counts the
 failures flagged and the good frames (IoU >= 0.6) flagged, and prints the limit over all
 drives (the shipped ``min_row_fill``).
@@ -38,15 +42,18 @@ import time
 
 from common import data_folder, SHARED_DATA
 import cv2
-from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out, row_fill_limits
+from landmark_nav.evaluation.road_cross_drive import (CNN_STEPS, leave_one_drive_out,
+                                                      row_fill_limits)
 from landmark_nav.evaluation.road_fusion import CAMERA, CAMERA_MOUNT, SIM_CONFIG
 from landmark_nav.evaluation.road_laser import ANGLES
 from landmark_nav.evaluation.road_outline import (CLASS_NAMES, FAIL_IOU, frame_names,
                                                   load_frame, SEED_COLS, SEED_ROWS)
-from landmark_nav.road.outline import band_seed, chromaticity, OutlineParams, road_outline
+from landmark_nav.road.outline import (band_seed, chromaticity, METHODS, OutlineParams,
+                                       road_outline)
 from landmark_nav.road.terrain import classify_scan, LaserMount
 from landmark_nav.sim.park_road import cast_scan, ParkRoad, render_view
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 
 def median_ms(fn, items, repeat: int = 3) -> float:
@@ -60,6 +67,17 @@ def median_ms(fn, items, repeat: int = 3) -> float:
             best = min(best, time.perf_counter() - t0)
         times.append(best)
     return 1e3 * statistics.median(times)
+
+
+def paired_ms(fn, ref, items, repeat: int = 3):
+    """Median times of fn and ref [ms] and the median of their per-item ratio.
+
+    Each item's fn and ref are timed back to back (best of ``repeat`` each), so a change of
+    the machine's load during the run weighs on both alike.
+    """
+    pairs = [(median_ms(fn, [it], repeat), median_ms(ref, [it], repeat)) for it in items]
+    t, r = np.array(pairs).T
+    return float(np.median(t)), float(np.median(r)), float(np.median(t / r))
 
 
 def reference_pass(rgb: np.ndarray) -> None:
@@ -86,11 +104,18 @@ def main(argv=None) -> int:
     ap.add_argument('--cross-drive', nargs='+', metavar='DIR', help='score the outline '
                     'leaving one drive out over these CamVid-format folders (e.g. '
                     '../shared/data/camvid_train ../shared/data/camvid_road)')
+    ap.add_argument('--methods', nargs='+', choices=METHODS, default=['learned', 'chapter'],
+                    help='with --cross-drive: road criteria to score (default: learned '
+                    'chapter; cnn needs PyTorch)')
+    ap.add_argument('--cnn-steps', type=int, default=CNN_STEPS,
+                    help=f'with --cross-drive: CNN training mini-batches (default {CNN_STEPS})')
     ap.add_argument('--json', help='with --cross-drive: write the per-frame scores here')
     args = ap.parse_args(argv)
     if args.cross_drive:
-        return cross_drive([data_folder(d) for d in args.cross_drive], args.json)
+        return cross_drive([data_folder(d) for d in args.cross_drive], args.json,
+                           args.methods, args.cnn_steps)
     cv2.setNumThreads(1)
+    threadpool_limits(1)
     rng = np.random.default_rng(args.seed)
     mount = LaserMount()
     print(f'{"case":34s} {"ms":>7s} {"ref ms":>7s} {"ratio":>6s}')
@@ -121,26 +146,26 @@ def main(argv=None) -> int:
                  'labels_camvid11/NAME.png')
     real = [load_frame(folder, n)[0] for n in frame_names(folder)[:args.frames]]
     seed = band_seed(real[0].shape, SEED_ROWS, SEED_COLS)
-    r = median_ms(reference_pass, real)
-    for name, params in (('learned', OutlineParams()),
-                         ('chapter', OutlineParams(method='chapter'))):
-        t = median_ms(lambda f: road_outline(f, seed, params), real)
-        print(f'{"vision CamVid 480x360 " + name:34s} {t:7.2f} {r:7.2f} {t / r:6.1f}')
+    for name in METHODS:
+        params = OutlineParams(method=name)
+        t, r, ratio = paired_ms(lambda f: road_outline(f, seed, params), reference_pass, real)
+        print(f'{"vision CamVid 480x360 " + name:34s} {t:7.2f} {r:7.2f} {ratio:6.1f}')
     return 0
 
 
-def cross_drive(folders, json_path=None) -> int:
-    """Print the leave-one-drive-out table (learned criterion, then the chapter's)."""
+def cross_drive(folders, json_path=None, methods=('learned', 'chapter'),
+                cnn_steps=CNN_STEPS) -> int:
+    """Print the leave-one-drive-out table of each criterion of ``methods``."""
     print(f'{"criterion":9s} {"held out":8s} {"frames":>6s} {"IoU med":>7s} {"prec":>6s} '
           f'{"recall":>6s} {"fail<0.6":>9s} {"fill lim":>8s} {"fail&flag":>9s} '
           f'{"good&flag":>9s} {"kept":>5s} {"IoU med":>7s} {"fail<0.6":>9s} '
           f'{"seed not road":>13s}')
     results = {}
-    for name, params in (('learned', OutlineParams(min_row_fill=0.0)),
-                         ('chapter', OutlineParams(method='chapter'))):
-        results[name] = leave_one_drive_out(folders, params)
+    for name in methods:
+        params = OutlineParams(method=name, min_row_fill=0.0)
+        results[name] = leave_one_drive_out(folders, params, cnn_steps=cnn_steps)
         # eqs. 26-28 have no row fill (1.0): nothing to calibrate
-        limits = row_fill_limits(results[name]) if name == 'learned' else \
+        limits = row_fill_limits(results[name]) if name != 'chapter' else \
             dict.fromkeys(list(results[name]) + ['all'], 0.0)
         for drive, res in results[name].items():
             s, frames = res['summary'], res['frames']
@@ -158,7 +183,7 @@ def cross_drive(folders, json_path=None) -> int:
                   f'{np.median(kept):7.3f} {int(np.sum(kept < FAIL_IOU)):4d} '
                   f'({100 * np.mean(kept < FAIL_IOU):2.0f}%) '
                   f'{bad["frames"]:13d} {" ".join(bad.get("names", []))}')
-        if name == 'learned':
+        if name != 'chapter':
             print(f'row-fill limit over all drives (min_row_fill): {limits["all"]:.3f}')
         for drive, res in results[name].items():
             wrong = np.sum([f.wrong_pixels for f in res['frames'] if f.seed_is_road], axis=0)

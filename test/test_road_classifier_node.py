@@ -48,6 +48,16 @@ def test_bad_parameters():
                 Parameter('camera_mount', value=[0.3, 0.0, 1.0])])
 
 
+def test_cnn_outline_method_loads_the_packaged_network():
+    with RosHarness() as ros:
+        node = RoadClassifier(context=ros.context, parameter_overrides=[
+            Parameter('outline_method', value='cnn')])
+        assert node.outline_params.method == 'cnn'
+        with pytest.raises(ParameterError, match='outline_method'):
+            RoadClassifier(context=ros.context, parameter_overrides=[
+                Parameter('outline_method', value='unet')])
+
+
 def _scan_msg(pose, stamp, rng, ranges=None):
     if ranges is None:
         ranges = cast_scan(ROAD, pose, MOUNT, ANGLES, rng=rng).ranges

@@ -5,8 +5,11 @@ drive is the part of its name before the first ``_`` (CamVid: ``0001TP``, ``0006
 ``0016E5``). Training samples ``SAMPLES_PER_FRAME`` random pixels of every frame whose seed
 band is road (road share of the band >= ``SEED_ROAD_SHARE``; the others would teach the
 seed-relative features a wrong reference), skipping unlabelled pixels, with each drive
-weighted equally. Leave one drive out: for every drive, a model fitted on the other drives
-scores that drive's frames.
+weighted equally. The convolutional network (:mod:`landmark_nav.road.road_cnn`) trains on
+whole frames instead (:func:`feature_maps`): every such frame's feature maps and
+``CNN_COPIES`` photometrically altered copies, unlabelled pixels not scored, each drive
+weighted equally (:func:`train_cnn`, PyTorch). Leave one drive out: for every drive, a model
+fitted on the other drives scores that drive's frames.
 
 The outline's row-fill limit (:func:`landmark_nav.road.outline.row_fill`) is calibrated the
 same way: for a held-out drive, the ``ROW_FILL_QUANTILE`` quantile of the row fill of the other
@@ -23,12 +26,15 @@ from landmark_nav.evaluation.road_outline import (evaluate_folder, frame_names, 
                                                   ROAD_CLASS, SEED_COLS, SEED_ROAD_SHARE,
                                                   SEED_ROWS, summarize, UNLABELLED_CLASS)
 from landmark_nav.road.outline import band_seed, OutlineParams
+from landmark_nav.road.road_cnn import MeanProbability
 from landmark_nav.road.road_probability import FEATURE_NAMES, FEATURE_SIZE, pixel_features
 from landmark_nav.road.road_probability import RoadModel
 from landmark_nav.road.road_training import fit_road_model
 import numpy as np
 
 SAMPLES_PER_FRAME = 600
+CNN_COPIES = 3
+CNN_STEPS = 600
 ROW_FILL_QUANTILE = 0.1
 
 
@@ -47,11 +53,11 @@ class TrainingSet:
     skipped: Tuple[str, ...]       # frames whose seed band is not road
 
 
-def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
-                  seed: int = 0) -> TrainingSet:
-    """Sample labelled pixels of every frame of the folders (see the module text)."""
-    rng = np.random.default_rng(seed)
-    xs, ys, drives, skipped = [], [], [], []
+def _road_seeded_frames(folders: Sequence[Path], skipped: List[str]):
+    """Yield (name, RGB, label at FEATURE_SIZE, seed band) of the frames whose band is road.
+
+    The names of the others are appended to ``skipped``.
+    """
     for folder in map(Path, folders):
         names = frame_names(folder)
         if not names:
@@ -63,13 +69,23 @@ def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
             if float(np.mean(label[seed] == ROAD_CLASS)) < SEED_ROAD_SHARE:
                 skipped.append(name)
                 continue
-            feats = pixel_features(rgb, seed).reshape(-1, len(FEATURE_NAMES))
-            small = cv2.resize(label, FEATURE_SIZE, interpolation=cv2.INTER_NEAREST).ravel()
-            usable = np.flatnonzero(small != UNLABELLED_CLASS)
-            idx = rng.choice(usable, min(per_frame, len(usable)), replace=False)
-            xs.append(feats[idx])
-            ys.append((small[idx] == ROAD_CLASS).astype(np.float32))
-            drives.append(np.full(len(idx), drive_of(name)))
+            yield name, rgb, cv2.resize(label, FEATURE_SIZE,
+                                        interpolation=cv2.INTER_NEAREST), seed
+
+
+def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
+                  seed: int = 0) -> TrainingSet:
+    """Sample labelled pixels of every frame of the folders (see the module text)."""
+    rng = np.random.default_rng(seed)
+    xs, ys, drives, skipped = [], [], [], []
+    for name, rgb, small, seed_band in _road_seeded_frames(folders, skipped):
+        feats = pixel_features(rgb, seed_band).reshape(-1, len(FEATURE_NAMES))
+        small = small.ravel()
+        usable = np.flatnonzero(small != UNLABELLED_CLASS)
+        idx = rng.choice(usable, min(per_frame, len(usable)), replace=False)
+        xs.append(feats[idx])
+        ys.append((small[idx] == ROAD_CLASS).astype(np.float32))
+        drives.append(np.full(len(idx), drive_of(name)))
     if not xs:
         raise ValueError('no frame with a road seed to train on')
     return TrainingSet(np.concatenate(xs), np.concatenate(ys), np.concatenate(drives),
@@ -93,22 +109,87 @@ def train(data: TrainingSet, drives: Sequence[str] = (), seed: int = 0) -> RoadM
     return fit_road_model(data.x[use], data.y[use], weights=weights, seed=seed)
 
 
+@dataclass(frozen=True, eq=False)
+class FeatureMaps:
+    """Whole frames for the CNN.
+
+    Features (N, 120, 160, F) float16, labels and scored pixels (N, 120, 160) bool, the drive
+    of each map; the ``copies`` photometrically altered maps of a frame follow its original.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    valid: np.ndarray
+    drive: np.ndarray
+    skipped: Tuple[str, ...]       # frames whose seed band is not road
+
+
+def feature_maps(folders: Sequence[Path], copies: int = CNN_COPIES, seed: int = 0
+                 ) -> FeatureMaps:
+    """Feature maps of every frame whose seed band is road, and ``copies`` altered ones each.
+
+    The alterations (:func:`landmark_nav.road.road_cnn_training.photometric`) change the
+    image before its features are computed, as a change of light or camera would.
+    """
+    from landmark_nav.road.road_cnn_training import photometric
+    rng = np.random.default_rng(seed)
+    xs, ys, valid, drives, skipped = [], [], [], [], []
+    for name, rgb, small, seed_band in _road_seeded_frames(folders, skipped):
+        for k in range(copies + 1):
+            img = rgb if k == 0 else photometric(rgb, rng)
+            xs.append(pixel_features(img, seed_band).astype(np.float16))
+            ys.append(small == ROAD_CLASS)
+            valid.append(small != UNLABELLED_CLASS)
+            drives.append(drive_of(name))
+    if not xs:
+        raise ValueError('no frame with a road seed to train on')
+    return FeatureMaps(np.stack(xs), np.stack(ys), np.stack(valid), np.array(drives),
+                       tuple(skipped))
+
+
+def train_cnn(data: FeatureMaps, drives: Sequence[str] = (), seed: int = 0,
+              steps: int = CNN_STEPS, log=None):
+    """Fit the road CNN on the maps of ``drives`` (all when empty), each drive weighed equally.
+
+    Raises:
+        ImportError: PyTorch is missing (training only).
+        ValueError: A drive has no maps.
+    """
+    from landmark_nav.road.road_cnn_training import fit_road_cnn
+    for d in drives:
+        if not np.any(data.drive == d):
+            raise ValueError(f'drive {d!r} has no training frames (drives: '
+                             f'{sorted(set(data.drive))})')
+    use = np.flatnonzero(np.isin(data.drive, list(drives)) if drives else
+                         np.ones(len(data.drive), bool))
+    return fit_road_cnn(data.x[use], data.y[use], data.valid[use], data.drive[use],
+                        steps=steps, seed=seed, log=log)
+
+
 def leave_one_drive_out(folders: Sequence[Path], params: OutlineParams = OutlineParams(),
-                        seed: int = 0) -> Dict[str, dict]:
+                        seed: int = 0, cnn_steps: int = CNN_STEPS) -> Dict[str, dict]:
     """Per drive: the summary of its frames scored by a model fitted on the other drives.
 
-    With ``params.method == 'chapter'`` nothing is trained (eqs. 26-28 have no model).
+    ``params.method``: 'learned' fits the perceptron, 'cnn' the perceptron and the
+    convolutional network (``cnn_steps`` mini-batches; needs PyTorch) and averages their
+    probabilities; with 'chapter' nothing is trained (eqs. 26-28 have no model).
     """
     folders = [Path(f) for f in folders]
-    learned = params.method == 'learned'
-    data = sample_frames(folders, seed=seed) if learned else None
     drives = sorted({drive_of(n) for f in folders for n in frame_names(f)})
     if len(drives) < 2:
         raise ValueError(f'leave one drive out needs two drives or more; got {drives}')
+    if params.method != 'chapter':
+        data = sample_frames(folders, seed=seed)
+    if params.method == 'cnn':
+        maps = feature_maps(folders, seed=seed)
     out = {}
     for held in drives:
-        model = train(data, [d for d in drives if d != held and np.any(data.drive == d)],
-                      seed) if learned else None
+        model = None
+        if params.method != 'chapter':
+            others = [d for d in drives if d != held and np.any(data.drive == d)]
+            model = train(data, others, seed)
+        if params.method == 'cnn':
+            model = MeanProbability((train_cnn(maps, others, seed, cnn_steps), model))
         scores: List = []
         for folder in folders:
             names = [n for n in frame_names(folder) if drive_of(n) == held]

@@ -29,7 +29,7 @@ from typing import Dict, List, Optional, Sequence
 
 import cv2
 from landmark_nav.road.outline import band_seed, OutlineParams, road_outline
-from landmark_nav.road.road_probability import RoadModel
+from landmark_nav.road.road_cnn import ProbabilityModel
 import numpy as np
 
 ROAD_CLASS = 3
@@ -101,7 +101,7 @@ def is_hard_shadow(rgb: np.ndarray, road: np.ndarray) -> bool:
 
 
 def score_frame(rgb: np.ndarray, label: np.ndarray, params: OutlineParams,
-                name: str = '', model: Optional[RoadModel] = None
+                name: str = '', model: Optional[ProbabilityModel] = None
                 ) -> tuple[FrameScore, np.ndarray]:
     """Run the outline on one frame and score it; returns (score, road mask)."""
     truth = label == ROAD_CLASS
@@ -124,7 +124,7 @@ def score_frame(rgb: np.ndarray, label: np.ndarray, params: OutlineParams,
 
 def evaluate_folder(folder: Path, params: OutlineParams = OutlineParams(),
                     names: Optional[Sequence[str]] = None,
-                    model: Optional[RoadModel] = None) -> List[FrameScore]:
+                    model: Optional[ProbabilityModel] = None) -> List[FrameScore]:
     """Score every frame of a folder (or the ``names`` given; ``model``: the packaged one)."""
     folder = Path(folder)
     names = frame_names(folder) if names is None else list(names)

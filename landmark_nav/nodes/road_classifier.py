@@ -45,6 +45,7 @@ from landmark_nav.road.fusion import (choose_route, extend_with_outline,
                                       pixels_to_ground, plan_routes, road_widths,
                                       vision_lines)
 from landmark_nav.road.outline import polyline_seed, road_outline, SeedError
+from landmark_nav.road.road_cnn import default_cnn_criterion
 from landmark_nav.road.road_probability import default_model
 from landmark_nav.road.terrain import classify_scan, NOT_TRAVERSABLE
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
@@ -65,6 +66,8 @@ class RoadClassifier(Node):
             config = road_configuration(values)
             if config.outline.method == 'learned':
                 default_model()
+            elif config.outline.method == 'cnn':
+                default_cnn_criterion()
         except (ValueError, OSError) as err:
             raise ParameterError(f'road_classifier: {err}') from err
         self.laser, self.terrain = config.laser, config.terrain

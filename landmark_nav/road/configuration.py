@@ -15,7 +15,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 from landmark_nav.parameter_tables import Parameter, parameter_values
 from landmark_nav.road.fusion import FusionParams
 from landmark_nav.road.laser_mount import LaserMount
-from landmark_nav.road.outline import OutlineParams
+from landmark_nav.road.outline import METHODS, OutlineParams
 from landmark_nav.road.terrain_params import TerrainParams
 
 NODE = 'road_classifier'
@@ -56,18 +56,20 @@ def parameters() -> Dict[str, Parameter]:
                              (1, 1000)),
         'outline_method': Parameter(OutlineParams().method, 'road criterion of the vision '
                                     "outline: 'learned' (road probability of the packaged "
-                                    "model) or 'chapter' (eqs. 26-28)", None,
-                                    ['learned', 'chapter']),
+                                    "perceptron), 'cnn' (its mean with the packaged "
+                                    "convolutional network's) or 'chapter' (eqs. 26-28)",
+                                    None,
+                                    list(METHODS)),
         'k_limit': Parameter(OutlineParams().k_limit, 'road where P_c + P_e exceeds this '
                              "(eq. 26; outline_method 'chapter')", (0.0, 2.0)),
         'min_outline_confidence': Parameter(OutlineParams().min_confidence, 'an outline of '
                                             'lower confidence (seed road probability, border '
                                             'contrast) is flagged and not fused '
-                                            "(outline_method 'learned')", (0.0, 1.0)),
+                                            "(outline_method 'learned' or 'cnn')", (0.0, 1.0)),
         'min_outline_row_fill': Parameter(OutlineParams().min_row_fill, 'an outline covering '
                                           "less of its rows' spans (gaps around cars, along "
                                           'pavement) is flagged and not fused '
-                                          "(outline_method 'learned')", (0.0, 1.0)),
+                                          "(outline_method 'learned' or 'cnn')", (0.0, 1.0)),
         'seed_thickness_px': Parameter(9, 'thickness of the seed band [px]', (1, 200)),
         'outline_timeout': Parameter(0.5, 'an outline older than this (scan time) is not '
                                      'fused [s]', (0.0, 60.0)),

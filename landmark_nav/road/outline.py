@@ -41,7 +41,9 @@ grey and, on overcast frames, over walls and parked cars. The default criterion
 (:mod:`landmark_nav.road.road_probability`: colour relative to the seed, texture, image
 position) above ``p_road``, evaluated at 160 x 120 and interpolated to the working size;
 the seed's connected region, the closing and the hole filling are the same.
-``method='chapter'`` keeps eqs. 26-28.
+``method='cnn'`` averages that probability with a small fully convolutional network's over
+the same features (:mod:`landmark_nav.road.road_cnn`: it judges a pixel from the layout
+around it). ``method='chapter'`` keeps eqs. 26-28.
 
 Each outline carries a confidence in [0, 1]: the smaller of the model's mean road
 probability on the seed (is the seed road at all?) and the contrast of that probability
@@ -60,12 +62,16 @@ import math
 from typing import Optional
 
 import cv2
-from landmark_nav.road.road_probability import (FEATURE_SIZE, road_probability,
-                                                RoadModel)
+from landmark_nav.road.road_cnn import default_cnn_criterion, ProbabilityModel
+from landmark_nav.road.road_probability import FEATURE_SIZE, road_probability
 import numpy as np
 
 #: Processing size of the chapter (columns, rows).
 WORK_SIZE = (320, 240)
+
+
+#: Road criteria: learned perceptron, learned CNN, the chapter's eqs. 26-28.
+METHODS = ('learned', 'cnn', 'chapter')
 
 
 class SeedError(ValueError):
@@ -107,8 +113,8 @@ class OutlineParams:
             raise ValueError(f"outline chroma must be 'rg' or 'invariant'; got {self.chroma!r}")
         if self.close_px < 0 or self.min_seed_pixels < 1:
             raise ValueError('outline close_px must be >= 0 and min_seed_pixels >= 1')
-        if self.method not in ('learned', 'chapter'):
-            raise ValueError(f"outline method must be 'learned' or 'chapter'; got "
+        if self.method not in METHODS:
+            raise ValueError(f"outline method must be one of {', '.join(METHODS)}; got "
                              f'{self.method!r}')
         for name in ('p_road', 'min_confidence', 'min_row_fill'):
             value = getattr(self, name)
@@ -201,14 +207,16 @@ def _fill_marking_holes(mask: np.ndarray, intensity: np.ndarray, road_level: flo
 
 def road_outline(rgb: np.ndarray, seed: np.ndarray,
                  params: OutlineParams = OutlineParams(),
-                 model: Optional[RoadModel] = None) -> RoadOutline:
+                 model: Optional[ProbabilityModel] = None) -> RoadOutline:
     """Find the road region connected to a seed area (eqs. 25-28 or the learned criterion).
 
     Args:
         rgb: (H, W, 3) uint8 image in RGB order.
         seed: (H, W) bool mask of the seed area (the laser's traversable segment).
         params: Weights and limits.
-        model: Road-probability model of the learned criterion (default: the packaged one).
+        model: Road-probability model of the learned criteria (default: the packaged
+            perceptron with ``method='learned'``; with ``'cnn'`` the packaged network
+            averaged with it).
 
     Returns:
         The road mask and outline at the input resolution.
@@ -231,7 +239,9 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
     if n_seed < params.min_seed_pixels:
         raise SeedError(f'seed area has {n_seed} pixels at {WORK_SIZE[0]}x{WORK_SIZE[1]} '
                         f'(needs {params.min_seed_pixels})')
-    if params.method == 'learned':
+    if params.method != 'chapter':
+        if model is None and params.method == 'cnn':
+            model = default_cnn_criterion()
         prob = road_probability(img, seed, model)
         road = (_work_size(prob) > params.p_road) | seed_s
         p_c = p_e = None

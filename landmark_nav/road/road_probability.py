@@ -71,11 +71,8 @@ class RoadModel:
 
     def save(self, path: Union[str, Path]) -> Path:
         """Write the weights (float32) to an ``.npz`` file."""
-        path = Path(path)
-        np.savez_compressed(path, features=np.array(FEATURE_NAMES),
-                            **{k: np.asarray(getattr(self, k), np.float32)
-                               for k in ('mean', 'scale', 'w1', 'b1', 'w2', 'b2')})
-        return path
+        return write_weights(path, {k: getattr(self, k)
+                                    for k in ('mean', 'scale', 'w1', 'b1', 'w2', 'b2')})
 
     @classmethod
     def load(cls, path: Union[str, Path] = DEFAULT_MODEL) -> 'RoadModel':
@@ -85,13 +82,8 @@ class RoadModel:
             FileNotFoundError: No such file.
             ValueError: The file's features differ from :data:`FEATURE_NAMES`.
         """
-        with np.load(Path(path)) as z:
-            names = tuple(str(n) for n in z['features'])
-            if names != FEATURE_NAMES:
-                raise ValueError(f'{path}: road model features {names} differ from '
-                                 f'{FEATURE_NAMES}; retrain it (landmark_nav '
-                                 'train-road-outline)')
-            return cls(z['mean'], z['scale'], z['w1'], z['b1'], z['w2'], float(z['b2']))
+        z = read_weights(path, 'train-road-outline')
+        return cls(z['mean'], z['scale'], z['w1'], z['b1'], z['w2'], float(z['b2']))
 
     def predict(self, features: np.ndarray) -> np.ndarray:
         """Road probability of (..., F) features."""
@@ -99,6 +91,30 @@ class RoadModel:
         hidden = np.tanh(x @ self.w1 + self.b1)
         z = hidden @ self.w2 + self.b2
         return 1.0 / (1.0 + np.exp(-np.clip(z, -30.0, 30.0)))
+
+
+def write_weights(path: Union[str, Path], arrays: dict) -> Path:
+    """Write float32 arrays and :data:`FEATURE_NAMES` to an ``.npz`` file."""
+    path = Path(path)
+    np.savez_compressed(path, features=np.array(FEATURE_NAMES),
+                        **{k: np.asarray(v, np.float32) for k, v in arrays.items()})
+    return path
+
+
+def read_weights(path: Union[str, Path], command: str) -> dict:
+    """Read the arrays of :func:`write_weights` (float32), checking the feature names.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: The file's features differ from :data:`FEATURE_NAMES` (naming the
+            ``landmark_nav`` command that retrains it).
+    """
+    with np.load(Path(path)) as z:
+        names = tuple(str(n) for n in z['features'])
+        if names != FEATURE_NAMES:
+            raise ValueError(f'{path}: road model features {names} differ from '
+                             f'{FEATURE_NAMES}; retrain it (landmark_nav {command})')
+        return {k: z[k].astype(np.float32) for k in z.files if k != 'features'}
 
 
 _CACHE: dict = {}
@@ -166,6 +182,10 @@ def pixel_features(rgb: np.ndarray, seed: np.ndarray) -> np.ndarray:
 
 def road_probability(rgb: np.ndarray, seed: np.ndarray,
                      model: Optional[RoadModel] = None) -> np.ndarray:
-    """Return the (120, 160) float32 probability that each pixel is road."""
+    """Return the (120, 160) float32 probability that each pixel is road.
+
+    ``model``: the packaged perceptron by default, or any model with its ``predict`` on
+    (120, 160, F) features (:class:`landmark_nav.road.road_cnn.RoadCNN`).
+    """
     model = default_model() if model is None else model
     return model.predict(pixel_features(rgb, seed)).astype(np.float32)

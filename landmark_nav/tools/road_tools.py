@@ -2,8 +2,9 @@
 
 * ``landmark_nav evaluate-road-outline FOLDER``: the vision road outline on labelled street
   frames (IoU, precision, recall per frame set; overlays).
-* ``landmark_nav train-road-outline --data DIR [DIR ...] --out FILE``: fit the outline's
-  road-probability model to labelled street frames.
+* ``landmark_nav train-road-outline --data DIR [DIR ...] --out FILE [--kind cnn]``: fit the
+  outline's road-probability model (the perceptron, or the convolutional network with
+  PyTorch installed) to labelled street frames.
 * ``landmark_nav evaluate-road-laser``: tilted-laser terrain classification on the park-road
   simulator (per-reading accuracy, road width as in Table 3).
 * ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
@@ -82,6 +83,11 @@ def add_parsers(sub, parser_class) -> None:
                    help='e.g. ../shared/data/camvid_train')
     p.add_argument('--out', required=True, help='model file to write (.npz)')
     p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    p.add_argument('--kind', choices=['mlp', 'cnn'], default='mlp', help="'mlp': the "
+                   "perceptron of outline_method 'learned' (default); 'cnn': the "
+                   "convolutional network of outline_method 'cnn' (needs torch)")
+    p.add_argument('--steps', type=int, default=None,
+                   help='CNN training mini-batches (default: as the benchmark)')
     p.set_defaults(func=_cmd_train_road_outline)
 
     p = sub.add_parser('evaluate-road-laser', help='score the tilted-laser terrain '
@@ -111,13 +117,27 @@ def add_parsers(sub, parser_class) -> None:
 
 
 def _cmd_train_road_outline(args: argparse.Namespace) -> int:
-    from landmark_nav.evaluation.road_cross_drive import sample_frames, train
+    from landmark_nav.evaluation import road_cross_drive as rcd
     import numpy as np
-    data = sample_frames([Path(d) for d in args.data], seed=args.seed)
-    model = train(data, seed=args.seed)
+    folders = [Path(d) for d in args.data]
+    if args.kind == 'cnn':
+        try:
+            import torch  # noqa: F401
+        except ImportError:
+            import sys
+            print('error: training the CNN needs torch: pip install torch==2.13.0',
+                  file=sys.stderr)
+            return 2
+        data = rcd.feature_maps(folders, seed=args.seed)
+        model = rcd.train_cnn(data, seed=args.seed, steps=args.steps or rcd.CNN_STEPS)
+        unit = 'maps'
+    else:
+        data = rcd.sample_frames(folders, seed=args.seed)
+        model = rcd.train(data, seed=args.seed)
+        unit = 'pixels'
     path = model.save(args.out)
     drives = ', '.join(f'{d} {n}' for d, n in zip(*np.unique(data.drive, return_counts=True)))
-    print(f'{len(data.y)} pixels (drive: pixels {drives}); {len(data.skipped)} frames '
+    print(f'{len(data.drive)} {unit} (drive: {unit} {drives}); {len(data.skipped)} frames '
           f'skipped, their seed band not road: {" ".join(data.skipped) or "none"}')
     print(f'model: {path} ({path.stat().st_size} bytes)')
     return 0

@@ -1,0 +1,144 @@
+"""Fit the road CNN (:class:`landmark_nav.road.road_cnn.RoadCNN`) with PyTorch (optional).
+
+Training only: PyTorch is an optional extra (``pip install torch==2.13.0``, or the package's
+``train`` extra); inference is numpy (:mod:`landmark_nav.road.road_cnn`). Binary
+cross-entropy of the logistic output per pixel, unlabelled pixels weighed 0 and each drive
+weighed equally (frames drawn with probability 1 / frames of their drive); mini-batch Adam
+(Kingma and Ba 2015) with a cosine-decaying rate; random horizontal flips of the feature
+planes (the seed band is centred, so a flipped frame is another plausible frame). The
+photometric augmentation (brightness, contrast, gamma, saturation, white balance) acts on
+the image before its features are computed: :func:`photometric`. One thread and fixed seeds:
+the same data give the same weights.
+"""
+
+from typing import Dict
+
+from landmark_nav.road.road_cnn import LAYERS, RoadCNN
+import numpy as np
+
+TORCH_MISSING = 'training the CNN needs torch: pip install torch==2.13.0'
+
+
+def photometric(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Return a random change of light and camera of a (H, W, 3) uint8 image.
+
+    Brightness x [0.6, 1.4], contrast x [0.6, 1.3] about the mean, gamma in [0.7, 1.4],
+    saturation x [0.4, 1.3] (blend with the grey), per-channel gains (white balance, slight
+    hue) x [0.9, 1.1].
+    """
+    x = rgb.astype(np.float32) / 255.0
+    x = x * rng.uniform(0.9, 1.1, 3).astype(np.float32)
+    grey = x.mean(axis=2, keepdims=True)
+    x = grey + rng.uniform(0.4, 1.3) * (x - grey)
+    x = x.mean() + rng.uniform(0.6, 1.3) * (x - x.mean())
+    x = np.clip(x * rng.uniform(0.6, 1.4), 0.0, 1.0) ** rng.uniform(0.7, 1.4)
+    return np.clip(255.0 * x + 0.5, 0, 255).astype(np.uint8)
+
+
+def _torch():
+    try:
+        import torch
+    except ImportError as e:                      # pragma: no cover - depends on the extra
+        raise ImportError(TORCH_MISSING) from e
+    return torch
+
+
+def torch_network(c_in: int, widths: Dict[str, int]):
+    """Return the PyTorch twin of :class:`RoadCNN` (``widths``: channels per layer)."""
+    torch = _torch()
+    nn = torch.nn
+    f = nn.functional
+
+    class Net(nn.Module):
+        def __init__(self):
+            super().__init__()
+            ins = {'e1': c_in, 'e2': widths['e1'], 'c1': widths['e2'], 'c2': widths['c1'],
+                   'c3': widths['c2'], 'd1': widths['c3'] + widths['e1'],
+                   'h': widths['d1'] + c_in, 'out': widths['h']}
+            self.layers = nn.ModuleDict({
+                n: nn.Conv2d(ins[n], widths.get(n, 1), k, stride=s, dilation=d,
+                             padding=d * (k // 2))
+                for n, (k, s, d) in LAYERS.items()})
+
+        def forward(self, x):
+            L = self.layers
+            up = {'scale_factor': 2, 'mode': 'bilinear', 'align_corners': False}
+            e1 = f.relu(L['e1'](x))
+            y = f.relu(L['e2'](e1))
+            for n in ('c1', 'c2', 'c3'):
+                y = f.relu(L[n](y))
+            y = f.relu(L['d1'](torch.cat([f.interpolate(y, **up), e1], 1)))
+            y = f.relu(L['h'](torch.cat([f.interpolate(y, **up), x], 1)))
+            return L['out'](y)[:, 0]
+    return Net()
+
+
+WIDTHS = {'e1': 16, 'e2': 32, 'c1': 32, 'c2': 32, 'c3': 32, 'd1': 16, 'h': 16}
+
+
+def export(net, mean: np.ndarray, scale: np.ndarray) -> RoadCNN:
+    """Return the numpy :class:`RoadCNN` of a trained :func:`torch_network`."""
+    weights = {}
+    for name, layer in net.layers.items():
+        weights[f'{name}.w'] = layer.weight.detach().cpu().numpy().astype(np.float32)
+        weights[f'{name}.b'] = layer.bias.detach().cpu().numpy().astype(np.float32)
+    return RoadCNN(np.asarray(mean, np.float32), np.asarray(scale, np.float32), weights)
+
+
+def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndarray,
+                 steps: int = 1500, batch: int = 8, rate: float = 3e-3,
+                 weight_decay: float = 1e-4, seed: int = 0,
+                 widths: Dict[str, int] = WIDTHS, log=None) -> RoadCNN:
+    """Fit the network to feature maps ``x`` (N, H, W, F), labels ``y`` (N, H, W) in {0, 1}.
+
+    ``valid`` (N, H, W) bool marks the scored pixels; ``group`` (N,) the drive of each map
+    (maps drawn so that each drive is seen equally often). ``log(step, loss)`` is called every
+    100 steps when given.
+
+    Raises:
+        ImportError: PyTorch is not installed (:data:`TORCH_MISSING`).
+        ValueError: Shapes disagree.
+    """
+    torch = _torch()
+    n, h, w, c = x.shape
+    if y.shape != (n, h, w) or valid.shape != (n, h, w) or np.shape(group) != (n,):
+        raise ValueError(f'road CNN fit needs (N, H, W, F) features and (N, H, W) labels '
+                         f'and masks, (N,) groups; got {x.shape}, {y.shape}, {valid.shape}, '
+                         f'{np.shape(group)}')
+    torch.manual_seed(seed)
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(seed)
+    sub = x[rng.choice(n, min(n, 64), replace=False)].astype(np.float32).reshape(-1, c)
+    mean, scale = sub.mean(axis=0), sub.std(axis=0)
+    scale[scale < 1e-6] = 1.0
+    _, inverse, counts = np.unique(group, return_inverse=True, return_counts=True)
+    draw = 1.0 / counts[inverse]
+    draw /= draw.sum()
+    net = torch_network(c, widths)
+    opt = torch.optim.Adam(net.parameters(), lr=rate, weight_decay=weight_decay)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps)
+    m_t = torch.from_numpy(mean.astype(np.float32)).view(1, c, 1, 1)
+    s_t = torch.from_numpy(scale.astype(np.float32)).view(1, c, 1, 1)
+    running = 0.0
+    for step in range(steps):
+        idx = rng.choice(n, batch, p=draw)
+        xb = torch.from_numpy(x[idx].astype(np.float32)).permute(0, 3, 1, 2)
+        yb = torch.from_numpy(y[idx].astype(np.float32))
+        vb = torch.from_numpy(valid[idx].astype(np.float32))
+        flip = torch.from_numpy(rng.random(batch) < 0.5)
+        xb[flip] = xb[flip].flip(-1)
+        yb[flip] = yb[flip].flip(-1)
+        vb[flip] = vb[flip].flip(-1)
+        z = net((xb - m_t) / s_t)
+        loss = (torch.nn.functional.binary_cross_entropy_with_logits(
+            z, yb, reduction='none') * vb).sum() / vb.sum().clamp(min=1.0)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        running += float(loss.detach())
+        if log is not None and (step + 1) % 100 == 0:
+            log(step + 1, running / 100)
+            running = 0.0
+    net.eval()
+    return export(net, mean, scale)

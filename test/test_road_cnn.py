@@ -1,0 +1,113 @@
+"""Road CNN (road.road_cnn): numpy forward pass, weights file, and its PyTorch twin."""
+
+from landmark_nav.road.road_cnn import conv2d, LAYERS, RoadCNN, upsample2
+from landmark_nav.road.road_probability import FEATURE_NAMES
+import numpy as np
+import pytest
+
+F = len(FEATURE_NAMES)
+WIDTHS = {'e1': 4, 'e2': 5, 'c1': 5, 'c2': 5, 'c3': 5, 'd1': 3, 'h': 3, 'out': 1}
+
+
+def _random_cnn(rng):
+    """Return a small RoadCNN with random weights (the layer layout of :data:`LAYERS`)."""
+    ins = {'e1': F, 'e2': 4, 'c1': 5, 'c2': 5, 'c3': 5, 'd1': 5 + 4, 'h': 3 + F, 'out': 3}
+    weights = {}
+    for name, (k, _, _) in LAYERS.items():
+        weights[f'{name}.w'] = rng.normal(0, 0.3, (WIDTHS[name], ins[name], k, k)
+                                          ).astype(np.float32)
+        weights[f'{name}.b'] = rng.normal(0, 0.1, WIDTHS[name]).astype(np.float32)
+    return RoadCNN(rng.normal(0, 1, F).astype(np.float32),
+                   rng.uniform(0.5, 2, F).astype(np.float32), weights)
+
+
+def test_conv2d_is_a_zero_padded_cross_correlation():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(9, 12, 2)).astype(np.float32)
+    w = rng.normal(size=(3, 2, 3, 3)).astype(np.float32)
+    b = np.array([0.5, -1.0, 0.0], np.float32)
+    for stride, dil in ((1, 1), (2, 1), (1, 2), (1, 3)):
+        pad = np.pad(x, ((dil, dil), (dil, dil), (0, 0)))
+        want = np.zeros((-(-9 // stride), -(-12 // stride), 3))
+        for i in range(want.shape[0]):
+            for j in range(want.shape[1]):
+                for o in range(3):
+                    taps = pad[i * stride:i * stride + 2 * dil + 1:dil,
+                               j * stride:j * stride + 2 * dil + 1:dil]       # (3, 3, C)
+                    want[i, j, o] = np.sum(taps * w[o].transpose(1, 2, 0)) + b[o]
+        np.testing.assert_allclose(conv2d(x, w, b, stride, dil), want, rtol=1e-5, atol=1e-5)
+
+
+def test_upsample2_is_bilinear_with_half_pixel_centres():
+    x = np.random.default_rng(1).normal(size=(5, 7, 16)).astype(np.float32)
+    # output 2i at input i - 1/4, 2i + 1 at i + 1/4 (weights 3/4, 1/4), borders replicated
+    pad = np.pad(x, ((1, 1), (1, 1), (0, 0)), mode='edge')
+    rows = np.empty((10, 9, 16), np.float32)
+    rows[0::2] = 0.75 * pad[1:-1] + 0.25 * pad[:-2]
+    rows[1::2] = 0.75 * pad[1:-1] + 0.25 * pad[2:]
+    want = np.empty((10, 14, 16), np.float32)
+    want[:, 0::2] = 0.75 * rows[:, 1:-1] + 0.25 * rows[:, :-2]
+    want[:, 1::2] = 0.75 * rows[:, 1:-1] + 0.25 * rows[:, 2:]
+    np.testing.assert_allclose(upsample2(x), want, atol=1e-5)
+    assert upsample2(x[..., :1]).shape == (10, 14, 1)
+
+
+def test_cnn_save_load_and_refusals(tmp_path):
+    rng = np.random.default_rng(2)
+    cnn = _random_cnn(rng)
+    feats = rng.normal(size=(12, 16, F)).astype(np.float32)
+    p = cnn.predict(feats)
+    assert p.shape == (12, 16) and np.all((p > 0) & (p < 1))
+    loaded = RoadCNN.load(cnn.save(tmp_path / 'c.npz'))
+    np.testing.assert_array_equal(loaded.predict(feats), p)
+    with pytest.raises(ValueError, match='multiples of 4'):
+        cnn.predict(feats[:10])
+    bad = dict(cnn.weights)
+    bad['c2.w'] = bad['c2.w'][:, :4]
+    with pytest.raises(ValueError, match=r'layer c2 has weights \(5, 4, 3, 3\)'):
+        RoadCNN(cnn.mean, cnn.scale, bad)
+    with pytest.raises(ValueError, match='lacks weights'):
+        RoadCNN(cnn.mean, cnn.scale, {k: v for k, v in cnn.weights.items() if k != 'h.b'})
+
+
+def test_numpy_forward_matches_torch():
+    """The numpy pass equals the PyTorch network it was exported from (needs torch)."""
+    torch = pytest.importorskip('torch')
+    from landmark_nav.road.road_cnn_training import export, torch_network
+    torch.manual_seed(0)
+    net = torch_network(F, WIDTHS).eval()
+    rng = np.random.default_rng(3)
+    mean, scale = rng.normal(0, 1, F), rng.uniform(0.5, 2, F)
+    feats = rng.normal(size=(24, 32, F)).astype(np.float32)
+    x = torch.from_numpy(((feats - mean) / scale).astype(np.float32)).permute(2, 0, 1)[None]
+    with torch.no_grad():
+        want = net(x)[0].numpy()
+    got = export(net, mean, scale).logits(feats)
+    np.testing.assert_allclose(got, want, atol=1e-4)
+
+
+def test_cnn_training_smoke():
+    """Three Adam steps on two random maps run and give a usable model (needs torch)."""
+    pytest.importorskip('torch')
+    from landmark_nav.road.road_cnn_training import fit_road_cnn
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(2, 8, 12, F)).astype(np.float16)
+    y = rng.random((2, 8, 12)) < 0.5
+    cnn = fit_road_cnn(x, y, np.ones_like(y), np.array(['a', 'b']), steps=3, batch=2,
+                       widths=WIDTHS)
+    assert cnn.predict(x[0].astype(np.float32)).shape == (8, 12)
+    with pytest.raises(ValueError, match='labels'):
+        fit_road_cnn(x, y[:1], np.ones_like(y), np.array(['a', 'b']))
+
+
+def test_photometric_alteration_and_training_refusals():
+    from landmark_nav.evaluation.road_cross_drive import FeatureMaps, train_cnn
+    from landmark_nav.road.road_cnn_training import photometric
+    rgb = np.random.default_rng(5).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    a = photometric(rgb, np.random.default_rng(6))
+    assert a.shape == rgb.shape and a.dtype == np.uint8 and not np.array_equal(a, rgb)
+    np.testing.assert_array_equal(a, photometric(rgb, np.random.default_rng(6)))
+    maps = FeatureMaps(np.zeros((2, 8, 12, F), np.float16), np.zeros((2, 8, 12), bool),
+                       np.ones((2, 8, 12), bool), np.array(['0001TP', '0006R0']), ())
+    with pytest.raises(ValueError, match="drive '0016E5' has no training frames"):
+        train_cnn(maps, ['0016E5'])
