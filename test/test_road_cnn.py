@@ -70,32 +70,12 @@ def test_cnn_save_load_and_refusals(tmp_path):
         RoadCNN(cnn.mean, cnn.scale, {k: v for k, v in cnn.weights.items() if k != 'h.b'})
 
 
-def test_numpy_forward_matches_torch():
-    """The numpy pass equals the PyTorch network it was exported from (needs torch)."""
-    torch = pytest.importorskip('torch')
-    from landmark_nav.road.road_cnn_training import export, torch_network
-    torch.manual_seed(0)
-    net = torch_network(F, WIDTHS).eval()
-    rng = np.random.default_rng(3)
-    mean, scale = rng.normal(0, 1, F), rng.uniform(0.5, 2, F)
-    feats = rng.normal(size=(24, 32, F)).astype(np.float32)
-    x = torch.from_numpy(((feats - mean) / scale).astype(np.float32)).permute(2, 0, 1)[None]
-    with torch.no_grad():
-        want = net(x)[0].numpy()
-    got = export(net, mean, scale).logits(feats)
-    np.testing.assert_allclose(got, want, atol=1e-4)
-
-
-def test_cnn_training_smoke():
-    """Three Adam steps on two random maps run and give a usable model (needs torch)."""
-    pytest.importorskip('torch')
+def test_cnn_fit_refuses_shapes_before_needing_torch():
+    """Mismatched labels are refused with the shapes named, with or without PyTorch."""
     from landmark_nav.road.road_cnn_training import fit_road_cnn
     rng = np.random.default_rng(4)
     x = rng.normal(size=(2, 8, 12, F)).astype(np.float16)
     y = rng.random((2, 8, 12)) < 0.5
-    cnn = fit_road_cnn(x, y, np.ones_like(y), np.array(['a', 'b']), steps=3, batch=2,
-                       widths=WIDTHS)
-    assert cnn.predict(x[0].astype(np.float32)).shape == (8, 12)
     with pytest.raises(ValueError, match='labels'):
         fit_road_cnn(x, y[:1], np.ones_like(y), np.array(['a', 'b']))
 

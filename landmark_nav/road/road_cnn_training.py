@@ -99,12 +99,12 @@ def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndar
         ImportError: PyTorch is not installed (:data:`TORCH_MISSING`).
         ValueError: Shapes disagree.
     """
-    torch = _torch()
     n, h, w, c = x.shape
     if y.shape != (n, h, w) or valid.shape != (n, h, w) or np.shape(group) != (n,):
         raise ValueError(f'road CNN fit needs (N, H, W, F) features and (N, H, W) labels '
                          f'and masks, (N,) groups; got {x.shape}, {y.shape}, {valid.shape}, '
                          f'{np.shape(group)}')
+    torch = _torch()
     torch.manual_seed(seed)
     torch.set_num_threads(1)
     rng = np.random.default_rng(seed)
@@ -141,4 +141,18 @@ def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndar
             log(step + 1, running / 100)
             running = 0.0
     net.eval()
-    return export(net, mean, scale)
+    cnn = export(net, mean, scale)
+    # The exported numpy pass must be the network PyTorch trained (layer order, padding,
+    # dilation, upsampling): checked on the first training map at every fit.
+    check = x[0].astype(np.float32)
+    with torch.no_grad():
+        want = net(torch.from_numpy(((check - mean) / scale).astype(np.float32))
+                   .permute(2, 0, 1)[None])[0].numpy()
+    got = cnn.logits(check)
+    if got.shape != want.shape:
+        raise RuntimeError(f'exported road CNN gives logits of shape {got.shape}, the trained '
+                           f'network {want.shape}')
+    if not np.allclose(got, want, atol=1e-3):
+        raise RuntimeError(f'exported road CNN differs from the trained network: largest logit '
+                           f'difference {np.max(np.abs(got - want)):.3g}')
+    return cnn
