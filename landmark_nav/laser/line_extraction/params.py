@@ -182,7 +182,8 @@ class LineParams:
 LINE_PARAMETERS = {
     'method': ('line extractor: split_merge or alfa', None, ['split_merge', 'alfa']),
     'split_threshold': ('split_merge: split distance tolerance [m] (eq. 4); 0 = automatic, '
-                        'max(0.03, 4 sigma_r)', (0.0, 10.0), None, 0.0),
+                        'max(0.03, 4 sigma_r), on rounded ranges the 4-sigma tail of the rounded '
+                        'error', (0.0, 10.0), None, 0.0),
     'min_points': ('fewest points of a line', (2, 10000), None),
     'min_length': ('shortest line [m]', (0.0, 100.0), None),
     'merge_chi2': ('chi-square gate (2 dof) of the collinearity test for merging',
