@@ -18,7 +18,9 @@ SIGTERM stop playing cleanly. Also available as ``landmark_nav replay``.
 
 import argparse
 from collections import Counter
+import signal
 import sys
+import threading
 import time
 from typing import List, Optional
 
@@ -26,6 +28,7 @@ from landmark_nav.bag import BagError, BagReader, message_class
 from landmark_nav.conversions import ns_to_stamp
 from landmark_nav.nodes.common import destroy_and_shutdown, reject_undeclared
 from landmark_nav.replay import due_after_start_s, ReplayOptions
+from landmark_nav.stop_signals import STOP_SIGNALS
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -106,6 +109,7 @@ class BagPlayer(Node):
                            if options.clock_hz > 0 else None)
         self.topic_counts: Counter = Counter()  # messages published per topic
         self._last_clock_ns = 0
+        self.stopped = threading.Event()  # set by a stop signal: sleeps end at once
 
     def _connected(self) -> bool:
         """Return whether the subscribers are connected (see :class:`ReplayOptions`).
@@ -135,7 +139,7 @@ class BagPlayer(Node):
                 since = now
             elif now - since >= settle_s:
                 return True
-            time.sleep(0.02)
+            self.stopped.wait(0.02)
             now = time.monotonic()
         if not any(p.get_subscription_count() for p in self._topic_publishers.values()):
             self.get_logger().warning(
@@ -162,9 +166,9 @@ class BagPlayer(Node):
             if remaining <= 0:
                 return
             if period is None:
-                time.sleep(remaining)
+                self.stopped.wait(remaining)
                 return
-            time.sleep(min(remaining, period))
+            self.stopped.wait(min(remaining, period))
             elapsed_ns = int((time.monotonic() - wall_start) * self.options.rate * 1e9)
             self._publish_clock(min(first_ns + offset_ns + elapsed_ns, due_log_ns))
 
@@ -218,7 +222,7 @@ class BagPlayer(Node):
         if self.options.wait_for_subscribers_s > 0:
             self.wait_for_subscribers()
         if self.options.delay_s > 0:
-            time.sleep(self.options.delay_s)
+            self.stopped.wait(self.options.delay_s)
         while rclpy.ok():
             self.play_once()
             if not self.options.loop:
@@ -232,12 +236,33 @@ def _stopped(player: Optional[BagPlayer], bag: str) -> None:
         print(f'bag_player: stopped: published {player.summary()} from {bag}', flush=True)
 
 
+def _stop_between_messages(player: BagPlayer) -> None:
+    """Make SIGINT / SIGTERM shut the context down without raising in the player's thread.
+
+    rclpy's own handlers end in a KeyboardInterrupt raised wherever the main thread is, also
+    between a message's publish and its count (the count said one message less than the
+    subscribers had). These handlers shut the context down and wake the player's sleeps; the
+    play loop stops at its next check, between two messages. Only the main thread can
+    install them (a player run in a thread is stopped by ``rclpy.shutdown``).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def stop(signum, frame):
+        player.stopped.set()
+        rclpy.try_shutdown()
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, stop)
+
+
 def run(bag: str, options: ReplayOptions, args: Optional[List[str]] = None) -> int:
     """Initialise rclpy, play the bag, shut down; return messages published."""
-    rclpy.init(args=args)  # SIGINT / SIGTERM shut the context down: playing stops
+    rclpy.init(args=args)
     player = None
     try:
         player = BagPlayer(bag, options)
+        _stop_between_messages(player)  # SIGINT / SIGTERM: playing stops, counts exact
         reject_undeclared(player)  # its options are arguments; -p names nothing here
         published = player.play()
         if rclpy.ok():
