@@ -30,6 +30,7 @@ half-pixel centres (PyTorch's ``align_corners=False``) as in training.
 """
 
 from dataclasses import dataclass
+import functools
 from pathlib import Path
 from typing import Dict, Sequence, Union
 
@@ -191,14 +192,11 @@ class MeanProbability:
 #: Anything with a ``predict(features) -> probability`` the outline accepts.
 ProbabilityModel = Union[RoadModel, RoadCNN, MeanProbability]
 
-_CACHE: dict = {}
 
-
+@functools.lru_cache(maxsize=None)
 def default_cnn() -> RoadCNN:
     """Return the packaged network (loaded once)."""
-    if 'cnn' not in _CACHE:
-        _CACHE['cnn'] = RoadCNN.load(DEFAULT_CNN)
-    return _CACHE['cnn']
+    return RoadCNN.load(DEFAULT_CNN)
 
 
 def default_cnn_criterion() -> MeanProbability:

@@ -25,6 +25,7 @@ Features are standardised with the training mean and standard deviation stored i
 """
 
 from dataclasses import dataclass
+import functools
 from pathlib import Path
 from typing import Optional, Union
 
@@ -117,14 +118,10 @@ def read_weights(path: Union[str, Path], command: str) -> dict:
         return {k: z[k].astype(np.float32) for k in z.files if k != 'features'}
 
 
-_CACHE: dict = {}
-
-
+@functools.lru_cache(maxsize=None)
 def default_model() -> RoadModel:
     """Return the packaged model (loaded once)."""
-    if 'model' not in _CACHE:
-        _CACHE['model'] = RoadModel.load(DEFAULT_MODEL)
-    return _CACHE['model']
+    return RoadModel.load(DEFAULT_MODEL)
 
 
 def _box(img: np.ndarray, k: int) -> np.ndarray:
