@@ -35,7 +35,12 @@ def photometric(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(255.0 * x + 0.5, 0, 255).astype(np.uint8)
 
 
-def _torch():
+def torch_module():
+    """Return PyTorch (an optional extra: training only).
+
+    Raises:
+        ImportError: It is missing (:data:`TORCH_MISSING`).
+    """
     try:
         import torch
     except ImportError as e:                      # pragma: no cover - depends on the extra
@@ -45,7 +50,7 @@ def _torch():
 
 def torch_network(c_in: int, widths: Dict[str, int]):
     """Return the PyTorch twin of :class:`RoadCNN` (``widths``: channels per layer)."""
-    torch = _torch()
+    torch = torch_module()
     nn = torch.nn
     f = nn.functional
 
@@ -104,7 +109,7 @@ def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndar
         raise ValueError(f'road CNN fit needs (N, H, W, F) features and (N, H, W) labels '
                          f'and masks, (N,) groups; got {x.shape}, {y.shape}, {valid.shape}, '
                          f'{np.shape(group)}')
-    torch = _torch()
+    torch = torch_module()
     torch.manual_seed(seed)
     torch.set_num_threads(1)
     rng = np.random.default_rng(seed)

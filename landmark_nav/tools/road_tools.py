@@ -121,12 +121,12 @@ def _cmd_train_road_outline(args: argparse.Namespace) -> int:
     import numpy as np
     folders = [Path(d) for d in args.data]
     if args.kind == 'cnn':
+        from landmark_nav.road.road_cnn_training import torch_module
         try:
-            import torch  # noqa: F401
-        except ImportError:
+            torch_module()  # before the feature maps: say at once when it is missing
+        except ImportError as err:
             import sys
-            print('error: training the CNN needs torch: pip install torch==2.13.0',
-                  file=sys.stderr)
+            print(f'error: {err}', file=sys.stderr)
             return 2
         data = rcd.feature_maps(folders, seed=args.seed)
         model = rcd.train_cnn(data, seed=args.seed, steps=args.steps or rcd.CNN_STEPS)
