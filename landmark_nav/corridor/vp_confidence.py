@@ -214,7 +214,7 @@ def features(sigma_cov: float, sigma_frame: float, focal_px: float, inliers: int
         x.append(math.log(max(orthogonality, 1e-4)))
         if influence is not None:
             lo, hi = INFLUENCE_RANGE
-            x.append(math.log(min(max(influence, lo), hi) if influence == influence else hi))
+            x.append(math.log(hi if math.isnan(influence) else min(max(influence, lo), hi)))
     return np.array(x)
 
 
