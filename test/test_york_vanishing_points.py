@@ -30,9 +30,11 @@ cross them).
 from dataclasses import replace
 
 from landmark_nav.corridor.vanishing_point import consistency, VPParams
-from landmark_nav.evaluation.vanishing_points import (angular_error_deg, confidence_samples,
+from landmark_nav.evaluation.vanishing_points import (accuracy_summary, angular_error_deg,
+                                                      confidence_samples,
                                                       cross_validate_noise, evaluate_york,
-                                                      image_folds, load_york_urban,
+                                                      fit_segment_noise, image_folds,
+                                                      load_york_urban,
                                                       matched_errors, segment_noise,
                                                       summarize, YORK_FLIP, YORK_K)
 from landmark_nav.testing import shared_data
@@ -84,6 +86,20 @@ def test_bad_folder(tmp_path):
     np.savez(tmp_path / 'A_gt.npz', vp=np.eye(3), lines=np.zeros((0, 4)))
     with pytest.raises(ValueError, match="A_gt.npz: missing key 'vp_association'"):
         load_york_urban(tmp_path)
+
+
+def test_empty_inputs_are_refused_by_name():
+    # no residual (or only non-finite ones) fits no noise: an error, not the start values
+    with pytest.raises(ValueError, match='fit_segment_noise: 0 finite residuals of 0'):
+        fit_segment_noise(np.zeros(0), np.zeros(0), np.zeros(0))
+    nan = np.full(3, np.nan)
+    with pytest.raises(ValueError, match='1 finite residuals of 3'):
+        fit_segment_noise(np.array([0.1, 0.2, 0.3]), np.array([1.0, np.nan, 1.0]),
+                          np.array([1.0, 1.0, np.nan]))
+    with pytest.raises(ValueError, match='0 finite residuals of 3'):
+        fit_segment_noise(nan, nan, nan)
+    with pytest.raises(ValueError, match='no axis direction among 0 held-out'):
+        accuracy_summary([])
 
 
 @pytest.mark.slow

@@ -433,9 +433,15 @@ def accuracy_summary(held: Sequence[HeldOut]) -> Dict[str, float]:
 
     ``axis_*``: the detection matched to each image's true direction closest to the
     optical axis; ``all_median``: the median over all three matched directions.
+
+    Raises:
+        ValueError: No held-out direction matched to an image's axis direction.
     """
     axis = np.array([h.sample.error for h in held if h.sample.true_axis])
     every = np.array([h.sample.error for h in held])
+    if axis.size == 0:
+        raise ValueError(f'accuracy_summary: no axis direction among {len(held)} held-out '
+                         'directions (no image estimated?)')
     return {'images': float(axis.size), 'axis_median': float(np.median(axis)),
             'axis_within_2deg': float(np.mean(axis <= CORRECT_DEG)),
             'all_median': float(np.median(every))}
@@ -499,9 +505,15 @@ def fit_segment_noise(r: np.ndarray, a: np.ndarray, b: np.ndarray, trim: float =
 
     Returns:
         ``(sigma_px, sigma_angle_deg, residuals kept)``.
+
+    Raises:
+        ValueError: Fewer than two finite residuals (two noise terms cannot be fitted).
     """
     from scipy.optimize import minimize
     keep = np.isfinite(r) & np.isfinite(a) & np.isfinite(b)
+    if np.count_nonzero(keep) < 2:
+        raise ValueError(f'fit_segment_noise: {np.count_nonzero(keep)} finite residuals of '
+                         f'{np.size(r)}; at least 2 are needed to fit the two noise terms')
     t = np.array([0.0, np.log(1e-3)])
     for _ in range(10):
         def nll(t: np.ndarray, k=keep) -> float:
