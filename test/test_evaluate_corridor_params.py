@@ -24,10 +24,11 @@ def figures(tmp_path, *options):
 
 
 def test_the_node_and_the_offline_configuration_agree():
+    from landmark_nav.corridor.follower import CorridorTracker
     from landmark_nav.nodes.corridor_follower import CorridorFollower
     given = {'sigma_px': 1.5, 'line_method': 'lsd', 'camera_mount': [0.1, 0.0, 0.9, 0.0,
                                                                      0.05, 0.0],
-             'speed': 0.5, 'gate_chi2': 9.2}
+             'speed': 0.5, 'gate_chi2': 9.2, 'sigma_angle_deg': 0.5}
     with RosHarness() as ros:
         node = CorridorFollower(context=ros.context,
                                 parameter_overrides=[Parameter(k, value=v)
@@ -37,6 +38,8 @@ def test_the_node_and_the_offline_configuration_agree():
         node.destroy_node()
     offline = follower_configuration(given)
     assert (offline.follower, offline.controller) == (follower, controller)
+    # the segment direction noise reaches the vanishing-point estimator's parameters
+    assert CorridorTracker(follower).params.vp.sigma_angle_deg == 0.5
     assert {k: declared[k] for k in parameters()} == offline.values
 
 

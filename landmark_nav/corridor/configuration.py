@@ -29,6 +29,8 @@ ESTIMATION_PARAMETERS = {
     'line_method': ('image lines: segmented_hough (the chapter), hough_p or lsd', None,
                     ['segmented_hough', 'hough_p', 'lsd']),
     'sigma_px': ('end-point noise of image line segments [px]', (0.05, 5.0), None),
+    'sigma_angle_deg': ('direction noise of image line segments beyond their end-point noise '
+                        '[deg]', (0.0, 10.0), None),
     'heading_std_floor_deg': ('added to the visual heading std [deg]', (0.0, 20.0), None),
     'lateral_std_floor': ('added to the visual lateral std [m]', (0.0, 2.0), None),
     'max_axis_angle_deg': ('the corridor VP must lie within this angle of the optical axis '

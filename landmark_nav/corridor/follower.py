@@ -37,6 +37,7 @@ class FollowerConfig:
         camera_mount: camera_link in base_link ``[x, y, z, roll, pitch, yaw]``.
         line_method: ``segmented_hough``, ``hough_p`` or ``lsd``.
         sigma_px: end-point noise of image line segments [px].
+        sigma_angle_deg: direction noise of a segment beyond its end-point noise [deg].
         heading_std_floor_deg: added to the visual heading std [deg].
         lateral_std_floor: added to the visual lateral std [m].
         max_axis_angle_deg: the corridor VP must lie within this angle of the optical axis.
@@ -53,6 +54,7 @@ class FollowerConfig:
     camera_mount: Tuple[float, ...] = (0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
     line_method: str = 'segmented_hough'
     sigma_px: float = 0.6
+    sigma_angle_deg: float = 0.38
     heading_std_floor_deg: float = 0.3
     lateral_std_floor: float = 0.02
     max_axis_angle_deg: float = 45.0
@@ -96,7 +98,8 @@ class CorridorTracker:
         self.config = c
         self.model = CorridorModel(c.corridor_width, c.corridor_height or None, c.centre_line)
         self.mount = [float(v) for v in c.camera_mount]
-        self.params = FrameParams(line_method=c.line_method, vp=VPParams(sigma_px=c.sigma_px),
+        vp = VPParams(sigma_px=c.sigma_px, sigma_angle_deg=c.sigma_angle_deg)
+        self.params = FrameParams(line_method=c.line_method, vp=vp,
                                   max_axis_angle_deg=c.max_axis_angle_deg,
                                   heading_std_floor=math.radians(c.heading_std_floor_deg),
                                   lateral_std_floor=c.lateral_std_floor)
