@@ -46,8 +46,8 @@ LOOP_PARAMETERS = {
                          'the old one is a loop candidate [m]', (0.01, 1e6), None),
     'neighbourhood_m': ('the old keyframe nearest the estimate within the search window plus '
                         'this anchors the submap [m]', (0.01, 1e3), None),
-    'submap_keyframes': ("keyframes of the submap (the anchor's stretch of the chain)",
-                         (1, 1000), None),
+    'submap_keyframes': ('the submap is the anchor and half this many keyframes either side '
+                         'along the chain', (1, 1000), None),
     'trail_keyframes': ("previous keyframes' scans the free-space check moves by the loop",
                         (0, 1000), None),
     'window_sigmas': ("search window half widths in the keyframe marginal's stds",
