@@ -464,7 +464,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='data association (the parameter association; default icnn)')
     p.add_argument('--backend', choices=['ekf', 'graph'], default='ekf',
                    help="ekf (default): the ekf_slam node's filter; graph: the keyframe pose "
-                        "graph with loop closure (iSAM2; docs/ekf_slam.md, 'Graph back end'; "
+                        'graph with loop closure (iSAM2; docs/graph_slam.md; '
                         'uses --out, --max-seconds, --reference, --align, --laser-pose, '
                         '--sigma-r, --rpe-delta only)')
     p.add_argument('--out', default=None,

@@ -32,7 +32,7 @@ NODES = {
     'line_extractor': ('landmark_nav.nodes.line_extractor', 'LineExtractor',
                        'docs/laser_features.md'),
     'ekf_slam': ('landmark_nav.nodes.ekf_slam', 'EkfSlamNode', 'docs/ekf_slam.md'),
-    'graph_slam': ('landmark_nav.nodes.graph_slam', 'GraphSlamNode', 'docs/ekf_slam.md'),
+    'graph_slam': ('landmark_nav.nodes.graph_slam', 'GraphSlamNode', 'docs/graph_slam.md'),
     'sonar_localizer': ('landmark_nav.nodes.sonar_localizer', 'SonarLocalizer',
                         'docs/sonar_localization.md'),
     'laser_driver': ('landmark_nav.nodes.laser_driver', 'LaserDriver', 'docs/drivers.md'),
