@@ -215,8 +215,25 @@ def reject_undeclared(node: Node) -> None:
             raise ParameterError(unknown_parameter(node.get_name(), name, declared))
 
 
+HELP_FLAGS = ('-h', '--help')
+
+
+def help_requested(argv: Sequence[str]) -> bool:
+    """Return whether a node's command line (``argv[0]`` the program) asks for ``--help``.
+
+    Only the arguments before ``--ros-args`` count (after it, rcl's own).
+    """
+    args = list(argv[1:])
+    if '--ros-args' in args:
+        args = args[:args.index('--ros-args')]
+    return any(a in HELP_FLAGS for a in args)
+
+
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
     """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2.
+
+    ``-h`` / ``--help`` (before ``--ros-args``) prints the usage and the node's parameters
+    and exits with status 0 (:func:`~landmark_nav.tools.docs_params.node_help`).
 
     A bad parameter value or an undeclared parameter name (:func:`reject_undeclared`) is
     one line on stderr (``error: ...``) and exit status 2.
@@ -226,6 +243,12 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
     node is then destroyed without a traceback, exit status 0. A destruction still running
     after :data:`SHUTDOWN_TIMEOUT_S` ends the process with status 1 and the stacks on stderr.
     """
+    if help_requested(sys.argv if args is None else args):
+        from landmark_nav.tools.docs_params import node_help, node_name
+        name = node_name(factory)
+        if name is not None:
+            sys.stdout.write(node_help(name))
+            return 0
     node = None
     try:
         limit_threads()
