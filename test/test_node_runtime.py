@@ -114,6 +114,16 @@ def test_config_paths_work_from_any_directory(tmp_path):
     assert '--params-file config/' not in readme and '$(landmark_nav config' in readme
 
 
+def test_unknown_config_name_lists_the_shipped_files():
+    from landmark_nav.tools.config_files import available, config_path
+    with pytest.raises(FileNotFoundError) as err:
+        config_path('bag_player')
+    message = str(err.value)
+    assert 'no parameter file bag_player.yaml' in message
+    assert 'the shipped files: ' + ', '.join(available()) in message
+    assert 'ekf_slam, ekf_slam_chapter' in message and '--help' in message
+
+
 def _start(processes, args, env):
     return processes.start([sys.executable, '-m', *args], env=env, cwd=REPO,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
