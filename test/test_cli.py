@@ -140,3 +140,14 @@ def test_bad_parameter_files_are_one_line_errors(tmp_path, text, words, capsys):
     assert len(lines) == 1 and lines[0].startswith('landmark_nav: error: --params-file ')
     for word in [str(path)] + words:
         assert word in lines[0], lines[0]
+
+
+def test_help_texts_print_no_rest_markup():
+    from landmark_nav.tools.cli import build_parser
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    texts = {'landmark_nav': parser.format_help()}
+    texts.update((name, sub.format_help()) for name, sub in commands.items())
+    marked = [name for name, text in texts.items() if '``' in text]
+    assert not marked, f'reST literals in the --help of {marked}'
+    assert 'start a whole pipeline of nodes' in texts['pipeline']

@@ -15,7 +15,15 @@ PROG = 'landmark_nav'
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line on stderr (exit status 2)."""
+    """An argument parser whose errors are one line on stderr (exit status 2).
+
+    A description taken from a docstring is printed without its reST literal quotes.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        if kwargs.get('description'):
+            kwargs['description'] = kwargs['description'].replace('``', '')
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:
         """Print ``prog: error: message`` and exit with status 2."""
