@@ -146,6 +146,11 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
         raise ParameterError(f'parameter {name}: expected '
                              f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
     except InvalidParameterValueException as err:
+        given = node._parameter_overrides.get(name)
+        bounds = descriptor.floating_point_range or descriptor.integer_range
+        if given is not None and bounds:  # as the offline tools say it (check_value)
+            raise ParameterError(f'parameter {name} = {given.value!r} is outside '
+                                 f'[{bounds[0].from_value}, {bounds[0].to_value}]') from err
         raise ParameterError(f'parameter {name}: {err}') from err
 
 
