@@ -509,7 +509,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='write the final map (landmark_nav.slam.slam_map format)')
     p.add_argument('--scan-matching', action='store_true',
                    help="predict with the scans' point-to-line ICP motion where it agrees "
-                        'with the odometry (the parameter scan_matching; on by default)')
+                        'with the odometry (the parameter scan_matching; on by default: this '
+                        'turns it back on over a file that turns it off, such as '
+                        'ekf_slam_chapter; --set scan_matching=false turns it off)')
     p.add_argument('--scan-matching-fit-pairs', type=float, default=None, metavar='P',
                    help='the parameter scan_matching_fit_pairs (default 0.3)')
     p.add_argument('--scan-matching-side-starts', type=float, default=None, metavar='K',
@@ -518,8 +520,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
-    p.add_argument('--bag', default='bags/office', help='bag to evaluate')
-    p.add_argument('--out', default='out', help='output directory')
+    p.add_argument('--bag', default='bags/office', help='bag to evaluate (default bags/office)')
+    p.add_argument('--out', default='out', help='output directory (default out)')
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser('evaluate-corridor',
