@@ -6,6 +6,7 @@ seed, ...) as one line on stderr and exits with status 2; no tracebacks.
 
 import argparse
 import os
+from pathlib import Path
 import sys
 from typing import List, Optional
 
@@ -39,6 +40,13 @@ def _seed(text: str) -> int:
     if not 0 <= value < 2**32:
         raise argparse.ArgumentTypeError(f'seed must be in [0, 2**32), got {value}')
     return value
+
+
+def _existing_file(text: str) -> str:
+    """Parse the path of an input file that must exist (argparse names the option)."""
+    if not Path(text).is_file():
+        raise argparse.ArgumentTypeError(f'no such file: {text}')
+    return text
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -420,7 +428,7 @@ def build_parser() -> argparse.ArgumentParser:
                         '(default: the simulated one on a simulator bag, else auto)')
     p.add_argument('--truth-free', action='store_true',
                    help='truth-free metrics even on a simulator bag')
-    p.add_argument('--reference', default=None, metavar='FILE.tum',
+    p.add_argument('--reference', default=None, metavar='FILE.tum', type=_existing_file,
                    help='truth-free: reference poses (base_link in map, TUM) for '
                         'repeatability (default: /ground_truth/odom of the bag)')
     p.add_argument('--mount', type=float, nargs=3, default=None, metavar=('X', 'Y', 'YAW'),
@@ -477,7 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
                         '--sigma-r, --rpe-delta only)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
-    p.add_argument('--reference', default=None, metavar='FILE.tum',
+    p.add_argument('--reference', default=None, metavar='FILE.tum', type=_existing_file,
                    help='reference trajectory (TUM file) instead of /ground_truth/odom')
     p.add_argument('--align', choices=['none', 'se2', 'se3', 'sim3'], default='se2',
                    help='alignment of the aligned ATE (default se2; the unaligned ATE is '
