@@ -28,7 +28,7 @@ from landmark_nav.conversions import (ConversionError, pose_with_covariance_to_p
                                       scan_to_data)
 from landmark_nav.heap import release_free_heap
 from landmark_nav.parameter_names import unknown_parameter
-from landmark_nav.parameter_tables import dataclass_parameters, field_value
+from landmark_nav.parameter_tables import dataclass_parameters, field_value, name_parameters
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -318,7 +318,8 @@ def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
     try:
         return cls(**values)
     except (TypeError, ValueError) as err:
-        raise ParameterError(f'{node.get_name()}: {err}') from err
+        raise ParameterError(f'{node.get_name()}: '
+                             f'{name_parameters(str(err), {cls.__name__: prefix})}') from err
 
 
 _NUMBER = re.compile(r'(?<![\w.])[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|nan)(?![\w.])')
