@@ -8,6 +8,7 @@ files against them (:func:`parameter_values`, :mod:`landmark_nav.slam.configurat
 :mod:`landmark_nav.laser.extractor_configuration`).
 """
 
+import re
 from typing import Any, Dict, Mapping, NamedTuple, Optional, Tuple
 
 from landmark_nav.parameter_names import unknown_parameter
@@ -37,6 +38,18 @@ def dataclass_parameters(table: dict, instance, prefix: str = '') -> Dict[str, P
             default = [float(v) for v in default]
         out[prefix + name] = Parameter(default, description, limits, choices, tuple(auto))
     return out
+
+
+def name_parameters(message: str, prefixes: Mapping[str, str]) -> str:
+    """Return a parameter dataclass's refusal with the parameter names a user sets.
+
+    ``'CornerParams.window must be odd'`` -> ``'parameter window must be odd'``; ``prefixes``
+    maps each dataclass's name to its parameters' prefix (e.g. ``{'KeyframeParams':
+    'keyframe.'}``).
+    """
+    for cls, prefix in prefixes.items():
+        message = re.sub(rf'\b{re.escape(cls)}\.(?=\w)', f'parameter {prefix}', message)
+    return message
 
 
 def field_value(parameter: Parameter, value: Any) -> Any:

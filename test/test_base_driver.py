@@ -328,6 +328,10 @@ def test_bad_parameters_are_refused(tmp_path):
             with pytest.raises(ParameterError, match=name):
                 BaseDriver(context=ros.context,
                            parameter_overrides=[Parameter(name, value=value)])
+        # a value out of the declared range: one line with the range, as the offline tools
+        with pytest.raises(ParameterError) as err:
+            BaseDriver(context=ros.context, parameter_overrides=[Parameter('baud', value=-5)])
+        assert str(err.value) == 'parameter baud = -5 is outside [0, 10000000]'
 
 
 def input_counts(diag):

@@ -140,3 +140,25 @@ def test_bad_parameter_files_are_one_line_errors(tmp_path, text, words, capsys):
     assert len(lines) == 1 and lines[0].startswith('landmark_nav: error: --params-file ')
     for word in [str(path)] + words:
         assert word in lines[0], lines[0]
+
+
+def test_help_texts_print_no_rest_markup():
+    from landmark_nav.tools.cli import build_parser
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    texts = {'landmark_nav': parser.format_help()}
+    texts.update((name, sub.format_help()) for name, sub in commands.items())
+    marked = [name for name, text in texts.items() if '``' in text]
+    assert not marked, f'reST literals in the --help of {marked}'
+    assert 'start a whole pipeline of nodes' in texts['pipeline']
+
+
+@pytest.mark.parametrize('command', ['evaluate', 'evaluate-features'])
+def test_missing_reference_file_is_refused_before_the_run(command, tmp_path, capsys):
+    from landmark_nav.tools.cli import build_parser
+    missing = tmp_path / 'truth.tum'
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args([command, str(tmp_path), '--reference', str(missing)])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err == (f'landmark_nav {command}: error: argument --reference: '
+                                       f'no such file: {missing}\n')

@@ -91,3 +91,33 @@ def test_values_are_formatted_as_a_parameter_file_writes_them():
     assert format_value([0.0, 1.5]) == '[0.0, 1.5]' and format_value(3) == '3'
     assert format_value(0.01) == '0.01' and format_value(float('inf')) == '.inf'
     assert format_value(-float('inf')) == '-.inf' and format_value(float('nan')) == '.nan'
+
+
+@pytest.mark.parametrize('argv, asked', [
+    (['corner_extractor', '--help'], True),
+    (['corner_extractor', '-h'], True),
+    (['corner_extractor', '-h', '--ros-args', '-p', 'window:=5'], True),
+    (['corner_extractor'], False),
+    (['corner_extractor', '--ros-args', '-r', '__node:=h', '-p', 'h:=1'], False),
+])
+def test_help_flag_before_ros_args_only(argv, asked):
+    from landmark_nav.nodes.common import help_requested
+    assert help_requested(argv) is asked
+
+
+def test_node_help_prints_every_parameter_and_starts_nothing(declared, capfd, monkeypatch):
+    from landmark_nav.nodes import common
+    from landmark_nav.nodes.laser_driver import LaserDriver
+
+    def no_start(*args, **kwargs):
+        raise AssertionError('--help started the node')
+
+    monkeypatch.setattr(common.rclpy, 'spin', no_start)
+    assert common.run_node(LaserDriver, ['laser_driver', '--help']) == 0
+    out, err = capfd.readouterr()
+    assert out.startswith('usage: laser_driver [--ros-args ')
+    for p in declared['laser_driver']:
+        assert f'  {p.name} ({p.type_name}, default {p.default}' in out, p.name
+    assert 'landmark_nav config laser_driver' in out and 'docs/drivers.md' in out
+    # the port that does not exist (never the default device) is not reported as an error
+    assert err == ''

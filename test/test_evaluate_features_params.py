@@ -114,3 +114,10 @@ def test_an_unknown_name_in_a_file_exits_2(room, tmp_path, capsys):
     assert main(['evaluate-features', str(room), '--params-file', str(path)]) == 2
     assert ("corner_extractor has no parameter 'midpoint_shfit' (did you mean "
             'midpoint_shift?)') in capsys.readouterr().err
+
+
+def test_a_value_the_extractor_refuses_names_the_parameter():
+    with pytest.raises(ValueError) as err:
+        extractor_configuration('corner_extractor', {'window': 12})
+    assert str(err.value) == ('corner_extractor: parameter window must be an odd integer '
+                              '>= 5, got 12')

@@ -114,6 +114,40 @@ def test_config_paths_work_from_any_directory(tmp_path):
     assert '--params-file config/' not in readme and '$(landmark_nav config' in readme
 
 
+def test_ekf_slam_says_when_an_absent_scan_publisher_comes():
+    """A laser that starts after ekf_slam: its first message says lines are off, not for good."""
+    from types import SimpleNamespace
+    from landmark_nav.nodes.ekf_slam import EkfSlamNode
+    from landmark_nav.testing import RosHarness
+    said, sets = [], []
+    with RosHarness() as ros:
+        node = EkfSlamNode(context=ros.context)
+        node.get_logger = lambda: SimpleNamespace(info=said.append)
+        node._feature_set = lambda stamp, corners, scan: (stamp, corners, scan)
+        node._add_features = sets.append
+        publishers = {'corners'}
+        node._has_publisher = lambda part: part in publishers
+        node._offer('corners', 1000, 'c1')  # no scan publisher yet: the set goes on alone
+        publishers.add('scan')
+        node._offer('corners', 2000, 'c2')
+        node._offer('scan', 2000, 's2')
+        node.destroy_node()
+    assert sets == [(1000, 'c1', None), (2000, 'c2', 's2')]
+    assert said == ['No publisher on scan: feature sets go on without it (no lines, no '
+                    'visibility pruning)',
+                    'scan arrived: feature sets use it from the set at 2000 ns on']
+
+
+def test_unknown_config_name_lists_the_shipped_files():
+    from landmark_nav.tools.config_files import available, config_path
+    with pytest.raises(FileNotFoundError) as err:
+        config_path('bag_player')
+    message = str(err.value)
+    assert 'no parameter file bag_player.yaml' in message
+    assert 'the shipped files: ' + ', '.join(available()) in message
+    assert 'ekf_slam, ekf_slam_chapter' in message and '--help' in message
+
+
 def _start(processes, args, env):
     return processes.start([sys.executable, '-m', *args], env=env, cwd=REPO,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

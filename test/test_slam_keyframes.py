@@ -116,3 +116,14 @@ def test_update_corrections_are_zero_between_keyframes():
     k = 3
     np.testing.assert_allclose(moved[k], relative(compose(steps[0].pose, steps[k].increment),
                                                   steps[k].pose), atol=1e-12)
+
+
+def test_a_value_the_filter_refuses_names_the_parameter_as_set():
+    from landmark_nav.parameter_tables import name_parameters
+    from landmark_nav.slam.configuration import PARAMETER_PREFIXES
+    with pytest.raises(ValueError) as err:
+        slam_configuration({'sigma_range': -1.0})
+    assert str(err.value) == ('ekf_slam: parameter sigma_range must be a finite number '
+                              '>= 0.0, got -1.0')
+    assert name_parameters('KeyframeParams.min_travel_m must be >= 0', PARAMETER_PREFIXES) == (
+        'parameter keyframe.min_travel_m must be >= 0')

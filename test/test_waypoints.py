@@ -45,3 +45,18 @@ def test_bad_waypoints_are_rejected():
         WaypointFollower([[0.0, math.nan]])
     with pytest.raises(ValueError, match='max_speed'):
         FollowerParams(max_speed=0.0)
+
+
+def test_drive_says_what_it_waits_for_and_what_to_start():
+    import os
+    from landmark_nav.testing.harness import RosHarness
+    from landmark_nav.tools.drive import drive
+    topic = f'/no_pose_here_{os.getpid()}'
+    said = []
+    with RosHarness() as ros:
+        with pytest.raises(TimeoutError) as err:
+            drive(ROUTES['short'], (0.0, 0.0, 0.0), pose_topic=topic, wait=0.2,
+                  context=ros.context, log=said.append)
+    assert said == [f'drive: waiting up to 0.2 s for a pose on {topic}']
+    assert str(err.value).startswith(f'no pose on {topic} within 0.2 s: start the node')
+    assert 'landmark_nav pipeline slam' in str(err.value) and '--pose-topic' in str(err.value)

@@ -436,20 +436,22 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             'pos_max_trk_cm', 'head_max_trk_deg', 'nees_in_95', 'nees_in_95_trk',
             'pos_over_5cm', 'head_over_1deg', 'head_lost_z_max', 'lost_episodes',
             'converged_m', 'line_ms', 'filter_ms', 'frames')
-    print('seed ' + ' '.join(f'{k[:13]:>13}' for k in keys))
+    widths = [max(13, len(k)) for k in keys]  # whole names: the columns are read by them
+    print('seed ' + ' '.join(f'{k:>{w}}' for k, w in zip(keys, widths)))
     table = []
     for seed in range(a.first_seed, a.first_seed + a.seeds):
         run = run_hallway(seed, cfg)
         s = summarize(run)
         table.append([s[k] for k in keys])
-        print(f'{seed:4d} ' + ' '.join(f'{s[k]:13.3f}' for k in keys), flush=True)
+        print(f'{seed:4d} ' + ' '.join(f'{s[k]:{w}.3f}' for k, w in zip(keys, widths)),
+              flush=True)
         episodes = ', '.join(f'{a:.1f}-{b:.1f} s' for a, b in run.lost_episodes())
         print(f'     lost: {episodes or "never"}', flush=True)
     arr = np.array(table, dtype=float)
-    print('mean ' + ' '.join(f'{v:13.3f}' for v in arr.mean(axis=0)))
+    print('mean ' + ' '.join(f'{v:{w}.3f}' for v, w in zip(arr.mean(axis=0), widths)))
     worst = [arr[:, j].min() if k.startswith('nees') else arr[:, j].max()
              for j, k in enumerate(keys)]
-    print('worst' + ' '.join(f'{v:13.3f}' for v in worst))
+    print('worst' + ' '.join(f'{v:{w}.3f}' for v, w in zip(worst, widths)))
     return 0
 
 

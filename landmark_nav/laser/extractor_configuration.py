@@ -18,8 +18,8 @@ from landmark_nav.laser.corners import CORNER_PARAMETERS, CornerParams
 from landmark_nav.laser.lines import LINE_PARAMETERS, LineParams
 from landmark_nav.laser.range_noise import RangeNoiseTracker
 from landmark_nav.laser.segmentation import Cluster, segment_scan
-from landmark_nav.parameter_tables import (dataclass_parameters, field_value, Parameter,
-                                           parameter_values)
+from landmark_nav.parameter_tables import (dataclass_parameters, field_value,
+                                           name_parameters, Parameter, parameter_values)
 import numpy as np
 
 #: The parameters every laser feature node declares besides its extractor's.
@@ -94,7 +94,7 @@ def extractor_configuration(node: str, overrides: Optional[Mapping[str, Any]] = 
     try:
         params = cls(**fields)
     except (TypeError, ValueError) as err:
-        raise ValueError(f'{node}: {err}') from None
+        raise ValueError(f'{node}: {name_parameters(str(err), {cls.__name__: ""})}') from None
     return ExtractorConfiguration(
         node=node, params=params, incidence_deg=values['segmentation.incidence_deg'],
         min_points=values['segmentation.min_points'], max_beams=values['max_beams'],

@@ -15,8 +15,8 @@ from typing import Any, Dict, Mapping, Optional
 from landmark_nav.hardware import SONAR_MOUNTS
 from landmark_nav.localization.odometry import ProcessNoise
 from landmark_nav.localization.params import LocalizationParams
-from landmark_nav.parameter_tables import (dataclass_parameters, field_value, Parameter,
-                                           parameter_values)
+from landmark_nav.parameter_tables import (dataclass_parameters, field_value,
+                                           name_parameters, Parameter, parameter_values)
 
 NODE = 'sonar_localizer'
 
@@ -140,7 +140,8 @@ def localizer_configuration(overrides: Optional[Mapping[str, Any]] = None
         params = replace(LocalizationParams(**_fields(FILTER_PARAMETERS, LocalizationParams(),
                                                       values)), noise=noise)
     except (TypeError, ValueError) as err:
-        raise ValueError(f'{NODE}: {err}') from None
+        raise ValueError(f'{NODE}: ' + name_parameters(
+            str(err), {'ProcessNoise': 'process_noise.', 'LocalizationParams': ''})) from None
     if params.min_range >= params.max_range:
         raise ValueError('parameters min_range and max_range: need min_range < max_range')
     return LocalizerConfiguration(params=params, values=values)

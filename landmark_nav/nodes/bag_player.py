@@ -39,7 +39,8 @@ from rosgraph_msgs.msg import Clock
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the replay options to an argument parser (shared with ``landmark_nav replay``)."""
     parser.add_argument('bag', help='rosbag2 directory (or .mcap file)')
-    parser.add_argument('--rate', type=float, default=1.0, help='playback speed factor')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='playback speed factor (default 1)')
     parser.add_argument('--start-offset', type=float, default=0.0,
                         help='start this many seconds into the bag')
     parser.add_argument('--topics', nargs='+', default=None, help='only these topics')

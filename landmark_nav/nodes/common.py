@@ -28,7 +28,7 @@ from landmark_nav.conversions import (ConversionError, pose_with_covariance_to_p
                                       scan_to_data)
 from landmark_nav.heap import release_free_heap
 from landmark_nav.parameter_names import unknown_parameter
-from landmark_nav.parameter_tables import dataclass_parameters, field_value
+from landmark_nav.parameter_tables import dataclass_parameters, field_value, name_parameters
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -146,6 +146,11 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
         raise ParameterError(f'parameter {name}: expected '
                              f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
     except InvalidParameterValueException as err:
+        given = node._parameter_overrides.get(name)
+        bounds = descriptor.floating_point_range or descriptor.integer_range
+        if given is not None and bounds:  # as the offline tools say it (check_value)
+            raise ParameterError(f'parameter {name} = {given.value!r} is outside '
+                                 f'[{bounds[0].from_value}, {bounds[0].to_value}]') from err
         raise ParameterError(f'parameter {name}: {err}') from err
 
 
@@ -215,8 +220,25 @@ def reject_undeclared(node: Node) -> None:
             raise ParameterError(unknown_parameter(node.get_name(), name, declared))
 
 
+HELP_FLAGS = ('-h', '--help')
+
+
+def help_requested(argv: Sequence[str]) -> bool:
+    """Return whether a node's command line (``argv[0]`` the program) asks for ``--help``.
+
+    Only the arguments before ``--ros-args`` count (after it, rcl's own).
+    """
+    args = list(argv[1:])
+    if '--ros-args' in args:
+        args = args[:args.index('--ros-args')]
+    return any(a in HELP_FLAGS for a in args)
+
+
 def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) -> int:
     """Run a node as a standard main: init, spin, shut down; bad parameters exit with 2.
+
+    ``-h`` / ``--help`` (before ``--ros-args``) prints the usage and the node's parameters
+    and exits with status 0 (:func:`~landmark_nav.tools.docs_params.node_help`).
 
     A bad parameter value or an undeclared parameter name (:func:`reject_undeclared`) is
     one line on stderr (``error: ...``) and exit status 2.
@@ -226,6 +248,12 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
     node is then destroyed without a traceback, exit status 0. A destruction still running
     after :data:`SHUTDOWN_TIMEOUT_S` ends the process with status 1 and the stacks on stderr.
     """
+    if help_requested(sys.argv if args is None else args):
+        from landmark_nav.tools.docs_params import node_help, node_name
+        name = node_name(factory)
+        if name is not None:
+            sys.stdout.write(node_help(name))
+            return 0
     node = None
     try:
         limit_threads()
@@ -290,7 +318,8 @@ def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
     try:
         return cls(**values)
     except (TypeError, ValueError) as err:
-        raise ParameterError(f'{node.get_name()}: {err}') from err
+        raise ParameterError(f'{node.get_name()}: '
+                             f'{name_parameters(str(err), {cls.__name__: prefix})}') from err
 
 
 _NUMBER = re.compile(r'(?<![\w.])[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|nan)(?![\w.])')

@@ -418,6 +418,10 @@ class EkfSlamNode(Node):
                 self._absent_noted.add(p)
                 self.get_logger().info(f'No publisher on {self._topics[p]}: feature sets go '
                                        f'on without it (no lines, no visibility pruning)')
+            for p in self._absent_noted & set(have):  # its publisher came after all
+                self._absent_noted.discard(p)
+                self.get_logger().info(f'{self._topics[p]} arrived: feature sets use it from '
+                                       f'the set at {stamp} ns on')
             self._add_features(self._feature_set(stamp, have.get('corners'),
                                                  have.get('scan')))
 

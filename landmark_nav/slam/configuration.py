@@ -25,7 +25,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from landmark_nav.laser.lines import LINE_PARAMETERS, LineParams
 from landmark_nav.parameter_tables import (check_value, dataclass_parameters, field_value,
-                                           Parameter, parameter_values)
+                                           name_parameters, Parameter, parameter_values)
 from landmark_nav.slam.features import LANDMARK_TYPES
 from landmark_nav.slam.frontend import (FrontendParams, odometry_noise_model,
                                         ODOMETRY_NOISE_MODELS)
@@ -266,6 +266,11 @@ def _fields(table: dict, values: Mapping[str, Any], instance,
             for name, p in dataclass_parameters(table, instance, prefix).items()}
 
 
+#: The dataclasses of the configuration -> the prefix of their parameters.
+PARAMETER_PREFIXES = {'SlamParams': '', 'FrontendParams': '', 'KeyframeParams': 'keyframe.',
+                      'LineParams': 'lines.', 'OdometryNoise': 'odometry.'}
+
+
 def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamConfiguration:
     """Return the configuration of the shipped defaults with ``overrides`` on top.
 
@@ -293,7 +298,7 @@ def slam_configuration(overrides: Optional[Mapping[str, Any]] = None) -> SlamCon
         line_params = replace(LineParams(), **_fields(SLAM_LINE_PARAMETERS, values,
                                                       LineParams(), 'lines.'))
     except (TypeError, ValueError) as err:
-        raise ValueError(f'{NODE}: {err}') from None
+        raise ValueError(f'{NODE}: {name_parameters(str(err), PARAMETER_PREFIXES)}') from None
     if frontend.scan_matching and not values['visibility']:
         raise ValueError('parameter scan_matching needs the scan geometry: set '
                          'visibility: true')

@@ -12,7 +12,7 @@ node declares them (:func:`graph_parameters`) and builds the parameters from the
 import math
 from typing import Any, Dict, Mapping
 
-from landmark_nav.parameter_tables import dataclass_parameters, Parameter
+from landmark_nav.parameter_tables import dataclass_parameters, name_parameters, Parameter
 from landmark_nav.slam.configuration import FRONTEND_PARAMETERS
 from landmark_nav.slam.keyframe_graph import GraphParams
 from landmark_nav.slam.loop_closure import LoopParams
@@ -109,7 +109,8 @@ def graph_params(values: Mapping[str, Any]) -> GraphParams:
         return GraphParams(loop=loop, **{k: v for k, v in as_field.items()
                                          if not k.startswith('loop.')})
     except (TypeError, ValueError) as err:
-        raise ValueError(f'graph_slam: {err}') from None
+        raise ValueError('graph_slam: ' + name_parameters(
+            str(err), {'LoopParams': 'loop.', 'GraphParams': ''})) from None
 
 
 __all__ = ['GRAPH_PARAMETERS', 'graph_parameters', 'graph_params', 'LOOP_PARAMETERS',

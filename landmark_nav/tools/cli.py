@@ -6,6 +6,7 @@ seed, ...) as one line on stderr and exits with status 2; no tracebacks.
 
 import argparse
 import os
+from pathlib import Path
 import sys
 from typing import List, Optional
 
@@ -15,7 +16,15 @@ PROG = 'landmark_nav'
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line on stderr (exit status 2)."""
+    """An argument parser whose errors are one line on stderr (exit status 2).
+
+    A description taken from a docstring is printed without its reST literal quotes.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        if kwargs.get('description'):
+            kwargs['description'] = kwargs['description'].replace('``', '')
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:
         """Print ``prog: error: message`` and exit with status 2."""
@@ -31,6 +40,13 @@ def _seed(text: str) -> int:
     if not 0 <= value < 2**32:
         raise argparse.ArgumentTypeError(f'seed must be in [0, 2**32), got {value}')
     return value
+
+
+def _existing_file(text: str) -> str:
+    """Parse the path of an input file that must exist (argparse names the option)."""
+    if not Path(text).is_file():
+        raise argparse.ArgumentTypeError(f'no such file: {text}')
+    return text
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -412,7 +428,7 @@ def build_parser() -> argparse.ArgumentParser:
                         '(default: the simulated one on a simulator bag, else auto)')
     p.add_argument('--truth-free', action='store_true',
                    help='truth-free metrics even on a simulator bag')
-    p.add_argument('--reference', default=None, metavar='FILE.tum',
+    p.add_argument('--reference', default=None, metavar='FILE.tum', type=_existing_file,
                    help='truth-free: reference poses (base_link in map, TUM) for '
                         'repeatability (default: /ground_truth/odom of the bag)')
     p.add_argument('--mount', type=float, nargs=3, default=None, metavar=('X', 'Y', 'YAW'),
@@ -469,7 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
                         '--sigma-r, --rpe-delta only)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
-    p.add_argument('--reference', default=None, metavar='FILE.tum',
+    p.add_argument('--reference', default=None, metavar='FILE.tum', type=_existing_file,
                    help='reference trajectory (TUM file) instead of /ground_truth/odom')
     p.add_argument('--align', choices=['none', 'se2', 'se3', 'sim3'], default='se2',
                    help='alignment of the aligned ATE (default se2; the unaligned ATE is '
@@ -501,7 +517,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='write the final map (landmark_nav.slam.slam_map format)')
     p.add_argument('--scan-matching', action='store_true',
                    help="predict with the scans' point-to-line ICP motion where it agrees "
-                        'with the odometry (the parameter scan_matching; on by default)')
+                        'with the odometry (the parameter scan_matching; on by default: this '
+                        'turns it back on over a file that turns it off, such as '
+                        'ekf_slam_chapter; --set scan_matching=false turns it off)')
     p.add_argument('--scan-matching-fit-pairs', type=float, default=None, metavar='P',
                    help='the parameter scan_matching_fit_pairs (default 0.3)')
     p.add_argument('--scan-matching-side-starts', type=float, default=None, metavar='K',
@@ -510,8 +528,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
-    p.add_argument('--bag', default='bags/office', help='bag to evaluate')
-    p.add_argument('--out', default='out', help='output directory')
+    p.add_argument('--bag', default='bags/office', help='bag to evaluate (default bags/office)')
+    p.add_argument('--out', default='out', help='output directory (default out)')
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser('evaluate-corridor',

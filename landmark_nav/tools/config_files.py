@@ -37,7 +37,8 @@ def config_path(node: str) -> Path:
     """Return the shipped parameter file of a node (e.g. ``ekf_slam``).
 
     Raises:
-        FileNotFoundError: No directory holds ``<node>.yaml``; the message lists them.
+        FileNotFoundError: No directory holds ``<node>.yaml``; the message lists them and
+            the names that have a file.
 
     """
     dirs = config_dirs()
@@ -45,8 +46,10 @@ def config_path(node: str) -> Path:
         path = d / f'{node}.yaml'
         if path.is_file():
             return path
-    raise FileNotFoundError(f'no parameter file {node}.yaml in '
-                            f'{", ".join(str(d) for d in dirs)}')
+    raise FileNotFoundError(
+        f'no parameter file {node}.yaml in {", ".join(str(d) for d in dirs)}; the shipped '
+        f'files: {", ".join(available()) or "none"} (an executable without one, such as '
+        'bag_player, takes its options on its command line: --help)')
 
 
 def available() -> List[str]:

@@ -21,6 +21,7 @@ import math
 import os
 from pathlib import Path
 import re
+import textwrap
 from typing import Dict, Iterator, List, Optional, Sequence
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -140,6 +141,21 @@ def _private_context() -> Iterator[object]:
         rclpy.try_shutdown(context=context)
 
 
+@contextmanager
+def _quiet_logger(name: str) -> Iterator[None]:
+    """Silence a node's start-up log lines: the node is only read, never run.
+
+    Its summary (INFO) says nothing about the declarations, and a driver's error about the
+    port (:data:`_NO_DEVICE`, on purpose no device) is not one.
+    """
+    from rclpy.logging import LoggingSeverity, set_logger_level
+    set_logger_level(name, LoggingSeverity.FATAL)
+    try:
+        yield
+    finally:
+        set_logger_level(name, LoggingSeverity.INFO)
+
+
 def declared_parameters(
         nodes: Optional[Sequence[str]] = None) -> Dict[str, List[DeclaredParameter]]:
     """Return {node: its declared parameters in declaration order}.
@@ -164,9 +180,10 @@ def declared_parameters(
             node_class = getattr(importlib.import_module(module), cls)
             overrides = [Parameter(k, value=v) for k, v in _NO_DEVICE.get(name, {}).items()]
             records: list = []
-            with _recording(records):
-                node = node_class(context=context, parameter_overrides=overrides)
-            node.destroy_node()
+            with _quiet_logger(name):  # until the drivers' I/O thread has stopped
+                with _recording(records):
+                    node = node_class(context=context, parameter_overrides=overrides)
+                node.destroy_node()
             rows = []
             for pname, default, descriptor in records:
                 if descriptor is None or not descriptor.description.endswith(READ_ONLY_NOTE):
@@ -237,6 +254,36 @@ def write_pages(tables: Dict[str, List[DeclaredParameter]], root: Path = ROOT) -
             if str(page.relative_to(root)) not in changed:
                 changed.append(str(page.relative_to(root)))
     return changed
+
+
+def node_name(node_class) -> Optional[str]:
+    """Return the executable of a node class of :data:`NODES`, or None."""
+    for name, (_, cls, _) in NODES.items():
+        if cls == node_class.__name__:
+            return name
+    return None
+
+
+def node_help(name: str, width: int = 88) -> str:
+    """Return the ``--help`` text of a node executable: usage, purpose, parameters, pages.
+
+    The parameters are the node's own declarations (:func:`declared_parameters`).
+    """
+    module, _, page = NODES[name]
+    doc = (importlib.import_module(module).__doc__ or '').strip().split('\n')[0]
+    purpose = doc.split(': ', 1)[-1].replace('``', '')
+    lines = [f'usage: {name} [--ros-args [--params-file FILE] [-p NAME:=VALUE] '
+             '[-r FROM:=TO] ...]', '', f'{name}: {purpose}', '',
+             'parameters (read-only: set at start-up with -p NAME:=VALUE or '
+             '--params-file FILE):']
+    for p in declared_parameters([name])[name]:
+        limits = f'; {p.limits}' if p.limits else ''
+        lines.append(f'  {p.name} ({p.type_name}, default {p.default}{limits})')
+        lines.extend(textwrap.wrap(p.description, width, initial_indent=' ' * 6,
+                                   subsequent_indent=' ' * 6))
+    lines += ['', f'shipped parameter file: landmark_nav config {name}',
+              f'documentation: {page}', '']
+    return '\n'.join(lines)
 
 
 def add_parser(sub, parser_class=None) -> None:

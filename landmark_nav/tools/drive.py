@@ -130,9 +130,13 @@ def drive(points, start_pose, pose_topic: str = '/odometry', cmd_vel: str = '/cm
     laps = 0
     try:
         deadline = time.monotonic() + wait
+        log(f'drive: waiting up to {wait:g} s for a pose on {pose_topic}')
         while 'pose' not in latest and not stop.is_set():
             if time.monotonic() > deadline:
-                raise TimeoutError(f'no pose on {pose_topic} within {wait:g} s')
+                raise TimeoutError(
+                    f'no pose on {pose_topic} within {wait:g} s: start the node that '
+                    'publishes it (ekf_slam: landmark_nav pipeline slam) or name another '
+                    'nav_msgs/Odometry topic with --pose-topic')
             executor.spin_once(timeout_sec=0.1)
         started = time.monotonic()
         if 'pose' in latest:  # not when stopped while waiting

@@ -50,7 +50,8 @@ def add_parsers(sub: argparse._SubParsersAction, parser_class: type) -> None:
                        help=f'symlink to the pseudo-terminal (default /tmp/landmark_nav_{link}; '
                             '"" for no pty)')
         d.add_argument('--tcp', type=int, default=None, metavar='PORT',
-                       help='also listen on this TCP port (0: any free port)')
+                       help='also listen on this TCP port (0: any free port); p2os and '
+                            "robot listen on MobileSim's 8101 unless given")
         d.add_argument('--tcp-host', default='127.0.0.1', help='address to bind')
         d.add_argument('--seed', type=int, default=1, help='random seed (noise, faults)')
         d.add_argument('--fault-rate', type=float, default=0.0,

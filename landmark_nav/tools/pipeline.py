@@ -161,7 +161,7 @@ def add_parser(sub, parser_class) -> None:
                        description=__doc__.split('\n')[0])
     p.add_argument('name', choices=sorted(PIPELINES), help='which pipeline')
     p.add_argument('--bag', help='bag to replay (pipeline replay)')
-    p.add_argument('--rate', type=float, default=1.0, help='replay speed factor')
+    p.add_argument('--rate', type=float, default=1.0, help='replay speed factor (default 1)')
     p.add_argument('--loop', action='store_true', help='replay the bag in a loop')
     p.add_argument('--drain-timeout', type=float, default=DRAIN_TIMEOUT_S, metavar='SECONDS',
                    help='replay: when the bag has been played, wait up to this long until the '
