@@ -9,7 +9,7 @@ from landmark_nav.conversions import make_odometry, odometry_to_pose
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.occupancy_check import check_run, load_occupancy_grid
 from landmark_nav.evaluation.slam import (bag_odometry_noise, evaluate_bag, format_summary,
-                                          run_slam, update_corrections)
+                                          run_slam, ScanFeatureCache, update_corrections)
 from landmark_nav.evaluation.trajectory import read_tum, rpe, Trajectory, write_tum
 from landmark_nav.geometry import compose, relative
 from landmark_nav.importers import import_log
@@ -354,6 +354,22 @@ def test_update_corrections_are_what_each_update_moved_the_pose(scan_matching, m
     moved = np.array([relative(priors[k], run.poses[k]) for k in range(1, len(run.poses))])
     assert corr[1:] == pytest.approx(moved, abs=1e-12)
     assert np.all(corr[0] == 0.0) and np.max(np.abs(corr[1:, :2])) > 1e-4  # updates move it
+
+
+def test_runs_sharing_the_scans_features_are_the_runs_extracting_their_own(monkeypatch):
+    from landmark_nav.evaluation import slam_run
+    scenario = load_bag(BAG, max_seconds=3)
+    cache, extracted, extract = ScanFeatureCache(scenario), [], slam_run.scan_features
+    monkeypatch.setattr(slam_run, 'scan_features', lambda *a: extracted.append(1) or extract(*a))
+    for association in ('icnn', 'jcbb'):  # the second shared run takes the first's features
+        params = SlamParams(association=association)
+        own, shared = run_slam(scenario, params), run_slam(scenario, params, features=cache)
+        assert np.any(own.obs_landmark >= 0)
+        for name in ('poses', 'covariances', 'obs_status', 'obs_landmark', 'landmarks'):
+            assert np.array_equal(getattr(own, name), getattr(shared, name)), name
+    assert len(extracted) == 3 * len(scenario.of_type(ScanSample))  # own, own, shared once
+    with pytest.raises(ValueError, match='another scenario'):
+        run_slam(load_bag(BAG, max_seconds=1), features=cache)
 
 
 def test_ellipse_share_with_the_reference_noise():

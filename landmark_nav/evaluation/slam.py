@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 from landmark_nav.evaluation.bags import load_bag
 from landmark_nav.evaluation.slam_plots import plot_run
 from landmark_nav.evaluation.slam_run import (run_slam, scan_angles, scan_corners,
-                                              scan_features, SlamRun)
+                                              scan_features, ScanFeatureCache, SlamRun)
 from landmark_nav.evaluation.slam_scores import (ALIGN_DEFAULT, ellipse_share, RPE_DISTANCE_M,
                                                  score_run, SlamScore, true_visible_corners,
                                                  update_corrections)
@@ -432,5 +432,5 @@ def format_summary(r: dict) -> str:
 __all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_configuration', 'bag_odometry_noise',
            'bag_slam_parameters', 'DRIFT_KEY', 'ellipse_share',
            'evaluate', 'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M',
-           'run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'score_run', 'SlamRun',
-           'SlamScore', 'true_visible_corners', 'update_corrections']
+           'run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'ScanFeatureCache',
+           'score_run', 'SlamRun', 'SlamScore', 'true_visible_corners', 'update_corrections']

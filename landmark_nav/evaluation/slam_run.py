@@ -122,6 +122,33 @@ def scan_features(scan: ScanSample, landmarks: str = 'corners',
                                  landmarks, corner_params, line_params)
 
 
+class ScanFeatureCache:
+    """The features of one scenario's scans, extracted once for several runs on it.
+
+    Runs that differ only in the filter (e.g. the association method) see the same
+    features: ``cache = ScanFeatureCache(result)`` and ``run_slam(result, ...,
+    features=cache)`` for each run extract each scan's features (:func:`scan_features`)
+    once per landmark types and extractor parameters, and hand every run the same
+    (immutable) corners and lines.
+    """
+
+    def __init__(self, result: ScenarioResult) -> None:
+        """Keep the features of ``result``'s scans."""
+        self.result = result
+        self._features: Dict[tuple, Tuple[list, list]] = {}
+
+    def get(self, k: int, scan: ScanSample, landmarks: str,
+            corner_params: Optional[CornerParams] = None,
+            line_params: Optional[LineParams] = None) -> Tuple[list, list]:
+        """Return :func:`scan_features` of ``scan``, the ``k``-th scan of the scenario."""
+        key = (k, landmarks, corner_params, line_params)
+        got = self._features.get(key)
+        if got is None:
+            got = self._features[key] = scan_features(scan, landmarks, corner_params,
+                                                      line_params)
+        return got
+
+
 @single_threaded
 def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              corner_params: Optional[CornerParams] = None, deskew: bool = True,
@@ -130,7 +157,8 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
              frontend: Optional[FrontendParams] = None, landmarks: str = 'corners',
              line_params: Optional[LineParams] = None, visibility: bool = True,
              slam_map: Optional[SlamMap] = None,
-             map_pose_covariance: Optional[np.ndarray] = None) -> SlamRun:
+             map_pose_covariance: Optional[np.ndarray] = None,
+             features: Optional[ScanFeatureCache] = None) -> SlamRun:
     """Run the filter over a simulated scenario or a bag through :class:`SlamFrontend`.
 
     The odometry samples and each scan's features (:func:`scan_features`: corners and / or
@@ -158,14 +186,21 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
         slam_map: Start on this saved map (:meth:`EkfSlam.load_map`), e.g. with
             ``params.mode == 'localization'``; the start pose is the first odometry pose.
         map_pose_covariance: (3, 3) covariance of that start pose (default zeros).
+        features: The scans' features kept for other runs on ``result``
+            (:class:`ScanFeatureCache`); by default each run extracts its own.
 
     Returns:
         The per-scan record.
 
     Raises:
-        ValueError: ``frontend.scan_matching`` without ``visibility`` (it needs the scan).
+        ValueError: ``frontend.scan_matching`` without ``visibility`` (it needs the scan);
+            ``features`` kept for another scenario.
     """
     check_landmarks(landmarks)
+    if features is not None and features.result is not result:
+        raise ValueError('run_slam: features is the ScanFeatureCache of another scenario')
+    extract = features.get if features is not None else (
+        lambda k, scan, *args: scan_features(scan, *args))
     if frontend is not None and frontend.scan_matching and not visibility:
         raise ValueError('run_slam: frontend.scan_matching needs the scans (visibility=True)')
     corner_params = corner_params or CornerParams()
@@ -222,11 +257,11 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
             seconds += time.perf_counter() - tic
         elif isinstance(ev, ScanSample):
             if lazy_lines:  # extracted for the keyframes only
-                corners = (scan_features(ev, 'corners', corner_params)[0]
+                corners = (extract(scan_k, ev, 'corners', corner_params)[0]
                            if landmarks == 'both' else [])
                 segs = ()
             else:
-                corners, segs = scan_features(ev, landmarks, corner_params, line_params)
+                corners, segs = extract(scan_k, ev, landmarks, corner_params, line_params)
             pending[scan_k] = (ev, corners)
             geometry = None
             if visibility:
@@ -277,4 +312,5 @@ def run_slam(result: ScenarioResult, params: Optional[SlamParams] = None,
                    keyframe=np.array(keyframe, dtype=bool))
 
 
-__all__ = ['run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'SlamRun']
+__all__ = ['run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'ScanFeatureCache',
+           'SlamRun']
