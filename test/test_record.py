@@ -115,6 +115,14 @@ def test_demo_writes_plot_and_summary(office_demo):
     assert counts[channels['/scan'].id] == counts[channels['/pose'].id] == 1200
 
 
+def test_ground_truth_files_read_as_yaml_safe_load_reads_them():
+    import yaml
+    for scenario in sorted(COMMITTED):
+        path = REPO / 'bags' / scenario / 'ground_truth.yaml'
+        got, expected = load_ground_truth(path.parent), yaml.safe_load(path.read_text())
+        assert got == expected and repr(got) == repr(expected), scenario  # values and order
+
+
 @pytest.mark.parametrize('scenario', sorted(COMMITTED))
 def test_committed_bag_is_small_and_reproducible(scenario, tmp_path):
     bag = REPO / 'bags' / scenario

@@ -39,11 +39,10 @@ from landmark_nav.evaluation.trajectory import read_tum
 from landmark_nav.geometry import compose, interpolate_pose, relative
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.sim.laser import LaserConfig, ScanSample
-from landmark_nav.sim.record import GROUND_TRUTH_FILE
+from landmark_nav.sim.record import GROUND_TRUTH_FILE, read_ground_truth_file
 from landmark_nav.sim.scenarios import OdometrySample
 from landmark_nav.sim.world import World
 import numpy as np
-import yaml
 
 REFERENCE_TOPIC = '/ground_truth/odom'
 TOPICS = ('/odom', '/scan')
@@ -159,8 +158,7 @@ def _simulator_meta(bag: Path) -> Optional[dict]:
     path = bag / GROUND_TRUTH_FILE
     if not path.is_file():
         return None
-    with open(path) as f:
-        meta = yaml.safe_load(f) or {}
+    meta = read_ground_truth_file(path) or {}
     if not isinstance(meta, dict):
         raise ValueError(f'{path}: not a mapping')
     return meta

@@ -132,12 +132,11 @@ def bag_slam_parameters(bag) -> Dict[str, Any]:
     """
     from landmark_nav.bag import BagReader
     from landmark_nav.evaluation.bags import laser_config
-    from landmark_nav.sim.record import GROUND_TRUTH_FILE
-    import yaml
+    from landmark_nav.sim.record import GROUND_TRUTH_FILE, read_ground_truth_file
     with BagReader(bag) as reader:
         custom = reader.custom_data
     meta_path = Path(bag) / GROUND_TRUTH_FILE
-    meta = yaml.safe_load(meta_path.read_text()) if meta_path.is_file() else None
+    meta = read_ground_truth_file(meta_path) if meta_path.is_file() else None
     meta = meta if isinstance(meta, dict) else None
     laser, notes = laser_config(custom, meta)
     out: Dict[str, Any] = {}

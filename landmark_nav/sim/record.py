@@ -33,7 +33,7 @@ from landmark_nav.conversions import (make_joint_state, make_odometry, make_rang
                                       ns_to_stamp, quaternion_msg_from_yaw)
 # The bag layout, shared with the camera and park-road recorders (still importable from here).
 from landmark_nav.sim.bag_layout import (BASE_FRAME, GROUND_TRUTH_FILE, LASER_FRAME, MAP_FRAME,
-                                         ODOM_FRAME, WHEEL_JOINTS)
+                                         ODOM_FRAME, read_ground_truth_file, WHEEL_JOINTS)
 from landmark_nav.sim.laser import ScanSample
 from landmark_nav.sim.scenarios import OdometrySample, run_scenario, scenario_names, TruthSample
 from landmark_nav.sim.sonar import SonarSample
@@ -175,5 +175,4 @@ def load_ground_truth(bag_dir) -> dict:
     path = Path(bag_dir) / GROUND_TRUTH_FILE
     if not path.is_file():
         raise ValueError(f'{bag_dir} has no {GROUND_TRUTH_FILE} (not a simulator recording)')
-    with open(path) as f:
-        return yaml.safe_load(f)
+    return read_ground_truth_file(path)
