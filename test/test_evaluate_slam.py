@@ -3,6 +3,7 @@
 import json
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Optional
 
 from landmark_nav.bag import BagError, BagReader, BagWriter
 from landmark_nav.conversions import make_odometry, odometry_to_pose
@@ -87,11 +88,12 @@ def test_rpe_of_truth_is_zero():
 
 
 def reencode(src: Path, dst: Path, reference_topic: bool, custom: dict,
-             odom_start=ODOM_START) -> None:
+             odom_start=ODOM_START, seconds: Optional[float] = None) -> None:
     """Write ``src``'s /scan, /odom (and /ground_truth/odom) into a bag without its yaml.
 
     The odometry is re-expressed in a frame where it starts at ``odom_start`` (a rigid
-    change of frame: every increment is unchanged).
+    change of frame: every increment is unchanged). Only the messages of the first
+    ``seconds`` of the log if given.
     """
     with BagReader(src) as reader, BagWriter(dst) as out:
         out.add_topic('/scan', LaserScan)
@@ -99,7 +101,10 @@ def reencode(src: Path, dst: Path, reference_topic: bool, custom: dict,
         if reference_topic:
             out.add_topic('/ground_truth/odom', Odometry)
         first = None
+        stop = None if seconds is None else reader.start_ns + round(seconds * 1e9)
         for topic, t, msg in reader.decoded(['/scan', '/odom', '/ground_truth/odom']):
+            if stop is not None and t >= stop:
+                break
             if topic == '/odom':
                 p = odometry_to_pose(msg)
                 first = p.pose if first is None else first
@@ -118,17 +123,28 @@ def office_result(office_evaluation):
     return office_evaluation('icnn')
 
 
-def test_bag_without_simulator_truth_gives_the_same_trajectory(tmp_path, office_result):
+@pytest.fixture(scope='module')
+def office_without_reference(tmp_path_factory) -> Path:
+    """Return the office bag re-encoded without its yaml and /ground_truth/odom (read only).
+
+    The odometry starts at ``ODOM_START``; the laser facts are in custom_data.
+    """
+    bag = tmp_path_factory.mktemp('reencoded') / 'noref'
+    reencode(BAG, bag, reference_topic=False,
+             custom={'landmark_nav.laser_mount': '0 0 0',
+                     'landmark_nav.laser_sigma_range': '0.01'})
+    return bag
+
+
+def test_bag_without_simulator_truth_gives_the_same_trajectory(
+        tmp_path, office_result, office_without_reference):
     """Evaluate a re-encoded office bag: same filter path, same figures.
 
     No ground_truth.yaml, odometry starting elsewhere, the reference from a TUM file, laser
     facts in custom_data.
     """
     ref, ref_out = office_result
-    bag = tmp_path / 'real'
-    reencode(BAG, bag, reference_topic=False,
-             custom={'landmark_nav.laser_mount': '0 0 0',
-                     'landmark_nav.laser_sigma_range': '0.01'})
+    bag = office_without_reference
     tum = tmp_path / 'reference.tum'
     with BagReader(BAG) as reader:
         gt = [odometry_to_pose(m) for _, _, m in reader.decoded(['/ground_truth/odom'])]
@@ -161,17 +177,14 @@ def _path_length(positions: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(positions[:, :2], axis=0), axis=1).sum())
 
 
-def test_bag_without_reference(tmp_path, office_result):
+def test_bag_without_reference(tmp_path, office_result, office_without_reference):
     """No /ground_truth/odom, no TUM file: SLAM runs, the error figures are null, not guessed.
 
     The odometry frame is a rigid change of the office bag's, so the filter path and the map
     are the reference run's moved: same counts, same path lengths, same SLAM-odometry gap.
     """
     ref, ref_out = office_result
-    bag = tmp_path / 'noref'
-    reencode(BAG, bag, reference_topic=False,
-             custom={'landmark_nav.laser_mount': '0 0 0',
-                     'landmark_nav.laser_sigma_range': '0.01'})
+    bag = office_without_reference
     r = evaluate_bag(bag, 'icnn', tmp_path / 'out', progress=False, params=SlamParams(),
                      config=chapter_config(BAG))  # the reference run's odometry noise
     assert r['reference'] is None and r['simulator_truth'] is False
@@ -277,15 +290,15 @@ def test_evaluate_imported_carmen_log(carmen_evaluation):
 def test_laser_facts_precedence(tmp_path):
     """custom_data wins over the option; the option over the default; the default is noted."""
     stated = tmp_path / 'stated'
-    reencode(BAG, stated, reference_topic=True,
+    reencode(BAG, stated, reference_topic=True,  # the 5 s evaluated, and 1 s more
              custom={'landmark_nav.laser_mount': '0.2 0 0',
-                     'landmark_nav.laser_sigma_range': '0.02'})
+                     'landmark_nav.laser_sigma_range': '0.02'}, seconds=6)
     r = evaluate_bag(stated, progress=False, max_seconds=5, laser_pose=(1, 2, 3),
                      sigma_r=0.5)
     assert r['laser_mount'] == [0.2, 0.0, 0.0] and r['laser_sigma_range'] == 0.02
     assert any('--laser-pose ignored' in n for n in r['notes'])
     bare = tmp_path / 'bare'
-    reencode(BAG, bare, reference_topic=True, custom={})
+    reencode(BAG, bare, reference_topic=True, custom={}, seconds=6)
     r = evaluate_bag(bare, progress=False, max_seconds=5, laser_pose=(0.1, 0, 0.5),
                      sigma_r=0.03)
     assert r['laser_mount'] == [0.1, 0.0, 0.5] and r['laser_sigma_range'] == 0.03
@@ -293,7 +306,8 @@ def test_laser_facts_precedence(tmp_path):
     assert r['laser_mount'] == [0.0, 0.0, 0.0]
     assert any('using 0 0 0' in n for n in r['notes'])
     bad = tmp_path / 'bad'
-    reencode(BAG, bad, reference_topic=True, custom={'landmark_nav.laser_mount': '0.2 0'})
+    reencode(BAG, bad, reference_topic=True, custom={'landmark_nav.laser_mount': '0.2 0'},
+             seconds=1)
     with pytest.raises(ValueError, match='laser_mount: expected 3 finite numbers'):
         evaluate_bag(bad, progress=False, max_seconds=5)
 
@@ -308,7 +322,7 @@ def test_cli_prints_figures(tmp_path, capsys):
 
 def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
     out = tmp_path / 'o'
-    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '5', '--no-progress',
                      '--params-file', str(CHAPTER_FILE), '--scan-matching', '--out',
                      str(out)]) == 0
     text = capsys.readouterr().out
@@ -317,7 +331,7 @@ def test_cli_scan_matching_counts_the_scan_matched_steps(tmp_path, capsys):
     assert f"motion: {r['motions']['scan_matching']} steps scan-matched" in text
     # Fused with the odometry: the same steps use the scans, the path differs.
     fused = tmp_path / 'f'
-    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '5', '--no-progress',
                      '--params-file', str(CHAPTER_FILE), '--scan-matching',
                      '--scan-matching-fit-pairs', '0.3', '--out', str(fused)]) == 0
     f = json.loads((fused / 'slam.json').read_text())
@@ -468,11 +482,11 @@ def test_cli_takes_the_nodes_parameter_files_and_settings(tmp_path, capsys):
     }
     figures = {}
     for name, args in runs.items():
-        assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+        assert cli_main(['evaluate', str(BAG), '--max-seconds', '5', '--no-progress',
                          '--out', str(tmp_path / name)] + args) == 0
         figures[name] = json.loads((tmp_path / name / 'slam.json').read_text())
     capsys.readouterr()
-    direct = evaluate_bag(BAG, progress=False, max_seconds=10, config=chapter_config(BAG))
+    direct = evaluate_bag(BAG, progress=False, max_seconds=5, config=chapter_config(BAG))
     for k in ('ate_rmse', 'mapped', 'associations', 'landmarks', 'motions'):
         assert figures['file'][k] == figures['set'][k] == direct[k], k
     assert figures['file']['landmarks'] == 'corners' and figures['later']['landmarks'] == 'both'
@@ -481,10 +495,10 @@ def test_cli_takes_the_nodes_parameter_files_and_settings(tmp_path, capsys):
 
 def test_cli_without_flags_runs_the_shipped_defaults(tmp_path, capsys):
     """No flags: the node's declared defaults (corners and lines, the scan-matched motion)."""
-    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '5', '--no-progress',
                      '--out', str(tmp_path / 'a')]) == 0
     default = CONFIG_DIR / 'ekf_slam.yaml'
-    assert cli_main(['evaluate', str(BAG), '--max-seconds', '10', '--no-progress',
+    assert cli_main(['evaluate', str(BAG), '--max-seconds', '5', '--no-progress',
                      '--params-file', str(default), '--out', str(tmp_path / 'b')]) == 0
     capsys.readouterr()
     a, b = (json.loads((tmp_path / n / 'slam.json').read_text()) for n in 'ab')
