@@ -136,15 +136,50 @@ def _raster(xy: np.ndarray, res: float) -> Tuple[np.ndarray, np.ndarray]:
     return counts, lo
 
 
-def _best_shift(near: np.ndarray, open_: np.ndarray, lm: np.ndarray, poses: np.ndarray,
-                res: float) -> Tuple[float, np.ndarray]:
+class _GridCorrelation:
+    """Cross-correlations of one grid with point rasters: ``fftconvolve``'s, grid FFT kept.
+
+    :meth:`correlate` returns ``scipy.signal.fftconvolve(grid, counts[::-1, ::-1],
+    mode='full')`` by the same operations (the real FFTs of both at the same padded size,
+    the product, the inverse, cropped): the grid's FFT at a padded size is the same array
+    for every raster padded to that size, so it is computed once per size (the rotations
+    of a search mostly share a few sizes) instead of once per raster.
+    """
+
+    def __init__(self, grid: np.ndarray) -> None:
+        """Correlate with ``grid`` (2-D, float)."""
+        self.grid = grid
+        self._spectra: Dict[Tuple[int, int], np.ndarray] = {}
+
+    def correlate(self, counts: np.ndarray) -> np.ndarray:
+        """Return ``fftconvolve(grid, counts[::-1, ::-1], mode='full')``."""
+        from scipy import fft, signal  # here: scipy.signal takes 0.5 s to import
+        kernel = counts[::-1, ::-1]
+        if 1 in self.grid.shape or 1 in kernel.shape:  # fftconvolve broadcasts such an axis
+            return signal.fftconvolve(self.grid, kernel, mode='full')
+        shape = [self.grid.shape[a] + kernel.shape[a] - 1 for a in (0, 1)]
+        padded = tuple(fft.next_fast_len(n, True) for n in shape)
+        spectrum = self._spectra.get(padded)
+        if spectrum is None:
+            if len(self._spectra) >= 8:  # a few sizes recur; bound the memory
+                self._spectra.clear()
+            spectrum = self._spectra[padded] = fft.rfftn(self.grid, padded, axes=[0, 1])
+        # grid spectrum times the raster's, in that order, as fftconvolve multiplies (a
+        # temporary on the right would be multiplied in place, in the other order, which
+        # rounds differently)
+        raster = fft.rfftn(kernel, padded, axes=[0, 1])
+        out = fft.irfftn(spectrum * raster, padded, axes=[0, 1])
+        return out[:shape[0], :shape[1]].copy()
+
+
+def _best_shift(near: _GridCorrelation, open_: _GridCorrelation, lm: np.ndarray,
+                poses: np.ndarray, res: float) -> Tuple[float, np.ndarray]:
     """Best integer-cell translation for points already rotated: (score, translation)."""
     cl, lo_l = _raster(lm, res)
     cp, lo_p = _raster(poses, res)
-    from scipy import signal  # here: scipy.signal (with scipy.stats) takes 0.5 s to import
     # score[s] = sum_k near[s + ij_k]: correlation = convolution with the flipped raster.
-    sl = signal.fftconvolve(near, cl[::-1, ::-1], mode='full') / lm.shape[0]
-    sp = signal.fftconvolve(open_, cp[::-1, ::-1], mode='full') / poses.shape[0]
+    sl = near.correlate(cl) / lm.shape[0]
+    sp = open_.correlate(cp) / poses.shape[0]
     # sl[a] is the score of shift s = a - (shape(cl) - 1) - lo_l, likewise sp.
     off_l = np.array(cl.shape) - 1 + lo_l
     off_p = np.array(cp.shape) - 1 + lo_p
@@ -231,6 +266,7 @@ def occupancy_check(grid: OccupancyGrid, landmarks: np.ndarray, poses: np.ndarra
     fit0, ps0 = fit - centre, ps - centre
 
     def search(thetas, near_g, open_g, res_g):
+        near_g, open_g = _GridCorrelation(near_g), _GridCorrelation(open_g)
         best = (-np.inf, None, None)
         for th in thetas:
             r = _rot(th)
