@@ -256,3 +256,17 @@ def test_place_scan_agreement_judges_the_places_corner_places_judges():
     assert (p['count'], p['left_out']) == (1, 1)
     assert [(q['views'], q['on_wall']) for q in a['places']] == [(3, True)]
     assert (a['on']['count'], a['off']['count']) == (1, 0)
+
+
+def test_grid_correlation_is_fftconvolve_bit_for_bit():
+    """The kept grid FFT changes nothing: equal arrays, one-cell-wide rasters included."""
+    from landmark_nav.evaluation.occupancy_check import _GridCorrelation
+    from scipy import signal
+    rng = np.random.default_rng(3)
+    grid = (rng.random((90, 70)) < 0.2).astype(float)
+    corr = _GridCorrelation(grid)
+    for shape in [(12, 9), (13, 9), (12, 9), (1, 7), (6, 1), (25, 30), (12, 10)] * 2:
+        counts = rng.integers(0, 3, shape).astype(float)
+        got = corr.correlate(counts)
+        assert np.array_equal(got, signal.fftconvolve(grid, counts[::-1, ::-1], 'full'))
+    assert 1 <= len(corr._spectra) <= 8
