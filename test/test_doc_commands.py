@@ -255,6 +255,8 @@ def _help_job(words: List[str]) -> Tuple[Optional[Tuple[str, str, tuple]], Optio
     if head not in ARGPARSE_SCRIPTS:
         before = words[1:words.index('--ros-args')] if '--ros-args' in words else words[1:]
         opts = [w for w in before if w.startswith('-')]
+        if before in (['-h'], ['--help']):      # ``NODE --help``: the node prints its help
+            return None, None
         return None, (f'{head} is a ROS node: options {opts} before --ros-args'
                       if opts else None)
     return ('console', SCRIPTS[head], (head, '--help')), None
@@ -400,11 +402,13 @@ def test_check_finds_what_does_not_run(tmp_path):
                    'no_such_node --ros-args\n'
                    'ros2 launch landmark_nav slam.launch.py laser_port:=/dev/x no_arg:=1\n'
                    'ros2 launch landmark_nav none.launch.py\n'
-                   'ekf_slam --ros-args --params-file "$(landmark_nav config no_such)"\n```\n')
+                   'ekf_slam --ros-args --params-file "$(landmark_nav config no_such)"\n'
+                   'ekf_slam --help\nekf_slam --help --rate 2\n```\n')
     commands = doc_commands(doc)
     assert [w[0] for _, w in commands] == [
         'make', 'landmark_nav', 'landmark_nav', 'landmark_nav', 'python', 'python', 'python',
-        'ekf_slam', 'ros2', 'ros2', 'ekf_slam', 'landmark_nav']   # not no_such_node
+        'ekf_slam', 'ros2', 'ros2', 'ekf_slam', 'landmark_nav', 'ekf_slam',
+        'ekf_slam']   # not no_such_node
     subs = _subcommands(_help_text([sys.executable, '-m', 'landmark_nav.tools.cli', '--help']))
     assert 'emulate' in subs
     assert check_commands(commands, tmp_path) == [
@@ -414,6 +418,7 @@ def test_check_finds_what_does_not_run(tmp_path):
         "x.md:11: slam.launch.py: no launch argument ['no_arg']",
         'x.md:12: none.launch.py: no such launch file in launch/',
         'x.md:13: landmark_nav config no_such: no config/no_such.yaml',
+        "x.md:15: ekf_slam is a ROS node: options ['--help', '--rate'] before --ros-args",
         f"x.md:4: landmark_nav: subcommand 'no-such-command' not one of {subs}",
         "x.md:7: benchmarks/bench_lines.py: subcommand '--scans' not one of "
         "['clusters', 'logs']",
