@@ -326,6 +326,36 @@ def test_a_node_whose_destruction_hangs_still_exits_with_its_stacks():
     assert 'Timeout' in out.stderr and 'destroy_node' in out.stderr, out.stderr
 
 
+# Ctrl-C pressed again while a node shuts down: its destruction (a driver joining its I/O
+# thread) receives the second SIGINT. It used to raise KeyboardInterrupt there (a traceback,
+# exit status 1); now the shutdown ignores it and ends normally.
+SECOND_SIGINT = """
+import os, signal, sys, time
+import rclpy
+from rclpy.node import Node
+from landmark_nav.nodes import common
+class Joining(Node):
+    def __init__(self):
+        super().__init__('joining')
+        self.create_timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT))
+    def destroy_node(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)       # where the second signal would raise
+        print('destroyed', flush=True)
+        super().destroy_node()
+code = common.run_node(Joining, [sys.argv[0]])
+print('handler restored:', signal.getsignal(signal.SIGINT) is signal.default_int_handler)
+sys.exit(code)
+"""
+
+
+def test_a_second_sigint_during_the_shutdown_is_not_a_traceback():
+    out = subprocess.run([sys.executable, '-c', SECOND_SIGINT], env=node_env(),
+                         capture_output=True, text=True, timeout=60)
+    assert out.stdout.split('\n')[:2] == ['destroyed', 'handler restored: True'], out
+    assert out.returncode == 0 and 'Traceback' not in out.stderr, out
+
+
 def run_owned(processes, args, cwd=None):
     """Run a command owned by the ``processes`` fixture until it exits; return (code, stderr)."""
     proc = processes.start(args, env=node_env(), stdout=subprocess.PIPE,

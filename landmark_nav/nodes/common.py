@@ -19,7 +19,9 @@ import math
 import os
 from pathlib import Path
 import re
+import signal
 import sys
+import threading
 import time
 from typing import Callable, Optional, Sequence
 
@@ -282,9 +284,18 @@ def destroy_and_shutdown(node: Optional[Node]) -> None:
 
     A destruction still running after that ends the process with status 1 and the stacks
     on stderr (a native :mod:`faulthandler` watchdog); a node already invalid after a
-    signal's shutdown is not an error.
+    signal's shutdown is not an error. A second SIGINT / SIGTERM during it (Ctrl-C pressed
+    again, a launcher's escalation) is ignored instead of raising ``KeyboardInterrupt`` in
+    whatever the destruction waits on (a driver joining its I/O thread): the watchdog bounds
+    the shutdown, and SIGKILL still ends it.
     """
     faulthandler.dump_traceback_later(SHUTDOWN_TIMEOUT_S, exit=True)
+    restore = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous = signal.signal(sig, signal.SIG_IGN)
+            if previous is not None:  # None: a handler not set from Python (left ignored)
+                restore[sig] = previous
     try:
         if node is not None:
             try:
@@ -294,6 +305,8 @@ def destroy_and_shutdown(node: Optional[Node]) -> None:
         rclpy.try_shutdown()
     finally:
         faulthandler.cancel_dump_traceback_later()
+        for sig, handler in restore.items():   # a caller that goes on (a test) gets them back
+            signal.signal(sig, handler)
 
 
 def declare_dataclass(node: Node, cls, docs: dict, prefix: str = '') -> object:
