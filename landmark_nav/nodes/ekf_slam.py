@@ -290,7 +290,8 @@ class EkfSlamNode(Node):
         self._clear()  # also _first_set_ns: stamp of the first feature set (info line)
         self.get_logger().info(f'ekf_slam: landmarks {self.landmarks}, visibility '
                                f'{self.visibility}, association {self.params.association}, '
-                               f'odometry noise {self.params.odometry}')
+                               'odometry noise ' + ', '.join(
+                                   f'{k} {v:g}' for k, v in vars(self.params.odometry).items()))
 
     @property
     def slam(self):
