@@ -86,6 +86,7 @@ def _fit_arms(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     near = np.maximum(sig, 0.5 * spacing[:, None, None])
     far_tol = 4.0 * sig + 0.01
     stop = np.zeros(x.shape, dtype=bool)
+    size = x.shape[-1]
     r = np.hypot(x, y)
     for _ in range(2):
         c, s, rho = lines.c[..., None], lines.s[..., None], lines.rho[..., None]
@@ -98,9 +99,10 @@ def _fit_arms(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray,
         # more than its noise allows (tested on the few far samples only).
         np.logical_and(far[..., :-1], far[..., 1:], out=stop[..., :-1])
         stop[..., -1] = False
-        off = np.nonzero(far & valid)
-        if off[0].size:
-            stop[off] |= _opening(d[off], r[off], lines.rho[off[:2]], p)
+        off = np.flatnonzero(far & valid)
+        if off.size:
+            stop.ravel()[off] |= _opening(d.ravel()[off], r.ravel()[off],
+                                          lines.rho.ravel()[off // size], p)
         cut = np.logical_or.accumulate(stop, axis=-1)
         ux, uy = _arm_directions(lines, cx, cy)
         along = (x - cx[:, None, None]) * ux[..., None] + (y - cy[:, None, None]) * uy[..., None]
@@ -214,11 +216,13 @@ def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
     else:
         pick[..., 0], pick[..., 1] = first, last
     pick[..., 2] = last
-    xi = np.take_along_axis(x, pick, axis=-1)
-    yi = np.take_along_axis(y, pick, axis=-1)
+    flat = pick + size * np.arange(pick.size // 3).reshape(pick.shape[:-1] + (1,))
+    xi, yi = x.ravel()[flat], y.ravel()[flat]
+    ends = np.empty(pick.shape + (2,))  # (K, arm, inner / outer / last used, xy)
     with np.errstate(divide='ignore', invalid='ignore'):
         t = rho / (xi * c + yi * s)  # the ray through the sample meets the line
-    ends = np.stack([t * xi, t * yi], axis=-1)  # (K, arm, inner / outer / last used, xy)
+    np.multiply(t, xi, out=ends[..., 0])
+    np.multiply(t, yi, out=ends[..., 1])
     cx, cy = _intersect(ln)
     reach = np.hypot(ends[..., 2, 0] - cx[:, None], ends[..., 2, 1] - cy[:, None])
     real = n >= p.min_arm_points
