@@ -249,7 +249,9 @@ def _dedup(x: np.ndarray, y: np.ndarray, score: np.ndarray, radius: float) -> np
     if not d2.min() < r2:
         return np.arange(x.size)
     kept: List[int] = []
+    rows = d2.tolist()  # Python floats: the same comparisons without numpy scalars
     for i in np.argsort(score, kind='stable').tolist():
-        if all(d2[i, j] >= r2 for j in kept):
+        row = rows[i]
+        if all(row[j] >= r2 for j in kept):
             kept.append(i)
     return np.sort(np.array(kept, dtype=np.int64))
