@@ -144,38 +144,44 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     return _make(cx, cy, bis, opening, cov, st.beam[g], fg, arms, st.dphi[g])
 
 
-def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,
-            p: CornerParams) -> np.ndarray:
-    """Return the valid samples (K, 2, M) seen through their arm's line.
+def _past_line(d: np.ndarray, r: np.ndarray, rho: np.ndarray, p: CornerParams
+               ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``d + rho``, how far beyond its line each sample lies, and whether too far.
 
-    ``d`` are the samples' signed distances to their arm's line ``x cos a + y sin a = rho``
-    (``rho`` (K, 2, 1)), ``r`` their ranges. A sample is seen through when it lies more
-    than ``see_through_tolerance`` beyond the line along its ray: ``r - t > tol`` with
-    ``t = rho r / (d + rho)`` the range at which the ray meets the line.
+    ``d`` are the samples' signed distances to their line ``x cos a + y sin a = rho``, ``r``
+    their ranges. The ray meets the line at range ``t = rho r / (d + rho)`` (``d + rho`` is
+    ``r cos(incidence)``); a sample lies ``r - t = r d / (d + rho)`` beyond it, too far
+    when ``t > 0`` and that exceeds ``see_through_tolerance``.
     """
-    proj = d + rho  # r cos(incidence)
+    proj = d + rho
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = rho * r / proj
-        beyond = r * d / proj  # r - t
-        return valid & (t > 0.0) & (beyond > p.see_through_tolerance)
+        beyond = r * d / proj
+        return proj, beyond, (t > 0.0) & (beyond > p.see_through_tolerance)
+
+
+def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,
+            p: CornerParams) -> np.ndarray:
+    """Return the valid samples (K, 2, M) seen through their arm's line (:func:`_past_line`).
+
+    ``rho`` (K, 2, 1) are the arms' lines.
+    """
+    return valid & _past_line(d, r, rho, p)[2]
 
 
 def _opening(d: np.ndarray, r: np.ndarray, rho: np.ndarray, p: CornerParams) -> np.ndarray:
     """Return which valid samples (any shape, with their line's ``rho``) are openings.
 
-    An opening is seen through the line (:func:`_behind`) by more than
+    An opening is seen through the line (:func:`_past_line`) by more than
     ``see_through_tolerance`` plus 3 standard deviations of its distance along the ray
     (eq. 7: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``), else it is the surface's own
     noise (at grazing incidence, or a rare large error).
     """
-    proj = d + rho  # r cos(incidence)
+    proj, beyond, seen = _past_line(d, r, rho, p)
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        t = rho * r / proj
-        beyond = r * d / proj  # r - t
         c2 = (proj / r) ** 2
         var = p.sigma_r ** 2 + (r * p.sigma_phi) ** 2 * (1.0 - c2) / c2
-        return ((t > 0.0) & (beyond > p.see_through_tolerance)
-                & (beyond > p.see_through_tolerance + 3.0 * np.sqrt(var)))
+        return seen & (beyond > p.see_through_tolerance + 3.0 * np.sqrt(var))
 
 
 def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
