@@ -84,22 +84,31 @@ def _fit_arms(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     x, y = st.x[idx], st.y[idx]
     sig = sig[:, None, None]
     near = np.maximum(sig, 0.5 * spacing[:, None, None])
-    two = np.zeros(x.shape, dtype=bool)
+    far_tol = 4.0 * sig + 0.01
+    stop = np.zeros(x.shape, dtype=bool)
+    size = x.shape[-1]
     r = np.hypot(x, y)
     for _ in range(2):
         c, s, rho = lines.c[..., None], lines.s[..., None], lines.rho[..., None]
         d = x * c + y * s - rho
         d_own = np.abs(d)
         d_other = np.abs(x * c[:, ::-1] + y * s[:, ::-1] - rho[:, ::-1])
-        far = d_own > 4.0 * sig + 0.01
-        np.logical_and(far[..., :-1], far[..., 1:], out=two[..., :-1])
-        cut = np.logical_or.accumulate(two, axis=-1)  # the arm ends at two consecutive misses
-        # ... and before an opening seen through it (no false surface): a sample off the
-        # line (far) and beyond it along its ray by more than its noise allows
-        cut |= np.logical_or.accumulate(far & _behind(d, r, valid, rho, p)[1], axis=-1)
+        far = d_own > far_tol
+        # The arm ends at two consecutive misses and before an opening seen through it
+        # (no false surface): a sample off the line (far) and beyond it along its ray by
+        # more than its noise allows (tested on the few far samples only).
+        np.logical_and(far[..., :-1], far[..., 1:], out=stop[..., :-1])
+        stop[..., -1] = False
+        off = np.flatnonzero(far & valid)
+        if off.size:
+            stop.ravel()[off] |= _opening(d.ravel()[off], r.ravel()[off],
+                                          lines.rho.ravel()[off // size], p)
+        cut = np.logical_or.accumulate(stop, axis=-1)
         ux, uy = _arm_directions(lines, cx, cy)
         along = (x - cx[:, None, None]) * ux[..., None] + (y - cy[:, None, None]) * uy[..., None]
-        w = (valid & ~cut & ~far & (d_own <= d_other) & (along > near)).astype(float)
+        keep = valid & (d_own <= d_other) & (along > near)
+        keep &= ~(cut | far)
+        w = keep.astype(float)
         lines = _lines(_weighted_moments(w, x, y))  # eqs. 8-10 on the kept arm samples
         cx, cy = _intersect(lines)
     return g, found, lines, cx, cy, x, y, r, valid, w
@@ -135,33 +144,44 @@ def _refine(st: _Stack, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, fg: np.nd
     return _make(cx, cy, bis, opening, cov, st.beam[g], fg, arms, st.dphi[g])
 
 
-def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,
-            p: CornerParams, openings: bool = True):
-    """Return the valid samples (K, 2, M) seen through their arm's line, and the openings.
+def _past_line(d: np.ndarray, r: np.ndarray, rho: np.ndarray, p: CornerParams
+               ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``d + rho``, how far beyond its line each sample lies, and whether too far.
 
-    ``d`` are the samples' signed distances to their arm's line ``x cos a + y sin a = rho``
-    (``rho`` (K, 2, 1)), ``r`` their ranges. A sample is seen through when it lies more
-    than ``see_through_tolerance`` beyond the line along its ray: ``r - t > tol`` with
-    ``t = rho r / (d + rho)`` the range at which the ray meets the line; an opening when
-    beyond by more than that plus 3 standard deviations of its distance along the ray
-    (eq. 7: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``), else it is the surface's own
-    noise (at grazing incidence, or a rare large error). Without ``openings`` only the
-    first mask is returned.
+    ``d`` are the samples' signed distances to their line ``x cos a + y sin a = rho``, ``r``
+    their ranges. The ray meets the line at range ``t = rho r / (d + rho)`` (``d + rho`` is
+    ``r cos(incidence)``); a sample lies ``r - t = r d / (d + rho)`` beyond it, too far
+    when ``t > 0`` and that exceeds ``see_through_tolerance``.
     """
-    proj = d + rho  # r cos(incidence)
+    proj = d + rho
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = rho * r / proj
-        beyond = r * d / proj  # r - t
-        seen = valid & (t > 0.0) & (beyond > p.see_through_tolerance)
-    if not openings:
-        return seen
-    opening = np.zeros_like(seen)
-    if seen.any():  # few samples: the noise test only where needed
-        idx = np.nonzero(seen)
-        c2 = (proj[idx] / r[idx]) ** 2
-        var = p.sigma_r ** 2 + (r[idx] * p.sigma_phi) ** 2 * (1.0 - c2) / c2
-        opening[idx] = beyond[idx] > p.see_through_tolerance + 3.0 * np.sqrt(var)
-    return seen, opening
+        beyond = r * d / proj
+        return proj, beyond, (t > 0.0) & (beyond > p.see_through_tolerance)
+
+
+def _behind(d: np.ndarray, r: np.ndarray, valid: np.ndarray, rho: np.ndarray,
+            p: CornerParams) -> np.ndarray:
+    """Return the valid samples (K, 2, M) seen through their arm's line (:func:`_past_line`).
+
+    ``rho`` (K, 2, 1) are the arms' lines.
+    """
+    return valid & _past_line(d, r, rho, p)[2]
+
+
+def _opening(d: np.ndarray, r: np.ndarray, rho: np.ndarray, p: CornerParams) -> np.ndarray:
+    """Return which valid samples (any shape, with their line's ``rho``) are openings.
+
+    An opening is seen through the line (:func:`_past_line`) by more than
+    ``see_through_tolerance`` plus 3 standard deviations of its distance along the ray
+    (eq. 7: ``sigma_r^2 + (r sigma_phi tan(incidence))^2``), else it is the surface's own
+    noise (at grazing incidence, or a rare large error).
+    """
+    proj, beyond, seen = _past_line(d, r, rho, p)
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        c2 = (proj / r) ** 2
+        var = p.sigma_r ** 2 + (r * p.sigma_phi) ** 2 * (1.0 - c2) / c2
+        return seen & (beyond > p.see_through_tolerance + 3.0 * np.sqrt(var))
 
 
 def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
@@ -187,7 +207,7 @@ def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
     last = size - 1 - used[..., ::-1].argmax(axis=-1)
     c, s, rho = ln.c[..., None], ln.s[..., None], ln.rho[..., None]
     d = x * c + y * s - rho
-    seen = _behind(d, r, valid, rho, p, openings=False)
+    seen = _behind(d, r, valid, rho, p)
     if seen.any():
         run = np.cumsum(seen, axis=-1)  # samples seen through the line separate the runs
         good = used & ~seen
@@ -202,11 +222,13 @@ def _arm_support(x: np.ndarray, y: np.ndarray, r: np.ndarray, valid: np.ndarray,
     else:
         pick[..., 0], pick[..., 1] = first, last
     pick[..., 2] = last
-    xi = np.take_along_axis(x, pick, axis=-1)
-    yi = np.take_along_axis(y, pick, axis=-1)
+    flat = pick + size * np.arange(pick.size // 3).reshape(pick.shape[:-1] + (1,))
+    xi, yi = x.ravel()[flat], y.ravel()[flat]
+    ends = np.empty(pick.shape + (2,))  # (K, arm, inner / outer / last used, xy)
     with np.errstate(divide='ignore', invalid='ignore'):
         t = rho / (xi * c + yi * s)  # the ray through the sample meets the line
-    ends = np.stack([t * xi, t * yi], axis=-1)  # (K, arm, inner / outer / last used, xy)
+    np.multiply(t, xi, out=ends[..., 0])
+    np.multiply(t, yi, out=ends[..., 1])
     cx, cy = _intersect(ln)
     reach = np.hypot(ends[..., 2, 0] - cx[:, None], ends[..., 2, 1] - cy[:, None])
     real = n >= p.min_arm_points
@@ -233,7 +255,9 @@ def _dedup(x: np.ndarray, y: np.ndarray, score: np.ndarray, radius: float) -> np
     if not d2.min() < r2:
         return np.arange(x.size)
     kept: List[int] = []
+    rows = d2.tolist()  # Python floats: the same comparisons without numpy scalars
     for i in np.argsort(score, kind='stable').tolist():
-        if all(d2[i, j] >= r2 for j in kept):
+        row = rows[i]
+        if all(row[j] >= r2 for j in kept):
             kept.append(i)
     return np.sort(np.array(kept, dtype=np.int64))

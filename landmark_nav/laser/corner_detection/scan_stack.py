@@ -30,16 +30,24 @@ def _stack(clusters: Sequence[Cluster]) -> Optional[_Stack]:
     sizes = np.array([len(c.indices) for c in cl])
     ends = sizes.cumsum()
     starts = ends - sizes
-    phi = np.concatenate([c.angles for c in cl]).astype(float, copy=False)
+    beam = np.concatenate([c.indices for c in cl]).astype(np.int64)
+    scan = cl[0].scan
+    if scan is not None and all(c.scan is scan for c in cl):
+        # the clusters' arrays are slices of their scan's: one gather each
+        phi = scan.angles[beam].astype(float, copy=False)
+        xy = scan.points[beam].astype(float, copy=False)
+        r = scan.ranges[beam].astype(float, copy=False)
+    else:
+        phi = np.concatenate([c.angles for c in cl]).astype(float, copy=False)
+        xy = np.concatenate([c.points for c in cl]).astype(float, copy=False).reshape(-1, 2)
+        r = np.concatenate([c.ranges for c in cl]).astype(float, copy=False)
     dphi = np.abs(phi[ends - 1] - phi[starts]) / np.maximum(sizes - 1, 1)
-    xy = np.concatenate([c.points for c in cl]).astype(float, copy=False).reshape(-1, 2)
     x, y = np.array(xy.T)  # contiguous copies
-    r = np.concatenate([c.ranges for c in cl]).astype(float, copy=False)
     bad = ~(r > 0.0) | ~np.isfinite(x + y + r)
     if bad.any():  # not a return: nan makes every window and fit through it fail
         x[bad] = y[bad] = math.nan
     return _Stack(x=x, y=y, r=r,
-                  phi=phi, beam=np.concatenate([c.indices for c in cl]).astype(np.int64),
+                  phi=phi, beam=beam,
                   start=np.repeat(starts, sizes), end=np.repeat(ends, sizes),
                   dphi=np.repeat(dphi, sizes))
 
@@ -54,8 +62,11 @@ def _gather_arms(st: _Stack, first: np.ndarray, count: np.ndarray, fallback: np.
     big = max(int(count.max()), 1)
     k = np.arange(big)
     idx = first[:, :, None] + _STEP * k
-    valid = ((k < count[:, :, None]) & (idx >= st.start[fallback][:, None, None])
-             & (idx < st.end[fallback][:, None, None]))
+    # inside the cluster: arm 0 down to its start, arm 1 up to its end
+    room = np.empty_like(count)
+    room[:, 0] = first[:, 0] - st.start[fallback] + 1
+    room[:, 1] = st.end[fallback] - first[:, 1]
+    valid = k < np.minimum(count, room)[:, :, None]
     return np.where(valid, idx, fallback[:, None, None]), valid
 
 

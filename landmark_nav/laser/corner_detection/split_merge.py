@@ -22,17 +22,18 @@ def _split_indices(x: np.ndarray, y: np.ndarray, tol: float) -> List[int]:
     """Break indices (incl. both ends) of recursive splitting at the largest eq. 4 distance."""
     breaks = [0, x.size - 1]
     todo = [(0, x.size - 1)]
+    xs, ys = x.tolist(), y.tolist()  # Python floats for the ends: no numpy scalars
     while todo:
         i, j = todo.pop()
         if j - i < 2:
             continue
-        xi, yi, xf, yf = x[i], y[i], x[j], y[j]
+        xi, yi, xf, yf = xs[i], ys[i], xs[j], ys[j]
         a, b = yf - yi, xf - xi  # A x + B y + C = 0 through both ends
         norm = math.hypot(a, b)
         if norm == 0.0:
             continue
         d = np.abs(a * (x[i + 1:j] - xi) - b * (y[i + 1:j] - yi))  # eq. 4 (times norm)
-        k = int(np.argmax(d))
+        k = int(d.argmax())
         if d[k] > tol * norm:
             s = i + 1 + k
             breaks.append(s)
@@ -87,7 +88,8 @@ def _split_merge(clusters: Sequence[Cluster], st: _Stack, p: CornerParams) -> Li
     ux, uy = _arm_directions(lines, cx, cy)
     bis, opening, cos_t = _free_side(cx, cy, ux[:, 0], uy[:, 0], ux[:, 1], uy[:, 1])
     last = st.x.size - 1
-    far, near = np.clip(pc[:, [0, 3]], 0, last), np.clip(first, 0, last)
+    far = np.minimum(np.maximum(pc[:, [0, 3]], 0), last)  # np.clip, cheaper
+    near = np.minimum(np.maximum(first, 0), last)
     length = np.hypot(st.x[far] - st.x[near], st.y[far] - st.y[near])
     spacing = st.r[jt] * st.dphi[jt]
     off = np.hypot(cx - st.x[jt], cy - st.y[jt])

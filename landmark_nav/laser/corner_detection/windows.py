@@ -15,7 +15,6 @@ from landmark_nav.laser.corner_detection.refine import _refine
 from landmark_nav.laser.corner_detection.scan_stack import _Stack
 from landmark_nav.laser.corner_detection.tls_lines import point_covariance
 import numpy as np
-from scipy.ndimage import minimum_filter1d
 
 
 def _minus_cos(xl: np.ndarray, yl: np.ndarray, xm: np.ndarray, ym: np.ndarray,
@@ -64,7 +63,8 @@ def _local_minima(pos: np.ndarray, score: np.ndarray, size: int) -> np.ndarray:
     """
     dense = np.full(size, np.inf)
     dense[pos] = score
-    return np.flatnonzero(minimum_filter1d(dense, 3, mode='nearest')[pos] >= score)
+    return np.flatnonzero((dense[np.maximum(pos - 1, 0)] >= score)
+                          & (dense[np.minimum(pos + 1, size - 1)] >= score))
 
 
 def _window_f_sd(st: _Stack, lo: np.ndarray, mid: np.ndarray, hi: np.ndarray,
