@@ -24,7 +24,7 @@ learned criterion (the default), the packaged CNN (``cnn``) and the chapter's (e
 road-probability model fitted on the other drives' frames, the drive's frames scored; the
 chapter's criterion (no training) on the same frames for comparison. ``--methods`` picks
 the criteria (default ``learned chapter``; ``cnn`` trains the convolutional network per
-drive with PyTorch, ``--cnn-steps`` mini-batches, about 3 min per drive on one core).
+drive with PyTorch, ``--cnn-steps`` mini-batches, about 6 min per drive on one core).
 Frames whose seed band is not road are counted and listed apart. A frame is flagged when
 the outline's confidence is below ``min_confidence`` or its row fill below the limit
 calibrated on the other drives

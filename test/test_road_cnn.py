@@ -91,3 +91,38 @@ def test_photometric_alteration_and_training_refusals():
                        np.ones((2, 8, 12), bool), np.array(['0001TP', '0006R0']), ())
     with pytest.raises(ValueError, match="drive '0016E5' has no training frames"):
         train_cnn(maps, ['0016E5'])
+
+
+def test_soft_dice_loss_scores_the_valid_pixels_of_each_map():
+    from landmark_nav.road.road_cnn_training import soft_dice_loss
+    y = np.zeros((2, 4, 6), np.float32)
+    y[:, 2:] = 1.0
+    valid = np.ones_like(y)
+    assert soft_dice_loss(y, y, valid) == pytest.approx(0.0)
+    assert soft_dice_loss(1.0 - y, y, valid) == pytest.approx(1.0)
+    # half the road found in the first map: 1 - 2 * 6 / (6 + 12) = 1/3; second map perfect
+    p = y.copy()
+    p[0, 3] = 0.0
+    assert soft_dice_loss(p, y, valid) == pytest.approx((1.0 / 3.0) / 2.0)
+    valid[0, 3] = 0.0                    # the missed row not scored: both maps perfect
+    assert soft_dice_loss(p, y, valid) == pytest.approx(0.0)
+
+
+def test_zoom_crop_resamples_a_part_of_image_and_label_alike():
+    from landmark_nav.road.road_cnn_training import zoom_crop
+    rgb = np.zeros((36, 48, 3), np.uint8)
+    rgb[:, :24] = 200                                  # left half bright
+    label = np.where(rgb[..., 0] > 0, 3, 4).astype(np.uint8)
+    same = zoom_crop(rgb, label, np.random.default_rng(0), 1.0)
+    np.testing.assert_array_equal(same[0], rgb)
+    np.testing.assert_array_equal(same[1], label)
+    shares = set()
+    for s in range(5):
+        img, lab = zoom_crop(rgb, label, np.random.default_rng(s), 1.5)
+        assert img.shape == rgb.shape and lab.shape == label.shape
+        assert set(np.unique(lab)) <= {3, 4}           # nearest neighbour: no new classes
+        # the label stays on its image: they differ at most on the one blended column
+        differ = (img[..., 0] > 100) != (lab == 3)
+        assert np.sum(differ.any(axis=0)) <= 1
+        shares.add(float(np.mean(lab == 3)))
+    assert len(shares) > 2                             # crops of other places and sizes

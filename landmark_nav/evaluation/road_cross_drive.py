@@ -7,9 +7,10 @@ band is road (road share of the band >= ``SEED_ROAD_SHARE``; the others would te
 seed-relative features a wrong reference), skipping unlabelled pixels, with each drive
 weighted equally. The convolutional network (:mod:`landmark_nav.road.road_cnn`) trains on
 whole frames instead (:func:`feature_maps`): every such frame's feature maps and
-``CNN_COPIES`` photometrically altered copies, unlabelled pixels not scored, each drive
-weighted equally (:func:`train_cnn`, PyTorch). Leave one drive out: for every drive, a model
-fitted on the other drives scores that drive's frames.
+``CNN_COPIES`` altered copies (a random zoom up to ``CNN_MAX_ZOOM`` and a change of light),
+unlabelled pixels not scored, each drive weighted equally, cross-entropy plus ``CNN_DICE``
+times the soft Dice loss (:func:`train_cnn`, PyTorch). Leave one drive out: for every
+drive, a model fitted on the other drives scores that drive's frames.
 
 The outline's row-fill limit (:func:`landmark_nav.road.outline.row_fill`) is calibrated the
 same way: for a held-out drive, the ``ROW_FILL_QUANTILE`` quantile of the row fill of the other
@@ -33,8 +34,10 @@ from landmark_nav.road.road_training import fit_road_model
 import numpy as np
 
 SAMPLES_PER_FRAME = 600
-CNN_COPIES = 3
-CNN_STEPS = 600
+CNN_COPIES = 5
+CNN_STEPS = 1200
+CNN_MAX_ZOOM = 1.4
+CNN_DICE = 1.0
 ROW_FILL_QUANTILE = 0.1
 
 
@@ -54,7 +57,7 @@ class TrainingSet:
 
 
 def _road_seeded_frames(folders: Sequence[Path], skipped: List[str]):
-    """Yield (name, RGB, label at FEATURE_SIZE, seed band) of the frames whose band is road.
+    """Yield (name, RGB, label, label at FEATURE_SIZE, seed band) of the road-seeded frames.
 
     The names of the others are appended to ``skipped``.
     """
@@ -69,8 +72,8 @@ def _road_seeded_frames(folders: Sequence[Path], skipped: List[str]):
             if float(np.mean(label[seed] == ROAD_CLASS)) < SEED_ROAD_SHARE:
                 skipped.append(name)
                 continue
-            yield name, rgb, cv2.resize(label, FEATURE_SIZE,
-                                        interpolation=cv2.INTER_NEAREST), seed
+            yield name, rgb, label, cv2.resize(label, FEATURE_SIZE,
+                                               interpolation=cv2.INTER_NEAREST), seed
 
 
 def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
@@ -78,7 +81,7 @@ def sample_frames(folders: Sequence[Path], per_frame: int = SAMPLES_PER_FRAME,
     """Sample labelled pixels of every frame of the folders (see the module text)."""
     rng = np.random.default_rng(seed)
     xs, ys, drives, skipped = [], [], [], []
-    for name, rgb, small, seed_band in _road_seeded_frames(folders, skipped):
+    for name, rgb, _, small, seed_band in _road_seeded_frames(folders, skipped):
         feats = pixel_features(rgb, seed_band).reshape(-1, len(FEATURE_NAMES))
         small = small.ravel()
         usable = np.flatnonzero(small != UNLABELLED_CLASS)
@@ -124,22 +127,31 @@ class FeatureMaps:
     skipped: Tuple[str, ...]       # frames whose seed band is not road
 
 
-def feature_maps(folders: Sequence[Path], copies: int = CNN_COPIES, seed: int = 0
-                 ) -> FeatureMaps:
+def feature_maps(folders: Sequence[Path], copies: int = CNN_COPIES, seed: int = 0,
+                 max_zoom: float = CNN_MAX_ZOOM) -> FeatureMaps:
     """Feature maps of every frame whose seed band is road, and ``copies`` altered ones each.
 
     The alterations (:func:`landmark_nav.road.road_cnn_training.photometric`) change the
-    image before its features are computed, as a change of light or camera would.
+    image before its features are computed, as a change of light or camera would; with
+    ``max_zoom`` > 1 each copy is first a random zoomed-in part of the frame
+    (:func:`landmark_nav.road.road_cnn_training.zoom_crop`: another focal length, camera
+    height or pitch), kept when its seed band is still road.
     """
-    from landmark_nav.road.road_cnn_training import photometric
+    from landmark_nav.road.road_cnn_training import photometric, zoom_crop
     rng = np.random.default_rng(seed)
     xs, ys, valid, drives, skipped = [], [], [], [], []
-    for name, rgb, small, seed_band in _road_seeded_frames(folders, skipped):
+    for name, rgb, label, small, seed_band in _road_seeded_frames(folders, skipped):
         for k in range(copies + 1):
-            img = rgb if k == 0 else photometric(rgb, rng)
+            img, lab = rgb, small
+            if k and max_zoom > 1.0:
+                z_img, z_lab = zoom_crop(rgb, label, rng, max_zoom)
+                if float(np.mean(z_lab[seed_band] == ROAD_CLASS)) >= SEED_ROAD_SHARE:
+                    img, lab = z_img, cv2.resize(z_lab, FEATURE_SIZE,
+                                                 interpolation=cv2.INTER_NEAREST)
+            img = img if k == 0 else photometric(img, rng)
             xs.append(pixel_features(img, seed_band).astype(np.float16))
-            ys.append(small == ROAD_CLASS)
-            valid.append(small != UNLABELLED_CLASS)
+            ys.append(lab == ROAD_CLASS)
+            valid.append(lab != UNLABELLED_CLASS)
             drives.append(drive_of(name))
     if not xs:
         raise ValueError('no frame with a road seed to train on')
@@ -148,7 +160,7 @@ def feature_maps(folders: Sequence[Path], copies: int = CNN_COPIES, seed: int = 
 
 
 def train_cnn(data: FeatureMaps, drives: Sequence[str] = (), seed: int = 0,
-              steps: int = CNN_STEPS, log=None):
+              steps: int = CNN_STEPS, log=None, dice: float = CNN_DICE):
     """Fit the road CNN on the maps of ``drives`` (all when empty), each drive weighed equally.
 
     Raises:
@@ -163,7 +175,7 @@ def train_cnn(data: FeatureMaps, drives: Sequence[str] = (), seed: int = 0,
     use = np.flatnonzero(np.isin(data.drive, list(drives)) if drives else
                          np.ones(len(data.drive), bool))
     return fit_road_cnn(data.x[use], data.y[use], data.valid[use], data.drive[use],
-                        steps=steps, seed=seed, log=log)
+                        steps=steps, seed=seed, dice=dice, log=log)
 
 
 def leave_one_drive_out(folders: Sequence[Path], params: OutlineParams = OutlineParams(),

@@ -2,37 +2,67 @@
 
 Training only: PyTorch is an optional extra (``pip install torch==2.13.0``, or the package's
 ``train`` extra); inference is numpy (:mod:`landmark_nav.road.road_cnn`). Binary
-cross-entropy of the logistic output per pixel, unlabelled pixels weighed 0 and each drive
-weighed equally (frames drawn with probability 1 / frames of their drive); mini-batch Adam
+cross-entropy of the logistic output per pixel plus ``dice`` times the soft Dice loss
+(:func:`soft_dice_loss`), unlabelled pixels weighed 0 and each drive weighed equally (frames
+drawn with probability 1 / frames of their drive); mini-batch Adam
 (Kingma and Ba 2015) with a cosine-decaying rate; random horizontal flips of the feature
 planes (the seed band is centred, so a flipped frame is another plausible frame). The
-photometric augmentation (brightness, contrast, gamma, saturation, white balance) acts on
-the image before its features are computed: :func:`photometric`. One thread and fixed seeds:
+photometric augmentation (brightness, contrast, gamma, saturation, white balance) and the
+random zoom act on the image before its features are computed: :func:`photometric`,
+:func:`zoom_crop`. One thread and fixed seeds:
 the same data give the same weights.
 """
 
 from typing import Dict
 
+import cv2
 from landmark_nav.road.road_cnn import LAYERS, RoadCNN
 import numpy as np
 
 TORCH_MISSING = 'training the CNN needs torch: pip install torch==2.13.0'
 
 
-def photometric(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+#: Ranges of :func:`photometric`: uniform factors (brightness, contrast, saturation, gains)
+#: and exponent (gamma).
+#: Wide enough to take a sunny drive to an overcast one (dark, dull, low contrast).
+PHOTOMETRIC = {'brightness': (0.35, 1.4), 'contrast': (0.4, 1.3), 'gamma': (0.7, 1.8),
+               'saturation': (0.2, 1.3), 'gains': (0.9, 1.1)}
+
+
+def photometric(rgb: np.ndarray, rng: np.random.Generator,
+                ranges: Dict[str, tuple] = PHOTOMETRIC) -> np.ndarray:
     """Return a random change of light and camera of a (H, W, 3) uint8 image.
 
-    Brightness x [0.6, 1.4], contrast x [0.6, 1.3] about the mean, gamma in [0.7, 1.4],
-    saturation x [0.4, 1.3] (blend with the grey), per-channel gains (white balance, slight
-    hue) x [0.9, 1.1].
+    Per-channel gains (white balance, slight hue), saturation (blend with the grey), contrast
+    about the mean, brightness and gamma, each uniform in its range of ``ranges`` (default
+    :data:`PHOTOMETRIC`: brightness x [0.35, 1.4], contrast x [0.4, 1.3], gamma in [0.7, 1.8],
+    saturation x [0.2, 1.3], gains x [0.9, 1.1]).
     """
     x = rgb.astype(np.float32) / 255.0
-    x = x * rng.uniform(0.9, 1.1, 3).astype(np.float32)
+    x = x * rng.uniform(*ranges['gains'], 3).astype(np.float32)
     grey = x.mean(axis=2, keepdims=True)
-    x = grey + rng.uniform(0.4, 1.3) * (x - grey)
-    x = x.mean() + rng.uniform(0.6, 1.3) * (x - x.mean())
-    x = np.clip(x * rng.uniform(0.6, 1.4), 0.0, 1.0) ** rng.uniform(0.7, 1.4)
+    x = grey + rng.uniform(*ranges['saturation']) * (x - grey)
+    x = x.mean() + rng.uniform(*ranges['contrast']) * (x - x.mean())
+    x = np.clip(x * rng.uniform(*ranges['brightness']), 0.0, 1.0) ** \
+        rng.uniform(*ranges['gamma'])
     return np.clip(255.0 * x + 0.5, 0, 255).astype(np.uint8)
+
+
+def zoom_crop(rgb: np.ndarray, label: np.ndarray, rng: np.random.Generator,
+              max_zoom: float) -> tuple:
+    """Return a random zoomed-in view of an image and its label, at the image's size.
+
+    A part of ``1 / s`` of the frame's height and width (``s`` uniform in [1, ``max_zoom``]),
+    placed at random, resampled to the full size (the image bilinearly, the label by nearest
+    neighbour): the road as a longer lens, a lower camera or another pitch would show it.
+    """
+    h, w = label.shape[:2]
+    s = rng.uniform(1.0, max_zoom)
+    ch, cw = int(round(h / s)), int(round(w / s))
+    y0, x0 = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
+    img = cv2.resize(rgb[y0:y0 + ch, x0:x0 + cw], (w, h), interpolation=cv2.INTER_LINEAR)
+    lab = cv2.resize(label[y0:y0 + ch, x0:x0 + cw], (w, h), interpolation=cv2.INTER_NEAREST)
+    return img, lab
 
 
 def torch_module():
@@ -81,6 +111,19 @@ def torch_network(c_in: int, widths: Dict[str, int]):
 WIDTHS = {'e1': 16, 'e2': 32, 'c1': 32, 'c2': 32, 'c3': 32, 'd1': 16, 'h': 16}
 
 
+def soft_dice_loss(p, y, valid):
+    """1 - soft Dice of probabilities ``p`` against labels ``y`` over the ``valid`` pixels.
+
+    Milletari et al. 2016 (V-Net, eq. 1): ``1 - 2 sum(p y) / (sum(p^2) + sum(y^2))`` per
+    (N, H, W) map, averaged over the batch; it weighs a map's road as a whole, however few
+    its pixels. Torch tensors in training; numpy arrays work alike.
+    """
+    dims = (1, 2)
+    inter = (p * y * valid).sum(dims)
+    total = (p * p * valid).sum(dims) + (y * y * valid).sum(dims)
+    return (1.0 - 2.0 * inter / total.clip(min=1.0)).mean()
+
+
 def export(net, mean: np.ndarray, scale: np.ndarray) -> RoadCNN:
     """Return the numpy :class:`RoadCNN` of a trained :func:`torch_network`."""
     weights = {}
@@ -93,7 +136,7 @@ def export(net, mean: np.ndarray, scale: np.ndarray) -> RoadCNN:
 def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndarray,
                  steps: int = 1500, batch: int = 8, rate: float = 3e-3,
                  weight_decay: float = 1e-4, seed: int = 0,
-                 widths: Dict[str, int] = WIDTHS, log=None) -> RoadCNN:
+                 widths: Dict[str, int] = WIDTHS, dice: float = 0.0, log=None) -> RoadCNN:
     """Fit the network to feature maps ``x`` (N, H, W, F), labels ``y`` (N, H, W) in {0, 1}.
 
     ``valid`` (N, H, W) bool marks the scored pixels; ``group`` (N,) the drive of each map
@@ -137,6 +180,8 @@ def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndar
         z = net((xb - m_t) / s_t)
         loss = (torch.nn.functional.binary_cross_entropy_with_logits(
             z, yb, reduction='none') * vb).sum() / vb.sum().clamp(min=1.0)
+        if dice:
+            loss = loss + dice * soft_dice_loss(torch.sigmoid(z), yb, vb)
         opt.zero_grad()
         loss.backward()
         opt.step()
