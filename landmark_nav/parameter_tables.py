@@ -15,6 +15,8 @@ from landmark_nav.parameter_names import unknown_parameter
 
 #: The parameters rclpy declares in every node (accepted, no effect on the configuration).
 RCLPY_PARAMETERS = ('use_sim_time', 'start_type_description_service')
+#: appended to every declared parameter's description (and removed for the docs' tables).
+READ_ONLY_NOTE = ' (read-only: set at start-up, e.g. -p or --params-file)'
 
 
 class Parameter(NamedTuple):

@@ -49,7 +49,7 @@ def test_the_page_table_is_the_generated_one(declared, node):
 def test_declared_defaults_are_the_values_in_the_code(declared):
     """Spot checks against the declarations themselves (not against the tool's own output)."""
     from landmark_nav.laser.corners import CornerParams
-    from landmark_nav.nodes.common import READ_ONLY_NOTE
+    from landmark_nav.parameter_tables import READ_ONLY_NOTE
     corner = {p.name: p for p in declared['corner_extractor']}
     assert corner['method'].default == CornerParams().method == 'minus_cosine'
     assert corner['window'].default == str(CornerParams().window)

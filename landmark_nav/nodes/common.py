@@ -30,7 +30,8 @@ from landmark_nav.conversions import (ConversionError, pose_with_covariance_to_p
                                       scan_to_data)
 from landmark_nav.heap import release_free_heap
 from landmark_nav.parameter_names import unknown_parameter
-from landmark_nav.parameter_tables import dataclass_parameters, field_value, name_parameters
+from landmark_nav.parameter_tables import (dataclass_parameters, field_value, name_parameters,
+                                           READ_ONLY_NOTE)
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -56,7 +57,6 @@ SCAN_QOS = QoSProfile(depth=SCAN_DEPTH, reliability=ReliabilityPolicy.BEST_EFFOR
 #: cores lost 42 of 3575 sets while ekf_slam used 12 % of one core).
 FEATURE_DEPTH = 4 * SCAN_DEPTH
 WARN_THROTTLE_S = 5.0
-READ_ONLY_NOTE = ' (read-only: set at start-up, e.g. -p or --params-file)'
 THREADS_ENV = 'LANDMARK_NAV_THREADS'
 LIBRARY_THREAD_ENVS = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
                        'BLIS_NUM_THREADS')

@@ -24,6 +24,8 @@ import re
 import textwrap
 from typing import Dict, Iterator, List, Optional, Sequence
 
+from landmark_nav.parameter_tables import READ_ONLY_NOTE
+
 ROOT = Path(__file__).resolve().parents[2]
 
 #: Node executable -> (module, class, docs page relative to the repository).
@@ -167,7 +169,6 @@ def declared_parameters(
         ValueError: An unknown node name.
 
     """
-    from landmark_nav.nodes.common import READ_ONLY_NOTE
     from rclpy.parameter import Parameter
     names = list(NODES) if not nodes else list(nodes)
     unknown = [n for n in names if n not in NODES]
