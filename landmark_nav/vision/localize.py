@@ -32,7 +32,6 @@ from landmark_nav.geometry import compose, compose_jacobians, wrap_angle
 from landmark_nav.vision.camera import OPTICAL_FROM_BODY
 from landmark_nav.vision.pose import LandmarkPose, rotation_matrix
 import numpy as np
-from scipy.spatial.transform import Rotation
 import yaml
 
 _M = np.asarray(OPTICAL_FROM_BODY, dtype=float)
@@ -44,6 +43,7 @@ class LandmarkMapError(ValueError):
 
 def pose6_to_matrix(pose: Sequence[float]) -> np.ndarray:
     """Return the 4 x 4 transform of ``[x, y, z, roll, pitch, yaw]``."""
+    from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
     p = np.asarray(pose, dtype=float).reshape(6)
     t = np.eye(4)
     t[:3, :3] = Rotation.from_euler('xyz', p[3:]).as_matrix()
@@ -53,6 +53,7 @@ def pose6_to_matrix(pose: Sequence[float]) -> np.ndarray:
 
 def matrix_to_pose6(t: np.ndarray) -> np.ndarray:
     """Return ``[x, y, z, roll, pitch, yaw]`` of a 4 x 4 transform."""
+    from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
     out = np.zeros(6)
     out[:3] = t[:3, 3]
     out[3:] = Rotation.from_matrix(t[:3, :3]).as_euler('xyz')
@@ -145,6 +146,7 @@ def _entry_matrix(code: int, entry: object, where: str) -> np.ndarray:
                                f'[m]') from err
     if 'rpy' in entry and 'quaternion' in entry:
         raise LandmarkMapError(f'{where}: landmark {code}: give rpy or quaternion, not both')
+    from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
     try:
         if 'quaternion' in entry:
             q = np.asarray(entry['quaternion'], dtype=float).reshape(4)
