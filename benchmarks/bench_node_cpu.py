@@ -53,12 +53,19 @@ The CPU counters start once both nodes are idle after their start-up (imports, D
 discovery), so the start-up is not charged to the scans. ``--profile FILE`` runs
 ``ekf_slam`` under cProfile, timed by its main thread's CPU clock (its CPU figure then
 includes the profiler's overhead).
+
+``--imports`` measures start-up instead: the CPU time (user + system) of a fresh interpreter
+importing each executable's node module (``setup.py``'s ``EXECUTABLES`` of ``--repo``),
+median of ``--runs``, and as the reference in the same run ``import rclpy.node`` (the floor
+every node pays); printed per node: CPU [s] and its ratio to the reference.
 """
 
 import argparse
+import ast
 import os
 from pathlib import Path
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -93,6 +100,32 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
+def import_cpu(repo: str, module: str, runs: int) -> float:
+    """Return the median CPU time [s] of a fresh interpreter importing ``module`` in ``repo``."""
+    times = []
+    for _ in range(runs):
+        before = os.times()
+        subprocess.run([sys.executable, '-c', f'import {module}'], cwd=repo, check=True)
+        after = os.times()
+        times.append(after.children_user - before.children_user
+                     + after.children_system - before.children_system)
+    return statistics.median(times)
+
+
+def print_import_cpu(repo: str, runs: int) -> int:
+    """Print each node module's import CPU and its ratio to ``import rclpy.node``'s."""
+    tree = ast.parse((Path(repo) / 'setup.py').read_text())
+    exes = next(ast.literal_eval(n.value) for n in tree.body
+                if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'EXECUTABLES')
+    reference = import_cpu(repo, 'rclpy.node', runs)
+    print(f'import rclpy.node (reference): {reference:.2f} CPU-s (median of {runs})')
+    for exe, target in sorted(exes.items()):
+        if '.nodes.' in target:
+            cpu = import_cpu(repo, target.split(':')[0], runs)
+            print(f'{exe:18s} {cpu:5.2f} CPU-s  {cpu / reference:4.1f} x reference')
+    return 0
+
+
 def main() -> int:
     """Run the nodes, replay the bag, print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -115,7 +148,12 @@ def main() -> int:
     parser.add_argument('--params-file', metavar='YAML', default=None,
                         help="ekf_slam's parameters on top of the defaults (e.g. "
                              'config/ekf_slam_chapter.yaml), node and core alike')
+    parser.add_argument('--imports', action='store_true',
+                        help="print each node module's import CPU instead (start-up cost)")
+    parser.add_argument('--runs', type=int, default=5, help='--imports: runs per module')
     args = parser.parse_args()
+    if args.imports:
+        return print_import_cpu(args.repo, args.runs)
     slam_options = params_file_options(args.params_file)
     landmarks = slam_options.pop('landmarks')
     args.landmarks = args.landmarks or landmarks

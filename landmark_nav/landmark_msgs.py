@@ -21,7 +21,6 @@ import cv2
 from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
 from landmark_nav.conversions import ConversionError, image_to_array, ns_to_stamp
 import numpy as np
-from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -74,6 +73,7 @@ def _header(stamp_ns: int, frame_id: str) -> Header:
 
 def pose_msg(rotation: np.ndarray, translation: np.ndarray) -> Pose:
     """Return a geometry_msgs/Pose for a 3 x 3 rotation and a translation (w >= 0)."""
+    from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
     q = Rotation.from_matrix(np.asarray(rotation, dtype=float)).as_quat()
     if q[3] < 0:
         q = -q
@@ -141,6 +141,7 @@ def make_pose_with_covariance_6d(stamp_ns: int, frame_id: str, pose6: Sequence[f
     Raises:
         ConversionError: non-finite pose or a covariance that is not a finite 6 x 6.
     """
+    from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
     p = np.asarray(pose6, dtype=float).reshape(-1)
     c = np.asarray(covariance6, dtype=float)
     if p.shape != (6,) or not np.all(np.isfinite(p)):

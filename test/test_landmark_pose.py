@@ -12,7 +12,8 @@ from landmark_nav.vision.landmark import LandmarkDesign
 from landmark_nav.vision.localize import (camera_mount_matrix, FixCorrectedOdometry,
                                           landmark_in_optical, LandmarkMapError,
                                           load_landmark_map, matrix_to_pose6, parse_landmark_map,
-                                          planar, pose6_to_matrix, robot_pose_from_landmark)
+                                          planar, pose6_to_matrix, robot_pose_from_landmark,
+                                          rpy_matrix)
 from landmark_nav.vision.pose import (angles_from_rotation, CHI2_6_999, estimate_pose,
                                       LandmarkPose,
                                       pose_from_optical, PoseError, PoseParams,
@@ -170,6 +171,16 @@ def test_pose_message_helpers():
     np.testing.assert_allclose(pose_from_optical(p.rotation_optical, p.translation_optical), v)
     q = p.quaternion_optical
     assert q.shape == (4,) and abs(np.linalg.norm(q) - 1.0) < 1e-12
+
+
+def test_rpy_matrix_is_scipys_from_euler_bit_for_bit():
+    """The numpy rotation spares the nodes importing scipy.spatial; results are unchanged."""
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng(3)
+    angles = [*rng.uniform(-4.0, 4.0, (2000, 3)), [0.0, 0.0, 0.0], [math.pi, 0.0, 0.0],
+              [0.0, math.pi / 2, 0.0], [-math.pi, -math.pi / 2, math.pi], [1e-300, -1e-9, 7.0]]
+    for rpy in angles:
+        assert np.array_equal(rpy_matrix(rpy), Rotation.from_euler('xyz', rpy).as_matrix()), rpy
 
 
 # ---------------------------------------------------------------------- robot fixes

@@ -20,6 +20,7 @@ import importlib, sys
 import rclpy
 from threadpoolctl import threadpool_info
 def spin(node):
+    import scipy.linalg  # its OpenBLAS loaded after the limit, as the cores load it on first use
     pools = sorted((i['internal_api'], i['num_threads']) for i in threadpool_info())
     import cv2
     print('POOLS', pools, 'cv2', cv2.getNumThreads(), flush=True)
@@ -54,6 +55,51 @@ def test_numerical_libraries_are_single_threaded_in_every_node(node):
     pools = eval(line.split(' ', 1)[1].rsplit(' cv2', 1)[0])
     assert pools and all(n == 1 for _, n in pools), line
     assert line.endswith('cv2 1'), line
+
+
+# Heavy libraries a node may load at import (every other one is imported where it is used):
+# OpenCV in the image nodes (their conversions and cores), GTSAM in graph_slam, scipy.ndimage
+# (and the scipy.special it imports) where laser/corner_detection/windows.py is imported,
+# scipy.special in road/road_edges.py.
+NDIMAGE = {'scipy.ndimage', 'scipy.special'}
+ALLOWED_AT_IMPORT = {
+    'corner_extractor': NDIMAGE, 'ekf_slam': NDIMAGE, 'graph_slam': {'gtsam', *NDIMAGE},
+    'road_classifier': {'cv2', 'scipy.special'},
+    'landmark_detector': {'cv2'}, 'model_localizer': {'cv2'}, 'corridor_follower': {'cv2'}}
+# One process for all executables: a node is charged with the heavy modules its import adds,
+# so the nodes that must load none come first.
+HEAVY_PROBE = """
+import ast, importlib, sys
+def heavy():
+    return {'.'.join(m.split('.')[:2]) if m.startswith('scipy.') else m.split('.')[0]
+            for m in sys.modules
+            if m.split('.')[0] in ('cv2', 'evo', 'gtsam', 'matplotlib', 'pandas', 'sklearn',
+                                   'torch')
+            or (m.startswith('scipy.') and m[6].isalpha() and m != 'scipy.version')}
+tree = ast.parse(open(sys.argv[1]).read())
+exes = next(ast.literal_eval(n.value) for n in tree.body
+            if isinstance(n, ast.Assign) and n.targets[0].id == 'EXECUTABLES')
+nodes = sorted((v.split(':')[0] for v in exes.values() if '.nodes.' in v),
+               key=lambda m: m.rsplit('.', 1)[1] in sys.argv[2:])
+added = {}
+for m in nodes:
+    before = heavy()
+    importlib.import_module(m)
+    added[m.rsplit('.', 1)[1]] = sorted(heavy() - before)
+print(added)
+"""
+
+
+def test_node_modules_import_no_heavy_library_they_load_on_first_use():
+    """scipy.linalg / spatial / sparse, matplotlib, ... cost up to 0.6 CPU-s per node start."""
+    out = subprocess.run([sys.executable, '-c', HEAVY_PROBE, str(REPO / 'setup.py'),
+                          *ALLOWED_AT_IMPORT], env=node_env(), capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    added = eval(out.stdout)
+    assert len(added) == 12, out.stdout
+    assert all(set(mods) <= ALLOWED_AT_IMPORT.get(node, set()) for node, mods in added.items()), \
+        out.stdout
 
 
 def test_thread_limit_can_be_configured():

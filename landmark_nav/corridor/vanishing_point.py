@@ -76,7 +76,6 @@ from dataclasses import dataclass
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy.ndimage import maximum_filter, uniform_filter
 
 _EPS = 1e-12
 
@@ -668,6 +667,7 @@ def sphere_peaks(d: np.ndarray, w: np.ndarray, count: int,
     flat = np.concatenate([ip * n_a + ia, (ip * n_a + ia2)[rim]])
     wt = np.concatenate([w, w[rim]])
     hist = np.bincount(flat, weights=wt, minlength=n_p * n_a).reshape(n_p, n_a)
+    from scipy.ndimage import maximum_filter, uniform_filter  # on first use, not at node start
     sm = uniform_filter(hist, size=3, mode=('nearest', 'wrap'))
     peak = (sm == maximum_filter(sm, size=5, mode=('nearest', 'wrap'))) & (sm > 0)
     cells = np.nonzero(peak.ravel())[0]

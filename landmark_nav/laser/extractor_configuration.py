@@ -14,7 +14,7 @@ noise (tracked with ``sigma_r_from_data``) and the segmentation.
 from dataclasses import dataclass, replace
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
-from landmark_nav.laser.corners import CORNER_PARAMETERS, CornerParams
+from landmark_nav.laser.corner_detection.params import CORNER_PARAMETERS, CornerParams
 from landmark_nav.laser.lines import LINE_PARAMETERS, LineParams
 from landmark_nav.laser.range_noise import RangeNoiseTracker
 from landmark_nav.laser.segmentation import Cluster, segment_scan

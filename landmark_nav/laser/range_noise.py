@@ -41,7 +41,6 @@ import math
 from typing import Iterable, Optional, Tuple
 
 import numpy as np
-from scipy.special import ndtr
 
 __all__ = ['MAX_EXTENT', 'MAX_INCIDENCE_DEG', 'RangeNoise', 'RangeNoiseTracker', 'STEPS', 'WINDOW',
            'estimate_range_noise', 'gate_sigma', 'range_step', 'window_variances']
@@ -188,6 +187,7 @@ def _rounded_tail(t: float, sigma_0: float, half: float) -> float:
     """
     if sigma_0 <= 0.0:
         return max(0.0, 1.0 - t / half)
+    from scipy.special import ndtr  # on first use: scipy.special costs ~0.3 CPU-s to import
 
     def g(x: float) -> float:
         return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi) - x * float(ndtr(-x))
@@ -208,6 +208,7 @@ def gate_sigma(sigma_r: float, step: float = 0.0, share: float = 1.0, k: float =
     """
     if step <= 0.0 or share <= 0.0 or sigma_r <= 0.0:
         return sigma_r
+    from scipy.special import ndtr  # on first use: scipy.special costs ~0.3 CPU-s to import
     share = min(share, 1.0)
     sigma_0 = math.sqrt(max(sigma_r * sigma_r - share * step * step / 12.0, 0.0))
     target = 2.0 * float(ndtr(-k))

@@ -165,7 +165,9 @@ def limit_threads(default: int = 1) -> Optional[int]:
     library (threadpoolctl for BLAS / OpenMP, ``cv2.setNumThreads`` or
     ``OPENCV_FOR_THREADS_NUM`` for OpenCV); if it is unset and one of ``OMP_NUM_THREADS``,
     ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` or ``BLIS_NUM_THREADS`` is set, the
-    libraries are left as configured.
+    libraries are left as configured. Libraries loaded later (the cores import scipy's own
+    OpenBLAS on first use) read the limit from ``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
+    ``MKL_NUM_THREADS`` and ``BLIS_NUM_THREADS``, which are set to it.
 
     Returns:
         The thread limit applied, or None when the libraries were left as configured.
@@ -189,6 +191,8 @@ def limit_threads(default: int = 1) -> Optional[int]:
     else:
         n = default
     threadpool_limits(limits=n)
+    for var in LIBRARY_THREAD_ENVS:  # read by a BLAS / OpenMP library when it is loaded
+        os.environ[var] = str(n)
     if 'cv2' in sys.modules:
         sys.modules['cv2'].setNumThreads(n)
     else:  # read by OpenCV when it is imported

@@ -1,10 +1,22 @@
 """Small numerical helpers shared by the SLAM modules: triangular solve, angle wrap."""
 
+import functools
 import math
 
 from landmark_nav.geometry import wrap_angle
 import numpy as np
-from scipy.linalg.lapack import dtrtrs
+
+
+@functools.cache
+def lapack():
+    """Return ``scipy.linalg.lapack``, imported on first use.
+
+    Importing ``scipy.linalg`` costs about 0.3 CPU-s, which every node process would pay at
+    start-up (help, parameter errors included); the cached module keeps the per-call cost
+    of the solvers below a dictionary lookup.
+    """
+    from scipy.linalg import lapack as module
+    return module
 
 
 def solve_lower(low: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -26,7 +38,7 @@ def solve_lower(low: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     if b.size == 0:
         return np.zeros(b.shape)
-    x, info = dtrtrs(low, b, lower=1)
+    x, info = lapack().dtrtrs(low, b, lower=1)
     if info != 0:
         raise np.linalg.LinAlgError(f'triangular solve failed (LAPACK info {info})')
     return x

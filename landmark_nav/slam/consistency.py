@@ -18,7 +18,6 @@ from typing import Tuple
 
 from landmark_nav.geometry import wrap_angle
 import numpy as np
-from scipy.special import gammaincinv
 
 
 @lru_cache(maxsize=256)
@@ -40,7 +39,9 @@ def chi2_gate(dof: int, probability: float = 0.95) -> float:
     if not 0.0 < probability < 1.0:
         raise ValueError(f'chi2_gate: probability must be in (0, 1), got {probability!r}')
     # The quantile as scipy.stats.chi2.ppf computes it, 2 P^-1(d / 2, p) (P the regularised
-    # lower incomplete gamma function), without importing scipy.stats (0.3 s).
+    # lower incomplete gamma function), without importing scipy.stats (0.3 s); scipy.special
+    # itself is imported here, on first use, not by every node start.
+    from scipy.special import gammaincinv
     return float(2.0 * gammaincinv(0.5 * int(dof), probability))
 
 

@@ -20,7 +20,6 @@ import math
 from typing import Tuple
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 
 @dataclass(frozen=True)
@@ -65,6 +64,7 @@ class LikelihoodField:
         occupied = np.zeros((int(size[0]), int(size[1])), dtype=bool)
         ij = np.floor((pts - self.origin) / resolution).astype(int)
         occupied[ij[:, 0], ij[:, 1]] = True
+        from scipy.ndimage import distance_transform_edt  # on first use, not at node start
         d = distance_transform_edt(~occupied) * resolution
         self.field = np.exp(-0.5 * (d / sigma) ** 2)
         self.field_flat = self.field.ravel()

@@ -42,7 +42,6 @@ from typing import Dict, Optional
 from landmark_nav.slam.correlative_matching import coarse_to_fine, CorrelativeMatch
 from landmark_nav.slam.scan_matching import IcpResult, point_to_line_icp
 import numpy as np
-from scipy.spatial import cKDTree
 
 #: Reasons a proposed loop is refused (counted in :attr:`LoopCounts.refused`).
 REFUSALS = ('score', 'fit', 'ambiguous', 'free_space')
@@ -220,6 +219,7 @@ class FreeSpace:
         self.margin = float(margin)
         self.shape = tuple((np.ceil((hi - self.lo) / resolution) + 1).astype(int))
         self.free = free_cells(origins, hits, resolution, self.lo, self.shape)
+        from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
         self.tree = cKDTree(submap)
 
     def share(self, points: np.ndarray) -> float:
@@ -284,6 +284,7 @@ def verify_loop(scan: np.ndarray, submap: np.ndarray, guess: np.ndarray, window_
         return LoopResult(False, 'fit', found.pose, found, None)
     c, s = math.cos(fit.pose[2]), math.sin(fit.pose[2])
     moved = scan @ np.array([[c, s], [-s, c]]) + fit.pose[:2]
+    from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
     d, _ = cKDTree(submap).query(moved)
     overlap = float(np.mean(d <= params.overlap_distance))
     if overlap < params.min_overlap or fit.rms > params.max_rms:

@@ -18,11 +18,13 @@ the sum of squared residuals; the gate may shrink over stages (coarse to fine).
 
 from dataclasses import dataclass
 import math
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, TYPE_CHECKING
 
 from landmark_nav.geometry import compose, compose_jacobians, inverse, wrap_angle
 import numpy as np
-from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:  # scipy.spatial is imported where a tree is built, not at every node start
+    from scipy.spatial import cKDTree
 
 #: Pairing distance per ICP stage of :func:`scan_motion` [m] (coarse to fine).
 SCAN_MOTION_GATES = (0.5, 0.3, 0.15)
@@ -61,7 +63,7 @@ class IcpTarget:
     """
 
     points: np.ndarray
-    tree: cKDTree
+    tree: 'cKDTree'
     normals: np.ndarray
 
 
@@ -71,6 +73,7 @@ def icp_target(target: np.ndarray, neighbours: int = 5) -> IcpTarget:
     The normal of a point is the smallest-eigenvalue direction of the scatter of its
     ``neighbours`` nearest target points (Censi's point-to-line metric).
     """
+    from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s to import
     q = np.asarray(target, dtype=float).reshape(-1, 2)
     tree = cKDTree(q)
     if len(q) < neighbours:

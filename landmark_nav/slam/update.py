@@ -31,9 +31,8 @@ reach the state.
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf
 
-from ._linalg import _wrap, solve_lower
+from ._linalg import _wrap, lapack, solve_lower
 from .consistent_linearisation import (constrain_jacobians, invariant_retraction,
                                        invariant_transport)
 from .observation_models import _landmark_cols, _relative_points, observation_model
@@ -197,5 +196,5 @@ def is_psd(p: np.ndarray, tolerance: float = 1e-9) -> bool:
     eps = tolerance * max(float(np.max(np.abs(np.diag(p)))), 1e-300) + 1e-300
     q = p.T.copy(order='F')  # P symmetric: a plain memory copy in LAPACK order
     q.flat[::q.shape[0] + 1] += eps
-    _, info = dpotrf(q, lower=1, clean=0, overwrite_a=1)  # LAPACK: far faster than numpy's
+    _, info = lapack().dpotrf(q, lower=1, clean=0, overwrite_a=1)  # far faster than numpy's
     return info == 0

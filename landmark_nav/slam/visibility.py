@@ -35,7 +35,6 @@ from functools import cached_property
 from typing import Tuple
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
 _PI = np.pi
 _TWO_PI = 2.0 * np.pi
@@ -107,6 +106,7 @@ def swept_region(scan: ScanGeometry) -> Tuple[float, float]:
 
 def _hull_perimeter(points: np.ndarray) -> float:
     """Perimeter of the convex hull of (N, 2) points (qhull; a segment's twice its length)."""
+    from scipy.spatial import ConvexHull, QhullError  # on first use: not at every node start
     try:
         return float(ConvexHull(points).area)  # in 2-D qhull's "area" is the perimeter
     except QhullError:  # fewer than three points or all on one line

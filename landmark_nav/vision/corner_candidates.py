@@ -40,9 +40,6 @@ from typing import List, Sequence, Tuple
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,8 +166,9 @@ def _components(n: int, src: np.ndarray, dst: np.ndarray) -> Tuple[int, np.ndarr
     """
     if not len(src):
         return n, np.arange(n)
+    from scipy.sparse import coo_matrix, csgraph  # on first use: not at every node start
     graph = coo_matrix((np.ones(len(src), np.int8), (src, dst)), shape=(n, n))
-    count, lab = connected_components(graph, directed=False)
+    count, lab = csgraph.connected_components(graph, directed=False)
     _, first = np.unique(lab, return_index=True)      # smallest node of each component
     rank = np.empty(count, np.int64)
     rank[np.argsort(first)] = np.arange(count)
@@ -220,6 +218,7 @@ def corner_groups(pixels: Sequence[np.ndarray], merge_distance: float = 1.5) -> 
     sx, sy, wsum, gfilt = sx[keep], sy[keep], wsum[keep], gfilt[keep]
     pts = np.column_stack([sx / wsum, sy / wsum])                 # eq. 2
     if merge_distance > 0 and len(pts) > 1:
+        from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
         pairs = cKDTree(pts).query_pairs(merge_distance, output_type='ndarray')
         if len(pairs):
             pairs = pairs[gfilt[pairs[:, 0]] != gfilt[pairs[:, 1]]]
@@ -350,6 +349,7 @@ def saddle_corners(g: np.ndarray, threshold: float = 1000.0, kappa: float = 0.0,
         # block: 4-7 % of the corner's strength, 5-8 px away; frame X-corners at 3-5 px
         # per block are at least 17 % of any candidate near them)
         # (the pairs' order does not matter to the maxima: the unbalanced tree builds faster)
+        from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
         pairs = cKDTree(pts, balanced_tree=False, compact_nodes=False).query_pairs(
             radius, output_type='ndarray')
         if len(pairs):

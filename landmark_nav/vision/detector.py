@@ -59,7 +59,6 @@ from landmark_nav.vision.frame_search import (chain_edges, corner_neighbours, fi
                                               frame_edges)
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
-from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True)
@@ -457,6 +456,7 @@ def detect_landmarks(gray: np.ndarray, params: DetectorParams = DetectorParams()
     if len(pts) > params.max_corners:
         keep = np.argsort(corners.weights)[::-1][:params.max_corners]
         pts, filt = pts[keep], filt[keep]
+    from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
     tree = cKDTree(pts) if len(pts) else None
     nbrs = corner_neighbours(pts, params.neighbour_fraction * img.shape[0],
                              params.max_neighbours, tree, params.neighbour_mode,

@@ -35,14 +35,16 @@ Readings of the chapter that needed a decision (tested in
 """
 
 import math
-from typing import List, Optional, Tuple
+from typing import List, Optional, Tuple, TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:  # scipy.spatial is imported where a tree is built, not at every node start
+    from scipy.spatial import cKDTree
 
 
 def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
-                      tree: Optional[cKDTree] = None, mode: str = 'closest',
+                      tree: Optional['cKDTree'] = None, mode: str = 'closest',
                       second_angle: float = 0.0) -> np.ndarray:
     """Return up to k neighbours of every corner within ``max_distance`` (§2.2.2).
 
@@ -66,6 +68,7 @@ def corner_neighbours(points: np.ndarray, max_distance: float, k: int = 8,
     n = len(points)
     if n < 2:
         return np.full((n, k), n, dtype=np.int64)
+    from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
     tree = cKDTree(points) if tree is None else tree
     kk = min((k if mode == 'closest' else 3 * k) + 1, n)
     dist, idx = tree.query(points, k=kk, distance_upper_bound=max_distance)
@@ -131,7 +134,7 @@ def _first_rows(a: np.ndarray) -> np.ndarray:
 
 
 def frame_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
-                k_lim: float = 0.37, k_g: float = 0.5, tree: Optional[cKDTree] = None,
+                k_lim: float = 0.37, k_g: float = 0.5, tree: Optional['cKDTree'] = None,
                 filters: Optional[np.ndarray] = None) -> np.ndarray:
     """Return every chain of ``n_corners`` corners along a straight edge (eq. 3).
 
@@ -161,7 +164,7 @@ def frame_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
 
 
 def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
-                k_lim: float = 0.37, k_g: float = 0.5, tree: Optional[cKDTree] = None,
+                k_lim: float = 0.37, k_g: float = 0.5, tree: Optional['cKDTree'] = None,
                 filters: Optional[np.ndarray] = None, max_gaps: int = 0
                 ) -> Tuple[np.ndarray, np.ndarray]:
     """Chain corners into frame edges (eq. 3), bridging up to ``max_gaps`` missed corners.
@@ -191,6 +194,7 @@ def chain_edges(points: np.ndarray, neighbours: np.ndarray, n_corners: int = 6,
     none = (np.zeros((0, n_corners), np.int64), np.zeros((0, 2)))
     if n < n_corners or neighbours.size == 0:
         return none
+    from scipy.spatial import cKDTree  # on first use: scipy.spatial costs ~0.5 CPU-s
     tree = cKDTree(points) if tree is None else tree
     h2 = neighbours.ravel()
     h1 = np.repeat(np.arange(n), neighbours.shape[1])

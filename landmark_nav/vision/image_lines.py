@@ -48,8 +48,6 @@ from typing import Optional, Union
 import cv2
 from landmark_nav.vision.camera import CameraModel
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 METHODS = ('segmented_hough', 'hough_p', 'lsd')
 
@@ -454,8 +452,9 @@ def _join(mom: np.ndarray, segs: np.ndarray, i: np.ndarray, j: np.ndarray, max_g
     _, u, rms = _moments_fit(mm)
     ok = (rms <= max_rms) & (_gap(segs[i], segs[j], u) <= max_gap)
     i, j = i[ok], j[ok]
+    from scipy.sparse import coo_matrix, csgraph  # on first use: not at every node start
     graph = coo_matrix((np.ones(i.size), (i, j)), shape=(n, n))
-    n_comp, label = connected_components(graph, directed=False)
+    n_comp, label = csgraph.connected_components(graph, directed=False)
     cm = np.zeros((n_comp, 6))
     np.add.at(cm, label, mom)
     c, u, rms = _moments_fit(cm)

@@ -75,7 +75,6 @@ import cv2
 from landmark_nav.vision.camera import CameraModel, OPTICAL_FROM_BODY
 from landmark_nav.vision.landmark import LandmarkDesign
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 _M = np.asarray(OPTICAL_FROM_BODY, dtype=float)
 _RZ_PI = np.diag([-1.0, -1.0, 1.0])
@@ -207,6 +206,7 @@ class LandmarkPose:
     @property
     def quaternion_optical(self) -> np.ndarray:
         """Orientation of the landmark in the optical frame as a quaternion (x, y, z, w)."""
+        from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
         return Rotation.from_matrix(self.rotation_optical).as_quat()
 
     @property
