@@ -58,13 +58,9 @@ def test_numerical_libraries_are_single_threaded_in_every_node(node):
 
 
 # Heavy libraries a node may load at import (every other one is imported where it is used):
-# OpenCV in the image nodes (their conversions and cores), GTSAM in graph_slam, scipy.ndimage
-# (and the scipy.special it imports) where laser/corner_detection/windows.py is imported,
-# scipy.special in road/road_edges.py.
-NDIMAGE = {'scipy.ndimage', 'scipy.special'}
+# OpenCV in the image nodes (their conversions and cores), GTSAM in graph_slam.
 ALLOWED_AT_IMPORT = {
-    'corner_extractor': NDIMAGE, 'ekf_slam': NDIMAGE, 'graph_slam': {'gtsam', *NDIMAGE},
-    'road_classifier': {'cv2', 'scipy.special'},
+    'graph_slam': {'gtsam'}, 'road_classifier': {'cv2'},
     'landmark_detector': {'cv2'}, 'model_localizer': {'cv2'}, 'corridor_follower': {'cv2'}}
 # One process for all executables: a node is charged with the heavy modules its import adds,
 # so the nodes that must load none come first.

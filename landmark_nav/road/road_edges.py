@@ -16,7 +16,6 @@ from typing import Optional
 from landmark_nav.road.profile_fits import _fit_piece, _orthogonal_sums
 from landmark_nav.road.terrain_params import TerrainParams
 import numpy as np
-from scipy.special import fdtri
 
 
 def _rougher(v_a: float, n_a: int, v_b: float, n_b: int, params: TerrainParams) -> bool:
@@ -34,6 +33,7 @@ def _rougher(v_a: float, n_a: int, v_b: float, n_b: int, params: TerrainParams) 
 @functools.lru_cache(maxsize=4096)
 def _f_quantile(dfn: int, dfd: int, q: float) -> float:
     """Return the F distribution's ``q`` quantile (cached: the piece sizes repeat)."""
+    from scipy.special import fdtri  # on first use: the node starts without scipy.special
     return float(fdtri(dfn, dfd, q))
 
 
