@@ -118,13 +118,17 @@ class ChildProcesses:
         Args:
             args: The command.
             sigint_ignored: Start it with SIGINT ignored, as ``bash -c 'cmd &'`` does to a
-                background job (it must still stop on SIGINT).
+                background job (it must still stop on SIGINT); otherwise with SIGINT at its
+                default, whatever the test run itself was started with (a test run started
+                as a background job has it ignored, and a child would inherit that).
             **popen_kwargs: Passed to :class:`subprocess.Popen`.
 
         """
         popen_kwargs.setdefault('start_new_session', True)
         if sigint_ignored:
             popen_kwargs['preexec_fn'] = _ignore_sigint
+        else:
+            popen_kwargs.setdefault('preexec_fn', _default_sigint)
         proc = subprocess.Popen(list(args), **popen_kwargs)
         self._procs.append(proc)
         if popen_kwargs['start_new_session']:
@@ -184,6 +188,10 @@ class ChildProcesses:
 
 def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _args(proc: subprocess.Popen) -> str:
