@@ -20,6 +20,7 @@ from builtin_interfaces.msg import Duration
 import cv2
 from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
 from landmark_nav.conversions import ConversionError, image_to_array, ns_to_stamp
+from landmark_nav.vision.localize import rpy_matrix
 import numpy as np
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
@@ -141,7 +142,6 @@ def make_pose_with_covariance_6d(stamp_ns: int, frame_id: str, pose6: Sequence[f
     Raises:
         ConversionError: non-finite pose or a covariance that is not a finite 6 x 6.
     """
-    from scipy.spatial.transform import Rotation  # on first use: ~0.6 CPU-s to import
     p = np.asarray(pose6, dtype=float).reshape(-1)
     c = np.asarray(covariance6, dtype=float)
     if p.shape != (6,) or not np.all(np.isfinite(p)):
@@ -150,7 +150,7 @@ def make_pose_with_covariance_6d(stamp_ns: int, frame_id: str, pose6: Sequence[f
         raise ConversionError('PoseWithCovarianceStamped: covariance must be a finite 6x6')
     msg = PoseWithCovarianceStamped()
     msg.header = _header(stamp_ns, frame_id)
-    msg.pose.pose = pose_msg(Rotation.from_euler('xyz', p[3:]).as_matrix(), p[:3])
+    msg.pose.pose = pose_msg(rpy_matrix(p[3:]), p[:3])
     msg.pose.covariance = [float(v) for v in (0.5 * (c + c.T)).ravel()]
     return msg
 
