@@ -139,7 +139,8 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
     try:
         return node.declare_parameter(name, default, descriptor).value
     except InvalidParameterTypeException as err:
-        given = node._parameter_overrides.get(name)
+        # the value as given (rclpy keeps the overrides privately; without them, its message)
+        given = getattr(node, '_parameter_overrides', {}).get(name)
         kind = None if given is None else _TYPE_NAMES.get(given.type_.value, 'another type')
         got = '' if given is None else f', got {given.value!r} ({kind.split(" (")[0]})'
         if (given is not None and descriptor.type == ParameterType.PARAMETER_DOUBLE
@@ -148,7 +149,8 @@ def _declare(node: Node, name: str, default, descriptor: ParameterDescriptor):
         raise ParameterError(f'parameter {name}: expected '
                              f'{_TYPE_NAMES.get(descriptor.type, "another type")}{got}') from err
     except InvalidParameterValueException as err:
-        given = node._parameter_overrides.get(name)
+        # the value as given (rclpy keeps the overrides privately; without them, its message)
+        given = getattr(node, '_parameter_overrides', {}).get(name)
         bounds = descriptor.floating_point_range or descriptor.integer_range
         if given is not None and bounds:  # as the offline tools say it (check_value)
             raise ParameterError(f'parameter {name} = {given.value!r} is outside '
