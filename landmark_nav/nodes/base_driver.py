@@ -51,7 +51,7 @@ from landmark_nav.drivers.p2os_client import ClientConfig, P2osClient, SipUpdate
 from landmark_nav.hardware import SONAR_FIELD_OF_VIEW, SONAR_MAX_RANGE, SONAR_MIN_RANGE
 from landmark_nav.localization.wheel_odometry import WheelOdometry
 from landmark_nav.nodes.common import (declare, declare_strings, InputStats, ParameterError,
-                                       ProblemWarner, run_node)
+                                       ProblemWarner, reject_undeclared, run_node)
 from landmark_nav.nodes.driver_common import (declare_link_parameters, DeviceLink,
                                               DiagnosticsPublisher, ERROR, LinkHealth,
                                               make_transport, OK, Status, WARN)
@@ -160,6 +160,7 @@ class BaseDriver(Node):
                              'of a status packet (link latency) [s]', (-1.0, 1.0))
         publish_tf = d(self, 'publish_tf', True, 'broadcast odom -> base_link when tf2_ros '
                        'is available')
+        reject_undeclared(self)
         if len(self.joints) != 2 or self.sonar_min > self.sonar_max \
                 or self.battery_error > self.battery_warn:
             raise ParameterError('base_driver: need two wheel_joints, sonar_min_range <= '

@@ -216,7 +216,10 @@ def reject_undeclared(node: Node) -> None:
     """Refuse an override (``-p``, ``--params-file``) of a parameter the node did not declare.
 
     rclpy keeps such an override unused and says nothing, so a misspelt name leaves the
-    default in force; the node is started only with names it declares.
+    default in force; the node is started only with names it declares. Each node calls it
+    in its constructor right after its last declaration, before it starts anything (a timer,
+    a thread, a device link, a model load) or logs that it runs: the error is then the
+    node's only output. :func:`run_node` calls it again after the constructor.
 
     Raises:
         ParameterError: The first unknown name, with the nearest declared one.
@@ -248,8 +251,8 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
     ``-h`` / ``--help`` (before ``--ros-args``) prints the usage and the node's parameters
     and exits with status 0 (:func:`~landmark_nav.tools.docs_params.node_help`).
 
-    A bad parameter value or an undeclared parameter name (:func:`reject_undeclared`) is
-    one line on stderr (``error: ...``) and exit status 2.
+    A bad parameter value or an undeclared parameter name (:func:`reject_undeclared`, in
+    the node's constructor) is one line on stderr (``error: ...``) and exit status 2.
 
     Numerical libraries run single-threaded unless configured (:func:`limit_threads`).
     SIGINT (Ctrl-C) and SIGTERM shut rclpy down (its signal handlers) and end the spin; the

@@ -36,7 +36,7 @@ from landmark_nav.corridor.controller import CorridorController
 from landmark_nav.corridor.follower import CorridorTracker
 from landmark_nav.landmark_msgs import compressed_to_gray, image_to_gray
 from landmark_nav.nodes.common import declare, InputStats, ParameterError, ProblemWarner, \
-    run_node, SENSOR_QOS
+    reject_undeclared, run_node, SENSOR_QOS
 from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.node import Node
@@ -54,6 +54,7 @@ class CorridorFollower(Node):
         """Declare and validate parameters and create the interfaces."""
         super().__init__('corridor_follower', **kwargs)
         values = {name: declare(self, name, *p[:4]) for name, p in parameters().items()}
+        reject_undeclared(self)
         try:
             config = follower_configuration(values)
         except ValueError as err:

@@ -119,8 +119,8 @@ from landmark_nav.conversions import (ConversionError, make_odometry,
                                       set_stamp, stamp_to_ns)
 from landmark_nav.feature_msgs import feature_cloud_to_arrays, make_landmark_markers
 from landmark_nav.nodes.common import (declare_table, FEATURE_DEPTH, InputStats, output_path,
-                                       ParameterError, ProblemWarner, read_scan, require_stamp,
-                                       run_node, SCAN_QOS)
+                                       ParameterError, ProblemWarner, read_scan, reject_undeclared,
+                                       require_stamp, run_node, SCAN_QOS)
 from landmark_nav.nodes.stamp_join import StampJoin
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import CORNER, LINE
@@ -212,6 +212,7 @@ class EkfSlamNode(Node):
         """Declare the parameters, create subscriptions, publishers and services."""
         super().__init__('ekf_slam', **kwargs)
         config = declare_configuration(self)
+        reject_undeclared(self)
         values = config.values
         self.params = config.params
         self.frontend_params = config.frontend

@@ -65,7 +65,8 @@ from landmark_nav.conversions import (ConversionError, make_pose_with_covariance
                                       set_pose_2d, set_stamp)
 from landmark_nav.geometry import compose, inverse
 from landmark_nav.nodes.common import (declare, declare_table, InputStats, ParameterError,
-                                       ProblemWarner, read_scan, require_stamp, run_node)
+                                       ProblemWarner, read_scan, reject_undeclared,
+                                       require_stamp, run_node)
 from landmark_nav.nodes.ekf_slam import FEATURE_SCAN_QOS, ODOM_QOS
 from landmark_nav.slam.graph_configuration import (graph_parameters, graph_params,
                                                    odometry_check_parameters, odometry_limits)
@@ -155,6 +156,7 @@ class GraphSlamNode(Node):
         self.display_period = declare(self, 'display_period', 0.5, 'least period of the path '
                                       'topic (published after a keyframe) [s]', (0.01, 3600.0))
         limits = declare_table(self, odometry_check_parameters(), odometry_limits)
+        reject_undeclared(self)
         self.warner = ProblemWarner(self)
         self.steps = GraphScanSteps(laser_pose, noise, params, buffer_s, self._on_drop,
                                     restart=True, limits=limits)

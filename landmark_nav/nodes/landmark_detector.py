@@ -34,7 +34,8 @@ from landmark_nav.landmark_msgs import (compressed_to_gray, draw_detections, ima
                                         make_landmark_markers, make_landmark_pose_array,
                                         make_pose_with_covariance_6d)
 from landmark_nav.nodes.common import (declare, declare_dataclass, InputStats, ParameterError,
-                                       ProblemWarner, run_node, SENSOR_QOS)
+                                       ProblemWarner, reject_undeclared, run_node,
+                                       SENSOR_QOS)
 from landmark_nav.vision.detector import detect_landmarks, DetectorParams, image_problem
 from landmark_nav.vision.landmark import LandmarkDesign
 from landmark_nav.vision.localize import (camera_mount_matrix, LandmarkMapError,
@@ -143,6 +144,7 @@ class LandmarkDetector(Node):
                         'yaw [rad]')
         self.debug_image = declare(self, 'publish_debug_image', False,
                                    'publish landmarks/debug_image (bgr8, grid drawn)')
+        reject_undeclared(self)
         if len(mount) != 6 or not all(math.isfinite(v) for v in mount):
             raise ParameterError(f'parameter camera_mount must be 6 finite numbers; got {mount}')
         self.mount = camera_mount_matrix(mount)

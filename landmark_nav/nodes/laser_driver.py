@@ -24,7 +24,8 @@ import time
 
 from landmark_nav.conversions import ConversionError, make_scan
 from landmark_nav.drivers.laser_session import make_session, Output
-from landmark_nav.nodes.common import declare, ParameterError, ProblemWarner, run_node, SENSOR_QOS
+from landmark_nav.nodes.common import (declare, ParameterError, ProblemWarner, reject_undeclared,
+                                       run_node, SENSOR_QOS)
 from landmark_nav.nodes.driver_common import (declare_link_parameters, DeviceLink,
                                               DiagnosticsPublisher, LinkHealth, make_transport)
 from rclpy.node import Node
@@ -73,6 +74,7 @@ class LaserDriver(Node):
                        'or 1 (0.25 only with variant 100)', (0.25, 1.0))
         units = d(self, 'units', 'mm', 'lms2xx: distance units, mm (8 m range) or cm (80 m)',
                   choices=['mm', 'cm'])
+        reject_undeclared(self)
         if not scip and variant not in (100, 180):
             raise ParameterError(f'parameter variant = {variant}: must be 100 or 180')
         if not scip and resolution not in (0.25, 0.5, 1.0):

@@ -40,7 +40,7 @@ from landmark_nav.monocular.matching import MatchParams
 from landmark_nav.monocular.model import DEFAULT_MODEL_PATH, load_model, ModelError
 from landmark_nav.monocular.visibility import CameraMount, Intrinsics
 from landmark_nav.nodes.common import (declare, initial_pose, InputStats, ParameterError,
-                                       ProblemWarner, run_node, SENSOR_QOS)
+                                       ProblemWarner, reject_undeclared, run_node, SENSOR_QOS)
 from landmark_nav.vision.image_lines import undistort_segments
 from landmark_nav.vision.rwrht import detect_model_lines, MODEL_LINE_METHODS
 from nav_msgs.msg import Odometry
@@ -97,6 +97,7 @@ class ModelLocalizerNode(Node):
                               (1, 100)))
         self.frame_id = d('global_frame', 'map', 'frame of pose and initialpose')
         self.debug = d('publish_debug_image', False, 'publish model_localizer/debug_image')
+        reject_undeclared(self)
         for name, vec, n in (('camera_mount', mount, 4), ('initial_pose', pose0, 3),
                              ('initial_std', std0, 3)):
             if len(vec) != n or not all(math.isfinite(v) for v in vec):

@@ -38,7 +38,7 @@ from landmark_nav.conversions import (array_to_image, camera_info_to_model, Conv
                                       odometry_to_pose, scan_to_data, stamp_to_ns)
 from landmark_nav.geometry import transform_points
 from landmark_nav.nodes.common import (declare, InputStats, ParameterError, ProblemWarner,
-                                       run_node, SENSOR_QOS)
+                                       reject_undeclared, run_node, SENSOR_QOS)
 from landmark_nav.road.configuration import parameters, road_configuration
 from landmark_nav.road.fusion import (choose_route, extend_with_outline,
                                       ground_to_pixels, laser_corridors, MIN_VISION_LINES,
@@ -62,6 +62,7 @@ class RoadClassifier(Node):
         """Declare and validate parameters and create the interfaces."""
         super().__init__('road_classifier', **kwargs)
         values = {name: declare(self, name, *p[:4]) for name, p in parameters().items()}
+        reject_undeclared(self)
         try:
             config = road_configuration(values)
             if config.outline.method == 'learned':

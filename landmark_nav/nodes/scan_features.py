@@ -23,8 +23,8 @@ import math
 
 from landmark_nav.conversions import ConversionError, scan_to_data, ScanData
 from landmark_nav.laser.extractor_configuration import SCAN_PARAMETERS, ScanSegmenter
-from landmark_nav.nodes.common import (declare, InputStats, ProblemWarner, require_stamp,
-                                       SCAN_QOS)
+from landmark_nav.nodes.common import (declare, InputStats, ProblemWarner, reject_undeclared,
+                                       require_stamp, SCAN_QOS)
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
@@ -34,18 +34,23 @@ class ScanFeatureNode(Node):
     """A node that extracts features from every scan it receives."""
 
     def __init__(self, name: str, **kwargs) -> None:
-        """Declare the segmentation parameters (subscribe with :meth:`subscribe_scans`)."""
+        """Declare the segmentation parameters (start with :meth:`subscribe_scans`)."""
         super().__init__(name, **kwargs)
         self.values = {key: declare(self, key, *p[:4]) for key, p in SCAN_PARAMETERS.items()}
         self.incidence_deg = self.values['segmentation.incidence_deg']
         self.min_cluster_points = self.values['segmentation.min_points']
         self.max_beams = self.values['max_beams']
         self.segmenter = None  # ScanSegmenter, from subscribe_scans
-        self.warner = ProblemWarner(self)
-        self.stats = InputStats(self, self.warner)
 
     def subscribe_scans(self, sigma_r: float) -> None:
-        """Start receiving scans; ``sigma_r`` is the range noise (its lower bound if estimated)."""
+        """Start receiving scans; ``sigma_r`` is the range noise (its lower bound if estimated).
+
+        Called once the subclass has declared its parameters: an undeclared name is refused
+        before the diagnostics timer starts.
+        """
+        reject_undeclared(self)
+        self.warner = ProblemWarner(self)
+        self.stats = InputStats(self, self.warner)
         v = self.values
         self.segmenter = ScanSegmenter(v['segmentation.incidence_deg'],
                                        v['segmentation.min_points'], sigma_r,

@@ -55,7 +55,7 @@ from landmark_nav.localization.params import LocalizationParams
 from landmark_nav.localization.tracking import sonar_reading, SonarTracker
 from landmark_nav.nodes.common import (declare, declare_dataclass, declare_strings,
                                        initial_pose, InputStats, ParameterError, ProblemWarner,
-                                       run_node, SENSOR_QOS)
+                                       reject_undeclared, run_node, SENSOR_QOS)
 from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 from rclpy.node import Node
@@ -85,6 +85,7 @@ class SonarLocalizer(Node):
         sync, stale, sonar_timeout = v['sync_timeout'], v['stale_cycles'], v['sonar_timeout']
         params = declare_dataclass(self, LocalizationParams, FILTER_PARAMETERS)
         noise = declare_dataclass(self, ProcessNoise, NOISE_PARAMETERS, 'process_noise.')
+        reject_undeclared(self)
         self._check(source, mounts, params)
         self.initial_cov = np.diag(np.square(std0))
         self.warner = ProblemWarner(self)
