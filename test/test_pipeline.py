@@ -115,6 +115,13 @@ def test_replay_ends_when_the_nodes_have_processed_every_scan(processes, office_
     # One pose per scan: ekf_slam made as many steps as the offline run ...
     assert len(ref.stamps_ns) == 1200
     assert 'ekf_slam processed 1200, dropped 0' in out, out
+    # ... and the last line says so, with the offline run's ATE (the same poses)
+    figures = office_evaluation('icnn')[0]
+    last = out.splitlines()[-1]
+    assert last.startswith(f'replay: {bag}, 1200 scans played in ') and (
+        'ekf_slam published 1200 poses; ATE RMSE '
+        f'{100 * figures["ate_rmse"]:.2f} cm (max {100 * figures["ate_max"]:.2f} cm) '
+        'against /ground_truth/odom; outputs on /pose') in last, out
     # ... the same ones: the poses this test received (its subscription may match the node
     # after the first steps) are the offline run's at their stamps, to the file's rounding
     # (5e-10 m per coordinate).
@@ -125,3 +132,35 @@ def test_replay_ends_when_the_nodes_have_processed_every_scan(processes, office_
     err = np.hypot(*(xy - ref.positions[first:, :2]).T)
     assert err.max() < 1e-9, (err.max(), int(np.argmax(err > 0)), [
         line for line in out.splitlines() if 'WARN' in line])
+
+
+def test_the_replay_result_scores_the_poses_as_evaluate_does(office_evaluation):
+    """The ATE of the result line is evaluate's ``ATE RMSE`` (its trajectory_slam.tum)."""
+    from landmark_nav.evaluation.trajectory import read_tum
+    from landmark_nav.tools.replay_result import reference_ate, result_line
+    figures, folder = office_evaluation('icnn')
+    traj = read_tum(folder / 'trajectory_slam.tum')
+    bag = str(REPO / 'bags' / 'office')
+    ate = reference_ate(bag, traj.stamps_ns, traj.planar())
+    assert ate['poses'] == 1200
+    assert abs(ate['rmse'] - figures['ate_rmse']) < 1e-9  # the file's rounding: 5e-10 m
+    assert abs(ate['max'] - figures['ate_max']) < 1e-9
+    line = result_line('bags/office', 3.0, 1200, 40.04, traj.stamps_ns, traj.planar(), ate)
+    assert line.startswith('replay: bags/office, 1200 scans played in 40.0 s at rate 3; '
+                           'ekf_slam published 1200 poses; ATE RMSE ')
+    assert '\n' not in line
+    assert line.endswith('outputs on /pose, /odometry, /path, /landmarks (not recorded)')
+
+
+def test_the_replay_result_without_a_reference_or_an_end():
+    from landmark_nav.tools.replay_result import reference_ate, result_line
+    import numpy as np
+    stamps, poses = np.array([1, 2], dtype=np.int64), np.zeros((2, 3))
+    assert reference_ate(str(REPO / 'bags' / 'corridor'), stamps, poses) is None  # no pose
+    assert result_line('b', 1.0, None, None, stamps, poses, None) == (
+        'replay: b, its scans stopped before its end; ekf_slam published 2 poses; outputs on '
+        '/pose, /odometry, /path, /landmarks (not recorded)')
+    assert result_line('b', 2.0, 5, 1.25, stamps, poses, None) == (
+        'replay: b, 5 scans played in 1.2 s at rate 2; ekf_slam published 2 poses; not scored '
+        '(no /ground_truth/odom in the bag over their stamps); outputs on /pose, /odometry, '
+        '/path, /landmarks (not recorded)')

@@ -24,7 +24,9 @@ Pipelines:
   subscribed by every node that takes them, so no scan is lost to the nodes' start-up).
   ``ekf_slam`` gets what the bag states, as ``landmark_nav evaluate`` uses it
   (:func:`bag_slam_settings`): the laser mount and the odometry noise model (an ``--set``
-  wins).
+  wins). It ends with one result line (:mod:`~landmark_nav.tools.replay_result`): the bag,
+  its scans and the seconds it took, the poses ekf_slam published and their ATE against
+  the bag's ``/ground_truth/odom`` when it has one, the output topics.
 """
 
 import argparse
@@ -193,7 +195,21 @@ def run(args: argparse.Namespace) -> int:
                               scans, args.drain_timeout)
     for node, cmd in commands.items():
         manager.add_process(node, 'exec ' + shlex.join(cmd))  # no shell between
-    manager.loop()
+    recorder = None
+    if args.name == 'replay':
+        from landmark_nav.tools.replay_result import PoseRecorder
+        recorder = PoseRecorder()  # before the nodes: it sees their first pose
+    try:
+        manager.loop()
+    finally:
+        if recorder is not None:
+            stamps, poses = recorder.stop()
+    if recorder is not None:
+        from landmark_nav.tools.replay_result import reference_ate, result_line
+        played_s = manager.played_seconds()
+        ate = reference_ate(args.bag, stamps, poses) if played_s is not None else None
+        print(result_line(args.bag, args.rate, scans, played_s, stamps, poses, ate),
+              flush=True)
     return exit_status(manager)
 
 

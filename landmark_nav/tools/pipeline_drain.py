@@ -154,6 +154,8 @@ class DrainingManager(Manager):
         self.scans = scans
         self.timeout_s = float(timeout_s)
         self.drained: Optional[bool] = None
+        self.player_started: Optional[float] = None  # monotonic [s]
+        self.player_ended: Optional[float] = None  # monotonic [s], when it ended by itself
         self._draining = False
         self._term_at: Optional[float] = None
         self._guard = threading.Lock()
@@ -178,10 +180,13 @@ class DrainingManager(Manager):
                                                     target=player['obj'].run,
                                                     args=(self.events, True))
         player['process'].start()
+        self.player_started = time.monotonic()
 
     def terminate(self) -> None:
         """Stop the nodes: after the drain when the player ended with 0, else at once."""
         player = self._processes.get('bag_player', {})
+        if player.get('returncode') == 0 and self.player_ended is None:
+            self.player_ended = time.monotonic()
         with self._guard:
             if (self._draining or self.scans is None or self.returncode != 0
                     or player.get('returncode') != 0 or self.timeout_s <= 0.0):
@@ -202,6 +207,12 @@ class DrainingManager(Manager):
         if self._term_at is None:
             self._term_at = time.monotonic()
         Manager.terminate(self)
+
+    def played_seconds(self) -> Optional[float]:
+        """Seconds the player took to play the bag (None: it did not end by itself)."""
+        if self.player_started is None or self.player_ended is None:
+            return None
+        return self.player_ended - self.player_started
 
     def kill(self) -> None:
         """SIGKILL only ``KILL_WAIT`` seconds after the SIGTERM (not during the drain)."""
