@@ -164,3 +164,17 @@ def test_the_replay_result_without_a_reference_or_an_end():
         'replay: b, 5 scans played in 1.2 s at rate 2; ekf_slam published 2 poses; not scored '
         '(no /ground_truth/odom in the bag over their stamps); outputs on /pose, /odometry, '
         '/path, /landmarks (not recorded)')
+
+
+@pytest.mark.parametrize('bag, message', [
+    ('no/such/bag', 'No bag at no/such/bag'),
+    (str(REPO / 'bags' / 'corridor'), f'{REPO / "bags" / "corridor"} has no /scan topic '
+     '(pipeline replay plays /scan and /odom)'),
+])
+def test_a_replay_of_a_bag_it_cannot_play_starts_nothing(bag, message):
+    """One line and exit status 2, before any node starts (they used to start, then stop)."""
+    proc = subprocess.run([sys.executable, '-m', 'landmark_nav.tools.cli', 'pipeline',
+                           'replay', '--bag', bag], capture_output=True, text=True,
+                          timeout=120)
+    assert (proc.returncode, proc.stdout, proc.stderr) == (
+        2, '', f'landmark_nav: error: {message}\n')

@@ -145,6 +145,23 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
     return commands
 
 
+def check_replay_bag(bag: str) -> None:
+    """Refuse a bag the replay cannot play, before any node starts (one line, exit 2).
+
+    Raises:
+        BagError: No bag there, or it cannot be read.
+        ValueError: It has no ``/scan`` or no ``/odom``.
+
+    """
+    from landmark_nav.bag import BagReader
+    with BagReader(bag) as reader:
+        topics = reader.topics()
+    missing = [t for t in ('/scan', '/odom') if t not in topics]
+    if missing:
+        raise ValueError(f'{bag} has no {" and no ".join(missing)} topic (pipeline replay '
+                         'plays /scan and /odom)')
+
+
 def _scan_subscribers(settings: Sequence[str]) -> int:
     """Return the number of replay nodes subscribing ``/scan``.
 
@@ -187,6 +204,8 @@ def run(args: argparse.Namespace) -> int:
         for node, cmd in commands.items():
             print(f'{node}: {shlex.join(cmd)}')
         return 0
+    if args.name == 'replay':
+        check_replay_bag(args.bag)
     from honcho.printer import Printer
     from landmark_nav.tools.pipeline_drain import DrainingManager, scans_in_bag
     scans = scans_in_bag(args.bag) if args.name == 'replay' and not args.loop else None
