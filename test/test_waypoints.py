@@ -3,7 +3,7 @@
 import math
 
 from landmark_nav.sim.robot import step_pose
-from landmark_nav.tools.drive import route_in_start_frame, ROUTES
+from landmark_nav.tools.drive import result_line, route_in_start_frame, ROUTES
 from landmark_nav.waypoints import FollowerParams, WaypointFollower
 import numpy as np
 import pytest
@@ -60,3 +60,12 @@ def test_drive_says_what_it_waits_for_and_what_to_start():
     assert said == [f'drive: waiting up to 0.2 s for a pose on {topic}']
     assert str(err.value).startswith(f'no pose on {topic} within 0.2 s: start the node')
     assert 'landmark_nav pipeline slam' in str(err.value) and '--pose-topic' in str(err.value)
+
+
+def test_the_result_line_counts_laps_only_when_looping():
+    """A run without --loop printed '0 laps and 10/11 waypoints ...'."""
+    result = {'laps': 0, 'reached': 10, 'waypoints': 11, 'seconds': 120.24, 'poses': 1201}
+    assert result_line(result, loop=False) == (
+        'drive: 10/11 waypoints in 120.2 s, 1201 poses received')
+    assert result_line(dict(result, laps=2), loop=True) == (
+        'drive: 2 laps and 10/11 waypoints in 120.2 s, 1201 poses received')

@@ -185,7 +185,12 @@ def run(args: argparse.Namespace) -> int:
     result = drive(points, (x, y, math.radians(yaw_deg)), args.pose_topic, args.cmd_vel,
                    args.max_speed, args.max_turn_rate, args.duration, args.wait, args.record,
                    stop, log=lambda text: print(text, flush=True), loop=args.loop)
-    print(f'drive: {result["laps"]} laps and {result["reached"]}/{result["waypoints"]} '
-          f'waypoints in '
-          f'{result["seconds"]:.1f} s, {result["poses"]} poses received', flush=True)
+    print(result_line(result, args.loop), flush=True)
     return 0
+
+
+def result_line(result: dict, loop: bool) -> str:
+    """Return drive's last line: waypoints reached (and laps with ``--loop``), time, poses."""
+    laps = f'{result["laps"]} laps and ' if loop else ''
+    return (f'drive: {laps}{result["reached"]}/{result["waypoints"]} waypoints in '
+            f'{result["seconds"]:.1f} s, {result["poses"]} poses received')
