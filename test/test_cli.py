@@ -151,6 +151,13 @@ def test_help_texts_print_no_rest_markup():
     marked = [name for name, text in texts.items() if '``' in text]
     assert not marked, f'reST literals in the --help of {marked}'
     assert 'start a whole pipeline of nodes' in texts['pipeline']
+    # what each pipeline starts, and what the demo does (it said 'the main job')
+    assert ('slam = laser_driver + base_driver + corner_extractor + ekf_slam'
+            in ' '.join(texts['pipeline'].split()))
+    assert 'replay = bag_player + corner_extractor + ekf_slam' in ' '.join(
+        texts['pipeline'].split())
+    assert 'main job' not in texts['landmark_nav'] and 'EKF-SLAM (chapter profile) on a' in (
+        ' '.join(texts['landmark_nav'].split()))
 
 
 @pytest.mark.parametrize('command', ['evaluate', 'evaluate-features'])

@@ -527,7 +527,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_parameter_arguments(p, 'ekf_slam')
     p.set_defaults(func=_cmd_evaluate)
 
-    p = sub.add_parser('demo', help='the main job: summarise bags/office into out/')
+    p = sub.add_parser('demo', help='odometry drift and EKF-SLAM (chapter profile) on a '
+                       'simulator bag against its ground truth: figures, plots and a viewer '
+                       'file into out/')
     p.add_argument('--bag', default='bags/office', help='bag to evaluate (default bags/office)')
     p.add_argument('--out', default='out', help='output directory (default out)')
     p.set_defaults(func=_cmd_demo)

@@ -178,7 +178,8 @@ def add_parser(sub, parser_class) -> None:
     p = sub.add_parser('pipeline', help='start a pipeline of nodes (slam, sonar, landmarks, '
                        'replay) with the shipped parameters; Ctrl-C stops it',
                        description=__doc__.split('\n')[0])
-    p.add_argument('name', choices=sorted(PIPELINES), help='which pipeline')
+    p.add_argument('name', choices=sorted(PIPELINES), help='which pipeline: ' + '; '.join(
+        f'{name} = {" + ".join(nodes)}' for name, nodes in PIPELINES.items()))
     p.add_argument('--bag', help='bag to replay (pipeline replay)')
     p.add_argument('--rate', type=float, default=1.0, help='replay speed factor (default 1)')
     p.add_argument('--loop', action='store_true', help='replay the bag in a loop')
