@@ -10,7 +10,8 @@ import importlib
 import threading
 
 from landmark_nav.nodes.common import ParameterError
-from landmark_nav.tools.docs_params import _NO_DEVICE, _private_context, NODES
+from landmark_nav.tools.docs_params import (_NO_DEVICE, _private_context, _quiet_logger,
+                                            _recording, NODES)
 import pytest
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.node import Node
@@ -43,3 +44,20 @@ def test_an_undeclared_name_is_refused_before_the_node_starts_anything(name, mon
             if node is not None:
                 node.destroy_node()
     assert not started, f'{name} started {", ".join(started)} before refusing the name'
+
+
+@pytest.mark.parametrize('name', list(NODES))
+def test_every_declared_name_passes_the_check(name):
+    """The check runs after the last declaration: each name the node declares is accepted."""
+    module, cls, _ = NODES[name]
+    node_class = getattr(importlib.import_module(module), cls)
+    records = []
+    with _private_context() as context, _quiet_logger(name):
+        device = [Parameter(k, value=v) for k, v in _NO_DEVICE.get(name, {}).items()]
+        with _recording(records):
+            node_class(context=context, parameter_overrides=device).destroy_node()
+        given = {k: v for k, v, _ in records if v is not None}
+        given.update(_NO_DEVICE.get(name, {}))
+        overrides = [Parameter(k, value=v) for k, v in given.items()]
+        node_class(context=context, parameter_overrides=overrides).destroy_node()
+    assert len(given) > 5
