@@ -483,3 +483,23 @@ def test_the_bag_player_refuses_a_parameter(processes):
                                       'rate:=2.0'])
     assert code == 2, err
     assert "bag_player: error: bag_player has no parameter 'rate'" in err.splitlines(), err
+
+
+#: run_node with a node whose start-up is interrupted (rclpy shut down as SIGTERM does).
+STARTUP_SIGNAL_PROBE = """
+import sys
+import rclpy
+from rclpy.node import Node
+from landmark_nav.nodes.common import run_node
+def factory():
+    node = Node('startup_probe')
+    rclpy.try_shutdown()  # what SIGINT / SIGTERM during the constructor does
+    return node
+sys.exit(run_node(factory, [sys.argv[0]]))
+"""
+
+
+def test_a_signal_during_the_start_up_stops_the_node_without_a_traceback(processes):
+    """Ctrl-C while a node was constructing: exit 0, and no rclpy Executor.__del__ trace."""
+    code, err = run_owned(processes, [sys.executable, '-c', STARTUP_SIGNAL_PROBE])
+    assert (code, err) == (0, ''), err

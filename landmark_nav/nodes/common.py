@@ -271,7 +271,11 @@ def run_node(factory: Callable[[], Node], args: Optional[Sequence[str]] = None) 
         rclpy.init(args=args)
         node = factory()
         reject_undeclared(node)
-        rclpy.spin(node)
+        # SIGINT / SIGTERM during the start-up has shut rclpy down: nothing to spin (rclpy's
+        # executor, created on the shut-down context, would fail half-built and print a
+        # traceback when collected)
+        if rclpy.ok():
+            rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ParameterError as err:
