@@ -11,6 +11,8 @@ Run from the repository root (needs ``../shared/data/carmen`` or ``--data DIR``)
     python benchmarks/bench_feature_metrics.py quantised-lines [--data DIR] [--step 0.05]
         [--drho 0.05 ...] [--dalpha 2 ...] [--set NAME=VALUE ...] [--misses] [--gate-costs]
         [LOG ...]
+    python benchmarks/bench_feature_metrics.py line-covariance [--data DIR] [--bag BAG ...]
+        [LOG ...]
 
 A LOG is a log name in ``--data DIR`` (``aces`` -> ``DIR/aces-corrected.log.gz``; default
 the six Carmen logs) or a path to a Carmen log.
@@ -73,6 +75,18 @@ cost, the rest what the rounded data lose. ``--set NAME=VALUE`` (repeatable) cha
 the log and its copy (:func:`line_misses`). ``--gate-costs``: which of the settings cost
 it (:func:`gate_costs`): the log at its own settings with one gate at the copy's, and the
 copy at its settings with one gate at the log's.
+
+``line-covariance``: whether the (rho, alpha) covariance of the lines matches their spread
+(:func:`halves_d2`). Every line the extractor finds (node defaults, every scan as
+``metrics --direct`` reads the log; ``--bag``: a bag's ``/scan``, e.g. the simulator's
+bags/office as the control) is refitted on its even and on its odd beams with
+:func:`fit_line`: two estimates of one wall with independent noise, so
+``d2 = dl^T (C_even + C_odd)^-1 dl`` is chi-square with 2 dof (mean 2, 5 % above 5.99)
+when the covariance is right. Printed per log and line size (supporting beams), the mean
+d2 and the share above 5.99 with the covariance of three range noises: the node default
+``sigma_r``; it with the readings' rounding q (:func:`range_step`: ``sigma_r^2 + share q^2
+/ 12``, the finer step's on the rest); the estimate ``sigma_r_from_data`` gives
+(:func:`estimate_range_noise`, at least ``sigma_r``).
 """
 
 from dataclasses import replace
@@ -98,8 +112,8 @@ from landmark_nav.importers.writer import import_log
 from landmark_nav.laser.corners import CornerParams, detect_corners
 from landmark_nav.laser.extractor_configuration import (extractor_configuration,
                                                         ScanSegmenter)
-from landmark_nav.laser.lines import extract_lines, LineParams
-from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma
+from landmark_nav.laser.lines import extract_lines, fit_line, LineParams
+from landmark_nav.laser.range_noise import estimate_range_noise, gate_sigma, range_step
 from landmark_nav.laser.segmentation import segment_scan
 from landmark_nav.tools.evaluate_features import format_scan_metrics
 import numpy as np
@@ -558,6 +572,69 @@ def run_quantised_lines(args) -> int:
     return 0
 
 
+HALF_SIZES = ((8, 15), (15, 40), (40, None))  # supporting beams of a line, per row
+
+
+def halves_d2(scans: list, params: LineParams, sigmas: list) -> np.ndarray:
+    """Return per line (beams, d2 under each range noise of ``sigmas``) of the even / odd refits.
+
+    The beams of each line's extent within ``3 max(sigma_r, rmse)`` of it (8 at least) are
+    split into even and odd ones and refitted (:func:`fit_line`, ``params.sigma_phi``); a
+    line through the origin (normals 1 rad apart or more) is left out.
+    """
+    cfg = extractor_configuration('line_extractor')
+    seg = ScanSegmenter(cfg.incidence_deg, cfg.min_points, params.sigma_r)
+    rows = []
+    for sc in scans:
+        for line in extract_lines(seg.segment(sc.ranges, sc.angles, sc.valid,
+                                              sc.angle_increment), params):
+            idx = np.arange(line.first_index, line.last_index + 1)
+            idx = idx[sc.valid[idx]]
+            r, a = sc.ranges[idx], sc.angles[idx]
+            pts = np.column_stack([r * np.cos(a), r * np.sin(a)])
+            near = np.abs(pts @ line.normal - line.rho) <= 3 * max(params.sigma_r, line.rmse)
+            if near.sum() < 8:
+                continue
+            r, a, pts = r[near], a[near], pts[near]
+            halves = [np.arange(len(r)) % 2 == k for k in (0, 1)]
+            row = [len(r)]
+            for sigma in sigmas:
+                (r0, a0, c0, _), (r1, a1, c1, _) = [
+                    fit_line(pts[h], r[h], a[h], sigma, params.sigma_phi) for h in halves]
+                dl = np.array([r0 - r1, wrap_angle(a0 - a1)])
+                row.append(float(dl @ np.linalg.solve(c0 + c1, dl)))
+            if abs(wrap_angle(a0 - a1)) < 1.0:
+                rows.append(row)
+    return np.array(rows, dtype=float).reshape(-1, 1 + len(sigmas))
+
+
+def run_line_covariance(args) -> int:
+    """Print the even / odd refit d2 of each log's lines per size and range noise."""
+    items = [(Path(b).name, bag_metric_scans(b, sensor_facts(b)[0])[0]) for b in args.bag]
+    items += list(carmen_logs(args.data, args.logs if not args.bag or args.logs != list(LOGS)
+                              else []))
+    base = extractor_configuration('line_extractor').params
+    print('| log | rounding q (share) | sigma_r: default / with q^2/12 / estimated [cm] | '
+          'beams | lines | mean d2 (share > 5.99): default | with q^2/12 | estimated |\n'
+          '| --- | --- | --- | --- | --- | --- | --- | --- |')
+    for name, scans in items:
+        q, share, fine = range_step(np.concatenate([s.ranges[s.valid] for s in scans]))
+        sigmas = [base.sigma_r, math.sqrt(base.sigma_r ** 2 + share * q ** 2 / 12
+                                          + (1 - share) * fine ** 2 / 12),
+                  estimate_range_noise(((s.ranges, s.angles, s.valid) for s in scans),
+                                       stated=base.sigma_r).sigma_r]
+        d2 = halves_d2(scans, base, sigmas)
+        for lo, hi in HALF_SIZES:
+            sel = d2[(d2[:, 0] >= lo) & (d2[:, 0] < (hi or np.inf))]
+            cells = ' | '.join(f'{np.mean(sel[:, k]):.2f} ({np.mean(sel[:, k] > 5.99):.2f})'
+                               if len(sel) else '–' for k in (1, 2, 3))
+            print(f'| {name} | {100 * q:g} cm ({share:.2f}) | '
+                  + ' / '.join(f'{100 * v:.2f}' for v in sigmas)
+                  + f' | {lo}{f"–{hi - 1}" if hi else "+"} | {len(sel)} | {cells} |',
+                  flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     """Parse the subcommand and run it."""
     ap, sub = subcommand_parser(__doc__)
@@ -611,6 +688,14 @@ def main(argv=None) -> int:
                         '(Corner.occluded, Corner.silhouette; measured, not adopted); '
                         'ignored (default, as Corner.structural): arm length and beam steps')
     p.set_defaults(run=run_structural_rule)
+    p = sub.add_parser('line-covariance',
+                       help='line (rho, alpha) covariance against the spread of even / odd '
+                            'refits, with and without the rounding of the ranges')
+    add_logs_argument(p, 'carmen', LOGS)
+    p.add_argument('--bag', action='append', default=[],
+                   help='a bag instead (repeatable; with no LOG given, the bags only), e.g. '
+                        'bags/office as the control')
+    p.set_defaults(run=run_line_covariance)
     return run_subcommand(ap, argv)
 
 

@@ -56,7 +56,9 @@ TINY_RUNS = {
           '--gate-costs'],
          r'\| tiny \| [\d.]+ \| [\d.]+ \| 0.05 \| 2 \| [\d.]+ \| [\d.]+ \| ([\d.]+|nan) \| '
          r'([\d.]+|nan) \| \d+ \| \d+ \| (.*\n)+'
-         r'\| tiny \| 0.05 \| 2 \| copy( \| ([\d.]+|nan)){6} \|')],
+         r'\| tiny \| 0.05 \| 2 \| copy( \| ([\d.]+|nan)){6} \|'),
+        (['line-covariance', '--data', '{carmen}', 'tiny'],
+         r'\| tiny \| [\d.]+ cm \([\d.]+\) \| [\d.]+ / [\d.]+ / [\d.]+ \| 8–14 \| \d+ \| ')],
     'bench_slam.py': [
         (['step-time', '--landmarks', '10', '--steps', '3'], r'\n\s+10\s+23\s+[\d.]+'),
         (['step-time', '--bag', '{small_bag}', '--steps', '8'],
