@@ -88,9 +88,19 @@ class RoadModel:
 
     def predict(self, features: np.ndarray) -> np.ndarray:
         """Road probability of (..., F) features."""
-        x = (features - self.mean) / self.scale
-        hidden = np.tanh(x @ self.w1 + self.b1)
-        z = hidden @ self.w2 + self.b2
+        f = np.asarray(features)
+        if f.ndim >= 3 and f.flags.c_contiguous:
+            # whole image rows against the mean and scale repeated along them (numpy's
+            # broadcast of an (F,) vector loops over F values at a time)
+            n = f.shape[-2]
+            x = f.reshape(-1, n * f.shape[-1]) - np.tile(self.mean, n)
+            x /= np.tile(self.scale, n)
+            x = x.reshape(f.shape)
+        else:
+            x = (f - self.mean) / self.scale
+        hidden = x @ self.w1
+        hidden += self.b1
+        z = np.tanh(hidden, out=hidden) @ self.w2 + self.b2
         return 1.0 / (1.0 + np.exp(-np.clip(z, -30.0, 30.0)))
 
 
