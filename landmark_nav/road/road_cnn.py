@@ -73,8 +73,18 @@ def conv2d(x: np.ndarray, w: np.ndarray, b: np.ndarray, stride: int = 1,
     win = win[:(h - 1) * stride + 1:stride, :(w_ - 1) * stride * c + 1:stride * c]
     cols = win.reshape(h, w_, span, span, c)[:, :, ::dilation, ::dilation]
     out = cols.reshape(h * w_, -1) @ w.transpose(2, 3, 1, 0).reshape(-1, o)
-    out += b
-    return out.reshape(h, w_, o)
+    return add_per_channel(out.reshape(h, w_, o), b)
+
+
+def add_per_channel(y: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Add a (C,) vector to a C-contiguous (..., W, C) array in place; return the array.
+
+    Whole rows of W * C values against ``v`` repeated W times: the same sums as ``y += v``,
+    whose broadcast loops over C values at a time.
+    """
+    rows = y.reshape(-1, y.shape[-2] * y.shape[-1])
+    rows += np.tile(v, y.shape[-2])
+    return y
 
 
 def upsample2(x: np.ndarray) -> np.ndarray:
@@ -175,8 +185,7 @@ class RoadCNN:
             coarse = w.shape[1] - skip.shape[2]
             y = upsample2(y @ w[:, :coarse].T)
             y += skip @ w[:, coarse:].T
-            y += p[f'{name}.b']
-            np.maximum(y, 0.0, out=y)
+            np.maximum(add_per_channel(y, p[f'{name}.b']), 0.0, out=y)
         return layer('out', y, relu=False)[..., 0]
 
     def predict(self, features: np.ndarray) -> np.ndarray:
