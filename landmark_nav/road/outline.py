@@ -205,13 +205,17 @@ def _fill_marking_holes(mask: np.ndarray, intensity: np.ndarray, road_level: flo
     n, labels = cv2.connectedComponents((~mask).astype(np.uint8), connectivity=4)
     if n <= 1:
         return mask
-    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    area = np.bincount(labels.ravel(), minlength=n)
-    level = np.bincount(labels.ravel(), weights=intensity.ravel(), minlength=n) / \
+    hole = np.ones(n, bool)
+    hole[0] = False                       # label 0 is the region itself
+    for edge in (labels[0], labels[-1], labels[:, 0], labels[:, -1]):
+        hole[edge] = False
+    # areas and intensity sums over the holes' pixels only (in raster order, as over all)
+    pixels = np.flatnonzero(hole[labels])
+    lab = labels.ravel()[pixels]
+    area = np.bincount(lab, minlength=n)
+    level = np.bincount(lab, weights=intensity.ravel()[pixels], minlength=n) / \
         np.maximum(area, 1)
-    fill = (level > road_level + contrast) | (area <= small)
-    fill[0] = False                       # label 0 is the region itself
-    fill[border] = False
+    fill = hole & ((level > road_level + contrast) | (area <= small))
     return mask | fill[labels]
 
 
@@ -289,9 +293,11 @@ def _work_size(prob: np.ndarray) -> np.ndarray:
 
 def _seed_region(road: np.ndarray, seed: np.ndarray) -> np.ndarray:
     """Return the connected (4-neighbour) parts of ``road`` that touch the seed."""
-    _, labels = cv2.connectedComponents(road.astype(np.uint8), connectivity=4)
-    keep = np.unique(labels[seed])
-    return np.isin(labels, keep[keep > 0])
+    n, labels = cv2.connectedComponents(road.astype(np.uint8), connectivity=4)
+    keep = np.zeros(n, bool)
+    keep[labels[seed]] = True
+    keep[0] = False
+    return keep[labels]
 
 
 def _chapter_criterion(small: np.ndarray, seed_s: np.ndarray,

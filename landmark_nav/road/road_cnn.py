@@ -24,9 +24,15 @@ layer      operation                                   output       receptive fi
 two layers see each pixel's own features next to the context, so borders stay at the
 feature resolution. About 37 000 weights, trained with PyTorch by
 :mod:`landmark_nav.road.road_cnn_training` (an optional extra) and shipped as float32 numpy
-arrays; the forward pass here needs numpy only: every 3 x 3 convolution is an im2col (the
-nine shifted copies side by side) and one matrix product. Zero padding and bilinear upsampling with
-half-pixel centres (PyTorch's ``align_corners=False``) as in training.
+arrays; the forward pass here needs numpy only (and OpenCV's bilinear resize): every 3 x 3
+convolution is an im2col and one matrix product, the im2col a single copy of sliding windows
+over the rows (a row's taps are k * C contiguous values at dilation 1); a 1 x 1 layer after an
+upsampling mixes its coarse input before upsampling it (both are linear) and adds its skip
+input's share after, without concatenating. Zero padding and bilinear upsampling with
+half-pixel centres (PyTorch's ``align_corners=False``) as in training. The CNN criterion
+(features, perceptron, this network and the outline) takes 1.0-1.3 x the OpenCV reference
+of ``python benchmarks/bench_road.py --scans 60 --frames 20`` per 480 x 360 frame, the
+network itself 0.4-0.7 x (docs/road_following.md, Speed).
 """
 
 from dataclasses import dataclass
@@ -35,8 +41,8 @@ from pathlib import Path
 from typing import Dict, Sequence, Union
 
 import cv2
-from landmark_nav.road.road_probability import (default_model, FEATURE_NAMES, read_weights,
-                                                RoadModel, write_weights)
+from landmark_nav.road.road_probability import (add_per_channel, default_model, FEATURE_NAMES,
+                                                read_weights, RoadModel, write_weights)
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -74,17 +80,6 @@ def conv2d(x: np.ndarray, w: np.ndarray, b: np.ndarray, stride: int = 1,
     cols = win.reshape(h, w_, span, span, c)[:, :, ::dilation, ::dilation]
     out = cols.reshape(h * w_, -1) @ w.transpose(2, 3, 1, 0).reshape(-1, o)
     return add_per_channel(out.reshape(h, w_, o), b)
-
-
-def add_per_channel(y: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Add a (C,) vector to a C-contiguous (..., W, C) array in place; return the array.
-
-    Whole rows of W * C values against ``v`` repeated W times: the same sums as ``y += v``,
-    whose broadcast loops over C values at a time.
-    """
-    rows = y.reshape(-1, y.shape[-2] * y.shape[-1])
-    rows += np.tile(v, y.shape[-2])
-    return y
 
 
 def upsample2(x: np.ndarray) -> np.ndarray:

@@ -98,10 +98,23 @@ class RoadModel:
             x = x.reshape(f.shape)
         else:
             x = (f - self.mean) / self.scale
-        hidden = x @ self.w1
-        hidden += self.b1
+        hidden = add_per_channel(x @ self.w1, self.b1)
         z = np.tanh(hidden, out=hidden) @ self.w2 + self.b2
         return 1.0 / (1.0 + np.exp(-np.clip(z, -30.0, 30.0)))
+
+
+def add_per_channel(y: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Add a (C,) vector to a C-contiguous (..., W, C) array in place; return the array.
+
+    Whole rows of W * C values against ``v`` repeated W times: the same sums as ``y += v``,
+    whose broadcast loops over C values at a time.
+    """
+    if y.ndim < 2:
+        y += v
+        return y
+    rows = y.reshape(-1, y.shape[-2] * y.shape[-1])
+    rows += np.tile(v, y.shape[-2])
+    return y
 
 
 def write_weights(path: Union[str, Path], arrays: dict) -> Path:
