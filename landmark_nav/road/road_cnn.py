@@ -32,7 +32,7 @@ input's share after, without concatenating. Zero padding and bilinear upsampling
 half-pixel centres (PyTorch's ``align_corners=False``) as in training. The CNN criterion
 (features, perceptron, this network and the outline) takes 1.0-1.3 x the OpenCV reference
 of ``python benchmarks/bench_road.py --scans 60 --frames 20`` per 480 x 360 frame, the
-network itself 0.4-0.7 x (docs/road_following.md, Speed).
+network itself 0.4-0.9 x (docs/road_following.md, Speed).
 """
 
 from dataclasses import dataclass
