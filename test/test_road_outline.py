@@ -8,7 +8,8 @@ from landmark_nav.evaluation.road_outline import (CLASS_NAMES, evaluate_folder,
 from landmark_nav.road.outline import (band_seed, chromaticity, outline_confidence,
                                        OutlineParams, polyline_seed, road_outline, row_fill,
                                        SeedError)
-from landmark_nav.road.road_probability import FEATURE_NAMES, pixel_features, RoadModel
+from landmark_nav.road.road_probability import (default_model, FEATURE_NAMES, FEATURE_SIZE,
+                                                pixel_features, RoadModel)
 from landmark_nav.road.road_training import fit_road_model
 from landmark_nav.testing import shared_data
 import numpy as np
@@ -180,6 +181,30 @@ def test_road_model_fit_save_load(tmp_path):
         fit_road_model(x, y + 0.5)
     with pytest.raises(ValueError, match='non-empty seed'):
         pixel_features(np.zeros((120, 160, 3), np.uint8), np.zeros((120, 160), bool))
+
+
+def test_colour_planes_and_perceptron_equal_the_numpy_reductions_bit_for_bit():
+    """Colour planes and row-wise standardisation give the floats of the formulas as written.
+
+    The features' intensity and saturation, the outline's grey level (numpy's reductions
+    over the colour axis) and the perceptron's probability.
+    """
+    from landmark_nav.road.outline import _grey
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 256, (360, 480, 3), dtype=np.uint8)
+    seed = band_seed(rgb.shape, (0.86, 0.92), (0.38, 0.62))
+    feats = pixel_features(rgb, seed)
+    f = cv2.resize(rgb, FEATURE_SIZE, interpolation=cv2.INTER_AREA).astype(np.float32) + 1.0
+    log_i = np.log(f.mean(axis=2))
+    seed_s = cv2.resize(seed.astype(np.float32), FEATURE_SIZE, interpolation=cv2.INTER_AREA) > 0
+    np.testing.assert_array_equal(feats[..., FEATURE_NAMES.index('d_log_intensity')],
+                                  log_i - float(np.median(log_i[seed_s])))
+    np.testing.assert_array_equal(feats[..., FEATURE_NAMES.index('saturation')],
+                                  (f.max(axis=2) - f.min(axis=2)) / f.max(axis=2))
+    np.testing.assert_array_equal(_grey(rgb), rgb.astype(np.float32).mean(axis=2))
+    m = default_model()
+    z = np.tanh((feats - m.mean) / m.scale @ m.w1 + m.b1) @ m.w2 + m.b2
+    np.testing.assert_array_equal(m.predict(feats), 1.0 / (1.0 + np.exp(-np.clip(z, -30, 30))))
 
 
 def test_summary_reports_frames_whose_seed_is_not_road_apart():

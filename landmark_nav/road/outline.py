@@ -169,6 +169,16 @@ def chromaticity(rgb: np.ndarray, kind: str = 'rg',
     return np.dstack([inv, g]).astype(np.float32)
 
 
+def _grey(rgb: np.ndarray) -> np.ndarray:
+    """Mean of the three colour planes of a uint8 image, float32.
+
+    Bit for bit ``rgb.astype(np.float32).mean(axis=2)`` (a sum of three integer grey levels
+    is exact in any order), without numpy's slow reduction over a last axis of 3.
+    """
+    r, g, b = cv2.split(rgb)
+    return (r.astype(np.float32) + g + b) / 3
+
+
 def _gradient_squared(intensity: np.ndarray) -> np.ndarray:
     """|grad I|^2 with a 3 x 3 Sobel in the upper half and 5 x 5 in the lower (eq. 28)."""
     out = np.empty_like(intensity)
@@ -195,13 +205,17 @@ def _fill_marking_holes(mask: np.ndarray, intensity: np.ndarray, road_level: flo
     n, labels = cv2.connectedComponents((~mask).astype(np.uint8), connectivity=4)
     if n <= 1:
         return mask
-    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    area = np.bincount(labels.ravel(), minlength=n)
-    level = np.bincount(labels.ravel(), weights=intensity.ravel(), minlength=n) / \
+    hole = np.ones(n, bool)
+    hole[0] = False                       # label 0 is the region itself
+    for edge in (labels[0], labels[-1], labels[:, 0], labels[:, -1]):
+        hole[edge] = False
+    # areas and intensity sums over the holes' pixels only (in raster order, as over all)
+    pixels = np.flatnonzero(hole[labels])
+    lab = labels.ravel()[pixels]
+    area = np.bincount(lab, minlength=n)
+    level = np.bincount(lab, weights=intensity.ravel()[pixels], minlength=n) / \
         np.maximum(area, 1)
-    fill = (level > road_level + contrast) | (area <= small)
-    fill[0] = False                       # label 0 is the region itself
-    fill[border] = False
+    fill = hole & ((level > road_level + contrast) | (area <= small))
     return mask | fill[labels]
 
 
@@ -254,7 +268,7 @@ def road_outline(rgb: np.ndarray, seed: np.ndarray,
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.close_px, params.close_px))
         region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, k) > 0
     if params.fill_holes:
-        grey = small.astype(np.float32).mean(axis=2)
+        grey = _grey(small)
         region = _fill_marking_holes(region, grey, float(grey[seed_s].mean()),
                                      params.marking_contrast, params.small_hole)
     mask = cv2.resize(region.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
@@ -279,9 +293,11 @@ def _work_size(prob: np.ndarray) -> np.ndarray:
 
 def _seed_region(road: np.ndarray, seed: np.ndarray) -> np.ndarray:
     """Return the connected (4-neighbour) parts of ``road`` that touch the seed."""
-    _, labels = cv2.connectedComponents(road.astype(np.uint8), connectivity=4)
-    keep = np.unique(labels[seed])
-    return np.isin(labels, keep[keep > 0])
+    n, labels = cv2.connectedComponents(road.astype(np.uint8), connectivity=4)
+    keep = np.zeros(n, bool)
+    keep[labels[seed]] = True
+    keep[0] = False
+    return keep[labels]
 
 
 def _chapter_criterion(small: np.ndarray, seed_s: np.ndarray,
@@ -292,7 +308,7 @@ def _chapter_criterion(small: np.ndarray, seed_s: np.ndarray,
     mean = cs.mean(axis=0)
     q = np.cov(cs.T) + params.regularization * np.eye(2)
     d = c - mean.astype(np.float32)
-    intensity = small.astype(np.float32).mean(axis=2)
+    intensity = _grey(small)
     # Q plus the pixel's own chromaticity noise: grey-level noise divided by the intensity
     # (dark, e.g. shadowed, pixels have noisier chromaticity), isotropic.
     extra = (params.chroma_noise / (intensity + 1.0)) ** 2

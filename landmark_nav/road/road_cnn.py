@@ -24,9 +24,15 @@ layer      operation                                   output       receptive fi
 two layers see each pixel's own features next to the context, so borders stay at the
 feature resolution. About 37 000 weights, trained with PyTorch by
 :mod:`landmark_nav.road.road_cnn_training` (an optional extra) and shipped as float32 numpy
-arrays; the forward pass here needs numpy only: every 3 x 3 convolution is an im2col (the
-nine shifted copies side by side) and one matrix product. Zero padding and bilinear upsampling with
-half-pixel centres (PyTorch's ``align_corners=False``) as in training.
+arrays; the forward pass here needs numpy only (and OpenCV's bilinear resize): every 3 x 3
+convolution is an im2col and one matrix product, the im2col a single copy of sliding windows
+over the rows (a row's taps are k * C contiguous values at dilation 1); a 1 x 1 layer after an
+upsampling mixes its coarse input before upsampling it (both are linear) and adds its skip
+input's share after, without concatenating. Zero padding and bilinear upsampling with
+half-pixel centres (PyTorch's ``align_corners=False``) as in training. The CNN criterion
+(features, perceptron, this network and the outline) takes 1.0-1.3 x the OpenCV reference
+of ``python benchmarks/bench_road.py --scans 60 --frames 20`` per 480 x 360 frame, the
+network itself 0.4-0.9 x (docs/road_following.md, Speed).
 """
 
 from dataclasses import dataclass
@@ -35,9 +41,10 @@ from pathlib import Path
 from typing import Dict, Sequence, Union
 
 import cv2
-from landmark_nav.road.road_probability import (default_model, FEATURE_NAMES, read_weights,
-                                                RoadModel, write_weights)
+from landmark_nav.road.road_probability import (add_per_channel, default_model, FEATURE_NAMES,
+                                                read_weights, RoadModel, write_weights)
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 #: The CNN shipped with the package (trained on all CamVid training drives).
 DEFAULT_CNN = Path(__file__).with_name('road_cnn.npz')
@@ -49,27 +56,30 @@ LAYERS = {'e1': (3, 2, 1), 'e2': (3, 2, 1), 'c1': (3, 1, 2), 'c2': (3, 1, 4),
 
 
 def conv2d(x: np.ndarray, w: np.ndarray, b: np.ndarray, stride: int = 1,
-           dilation: int = 1) -> np.ndarray:
+           dilation: int = 1, padded: bool = False) -> np.ndarray:
     """Zero-padded ('same' for stride 1) 2-D convolution of (H, W, C) by (O, C, k, k) weights.
 
     Cross-correlation as in PyTorch's ``Conv2d`` with ``padding = dilation * (k - 1) / 2``;
-    returns (ceil(H / stride), ceil(W / stride), O) float32.
+    returns (ceil(H / stride), ceil(W / stride), O) float32. ``padded``: ``x`` already has
+    that zero border (H and W include it).
     """
-    k = w.shape[2]
+    o, c, k, _ = w.shape
     if k == 1 and stride == 1:
         return x @ w[:, :, 0, 0].T + b
     pad = dilation * (k // 2)
-    if pad:
+    if pad and not padded:
         x = np.pad(x, ((pad, pad), (pad, pad), (0, 0)))
-    h = (x.shape[0] - dilation * (k - 1) - 1) // stride + 1
-    w_ = (x.shape[1] - dilation * (k - 1) - 1) // stride + 1
-    # im2col: the k x k shifted copies side by side, (H', W', k * k * C) in (ky, kx, c)
-    # order; each copies runs of C contiguous values
-    cols = np.concatenate([x[dy * dilation:dy * dilation + stride * (h - 1) + 1:stride,
-                             dx * dilation:dx * dilation + stride * (w_ - 1) + 1:stride]
-                           for dy in range(k) for dx in range(k)], axis=2)
-    out = cols.reshape(h * w_, -1) @ w.transpose(2, 3, 1, 0).reshape(-1, w.shape[0]) + b
-    return out.reshape(h, w_, w.shape[0])
+    span = dilation * (k - 1) + 1
+    h = (x.shape[0] - span) // stride + 1
+    w_ = (x.shape[1] - span) // stride + 1
+    # im2col: (H', W', k * k * C) in (ky, kx, c) order, from windows of the rows seen as
+    # (H, W * C); one copy, in which numpy moves k * C contiguous values at a time when the
+    # taps of a row touch (dilation 1) and C values otherwise
+    win = sliding_window_view(x.reshape(x.shape[0], -1), (span, span * c))
+    win = win[:(h - 1) * stride + 1:stride, :(w_ - 1) * stride * c + 1:stride * c]
+    cols = win.reshape(h, w_, span, span, c)[:, :, ::dilation, ::dilation]
+    out = cols.reshape(h * w_, -1) @ w.transpose(2, 3, 1, 0).reshape(-1, o)
+    return add_per_channel(out.reshape(h, w_, o), b)
 
 
 def upsample2(x: np.ndarray) -> np.ndarray:
@@ -144,14 +154,22 @@ class RoadCNN:
             raise ValueError(f'road CNN needs (H, W, F) features with H, W multiples of 4; '
                              f'got {features.shape}')
         p = self.weights
-        x = np.subtract(features, self.mean, dtype=np.float32)
-        x *= 1.0 / self.scale
+        f = features.shape[2]
+        # standardised features inside a zero border of one pixel (e1's padding); whole rows
+        # against the mean and scale repeated along them (numpy's broadcast of an (F,)
+        # vector loops over F values at a time)
+        xp = np.zeros((h + 2, w + 2, f), np.float32)
+        rows = xp[1:-1].reshape(h, -1)[:, f:-f]
+        np.subtract(features.reshape(h, -1), np.tile(self.mean, w), out=rows,
+                    dtype=np.float32)
+        rows *= np.tile(1.0 / self.scale, w)
+        x = xp[1:-1, 1:-1]
 
-        def layer(name: str, a: np.ndarray, relu: bool = True) -> np.ndarray:
+        def layer(name: str, a: np.ndarray, relu: bool = True, padded: bool = False):
             _, stride, dilation = LAYERS[name]
-            y = conv2d(a, p[f'{name}.w'], p[f'{name}.b'], stride, dilation)
-            return np.maximum(y, 0.0) if relu else y
-        e1 = layer('e1', x)
+            y = conv2d(a, p[f'{name}.w'], p[f'{name}.b'], stride, dilation, padded)
+            return np.maximum(y, 0.0, out=y) if relu else y
+        e1 = layer('e1', xp, padded=True)
         y = layer('e2', e1)
         for name in ('c1', 'c2', 'c3'):
             y = layer(name, y)
@@ -160,8 +178,9 @@ class RoadCNN:
         for name, skip in (('d1', e1), ('h', x)):
             w = p[f'{name}.w'][:, :, 0, 0]
             coarse = w.shape[1] - skip.shape[2]
-            y = np.maximum(upsample2(y @ w[:, :coarse].T) + skip @ w[:, coarse:].T +
-                           p[f'{name}.b'], 0.0)
+            y = upsample2(y @ w[:, :coarse].T)
+            y += skip @ w[:, coarse:].T
+            np.maximum(add_per_channel(y, p[f'{name}.b']), 0.0, out=y)
         return layer('out', y, relu=False)[..., 0]
 
     def predict(self, features: np.ndarray) -> np.ndarray:
