@@ -126,3 +126,13 @@ def test_zoom_crop_resamples_a_part_of_image_and_label_alike():
         assert np.sum(differ.any(axis=0)) <= 1
         shares.add(float(np.mean(lab == 3)))
     assert len(shares) > 2                             # crops of other places and sizes
+
+
+def test_train_road_outline_takes_cnn_steps_as_the_benchmark_does():
+    """``--cnn-steps`` as in ``bench_road.py --cross-drive``; the old ``--steps`` still read."""
+    from landmark_nav.tools.cli import build_parser
+    parser = build_parser()
+    base = ['train-road-outline', '--kind', 'cnn', '--data', 'd', '--out', 'o.npz']
+    assert parser.parse_args(base).cnn_steps is None                # CNN_STEPS
+    assert parser.parse_args(base + ['--cnn-steps', '7']).cnn_steps == 7
+    assert parser.parse_args(base + ['--steps', '9']).cnn_steps == 9

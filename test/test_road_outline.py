@@ -1,7 +1,7 @@
 """Vision road outline (road.outline, eqs. 25-28) on synthetic images and real street frames."""
 
 import cv2
-from landmark_nav.evaluation.road_cross_drive import row_fill_limits
+from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out, row_fill_limits
 from landmark_nav.evaluation.road_outline import (CLASS_NAMES, evaluate_folder,
                                                   format_summary, FrameScore, score_frame,
                                                   summarize)
@@ -163,6 +163,18 @@ def test_row_fill_limits_come_from_the_other_drives():
     limits = row_fill_limits(results, 0.0)
     assert limits == {'a': 0.7, 'b': 0.5, 'c': 0.5, 'all': 0.5}
     assert row_fill_limits(results, 1.0)['c'] == 1.0
+    alone = row_fill_limits({'a': results['a']}, 0.1)      # one fold: no other drive
+    assert np.isnan(alone['a']) and alone['all'] == pytest.approx(0.51)
+
+
+def test_leave_one_drive_out_refuses_an_unknown_held_out_drive(tmp_path):
+    for sub in ('images', 'labels_camvid11'):
+        (tmp_path / sub).mkdir()
+        for name in ('0001TP_1', '0006R0_1'):
+            (tmp_path / sub / f'{name}.png').touch()
+    with pytest.raises(ValueError, match=r"held-out drive\(s\) \['0016E5'\] not in the "
+                       r"folders \(drives: \['0001TP', '0006R0'\]\)"):
+        leave_one_drive_out([tmp_path], OutlineParams(method='chapter'), held_out=['0016E5'])
 
 
 def test_road_model_fit_save_load(tmp_path):
