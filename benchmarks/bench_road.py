@@ -189,7 +189,7 @@ def cross_drive(folders, json_path=None, methods=('learned', 'chapter'),
                   f'{np.median(kept):7.3f} {int(np.sum(kept < FAIL_IOU)):4d} '
                   f'({100 * np.mean(kept < FAIL_IOU):2.0f}%) '
                   f'{bad["frames"]:13d} {" ".join(bad.get("names", []))}')
-        if name != 'chapter':
+        if name != 'chapter' and len(results[name]) > 1:     # not of one fold alone
             print(f'row-fill limit over all drives (min_row_fill): {limits["all"]:.3f}')
         for drive, res in results[name].items():
             wrong = np.sum([f.wrong_pixels for f in res['frames'] if f.seed_is_road], axis=0)
