@@ -83,8 +83,8 @@ def add_parsers(sub, parser_class) -> None:
                    help='e.g. ../shared/data/camvid_train')
     p.add_argument('--out', required=True, help='model file to write (.npz)')
     p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    p.add_argument('--kind', choices=['mlp', 'cnn'], default='mlp', help="'mlp': the "
-                   "perceptron of outline_method 'learned' (default); 'cnn': the "
+    p.add_argument('--kind', choices=['mlp', 'cnn'], default='mlp', help="'mlp' (default): the "
+                   "perceptron of outline_method 'learned'; 'cnn': the "
                    "convolutional network of outline_method 'cnn' (needs torch)")
     p.add_argument('--cnn-steps', type=int, default=None, metavar='N',
                    help='with --kind cnn: training mini-batches (default: CNN_STEPS of '
