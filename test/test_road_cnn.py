@@ -186,3 +186,13 @@ def test_forward_pass_equals_the_network_as_drawn(shipped):
         feats = (cnn.mean + cnn.scale * rng.normal(size=(h, w, F))).astype(np.float32)
         np.testing.assert_allclose(cnn.logits(feats), _logits_as_drawn(cnn, feats),
                                    rtol=1e-5, atol=1e-5)
+
+
+def test_train_road_outline_takes_cnn_steps_as_the_benchmark_does():
+    """``--cnn-steps`` as in ``bench_road.py --cross-drive``; the old ``--steps`` still read."""
+    from landmark_nav.tools.cli import build_parser
+    parser = build_parser()
+    base = ['train-road-outline', '--kind', 'cnn', '--data', 'd', '--out', 'o.npz']
+    assert parser.parse_args(base).cnn_steps is None                # CNN_STEPS
+    assert parser.parse_args(base + ['--cnn-steps', '7']).cnn_steps == 7
+    assert parser.parse_args(base + ['--steps', '9']).cnn_steps == 9

@@ -1,7 +1,7 @@
 """Vision road outline (road.outline, eqs. 25-28) on synthetic images and real street frames."""
 
 import cv2
-from landmark_nav.evaluation.road_cross_drive import row_fill_limits
+from landmark_nav.evaluation.road_cross_drive import leave_one_drive_out, row_fill_limits
 from landmark_nav.evaluation.road_outline import (CLASS_NAMES, evaluate_folder,
                                                   format_summary, FrameScore, score_frame,
                                                   summarize)
@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 CHAPTER = OutlineParams(method='chapter')
+LEARNED = OutlineParams(method='learned', min_row_fill=0.912)   # the perceptron's limit
 
 
 def _scene(rng, marking=False, obstacle=False):
@@ -94,23 +95,27 @@ def test_bad_input():
 def test_learned_outline_of_a_perspective_street():
     """The packaged model on a synthetic street: figures measured IoU 0.980, confidence 0.88."""
     img, truth = _street(np.random.default_rng(0))
-    out = road_outline(img, band_seed(img.shape, (0.86, 0.92), (0.4, 0.6)))
+    out = road_outline(img, band_seed(img.shape, (0.86, 0.92), (0.4, 0.6)), LEARNED)
     assert out.p_c is None and out.probability.shape == (120, 160)
     assert np.sum(out.mask & truth) / np.sum(out.mask | truth) > 0.97
     assert out.reliable and out.confidence > 0.85
-    assert out.row_fill > OutlineParams().min_row_fill      # one interval per row
+    assert out.row_fill > LEARNED.min_row_fill              # one interval per row
     # a seed in the sky is less road-like: lower confidence (measured 0.56)
-    sky = road_outline(img, band_seed(img.shape, (0.1, 0.16), (0.4, 0.6)))
+    sky = road_outline(img, band_seed(img.shape, (0.1, 0.16), (0.4, 0.6)), LEARNED)
     assert sky.confidence < out.confidence - 0.25
 
 
 def test_cnn_outline_of_a_perspective_street():
-    """The packaged CNN criterion (no torch needed): measured IoU 0.952, confidence 0.80."""
+    """The packaged CNN criterion (no torch needed): measured IoU 0.942, confidence 0.80.
+
+    The network of 2000 mini-batches; the missed pixels are the far tip of the road below
+    the horizon (the network of 1200 mini-batches: IoU 0.952, the same tip shorter).
+    """
     img, truth = _street(np.random.default_rng(0))
     cnn = OutlineParams(method='cnn')
     out = road_outline(img, band_seed(img.shape, (0.86, 0.92), (0.4, 0.6)), cnn)
     assert out.probability.shape == (120, 160)
-    assert np.sum(out.mask & truth) / np.sum(out.mask | truth) > 0.95
+    assert np.sum(out.mask & truth) / np.sum(out.mask | truth) > 0.93
     assert out.reliable and out.confidence > 0.75
     # a seed in the sky: the network sees it is no ground (measured confidence 0.03)
     sky = road_outline(img, band_seed(img.shape, (0.1, 0.16), (0.4, 0.6)), cnn)
@@ -148,7 +153,7 @@ def test_score_counts_pixels_wrongly_taken_as_road_per_class():
     img, truth = _street(np.random.default_rng(0))
     label = np.where(truth, 3, 1).astype(np.uint8)       # road, buildings
     label[150:170, 140:180] = 8                          # a 'car' the outline takes as road
-    score, pred = score_frame(img, label, OutlineParams())
+    score, pred = score_frame(img, label, LEARNED)
     wrong = np.array(score.wrong_pixels)
     assert len(wrong) == len(CLASS_NAMES) and CLASS_NAMES[8] == 'car'
     assert wrong[8] == np.sum(pred[150:170, 140:180]) > 0.9 * 20 * 40
@@ -164,6 +169,18 @@ def test_row_fill_limits_come_from_the_other_drives():
     limits = row_fill_limits(results, 0.0)
     assert limits == {'a': 0.7, 'b': 0.5, 'c': 0.5, 'all': 0.5}
     assert row_fill_limits(results, 1.0)['c'] == 1.0
+    alone = row_fill_limits({'a': results['a']}, 0.1)      # one fold: no other drive
+    assert np.isnan(alone['a']) and alone['all'] == pytest.approx(0.51)
+
+
+def test_leave_one_drive_out_refuses_an_unknown_held_out_drive(tmp_path):
+    for sub in ('images', 'labels_camvid11'):
+        (tmp_path / sub).mkdir()
+        for name in ('0001TP_1', '0006R0_1'):
+            (tmp_path / sub / f'{name}.png').touch()
+    with pytest.raises(ValueError, match=r"held-out drive\(s\) \['0016E5'\] not in the "
+                       r"folders \(drives: \['0001TP', '0006R0'\]\)"):
+        leave_one_drive_out([tmp_path], OutlineParams(method='chapter'), held_out=['0016E5'])
 
 
 def test_road_model_fit_save_load(tmp_path):
@@ -245,12 +262,30 @@ def test_real_street_frames_camvid_learned():
     """The packaged model on the 101 frames; measured: median IoU 0.832, min 0.693.
 
     Trained on camvid_train, whose 0016E5 frames are other frames of this drive; 0 failures.
-    ``landmark_nav evaluate-road-outline ../shared/data/camvid_road``; hard-shadow frames
-    27, median IoU 0.765 (the chapter's criterion: 0.853).
+    ``landmark_nav evaluate-road-outline ../shared/data/camvid_road --set
+    outline_method=learned --set min_outline_row_fill=0.912``; hard-shadow frames 27, median
+    IoU 0.765 (the chapter's criterion: 0.853).
     """
-    summary = summarize(evaluate_folder(shared_data('camvid_road')))
+    summary = summarize(evaluate_folder(shared_data('camvid_road'), LEARNED))
     s = summary['all']
     assert s['frames'] == 101 and summary['seed_not_road']['frames'] == 0
     assert s['iou_median'] >= 0.83 and s['iou_min'] >= 0.69 and s['failures'] == 0
     assert s['precision_median'] >= 0.93 and s['recall_median'] >= 0.88
     assert summary['hard_shadow']['iou_median'] >= 0.76
+
+
+@pytest.mark.slow
+def test_real_street_frames_camvid_cnn():
+    """The packaged CNN criterion on the 101 frames; measured: median IoU 0.914, min 0.854.
+
+    Precision 0.984, recall 0.930, 0 failures; hard shadows (27) median 0.893. The network
+    (2000 mini-batches) and the perceptron were trained on camvid_train, whose 0016E5
+    frames are other frames of this drive.
+    ``landmark_nav evaluate-road-outline ../shared/data/camvid_road --set outline_method=cnn``.
+    """
+    summary = summarize(evaluate_folder(shared_data('camvid_road')))     # the default
+    s = summary['all']
+    assert s['frames'] == 101 and summary['seed_not_road']['frames'] == 0
+    assert s['iou_median'] >= 0.91 and s['iou_min'] >= 0.85 and s['failures'] == 0
+    assert s['precision_median'] >= 0.98 and s['recall_median'] >= 0.92
+    assert summary['hard_shadow']['iou_median'] >= 0.89

@@ -35,7 +35,7 @@ import numpy as np
 
 SAMPLES_PER_FRAME = 600
 CNN_COPIES = 5
-CNN_STEPS = 1200
+CNN_STEPS = 2000
 CNN_MAX_ZOOM = 1.4
 CNN_DICE = 1.0
 ROW_FILL_QUANTILE = 0.1
@@ -179,23 +179,31 @@ def train_cnn(data: FeatureMaps, drives: Sequence[str] = (), seed: int = 0,
 
 
 def leave_one_drive_out(folders: Sequence[Path], params: OutlineParams = OutlineParams(),
-                        seed: int = 0, cnn_steps: int = CNN_STEPS) -> Dict[str, dict]:
+                        seed: int = 0, cnn_steps: int = CNN_STEPS,
+                        held_out: Sequence[str] = ()) -> Dict[str, dict]:
     """Per drive: the summary of its frames scored by a model fitted on the other drives.
 
     ``params.method``: 'learned' fits the perceptron, 'cnn' the perceptron and the
     convolutional network (``cnn_steps`` mini-batches; needs PyTorch) and averages their
     probabilities; with 'chapter' nothing is trained (eqs. 26-28 have no model).
+    ``held_out``: the drives to hold out in turn (default every drive).
+
+    Raises:
+        ValueError: Fewer than two drives, or a ``held_out`` drive that is not among them.
     """
     folders = [Path(f) for f in folders]
     drives = sorted({drive_of(n) for f in folders for n in frame_names(f)})
     if len(drives) < 2:
         raise ValueError(f'leave one drive out needs two drives or more; got {drives}')
+    unknown = sorted(set(held_out) - set(drives))
+    if unknown:
+        raise ValueError(f'held-out drive(s) {unknown} not in the folders (drives: {drives})')
     if params.method != 'chapter':
         data = sample_frames(folders, seed=seed)
     if params.method == 'cnn':
         maps = feature_maps(folders, seed=seed)
     out = {}
-    for held in drives:
+    for held in [d for d in drives if not held_out or d in held_out]:
         model = None
         if params.method != 'chapter':
             others = [d for d in drives if d != held and np.any(data.drive == d)]
@@ -216,11 +224,12 @@ def row_fill_limits(results: Dict[str, dict], quantile: float = ROW_FILL_QUANTIL
     """Per drive of :func:`leave_one_drive_out`'s result: the row-fill limit from the others.
 
     The ``quantile`` of the row fill of the other drives' frames whose seed is road; under
-    ``'all'``, the quantile over every drive's frames (the shipped ``min_row_fill``).
+    ``'all'``, the quantile over every drive's frames (the shipped ``min_row_fill``). NaN
+    where there is no other drive (one drive held out alone): nothing is flagged by it.
     """
-    def fills(drives):
-        return [f.row_fill for d in drives for f in results[d]['frames'] if f.seed_is_road]
-    out = {d: float(np.quantile(fills([o for o in results if o != d]), quantile))
-           for d in results}
-    out['all'] = float(np.quantile(fills(list(results)), quantile))
+    def limit(drives):
+        fills = [f.row_fill for d in drives for f in results[d]['frames'] if f.seed_is_road]
+        return float(np.quantile(fills, quantile)) if fills else float('nan')
+    out = {d: limit([o for o in results if o != d]) for d in results}
+    out['all'] = limit(list(results))
     return out

@@ -2,9 +2,9 @@
 
 * ``landmark_nav evaluate-road-outline FOLDER``: the vision road outline on labelled street
   frames (IoU, precision, recall per frame set; overlays).
-* ``landmark_nav train-road-outline --data DIR [DIR ...] --out FILE [--kind cnn]``: fit the
-  outline's road-probability model (the perceptron, or the convolutional network with
-  PyTorch installed) to labelled street frames.
+* ``landmark_nav train-road-outline --data DIR [DIR ...] --out FILE [--kind cnn]
+  [--cnn-steps N]``: fit the outline's road-probability model (the perceptron, or the
+  convolutional network with PyTorch installed) to labelled street frames.
 * ``landmark_nav evaluate-road-laser``: tilted-laser terrain classification on the park-road
   simulator (per-reading accuracy, road width as in Table 3).
 * ``landmark_nav evaluate-road-vision``: the laser-seeded vision outline on rendered park-road
@@ -83,11 +83,13 @@ def add_parsers(sub, parser_class) -> None:
                    help='e.g. ../shared/data/camvid_train')
     p.add_argument('--out', required=True, help='model file to write (.npz)')
     p.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    p.add_argument('--kind', choices=['mlp', 'cnn'], default='mlp', help="'mlp': the "
-                   "perceptron of outline_method 'learned' (default); 'cnn': the "
+    p.add_argument('--kind', choices=['mlp', 'cnn'], default='mlp', help="'mlp' (default): the "
+                   "perceptron of outline_method 'learned'; 'cnn': the "
                    "convolutional network of outline_method 'cnn' (needs torch)")
-    p.add_argument('--steps', type=int, default=None,
-                   help='CNN training mini-batches (default: as the benchmark)')
+    p.add_argument('--cnn-steps', type=int, default=None, metavar='N',
+                   help='with --kind cnn: training mini-batches (default: CNN_STEPS of '
+                   'landmark_nav.evaluation.road_cross_drive, as bench_road.py --cross-drive)')
+    p.add_argument('--steps', type=int, dest='cnn_steps', help=argparse.SUPPRESS)  # old name
     p.set_defaults(func=_cmd_train_road_outline)
 
     p = sub.add_parser('evaluate-road-laser', help='score the tilted-laser terrain '
@@ -129,7 +131,7 @@ def _cmd_train_road_outline(args: argparse.Namespace) -> int:
             print(f'error: {err}', file=sys.stderr)
             return 2
         data = rcd.feature_maps(folders, seed=args.seed)
-        model = rcd.train_cnn(data, seed=args.seed, steps=args.steps or rcd.CNN_STEPS)
+        model = rcd.train_cnn(data, seed=args.seed, steps=args.cnn_steps or rcd.CNN_STEPS)
         unit = 'maps'
     else:
         data = rcd.sample_frames(folders, seed=args.seed)
