@@ -17,7 +17,8 @@ Run from the repository root::
   reference in the same run: a full-frame OpenCV Sobel 3 x 3 + 5 x 5 and a Mahalanobis pass
   on the eq. 25 chromaticity at 320 x 240. Target (issue): <= 20 ms.
 Times are medians of single-threaded calls; the real frames are timed with the packaged
-learned criterion (the default), the packaged CNN (``cnn``) and the chapter's (eqs. 26-28).
+CNN criterion (``cnn``, the default), the packaged learned criterion and the chapter's
+(eqs. 26-28).
 
 ``--cross-drive DIR ...`` instead scores the outline leaving one drive out
 (:func:`landmark_nav.evaluation.road_cross_drive.leave_one_drive_out`): per drive, the
