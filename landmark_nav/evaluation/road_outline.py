@@ -28,6 +28,7 @@ import time
 from typing import Dict, List, Optional, Sequence
 
 import cv2
+from landmark_nav.evaluation.blas import single_threaded
 from landmark_nav.road.outline import band_seed, OutlineParams, road_outline
 from landmark_nav.road.road_cnn import ProbabilityModel
 import numpy as np
@@ -122,6 +123,7 @@ def score_frame(rgb: np.ndarray, label: np.ndarray, params: OutlineParams,
                       tuple(int(n) for n in wrong[:len(CLASS_NAMES)])), pred
 
 
+@single_threaded
 def evaluate_folder(folder: Path, params: OutlineParams = OutlineParams(),
                     names: Optional[Sequence[str]] = None,
                     model: Optional[ProbabilityModel] = None) -> List[FrameScore]:
