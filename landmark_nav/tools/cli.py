@@ -184,7 +184,8 @@ def _slam_configuration(args: argparse.Namespace):
              'scan_matching_fit_pairs': args.scan_matching_fit_pairs,
              'scan_matching_side_starts': args.scan_matching_side_starts}
     settings.update({k: v for k, v in flags.items() if v is not None})
-    return bag_configuration(args.bag, files, settings), {**files, **settings}
+    return (bag_configuration(args.bag, files, settings, args.sigma_r),
+            {**files, **settings})
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -210,9 +211,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     laser_pose = args.laser_pose  # the bag's statement wins over both (evaluate --help)
     if laser_pose is None and 'laser_pose' in given:
         laser_pose = config.laser_pose
-    sigma_r = args.sigma_r
-    if sigma_r is None and 'laser_sigma_range' in given:
-        sigma_r = config.laser_sigma_range
+    sigma_r = args.sigma_r  # the range noise: config's (--set, then the bag, then this)
     result = evaluate_bag(args.bag, None, args.out, progress=progress,
                           max_seconds=args.max_seconds,
                           reference=args.reference, align=args.align,
