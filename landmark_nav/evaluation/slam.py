@@ -498,4 +498,5 @@ __all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_configuration', 'bag_odometry_n
            'bag_slam_parameters', 'DRIFT_KEY', 'ellipse_share', 'extractor_parameters',
            'evaluate', 'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M',
            'run_parameters', 'run_slam', 'scan_angles', 'scan_corners', 'scan_features',
-           'ScanFeatureCache', 'score_run', 'SlamRun', 'SlamScore', 'true_visible_corners', 'update_corrections']
+           'ScanFeatureCache', 'score_run', 'SlamRun', 'SlamScore', 'true_visible_corners',
+           'update_corrections']

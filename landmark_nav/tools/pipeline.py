@@ -80,7 +80,7 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
 
 def bag_settings(bag: str, files: Sequence[str] = (), settings: Sequence[str] = ()
                  ) -> Dict[str, List[str]]:
-    """What a bag states for each node, as ``-p`` arguments before its ``--set`` (module docstring).
+    """Return what a bag states for each node, as ``-p`` arguments before its ``--set``.
 
     :func:`landmark_nav.evaluation.slam.run_parameters`, as ``evaluate`` uses it, over
     ``ekf_slam``'s profile ``files`` (``--params-file`` arguments) and ``settings``
@@ -238,8 +238,8 @@ def run(args: argparse.Namespace) -> int:
         from landmark_nav.tools.replay_result import reference_ate, result_line
         played_s = manager.played_seconds()
         ate = reference_ate(args.bag, stamps, poses) if played_s is not None else None
-        print(result_line(args.bag, args.rate, scans, played_s, stamps, poses, ate),
-              flush=True)
+        print(result_line(args.bag, args.rate, scans, played_s, stamps, poses, ate,
+                          recorder.other_publishers()), flush=True)
     return exit_status(manager)
 
 
