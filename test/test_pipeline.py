@@ -178,3 +178,33 @@ def test_a_replay_of_a_bag_it_cannot_play_starts_nothing(bag, message):
                           timeout=120)
     assert (proc.returncode, proc.stdout, proc.stderr) == (
         2, '', f'landmark_nav: error: {message}\n')
+
+
+@pytest.mark.dds
+def test_the_replay_result_names_other_publishers_of_pose():
+    """The recorder takes /pose from anyone on the domain: the line names the others."""
+    import rclpy
+    from landmark_nav.tools.replay_result import PoseRecorder, result_line
+    import numpy as np
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    nodes = [rclpy.create_node(name, context=context) for name in ('ekf_slam', 'intruder')]
+    recorder = PoseRecorder()
+    try:
+        pubs = [n.create_publisher(PoseWithCovarianceStamped, '/pose', 10) for n in nodes]
+        deadline = time.monotonic() + 20.0
+        while {n for n, _ in recorder.publishers} != {'/ekf_slam', '/intruder'} and \
+                time.monotonic() < deadline:
+            time.sleep(0.1)
+    finally:
+        stamps, poses = recorder.stop()
+        del pubs
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert recorder.other_publishers() == ['/intruder']
+    line = result_line('b', 1.0, 2, 1.0, np.array([1, 2]), np.zeros((2, 3)), None,
+                       recorder.other_publishers())
+    assert 'ekf_slam published 2 poses (/pose also published by /intruder: their poses are ' \
+        'counted too)' in line
+    assert '/pose also' not in result_line('b', 1.0, 2, 1.0, stamps, poses, None, [])

@@ -31,6 +31,7 @@ from landmark_nav.evaluation.slam_scores import (ALIGN_DEFAULT, ellipse_share, R
 from landmark_nav.evaluation.trajectory import (ALIGNMENTS, ate, rpe, STATISTICS, Trajectory,
                                                 write_tum)
 from landmark_nav.laser.corners import CornerParams
+from landmark_nav.laser.lines import LineParams
 from landmark_nav.sim import run_scenario, ScanSample
 from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
@@ -117,7 +118,14 @@ def bag_odometry_noise(scenario) -> Tuple[OdometryNoise, str]:
     return odometry_noise_model('pioneer'), 'default pioneer'
 
 
-def bag_slam_parameters(bag) -> Dict[str, Any]:
+#: ``ekf_slam`` parameters that take the laser's range noise ``laser_sigma_range`` when a
+#: layer gives it (the bag's statement, ``--set``) and does not give them.
+RANGE_NOISE_FOLLOWERS = ('lines.sigma_r',)
+#: Extractor nodes whose ``sigma_r`` and ``sigma_phi`` take the laser's stated noise.
+EXTRACTOR_NODES = ('corner_extractor', 'line_extractor')
+
+
+def bag_slam_parameters(bag, sigma_r: Optional[float] = None) -> Dict[str, Any]:
     """Return the ``ekf_slam`` parameters a bag states (``pipeline replay``, ``evaluate``).
 
     The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
@@ -125,6 +133,7 @@ def bag_slam_parameters(bag) -> Dict[str, Any]:
     ``lines.sigma_r`` and its bearing noise as ``lines.sigma_phi``, and ``odometry.model``:
     ``custom_data`` ``landmark_nav.drift_model``, ``simulator`` for a simulator
     recording, else nothing (the configuration's ``odometry.*``). Nothing for what the bag
+    does not state; ``sigma_r`` (``evaluate --sigma-r``) stands for the range noise a bag
     does not state.
 
     Raises:
@@ -138,7 +147,7 @@ def bag_slam_parameters(bag) -> Dict[str, Any]:
     meta_path = Path(bag) / GROUND_TRUTH_FILE
     meta = read_ground_truth_file(meta_path) if meta_path.is_file() else None
     meta = meta if isinstance(meta, dict) else None
-    laser, notes = laser_config(custom, meta)
+    laser, notes = laser_config(custom, meta, sigma_r=sigma_r)
     out: Dict[str, Any] = {}
     if not any('(default)' in n for n in notes):
         out['laser_pose'] = [float(v) for v in laser.mount]
@@ -152,22 +161,82 @@ def bag_slam_parameters(bag) -> Dict[str, Any]:
     return out
 
 
+def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
+                   settings: Optional[Mapping[str, Any]] = None,
+                   sigma_r: Optional[float] = None) -> Dict[str, Dict[str, Any]]:
+    """Return what each node of a run on a bag is given between its files and its ``--set``.
+
+    The one place that decides the laser noise of ``landmark_nav evaluate`` and of the nodes
+    of ``landmark_nav pipeline replay``. ``ekf_slam``'s layers, a later one winning: its
+    ``parameters`` (the ``--params-file`` files, the profiles), what the bag states
+    (:func:`bag_slam_parameters`), ``settings`` (``--set``); a layer that gives
+    ``laser_sigma_range`` gives :data:`RANGE_NOISE_FOLLOWERS` the same value unless it gives
+    them too. So ``--set`` wins over the bag, the bag over the files and the defaults.
+
+    Returns:
+        ``{'ekf_slam': values, 'corner_extractor': values, 'line_extractor': values}``:
+        ``ekf_slam`` gets what the bag states and the followers of a ``laser_sigma_range``
+        (``settings`` come after them); each extractor its ``sigma_r``, ``ekf_slam``'s
+        resulting ``laser_sigma_range`` when a layer gives it, and its ``sigma_phi``, the
+        bag's bearing noise when it states it (the node's own ``--set`` comes after them).
+
+    Raises:
+        BagError, ValueError: The bag cannot be read or states a malformed value.
+    """
+    layers = [dict(parameters or {}), bag_slam_parameters(bag, sigma_r), dict(settings or {})]
+    values: Dict[str, Any] = {}
+    for layer in layers:
+        values.update({k: layer['laser_sigma_range'] for k in RANGE_NOISE_FOLLOWERS
+                       if 'laser_sigma_range' in layer})
+        values.update(layer)
+    slam = dict(layers[1])
+    if any('laser_sigma_range' in layer for layer in layers):
+        slam.update({k: values[k] for k in RANGE_NOISE_FOLLOWERS if k not in layers[2]})
+    extractor = {}
+    if 'laser_sigma_range' in values:
+        extractor['sigma_r'] = float(values['laser_sigma_range'])
+    if 'lines.sigma_phi' in layers[1]:
+        extractor['sigma_phi'] = float(layers[1]['lines.sigma_phi'])
+    return {'ekf_slam': slam, **{node: dict(extractor) for node in EXTRACTOR_NODES}}
+
+
 def bag_configuration(bag, parameters: Optional[Mapping[str, Any]] = None,
-                      settings: Optional[Mapping[str, Any]] = None) -> SlamConfiguration:
+                      settings: Optional[Mapping[str, Any]] = None,
+                      sigma_r: Optional[float] = None) -> SlamConfiguration:
     """Return the ``ekf_slam`` configuration of a run on a bag, layered as the node's.
 
     The shipped defaults, then ``parameters`` (e.g. the ``--params-file`` files), then what
-    the bag states (:func:`bag_slam_parameters`), then ``settings`` (``--set``): the order in
-    which ``landmark_nav pipeline replay`` gives them to the node (its parameter file, the
-    bag's statements, ``--set``).
+    the bag states and the laser noise's followers (:func:`run_parameters`), then
+    ``settings`` (``--set``): the order in which ``landmark_nav pipeline replay`` gives them
+    to the node (its parameter file, the bag's statements, ``--set``). ``sigma_r``: the
+    range noise when the bag states none (``evaluate --sigma-r``).
 
     Raises:
         ValueError: An unknown parameter, a bad value, an unreadable bag.
     """
     values = dict(parameters or {})
-    values.update(bag_slam_parameters(bag))
+    values.update(run_parameters(bag, parameters, settings, sigma_r)['ekf_slam'])
     values.update(settings or {})
     return slam_configuration(values)
+
+
+def extractor_parameters(scenario, config: SlamConfiguration
+                         ) -> Tuple[CornerParams, LineParams]:
+    """Return the corner and line extractors' parameters of an offline run on a bag.
+
+    As :func:`run_parameters` gives them to the replay's nodes: the corner extractor's
+    range noise is ``config.laser_sigma_range`` (the bag's, unless ``--set`` gives it), its
+    bearing noise the bag's (``scenario.laser``); the lines are ``config.line_params``.
+    ``scenario.laser`` takes the same range noise (visibility, ``slam.json``), with a note
+    when it differs from the bag's.
+    """
+    sigma = float(config.laser_sigma_range)
+    if sigma != float(scenario.laser.sigma_range):
+        scenario.notes.append(f'sigma_r {sigma:g} m (the parameter laser_sigma_range) instead '
+                              f'of {float(scenario.laser.sigma_range):g} m')
+        scenario.laser = replace(scenario.laser, sigma_range=sigma)
+    return (CornerParams(sigma_r=sigma, sigma_phi=float(scenario.laser.sigma_angle)),
+            config.line_params)
 
 
 def _noise_source(bag, scenario, config: SlamConfiguration) -> str:
@@ -232,8 +301,8 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         frontend: Front-end parameters (default: the configuration's; ``deskew`` and
             ``descriptors`` are :func:`run_slam`'s defaults whatever it says).
         config: The ``ekf_slam`` configuration (default: :func:`bag_configuration`, the
-            shipped defaults with what the bag states); its line extractor takes the
-            laser's noise, as the corner extractor does.
+            shipped defaults with what the bag states); the corner extractor takes its
+            ``laser_sigma_range`` (:func:`extractor_parameters`).
 
     Returns:
         The figures (see ``slam.json``).
@@ -248,7 +317,7 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
                         require_reference=False)
-    cfg = config or bag_configuration(bag)
+    cfg = config or bag_configuration(bag, sigma_r=sigma_r)
     noise_source = 'params' if params is not None else _noise_source(bag, scenario, cfg)
     prm = params or cfg.params
     association = association or prm.association
@@ -262,10 +331,7 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
                               f'{DRIFT_KEY}): using the pioneer model')
     landmarks = landmarks or cfg.landmarks
     frontend = frontend or cfg.frontend
-    corner_params = CornerParams(sigma_r=float(scenario.laser.sigma_range),
-                                 sigma_phi=float(scenario.laser.sigma_angle))
-    line_params = replace(cfg.line_params, sigma_r=corner_params.sigma_r,
-                          sigma_phi=corner_params.sigma_phi)
+    corner_params, line_params = extractor_parameters(scenario, cfg)
     n_scans = len(scenario.of_type(ScanSample))
     bar = None
     if progress:
@@ -429,7 +495,8 @@ def format_summary(r: dict) -> str:
 
 
 __all__ = ['ALIGN_DEFAULT', 'ASSOCIATIONS', 'bag_configuration', 'bag_odometry_noise',
-           'bag_slam_parameters', 'DRIFT_KEY', 'ellipse_share',
+           'bag_slam_parameters', 'DRIFT_KEY', 'ellipse_share', 'extractor_parameters',
            'evaluate', 'evaluate_bag', 'format_summary', 'plot_run', 'RPE_DISTANCE_M',
-           'run_slam', 'scan_angles', 'scan_corners', 'scan_features', 'ScanFeatureCache',
-           'score_run', 'SlamRun', 'SlamScore', 'true_visible_corners', 'update_corrections']
+           'run_parameters', 'run_slam', 'scan_angles', 'scan_corners', 'scan_features',
+           'ScanFeatureCache', 'score_run', 'SlamRun', 'SlamScore', 'true_visible_corners',
+           'update_corrections']

@@ -42,7 +42,7 @@ from landmark_nav.bag import BagWriter
 from landmark_nav.conversions import (make_odometry, make_pose_with_covariance_stamped,
                                       make_scan, ns_to_stamp, pose_msg_from_2d)
 from landmark_nav.evaluation.bags import load_bag
-from landmark_nav.evaluation.slam import run_slam, scan_angles
+from landmark_nav.evaluation.slam import extractor_parameters, run_slam, scan_angles
 from landmark_nav.feature_msgs import (make_corner_markers, make_corner_pose_array,
                                        make_landmark_markers)
 from landmark_nav.geometry import compose, relative
@@ -186,10 +186,9 @@ def write_slam_view(bag, out_dir, association: str = 'icnn',
         params = SlamParams(association=association)
     else:
         params = replace(config.params, association=association)
+        corner_params, line_params = extractor_parameters(scenario, config)
         options = {'frontend': config.frontend, 'landmarks': config.landmarks,
-                   'visibility': config.visibility,
-                   'line_params': replace(config.line_params, sigma_r=corner_params.sigma_r,
-                                          sigma_phi=corner_params.sigma_phi)}
+                   'visibility': config.visibility, 'line_params': line_params}
     scans: List[ScanSample] = scenario.of_type(ScanSample)
     corners: List[list] = []
     snapshots: List[tuple] = []

@@ -184,7 +184,8 @@ def _slam_configuration(args: argparse.Namespace):
              'scan_matching_fit_pairs': args.scan_matching_fit_pairs,
              'scan_matching_side_starts': args.scan_matching_side_starts}
     settings.update({k: v for k, v in flags.items() if v is not None})
-    return bag_configuration(args.bag, files, settings), {**files, **settings}
+    return (bag_configuration(args.bag, files, settings, args.sigma_r),
+            {**files, **settings})
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -210,9 +211,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     laser_pose = args.laser_pose  # the bag's statement wins over both (evaluate --help)
     if laser_pose is None and 'laser_pose' in given:
         laser_pose = config.laser_pose
-    sigma_r = args.sigma_r
-    if sigma_r is None and 'laser_sigma_range' in given:
-        sigma_r = config.laser_sigma_range
+    sigma_r = args.sigma_r  # the range noise: config's (--set, then the bag, then this)
     result = evaluate_bag(args.bag, None, args.out, progress=progress,
                           max_seconds=args.max_seconds,
                           reference=args.reference, align=args.align,
@@ -471,7 +470,9 @@ def build_parser() -> argparse.ArgumentParser:
                        epilog="The filter runs ekf_slam's configuration: its defaults, then "
                        'the --params-file files, then what the bag states (laser mount and '
                        'noise, odometry noise model), then --set and the options above, as '
-                       '`landmark_nav pipeline replay` gives them to the node. The filter '
+                       '`landmark_nav pipeline replay` gives them to the node; the corner '
+                       'extractor and lines.sigma_r take the resulting laser_sigma_range '
+                       'unless --set lines.sigma_r. The filter '
                        'of the corner chapter: --params-file "$(landmark_nav config '
                        'ekf_slam_chapter)".')
     p.add_argument('bag', help='rosbag2 directory with /scan, /odom and optionally a reference '
@@ -495,7 +496,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help='laser mount in base_link [m m rad] when the bag does not state it '
                         '(default 0 0 0)')
     p.add_argument('--sigma-r', type=float, default=None,
-                   help='laser range noise [m] when the bag does not state it')
+                   help='laser range noise [m] when the bag does not state it (--set '
+                   'laser_sigma_range=... wins over the bag)')
     p.add_argument('--rpe-delta', type=float, default=1.0,
                    help='RPE distance along the reference [m] (default 1)')
     p.add_argument('--max-seconds', type=float, default=None,

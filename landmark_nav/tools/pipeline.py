@@ -22,9 +22,11 @@ Pipelines:
 * ``replay``: a bag's ``/scan`` and ``/odom`` through the SLAM nodes, bag_player +
   corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
   subscribed by every node that takes them, so no scan is lost to the nodes' start-up).
-  ``ekf_slam`` gets what the bag states, as ``landmark_nav evaluate`` uses it
-  (:func:`bag_slam_settings`): the laser mount and the odometry noise model (an ``--set``
-  wins). It ends with one result line (:mod:`~landmark_nav.tools.replay_result`): the bag,
+  Each node gets what the bag states, as ``landmark_nav evaluate`` uses it
+  (:func:`bag_settings`): ``ekf_slam`` the laser mount, its noise and the odometry noise
+  model, ``corner_extractor`` the laser's noise (``sigma_r`` is ``ekf_slam``'s
+  ``laser_sigma_range``: the bag's, or ``--set ekf_slam.laser_sigma_range``); a node's own
+  ``--set`` wins. It ends with one result line (:mod:`~landmark_nav.tools.replay_result`): the bag,
   its scans and the seconds it took, the poses ekf_slam published and their ATE against
   the bag's ``/ground_truth/odom`` when it has one, the output topics.
 """
@@ -76,18 +78,25 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
     return out
 
 
-def bag_slam_settings(bag: str) -> List[str]:
-    """``ekf_slam`` parameters a bag states, as ``-p`` arguments (module docstring).
+def bag_settings(bag: str, files: Sequence[str] = (), settings: Sequence[str] = ()
+                 ) -> Dict[str, List[str]]:
+    """Return what a bag states for each node, as ``-p`` arguments before its ``--set``.
 
-    :func:`landmark_nav.evaluation.slam.bag_slam_parameters`, as ``evaluate`` uses them;
-    nothing for a bag that cannot be read (the player reports that).
+    :func:`landmark_nav.evaluation.slam.run_parameters`, as ``evaluate`` uses it, over
+    ``ekf_slam``'s profile ``files`` (``--params-file`` arguments) and ``settings``
+    (``NODE.PARAMETER=VALUE``); nothing for a bag that cannot be read (the player reports
+    that).
     """
-    from landmark_nav.evaluation.slam import bag_slam_parameters
-    from landmark_nav.tools.node_parameters import as_ros_arguments
+    from landmark_nav.evaluation.slam import run_parameters
+    from landmark_nav.tools.node_parameters import (as_ros_arguments, given_parameters,
+                                                    parse_setting)
+    slam = [t for t in settings if t.partition('=')[0].startswith('ekf_slam.')]
     try:
-        return as_ros_arguments(bag_slam_parameters(bag))
+        given = run_parameters(bag, given_parameters(files[1::2], [], 'ekf_slam'),
+                               dict(parse_setting(t, 'ekf_slam') for t in slam))
     except Exception:  # noqa: B902 - the player names the problem with the bag
-        return []
+        return {}
+    return {node: as_ros_arguments(values) for node, values in given.items()}
 
 
 def _profile_files(names: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
@@ -127,6 +136,8 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
     nodes = PIPELINES[name]
     extra = _overrides(settings, nodes)
     files = _profile_files(profiles, nodes)
+    stated = bag_settings(bag, files['ekf_slam'], settings) if (
+        bag and 'bag_player' in nodes) else {}
     commands = {}
     for node in nodes:
         cmd = [sys.executable, '-m', f'landmark_nav.nodes.{node}']
@@ -138,9 +149,8 @@ def pipeline_commands(name: str, settings: Sequence[str] = (), bag: Optional[str
                     f'/scan={_scan_subscribers(settings)}', '/odom=1'] + (
                         ['--loop'] if loop else [])
         else:
-            stated = bag_slam_settings(bag) if (node == 'ekf_slam' and bag) else []
             cmd += (['--ros-args', '--params-file', str(config_path(node))] + files[node]
-                    + stated + extra[node])
+                    + stated.get(node, []) + extra[node])
         commands[node] = cmd
     return commands
 
@@ -228,8 +238,8 @@ def run(args: argparse.Namespace) -> int:
         from landmark_nav.tools.replay_result import reference_ate, result_line
         played_s = manager.played_seconds()
         ate = reference_ate(args.bag, stamps, poses) if played_s is not None else None
-        print(result_line(args.bag, args.rate, scans, played_s, stamps, poses, ate),
-              flush=True)
+        print(result_line(args.bag, args.rate, scans, played_s, stamps, poses, ate,
+                          recorder.other_publishers()), flush=True)
     return exit_status(manager)
 
 

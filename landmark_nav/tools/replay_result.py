@@ -5,13 +5,16 @@ its own rclpy context in a thread). At the end one line says what was played (th
 scans, the seconds the player took, the rate), how many poses ekf_slam published, and,
 when the bag has a reference (``/ground_truth/odom``), their ATE: the positions against the
 reference interpolated at their stamps, unaligned, as ``landmark_nav evaluate`` states it
-first (``ATE RMSE``; the replayed poses are the offline run's). The outputs are topics;
+first (``ATE RMSE``; the replayed poses are the offline run's). The recorder takes ``/pose``
+from any publisher on the ROS domain; it lists the publishers it sees (every 0.5 s) and the
+line names any other than one ``/ekf_slam``, whose poses would be mixed in. The outputs are topics;
 the line names them (a user records them with ``ros2 bag record`` or scores the bag
 offline with ``landmark_nav evaluate``).
 """
 
 import threading
-from typing import List, Optional, Tuple
+import time
+from typing import List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -32,6 +35,8 @@ class PoseRecorder:
         from rclpy.signals import SignalHandlerOptions
         self.stamps: List[int] = []
         self.poses: List[np.ndarray] = []
+        self.topic = topic
+        self.publishers: Set[Tuple[str, Tuple[int, ...]]] = set()  # (node, endpoint gid)
         self._context = rclpy.Context()
         rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
         self._node = rclpy.create_node('pipeline_result', context=self._context)
@@ -50,8 +55,22 @@ class PoseRecorder:
         self._thread.start()
 
     def _spin(self) -> None:
+        seen = 0.0
         while not self._stop.is_set():
             self._executor.spin_once(timeout_sec=0.1)
+            if time.monotonic() - seen >= 0.5:
+                seen = time.monotonic()
+                self.publishers |= {
+                    (f'{e.node_namespace.rstrip("/")}/{e.node_name}', tuple(e.endpoint_gid))
+                    for e in self._node.get_publishers_info_by_topic(self.topic)
+                    if e.node_name != '_NODE_NAME_UNKNOWN_'}  # not yet discovered
+
+    def other_publishers(self) -> List[str]:
+        """Return the publishers of the topic seen besides one ``/ekf_slam`` (node names)."""
+        names = sorted(name for name, _ in self.publishers)
+        if '/ekf_slam' in names:
+            names.remove('/ekf_slam')
+        return names
 
     def stop(self) -> Tuple[np.ndarray, np.ndarray]:
         """Stop recording; return the stamps (N,) [ns] and poses (N, 3)."""
@@ -88,7 +107,8 @@ def reference_ate(bag: str, stamps: np.ndarray, poses: np.ndarray) -> Optional[d
 
 
 def result_line(bag: str, rate: float, scans: Optional[int], played_s: Optional[float],
-                stamps: np.ndarray, poses: np.ndarray, ate: Optional[dict]) -> str:
+                stamps: np.ndarray, poses: np.ndarray, ate: Optional[dict],
+                others: Sequence[str] = ()) -> str:
     """Return the replay's one-line result (module docstring).
 
     Args:
@@ -100,6 +120,7 @@ def result_line(bag: str, rate: float, scans: Optional[int], played_s: Optional[
         stamps: Stamps of the poses received [ns].
         poses: The poses received (N, 3).
         ate: :func:`reference_ate` (None: no reference, or not computed).
+        others: Other publishers of ``/pose`` (:meth:`PoseRecorder.other_publishers`).
     """
     played = f'{scans} scans' if scans is not None else 'its scans'
     when = (f'played in {played_s:.1f} s at rate {rate:g}' if played_s is not None
@@ -111,8 +132,10 @@ def result_line(bag: str, rate: float, scans: Optional[int], played_s: Optional[
         figure = '; not scored (no /ground_truth/odom in the bag over their stamps)'
     else:
         figure = ''
+    mixed = (f' (/pose also published by {", ".join(others)}: their poses are counted too)'
+             if others else '')
     return (f'replay: {bag}, {played} {when}; ekf_slam published {len(stamps)} poses'
-            f'{figure}; outputs on {", ".join(OUTPUTS)} (not recorded)')
+            f'{mixed}{figure}; outputs on {", ".join(OUTPUTS)} (not recorded)')
 
 
 __all__ = ['OUTPUTS', 'PoseRecorder', 'reference_ate', 'result_line']
