@@ -1,9 +1,10 @@
-"""The laser noise of a run: ``--set`` > what the bag states > the defaults, offline and replay.
+"""What a bag states: ``--set`` > the bag > the defaults, offline, in the replay and its launch.
 
-``landmark_nav evaluate`` and ``landmark_nav pipeline replay`` take it from one function
+The laser noise, the laser mount and the odometry noise model: ``landmark_nav evaluate``,
+``landmark_nav pipeline replay`` and ``launch/replay.launch.py`` take them from one function
 (:func:`landmark_nav.evaluation.slam.run_parameters`). The bag is the office recording's
 first 6 s re-encoded with the imported-bag contract's ``custom_data`` stating a range noise
-of 2 cm (the shipped parameters say 1 cm).
+of 2 cm (the shipped parameters say 1 cm), the mount ``0 0 0`` and a drift model.
 """
 
 import json
@@ -19,13 +20,14 @@ from landmark_nav.evaluation.slam import bag_configuration, evaluate_bag, run_pa
 from landmark_nav.evaluation.trajectory import read_tum
 from landmark_nav.testing import RosHarness
 from landmark_nav.tools.cli import main as cli_main
-from landmark_nav.tools.demo import chapter_config
 from landmark_nav.tools.pipeline import pipeline_commands
 import numpy as np
 import pytest
 from test_evaluate_slam import BAG, reencode
 
 STATED = 0.02  # the bag's range noise [m]
+DRIFT = 'k_d=0.05 k_theta=0.05 k_dtheta=0.1'  # the bag's odometry noise model
+MOUNT = [0.05, 0.0, 0.02]  # a --set laser mount [m m rad]
 
 
 @pytest.fixture(scope='module')
@@ -36,7 +38,8 @@ def stated_bag(tmp_path_factory) -> Path:
         start = next(odometry_to_pose(m).pose for _, _, m in reader.decoded(['/odom']))
     reencode(BAG, bag, reference_topic=True, seconds=6, odom_start=start,
              custom={'landmark_nav.laser_mount': '0 0 0',
-                     'landmark_nav.laser_sigma_range': str(STATED)})
+                     'landmark_nav.laser_sigma_range': str(STATED),
+                     'landmark_nav.drift_model': DRIFT})
     return bag
 
 
@@ -88,24 +91,63 @@ def test_replay_gives_every_node_the_noise_evaluate_takes(stated_bag):
         'corner_extractor'] == {'sigma_r': 0.04, 'sigma_phi': 0.0017453292519943296}
 
 
+def test_evaluate_set_wins_over_the_bags_mount(stated_bag, tmp_path, capsys):
+    """--set laser_pose changes the run on a bag stating its mount; --laser-pose does not."""
+    pose = ['--laser-pose', '0.3', '0', '0']
+    runs = {'bag': (), 'option': pose, 'set': ('--set', f'laser_pose={MOUNT}'),
+            'both': pose + ['--set', f'laser_pose={MOUNT}']}
+    figures = {name: _evaluate(stated_bag, tmp_path / name, *args)
+               for name, args in runs.items()}
+    tum = {name: (tmp_path / name / 'trajectory_slam.tum').read_text() for name in runs}
+    assert tum['option'] == tum['bag'] != tum['set'] == tum['both'] != ''
+    mounts = {name: figures[name]['laser_mount'] for name in runs}
+    assert mounts == {'bag': [0.0] * 3, 'option': [0.0] * 3, 'set': MOUNT, 'both': MOUNT}
+    text = capsys.readouterr().out
+    assert 'laser mount 0.05 0 0.02 (the parameter laser_pose) instead of 0 0 0' in text
+    assert bag_configuration(stated_bag, laser_pose=(0.3, 0, 0)).laser_pose == (0, 0, 0)
+    assert run_parameters(stated_bag, settings={'laser_pose': MOUNT})['ekf_slam'][
+        'laser_pose'] == [0.0] * 3  # the bag's; the node's --set comes after it
+
+
+def test_set_wins_over_the_bags_odometry_model(stated_bag):
+    """The bag's drift model over the files, --set odometry.model over the bag, alike."""
+    from landmark_nav.slam.frontend import odometry_noise_model
+    files = {'odometry.model': 'simulator'}
+    config = bag_configuration(stated_bag, files)
+    assert config.params.odometry == odometry_noise_model(DRIFT)
+    config = bag_configuration(stated_bag, files, {'odometry.model': 'pioneer'})
+    assert config.params.odometry == odometry_noise_model('pioneer')
+    cmd = pipeline_commands('replay', ['ekf_slam.odometry.model=pioneer'],
+                            bag=str(stated_bag))['ekf_slam']
+    models = [a for a in cmd if a.startswith('odometry.model:=')]
+    assert models == [f'odometry.model:={DRIFT}', 'odometry.model:=pioneer']
+
+
 @pytest.mark.dds
+@pytest.mark.parametrize('settings', [(), (f'laser_pose={MOUNT}',)], ids=['bag', 'set-mount'])
 def test_the_replay_of_a_bag_stating_its_noise_is_evaluates_run(
-        stated_bag, processes, tmp_path):
+        stated_bag, processes, tmp_path, settings):
     """The replayed poses are the offline run's on a bag that does not state 1 cm.
 
     With the shipped 1 cm in corner_extractor (before), the replay's corners carried other
-    covariances than evaluate's, so the poses differed.
+    covariances than evaluate's, so the poses differed; with a --set laser mount, evaluate
+    kept the bag's (before) and the replay took the --set one.
     """
     from landmark_nav.conversions import stamp_to_ns
+    from landmark_nav.tools.config_files import config_path
+    from landmark_nav.tools.node_parameters import given_parameters
+    profile = given_parameters([str(config_path('ekf_slam_chapter'))], [], 'ekf_slam')
     evaluate_bag(stated_bag, 'icnn', tmp_path, progress=False, plots=False,
-                 config=chapter_config(stated_bag))
+                 config=bag_configuration(stated_bag, profile,
+                                          given_parameters([], settings, 'ekf_slam')))
     ref = read_tum(tmp_path / 'trajectory_slam.tum')
     with RosHarness() as ros:
         poses = ros.collect('/pose', PoseWithCovarianceStamped)
         proc = processes.start(
             [sys.executable, '-m', 'landmark_nav.tools.cli', 'pipeline', 'replay', '--bag',
              str(stated_bag), '--rate', '2', '--profile', 'ekf_slam_chapter',
-             '--drain-timeout', '5'],  # its last scan comes after the last odometry
+             '--drain-timeout', '5'] + [  # its last scan comes after the last odometry
+                 a for t in settings for a in ('--set', f'ekf_slam.{t}')],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         out, _ = proc.communicate(timeout=300)
         time.sleep(0.5)

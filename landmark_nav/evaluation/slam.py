@@ -125,7 +125,8 @@ RANGE_NOISE_FOLLOWERS = ('lines.sigma_r',)
 EXTRACTOR_NODES = ('corner_extractor', 'line_extractor')
 
 
-def bag_slam_parameters(bag, sigma_r: Optional[float] = None) -> Dict[str, Any]:
+def bag_slam_parameters(bag, sigma_r: Optional[float] = None,
+                        laser_pose: Optional[Sequence[float]] = None) -> Dict[str, Any]:
     """Return the ``ekf_slam`` parameters a bag states (``pipeline replay``, ``evaluate``).
 
     The laser mount (``custom_data`` ``landmark_nav.laser_mount`` or the simulator's
@@ -133,8 +134,8 @@ def bag_slam_parameters(bag, sigma_r: Optional[float] = None) -> Dict[str, Any]:
     ``lines.sigma_r`` and its bearing noise as ``lines.sigma_phi``, and ``odometry.model``:
     ``custom_data`` ``landmark_nav.drift_model``, ``simulator`` for a simulator
     recording, else nothing (the configuration's ``odometry.*``). Nothing for what the bag
-    does not state; ``sigma_r`` (``evaluate --sigma-r``) stands for the range noise a bag
-    does not state.
+    does not state; ``sigma_r`` (``evaluate --sigma-r``) stands for the range noise and
+    ``laser_pose`` (``evaluate --laser-pose``) for the mount a bag does not state.
 
     Raises:
         BagError, ValueError: The bag cannot be read or states a malformed value.
@@ -147,7 +148,7 @@ def bag_slam_parameters(bag, sigma_r: Optional[float] = None) -> Dict[str, Any]:
     meta_path = Path(bag) / GROUND_TRUTH_FILE
     meta = read_ground_truth_file(meta_path) if meta_path.is_file() else None
     meta = meta if isinstance(meta, dict) else None
-    laser, notes = laser_config(custom, meta, sigma_r=sigma_r)
+    laser, notes = laser_config(custom, meta, laser_pose, sigma_r)
     out: Dict[str, Any] = {}
     if not any('(default)' in n for n in notes):
         out['laser_pose'] = [float(v) for v in laser.mount]
@@ -163,11 +164,13 @@ def bag_slam_parameters(bag, sigma_r: Optional[float] = None) -> Dict[str, Any]:
 
 def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
                    settings: Optional[Mapping[str, Any]] = None,
-                   sigma_r: Optional[float] = None) -> Dict[str, Dict[str, Any]]:
+                   sigma_r: Optional[float] = None,
+                   laser_pose: Optional[Sequence[float]] = None) -> Dict[str, Dict[str, Any]]:
     """Return what each node of a run on a bag is given between its files and its ``--set``.
 
-    The one place that decides the laser noise of ``landmark_nav evaluate`` and of the nodes
-    of ``landmark_nav pipeline replay``. ``ekf_slam``'s layers, a later one winning: its
+    The one place that decides what a bag states for ``landmark_nav evaluate`` and for the
+    nodes of ``landmark_nav pipeline replay`` and ``replay.launch.py``: the laser mount, its
+    noise, the odometry noise model. ``ekf_slam``'s layers, a later one winning: its
     ``parameters`` (the ``--params-file`` files, the profiles), what the bag states
     (:func:`bag_slam_parameters`), ``settings`` (``--set``); a layer that gives
     ``laser_sigma_range`` gives :data:`RANGE_NOISE_FOLLOWERS` the same value unless it gives
@@ -183,7 +186,8 @@ def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
     Raises:
         BagError, ValueError: The bag cannot be read or states a malformed value.
     """
-    layers = [dict(parameters or {}), bag_slam_parameters(bag, sigma_r), dict(settings or {})]
+    layers = [dict(parameters or {}), bag_slam_parameters(bag, sigma_r, laser_pose),
+              dict(settings or {})]
     values: Dict[str, Any] = {}
     for layer in layers:
         values.update({k: layer['laser_sigma_range'] for k in RANGE_NOISE_FOLLOWERS
@@ -202,20 +206,22 @@ def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
 
 def bag_configuration(bag, parameters: Optional[Mapping[str, Any]] = None,
                       settings: Optional[Mapping[str, Any]] = None,
-                      sigma_r: Optional[float] = None) -> SlamConfiguration:
+                      sigma_r: Optional[float] = None,
+                      laser_pose: Optional[Sequence[float]] = None) -> SlamConfiguration:
     """Return the ``ekf_slam`` configuration of a run on a bag, layered as the node's.
 
     The shipped defaults, then ``parameters`` (e.g. the ``--params-file`` files), then what
     the bag states and the laser noise's followers (:func:`run_parameters`), then
     ``settings`` (``--set``): the order in which ``landmark_nav pipeline replay`` gives them
-    to the node (its parameter file, the bag's statements, ``--set``). ``sigma_r``: the
-    range noise when the bag states none (``evaluate --sigma-r``).
+    to the node (its parameter file, the bag's statements, ``--set``). ``sigma_r`` and
+    ``laser_pose``: the range noise and the mount when the bag states none (``evaluate
+    --sigma-r``, ``--laser-pose``).
 
     Raises:
         ValueError: An unknown parameter, a bad value, an unreadable bag.
     """
     values = dict(parameters or {})
-    values.update(run_parameters(bag, parameters, settings, sigma_r)['ekf_slam'])
+    values.update(run_parameters(bag, parameters, settings, sigma_r, laser_pose)['ekf_slam'])
     values.update(settings or {})
     return slam_configuration(values)
 
@@ -227,9 +233,15 @@ def extractor_parameters(scenario, config: SlamConfiguration
     As :func:`run_parameters` gives them to the replay's nodes: the corner extractor's
     range noise is ``config.laser_sigma_range`` (the bag's, unless ``--set`` gives it), its
     bearing noise the bag's (``scenario.laser``); the lines are ``config.line_params``.
-    ``scenario.laser`` takes the same range noise (visibility, ``slam.json``), with a note
-    when it differs from the bag's.
+    ``scenario.laser`` takes the same range noise (visibility, ``slam.json``) and the mount
+    ``config.laser_pose`` (the front end's, as ``ekf_slam``'s), each with a note when it
+    differs from the bag's.
     """
+    mount = tuple(float(v) for v in config.laser_pose)
+    if mount != tuple(float(v) for v in scenario.laser.mount):
+        scenario.notes.append('laser mount {} (the parameter laser_pose) instead of {}'.format(
+            *(' '.join(f'{v:g}' for v in m) for m in (mount, scenario.laser.mount))))
+        scenario.laser = replace(scenario.laser, mount=mount)
     sigma = float(config.laser_sigma_range)
     if sigma != float(scenario.laser.sigma_range):
         scenario.notes.append(f'sigma_r {sigma:g} m (the parameter laser_sigma_range) instead '
@@ -301,8 +313,8 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         frontend: Front-end parameters (default: the configuration's; ``deskew`` and
             ``descriptors`` are :func:`run_slam`'s defaults whatever it says).
         config: The ``ekf_slam`` configuration (default: :func:`bag_configuration`, the
-            shipped defaults with what the bag states); the corner extractor takes its
-            ``laser_sigma_range`` (:func:`extractor_parameters`).
+            shipped defaults with what the bag states); the run takes its ``laser_pose``
+            and the corner extractor its ``laser_sigma_range`` (:func:`extractor_parameters`).
 
     Returns:
         The figures (see ``slam.json``).
@@ -317,7 +329,7 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
                         require_reference=False)
-    cfg = config or bag_configuration(bag, sigma_r=sigma_r)
+    cfg = config or bag_configuration(bag, sigma_r=sigma_r, laser_pose=laser_pose)
     noise_source = 'params' if params is not None else _noise_source(bag, scenario, cfg)
     prm = params or cfg.params
     association = association or prm.association

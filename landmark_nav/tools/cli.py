@@ -171,9 +171,10 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
 
 
 def _slam_configuration(args: argparse.Namespace):
-    """Return the ``ekf_slam`` configuration of ``evaluate`` and the parameters given.
+    """Return the ``ekf_slam`` configuration of ``evaluate``.
 
-    The files, then the bag's statements, then ``--set`` and the flags.
+    The files, then the bag's statements (``--laser-pose`` and ``--sigma-r`` for what it does
+    not state), then ``--set`` and the flags.
     """
     from landmark_nav.evaluation.slam import bag_configuration
     from landmark_nav.tools.node_parameters import given_parameters
@@ -184,8 +185,7 @@ def _slam_configuration(args: argparse.Namespace):
              'scan_matching_fit_pairs': args.scan_matching_fit_pairs,
              'scan_matching_side_starts': args.scan_matching_side_starts}
     settings.update({k: v for k, v in flags.items() if v is not None})
-    return (bag_configuration(args.bag, files, settings, args.sigma_r),
-            {**files, **settings})
+    return bag_configuration(args.bag, files, settings, args.sigma_r, args.laser_pose)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -205,17 +205,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.mode == 'localization' and args.map is None:
         raise ValueError('--mode localization needs --map FILE.npz (a map saved with '
                          '--save-map)')
-    config, given = _slam_configuration(args)
+    config = _slam_configuration(args)
     pose_cov = None if args.map_pose_sigma is None else np.diag(
         np.square(np.asarray(args.map_pose_sigma, dtype=float)))
-    laser_pose = args.laser_pose  # the bag's statement wins over both (evaluate --help)
-    if laser_pose is None and 'laser_pose' in given:
-        laser_pose = config.laser_pose
-    sigma_r = args.sigma_r  # the range noise: config's (--set, then the bag, then this)
     result = evaluate_bag(args.bag, None, args.out, progress=progress,
                           max_seconds=args.max_seconds,
                           reference=args.reference, align=args.align,
-                          laser_pose=laser_pose, sigma_r=sigma_r,
+                          laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta, slam_map=args.map,
                           save_map_to=args.save_map, map_pose_covariance=pose_cov,
                           mode=args.mode, config=config)
@@ -226,7 +222,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from landmark_nav.evaluation.viewer import write_slam_view
         view = write_slam_view(args.bag, args.view, result['association'],
                                max_seconds=args.max_seconds, reference=args.reference,
-                               laser_pose=laser_pose, sigma_r=sigma_r, config=config)
+                               laser_pose=args.laser_pose, sigma_r=args.sigma_r,
+                               config=config)
         print(f'viewer file: {view["mcap"]} (Foxglove / Lichtblick; layout '
               'viewer/slam_layout.json)')
     if args.out is not None and result['reference'] is None:
@@ -494,7 +491,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--laser-pose', type=float, nargs=3, default=None,
                    metavar=('X', 'Y', 'YAW'),
                    help='laser mount in base_link [m m rad] when the bag does not state it '
-                        '(default 0 0 0)')
+                        '(default 0 0 0; --set laser_pose=[X,Y,YAW] wins over the bag)')
     p.add_argument('--sigma-r', type=float, default=None,
                    help='laser range noise [m] when the bag does not state it (--set '
                    'laser_sigma_range=... wins over the bag)')
