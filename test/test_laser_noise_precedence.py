@@ -123,6 +123,50 @@ def test_set_wins_over_the_bags_odometry_model(stated_bag):
     assert models == [f'odometry.model:={DRIFT}', 'odometry.model:=pioneer']
 
 
+def test_the_launch_file_gives_every_node_what_the_replay_gives(stated_bag, monkeypatch):
+    """launch/replay.launch.py passes each node the bag's values as pipeline replay does.
+
+    ``launch`` is not installable here: its few names are stubbed, the file's own code runs.
+    """
+    import runpy
+    import types
+    from landmark_nav.tools.config_files import config_path
+    from landmark_nav.tools.node_parameters import as_ros_arguments
+
+    class Action:
+        def __init__(self, *args, **kwargs):
+            self.args, self.kwargs = args, kwargs
+
+    class LaunchConfiguration(Action):
+        def perform(self, context):
+            return context[self.args[0]]
+
+    repo = Path(__file__).resolve().parents[1]
+    stubs = {'launch': {'LaunchDescription': list},
+             'launch.actions': {'DeclareLaunchArgument': Action, 'OpaqueFunction': Action},
+             'launch.substitutions': {'LaunchConfiguration': LaunchConfiguration},
+             'launch_ros.actions': {'Node': Action},
+             'ament_index_python.packages': {'get_package_share_directory': lambda _: repo}}
+    for name, names in stubs.items():
+        monkeypatch.setitem(sys.modules, name, types.SimpleNamespace(**names))
+    launch = runpy.run_path(str(repo / 'launch' / 'replay.launch.py'))
+    nodes = {node.kwargs['name']: node.kwargs
+             for action in launch['generate_launch_description']()
+             if 'function' in action.kwargs
+             for node in action.kwargs['function']({'bag': str(stated_bag)})}
+    assert list(nodes) == ['bag_player', 'corner_extractor', 'ekf_slam']
+    replay = pipeline_commands('replay', bag=str(stated_bag))
+    for name in ('corner_extractor', 'ekf_slam'):
+        file, values = nodes[name]['parameters']
+        assert Path(file) == config_path(name)
+        assert values == run_parameters(stated_bag)[name]
+        cmd = replay[name]
+        assert as_ros_arguments(values) == cmd[cmd.index('--params-file') + 2:]
+    assert nodes['ekf_slam']['parameters'][1]['laser_pose'] == [0.0] * 3
+    assert nodes['ekf_slam']['parameters'][1]['odometry.model'] == DRIFT
+    assert nodes['corner_extractor']['parameters'][1]['sigma_r'] == STATED
+
+
 @pytest.mark.dds
 @pytest.mark.parametrize('settings', [(), (f'laser_pose={MOUNT}',)], ids=['bag', 'set-mount'])
 def test_the_replay_of_a_bag_stating_its_noise_is_evaluates_run(

@@ -23,7 +23,7 @@ Pipelines:
   corner_extractor + ekf_slam (the player waits up to 30 s until both topics are
   subscribed by every node that takes them, so no scan is lost to the nodes' start-up).
   Each node gets what the bag states, as ``landmark_nav evaluate`` uses it
-  (:func:`bag_settings`): ``ekf_slam`` the laser mount, its noise and the odometry noise
+  (:func:`stated_parameters`): ``ekf_slam`` the laser mount, its noise and the odometry noise
   model, ``corner_extractor`` the laser's noise (``sigma_r`` is ``ekf_slam``'s
   ``laser_sigma_range``: the bag's, or ``--set ekf_slam.laser_sigma_range``); a node's own
   ``--set`` wins. It ends with one result line (:mod:`~landmark_nav.tools.replay_result`): the bag,
@@ -34,7 +34,7 @@ Pipelines:
 import argparse
 import shlex
 import sys
-from typing import Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 from landmark_nav.parameter_names import unknown_parameter
 from landmark_nav.tools.config_files import config_path
@@ -78,25 +78,32 @@ def _overrides(settings: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[
     return out
 
 
-def bag_settings(bag: str, files: Sequence[str] = (), settings: Sequence[str] = ()
-                 ) -> Dict[str, List[str]]:
-    """Return what a bag states for each node, as ``-p`` arguments before its ``--set``.
+def stated_parameters(bag: str, files: Sequence[str] = (), settings: Sequence[str] = ()
+                      ) -> Dict[str, Dict[str, Any]]:
+    """Return what a bag states for each node of a replay, to give it before its ``--set``.
 
     :func:`landmark_nav.evaluation.slam.run_parameters`, as ``evaluate`` uses it, over
     ``ekf_slam``'s profile ``files`` (``--params-file`` arguments) and ``settings``
-    (``NODE.PARAMETER=VALUE``); nothing for a bag that cannot be read (the player reports
-    that).
+    (``NODE.PARAMETER=VALUE``): ``{'ekf_slam': values, 'corner_extractor': values,
+    'line_extractor': values}``, each empty for a bag that cannot be read (the player reports
+    that). ``launch/replay.launch.py`` gives the nodes the same values.
     """
-    from landmark_nav.evaluation.slam import run_parameters
-    from landmark_nav.tools.node_parameters import (as_ros_arguments, given_parameters,
-                                                    parse_setting)
+    from landmark_nav.evaluation.slam import EXTRACTOR_NODES, run_parameters
+    from landmark_nav.tools.node_parameters import given_parameters, parse_setting
     slam = [t for t in settings if t.partition('=')[0].startswith('ekf_slam.')]
     try:
-        given = run_parameters(bag, given_parameters(files[1::2], [], 'ekf_slam'),
-                               dict(parse_setting(t, 'ekf_slam') for t in slam))
+        return run_parameters(bag, given_parameters(files[1::2], [], 'ekf_slam'),
+                              dict(parse_setting(t, 'ekf_slam') for t in slam))
     except Exception:  # noqa: B902 - the player names the problem with the bag
-        return {}
-    return {node: as_ros_arguments(values) for node, values in given.items()}
+        return {node: {} for node in ('ekf_slam',) + EXTRACTOR_NODES}
+
+
+def bag_settings(bag: str, files: Sequence[str] = (), settings: Sequence[str] = ()
+                 ) -> Dict[str, List[str]]:
+    """Return :func:`stated_parameters` as ``-p`` arguments per node."""
+    from landmark_nav.tools.node_parameters import as_ros_arguments
+    return {node: as_ros_arguments(values)
+            for node, values in stated_parameters(bag, files, settings).items()}
 
 
 def _profile_files(names: Sequence[str], nodes: Sequence[str]) -> Dict[str, List[str]]:
