@@ -38,13 +38,13 @@ def mark_descendants() -> str:
     return os.environ[SESSION_VAR]
 
 
-def _environment(pid: int) -> Dict[str, str]:
+def _environment(pid: int) -> bytes:
+    """Return the environment of a process as ``/proc`` has it (b'' when unreadable)."""
     try:
-        raw = Path(f'/proc/{pid}/environ').read_bytes()
+        with open(f'/proc/{pid}/environ', 'rb') as f:
+            return f.read()
     except OSError:  # gone, or not ours to read
-        return {}
-    pairs = (item.partition(b'=') for item in raw.split(b'\0') if item)
-    return {k.decode(errors='replace'): v.decode(errors='replace') for k, _, v in pairs}
+        return b''
 
 
 def command_line(pid: int) -> str:
@@ -61,14 +61,18 @@ def marked_processes(var: str, value: str, exclude: Sequence[int] = ()) -> Dict[
 
     Zombies (exited, not yet reaped) have no environment left and are not listed.
     """
+    # each NUL-terminated entry of the environment looked up as bytes (run after every test:
+    # pathlib and decoding every process's whole environment into a dict were most of it)
+    name, entry = f'{var}='.encode(), f'\0{var}={value}\0'.encode()
     found = {}
-    for entry in Path('/proc').iterdir():
-        if not entry.name.isdigit():
+    for pid_name in os.listdir('/proc'):
+        if not pid_name.isdigit():
             continue
-        pid = int(entry.name)
+        pid = int(pid_name)
         if pid in exclude or pid == os.getpid():
             continue
-        if _environment(pid).get(var) == value:
+        env = _environment(pid)
+        if name in env and entry in b'\0' + env + b'\0':
             found[pid] = command_line(pid)
     return found
 
