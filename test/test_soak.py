@@ -28,6 +28,9 @@ pytestmark = pytest.mark.dds
 REPO = Path(__file__).resolve().parents[1]
 NODES = ('corner_extractor', 'ekf_slam')
 SOAK_S = 15.0
+#: corner sets newer than the last odometry message, held by ekf_slam until odometry past
+#: their stamp arrives: the last one or two
+HELD = 2
 
 
 def _statuses(diagnostics, node: str) -> list:
@@ -80,7 +83,12 @@ def test_live_slam_nodes_at_40_hz_process_or_count_every_scan(tmp_path, processe
         published = int(found.group(1))
         assert ros.wait_until(lambda: _settled(diagnostics, 'corner_extractor', published),
                               timeout=60.0)
-        assert ros.wait_until(lambda: _settled(diagnostics, 'ekf_slam', 0), timeout=60.0)
+        # ekf_slam has every corner set the extractor processed but the held ones (HELD);
+        # a total of 0 made this wait end at its first status, also while corner sets
+        # were still on their way on a loaded machine (3 short of the extractor, once)
+        extracted = int(_statuses(diagnostics, 'corner_extractor')[-1]['processed'])
+        assert ros.wait_until(lambda: _settled(diagnostics, 'ekf_slam', extracted - HELD),
+                              timeout=60.0)
         status = {n: _statuses(diagnostics, n)[-1] for n in NODES}
     for n, p in procs.items():
         assert processes.stop(p, signal.SIGINT, timeout=30.0) == 0, n
@@ -93,7 +101,7 @@ def test_live_slam_nodes_at_40_hz_process_or_count_every_scan(tmp_path, processe
     # every corner set reached ekf_slam's counts, but those newer than the last odometry
     # message (held until odometry past their stamp arrives: the last one or two)
     slam = status['ekf_slam']
-    assert 0 <= int(ce['processed']) - int(slam['processed']) - int(slam['dropped']) <= 2, \
+    assert 0 <= int(ce['processed']) - int(slam['processed']) - int(slam['dropped']) <= HELD, \
         (ce, slam)
     for n in NODES:
         log = (tmp_path / f'{n}.log').read_text()
