@@ -247,7 +247,15 @@ def _signal_all(children: dict, sig) -> dict:
         c.proc.send_signal(sig)
     errs = {}
     for name, c in children.items():
-        _, err = c.communicate(timeout=60)
+        try:
+            _, err = c.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            # where it hangs: the children run with faulthandler, which prints every
+            # thread's Python stack on SIGABRT
+            c.proc.send_signal(signal.SIGABRT)
+            _, err = c.communicate(timeout=10)
+            pytest.fail(f'{name} still ran 60 s after {signal.Signals(sig).name}; its '
+                        f'threads on SIGABRT:\n{err}')
         assert 'Traceback' not in err, f'{name}:\n{err}'
         assert c.proc.returncode == 0, f'{name} exited with {c.proc.returncode}:\n{err}'
         errs[name] = err
@@ -264,7 +272,7 @@ STARTED = {'corner_extractor': 'corner_extractor: method',
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_nodes_and_bag_player_stop_cleanly_on_signals(sig, processes):
     """Ctrl-C or kill printed tracebacks (bag_player, ekf_slam while processing)."""
-    env = node_env()
+    env = node_env(PYTHONFAULTHANDLER='1')  # a child that hangs says where (_signal_all)
     nodes = {n: _Child(_start(processes, [f'landmark_nav.nodes.{n}'], env)) for n in NODES}
     # start-up: every node has logged its start line (it slept a fixed 8 s)
     _wait_for(lambda: all(STARTED[n] in c.err() or c.proc.poll() is not None
