@@ -170,11 +170,11 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
     return 0
 
 
-def _slam_configuration(args: argparse.Namespace):
+def _slam_configuration(args: argparse.Namespace, notes=None):
     """Return the ``ekf_slam`` configuration of ``evaluate``.
 
     The files, then the bag's statements (``--laser-pose`` and ``--sigma-r`` for what it does
-    not state), then ``--set`` and the flags.
+    not state), then ``--set`` and the flags; ``notes`` (a list) takes what they replaced.
     """
     from landmark_nav.evaluation.slam import bag_configuration
     from landmark_nav.tools.node_parameters import given_parameters
@@ -185,7 +185,7 @@ def _slam_configuration(args: argparse.Namespace):
              'scan_matching_fit_pairs': args.scan_matching_fit_pairs,
              'scan_matching_side_starts': args.scan_matching_side_starts}
     settings.update({k: v for k, v in flags.items() if v is not None})
-    return bag_configuration(args.bag, files, settings, args.sigma_r, args.laser_pose)
+    return bag_configuration(args.bag, files, settings, args.sigma_r, args.laser_pose, notes)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -205,7 +205,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.mode == 'localization' and args.map is None:
         raise ValueError('--mode localization needs --map FILE.npz (a map saved with '
                          '--save-map)')
-    config = _slam_configuration(args)
+    notes = []
+    config = _slam_configuration(args, notes)
     pose_cov = None if args.map_pose_sigma is None else np.diag(
         np.square(np.asarray(args.map_pose_sigma, dtype=float)))
     result = evaluate_bag(args.bag, None, args.out, progress=progress,
@@ -214,7 +215,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta, slam_map=args.map,
                           save_map_to=args.save_map, map_pose_covariance=pose_cov,
-                          mode=args.mode, config=config)
+                          mode=args.mode, config=config, notes=notes)
     print(format_summary(result))
     if result.get('map_file'):
         print(f'map written: {result["map_file"]}')
