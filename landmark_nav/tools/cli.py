@@ -188,10 +188,44 @@ def _slam_configuration(args: argparse.Namespace, notes=None):
     return bag_configuration(args.bag, files, settings, args.sigma_r, args.laser_pose, notes)
 
 
+#: ``evaluate``'s options the graph back end does not take (``ekf_slam``'s filter): dest ->
+#: option.
+_NOT_GRAPH = {'set': '--set', 'params_file': '--params-file', 'association': '--association',
+              'landmarks': '--landmarks', 'mode': '--mode', 'map': '--map',
+              'map_pose_sigma': '--map-pose-sigma', 'save_map': '--save-map', 'view': '--view',
+              'scan_matching': '--scan-matching',
+              'scan_matching_fit_pairs': '--scan-matching-fit-pairs',
+              'scan_matching_side_starts': '--scan-matching-side-starts'}
+
+
+def _refuse_graph_options(args: argparse.Namespace) -> None:
+    """Refuse an option of ``evaluate`` the graph back end would ignore (one line, exit 2).
+
+    Raises:
+        ValueError: Names each option given and its values.
+    """
+    given = []
+    for dest, option in _NOT_GRAPH.items():
+        value = getattr(args, dest)
+        if dest in ('set', 'params_file'):  # repeatable
+            given += [f'{option} {v}' for v in value]
+        elif value is True:
+            given.append(option)
+        elif value is not None and value is not False:
+            text = ' '.join(map(str, value)) if isinstance(value, list) else value
+            given.append(f'{option} {text}')
+    if given:
+        raise ValueError(f'--backend graph does not take {", ".join(given)} (they configure '
+                         "the ekf back end's filter; the graph back end takes --out, "
+                         '--max-seconds, --reference, --align, --laser-pose, --sigma-r, '
+                         '--rpe-delta)')
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
     import numpy as np
     if args.backend == 'graph':
+        _refuse_graph_options(args)
         from landmark_nav.evaluation.slam_graph import evaluate_graph_bag, format_graph_summary
         print(format_graph_summary(evaluate_graph_bag(
             args.bag, args.out, max_seconds=args.max_seconds, reference=args.reference,
@@ -480,8 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--backend', choices=['ekf', 'graph'], default='ekf',
                    help="ekf (default): the ekf_slam node's filter; graph: the keyframe pose "
                         'graph with loop closure (iSAM2; docs/graph_slam.md; '
-                        'uses --out, --max-seconds, --reference, --align, --laser-pose, '
-                        '--sigma-r, --rpe-delta only)')
+                        'takes --out, --max-seconds, --reference, --align, --laser-pose, '
+                        '--sigma-r, --rpe-delta, --no-progress only and refuses the others, '
+                        '--set included)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
     p.add_argument('--reference', default=None, metavar='FILE.tum', type=_existing_file,
