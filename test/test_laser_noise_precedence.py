@@ -28,6 +28,7 @@ from test_evaluate_slam import BAG, reencode
 STATED = 0.02  # the bag's range noise [m]
 DRIFT = 'k_d=0.05 k_theta=0.05 k_dtheta=0.1'  # the bag's odometry noise model
 MOUNT = [0.05, 0.0, 0.02]  # a --set laser mount [m m rad]
+GAIN = 'odometry.sigma_xy_per_sqrt_m=0.01'  # a --set odometry gain (the bag's model: 0.05)
 
 
 @pytest.fixture(scope='module')
@@ -123,6 +124,44 @@ def test_set_wins_over_the_bags_odometry_model(stated_bag):
     assert models == [f'odometry.model:={DRIFT}', 'odometry.model:=pioneer']
 
 
+def test_a_set_odometry_gain_wins_over_the_bags_model(stated_bag, tmp_path, capsys):
+    """--set odometry.<gain> replaces the bag's drift model's value, its others kept, noted.
+
+    Before, a non-empty odometry.model (the bag's) replaced every odometry.* value, so the
+    --set gain had no effect, silently, in evaluate and in the replay.
+    """
+    from dataclasses import asdict, replace
+    from landmark_nav.slam.frontend import odometry_noise_model
+    runs = {'bag': (), 'gain': ('--set', GAIN),
+            'same': ('--set', 'odometry.sigma_xy_per_sqrt_m=0.05')}  # the model's own value
+    figures = {name: _evaluate(stated_bag, tmp_path / name, *args)
+               for name, args in runs.items()}
+    text = capsys.readouterr().out
+    note = ('odometry.sigma_xy_per_sqrt_m 0.01 (--set) instead of 0.05 of the odometry model '
+            f"'{DRIFT}' (the bag's), its other gains kept")
+    assert note in text and note in figures['gain']['notes']
+    want = replace(odometry_noise_model(DRIFT), sigma_xy_per_sqrt_m=0.01)
+    got = {k: v for k, v in figures['gain']['odometry_noise'].items() if k != 'source'}
+    assert got == asdict(want)
+    tum = {name: (tmp_path / name / 'trajectory_slam.tum').read_text() for name in runs}
+    assert tum['gain'] != tum['bag'] == tum['same'] != ''
+    # The gains are the --set one's and the model's, not the pioneer default.
+    assert figures['same']['odometry_noise']['source'] == 'odometry.*'
+    assert not any('no odometry noise model' in n for n in figures['same']['notes'])
+    assert bag_configuration(stated_bag, settings={'odometry.sigma_xy_per_sqrt_m': 0.01}
+                             ).params.odometry == want
+    # The replay: ekf_slam gets the model's gains after its files, the --set gain last.
+    cmd = pipeline_commands('replay', [f'ekf_slam.{GAIN}'], bag=str(stated_bag))['ekf_slam']
+    stated = run_parameters(stated_bag, settings={'odometry.sigma_xy_per_sqrt_m': 0.01})
+    assert stated['ekf_slam']['odometry.model'] == ''
+    assert 'odometry.sigma_xy_per_sqrt_m' not in stated['ekf_slam']
+    assert [a for a in cmd if a.startswith('odometry.')] == [
+        "odometry.model:=''"] + [
+            f'odometry.{k}:={v!r}' for k, v in asdict(want).items()
+            if k != 'sigma_xy_per_sqrt_m'] + ['odometry.sigma_xy_per_sqrt_m:=0.01']
+    assert note in capsys.readouterr().err
+
+
 def test_the_launch_file_gives_every_node_what_the_replay_gives(stated_bag, monkeypatch):
     """launch/replay.launch.py passes each node the bag's values as pipeline replay does.
 
@@ -168,7 +207,8 @@ def test_the_launch_file_gives_every_node_what_the_replay_gives(stated_bag, monk
 
 
 @pytest.mark.dds
-@pytest.mark.parametrize('settings', [(), (f'laser_pose={MOUNT}',)], ids=['bag', 'set-mount'])
+@pytest.mark.parametrize('settings', [(), (f'laser_pose={MOUNT}',), (GAIN,)],
+                         ids=['bag', 'set-mount', 'set-gain'])
 def test_the_replay_of_a_bag_stating_its_noise_is_evaluates_run(
         stated_bag, processes, tmp_path, settings):
     """The replayed poses are the offline run's on a bag that does not state 1 cm.

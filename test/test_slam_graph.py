@@ -25,3 +25,22 @@ def test_cli_graph_backend_prints_and_writes_its_figures(tmp_path, capsys):
     assert r['loops_accepted'] == 0
     assert r['final_ate_se2_rmse'] < 0.6 * r['odom_ate_se2_rmse']
     assert r['final_ellipse95_share'] >= 0.95
+
+
+def test_cli_graph_backend_refuses_what_it_would_ignore(tmp_path, capsys):
+    """--set and the ekf filter's options with --backend graph: one line naming them, exit 2.
+
+    The graph back end does not read ekf_slam's parameters (before, it ran without them).
+    """
+    options = ('--association', 'jcbb', '--scan-matching', '--scan-matching-fit-pairs', '0',
+               '--map-pose-sigma', '0.1', '0.1', '0')
+    runs = {('--set', 'laser_sigma_range=0.04'): '--set laser_sigma_range=0.04',
+            options: ('--association jcbb, --map-pose-sigma 0.1 0.1 0.0, --scan-matching, '
+                      '--scan-matching-fit-pairs 0.0')}
+    for args, named in runs.items():
+        out = tmp_path / args[0].strip('-')
+        assert cli_main(['evaluate', str(BAG), '--backend', 'graph', '--max-seconds', '1',
+                         '--out', str(out)] + list(args)) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f'--backend graph does not take {named} (' in err[0], err
+        assert not out.exists()

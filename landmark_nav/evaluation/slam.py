@@ -33,7 +33,8 @@ from landmark_nav.evaluation.trajectory import (ALIGNMENTS, ate, rpe, STATISTICS
 from landmark_nav.laser.corners import CornerParams
 from landmark_nav.laser.lines import LineParams
 from landmark_nav.sim import run_scenario, ScanSample
-from landmark_nav.slam.configuration import parameters, slam_configuration, SlamConfiguration
+from landmark_nav.slam.configuration import (ODOMETRY_PARAMETERS, parameters,
+                                             slam_configuration, SlamConfiguration)
 from landmark_nav.slam.ekf_slam import OdometryNoise, SlamParams
 from landmark_nav.slam.frontend import FrontendParams, odometry_noise_model
 from landmark_nav.slam.slam_map import load_map, save_map, SlamMap
@@ -162,10 +163,34 @@ def bag_slam_parameters(bag, sigma_r: Optional[float] = None,
     return out
 
 
+def _odometry_model_gains(model: str, source: str, settings: Mapping[str, Any],
+                          notes: Optional[List[str]]) -> Dict[str, Any]:
+    """Return ``odometry.model`` ``''`` and ``model``'s gains but those ``settings`` give.
+
+    A non-empty ``odometry.model`` replaces the ``odometry.*`` values
+    (:func:`landmark_nav.slam.configuration.slam_configuration`): a ``--set`` gain on top of
+    a model a file or the bag gives takes that model's place for its own value, the model's
+    other gains kept. Appends to ``notes`` one line naming what was replaced.
+    """
+    try:
+        noise = odometry_noise_model(model)
+    except ValueError as err:
+        raise ValueError(f'{source} odometry.model: {err}') from None
+    gains = {f'odometry.{name}': float(getattr(noise, name)) for name in ODOMETRY_PARAMETERS}
+    given = [k for k in gains if k in settings]
+    if notes is not None:
+        notes.append('{} (--set) instead of {} of the odometry model {!r} ({}), its other '
+                     'gains kept'.format(', '.join(f'{k} {settings[k]}' for k in given),
+                                         ', '.join(f'{gains[k]:g}' for k in given),
+                                         model, source))
+    return {'odometry.model': '', **{k: v for k, v in gains.items() if k not in given}}
+
+
 def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
                    settings: Optional[Mapping[str, Any]] = None,
                    sigma_r: Optional[float] = None,
-                   laser_pose: Optional[Sequence[float]] = None) -> Dict[str, Dict[str, Any]]:
+                   laser_pose: Optional[Sequence[float]] = None,
+                   notes: Optional[List[str]] = None) -> Dict[str, Dict[str, Any]]:
     """Return what each node of a run on a bag is given between its files and its ``--set``.
 
     The one place that decides what a bag states for ``landmark_nav evaluate`` and for the
@@ -174,7 +199,10 @@ def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
     ``parameters`` (the ``--params-file`` files, the profiles), what the bag states
     (:func:`bag_slam_parameters`), ``settings`` (``--set``); a layer that gives
     ``laser_sigma_range`` gives :data:`RANGE_NOISE_FOLLOWERS` the same value unless it gives
-    them too. So ``--set`` wins over the bag, the bag over the files and the defaults.
+    them too. So ``--set`` wins over the bag, the bag over the files and the defaults. An
+    odometry gain (``odometry.sigma_*``) in ``settings`` without ``odometry.model`` wins over
+    the model the bag or a file states: ``ekf_slam`` gets ``odometry.model`` ``''`` and that
+    model's other gains, and ``notes`` (a list) a line naming what the setting replaced.
 
     Returns:
         ``{'ekf_slam': values, 'corner_extractor': values, 'line_extractor': values}``:
@@ -201,13 +229,19 @@ def run_parameters(bag, parameters: Optional[Mapping[str, Any]] = None,
         extractor['sigma_r'] = float(values['laser_sigma_range'])
     if 'lines.sigma_phi' in layers[1]:
         extractor['sigma_phi'] = float(layers[1]['lines.sigma_phi'])
+    model = str(layers[1].get('odometry.model', layers[0].get('odometry.model', ''))).strip()
+    if model and 'odometry.model' not in layers[2] and any(
+            k.startswith('odometry.') for k in layers[2]):
+        source = "the bag's" if 'odometry.model' in layers[1] else "the files'"
+        slam.update(_odometry_model_gains(model, source, layers[2], notes))
     return {'ekf_slam': slam, **{node: dict(extractor) for node in EXTRACTOR_NODES}}
 
 
 def bag_configuration(bag, parameters: Optional[Mapping[str, Any]] = None,
                       settings: Optional[Mapping[str, Any]] = None,
                       sigma_r: Optional[float] = None,
-                      laser_pose: Optional[Sequence[float]] = None) -> SlamConfiguration:
+                      laser_pose: Optional[Sequence[float]] = None,
+                      notes: Optional[List[str]] = None) -> SlamConfiguration:
     """Return the ``ekf_slam`` configuration of a run on a bag, layered as the node's.
 
     The shipped defaults, then ``parameters`` (e.g. the ``--params-file`` files), then what
@@ -215,13 +249,14 @@ def bag_configuration(bag, parameters: Optional[Mapping[str, Any]] = None,
     ``settings`` (``--set``): the order in which ``landmark_nav pipeline replay`` gives them
     to the node (its parameter file, the bag's statements, ``--set``). ``sigma_r`` and
     ``laser_pose``: the range noise and the mount when the bag states none (``evaluate
-    --sigma-r``, ``--laser-pose``).
+    --sigma-r``, ``--laser-pose``); ``notes``: :func:`run_parameters`'.
 
     Raises:
         ValueError: An unknown parameter, a bad value, an unreadable bag.
     """
     values = dict(parameters or {})
-    values.update(run_parameters(bag, parameters, settings, sigma_r, laser_pose)['ekf_slam'])
+    values.update(run_parameters(bag, parameters, settings, sigma_r, laser_pose,
+                                 notes)['ekf_slam'])
     values.update(settings or {})
     return slam_configuration(values)
 
@@ -254,13 +289,14 @@ def extractor_parameters(scenario, config: SlamConfiguration
 def _noise_source(bag, scenario, config: SlamConfiguration) -> str:
     """Where the configuration's odometry noise comes from (``slam.json``)."""
     model = config.values['odometry.model'].strip()
-    if model and model == bag_slam_parameters(bag).get('odometry.model'):
+    stated = bag_slam_parameters(bag).get('odometry.model')
+    if model and model == stated:
         return f'custom_data {DRIFT_KEY}' if DRIFT_KEY in scenario.custom_data else model
     if model:
         return f'odometry.model {model}'
     pioneer = all(config.values[k] == p.default for k, p in parameters().items()
                   if k.startswith('odometry.'))
-    return 'default pioneer' if pioneer else 'odometry.*'
+    return 'default pioneer' if pioneer and not stated else 'odometry.*'
 
 
 def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress: bool = True,
@@ -272,7 +308,8 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
                  map_pose_covariance: Optional[np.ndarray] = None,
                  mode: Optional[str] = None,
                  frontend: Optional[FrontendParams] = None,
-                 config: Optional[SlamConfiguration] = None) -> dict:
+                 config: Optional[SlamConfiguration] = None,
+                 notes: Sequence[str] = ()) -> dict:
     """Run EKF-SLAM over a bag and score it against its reference.
 
     Any bag with ``/scan``, ``/odom`` and a reference (``/ground_truth/odom`` or
@@ -315,6 +352,8 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         config: The ``ekf_slam`` configuration (default: :func:`bag_configuration`, the
             shipped defaults with what the bag states); the run takes its ``laser_pose``
             and the corner extractor its ``laser_sigma_range`` (:func:`extractor_parameters`).
+        notes: Notes of the configuration (:func:`bag_configuration`'s ``notes``), first in
+            the run's.
 
     Returns:
         The figures (see ``slam.json``).
@@ -329,6 +368,7 @@ def evaluate_bag(bag, association: Optional[str] = None, out_dir=None, progress:
         raise ValueError(f'align must be one of {", ".join(ALIGNMENTS)}, got {align!r}')
     scenario = load_bag(bag, max_seconds, reference, laser_pose, sigma_r,
                         require_reference=False)
+    scenario.notes[:0] = notes
     cfg = config or bag_configuration(bag, sigma_r=sigma_r, laser_pose=laser_pose)
     noise_source = 'params' if params is not None else _noise_source(bag, scenario, cfg)
     prm = params or cfg.params

@@ -170,11 +170,11 @@ def _cmd_calibrate_odometry(args: argparse.Namespace) -> int:
     return 0
 
 
-def _slam_configuration(args: argparse.Namespace):
+def _slam_configuration(args: argparse.Namespace, notes=None):
     """Return the ``ekf_slam`` configuration of ``evaluate``.
 
     The files, then the bag's statements (``--laser-pose`` and ``--sigma-r`` for what it does
-    not state), then ``--set`` and the flags.
+    not state), then ``--set`` and the flags; ``notes`` (a list) takes what they replaced.
     """
     from landmark_nav.evaluation.slam import bag_configuration
     from landmark_nav.tools.node_parameters import given_parameters
@@ -185,13 +185,47 @@ def _slam_configuration(args: argparse.Namespace):
              'scan_matching_fit_pairs': args.scan_matching_fit_pairs,
              'scan_matching_side_starts': args.scan_matching_side_starts}
     settings.update({k: v for k, v in flags.items() if v is not None})
-    return bag_configuration(args.bag, files, settings, args.sigma_r, args.laser_pose)
+    return bag_configuration(args.bag, files, settings, args.sigma_r, args.laser_pose, notes)
+
+
+#: ``evaluate``'s options the graph back end does not take (``ekf_slam``'s filter): dest ->
+#: option.
+_NOT_GRAPH = {'set': '--set', 'params_file': '--params-file', 'association': '--association',
+              'landmarks': '--landmarks', 'mode': '--mode', 'map': '--map',
+              'map_pose_sigma': '--map-pose-sigma', 'save_map': '--save-map', 'view': '--view',
+              'scan_matching': '--scan-matching',
+              'scan_matching_fit_pairs': '--scan-matching-fit-pairs',
+              'scan_matching_side_starts': '--scan-matching-side-starts'}
+
+
+def _refuse_graph_options(args: argparse.Namespace) -> None:
+    """Refuse an option of ``evaluate`` the graph back end would ignore (one line, exit 2).
+
+    Raises:
+        ValueError: Names each option given and its values.
+    """
+    given = []
+    for dest, option in _NOT_GRAPH.items():
+        value = getattr(args, dest)
+        if dest in ('set', 'params_file'):  # repeatable
+            given += [f'{option} {v}' for v in value]
+        elif value is True:
+            given.append(option)
+        elif value is not None and value is not False:
+            text = ' '.join(map(str, value)) if isinstance(value, list) else value
+            given.append(f'{option} {text}')
+    if given:
+        raise ValueError(f'--backend graph does not take {", ".join(given)} (they configure '
+                         "the ekf back end's filter; the graph back end takes --out, "
+                         '--max-seconds, --reference, --align, --laser-pose, --sigma-r, '
+                         '--rpe-delta)')
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from landmark_nav.evaluation.slam import evaluate_bag, format_summary
     import numpy as np
     if args.backend == 'graph':
+        _refuse_graph_options(args)
         from landmark_nav.evaluation.slam_graph import evaluate_graph_bag, format_graph_summary
         print(format_graph_summary(evaluate_graph_bag(
             args.bag, args.out, max_seconds=args.max_seconds, reference=args.reference,
@@ -205,7 +239,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.mode == 'localization' and args.map is None:
         raise ValueError('--mode localization needs --map FILE.npz (a map saved with '
                          '--save-map)')
-    config = _slam_configuration(args)
+    notes = []
+    config = _slam_configuration(args, notes)
     pose_cov = None if args.map_pose_sigma is None else np.diag(
         np.square(np.asarray(args.map_pose_sigma, dtype=float)))
     result = evaluate_bag(args.bag, None, args.out, progress=progress,
@@ -214,7 +249,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                           laser_pose=args.laser_pose, sigma_r=args.sigma_r,
                           rpe_delta=args.rpe_delta, slam_map=args.map,
                           save_map_to=args.save_map, map_pose_covariance=pose_cov,
-                          mode=args.mode, config=config)
+                          mode=args.mode, config=config, notes=notes)
     print(format_summary(result))
     if result.get('map_file'):
         print(f'map written: {result["map_file"]}')
@@ -479,8 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--backend', choices=['ekf', 'graph'], default='ekf',
                    help="ekf (default): the ekf_slam node's filter; graph: the keyframe pose "
                         'graph with loop closure (iSAM2; docs/graph_slam.md; '
-                        'uses --out, --max-seconds, --reference, --align, --laser-pose, '
-                        '--sigma-r, --rpe-delta only)')
+                        'takes --out, --max-seconds, --reference, --align, --laser-pose, '
+                        '--sigma-r, --rpe-delta, --no-progress only and refuses the others, '
+                        '--set included)')
     p.add_argument('--out', default=None,
                    help='directory for the TUM trajectories, slam.json and the PNGs')
     p.add_argument('--reference', default=None, metavar='FILE.tum', type=_existing_file,

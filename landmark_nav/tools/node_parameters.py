@@ -123,7 +123,7 @@ def _ros_value(value: Any) -> str:
         return '[' + ','.join(_ros_value(v) for v in value) + ']'
     if isinstance(value, (int, float)):
         return repr(value)
-    return str(value)
+    return str(value) if value != '' else "''"
 
 
 def as_ros_arguments(values: Mapping[str, Any]) -> List[str]:

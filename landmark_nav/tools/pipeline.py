@@ -86,16 +86,21 @@ def stated_parameters(bag: str, files: Sequence[str] = (), settings: Sequence[st
     ``ekf_slam``'s profile ``files`` (``--params-file`` arguments) and ``settings``
     (``NODE.PARAMETER=VALUE``): ``{'ekf_slam': values, 'corner_extractor': values,
     'line_extractor': values}``, each empty for a bag that cannot be read (the player reports
-    that). ``launch/replay.launch.py`` gives the nodes the same values.
+    that). ``launch/replay.launch.py`` gives the nodes the same values. Prints a ``note:``
+    line on stderr for what a setting replaced (as ``evaluate`` notes it).
     """
     from landmark_nav.evaluation.slam import EXTRACTOR_NODES, run_parameters
     from landmark_nav.tools.node_parameters import given_parameters, parse_setting
     slam = [t for t in settings if t.partition('=')[0].startswith('ekf_slam.')]
+    notes = []
     try:
-        return run_parameters(bag, given_parameters(files[1::2], [], 'ekf_slam'),
-                              dict(parse_setting(t, 'ekf_slam') for t in slam))
+        values = run_parameters(bag, given_parameters(files[1::2], [], 'ekf_slam'),
+                                dict(parse_setting(t, 'ekf_slam') for t in slam), notes=notes)
     except Exception:  # noqa: B902 - the player names the problem with the bag
         return {node: {} for node in ('ekf_slam',) + EXTRACTOR_NODES}
+    for note in notes:
+        print(f'note: ekf_slam: {note}', file=sys.stderr)
+    return values
 
 
 def bag_settings(bag: str, files: Sequence[str] = (), settings: Sequence[str] = ()
