@@ -191,17 +191,20 @@ def test_the_replay_result_names_other_publishers_of_pose():
     nodes = [rclpy.create_node(name, context=context) for name in ('ekf_slam', 'intruder')]
     recorder = PoseRecorder()
     try:
+        alone = recorder.connected()  # the replay's player waits until it is matched
         pubs = [n.create_publisher(PoseWithCovarianceStamped, '/pose', 10) for n in nodes]
         deadline = time.monotonic() + 20.0
-        while {n for n, _ in recorder.publishers} != {'/ekf_slam', '/intruder'} and \
-                time.monotonic() < deadline:
+        while ({n for n, _ in recorder.publishers} != {'/ekf_slam', '/intruder'}
+               or not recorder.connected()) and time.monotonic() < deadline:
             time.sleep(0.1)
+        matched = recorder.connected()
     finally:
         stamps, poses = recorder.stop()
         del pubs
         for n in nodes:
             n.destroy_node()
         rclpy.try_shutdown(context=context)
+    assert not alone and matched
     assert recorder.other_publishers() == ['/intruder']
     line = result_line('b', 1.0, 2, 1.0, np.array([1, 2]), np.zeros((2, 3)), None,
                        recorder.other_publishers())

@@ -241,6 +241,7 @@ def run(args: argparse.Namespace) -> int:
     if args.name == 'replay':
         from landmark_nav.tools.replay_result import PoseRecorder
         recorder = PoseRecorder()  # before the nodes: it sees their first pose
+        manager.also_ready = recorder.connected  # the player starts once it is matched
     try:
         manager.loop()
     finally:

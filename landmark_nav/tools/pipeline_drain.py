@@ -16,7 +16,8 @@ At the start, the player is started only once the nodes run and ekf_slam's
 ``corners/features`` subscription is matched with the corner extractor (``matched.*`` on
 ``/diagnostics``; at most ``READY_TIMEOUT_S``): the player already waits for the subscribers
 of its own topics, but the first corner clouds went out before that match, and their
-feature sets went on without them (the trajectory then differed from the offline one).
+feature sets went on without them (the trajectory then differed from the offline one);
+and, with ``also_ready`` (the replay's ``/pose`` recorder), until that holds too.
 """
 
 import multiprocessing
@@ -157,6 +158,8 @@ class DrainingManager(Manager):
         self.player_started: Optional[float] = None  # monotonic [s]
         self.player_ended: Optional[float] = None  # monotonic [s], when it ended by itself
         self._draining = False
+        #: Also waited for before the player starts (e.g. the pose recorder's match).
+        self.also_ready: Callable[[], bool] = lambda: True
         self._term_at: Optional[float] = None
         self._guard = threading.Lock()
 
@@ -172,7 +175,8 @@ class DrainingManager(Manager):
             return
         player = self._processes.pop('bag_player')
         super()._start()
-        ok, _, waited = watch_inputs(ready, READY_TIMEOUT_S)
+        ok, _, waited = watch_inputs(lambda status: ready(status) and self.also_ready(),
+                                     READY_TIMEOUT_S)
         self._system_print(f'replay nodes {"ready" if ok else "not ready"} after '
                            f'{waited:.1f} s: starting bag_player\n')
         self._processes['bag_player'] = player
