@@ -28,6 +28,7 @@ from landmark_nav.evaluation.road_outline import (evaluate_folder, frame_names, 
                                                   SEED_ROWS, summarize, UNLABELLED_CLASS)
 from landmark_nav.road.outline import band_seed, OutlineParams
 from landmark_nav.road.road_cnn import MeanProbability
+from landmark_nav.road.road_cnn_training import DICE, STEPS
 from landmark_nav.road.road_probability import FEATURE_NAMES, FEATURE_SIZE, pixel_features
 from landmark_nav.road.road_probability import RoadModel
 from landmark_nav.road.road_training import fit_road_model
@@ -35,9 +36,9 @@ import numpy as np
 
 SAMPLES_PER_FRAME = 600
 CNN_COPIES = 5
-CNN_STEPS = 2000
+CNN_STEPS = STEPS  # the shipped network's training (road_cnn_training)
 CNN_MAX_ZOOM = 1.4
-CNN_DICE = 1.0
+CNN_DICE = DICE
 ROW_FILL_QUANTILE = 0.1
 
 

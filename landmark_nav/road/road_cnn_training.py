@@ -109,6 +109,10 @@ def torch_network(c_in: int, widths: Dict[str, int]):
 
 
 WIDTHS = {'e1': 16, 'e2': 32, 'c1': 32, 'c2': 32, 'c3': 32, 'd1': 16, 'h': 16}
+#: Mini-batches and soft Dice weight of the shipped network's training (``landmark_nav
+#: train-road-outline --kind cnn``, the leave-one-drive-out benchmark).
+STEPS = 2000
+DICE = 1.0
 
 
 def soft_dice_loss(p, y, valid):
@@ -134,9 +138,9 @@ def export(net, mean: np.ndarray, scale: np.ndarray) -> RoadCNN:
 
 
 def fit_road_cnn(x: np.ndarray, y: np.ndarray, valid: np.ndarray, group: np.ndarray,
-                 steps: int = 1500, batch: int = 8, rate: float = 3e-3,
+                 steps: int = STEPS, batch: int = 8, rate: float = 3e-3,
                  weight_decay: float = 1e-4, seed: int = 0,
-                 widths: Dict[str, int] = WIDTHS, dice: float = 0.0, log=None) -> RoadCNN:
+                 widths: Dict[str, int] = WIDTHS, dice: float = DICE, log=None) -> RoadCNN:
     """Fit the network to feature maps ``x`` (N, H, W, F), labels ``y`` (N, H, W) in {0, 1}.
 
     ``valid`` (N, H, W) bool marks the scored pixels; ``group`` (N,) the drive of each map
